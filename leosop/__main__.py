@@ -1,0 +1,4 @@
+
+from .cli import main_exit
+
+main_exit()

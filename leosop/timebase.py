@@ -1,0 +1,116 @@
+"""Time: UTC instants at the edges, split Julian dates for SGP4 and UT1.
+
+UTC instants are ``numpy.datetime64[ns]`` (ISO 8601 in files). SGP4 takes
+UTC Julian dates split into a whole part and a fraction so that nanoseconds
+survive; Earth orientation needs UT1, taken from skyfield's bundled IERS
+table (observed values, then its predictions).
+"""
+
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = ["parse_utc", "format_utc", "seconds_since", "jd_utc", "jd_ut1", "ut1_minus_utc_s"]
+
+_UNIX_EPOCH_JD = 2_440_587.5
+_NS_PER_DAY = 86_400 * 1_000_000_000
+
+
+def parse_utc(value, *, name="time"):
+    """UTC instant(s) from ISO 8601 text or datetime64.
+
+    A trailing ``Z`` or ``+00:00`` is accepted; other offsets are refused
+    rather than silently shifted.
+
+    Parameters
+    ----------
+    value : str, datetime64 or array_like of those
+    name : str
+        What the value is, for the error message.
+
+    Returns
+    -------
+    numpy.datetime64 or ndarray of datetime64[ns]
+    """
+    arr = np.asarray(value)
+    if np.issubdtype(arr.dtype, np.datetime64):
+        return arr.astype("datetime64[ns]")[()]
+    flat = []
+    for text in arr.ravel():
+        s = str(text).strip()
+        if s.endswith("Z"):
+            s = s[:-1]
+        elif s.endswith("+00:00"):
+            s = s[:-6]
+        try:
+            flat.append(np.datetime64(s, "ns"))
+        except ValueError:
+            raise ValueError(f"{name}: {str(text)!r} is not an ISO 8601 UTC time (e.g. 2024-01-02T03:04:05Z)") from None
+    out = np.array(flat, dtype="datetime64[ns]").reshape(arr.shape)
+    return out[()]
+
+
+def format_utc(times):
+    """ISO 8601 text with a trailing Z, microsecond precision; list for arrays."""
+    t = np.asarray(times, dtype="datetime64[us]")
+    text = np.datetime_as_string(t, unit="us")
+    if t.ndim == 0:
+        return str(text) + "Z"
+    return [s + "Z" for s in text.ravel().tolist()]
+
+
+def seconds_since(times, epoch):
+    """Float seconds of ``times`` after ``epoch`` (both UTC datetime64)."""
+    dt = np.asarray(times, dtype="datetime64[ns]") - np.datetime64(epoch, "ns")
+    return dt.astype(np.int64) * 1e-9
+
+
+def jd_utc(times):
+    """Split UTC Julian date ``(jd, fr)`` of datetime64 instants, as SGP4 takes it.
+
+    ``jd`` is a whole day at midnight (``x.5``) and ``fr`` the day fraction.
+    """
+    ns = np.asarray(times, dtype="datetime64[ns]").astype(np.int64)
+    days, rem = np.divmod(ns, _NS_PER_DAY)
+    return days + _UNIX_EPOCH_JD, rem / _NS_PER_DAY
+
+
+@lru_cache(maxsize=1)
+def _timescale():
+    from skyfield.api import load
+
+    return load.timescale(builtin=True)
+
+
+def ut1_minus_utc_s(times):
+    """UT1 - UTC [s] at UTC instants, from skyfield's bundled IERS data."""
+    t = np.asarray(times, dtype="datetime64[ns]")
+    flat = t.ravel()
+    if flat.size == 0:
+        return np.zeros(t.shape)
+    # UT1-UTC changes by well under 1 ms per hour: evaluate on an hourly grid
+    # and interpolate, except across a leap second where it jumps by 1 s.
+    hours = flat.astype("datetime64[h]")
+    grid = np.arange(hours.min(), hours.max() + np.timedelta64(2, "h"), np.timedelta64(1, "h"))
+    ymd = grid.astype("datetime64[D]")
+    year = ymd.astype("datetime64[Y]").astype(int) + 1970
+    month = ymd.astype("datetime64[M]").astype(int) % 12 + 1
+    day = (ymd - ymd.astype("datetime64[M]")).astype(int) + 1
+    hour = (grid - ymd).astype(int)
+    dut1 = np.atleast_1d(_timescale().utc(year, month, day, hour).dut1)
+    x = seconds_since(grid, grid[0])
+    # Unwrap leap-second jumps before interpolating, wrap back after.
+    steps = np.round(np.diff(dut1))
+    smooth = dut1 - np.concatenate([[0.0], np.cumsum(steps)])
+    xi = seconds_since(flat, grid[0])
+    k = np.clip(np.searchsorted(x, xi, side="right") - 1, 0, len(x) - 1)
+    jumps = np.concatenate([[0.0], np.cumsum(steps)])[k]
+    return (np.interp(xi, x, smooth) + jumps).reshape(t.shape)
+
+
+def jd_ut1(times):
+    """Split UT1 Julian date ``(jd, fr)`` at UTC instants, for Earth rotation."""
+    jd, fr = jd_utc(times)
+    fr = fr + ut1_minus_utc_s(times) / 86_400.0
+    whole = np.floor(fr)
+    return jd + whole, fr - whole
