@@ -1,0 +1,38 @@
+"""Constellations: element-set readers, SGP4 propagation, visibility.
+
+``load_constellation(path)`` reads TLE (2-line or 3-line) and CelesTrak OMM
+(JSON, CSV) files; without a path it returns the bundled default, a
+Starlink-like Walker constellation (``tle/starlink_walker.tle``, epoch
+2025-01-01T00:00:00Z, made by ``tools/make_walker_tle.py``).
+"""
+
+from pathlib import Path
+
+from .constellation import CARRIERS, Constellation
+from .omm import read_omm
+from .tle import read_tle
+
+__all__ = ["DEFAULT_TLE", "CARRIERS", "Constellation", "load_constellation", "read_tle", "read_omm"]
+
+#: The bundled default constellation.
+DEFAULT_TLE = Path(__file__).resolve().parents[2] / "tle" / "starlink_walker.tle"
+
+
+def load_constellation(path=None, *, skip_bad=False):
+    """Read an element-set file (TLE or OMM by suffix), or the bundled default.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        ``.json`` and ``.csv`` are read as OMM, anything else as TLE.
+    skip_bad : bool
+        Warn and skip bad TLE records instead of raising.
+
+    Returns
+    -------
+    Constellation
+    """
+    path = Path(path) if path is not None else DEFAULT_TLE
+    if path.suffix.lower() in (".json", ".csv"):
+        return read_omm(path)
+    return read_tle(path, skip_bad=skip_bad)

@@ -1,0 +1,80 @@
+"""CelesTrak OMM element sets (JSON and CSV) as a :class:`Constellation`."""
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+from sgp4 import omm
+from sgp4.api import Satrec
+
+from ..errors import InputError
+from .constellation import Constellation
+from .tle import satrec_epoch_utc
+
+__all__ = ["read_omm"]
+
+_REQUIRED = ("OBJECT_NAME", "NORAD_CAT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION",
+             "RA_OF_ASC_NODE", "ARG_OF_PERICENTER", "MEAN_ANOMALY", "BSTAR", "MEAN_MOTION_DOT",
+             "MEAN_MOTION_DDOT")
+_DEFAULTS = {"CLASSIFICATION_TYPE": "U", "OBJECT_ID": "", "EPHEMERIS_TYPE": "0", "ELEMENT_SET_NO": "999",
+             "REV_AT_EPOCH": "0"}
+
+
+def read_omm(path):
+    """Read a CelesTrak OMM file, JSON (``FORMAT=json``) or CSV (``FORMAT=csv``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The format is taken from the suffix (``.json`` or ``.csv``), else
+        from the first non-blank character.
+
+    Returns
+    -------
+    Constellation
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such OMM file")
+    text = path.read_text(encoding="utf-8", errors="replace")
+    if not text.strip():
+        raise InputError(f"{path}: empty file, expected OMM element sets")
+    if path.suffix.lower() == ".json" or text.lstrip().startswith(("[", "{")):
+        try:
+            records = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{path}:{exc.lineno}: invalid JSON ({exc.msg})") from None
+        records = [records] if isinstance(records, dict) else records
+        where = [f"{path}: record {k + 1}" for k in range(len(records))]
+    else:
+        records = list(csv.DictReader(text.splitlines()))
+        where = [f"{path}:{k + 2}" for k in range(len(records))]
+    names, satrecs = [], []
+    for fields, at in zip(records, where):
+        if not isinstance(fields, dict):
+            raise InputError(f"{at}: expected an object of OMM fields")
+        missing = [k for k in _REQUIRED if k not in fields or fields[k] in (None, "")]
+        if missing:
+            raise InputError(f"{at}: missing OMM field {missing[0]}")
+        fields = {**_DEFAULTS, **{k: str(v) for k, v in fields.items() if v is not None}}
+        if "." not in fields["EPOCH"]:
+            fields["EPOCH"] += ".0"
+        sat = Satrec()
+        try:
+            omm.initialize(sat, fields)
+        except (ValueError, KeyError) as exc:
+            raise InputError(f"{at}: bad OMM field value ({exc})") from None
+        if sat.error:
+            raise InputError(f"{at}: SGP4 rejects the element set (error code {sat.error})")
+        names.append(fields["OBJECT_NAME"].strip())
+        satrecs.append(sat)
+    if not satrecs:
+        raise InputError(f"{path}: no OMM element sets found")
+    return Constellation(
+        tuple(names),
+        np.array([str(s.satnum) for s in satrecs]),
+        tuple(satrecs),
+        np.array([satrec_epoch_utc(s) for s in satrecs], dtype="datetime64[ns]"),
+        str(path),
+    )

@@ -1,0 +1,166 @@
+"""Two-line element set files (2-line and 3-line), checked strictly.
+
+Accepts LF, CRLF, CR and the doubled CR-CR-LF line endings found in the wild,
+blank lines, ``#`` comment lines, and CelesTrak's optional ``0 `` prefix on name lines. Each record
+is checked for ASCII text, line numbers, the column layout, matching
+catalogue numbers and the modulo-10 checksums before SGP4 initialises it. A bad
+record raises :class:`~leosop.errors.InputError` naming the file and line,
+or, with ``skip_bad=True``, is skipped with a warning.
+"""
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+from sgp4.api import Satrec
+
+from ..errors import InputError
+from .constellation import Constellation
+
+__all__ = ["read_tle", "parse_tle_lines", "tle_checksum", "satrec_epoch_utc"]
+
+_NS_PER_DAY = 86_400 * 1_000_000_000
+# Columns (0-based) that must be blank in each line of a valid element set.
+_BLANKS = {"1": (1, 8, 17, 32, 43, 52, 61, 63), "2": (1, 7, 16, 25, 33, 42, 51)}
+
+
+def tle_checksum(line):
+    """Modulo-10 checksum of the first 68 columns (digits, and 1 for each '-')."""
+    return sum(int(c) if c.isdigit() else (c == "-") for c in line[:68]) % 10
+
+
+def satrec_epoch_utc(satrec):
+    """Element-set epoch of a Satrec as datetime64[ns]."""
+    days = int(round(satrec.jdsatepoch - 2_440_587.5))
+    return np.datetime64(days * _NS_PER_DAY + int(round(satrec.jdsatepochF * _NS_PER_DAY)), "ns")
+
+
+def _check_line(text, expect, where):
+    if len(text) < 69:
+        raise InputError(f"{where}: truncated TLE line {expect} ({len(text)} characters, expected 69)")
+    if len(text) > 69:
+        raise InputError(f"{where}: TLE line {expect} too long ({len(text)} characters, expected 69)")
+    if text[0] != expect:
+        raise InputError(f"{where}: expected TLE line {expect}, found line number {text[0]!r}")
+    bad = [c + 1 for c in _BLANKS[expect] if text[c] != " "]
+    if bad:
+        raise InputError(f"{where}: TLE line {expect} column layout broken (column {bad[0]} must be blank)")
+    if not text[68].isdigit():
+        raise InputError(f"{where}: TLE line {expect} checksum column holds {text[68]!r}, expected a digit")
+    if tle_checksum(text) != int(text[68]):
+        raise InputError(
+            f"{where}: bad TLE checksum on line {expect} (column 69 says {text[68]}, computed {tle_checksum(text)})"
+        )
+
+
+def parse_tle_lines(lines, source="<text>", *, skip_bad=False):
+    """Parse element sets from text lines.
+
+    Parameters
+    ----------
+    lines : iterable of str or bytes
+        Raw lines; line ending characters are stripped here.
+    source : str
+        File name used in messages.
+    skip_bad : bool
+        Warn and skip bad records instead of raising.
+
+    Returns
+    -------
+    Constellation
+    """
+    entries = []
+    for number, raw in enumerate(lines, start=1):
+        if isinstance(raw, bytes):
+            try:
+                raw = raw.decode("ascii")
+            except UnicodeDecodeError:
+                raw = "\x00non-ascii"
+        text = raw.strip("\r\n").rstrip()
+        if text.strip() and not text.startswith("#"):
+            entries.append((number, text))
+
+    names, satrecs, skipped = [], [], 0
+    i = 0
+    while i < len(entries):
+        number, text = entries[i]
+        # A record is [name] line1 line2; its extent is fixed by the first two characters.
+        if text.startswith("1 ") or text.startswith("2 "):
+            name, start = "", i
+        else:
+            name, start = text[2:].strip() if text.startswith("0 ") else text.strip(), i + 1
+        extent = start + 2 - i
+        try:
+            for k in (i, *range(start, min(start + 2, len(entries)))):
+                if not entries[k][1].isascii() or "\x00" in entries[k][1]:
+                    raise InputError(f"{source}:{entries[k][0]}: non-ASCII characters in a TLE file")
+            if start + 1 >= len(entries):
+                raise InputError(f"{source}:{number}: truncated file, element set has no line 2")
+            (n1, l1), (n2, l2) = entries[start], entries[start + 1]
+            _check_line(l1, "1", f"{source}:{n1}")
+            _check_line(l2, "2", f"{source}:{n2}")
+            if l1[2:7] != l2[2:7]:
+                raise InputError(
+                    f"{source}:{n2}: catalogue number {l2[2:7].strip()} on line 2 differs from {l1[2:7].strip()} on line 1"
+                )
+            try:
+                sat = Satrec.twoline2rv(l1, l2)
+            except Exception as exc:  # sgp4's parser raises ValueError/IndexError on bad fields
+                raise InputError(f"{source}:{n1}: unreadable element set ({exc})") from None
+            if sat.error:
+                raise InputError(f"{source}:{n1}: SGP4 rejects the element set (error code {sat.error})")
+        except InputError as exc:
+            if not skip_bad:
+                raise
+            warnings.warn(f"skipping bad record: {exc}", stacklevel=2)
+            skipped += 1
+            i += max(extent, 1)
+            continue
+        names.append(name)
+        satrecs.append(sat)
+        i += extent
+
+    if not satrecs:
+        raise InputError(f"{source}: no TLE records found" + (f" ({skipped} bad records skipped)" if skipped else ""))
+    sat_ids = np.array([str(s.satnum) for s in satrecs])
+    epochs = np.array([satrec_epoch_utc(s) for s in satrecs], dtype="datetime64[ns]")
+    return _unique(Constellation(tuple(names), sat_ids, tuple(satrecs), epochs, str(source)))
+
+
+def _unique(const):
+    """Keep the newest element set of each catalogue number."""
+    order = np.lexsort((const.epochs_utc, const.sat_ids))
+    last = np.r_[const.sat_ids[order][1:] != const.sat_ids[order][:-1], True]
+    if last.all():
+        return const
+    keep = np.sort(order[last])
+    warnings.warn(
+        f"{const.source}: {len(const) - len(keep)} duplicate catalogue numbers; kept the newest element set of each",
+        stacklevel=3,
+    )
+    return const.subset(keep)
+
+
+def read_tle(path, *, skip_bad=False):
+    """Read a 2-line or 3-line TLE file.
+
+    Parameters
+    ----------
+    path : str or Path
+    skip_bad : bool
+        Warn and skip bad records instead of raising.
+
+    Returns
+    -------
+    Constellation
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, expected a TLE file")
+    if not path.exists():
+        raise InputError(f"{path}: no such TLE file")
+    data = path.read_bytes()
+    if not data.strip():
+        raise InputError(f"{path}: empty file, expected TLE records")
+    # splitlines() ends lines at LF, CR and CRLF; CR-CR-LF yields empty lines, skipped.
+    return parse_tle_lines(data.splitlines(), str(path), skip_bad=skip_bad)
