@@ -1,0 +1,256 @@
+"""Simulation scenarios: the bundled ``xian-baoji`` flight and JSON files.
+
+A scenario says where and when the receiver flies, how bad its IMU is and
+how the LEO measurements are corrupted (DESIGN.md 4.1, seed 004 section 4.1
+and Table 1). Scenario files are JSON objects with the keys of
+:data:`XIAN_BAOJI` (as :func:`to_dict` writes them); every key is optional
+and missing keys take the xian-baoji values. Unknown keys are refused.
+"""
+
+import json
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .timebase import format_utc, parse_utc
+
+__all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN", "load_scenario",
+           "scenario_from_dict", "to_dict"]
+
+
+@dataclass(frozen=True)
+class ImuSpec:
+    """IMU error figures, in the units their names carry (seed 004 Table 1)."""
+
+    gyro_bias_deg_per_h: float = 0.03
+    gyro_arw_deg_per_rt_h: float = 0.01
+    accel_bias_g: float = 1e-4
+    accel_vrw_g_per_rt_hz: float = 1e-5
+    rate_hz: float = 100.0
+
+
+@dataclass(frozen=True)
+class LeoSpec:
+    """LEO measurement errors (seed 004 Table 1) and fix settings.
+
+    ``sat_doppler_offset_max_hz``: every satellite carries a constant clock-
+    induced Doppler offset drawn uniformly in [0, max]. ``rx_freq_offset_hz``:
+    the receiver's fixed frequency offset (estimated by every fix).
+    ``orbit_error_m``: standard deviation per ECEF axis of the satellite
+    position error, constant per satellite over a run. ``cn0_dbhz``: pilot
+    carrier-to-noise density (not given by the paper; 45 dB-Hz is a
+    conservative figure for the Starlink pilot tone seen by a small dish).
+    """
+
+    sat_doppler_offset_max_hz: float = 5.0
+    rx_freq_offset_hz: float = 5.0
+    orbit_error_m: float = 1.0
+    fix_rate_hz: float = 1.0
+    cn0_dbhz: float = 45.0
+
+
+@dataclass(frozen=True)
+class InitError:
+    """Initial INS errors: ENU position [m] and velocity [m/s] (seed 004 Table 1)."""
+
+    pos_m: tuple = (100.0, 100.0, 100.0)
+    vel_mps: tuple = (1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One flight with its sensors.
+
+    Attributes
+    ----------
+    name : str
+    start_utc : numpy.datetime64
+        Take-off time (UTC).
+    waypoints : tuple of (lat_deg, lon_deg, alt_m)
+        Great-circle legs flown at constant speed and altitude profile.
+    speed_mps, mask_deg : float
+    duration_s : float or None
+        None: the time to fly the waypoints.
+    imu : ImuSpec
+    leo : LeoSpec
+    init_error : InitError
+    """
+
+    name: str
+    start_utc: np.datetime64
+    waypoints: tuple
+    speed_mps: float
+    mask_deg: float
+    duration_s: float | None
+    imu: ImuSpec
+    leo: LeoSpec
+    init_error: InitError
+
+
+#: Seed 004 section 4.1: Xi'an (34.342 N, 108.940 E) to Baoji (34.363 N,
+#: 107.239 E) at 3 km and 200 m/s, 782 s, 40 deg mask.
+#: The start time was chosen with leosop.orbits.visibility over the bundled
+#: constellation: every 60 s over the day 2025-01-01 (the bundled TLE epoch)
+#: the visible-satellite count along this flight was computed at 1 Hz, and we
+#: kept a start whose profile looks like the paper's Fig. 9: 7 or more
+#: satellites nearly all the time with one short thin stretch mid-flight
+#: (see tools/search_start_time.py for the search and its table).
+XIAN_BAOJI = Scenario(
+    name="xian-baoji",
+    start_utc=np.datetime64("2025-01-01T04:00:00", "ns"),
+    waypoints=((34.342, 108.940, 3000.0), (34.363, 107.239, 3000.0)),
+    speed_mps=200.0,
+    mask_deg=40.0,
+    duration_s=782.0,
+    imu=ImuSpec(),
+    leo=LeoSpec(),
+    init_error=InitError(),
+)
+
+#: Scenarios known by name.
+BUILTIN = {XIAN_BAOJI.name: XIAN_BAOJI}
+
+
+def to_dict(scenario):
+    """The scenario as a JSON-ready dict with the file keys (DESIGN.md 4.1)."""
+    doc = asdict(scenario)
+    doc["start_utc"] = format_utc(scenario.start_utc)
+    doc["waypoints"] = [list(w) for w in scenario.waypoints]
+    doc["init_error"] = {k: list(v) for k, v in doc["init_error"].items()}
+    return doc
+
+
+def _number(value, where, *, low=-np.inf, high=np.inf, low_open=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{where}: expected a number, got {value!r}")
+    value = float(value)
+    bad_low = value <= low if low_open else value < low
+    if not np.isfinite(value) or bad_low or value > high:
+        bracket = "(" if low_open else "["
+        raise InputError(f"{where}: {value!r} is outside {bracket}{low}, {high}]")
+    return value
+
+
+def _vector3(value, where, low=-np.inf, high=np.inf):
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise InputError(f"{where}: expected a list of 3 numbers, got {value!r}")
+    return tuple(_number(v, f"{where}[{i}]", low=low, high=high) for i, v in enumerate(value))
+
+
+def _check_keys(doc, allowed, where):
+    if not isinstance(doc, dict):
+        raise InputError(f"{where}: expected a JSON object, got {type(doc).__name__}")
+    unknown = sorted(set(doc) - set(allowed))
+    if unknown:
+        raise InputError(f"{where}: unknown key {unknown[0]!r} (expected one of {', '.join(sorted(allowed))})")
+
+
+# Limits of each numeric field: (low, high, low_open).
+_LIMITS = {
+    "gyro_bias_deg_per_h": (0.0, 1e4, False),
+    "gyro_arw_deg_per_rt_h": (0.0, 1e3, False),
+    "accel_bias_g": (0.0, 1.0, False),
+    "accel_vrw_g_per_rt_hz": (0.0, 1.0, False),
+    "rate_hz": (1.0, 2000.0, False),
+    "sat_doppler_offset_max_hz": (0.0, 1e4, False),
+    "rx_freq_offset_hz": (-1e6, 1e6, False),
+    "orbit_error_m": (0.0, 1e5, False),
+    "fix_rate_hz": (0.0, 100.0, True),
+    "cn0_dbhz": (0.0, 100.0, False),
+}
+
+
+def _section(cls, doc, base, where):
+    names = [f.name for f in fields(cls)]
+    _check_keys(doc, names, where)
+    values = {}
+    for key, value in doc.items():
+        if cls is InitError:
+            values[key] = _vector3(value, f"{where}.{key}", -1e6, 1e6)
+        else:
+            low, high, low_open = _LIMITS[key]
+            values[key] = _number(value, f"{where}.{key}", low=low, high=high, low_open=low_open)
+    return replace(base, **values)
+
+
+def _waypoints(value, where):
+    if not isinstance(value, (list, tuple)) or len(value) < 2:
+        raise InputError(f"{where}: expected a list of at least 2 [lat_deg, lon_deg, alt_m] points")
+    points = []
+    for i, point in enumerate(value):
+        if not isinstance(point, (list, tuple)) or len(point) != 3:
+            raise InputError(f"{where}[{i}]: expected [lat_deg, lon_deg, alt_m], got {point!r}")
+        lat = _number(point[0], f"{where}[{i}] latitude", low=-89.0, high=89.0)
+        lon = _number(point[1], f"{where}[{i}] longitude", low=-180.0, high=180.0)
+        alt = _number(point[2], f"{where}[{i}] altitude", low=-400.0, high=50_000.0)
+        points.append((lat, lon, alt))
+    return tuple(points)
+
+
+def scenario_from_dict(doc, *, source="scenario", base=XIAN_BAOJI):
+    """A validated :class:`Scenario` from a dict of file keys; missing keys from ``base``.
+
+    Raises
+    ------
+    InputError
+        Naming ``source`` and the key for unknown keys and out-of-range values.
+    """
+    top = ("name", "start_utc", "waypoints", "speed_mps", "mask_deg", "duration_s", "imu", "leo", "init_error")
+    _check_keys(doc, top, source)
+    values = {}
+    if "name" in doc:
+        if not isinstance(doc["name"], str) or not doc["name"].strip():
+            raise InputError(f"{source}.name: expected a non-empty string")
+        values["name"] = doc["name"].strip()
+    if "start_utc" in doc:
+        try:
+            values["start_utc"] = np.datetime64(parse_utc(str(doc["start_utc"]), name=f"{source}.start_utc"), "ns")
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+    if "waypoints" in doc:
+        values["waypoints"] = _waypoints(doc["waypoints"], f"{source}.waypoints")
+    if "speed_mps" in doc:
+        values["speed_mps"] = _number(doc["speed_mps"], f"{source}.speed_mps", low=0.0, high=8000.0, low_open=True)
+    if "mask_deg" in doc:
+        values["mask_deg"] = _number(doc["mask_deg"], f"{source}.mask_deg", low=0.0, high=89.0)
+    if "duration_s" in doc:
+        values["duration_s"] = None if doc["duration_s"] is None else _number(
+            doc["duration_s"], f"{source}.duration_s", low=0.0, high=86_400.0, low_open=True)
+    elif "waypoints" in doc or "speed_mps" in doc:
+        values["duration_s"] = None  # the base flight's length no longer applies
+    for key, cls in (("imu", ImuSpec), ("leo", LeoSpec), ("init_error", InitError)):
+        if key in doc:
+            values[key] = _section(cls, doc[key], getattr(base, key), f"{source}.{key}")
+    return replace(base, **values)
+
+
+def load_scenario(name_or_path):
+    """A built-in scenario by name, or a scenario JSON file.
+
+    Parameters
+    ----------
+    name_or_path : str or path-like
+        ``"xian-baoji"`` or the path of a JSON file.
+
+    Returns
+    -------
+    Scenario
+    """
+    key = str(name_or_path)
+    if key in BUILTIN:
+        return BUILTIN[key]
+    path = Path(key)
+    if not path.suffix == ".json" and not path.exists():
+        raise InputError(f"--scenario: {key!r} is neither a built-in scenario ({', '.join(BUILTIN)}) "
+                         "nor a JSON file")
+    text = path.read_text()
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    scenario = scenario_from_dict(doc, source=str(path))
+    if "name" not in doc:
+        scenario = replace(scenario, name=path.stem)
+    return scenario

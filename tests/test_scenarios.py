@@ -1,0 +1,72 @@
+"""Scenario files: defaults, round trip, and the bad inputs of issue 6."""
+
+import json
+
+import numpy as np
+import pytest
+
+from leosop.errors import InputError
+from leosop.scenarios import XIAN_BAOJI, load_scenario, scenario_from_dict, to_dict
+
+
+def test_xian_baoji_carries_seed004_table1_and_section_4_1():
+    s = load_scenario("xian-baoji")
+    assert s.waypoints == ((34.342, 108.940, 3000.0), (34.363, 107.239, 3000.0))
+    assert (s.speed_mps, s.mask_deg, s.duration_s) == (200.0, 40.0, 782.0)
+    assert (s.imu.gyro_bias_deg_per_h, s.imu.gyro_arw_deg_per_rt_h) == (0.03, 0.01)
+    assert (s.imu.accel_bias_g, s.imu.accel_vrw_g_per_rt_hz, s.imu.rate_hz) == (1e-4, 1e-5, 100.0)
+    assert (s.leo.sat_doppler_offset_max_hz, s.leo.rx_freq_offset_hz, s.leo.orbit_error_m) == (5.0, 5.0, 1.0)
+    assert s.init_error.pos_m == (100.0, 100.0, 100.0) and s.init_error.vel_mps == (1.0, 1.0, 1.0)
+
+
+def test_dict_round_trip_and_json_file(tmp_path):
+    doc = to_dict(XIAN_BAOJI)
+    assert scenario_from_dict(json.loads(json.dumps(doc))) == XIAN_BAOJI
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({"start_utc": "2025-01-01T10:00:00Z", "leo": {"orbit_error_m": 30}}))
+    s = load_scenario(path)
+    assert s.name == "mine"  # file stem when the file has no name
+    assert s.start_utc == np.datetime64("2025-01-01T10:00:00", "ns")
+    assert s.leo.orbit_error_m == 30.0
+    assert s.leo.rx_freq_offset_hz == XIAN_BAOJI.leo.rx_freq_offset_hz  # missing keys: xian-baoji values
+    assert s.waypoints == XIAN_BAOJI.waypoints and s.duration_s == 782.0
+
+
+def test_new_waypoints_drop_the_default_duration():
+    s = scenario_from_dict({"waypoints": [[10, 20, 100], [10.1, 20, 100]]})
+    assert s.duration_s is None
+
+
+@pytest.mark.parametrize(
+    "doc, words",
+    [
+        ({"colour": "red"}, ["'colour'"]),
+        ({"imu": {"gyro_bias": 1}}, ["imu", "'gyro_bias'"]),
+        ({"leo": {"orbit_error_m": -1}}, ["leo.orbit_error_m"]),
+        ({"waypoints": [[34, 108, 3000], [95, 108, 3000]]}, ["waypoints[1] latitude"]),
+        ({"waypoints": [[34, 108, 3000], [34, 200, 3000]]}, ["waypoints[1] longitude"]),
+        ({"waypoints": [[34, 108, 3000]]}, ["waypoints", "at least 2"]),
+        ({"waypoints": [[34, 108], [34, 107, 0]]}, ["waypoints[0]"]),
+        ({"speed_mps": 0}, ["speed_mps"]),
+        ({"start_utc": "yesterday"}, ["start_utc"]),
+        ({"init_error": {"pos_m": [1, 2]}}, ["init_error.pos_m"]),
+        ({"leo": {"fix_rate_hz": 0}}, ["fix_rate_hz"]),
+        ({"mask_deg": "40"}, ["mask_deg", "number"]),
+    ],
+)
+def test_bad_scenarios_are_refused_naming_the_field(doc, words):
+    with pytest.raises(InputError) as info:
+        scenario_from_dict(doc, source="my.json")
+    message = str(info.value)
+    assert message.startswith("my.json")
+    for word in words:
+        assert word in message
+
+
+def test_unknown_name_and_bad_json(tmp_path):
+    with pytest.raises(InputError, match="neither a built-in"):
+        load_scenario("paris-lyon")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{nope")
+    with pytest.raises(InputError, match="not valid JSON"):
+        load_scenario(bad)
