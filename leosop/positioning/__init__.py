@@ -1,0 +1,1 @@
+"""Positioning: Doppler least squares and dilution of precision."""
