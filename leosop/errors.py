@@ -7,3 +7,10 @@ class InputError(ValueError):
     The message is one line that names the file, field or option and says
     what was expected. The CLI prints it and exits with status 2.
     """
+
+
+class ExternalError(RuntimeError):
+    """Something outside the toolkit failed: network, a remote server.
+
+    The CLI prints the one-line message and exits with status 1.
+    """

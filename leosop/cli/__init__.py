@@ -18,7 +18,7 @@ import math
 import os
 import sys
 
-from ..errors import InputError
+from ..errors import ExternalError, InputError
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ()
@@ -76,6 +76,9 @@ def main(argv=None):
     except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         print(f"leosop {args.command}: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
         return 2
+    except ExternalError as exc:
+        print(f"leosop {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"leosop {args.command}: interrupted", file=sys.stderr)
         return 1

@@ -1,0 +1,47 @@
+"""Parsing and checking of option values shared by several subcommands."""
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from ..timebase import parse_utc
+
+__all__ = ["parse_site", "parse_time", "positive", "mask_deg"]
+
+
+def parse_site(text, option="--site"):
+    """``LAT_DEG,LON_DEG,ALT_M`` -> (lat_deg, lon_deg, alt_m), checked."""
+    parts = str(text).split(",")
+    try:
+        lat, lon, alt = (float(p) for p in parts)
+    except ValueError:
+        raise InputError(f"{option} {text!r}: expected LAT_DEG,LON_DEG,ALT_M (three numbers)") from None
+    if not all(math.isfinite(v) for v in (lat, lon, alt)):
+        raise InputError(f"{option} {text!r}: values must be finite")
+    if not -90.0 <= lat <= 90.0:
+        raise InputError(f"{option}: latitude {lat:g} deg is outside [-90, 90]")
+    if not -180.0 <= lon <= 360.0:
+        raise InputError(f"{option}: longitude {lon:g} deg is outside [-180, 360]")
+    if not -1.2e4 <= alt <= 1e8:
+        raise InputError(f"{option}: altitude {alt:g} m is outside [-12000, 1e8]")
+    return lat, lon, alt
+
+
+def parse_time(text, option="--start"):
+    """ISO 8601 UTC text -> datetime64[ns]."""
+    return np.datetime64(parse_utc(text, name=option), "ns")
+
+
+def positive(value, option):
+    """``value`` if finite and > 0, else InputError naming ``option``."""
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{option} {value:g}: must be a positive number")
+    return value
+
+
+def mask_deg(value, option="--mask-deg"):
+    """Elevation mask checked to lie in [0, 90)."""
+    if not (math.isfinite(value) and 0.0 <= value < 90.0):
+        raise InputError(f"{option} {value:g}: elevation mask must be in [0, 90) deg")
+    return value
