@@ -21,7 +21,7 @@ import sys
 from ..errors import ExternalError, InputError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ()
+COMMANDS = ("visibility", "tle",)
 
 
 def add_command(subparsers, name, module, *, help, description=None):
@@ -88,11 +88,15 @@ def main(argv=None):
         print(f"leosop {args.command}: internal error: {type(exc).__name__}: {exc} "
               "(set LEOSOP_DEBUG=1 for a traceback)", file=sys.stderr)
         return 1
-    if args.json:
-        json.dump(doc, sys.stdout)
-        sys.stdout.write("\n")
-    elif hasattr(module, "summary"):
-        print(module.summary(doc))
+    try:
+        if args.json:
+            json.dump(doc, sys.stdout)
+            sys.stdout.write("\n")
+        elif hasattr(module, "summary"):
+            print(module.summary(doc))
+        sys.stdout.flush()
+    except BrokenPipeError:  # e.g. piped into `head`: the reader left, not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 
