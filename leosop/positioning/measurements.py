@@ -1,0 +1,306 @@
+"""Doppler measurement tables (DESIGN 4.3) and the satellite states they need.
+
+A table has a header row and one measurement per row: ``time_utc`` (ISO
+8601) or ``t_s``; ``sat_id``; ``doppler_hz``; optional ``sigma_hz``,
+``carrier_hz`` and the satellite state ``x_sv_m, y_sv_m, z_sv_m, vx_sv_mps,
+vy_sv_mps, vz_sv_mps`` (ECEF at the measurement time). A missing column is an
+error for the whole file; a bad row (empty, NaN or non-numeric value,
+non-positive sigma or carrier, duplicate of an earlier row) is set aside with
+its reason in :attr:`Measurements.rejected` so that the rest can be solved.
+
+Satellite states from element sets include the light time: the state is
+taken at the transmit time ``t - |r_s - r_r| / c`` and rotated into the ECEF
+frame of the reception time (the Earth turns ``omega_e * tau`` meanwhile).
+"""
+
+import csv
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..constants import C_MPS, DAY_S, OMEGA_E_RAD_PER_S, STARLINK_PILOT_HZ
+from ..errors import InputError
+from ..fileio import write_csv
+from ..orbits.propagate import state_ecef_pairs
+from ..timebase import format_utc, seconds_since
+
+__all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states_from_tle",
+           "SV_STATE_COLUMNS", "DEFAULT_CARRIER_HZ", "MAX_TLE_AGE_DAYS"]
+
+#: Satellite state columns, ECEF at the measurement time.
+SV_STATE_COLUMNS = ("x_sv_m", "y_sv_m", "z_sv_m", "vx_sv_mps", "vy_sv_mps", "vz_sv_mps")
+#: Carrier when neither the table nor the caller gives one (Starlink pilot, seed 004).
+DEFAULT_CARRIER_HZ = STARLINK_PILOT_HZ
+#: Largest distance in time from an element set's epoch that is propagated [days].
+MAX_TLE_AGE_DAYS = 30.0
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """Accepted rows of a measurement table, in file order.
+
+    Attributes
+    ----------
+    t_s : ndarray, (n,)
+        Seconds after ``epoch_utc`` (or as given in a ``t_s`` column).
+    time_utc : ndarray of datetime64[ns], (n,), or None
+        None when the table has only ``t_s``.
+    sat_id : ndarray of str, (n,)
+    doppler_hz, sigma_hz, carrier_hz : ndarray, (n,)
+        ``sigma_hz`` is NaN where not given.
+    pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n, 3), or None
+        From the state columns, None without them.
+    line : ndarray of int, (n,)
+        Line number of each row in the file.
+    rejected : tuple of (int, str)
+        Line number and reason of every row set aside.
+    source : str
+    """
+
+    t_s: np.ndarray
+    time_utc: np.ndarray
+    sat_id: np.ndarray
+    doppler_hz: np.ndarray
+    sigma_hz: np.ndarray
+    carrier_hz: np.ndarray
+    pos_sv_ecef_m: np.ndarray = None
+    vel_sv_ecef_mps: np.ndarray = None
+    line: np.ndarray = None
+    rejected: tuple = ()
+    source: str = ""
+
+    def __len__(self):
+        return len(self.doppler_hz)
+
+    @property
+    def epoch_utc(self):
+        """First measurement time (the origin of ``t_s``), or None."""
+        return None if self.time_utc is None else self.time_utc.min()
+
+    def take(self, index):
+        """Rows at ``index``; rejected rows are kept."""
+        pick = lambda a: None if a is None else a[index]  # noqa: E731
+        return replace(self, t_s=self.t_s[index], time_utc=pick(self.time_utc), sat_id=self.sat_id[index],
+                       doppler_hz=self.doppler_hz[index], sigma_hz=self.sigma_hz[index],
+                       carrier_hz=self.carrier_hz[index], pos_sv_ecef_m=pick(self.pos_sv_ecef_m),
+                       vel_sv_ecef_mps=pick(self.vel_sv_ecef_mps), line=self.line[index])
+
+
+def _floats(values):
+    """Floats of text values and a mask of those that are not finite numbers."""
+    out = np.empty(len(values))
+    for k, v in enumerate(values):
+        try:
+            out[k] = float(v)
+        except ValueError:
+            out[k] = np.nan
+    return out, ~np.isfinite(out)
+
+
+def read_measurements(path, *, carrier_hz=None):
+    """Read a Doppler measurement CSV (DESIGN 4.3).
+
+    Parameters
+    ----------
+    path : str or Path
+    carrier_hz : float, optional
+        Carrier of rows without a ``carrier_hz`` value; default
+        :data:`DEFAULT_CARRIER_HZ`.
+
+    Returns
+    -------
+    Measurements
+        Only accepted rows; the others are listed in ``rejected``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such measurement file")
+    with open(path, newline="", encoding="utf-8", errors="replace") as fh:
+        rows = [r for r in csv.reader(fh)]
+    numbered = [(k + 1, r) for k, r in enumerate(rows) if r and any(c.strip() for c in r)]
+    if not numbered:
+        raise InputError(f"{path}: empty file, expected a header row and Doppler measurements")
+    header = [c.strip().lower() for c in numbered[0][1]]
+    body = numbered[1:]
+    col = {name: k for k, name in enumerate(header)}
+    missing = [c for c in ("sat_id", "doppler_hz") if c not in col]
+    if "time_utc" not in col and "t_s" not in col:
+        missing.insert(0, "time_utc or t_s")
+    if missing:
+        raise InputError(f"{path}: missing column {', '.join(missing)} (columns: {', '.join(header)})")
+    state_given = [c for c in SV_STATE_COLUMNS if c in col]
+    if state_given and len(state_given) < len(SV_STATE_COLUMNS):
+        absent = [c for c in SV_STATE_COLUMNS if c not in col]
+        raise InputError(f"{path}: incomplete satellite state, missing column {', '.join(absent)}")
+    if not body:
+        raise InputError(f"{path}: no measurement rows after the header")
+
+    lines = np.array([n for n, _ in body])
+    reason = np.full(len(body), "", dtype=object)
+    width = len(header)
+    short = np.array([len(r) < width for _, r in body])
+    reason[short] = f"expected {width} fields"
+    field = lambda name: [r[col[name]].strip() if len(r) > col[name] else "" for _, r in body]  # noqa: E731
+
+    def number(name, default=None, positive=False):
+        if name not in col:
+            return np.full(len(body), np.nan if default is None else default)
+        text = field(name)
+        values, bad = _floats(text)
+        if default is not None:
+            blank = np.array([t == "" for t in text])
+            values[blank], bad[blank] = default, False
+        if positive:
+            bad |= ~(values > 0)
+        for k in np.flatnonzero(bad & (reason == "")):
+            reason[k] = f"{name} is {text[k]!r}, expected a {'positive ' if positive else ''}number"
+        return values
+
+    time_utc = None
+    if "time_utc" in col:
+        text = field("time_utc")
+        time_utc = np.full(len(body), np.datetime64("NaT"), dtype="datetime64[ns]")
+        for k, s in enumerate(text):
+            s = s[:-1] if s.endswith("Z") else s[:-6] if s.endswith("+00:00") else s
+            try:
+                time_utc[k] = np.datetime64(s, "ns")
+            except ValueError:
+                pass
+            if np.isnat(time_utc[k]) and reason[k] == "":
+                reason[k] = f"time_utc is {text[k]!r}, expected ISO 8601 UTC (e.g. 2024-01-02T03:04:05Z)"
+        t_s = np.zeros(len(body))
+    else:
+        t_s = number("t_s")
+    sat_id = np.array(field("sat_id"), dtype=str)
+    for k in np.flatnonzero((sat_id == "") & (reason == "")):
+        reason[k] = "sat_id is empty"
+    doppler = number("doppler_hz")
+    sigma = number("sigma_hz", default=np.nan)
+    for k in np.flatnonzero(np.isfinite(sigma) & ~(sigma > 0) & (reason == "")):
+        reason[k] = f"sigma_hz is {sigma[k]:g}, expected a positive number or an empty field"
+    default_carrier = DEFAULT_CARRIER_HZ if carrier_hz is None else float(carrier_hz)
+    carrier = number("carrier_hz", default=default_carrier, positive=True)
+    state = np.stack([number(c) for c in SV_STATE_COLUMNS], axis=-1) if state_given else None
+
+    # Duplicates: the same satellite at the same time; the first row is kept.
+    key_time = time_utc.astype(np.int64) if time_utc is not None else t_s
+    first = {}
+    for k in np.flatnonzero(reason == ""):
+        key = (key_time[k], sat_id[k])
+        if key in first:
+            reason[k] = f"duplicate of line {lines[first[key]]} (same sat_id and time)"
+        else:
+            first[key] = k
+    ok = reason == ""
+    rejected = tuple((int(lines[k]), str(reason[k])) for k in np.flatnonzero(~ok))
+    if not ok.any():
+        raise InputError(f"{path}: no usable measurement rows (line {rejected[0][0]}: {rejected[0][1]})")
+    if time_utc is not None:
+        t_s = seconds_since(time_utc, time_utc[ok].min())
+    return Measurements(
+        t_s=t_s[ok], time_utc=None if time_utc is None else time_utc[ok], sat_id=sat_id[ok],
+        doppler_hz=doppler[ok], sigma_hz=sigma[ok], carrier_hz=carrier[ok],
+        pos_sv_ecef_m=None if state is None else state[ok, :3],
+        vel_sv_ecef_mps=None if state is None else state[ok, 3:], line=lines[ok], rejected=rejected,
+        source=str(path),
+    )
+
+
+def write_measurements(path, meas):
+    """Write measurements as a DESIGN 4.3 table, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    meas : Measurements
+    """
+    header, cols = [], []
+    if meas.time_utc is not None:
+        header.append("time_utc")
+        cols.append(format_utc(meas.time_utc))
+    else:
+        header.append("t_s")
+        cols.append([repr(float(v)) for v in meas.t_s])
+    header += ["sat_id", "doppler_hz"]
+    cols += [list(meas.sat_id), [repr(float(v)) for v in meas.doppler_hz]]
+    if np.isfinite(meas.sigma_hz).any():
+        header.append("sigma_hz")
+        cols.append(["" if not np.isfinite(v) else repr(float(v)) for v in meas.sigma_hz])
+    header.append("carrier_hz")
+    cols.append([repr(float(v)) for v in meas.carrier_hz])
+    if meas.pos_sv_ecef_m is not None:
+        header += list(SV_STATE_COLUMNS)
+        state = np.concatenate([meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps], axis=-1)
+        cols += [[repr(float(v)) for v in state[:, j]] for j in range(6)]
+    write_csv(path, header, zip(*cols))
+
+
+def _rotate_z(vec, angle_rad):
+    """Components of ``vec`` in a frame turned by ``angle_rad`` about z, (n, 3)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    x, y = vec[..., 0], vec[..., 1]
+    return np.stack([c * x + s * y, -s * x + c * y, vec[..., 2]], axis=-1)
+
+
+def sv_states_from_tle(constellation, sat_id, time_utc, pos_rx_ecef_m=None, *, max_age_days=MAX_TLE_AGE_DAYS):
+    """Satellite states for measurements, propagated from element sets with light time.
+
+    Parameters
+    ----------
+    constellation : Constellation
+    sat_id : array_like of str, (n,)
+        NORAD catalogue numbers.
+    time_utc : array_like of datetime64, (n,)
+        Reception times.
+    pos_rx_ecef_m : array_like, (n, 3) or (3,), optional
+        Receiver position for the light time; None gives the states at the
+        reception time (no light time).
+    max_age_days : float
+        Rows further than this from their element set's epoch are refused.
+
+    Returns
+    -------
+    pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n, 3)
+        At transmit time, in the ECEF frame of the reception time; NaN where
+        refused.
+    reason : ndarray of str, (n,)
+        Why a row was refused; ``""`` where the state is valid.
+    """
+    ids = np.asarray(sat_id, dtype=str)
+    t_rx = np.asarray(time_utc, dtype="datetime64[ns]")
+    n = len(ids)
+    lookup = {sid: i for i, sid in enumerate(constellation.sat_ids)}
+    index = np.array([lookup.get(s, -1) for s in ids], dtype=int)
+    reason = np.full(n, "", dtype=object)
+    name = Path(constellation.source).name or "the element sets"
+    for k in np.flatnonzero(index < 0):
+        reason[k] = f"no element set for satellite id {ids[k]} in {name}"
+    known = index >= 0
+    age_days = np.full(n, np.nan)
+    age_days[known] = seconds_since(t_rx[known], np.datetime64(0, "ns")) / DAY_S - \
+        seconds_since(constellation.epochs_utc[index[known]], np.datetime64(0, "ns")) / DAY_S
+    for k in np.flatnonzero(known & ~(np.abs(age_days) <= max_age_days)):
+        reason[k] = (f"time {format_utc(t_rx[k])} is {age_days[k]:+.1f} days from the element set epoch of "
+                     f"satellite {ids[k]} (limit {max_age_days:g} days)")
+    ok = reason == ""
+    pos = np.full((n, 3), np.nan)
+    vel = np.full((n, 3), np.nan)
+    if ok.any():
+        rows = np.flatnonzero(ok)
+        tau = np.zeros(rows.size)
+        rx = None if pos_rx_ecef_m is None else np.broadcast_to(np.asarray(pos_rx_ecef_m, float), (n, 3))[rows]
+        # Fixed point of tau = |R(omega tau) r_s(t - tau) - r_r| / c; each pass gains a factor
+        # |range rate| / c ~ 3e-5, so three passes leave well under 1 ns.
+        for _ in range(4 if rx is not None else 1):
+            t_tx = t_rx[rows] - np.round(tau * 1e9).astype("timedelta64[ns]")
+            p, v, status = state_ecef_pairs(constellation, index[rows], t_tx)
+            p, v = _rotate_z(p, OMEGA_E_RAD_PER_S * tau), _rotate_z(v, OMEGA_E_RAD_PER_S * tau)
+            if rx is not None:
+                tau = np.linalg.norm(p - rx, axis=-1) / C_MPS
+        pos[rows], vel[rows] = p, v
+        for k, code in zip(rows, status):
+            if code:
+                reason[k] = f"SGP4 error code {code} for satellite {ids[k]} at {format_utc(t_rx[k])}"
+                pos[k] = vel[k] = np.nan
+    return pos, vel, reason.astype(str)
