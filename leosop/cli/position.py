@@ -1,0 +1,149 @@
+"""``leosop position MEAS.csv``: Doppler fixes from a measurement table (DESIGN 4.1, 4.3).
+
+Without ``--static`` one snapshot fix per epoch with at least 7 satellites
+(position, velocity, frequency offset); with ``--static`` one batch fix of a
+receiver at rest from all rows (position, frequency offset and drift),
+optionally with a known height (``--alt-m``). Besides the contract's
+``solutions``, the JSON document lists the ``rejected`` rows and
+``unsolved`` epochs with their reasons; each solution carries a ``status``.
+"""
+
+import sys
+
+import numpy as np
+
+from ..errors import InputError
+from ..fileio import write_csv, write_json
+from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
+from ..orbits import load_constellation
+from ..positioning.doppler_ls import FixStatus
+from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
+from ..positioning.solve import position_snapshots, position_static
+from ..timebase import format_utc
+from . import add_command
+
+_DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
+
+
+def register(subparsers):
+    p = add_command(subparsers, "position", sys.modules[__name__], help="Doppler positioning from a measurement CSV",
+                    description=_DESCRIPTION)
+    p.add_argument("meas", metavar="MEAS.csv", help="Doppler measurements (DESIGN 4.3 columns)")
+    p.add_argument("--tle", metavar="FILE", help="element sets for rows without satellite state columns "
+                   "(default: the bundled constellation)")
+    p.add_argument("--carrier-hz", type=float, default=DEFAULT_CARRIER_HZ, metavar="F",
+                   help="carrier of rows without carrier_hz (default %(default)g)")
+    p.add_argument("--static", action="store_true", help="one batch fix of a receiver at rest")
+    p.add_argument("--init", metavar="LAT_DEG,LON_DEG,ALT_M", help="start position (default: below the satellites)")
+    p.add_argument("--alt-m", type=float, metavar="H", help="known height above the ellipsoid (with --static)")
+    p.add_argument("--alt-sigma-m", type=float, default=10.0, metavar="S",
+                   help="standard deviation of --alt-m (default %(default)g)")
+    p.add_argument("--sigma-hz", type=float, metavar="S",
+                   help="sigma of rows without sigma_hz (default: estimated from the residuals)")
+    p.add_argument("--alpha", type=float, default=1e-3, metavar="P",
+                   help="significance of the chi-square outlier test, 0 to disable (default %(default)g)")
+    return p
+
+
+def _site(text):
+    try:
+        lat, lon, alt = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--init {text!r}: expected LAT_DEG,LON_DEG,ALT_M") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 360):
+        raise InputError(f"--init {text!r}: latitude must be in [-90, 90] and longitude in [-180, 360] deg")
+    return geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
+
+
+def _check(args):
+    if args.alt_m is not None and not args.static:
+        raise InputError("--alt-m constrains a static fix; add --static")
+    for name in ("carrier_hz", "alt_sigma_m", "sigma_hz"):
+        value = getattr(args, name)
+        if value is not None and not value > 0:
+            raise InputError(f"--{name.replace('_', '-')} {value!r}: expected a positive number")
+    if not 0 <= args.alpha < 1:
+        raise InputError(f"--alpha {args.alpha!r}: expected a probability in [0, 1)")
+
+
+def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iterations, rms, status, cov_pos):
+    lat, lon, alt = ecef_to_geodetic(pos)
+    C = C_e_n(lat, lon)
+    sig_enu = np.sqrt(np.diagonal(C.T @ cov_pos @ C)) if np.isfinite(cov_pos).all() else [np.nan] * 3
+    return {
+        "t_s": float(t_s), "time_utc": None if time_utc is None else format_utc(time_utc),
+        "lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)), "alt_m": float(alt),
+        "x_m": pos[0], "y_m": pos[1], "z_m": pos[2], "vx_mps": vel[0], "vy_mps": vel[1], "vz_mps": vel[2],
+        "clock_offset_hz": clock_hz, "gdop": gdop, "n_sats": int(n_sats), "n_used": int(n_used),
+        "iterations": int(iterations), "residual_rms_hz": rms, "status": FixStatus(int(status)).name.lower(),
+        "sigma_enu_m": list(sig_enu),
+    }
+
+
+def run(args):
+    _check(args)
+    meas = read_measurements(args.meas, carrier_hz=args.carrier_hz)
+    constellation = None if meas.pos_sv_ecef_m is not None else load_constellation(args.tle)
+    init = _site(args.init) if args.init else None
+    alpha = args.alpha or None
+    if args.static:
+        res = position_static(meas, constellation=constellation, init_pos_ecef_m=init, alt_m=args.alt_m,
+                              alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz, alpha=alpha)
+        f = res.fixes
+        sol = _solution(res.t_s[0], None if res.time_utc is None else res.time_utc[0], f.pos_ecef_m, np.zeros(3),
+                        f.clock_offset_hz, f.gdop, res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz,
+                        f.status, f.cov[:3, :3])
+        sol["clock_drift_hz_per_s"] = f.clock_drift_hz_per_s
+        solutions = [sol]
+        residuals = [(int(meas.line[k]), meas.t_s[k], meas.sat_id[k], f.residuals_hz[k], bool(f.used[k]))
+                     for k in range(len(meas))]
+    else:
+        res = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=init, sigma_hz=args.sigma_hz,
+                                 alpha=alpha)
+        f = res.fixes
+        rms = f.residual_rms_hz
+        solutions = [
+            _solution(res.t_s[k], None if res.time_utc is None else res.time_utc[k], f.pos_ecef_m[k],
+                      f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k], res.n_sats[k], f.n_used[k],
+                      f.iterations[k], rms[k], f.status[k], f.cov[k, :3, :3])
+            for k in np.flatnonzero(res.n_sats >= 7)
+        ]
+        ep, sl = np.nonzero(res.rows >= 0)
+        residuals = [(int(meas.line[i]), meas.t_s[i], meas.sat_id[i], f.residuals_hz[e, s], bool(f.used[e, s]))
+                     for e, s, i in zip(ep, sl, res.rows[ep, sl])]
+    for line, reason in res.rejected:
+        print(f"leosop position: warning: {meas.source}:{line}: {reason}", file=sys.stderr)
+    doc = {
+        "solutions": solutions,
+        "mode": "static" if args.static else "snapshot",
+        "sv_states": res.sv_states,
+        "sigma_hz_default": res.sigma_hz_default,
+        "rejected": [{"line": line, "reason": reason} for line, reason in res.rejected],
+        "unsolved": [{"t_s": t, "time_utc": None if u is None else format_utc(u), "reason": why}
+                     for t, u, why in res.unsolved],
+    }
+    if args.out:
+        write_json(f"{args.out}/position.json", doc)
+        keys = list(solutions[0]) if solutions else []
+        write_csv(f"{args.out}/fixes.csv", keys, [[s[k] for k in keys] for s in solutions])
+        write_csv(f"{args.out}/residuals.csv", ["line", "t_s", "sat_id", "residual_hz", "used"], residuals)
+    return doc
+
+
+def _fmt(value, spec):
+    return "nan" if value is None else format(value, spec)
+
+
+def summary(doc):
+    lines = []
+    for s in doc["solutions"]:
+        f = {k: _fmt(s[k], spec) for k, spec in (
+            ("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f"), ("vx_mps", ".3f"), ("vy_mps", ".3f"),
+            ("vz_mps", ".3f"), ("clock_offset_hz", ".3f"), ("gdop", ".3g"), ("residual_rms_hz", ".3g"))}
+        when = s["time_utc"] or f"t={s['t_s']:.3f} s"
+        lines.append(f"{when}  {f['lat_deg']} {f['lon_deg']} {f['alt_m']} m  v=({f['vx_mps']}, {f['vy_mps']}, {f['vz_mps']}) m/s  "
+                     f"clock {f['clock_offset_hz']} Hz  gdop {f['gdop']}  {s['n_used']}/{s['n_sats']} sats  "
+                     f"rms {f['residual_rms_hz']} Hz  {s['status']}")
+    lines.append(f"{len(doc['solutions'])} fix(es), {len(doc['unsolved'])} epoch(s) unsolved, "
+                 f"{len(doc['rejected'])} row(s) rejected")
+    return "\n".join(lines)

@@ -1,0 +1,249 @@
+"""From a measurement table to fixes: satellite states, grouping, sigmas, solving.
+
+What ``leosop position`` does, as functions:
+
+1. satellite states from the table's state columns, or from element sets
+   with light time (:func:`~leosop.positioning.measurements.sv_states_from_tle`)
+   computed for the start position and again for the solution;
+2. rows grouped into epochs (snapshot) or taken together (static);
+3. rows without ``sigma_hz`` get the caller's sigma, or one estimated from
+   the data: a first solve with unit weights, then the robust (MAD) scale of
+   its residuals, corrected for the states the fit absorbs;
+4. :func:`~leosop.positioning.doppler_ls.solve_snapshots` or
+   :func:`~leosop.positioning.doppler_ls.solve_static`.
+
+Rows that cannot be used and epochs that cannot be solved are reported,
+never silently dropped; the rest is still solved.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .doppler_ls import N_STATIC_STATES, solve_snapshots, solve_static, subpoint_centroid_ecef_m
+from .dop import N_DOPPLER_STATES
+from .measurements import sv_states_from_tle
+
+__all__ = ["PositionResult", "position_snapshots", "position_static", "satellite_states"]
+
+#: MAD to standard deviation for Gaussian residuals.
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True, eq=False)
+class PositionResult:
+    """Fixes with the bookkeeping that relates them to the table.
+
+    Attributes
+    ----------
+    fixes : SnapshotFixes or StaticFix
+    t_s : ndarray, (n_ep,)
+        Epoch times (snapshot) or the reference time (static, one value).
+    time_utc : ndarray of datetime64[ns], (n_ep,), or None
+    n_sats : ndarray of int, (n_ep,)
+        Satellites with a usable measurement at each epoch (static: distinct
+        satellites in the batch).
+    rows : ndarray of int, (n_ep, n_sv) or (m,)
+        Index into the measurements of each slot of the solver arrays, -1 for padding.
+    rejected : list of (int, str)
+        Line numbers and reasons of unusable rows (reading and states).
+    unsolved : list of (float, datetime64 or None, str)
+        Epochs (snapshot) without a fix and why.
+    sigma_hz_default : float
+        Sigma given to rows without one (estimated when not supplied).
+    sv_states : str
+        ``"csv"`` or ``"tle"``.
+    """
+
+    fixes: object
+    t_s: np.ndarray
+    time_utc: np.ndarray
+    n_sats: np.ndarray
+    rows: np.ndarray
+    rejected: list
+    unsolved: list
+    sigma_hz_default: float
+    sv_states: str
+
+
+def satellite_states(meas, constellation=None, pos_rx_ecef_m=None):
+    """Satellite states per row: the table's columns, else element sets with light time.
+
+    Parameters
+    ----------
+    meas : Measurements
+    constellation : Constellation, optional
+        Needed when the table has no state columns.
+    pos_rx_ecef_m : array_like, (n, 3) or (3,), optional
+        Receiver position for the light time.
+
+    Returns
+    -------
+    pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n, 3)
+    reason : ndarray of str, (n,)
+    source : str
+        ``"csv"`` or ``"tle"``.
+    """
+    if meas.pos_sv_ecef_m is not None:
+        ok = np.isfinite(meas.pos_sv_ecef_m).all(-1) & np.isfinite(meas.vel_sv_ecef_mps).all(-1)
+        reason = np.where(ok, "", "satellite state column is empty or not a number")
+        return meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, reason, "csv"
+    if constellation is None:
+        raise InputError(f"{meas.source}: no satellite state columns ({', '.join(('x_sv_m', '...'))}); "
+                         "give element sets with --tle")
+    if meas.time_utc is None:
+        raise InputError(f"{meas.source}: satellite states from --tle need a time_utc column (the table has t_s)")
+    pos, vel, reason = sv_states_from_tle(constellation, meas.sat_id, meas.time_utc, pos_rx_ecef_m)
+    return pos, vel, reason, "tle"
+
+
+def _epochs(meas):
+    """Epoch index of each row, epoch times, and each row's slot within its epoch."""
+    key = meas.time_utc.astype(np.int64) if meas.time_utc is not None else meas.t_s
+    _, first, epoch = np.unique(key, return_index=True, return_inverse=True)
+    order = np.argsort(epoch, kind="stable")
+    counts = np.bincount(epoch)
+    slot = np.empty(len(epoch), dtype=int)
+    slot[order] = np.arange(len(epoch)) - np.repeat(np.cumsum(counts) - counts, counts)
+    return epoch, first, slot, counts.max()
+
+
+def _robust_sigma(residuals_hz, n_states):
+    """Robust scale of least-squares residuals (..., m), corrected for the fitted states."""
+    r = residuals_hz[np.isfinite(residuals_hz)]
+    n_fits = np.count_nonzero(np.isfinite(residuals_hz).any(-1)) if residuals_hz.ndim > 1 else 1
+    if r.size <= n_states * n_fits:
+        return np.nan
+    mad = np.median(np.abs(r - np.median(r)))
+    return float(_MAD_TO_SIGMA * mad * np.sqrt(r.size / (r.size - n_states * n_fits)))
+
+
+def _rejections(meas, reason):
+    return list(meas.rejected) + [(int(meas.line[k]), str(reason[k])) for k in np.flatnonzero(reason != "")]
+
+
+def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_hz=None, alpha=1e-3):
+    """One snapshot fix per epoch with at least 7 usable satellites.
+
+    Parameters
+    ----------
+    meas : Measurements
+    constellation : Constellation, optional
+        Element sets, when the table has no state columns.
+    init_pos_ecef_m : array_like, (3,), optional
+        Start position of every epoch; default the ground point below the
+        satellites.
+    sigma_hz : float, optional
+        Sigma of rows without one; default estimated from the residuals.
+    alpha : float or None
+        Significance of the outlier test.
+
+    Returns
+    -------
+    PositionResult
+    """
+    epoch, first, slot, n_sv = _epochs(meas)
+    n_ep = len(first)
+    rows = np.full((n_ep, n_sv), -1)
+    rows[epoch, slot] = np.arange(len(meas))
+    pos, vel, reason, source = satellite_states(meas, constellation)
+    usable = reason == ""
+    mask = (rows >= 0) & usable[np.maximum(rows, 0)]
+    n_sats = mask.sum(-1)
+    take = lambda a: np.where(mask[..., None] if a.ndim == 2 else mask, a[np.maximum(rows, 0)], np.nan)  # noqa: E731
+    r_s, v_s = take(pos), take(vel)
+    if init_pos_ecef_m is not None:
+        x0 = np.zeros((n_ep, N_DOPPLER_STATES))
+        x0[:, :3] = np.asarray(init_pos_ecef_m, float)
+    else:
+        x0 = np.zeros((n_ep, N_DOPPLER_STATES))
+        x0[:, :3] = np.nan_to_num(subpoint_centroid_ecef_m(r_s, mask))
+    y, f0 = take(meas.doppler_hz), take(meas.carrier_hz)
+    sigma_row = take(meas.sigma_hz)
+    enough = n_sats >= N_DOPPLER_STATES
+    if not enough.any():
+        raise InputError(f"{meas.source}: fewer than {N_DOPPLER_STATES} usable satellites at every epoch "
+                         f"(at most {n_sats.max()}); a snapshot fix needs {N_DOPPLER_STATES}")
+    if sigma_hz is None and np.isnan(sigma_row[mask]).any():
+        pilot = solve_snapshots(y, np.nan_to_num(sigma_row, nan=1.0), r_s, v_s, f0, mask & enough[:, None], x0,
+                                alpha=None)
+        sigma_hz = _robust_sigma(pilot.residuals_hz[enough], N_DOPPLER_STATES)
+        if not np.isfinite(sigma_hz) or sigma_hz <= 0:
+            sigma_hz = 1.0
+    sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan
+    sigma = np.where(np.isfinite(sigma_row), sigma_row, sigma_default)
+    for _ in range(2 if source == "tle" else 1):
+        if source == "tle":
+            # Light time from the current receiver position of each row's epoch.
+            rx = np.where(np.isfinite(x0[epoch, :3]), x0[epoch, :3], 0.0)
+            pos, vel, reason, _ = satellite_states(meas, constellation, rx)
+            r_s, v_s = take(pos), take(vel)
+        fixes = solve_snapshots(y, sigma, r_s, v_s, f0, mask & enough[:, None], x0, alpha=alpha)
+        solved = np.isfinite(fixes.pos_ecef_m).all(-1)
+        x0 = np.where(solved[:, None], np.concatenate(
+            [fixes.pos_ecef_m, fixes.vel_ecef_mps, fixes.clock_offset_hz[:, None]], -1), x0)
+    t_s = meas.t_s[first]
+    time_utc = None if meas.time_utc is None else meas.time_utc[first]
+    unsolved = [(float(t_s[k]), None if time_utc is None else time_utc[k],
+                 f"only {n_sats[k]} usable satellites, a snapshot fix needs {N_DOPPLER_STATES}")
+                for k in np.flatnonzero(~enough)]
+    return PositionResult(fixes, t_s, time_utc, n_sats, rows, _rejections(meas, reason), unsolved,
+                          sigma_default, source)
+
+
+def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
+                    sigma_hz=None, alpha=1e-3):
+    """One batch fix of a receiver at rest from all rows.
+
+    Parameters
+    ----------
+    meas : Measurements
+    constellation : Constellation, optional
+    init_pos_ecef_m : array_like, (3,), optional
+        Start position; default three starts on the ground around the
+        satellites (see :func:`~leosop.positioning.doppler_ls.solve_static`).
+    alt_m : float, optional
+        Known height above the ellipsoid, with standard deviation ``alt_sigma_m``.
+    sigma_hz : float, optional
+        Sigma of rows without one; default estimated from the residuals.
+    alpha : float or None
+
+    Returns
+    -------
+    PositionResult
+    """
+    pos, vel, reason, source = satellite_states(meas, constellation)
+    usable = reason == ""
+    n_need = N_STATIC_STATES - (alt_m is not None)
+    if usable.sum() < n_need:
+        raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {n_need}"
+                         + (f" (first problem: line {meas.line[~usable][0]}: {reason[~usable][0]})"
+                            if (~usable).any() else ""))
+    pos0 = init_pos_ecef_m
+    kw = dict(alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable)
+    if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
+        pilot = solve_static(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel, meas.carrier_hz,
+                             meas.t_s, pos0_ecef_m=pos0, alpha=None, **kw)
+        sigma_hz = _robust_sigma(pilot.residuals_hz, N_STATIC_STATES)
+        if not np.isfinite(sigma_hz) or sigma_hz <= 0:
+            sigma_hz = 1.0
+        if np.isfinite(pilot.pos_ecef_m).all():
+            pos0 = pilot.pos_ecef_m
+    sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan
+    sigma = np.where(np.isfinite(meas.sigma_hz), meas.sigma_hz, sigma_default)
+    for _ in range(2 if source == "tle" else 1):
+        if source == "tle" and pos0 is not None:
+            pos, vel, reason, _ = satellite_states(meas, constellation, pos0)
+        fix = solve_static(meas.doppler_hz, sigma, pos, vel, meas.carrier_hz, meas.t_s, pos0_ecef_m=pos0,
+                           alpha=alpha, **kw)
+        if np.isfinite(fix.pos_ecef_m).all():
+            pos0 = fix.pos_ecef_m
+        elif pos0 is None:
+            break
+    t_ref = np.array([fix.t_ref_s])
+    time_utc = None if meas.time_utc is None else \
+        meas.epoch_utc + np.array([np.round(fix.t_ref_s * 1e9)], dtype="timedelta64[ns]")
+    n_sats = np.array([len(np.unique(meas.sat_id[usable]))])
+    return PositionResult(fix, t_ref, time_utc, n_sats, np.arange(len(meas)), _rejections(meas, reason), [],
+                          sigma_default, source)
