@@ -21,7 +21,7 @@ import sys
 from ..errors import ExternalError, InputError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle",)
+COMMANDS = ("visibility", "tle", "position",)
 
 
 def add_command(subparsers, name, module, *, help, description=None):
