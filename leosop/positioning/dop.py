@@ -55,7 +55,7 @@ def cofactor(H, weights=None, *, rcond=1e-12):
     weights : array_like, (..., n_rows), optional
         Row weights (1/sigma^2); 0 drops a row (e.g. a satellite below the mask).
     rcond : float
-        Smallest accepted eigenvalue ratio of ``H^T W H``.
+        Smallest accepted eigenvalue ratio of ``H^T W H`` scaled to unit diagonal.
 
     Returns
     -------
@@ -65,10 +65,14 @@ def cofactor(H, weights=None, *, rcond=1e-12):
     w = np.ones(H.shape[:-1]) if weights is None else np.nan_to_num(np.asarray(weights, dtype=float))
     n_states = H.shape[-1]
     HtH = np.einsum("...ki,...k,...kj->...ij", H, w, H)
-    lam, V = np.linalg.eigh(HtH)
-    ok = (lam[..., 0] > rcond * np.abs(lam[..., -1])) & (np.count_nonzero(w, axis=-1) >= n_states)
+    # Columns differ by orders of magnitude (Hz/m against Hz/(m/s)): judge the
+    # rank on the equilibrated matrix D HtH D with unit diagonal, then unscale.
+    diag = np.einsum("...ii->...i", HtH)
+    d = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+    lam, V = np.linalg.eigh(HtH * d[..., :, None] * d[..., None, :])
+    ok = (lam[..., 0] > rcond * np.abs(lam[..., -1])) & (np.count_nonzero(w, axis=-1) >= n_states) & (diag > 0).all(-1)
     inv_lam = np.where(ok[..., None], 1.0 / np.where(ok[..., None], lam, 1.0), np.nan)
-    return np.einsum("...ik,...k,...jk->...ij", V, inv_lam, V)
+    return np.einsum("...ik,...k,...jk->...ij", V, inv_lam, V) * d[..., :, None] * d[..., None, :]
 
 
 def gdop(H, weights=None):
