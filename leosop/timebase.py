@@ -6,9 +6,12 @@ survive; Earth orientation needs UT1, taken from skyfield's bundled IERS
 table (observed values, then its predictions).
 """
 
+import re
 from functools import lru_cache
 
 import numpy as np
+
+from .errors import InputError
 
 __all__ = ["parse_utc", "format_utc", "seconds_since", "jd_utc", "jd_ut1", "ut1_minus_utc_s"]
 
@@ -42,10 +45,12 @@ def parse_utc(value, *, name="time"):
             s = s[:-1]
         elif s.endswith("+00:00"):
             s = s[:-6]
+        if re.search(r"T.*[+-]\d\d:?\d\d$", s):
+            raise InputError(f"{name}: {str(text)!r} has a UTC offset; give the time in UTC (ending in Z)")
         try:
             flat.append(np.datetime64(s, "ns"))
         except ValueError:
-            raise ValueError(f"{name}: {str(text)!r} is not an ISO 8601 UTC time (e.g. 2024-01-02T03:04:05Z)") from None
+            raise InputError(f"{name}: {str(text)!r} is not an ISO 8601 UTC time (e.g. 2024-01-02T03:04:05Z)") from None
     out = np.array(flat, dtype="datetime64[ns]").reshape(arr.shape)
     return out[()]
 

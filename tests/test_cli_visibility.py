@@ -1,0 +1,107 @@
+"""`leosop visibility` and `leosop tle`: the JSON contract, bad input, and fetching."""
+
+import http.server
+import json
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from leosop.cli import main
+from leosop.orbits import DEFAULT_TLE
+
+
+def run_cli(*args):
+    proc = subprocess.run([sys.executable, "-m", "leosop", *args], capture_output=True, text=True)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def test_json_contract_and_outputs(tmp_path, capsys):
+    code = main(["visibility", "--start", "2025-01-01T00:00:00Z", "--duration-s", "300", "--step-s", "5",
+                 "--mask-deg", "40", "--json", "--out", str(tmp_path)])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert set(doc) == {"epochs_utc", "n_visible", "gdop", "visible_ids"}
+    assert len(doc["epochs_utc"]) == 61 and doc["epochs_utc"][1] == "2025-01-01T00:00:05.000000Z"
+    for n, g, ids in zip(doc["n_visible"], doc["gdop"], doc["visible_ids"]):
+        assert n == len(ids) and all(isinstance(s, str) and s.isdigit() for s in ids)
+        assert (g is None) == (n < 7)
+    for name in ("visibility.json", "visibility.csv", "passes.csv", "visibility.png", "skyplot.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert json.loads((tmp_path / "visibility.json").read_text()) == doc
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--site", "91,0,0"], "latitude 91 deg is outside"),
+    (["--site", "10,20"], "expected LAT_DEG,LON_DEG,ALT_M"),
+    (["--duration-s", "-60"], "--duration-s -60: must be a positive"),
+    (["--mask-deg", "90"], "elevation mask must be in [0, 90)"),
+    (["--mask-deg", "-1"], "elevation mask must be in [0, 90)"),
+    (["--start", "not-a-time"], "--start: 'not-a-time' is not an ISO 8601"),
+    (["--tle", "/nonexistent/x.tle"], "no such TLE file"),
+])
+def test_bad_input_is_one_line_exit_2_and_no_output(tmp_path, capsys, args, message):
+    out = tmp_path / "out"
+    code = main(["visibility", "--duration-s", "10", *args, "--out", str(out), "--json"])
+    stdout, stderr = capsys.readouterr()
+    assert code == 2
+    assert stdout == ""
+    assert message in stderr and len(stderr.strip().splitlines()) == 1
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_malformed_tle_file_is_reported_with_line_and_no_traceback(tmp_path):
+    lines = DEFAULT_TLE.read_text().splitlines()[:6]
+    lines[4] = lines[4][:68] + str((int(lines[4][68]) + 1) % 10)
+    bad = tmp_path / "bad.tle"
+    bad.write_text("\n".join(lines) + "\n")
+    code, _, stderr = run_cli("visibility", "--tle", str(bad), "--duration-s", "10")
+    assert code == 2 and f"{bad}:5: bad TLE checksum on line 1" in stderr
+
+
+class _Handler(http.server.BaseHTTPRequestHandler):
+    body = b""
+
+    def do_GET(self):  # noqa: N802 (http.server API)
+        self.send_response(200 if self.body else 404)
+        self.end_headers()
+        self.wfile.write(self.body)
+
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture()
+def server():
+    httpd = http.server.HTTPServer(("127.0.0.1", 0), _Handler)
+    thread = threading.Thread(target=httpd.serve_forever, daemon=True)
+    thread.start()
+    yield httpd
+    httpd.shutdown()
+
+
+def test_tle_fetch_from_a_local_server(tmp_path, server, capsys):
+    _Handler.body = "\n".join(DEFAULT_TLE.read_text().splitlines()[:30]).encode() + b"\n"
+    url = f"http://127.0.0.1:{server.server_port}/gp.php"
+    out = tmp_path / "starlink.tle"
+    assert main(["tle", "fetch", "starlink", "-o", str(out), "--url", url, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["n_sats"] == 10 and doc["by_family"] == {"starlink": 10}
+    assert out.read_bytes() == _Handler.body
+
+
+def test_tle_fetch_failures_leave_no_file(tmp_path, server):
+    out = tmp_path / "x.tle"
+    _Handler.body = b"<html>not element sets</html>\n"
+    code, _, stderr = run_cli("tle", "fetch", "starlink", "-o", str(out), "--url",
+                              f"http://127.0.0.1:{server.server_port}/gp.php")
+    assert code == 1 and "do not parse" in stderr and not out.exists()
+    _Handler.body = b""
+    code, _, stderr = run_cli("tle", "fetch", "starlink", "-o", str(out), "--url",
+                              f"http://127.0.0.1:{server.server_port}/gp.php")
+    assert code == 1 and "HTTP 404" in stderr and not out.exists()
+    # Nothing listens on port 9 of the loopback: a clear network error.
+    code, _, stderr = run_cli("tle", "fetch", "starlink", "-o", str(out), "--url", "http://127.0.0.1:9/gp.php")
+    assert code == 1 and "cannot download" in stderr and len(stderr.strip().splitlines()) == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == []
