@@ -1,0 +1,331 @@
+"""End-to-end simulation of seed 004's experiment: truth flight, IMU, LEO Doppler, fixes, loose EKF.
+
+:func:`run_scenario` is the one entry point; the ``simulate`` command and the
+table reproductions call it. For a scenario it
+
+1. flies the truth trajectory and corrupts its ideal IMU increments
+   (seed 004 Table 1; bias signs drawn per run);
+2. finds the visible satellites at 1 Hz (:mod:`leosop.orbits.visibility`)
+   and their true Doppler, plus a constant clock-induced offset per satellite
+   drawn uniformly in [0, max] and the receiver's fixed offset;
+3. measures every Doppler, either at signal level (a pilot block per
+   satellite-epoch, estimated by the ``fast`` estimator) or at measurement
+   level (the estimator's error model);
+4. solves a snapshot Doppler fix per epoch with 7 or more satellites, with
+   satellite positions carrying a constant orbit error per satellite;
+5. runs the INS alone and the loose EKF (:mod:`leosop.fusion.loose`).
+
+Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent
+streams for the IMU, the satellite offsets and orbit errors, and the
+measurement noise, so that the IMU errors of a seed are the same at both
+levels and for every correction period.
+
+The fix's weights (and so the ``R`` of the EKF) account for every error
+source the receiver knows the size of: estimator noise, the spread of the
+satellite offsets about their mean (the mean is absorbed by the receiver
+offset) and the orbit error mapped through the Doppler's sensitivity to the
+satellite position.
+"""
+
+import dataclasses
+import time
+import warnings
+
+import numpy as np
+
+from . import earth, frames
+from .constants import C_MPS, G0_MPS2
+from .errors import InputError
+from .fusion import kalman, loose
+from .ins import imu, strapdown, trajectory
+from .orbits import CARRIERS, load_constellation
+from .orbits.visibility import compute_visibility
+from .positioning.dop import doppler_jacobian
+from .positioning.doppler_ls import FixStatus, solve_snapshots
+from .signal.crlb import crlb_frequency_hz2
+from .timebase import format_utc, seconds_since
+
+__all__ = ["SimulationResult", "run_scenario", "metrics", "LEVELS", "COUPLINGS"]
+
+LEVELS = ("signal", "measurement")
+COUPLINGS = ("loose", "tight")
+#: Fusion and fix rate of seed 004 (1 Hz).
+STEP_S = 1.0
+#: Initial attitude uncertainty of the filter (E, N, U) [deg]: the paper
+#: gives none; the truth starts without attitude error, these are the
+#: figures of a fine-aligned navigation-grade INS.
+ATT_SIGMA_DEG = (0.01, 0.01, 0.05)
+#: Element sets further than this from the start earn a warning.
+STALE_TLE_DAYS = 14.0
+#: Pilot blocks (signal level): 9 tones, block length and sample rate.
+#: 20 ms at 500 kHz (1e4 samples) covers the +-176 kHz comb and keeps the
+#: default run well under a minute.
+BLOCK_S = 0.02
+SAMPLE_RATE_HZ = 500e3
+
+
+@dataclasses.dataclass(frozen=True)
+class SimulationResult:
+    """Everything a run produced, at the 1 Hz epochs ``t_s`` (n,).
+
+    Attributes
+    ----------
+    scenario : leosop.scenarios.Scenario
+    level, coupling : str
+    correction_period_s, orbit_error_m : float
+    seed : int
+    times_utc : ndarray of datetime64[ns], (n,)
+    t_s : ndarray, (n,)
+    truth_pos_ecef_m, truth_vel_enu_mps : ndarray, (n, 3)
+    truth_lat_rad, truth_lon_rad : ndarray, (n,)
+    ins_pos_ecef_m, ins_vel_enu_mps : ndarray, (n, 3)
+        INS alone, from the same erroneous start and IMU.
+    fix_pos_ecef_m, fix_vel_enu_mps : ndarray, (n, 3)
+        LEO snapshot fixes; NaN where none.
+    fix_cov : ndarray, (n, 7, 7)
+    fused : leosop.fusion.loose.LooseResult
+    n_visible : ndarray of int, (n,)
+    gdop : ndarray, (n,)
+        Eq. 10 along the true flight; NaN below 7 satellites.
+    tle_age_days : float
+    runtime_s : float
+    """
+
+    scenario: object
+    level: str
+    coupling: str
+    correction_period_s: float
+    orbit_error_m: float
+    seed: int
+    times_utc: np.ndarray
+    t_s: np.ndarray
+    truth_pos_ecef_m: np.ndarray
+    truth_vel_enu_mps: np.ndarray
+    truth_lat_rad: np.ndarray
+    truth_lon_rad: np.ndarray
+    ins_pos_ecef_m: np.ndarray
+    ins_vel_enu_mps: np.ndarray
+    fix_pos_ecef_m: np.ndarray
+    fix_vel_enu_mps: np.ndarray
+    fix_cov: np.ndarray
+    fused: loose.LooseResult
+    n_visible: np.ndarray
+    gdop: np.ndarray
+    tle_age_days: float
+    runtime_s: float
+
+    def errors(self):
+        """3D position [m] and velocity [m/s] errors, dict of (n,) arrays per solution."""
+        out = {}
+        for key, pos, vel in (("ins_only", self.ins_pos_ecef_m, self.ins_vel_enu_mps),
+                              ("leo_fix", self.fix_pos_ecef_m, self.fix_vel_enu_mps),
+                              ("fused", self.fused.pos_ecef_m, self.fused.vel_enu_mps)):
+            out[key] = (np.linalg.norm(pos - self.truth_pos_ecef_m, axis=-1),
+                        np.linalg.norm(vel - self.truth_vel_enu_mps, axis=-1))
+        return out
+
+    def error_enu(self):
+        """Fused errors ``[dv_enu, dpos_enu]`` (n, 6), m/s and m, in the filter's state order."""
+        dpos = frames.ecef_to_enu(self.fused.pos_ecef_m - self.truth_pos_ecef_m, self.truth_lat_rad,
+                                  self.truth_lon_rad)
+        return np.concatenate([self.fused.vel_enu_mps - self.truth_vel_enu_mps, dpos], axis=-1)
+
+    def nees(self):
+        """NEES of the fused position and velocity (6 dof), (n,)."""
+        return kalman.nees(self.error_enu(), self.fused.pos_vel_cov_enu())
+
+    def nis(self):
+        """NIS of the updates (6 dof), (n_updates,)."""
+        u = self.fused.updated
+        return kalman.nis(self.fused.innovation[u], self.fused.innovation_cov[u])
+
+
+def _check_options(level, coupling, correction_period_s, orbit_error_m):
+    if level not in LEVELS:
+        raise InputError(f"--level {level!r}: expected one of {', '.join(LEVELS)}")
+    if coupling not in COUPLINGS:
+        raise InputError(f"--coupling {coupling!r}: expected one of {', '.join(COUPLINGS)}")
+    if coupling == "tight":
+        raise InputError("--coupling tight: not implemented yet (the EKF updating directly with Doppler); "
+                         "use --coupling loose")
+    if not (np.isfinite(correction_period_s) and correction_period_s > 0):
+        raise InputError(f"--correction-period-s {correction_period_s:g}: must be a positive number of seconds")
+    if orbit_error_m is not None and not (np.isfinite(orbit_error_m) and orbit_error_m >= 0):
+        raise InputError(f"--orbit-error-m {orbit_error_m:g}: must be a number >= 0")
+
+
+def _imu_errors(spec, rng):
+    """Seed 004 Table 1 errors with the constant biases' signs drawn per axis."""
+    signs_g, signs_a = rng.choice([-1.0, 1.0], size=(2, 3))
+    return imu.ImuErrors.from_quoted(
+        gyro_bias_deg_per_h=signs_g * spec.gyro_bias_deg_per_h, gyro_arw_deg_per_rt_h=spec.gyro_arw_deg_per_rt_h,
+        accel_bias_g=signs_a * spec.accel_bias_g, accel_vrw_g_per_rt_hz=spec.accel_vrw_g_per_rt_hz)
+
+
+def _filter_settings(scenario, errors, correction_period_s):
+    init = scenario.init_error
+    return loose.FilterSettings(
+        pos_sigma_m=tuple(max(abs(v), 1.0) for v in init.pos_m),
+        vel_sigma_mps=tuple(max(abs(v), 0.01) for v in init.vel_mps),
+        att_sigma_rad=tuple(np.radians(ATT_SIGMA_DEG)),
+        gyro_bias_sigma_rad_per_s=max(float(np.abs(errors.gyro_bias_rad_per_s).max()), 1e-9),
+        accel_bias_sigma_mps2=max(float(np.abs(errors.accel_bias_mps2).max()), 1e-7),
+        gyro_arw_rad_per_rt_s=float(errors.gyro_arw_rad_per_rt_s.max()),
+        accel_vrw_mps2_per_rt_hz=float(errors.accel_vrw_mps_per_rt_s.max()),
+        correction_period_s=correction_period_s, step_s=STEP_S)
+
+
+def _initial_state(truth, init):
+    """Truth at t = 0 plus the scenario's ENU position and velocity errors."""
+    lat, alt = truth.lat_rad[0], truth.alt_m[0]
+    R_M, R_N = earth.radii_m(lat)
+    de, dn, du = init.pos_m
+    return strapdown.NavState.from_dcm(lat + dn / (R_M + alt), truth.lon_rad[0] + de / ((R_N + alt) * np.cos(lat)),
+                                       alt + du, truth.vel_enu_mps[0] + np.asarray(init.vel_mps), truth.C_n_b[0])
+
+
+def _estimator_sigma_hz(cn0_dbhz):
+    """Doppler standard deviation of one pilot block: the comb's Cramer-Rao bound."""
+    n = int(round(BLOCK_S * SAMPLE_RATE_HZ))
+    return float(np.sqrt(crlb_frequency_hz2(cn0_dbhz, n, SAMPLE_RATE_HZ, amplitudes=np.ones(9))))
+
+
+def _measure_doppler(level, doppler_hz, cn0_dbhz, rng):
+    """Measured Doppler of every visible pair and its estimator sigma, (m,)."""
+    sigma = _estimator_sigma_hz(cn0_dbhz)
+    if level == "measurement":
+        return doppler_hz + sigma * rng.standard_normal(doppler_hz.shape), sigma
+    raise InputError("--level signal: the signal module is not available yet; use --level measurement")
+
+
+def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_error_m=None, seed=0, tle=None,
+                 coupling="loose", progress=None):
+    """Simulate one flight end to end.
+
+    Parameters
+    ----------
+    scenario : leosop.scenarios.Scenario
+    level : {"signal", "measurement"}
+    correction_period_s : float
+        Seconds between EKF corrections of the INS (Table 5: 1, 30, 60, 100).
+    orbit_error_m : float, optional
+        Satellite orbit error per ECEF axis (standard deviation, constant per
+        satellite); default the scenario's.
+    seed : int
+    tle : path, optional
+        Element-set file; default the bundled constellation.
+    coupling : {"loose", "tight"}
+        Only ``"loose"`` is implemented.
+    progress : callable, optional
+        Wraps long loops (e.g. :func:`leosop.progress.progress`).
+
+    Returns
+    -------
+    SimulationResult
+    """
+    tic = time.perf_counter()
+    _check_options(level, coupling, correction_period_s, orbit_error_m)
+    orbit_error_m = scenario.leo.orbit_error_m if orbit_error_m is None else float(orbit_error_m)
+    rng_imu, rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
+
+    constellation = load_constellation(tle)
+    if tle is not None and len(constellation.family("starlink")):
+        constellation = constellation.family("starlink")
+    tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / 86_400.0)
+    if tle_age_days > STALE_TLE_DAYS:
+        warnings.warn(f"scenario start {format_utc(scenario.start_utc)} is {tle_age_days:.0f} days from the "
+                      "nearest element-set epoch; satellite positions will be off by many kilometres",
+                      stacklevel=2)
+    carrier_hz = CARRIERS["starlink"].default_hz
+
+    # 1. Truth and IMU.
+    truth = trajectory.flight(np.asarray(scenario.waypoints), speed_mps=scenario.speed_mps,
+                              rate_hz=scenario.imu.rate_hz, duration_s=scenario.duration_s)
+    errors = _imu_errors(scenario.imu, rng_imu)
+    dtheta, dvel = imu.corrupt(truth.dtheta_b_rad, truth.dvel_b_mps, truth.dt_s, errors, rng_imu)
+    per_step = int(round(STEP_S / truth.dt_s))
+    n_ep = (truth.t_s.size - 1) // per_step + 1
+    truth1 = truth.at(truth.t_s[: (n_ep - 1) * per_step + 1: per_step])
+    t_s = truth1.t_s
+    times_utc = scenario.start_utc + (t_s * 1e9).round().astype("timedelta64[ns]")
+    pos_rx = truth1.pos_ecef_m
+    C_e_n = frames.C_e_n(truth1.lat_rad, truth1.lon_rad)
+    vel_rx = np.einsum("kij,kj->ki", C_e_n, truth1.vel_enu_mps)
+
+    # 2. INS alone.
+    state0 = _initial_state(truth1, scenario.init_error)
+    ins = strapdown.integrate(state0, dtheta[: (n_ep - 1) * per_step], dvel[: (n_ep - 1) * per_step], truth.dt_s,
+                              out_every=per_step // 2)
+    ins_pos = frames.geodetic_to_ecef(ins.lat_rad, ins.lon_rad, ins.alt_m)
+    ins_vel_ecef = np.einsum("kij,kj->ki", frames.C_e_n(ins.lat_rad, ins.lon_rad), ins.vel_enu_mps)
+
+    # 3. Visibility and Doppler.
+    vis = compute_visibility(constellation, times_utc, pos_rx, scenario.mask_deg, vel_rx_ecef_mps=vel_rx,
+                             show_progress=progress is not None)
+    n_visible = vis.n_visible
+    gdop = vis.doppler_gdop(carrier_hz)
+    sat_offset_hz = rng_sat.uniform(0.0, scenario.leo.sat_doppler_offset_max_hz, len(constellation))
+    orbit_err = orbit_error_m * rng_sat.standard_normal((len(constellation), 3))
+    ep, sat = vis.epoch_index, vis.sat_index
+    range_rate = frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, pos_rx[ep], vel_rx[ep])
+    doppler_true = -range_rate * carrier_hz / C_MPS + sat_offset_hz[sat] + scenario.leo.rx_freq_offset_hz
+    doppler_meas, sigma_est = _measure_doppler(level, doppler_true, scenario.leo.cn0_dbhz, rng_meas)
+
+    # 4. Snapshot fixes from what the receiver knows: orbits with their errors.
+    pos_sv_known = vis.pos_sv_ecef_m + orbit_err[sat]
+    H_known = doppler_jacobian(pos_sv_known[:, None], vis.vel_sv_ecef_mps[:, None], ins_pos[ep], ins_vel_ecef[ep],
+                               carrier_hz)[:, 0]
+    sigma_hz = np.sqrt(sigma_est**2 + scenario.leo.sat_doppler_offset_max_hz**2 / 12.0
+                       + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
+    x0 = np.concatenate([ins_pos, ins_vel_ecef, np.zeros((n_ep, 1))], axis=-1)
+    fixes = solve_snapshots(vis.padded(doppler_meas), vis.padded(sigma_hz), vis.padded(pos_sv_known),
+                            vis.padded(vis.vel_sv_ecef_mps), carrier_hz, x0=x0)
+    good = (fixes.status == FixStatus.OK) & (n_visible >= 7)
+    fix_pos = np.where(good[:, None], fixes.pos_ecef_m, np.nan)
+    fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
+    fix_cov = np.where(good[:, None, None], fixes.cov, np.nan)
+
+    # 5. Loose EKF.
+    settings = _filter_settings(scenario, errors, correction_period_s)
+    fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, fix_cov[:, :6, :6]), settings,
+                      progress=progress)
+    fix_vel_enu = np.einsum("kji,kj->ki", C_e_n, fix_vel)
+    return SimulationResult(
+        scenario=scenario, level=level, coupling=coupling, correction_period_s=float(correction_period_s),
+        orbit_error_m=orbit_error_m, seed=int(seed), times_utc=times_utc, t_s=t_s,
+        truth_pos_ecef_m=pos_rx, truth_vel_enu_mps=truth1.vel_enu_mps, truth_lat_rad=truth1.lat_rad,
+        truth_lon_rad=truth1.lon_rad, ins_pos_ecef_m=ins_pos, ins_vel_enu_mps=ins.vel_enu_mps,
+        fix_pos_ecef_m=fix_pos, fix_vel_enu_mps=fix_vel_enu, fix_cov=fix_cov, fused=fused, n_visible=n_visible,
+        gdop=gdop, tle_age_days=tle_age_days, runtime_s=time.perf_counter() - tic)
+
+
+def metrics(result):
+    """The ``simulate`` JSON document (DESIGN.md 4.1), every key present.
+
+    Means are over the 1 Hz output epochs after the start (t >= 1 s);
+    ``availability`` is the fraction of those epochs with a fused output.
+    """
+    err = result.errors()
+    out = slice(1, None)
+
+    def mean(a):
+        a = a[out]
+        a = a[np.isfinite(a)]
+        return float(a.mean()) if a.size else None
+
+    fused_pos = err["fused"][0][out]
+    fix_ok = np.isfinite(err["leo_fix"][0][out])
+    gdop = result.gdop[np.isfinite(result.gdop)]
+    return {
+        "scenario": result.scenario.name,
+        "duration_s": float(result.t_s[-1]),
+        "ins_only": {"pos_err_mean_m": mean(err["ins_only"][0]), "vel_err_mean_mps": mean(err["ins_only"][1])},
+        "leo_fix": {"pos_err_mean_m": mean(err["leo_fix"][0]), "vel_err_mean_mps": mean(err["leo_fix"][1]),
+                    "n_fixes": int(fix_ok.sum())},
+        "fused": {"pos_err_mean_m": mean(err["fused"][0]), "vel_err_mean_mps": mean(err["fused"][1]),
+                  "pos_err_rms_m": float(np.sqrt(np.nanmean(fused_pos**2))) if np.isfinite(fused_pos).any() else None,
+                  "availability": float(np.isfinite(fused_pos).mean())},
+        "visible": {"min": int(result.n_visible.min()), "max": int(result.n_visible.max())},
+        "gdop": {"max": float(gdop.max()) if gdop.size else None},
+        "runtime_s": float(result.runtime_s),
+    }
