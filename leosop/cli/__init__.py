@@ -21,7 +21,7 @@ import sys
 from ..errors import ExternalError, InputError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle", "position",)
+COMMANDS = ("visibility", "tle", "position", "simulate",)
 
 
 def add_command(subparsers, name, module, *, help, description=None):
