@@ -402,3 +402,36 @@ def metrics(result):
         "gdop": {"max": float(gdop.max()) if gdop.size else None},
         "runtime_s": float(result.runtime_s),
     }
+
+
+def solution_table(result):
+    """The solution CSV: header and rows, one per 1 Hz epoch.
+
+    Columns: time; truth, INS-only, LEO fix and fused position (deg, deg, m)
+    and ENU velocity (m/s); the fused 1-sigma position (ENU m) and velocity
+    (m/s); visible satellites, GDOP and whether the filter updated.
+    """
+    header = ["t_s", "time_utc"]
+    cols = [result.t_s, format_utc(result.times_utc)]
+    for name, pos, vel in (("truth", result.truth_pos_ecef_m, result.truth_vel_enu_mps),
+                           ("ins", result.ins_pos_ecef_m, result.ins_vel_enu_mps),
+                           ("fix", result.fix_pos_ecef_m, result.fix_vel_enu_mps),
+                           ("fused", result.fused.pos_ecef_m, result.fused.vel_enu_mps)):
+        lat, lon, alt = frames.ecef_to_geodetic(pos)
+        header += [f"{name}_lat_deg", f"{name}_lon_deg", f"{name}_alt_m",
+                   f"{name}_ve_mps", f"{name}_vn_mps", f"{name}_vu_mps"]
+        cols += [np.degrees(lat), np.degrees(lon), alt, vel[:, 0], vel[:, 1], vel[:, 2]]
+    sigma = np.sqrt(np.diagonal(result.fused.pos_vel_cov_enu(), axis1=-2, axis2=-1))
+    header += ["sigma_e_m", "sigma_n_m", "sigma_u_m", "sigma_ve_mps", "sigma_vn_mps", "sigma_vu_mps",
+               "n_visible", "gdop", "updated"]
+    cols += [sigma[:, 3], sigma[:, 4], sigma[:, 5], sigma[:, 0], sigma[:, 1], sigma[:, 2], result.n_visible,
+             result.gdop, result.fused.updated.astype(int)]
+
+    def cell(v):
+        if isinstance(v, str):
+            return v
+        v = float(v)
+        return "" if not np.isfinite(v) else f"{v:.10g}"
+
+    rows = [[cell(c[k]) for c in cols] for k in range(result.t_s.size)]
+    return header, rows

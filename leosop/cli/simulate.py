@@ -1,0 +1,67 @@
+"""``leosop simulate``: seed 004's Starlink/INS flight end to end (the main job)."""
+
+import sys
+import warnings
+from pathlib import Path
+
+from ..fileio import write_csv, write_json
+from ..scenarios import load_scenario
+from ..simulate import COUPLINGS, LEVELS, metrics, run_scenario, solution_table
+from . import add_command
+
+
+def register(subparsers):
+    p = add_command(subparsers, "simulate", sys.modules[__name__],
+                    help="simulate a Starlink/INS flight end to end (default: seed 004's Xi'an-Baoji flight)")
+    p.add_argument("--scenario", default="xian-baoji", metavar="NAME|FILE.json",
+                   help="built-in scenario name or a scenario JSON file (default xian-baoji)")
+    p.add_argument("--tle", metavar="FILE", help="TLE or OMM file (default: the bundled constellation)")
+    p.add_argument("--correction-period-s", type=float, default=1.0, metavar="P",
+                   help="seconds between EKF corrections of the INS (default 1)")
+    p.add_argument("--orbit-error-m", type=float, metavar="E",
+                   help="satellite orbit error per axis [m] (default: the scenario's, 1 m)")
+    p.add_argument("--level", choices=LEVELS, default="signal",
+                   help="signal: pilot blocks through the fast estimator (default); measurement: its error model")
+    p.add_argument("--coupling", choices=COUPLINGS, default="loose", help="fusion (default loose)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+
+def run(args):
+    scenario = load_scenario(args.scenario)
+    from ..progress import progress
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        result = run_scenario(scenario, level=args.level, correction_period_s=args.correction_period_s,
+                              orbit_error_m=args.orbit_error_m, seed=args.seed, tle=args.tle,
+                              coupling=args.coupling, progress=progress)
+    doc = metrics(result)
+    if args.out:
+        from ..plots import write_figures
+
+        out = Path(args.out)
+        header, rows = solution_table(result)
+        write_csv(out / "solution.csv", header, rows)
+        write_json(out / "metrics.json", doc)
+        write_figures(result, out)
+    return doc
+
+
+def _num(value, fmt):
+    return "n/a" if value is None else format(value, fmt)
+
+
+def summary(doc):
+    f, i, x = doc["fused"], doc["ins_only"], doc["leo_fix"]
+    return "\n".join([
+        f"scenario {doc['scenario']}: {doc['duration_s']:g} s, {doc['visible']['min']}-{doc['visible']['max']} "
+        f"satellites visible, max GDOP {_num(doc['gdop']['max'], '.1f')}",
+        f"  INS only      position {_num(i['pos_err_mean_m'], '10.2f')} m   velocity "
+        f"{_num(i['vel_err_mean_mps'], '.3f')} m/s (mean 3D error)",
+        f"  LEO fixes     position {_num(x['pos_err_mean_m'], '10.2f')} m   velocity "
+        f"{_num(x['vel_err_mean_mps'], '.3f')} m/s ({x['n_fixes']} fixes)",
+        f"  Starlink/INS  position {_num(f['pos_err_mean_m'], '10.2f')} m   velocity "
+        f"{_num(f['vel_err_mean_mps'], '.3f')} m/s (RMS {_num(f['pos_err_rms_m'], '.2f')} m, "
+        f"availability {f['availability']:.3f})",
+        f"  runtime {doc['runtime_s']:.1f} s",
+    ])
