@@ -231,12 +231,29 @@ def update(state, dtheta_pair, dvel_pair, dt_s):
     -------
     NavState
     """
-    phi, dv = coning_sculling(dtheta_pair, dvel_pair, 2)
-    if phi.shape[0] != 1:
-        raise InputError(f"dtheta_pair and dvel_pair must have shape (2, 3), got {np.shape(dtheta_pair)}")
+    th = np.asarray(dtheta_pair, dtype=float)
+    dv = np.asarray(dvel_pair, dtype=float)
+    if th.shape != (2, 3) or dv.shape != (2, 3):
+        raise InputError(f"dtheta_pair and dvel_pair must have shape (2, 3), got {th.shape} and {dv.shape}")
+    (a1, a2, a3), (b1, b2, b3) = th.tolist()
+    (u1, u2, u3), (w1, w2, w3) = dv.tolist()
+    # coning_sculling() for one pair, on plain floats (numpy calls would cost ~20x more).
+    tx, ty, tz = a1 + b1, a2 + b2, a3 + b3
+    vx, vy, vz = u1 + w1, u2 + w2, u3 + w3
+    k = 2.0 / 3.0
+    px = tx + k * (a2 * b3 - a3 * b2)
+    py = ty + k * (a3 * b1 - a1 * b3)
+    pz = tz + k * (a1 * b2 - a2 * b1)
+    rx, ry, rz = ty * vz - tz * vy, tz * vx - tx * vz, tx * vy - ty * vx
+    sx = (a2 * w3 - a3 * w2) + (u2 * b3 - u3 * b2)
+    sy = (a3 * w1 - a1 * w3) + (u3 * b1 - u1 * b3)
+    sz = (a1 * w2 - a2 * w1) + (u1 * b2 - u2 * b1)
+    fx = vx + 0.5 * rx + (ty * rz - tz * ry) / 6.0 + k * sx
+    fy = vy + 0.5 * ry + (tz * rx - tx * rz) / 6.0 + k * sy
+    fz = vz + 0.5 * rz + (tx * ry - ty * rx) / 6.0 + k * sz
     v, q = state.vel_enu_mps, state.q_n_b
     out = _step(state.lat_rad, state.lon_rad, state.alt_m, float(v[0]), float(v[1]), float(v[2]),
-                float(q[0]), float(q[1]), float(q[2]), float(q[3]), *phi[0].tolist(), *dv[0].tolist(), 2.0 * dt_s)
+                float(q[0]), float(q[1]), float(q[2]), float(q[3]), px, py, pz, fx, fy, fz, 2.0 * dt_s)
     return NavState(out[0], out[1], out[2], np.array(out[3:6]), np.array(out[6:10]))
 
 
