@@ -130,6 +130,10 @@ class StaticFix:
     n_used, iterations : int
     chi2 : float
     status : FixStatus
+    ambiguous : bool
+        Another start reached a different solution (beyond ``ambiguity_m``)
+        that fits the data as well: typically the mirror image across the
+        ground track of a single pass.
     """
 
     pos_ecef_m: np.ndarray
@@ -144,6 +148,7 @@ class StaticFix:
     iterations: int
     chi2: float
     status: FixStatus
+    ambiguous: bool = False
 
     @property
     def residual_rms_hz(self):
@@ -362,24 +367,31 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     )
 
 
-def _ground_starts(pos_sv_ecef_m, vel_sv_ecef_mps, offset_m):
-    """Three starts: the sub-point centroid and ``offset_m`` either side across the tracks."""
+def _starts(pos_sv_ecef_m, vel_sv_ecef_mps, pos0_ecef_m, offset_m):
+    """Starts of a static solve and their mirror images across the mean ground track.
+
+    Without ``pos0_ecef_m``: the sub-point centroid and ``offset_m`` either side
+    of it; with it: ``pos0_ecef_m`` and its reflection.
+    """
     centre = subpoint_centroid_ecef_m(pos_sv_ecef_m)
     lat, lon, _ = ecef_to_geodetic(centre)
     C = C_e_n(lat, lon)
     v_enu = np.mean(vel_sv_ecef_mps, axis=0) @ C
     track = np.array([v_enu[0], v_enu[1], 0.0])
-    across = np.cross([0.0, 0.0, 1.0], track / np.linalg.norm(track))
+    across = C @ np.cross([0.0, 0.0, 1.0], track / np.linalg.norm(track))
+    if pos0_ecef_m is not None:
+        p0 = np.asarray(pos0_ecef_m, dtype=float).reshape(3)
+        return np.array([p0, p0 - 2.0 * ((p0 - centre) @ across) * across])
     starts = []
-    for s in (0.0, 1.0, -1.0):
-        p = centre + C @ (s * offset_m * across)
-        la, lo, _ = ecef_to_geodetic(p)
+    for side in (0.0, 1.0, -1.0):
+        la, lo, _ = ecef_to_geodetic(centre + side * offset_m * across)
         starts.append(geodetic_to_ecef(la, lo, 0.0))
     return np.array(starts)
 
 
 def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, *, pos0_ecef_m=None,
-                 alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=50, alpha=1e-3, start_offset_m=1.0e6):
+                 alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=50, alpha=1e-3, start_offset_m=1.0e6,
+                 ambiguity_m=10e3):
     """Batch Doppler fix of a receiver at rest in ECEF.
 
     Parameters
@@ -388,10 +400,14 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         Measurements, their standard deviations, carriers and times [s].
     pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
     pos0_ecef_m : array_like, (3,), optional
-        Start position. Default: three starts, the ground point below the
-        satellites' mean direction and ``start_offset_m`` either side of it
-        across the mean ground track (a single pass has a mirror solution
-        on the other side of the track); the lowest chi-square wins.
+        Start position. A single pass has a mirror solution on the other
+        side of the ground track, so the solve also starts from the mirror
+        image of ``pos0_ecef_m`` across the mean ground track; of the
+        solutions that fit equally well (chi-square within 3 standard
+        deviations of the best) the one nearest ``pos0_ecef_m`` is kept.
+        Default: the ground point below the satellites' mean direction and
+        ``start_offset_m`` either side of it across the track; the lowest
+        chi-square wins.
     alt_m : float, optional
         Known height above the ellipsoid, added as a pseudo-measurement with
         standard deviation ``alt_sigma_m``.
@@ -400,6 +416,8 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     alpha : float or None
         Significance of the chi-square outlier test; None disables it.
     start_offset_m : float
+    ambiguity_m : float
+        Equally good solutions further apart than this flag the fix ``ambiguous``.
 
     Returns
     -------
@@ -440,16 +458,34 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
             J = np.concatenate([J, np.concatenate([up, np.zeros((len(x), 2))], -1)[:, None, :]], axis=1)
         return pred, J
 
-    starts = (np.asarray(pos0_ecef_m, dtype=float).reshape(1, 3) if pos0_ecef_m is not None
-              else _ground_starts(r_s[m[:n_rows]], v_s[m[:n_rows]], start_offset_m) if m[:n_rows].any()
-              else np.zeros((1, 3)))
+    if m[:n_rows].any():
+        starts = _starts(r_s[m[:n_rows]], v_s[m[:n_rows]], pos0_ecef_m, start_offset_m)
+    else:
+        starts = np.zeros((1, 3)) if pos0_ecef_m is None else np.reshape(pos0_ecef_m, (1, 3))
     x0 = np.zeros((len(starts), N_STATIC_STATES))
     x0[:, :3] = starts
     ys, ss, ms = (np.broadcast_to(a, (len(starts), y.size)) for a in (y, sigma, m))
+    # Choose among the starts' solutions on the same rows (before any exclusion), then clean outliers.
     x, res, J, Q, used, iterations, chi2, status = _solve_robust(
-        model, x0, ys, ss, ms, N_STATIC_STATES, xtol=_XTOL_STATIC, max_iter=max_iter, alpha=alpha, fixed=fixed)
+        model, x0, ys, ss, ms, N_STATIC_STATES, xtol=_XTOL_STATIC, max_iter=max_iter, alpha=None, fixed=fixed)
     solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
-    best = int(np.argmin(np.where(solved, chi2, np.inf))) if solved.any() else 0
+    cost = np.where(solved, chi2, np.inf)
+    best = int(np.argmin(cost))
+    # Solutions whose chi-square is within 3 standard deviations of the best one fit the data
+    # equally well (a single pass's mirror image): the start given decides between them.
+    dof = max(int(used[best].sum()) - N_STATIC_STATES, 1)
+    fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
+    if pos0_ecef_m is not None and fits.sum() > 1:
+        best = int(np.argmin(np.where(fits, np.linalg.norm(x[:, :3] - starts[0], axis=-1), np.inf)))
+    spread = np.linalg.norm(x[fits, :3] - x[best, :3], axis=-1)
+    ambiguous = bool((spread > ambiguity_m).any())
+    if alpha is not None and solved[best]:
+        x, res, J, Q, used, it, chi2, status = _solve_robust(
+            model, x[best:best + 1], y[None], sigma[None], m[None], N_STATIC_STATES, xtol=_XTOL_STATIC,
+            max_iter=max_iter, alpha=alpha, fixed=fixed)
+        iterations = iterations[best:best + 1] + it
+        best = 0
+        solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
     w_rel = np.where(used[best], np.median(sigma[:n_rows][m[:n_rows]]) ** 2 / sigma**2, 0.0) if m[:n_rows].any() \
         else used[best].astype(float)
     gdop = float(np.sqrt(np.trace(cofactor(J[best], w_rel))))
@@ -459,4 +495,5 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         cov=Q[best] if solved[best] else np.full((5, 5), np.nan), gdop=gdop,
         residuals_hz=res[best, :n_rows], used=used[best, :n_rows], n_used=int(used[best, :n_rows].sum()),
         iterations=int(iterations[best]), chi2=float(chi2[best]), status=FixStatus(int(status[best])),
+        ambiguous=ambiguous,
     )

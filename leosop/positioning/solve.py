@@ -220,27 +220,25 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {n_need}"
                          + (f" (first problem: line {meas.line[~usable][0]}: {reason[~usable][0]})"
                             if (~usable).any() else ""))
-    pos0 = init_pos_ecef_m
-    kw = dict(alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable)
+    kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable)
+    # Light time is computed for the latest solution (the start at first).
+    pos_lt = init_pos_ecef_m
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
         pilot = solve_static(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel, meas.carrier_hz,
-                             meas.t_s, pos0_ecef_m=pos0, alpha=None, **kw)
+                             meas.t_s, alpha=None, **kw)
         sigma_hz = _robust_sigma(pilot.residuals_hz, N_STATIC_STATES)
         if not np.isfinite(sigma_hz) or sigma_hz <= 0:
             sigma_hz = 1.0
         if np.isfinite(pilot.pos_ecef_m).all():
-            pos0 = pilot.pos_ecef_m
+            pos_lt = pilot.pos_ecef_m
     sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan
     sigma = np.where(np.isfinite(meas.sigma_hz), meas.sigma_hz, sigma_default)
     for _ in range(2 if source == "tle" else 1):
-        if source == "tle" and pos0 is not None:
-            pos, vel, reason, _ = satellite_states(meas, constellation, pos0)
-        fix = solve_static(meas.doppler_hz, sigma, pos, vel, meas.carrier_hz, meas.t_s, pos0_ecef_m=pos0,
-                           alpha=alpha, **kw)
+        if source == "tle" and pos_lt is not None:
+            pos, vel, reason, _ = satellite_states(meas, constellation, pos_lt)
+        fix = solve_static(meas.doppler_hz, sigma, pos, vel, meas.carrier_hz, meas.t_s, alpha=alpha, **kw)
         if np.isfinite(fix.pos_ecef_m).all():
-            pos0 = fix.pos_ecef_m
-        elif pos0 is None:
-            break
+            pos_lt = fix.pos_ecef_m
     t_ref = np.array([fix.t_ref_s])
     time_utc = None if meas.time_utc is None else \
         meas.epoch_utc + np.array([np.round(fix.t_ref_s * 1e9)], dtype="timedelta64[ns]")

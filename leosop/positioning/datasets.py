@@ -1,0 +1,230 @@
+"""Readers of public real Doppler data sets into :class:`Measurements`.
+
+Each reader returns measurements in the toolkit's convention (DESIGN 4.3:
+Doppler = received minus nominal carrier, positive when approaching) with
+the data set's ground truth beside them. The data themselves are not part of
+the package; see ``PROVENANCE.md`` in each data folder.
+
+* DopTrack (TU Delft): passes of Delfi-C3 over a station at a known position,
+  received carrier frequency every 0.5 s, with the element set used for each
+  pass. Read straight from the ``data.tar.xz`` and ``metadata.tar.xz`` archives.
+* FOX-1D (AO-92) over the Virginia Tech ground station: one pass, 10 Hz FLL
+  Doppler offsets.
+* Google Smartphone Decimeter Challenge ``device_gnss.csv``: GNSS pseudorange
+  rates with satellite states, turned into L1/E1 (1575.42 MHz) Doppler.
+"""
+
+import csv
+import tarfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..constants import C_MPS, OMEGA_E_RAD_PER_S
+from ..errors import InputError
+from ..frames import geodetic_to_ecef
+from ..orbits.tle import parse_tle_lines
+from .measurements import Measurements
+
+__all__ = ["DopTrackPass", "read_doptrack", "read_fox1d", "GsdcEpochs", "read_gsdc",
+           "DELFI_C3_CARRIER_HZ", "FOX1D_CARRIER_HZ", "GPS_L1_HZ"]
+
+#: Delfi-C3 telemetry downlink, nominal [Hz]; the transmitter's own offset
+#: (about -2 kHz in April 2020) is left to the solver's frequency offset.
+DELFI_C3_CARRIER_HZ = 145.870e6
+#: FOX-1D (AO-92) downlink and the VTGS receiver's centre frequency [Hz].
+FOX1D_CARRIER_HZ = 145.880e6
+#: GPS L1 / Galileo E1 carrier [Hz].
+GPS_L1_HZ = 1575.42e6
+#: GSDC signal types on the L1/E1 carrier.
+_L1_SIGNALS = ("GPS_L1", "GPS_L1_CA", "GAL_E1", "GAL_E1_C_P", "QZS_J1")
+
+
+@dataclass(frozen=True, eq=False)
+class DopTrackPass:
+    """One DopTrack pass.
+
+    Attributes
+    ----------
+    name : str
+        File stem, e.g. ``Delfi-C3_32789_202004011044``.
+    meas : Measurements
+        Doppler against :data:`DELFI_C3_CARRIER_HZ`, sigma unknown (NaN).
+    constellation : Constellation
+        The element set used for the pass.
+    tle_lines : tuple of str
+    station_pos_ecef_m : ndarray, (3,)
+    station_lat_deg, station_lon_deg, station_alt_m : float
+    fca_hz : float
+        DopTrack's estimate of the carrier at closest approach.
+    tca_utc : datetime64[ns]
+    max_elevation_deg : float
+        Predicted maximum elevation of the pass.
+    """
+
+    name: str
+    meas: Measurements
+    constellation: object
+    tle_lines: tuple
+    station_pos_ecef_m: np.ndarray
+    station_lat_deg: float
+    station_lon_deg: float
+    station_alt_m: float
+    fca_hz: float
+    tca_utc: np.datetime64
+    max_elevation_deg: float
+
+
+def _utc(value):
+    """datetime or text from YAML to datetime64[ns] (times in the files are UTC)."""
+    return np.datetime64(str(value).replace(" ", "T").rstrip("Z"), "ns")
+
+
+def read_doptrack(folder):
+    """All passes of the DopTrack Delfi-C3 archives, sorted by name.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Holds ``data.tar.xz`` (``data/*.csv``) and ``metadata.tar.xz``
+        (``metadata/*.yml``).
+
+    Returns
+    -------
+    list of DopTrackPass
+    """
+    import yaml  # PyYAML, a dependency of dask
+
+    folder = Path(folder)
+    tables, metas = {}, {}
+    for archive, suffix, store in (("data.tar.xz", ".csv", tables), ("metadata.tar.xz", ".yml", metas)):
+        path = folder / archive
+        if not path.is_file():
+            raise InputError(f"{path}: no such DopTrack archive")
+        with tarfile.open(path, "r:xz") as tar:
+            for member in tar:
+                if member.isfile() and member.name.endswith(suffix):
+                    store[Path(member.name).stem] = tar.extractfile(member).read().decode("utf-8")
+    passes = []
+    for name in sorted(tables):
+        if name not in metas:
+            raise InputError(f"{folder}: pass {name} has no metadata file")
+        meta = yaml.safe_load(metas[name])
+        data = np.loadtxt(tables[name].splitlines(), delimiter=",", comments="#", ndmin=2)
+        epoch = _utc(meta["tracking"]["epoch"])
+        time_utc = epoch + np.round(data[:, 0] * 1e9).astype("timedelta64[ns]")
+        n = len(data)
+        meas = Measurements(
+            t_s=data[:, 0] - data[0, 0], time_utc=time_utc, sat_id=np.full(n, str(meta["satellite"]["noradid"])),
+            doppler_hz=data[:, 1] - DELFI_C3_CARRIER_HZ, sigma_hz=np.full(n, np.nan),
+            carrier_hz=np.full(n, DELFI_C3_CARRIER_HZ), line=np.arange(2, n + 2), source=f"{folder}/{name}.csv",
+        )
+        tle = (meta["satellite"]["tle"]["line1"], meta["satellite"]["tle"]["line2"])
+        site = meta["station"]["position"]
+        lat, lon, alt = float(site["latitude"]), float(site["longitude"]), float(site["altitude"])
+        passes.append(DopTrackPass(
+            name=name, meas=meas, constellation=parse_tle_lines(tle, f"{name}.yml"), tle_lines=tle,
+            station_pos_ecef_m=geodetic_to_ecef(np.radians(lat), np.radians(lon), alt),
+            station_lat_deg=lat, station_lon_deg=lon, station_alt_m=alt,
+            fca_hz=float(meta["tracking"]["fca"]), tca_utc=_utc(meta["tracking"]["tca"]),
+            max_elevation_deg=float(meta["prediction"]["max_elevation"]),
+        ))
+    return passes
+
+
+def read_fox1d(csv_path, sat_id="43137"):
+    """The FOX-1D pass recorded at VTGS (``index,doppler_offset,timestamp,measured_freq``).
+
+    Parameters
+    ----------
+    csv_path : str or Path
+    sat_id : str
+        Catalogue number to attach; the first element sets after launch do
+        not tell FOX-1D (43137 = 2018-004AC in later catalogues) from its
+        neighbours 43135/43136 (PROVENANCE.md).
+
+    Returns
+    -------
+    Measurements
+        Doppler against :data:`FOX1D_CARRIER_HZ`, sigma unknown (NaN).
+    """
+    path = Path(csv_path)
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows or not {"doppler_offset", "timestamp"} <= set(rows[0]):
+        raise InputError(f"{path}: expected columns doppler_offset and timestamp")
+    time_utc = np.array([_utc(r["timestamp"]) for r in rows], dtype="datetime64[ns]")
+    n = len(rows)
+    return Measurements(
+        t_s=(time_utc - time_utc[0]).astype(np.int64) * 1e-9, time_utc=time_utc, sat_id=np.full(n, str(sat_id)),
+        doppler_hz=np.array([float(r["doppler_offset"]) for r in rows]), sigma_hz=np.full(n, np.nan),
+        carrier_hz=np.full(n, FOX1D_CARRIER_HZ), line=np.arange(2, n + 2), source=str(path),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class GsdcEpochs:
+    """GSDC L1/E1 Doppler with the phone's own clock drift.
+
+    Attributes
+    ----------
+    meas : Measurements
+        Satellite states rotated into the ECEF frame of reception.
+    clock_drift_hz : ndarray, (n,)
+        ``-DriftNanosPerSecond * 1e-9 * f``: the frequency offset the
+        receiver's clock drift puts on an L1 Doppler (the chipset's estimate).
+    """
+
+    meas: Measurements
+    clock_drift_hz: np.ndarray
+
+
+def read_gsdc(device_gnss_csv):
+    """GSDC ``device_gnss.csv`` rows on 1575.42 MHz as Doppler measurements.
+
+    Doppler is ``-(PseudorangeRate + SvClockDrift) * f / c``: the satellite
+    clock drift is removed, the receiver's stays in (the solver's frequency
+    offset). Satellite positions are given at transmit time in the ECEF
+    frame of that time; they are turned by ``omega_e * tau`` (tau from the
+    raw pseudorange) into the frame of reception, as DESIGN 4.3 expects.
+
+    Parameters
+    ----------
+    device_gnss_csv : str or Path
+
+    Returns
+    -------
+    GsdcEpochs
+    """
+    path = Path(device_gnss_csv)
+    with open(path, newline="") as fh:
+        numbered = [(k + 2, r) for k, r in enumerate(csv.DictReader(fh)) if r.get("SignalType", "") in _L1_SIGNALS]
+    rows = [r for _, r in numbered]
+    need = ("utcTimeMillis", "Svid", "ConstellationType", "PseudorangeRateMetersPerSecond",
+            "PseudorangeRateUncertaintyMetersPerSecond", "SvClockDriftMetersPerSecond", "RawPseudorangeMeters",
+            "DriftNanosPerSecond", *(f"SvPosition{a}EcefMeters" for a in "XYZ"),
+            *(f"SvVelocity{a}EcefMetersPerSecond" for a in "XYZ"))
+    if not rows:
+        raise InputError(f"{path}: no GPS L1 / Galileo E1 rows")
+    missing = [k for k in need if k not in rows[0]]
+    if missing:
+        raise InputError(f"{path}: missing column {missing[0]}")
+    num = lambda key: np.array([float(r[key]) if r[key] else np.nan for r in rows])  # noqa: E731
+    prr = num("PseudorangeRateMetersPerSecond") + num("SvClockDriftMetersPerSecond")
+    pos = np.stack([num(f"SvPosition{a}EcefMeters") for a in "XYZ"], -1)
+    vel = np.stack([num(f"SvVelocity{a}EcefMetersPerSecond") for a in "XYZ"], -1)
+    angle = OMEGA_E_RAD_PER_S * num("RawPseudorangeMeters") / C_MPS
+    c, s = np.cos(angle), np.sin(angle)
+    rot = lambda v: np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]], -1)  # noqa: E731
+    time_utc = np.array([int(r["utcTimeMillis"]) for r in rows]).astype("datetime64[ms]").astype("datetime64[ns]")
+    n = len(rows)
+    sat_id = np.array([f"{r['ConstellationType']}-{r['Svid']}" for r in rows])
+    meas = Measurements(
+        t_s=(time_utc - time_utc.min()).astype(np.int64) * 1e-9, time_utc=time_utc, sat_id=sat_id,
+        doppler_hz=-prr * GPS_L1_HZ / C_MPS,
+        sigma_hz=num("PseudorangeRateUncertaintyMetersPerSecond") * GPS_L1_HZ / C_MPS,
+        carrier_hz=np.full(n, GPS_L1_HZ), pos_sv_ecef_m=rot(pos), vel_sv_ecef_mps=rot(vel),
+        line=np.array([k for k, _ in numbered]), source=str(path),
+    )
+    return GsdcEpochs(meas, -num("DriftNanosPerSecond") * 1e-9 * GPS_L1_HZ)
