@@ -40,7 +40,7 @@ import numpy as np
 from . import earth, frames
 from .constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 from .errors import InputError
-from .fusion import kalman, loose
+from .fusion import kalman, loose, tight
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, load_constellation
 from .orbits.visibility import compute_visibility
@@ -90,7 +90,7 @@ class SimulationResult:
     fix_pos_ecef_m, fix_vel_enu_mps : ndarray, (n, 3)
         LEO snapshot fixes; NaN where none.
     fix_cov : ndarray, (n, 7, 7)
-    fused : leosop.fusion.loose.LooseResult
+    fused : leosop.fusion.loose.FusionResult
     n_visible : ndarray of int, (n,)
     gdop : ndarray, (n,)
         Eq. 10 along the true flight; NaN below 7 satellites.
@@ -115,7 +115,7 @@ class SimulationResult:
     fix_pos_ecef_m: np.ndarray
     fix_vel_enu_mps: np.ndarray
     fix_cov: np.ndarray
-    fused: loose.LooseResult
+    fused: loose.FusionResult
     n_visible: np.ndarray
     gdop: np.ndarray
     tle_age_days: float
@@ -142,9 +142,9 @@ class SimulationResult:
         return kalman.nees(self.error_enu(), self.fused.pos_vel_cov_enu())
 
     def nis(self):
-        """NIS of the updates (6 dof), (n_updates,)."""
+        """NIS of the updates and their degrees of freedom, two (n_updates,) arrays."""
         u = self.fused.updated
-        return kalman.nis(self.fused.innovation[u], self.fused.innovation_cov[u])
+        return self.fused.nis[u], self.fused.nis_dof[u]
 
 
 def _check_options(level, coupling, correction_period_s, orbit_error_m):
@@ -152,9 +152,6 @@ def _check_options(level, coupling, correction_period_s, orbit_error_m):
         raise InputError(f"--level {level!r}: expected one of {', '.join(LEVELS)}")
     if coupling not in COUPLINGS:
         raise InputError(f"--coupling {coupling!r}: expected one of {', '.join(COUPLINGS)}")
-    if coupling == "tight":
-        raise InputError("--coupling tight: not implemented yet (the EKF updating directly with Doppler); "
-                         "use --coupling loose")
     if not (np.isfinite(correction_period_s) and correction_period_s > 0):
         raise InputError(f"--correction-period-s {correction_period_s:g}: must be a positive number of seconds")
     if orbit_error_m is not None and not (np.isfinite(orbit_error_m) and orbit_error_m >= 0):
@@ -358,10 +355,18 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
     fix_cov = np.where(good[:, None, None], fixes.cov, np.nan)
 
-    # 5. Loose EKF.
+    # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
-    fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, fix_cov[:, :6, :6]), settings,
-                      progress=progress)
+    if coupling == "loose":
+        fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, fix_cov[:, :6, :6]), settings,
+                          progress=progress)
+    else:
+        offset_max = scenario.leo.sat_doppler_offset_max_hz
+        priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max / 2, sat_offset_sigma_hz=offset_max / np.sqrt(12),
+                                     orbit_sigma_m=orbit_error_m, carrier_hz=carrier_hz)
+        meas = tight.DopplerMeasurements(ep, sat, doppler_meas, np.broadcast_to(sigma_est, doppler_meas.shape),
+                                         pos_sv_known, vis.vel_sv_ecef_mps)
+        fused = tight.run(state0, dtheta, dvel, truth.dt_s, meas, priors, settings, n_ep, progress=progress)
     fix_vel_enu = np.einsum("kji,kj->ki", C_e_n, fix_vel)
     return SimulationResult(
         scenario=scenario, level=level, coupling=coupling, correction_period_s=float(correction_period_s),

@@ -26,7 +26,7 @@ from ..ins import error_model, strapdown
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from . import kalman
 
-__all__ = ["FilterSettings", "LooseResult", "measurement", "initial_covariance", "run"]
+__all__ = ["FilterSettings", "FusionResult", "measurement", "initial_covariance", "run"]
 
 #: Innovations whose NIS exceeds this chi-square(6) quantile are rejected
 #: (a wrong Doppler peak can give a fix hundreds of metres off); at 1 - 1e-6
@@ -56,7 +56,7 @@ class FilterSettings:
 
 
 @dataclasses.dataclass(frozen=True)
-class LooseResult:
+class FusionResult:
     """Filter output at every step epoch (n epochs, the first is the initial state).
 
     Attributes
@@ -71,10 +71,13 @@ class LooseResult:
         An update was made at this epoch.
     rejected : ndarray of bool, (n,)
         A fix was offered but failed the innovation gate.
-    innovation : ndarray, (n, 6)
-        ``z - H x`` at updates (velocity [m/s], position [m] ENU), NaN elsewhere.
-    innovation_cov : ndarray, (n, 6, 6)
-        ``S`` at updates, NaN elsewhere.
+    nis : ndarray, (n,)
+        Normalised innovation squared of each update, NaN elsewhere.
+    nis_dof : ndarray of int, (n,)
+        Its degrees of freedom (measurements in the update; 0 without one).
+    innovation, innovation_cov : ndarray, (n, 6), (n, 6, 6), or None
+        Loose coupling: ``z - H x`` (velocity [m/s], position [m] ENU) and
+        ``S`` at updates, NaN elsewhere; None for tight coupling.
     gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
         Accumulated bias estimates.
     """
@@ -88,10 +91,12 @@ class LooseResult:
     P: np.ndarray
     updated: np.ndarray
     rejected: np.ndarray
-    innovation: np.ndarray
-    innovation_cov: np.ndarray
+    nis: np.ndarray
+    nis_dof: np.ndarray
     gyro_bias_rad_per_s: np.ndarray
     accel_bias_mps2: np.ndarray
+    innovation: np.ndarray | None = None
+    innovation_cov: np.ndarray | None = None
 
     @property
     def pos_ecef_m(self):
@@ -178,7 +183,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, progress=Non
 
     Returns
     -------
-    LooseResult
+    FusionResult
     """
     pos_fix, vel_fix, cov_fix = fixes
     per_step = int(round(settings.step_s / dt_s))
@@ -191,7 +196,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, progress=Non
 
     out = {k: np.full(shape, np.nan) for k, shape in (
         ("lat", (n,)), ("lon", (n,)), ("alt", (n,)), ("vel", (n, 3)), ("C", (n, 3, 3)), ("P", (n, 15, 15)),
-        ("y", (n, 6)), ("S", (n, 6, 6)), ("eps", (n, 3)), ("nabla", (n, 3)))}
+        ("y", (n, 6)), ("S", (n, 6, 6)), ("nis", (n,)), ("eps", (n, 3)), ("nabla", (n, 3)))}
     updated = np.zeros(n, dtype=bool)
     rejected = np.zeros(n, dtype=bool)
     state = state0
@@ -218,18 +223,20 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, progress=Non
         if k > 0 and due and np.all(np.isfinite(pos_fix[k])):
             z, H, R = measurement(state, pos_fix[k], vel_fix[k], cov_fix[k])
             x, P_post, y, S = kalman.update(x0, P, z, H, R)
-            if kalman.nis(y, S) <= gate:
+            nis = kalman.nis(y, S)
+            if nis <= gate:
                 P = P_post
                 state = state.corrected(x[PHI], x[DV], x[DPOS])
                 eps = eps + x[EPS]
                 nabla = nabla + x[NABLA]
                 updated[k] = True
                 last_update_s = t_s
-                out["y"][k], out["S"][k] = y, S
+                out["y"][k], out["S"][k], out["nis"][k] = y, S, nis
             else:
                 rejected[k] = True
         out["lat"][k], out["lon"][k], out["alt"][k] = state.lat_rad, state.lon_rad, state.alt_m
         out["vel"][k], out["C"][k], out["P"][k] = state.vel_enu_mps, state.C_n_b, P
         out["eps"][k], out["nabla"][k] = eps, nabla
-    return LooseResult(np.arange(n) * settings.step_s, out["lat"], out["lon"], out["alt"], out["vel"], out["C"],
-                       out["P"], updated, rejected, out["y"], out["S"], out["eps"], out["nabla"])
+    return FusionResult(np.arange(n) * settings.step_s, out["lat"], out["lon"], out["alt"], out["vel"], out["C"],
+                        out["P"], updated, rejected, out["nis"], np.where(updated, 6, 0), out["eps"], out["nabla"],
+                        out["y"], out["S"])
