@@ -1,0 +1,105 @@
+"""``leosop position`` end to end: simulate a table from element sets (with light time), recover the site."""
+
+import json
+
+import numpy as np
+import pytest
+
+from leosop.cli import main
+from leosop.constants import C_MPS
+from leosop.frames import azimuth_elevation_range, ecef_to_geodetic, geodetic_to_ecef
+from leosop.orbits import load_constellation
+from leosop.orbits.propagate import state_ecef
+from leosop.positioning.measurements import Measurements, sv_states_from_tle, write_measurements
+
+SITE = (34.342, 108.940, 30.0)
+F0_HZ = 11.325e9
+
+
+@pytest.fixture(scope="module")
+def table(tmp_path_factory):
+    """3 epochs of the bundled constellation over Xi'an, 1 Hz noise, 5 Hz receiver offset."""
+    const = load_constellation()
+    t = np.datetime64("2025-01-01T04:00:00", "ns") + np.arange(3).astype("timedelta64[s]")
+    pos, _, _ = state_ecef(const, t)
+    rx = geodetic_to_ecef(np.radians(SITE[0]), np.radians(SITE[1]), SITE[2])
+    _, el, _ = azimuth_elevation_range(pos, rx)
+    si, ti = np.nonzero(el > np.radians(25))
+    ids, tt = const.sat_ids[si], t[ti]
+    p, v, _ = sv_states_from_tle(const, ids, tt, rx)
+    rate = np.einsum("ni,ni->n", p - rx, v) / np.linalg.norm(p - rx, axis=1)
+    rng = np.random.default_rng(3)
+    dop = -rate * F0_HZ / C_MPS + 5.0 + rng.normal(0.0, 1.0, len(rate))
+    n = len(dop)
+    path = tmp_path_factory.mktemp("cli") / "meas.csv"
+    write_measurements(path, Measurements(t_s=np.zeros(n), time_utc=tt, sat_id=ids, doppler_hz=dop,
+                                          sigma_hz=np.full(n, 1.0), carrier_hz=np.full(n, F0_HZ), line=np.arange(n)))
+    return path, rx
+
+
+def _run(capsys, *argv):
+    status = main(["position", *map(str, argv), "--json"])
+    out, err = capsys.readouterr()
+    return status, (json.loads(out) if status == 0 else None), err
+
+
+def test_snapshot_fixes_recover_site(capsys, table):
+    path, rx = table
+    status, doc, _ = _run(capsys, path)
+    assert status == 0 and len(doc["solutions"]) == 3
+    for s in doc["solutions"]:
+        err = np.linalg.norm(np.array([s["x_m"], s["y_m"], s["z_m"]]) - rx)
+        # 1 Hz noise, GDOP ~3.7 in mixed units: posterior sigma ~2-3 m per axis; 5 sigma bound.
+        assert err < 5 * np.linalg.norm(s["sigma_enu_m"])
+        assert abs(s["clock_offset_hz"] - 5.0) < 2.0  # posterior sigma ~0.4 Hz
+        assert s["status"] == "ok" and s["n_used"] == s["n_sats"] >= 7
+    assert set(doc["solutions"][0]) >= {"t_s", "time_utc", "lat_deg", "lon_deg", "alt_m", "x_m", "y_m", "z_m",
+                                        "vx_mps", "vy_mps", "vz_mps", "clock_offset_hz", "gdop", "n_sats",
+                                        "n_used", "iterations", "residual_rms_hz"}
+
+
+def test_static_with_altitude_and_far_init(capsys, table, tmp_path):
+    path, rx = table
+    lat, lon, _ = ecef_to_geodetic(rx)
+    init = f"{np.degrees(lat) + 9.0},{np.degrees(lon)},0"  # ~1,000 km north
+    status, doc, _ = _run(capsys, path, "--static", "--alt-m", SITE[2], "--init", init, "--out", tmp_path)
+    assert status == 0
+    s = doc["solutions"][0]
+    # ~80 measurements at 1 Hz: posterior sigma well below 1 m; 5 m covers 5 sigma.
+    assert np.linalg.norm(np.array([s["x_m"], s["y_m"], s["z_m"]]) - rx) < 5.0
+    assert abs(s["alt_m"] - SITE[2]) < 1.0
+    assert (tmp_path / "fixes.csv").is_file() and (tmp_path / "residuals.csv").is_file()
+
+
+def test_bad_rows_reported_and_rest_solved(capsys, table, tmp_path):
+    path, rx = table
+    lines = path.read_text().splitlines()
+    t_first = lines[1].split(",")[0]
+    bad = lines + [f"{t_first},99999,100.0,1.0,{F0_HZ}", lines[2], lines[3].replace(lines[3].split(",")[2], "nan")]
+    bad_path = tmp_path / "bad.csv"
+    bad_path.write_text("\n".join(bad) + "\n")
+    status, doc, err = _run(capsys, bad_path)
+    assert status == 0 and len(doc["solutions"]) == 3
+    reasons = [r["reason"] for r in doc["rejected"]]
+    assert any("99999" in r for r in reasons) and any("duplicate" in r for r in reasons)
+    assert any("doppler_hz" in r for r in reasons)
+    assert "warning" in err
+
+
+def test_too_few_satellites_is_exit_2(capsys, tmp_path):
+    path = tmp_path / "few.csv"
+    path.write_text("time_utc,sat_id,doppler_hz\n" + "".join(
+        f"2025-01-01T04:00:00Z,{70001 + k},{1000.0 * k}\n" for k in range(5)))
+    status, _, err = _run(capsys, path)
+    assert status == 2 and "fewer than 7 usable satellites" in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--alt-m", "10"], "--alt-m constrains a static fix"),
+    (["--init", "north"], "--init"),
+    (["--tle", "/nonexistent.tle"], "no such TLE file"),
+])
+def test_bad_options_are_exit_2(capsys, table, argv, message):
+    path, _ = table
+    status, _, err = _run(capsys, path, *argv)
+    assert status == 2 and message in err
