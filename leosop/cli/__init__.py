@@ -21,7 +21,7 @@ import sys
 from ..errors import ExternalError, InputError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle", "position", "simulate",)
+COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler",)
 
 
 def add_command(subparsers, name, module, *, help, description=None):

@@ -232,6 +232,26 @@ def discretize(F, G, Qc, dt_s, *, method="van_loan"):
     return Phi, 0.5 * (Qd + np.swapaxes(Qd, -1, -2))
 
 
+def _expm_stack(A):
+    """Matrix exponential of a stack of small matrices, shape (k, n, n).
+
+    Scaling and squaring with a degree-12 Taylor polynomial: after scaling to
+    norm <= 0.5 the truncation error is below 0.5^13 / 13! ~ 2e-14 relative.
+    (scipy.linalg.expm is ~100x slower on long stacks of tiny matrices.)
+    """
+    norm = float(np.abs(A).sum(axis=-1).max()) if A.size else 0.0
+    s = max(0, int(np.ceil(np.log2(norm / 0.5)))) if norm > 0.5 else 0
+    X = A / 2.0**s
+    E = np.eye(A.shape[-1]) + X
+    term = X
+    for k in range(2, 13):
+        term = term @ X / k
+        E = E + term
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
 def propagate(F, G, u, dt_s, x0):
     """Propagate ``x_dot = F(t) x + G(t) u(t)`` with coefficients constant per step.
 
@@ -262,7 +282,7 @@ def propagate(F, G, u, dt_s, x0):
     A = np.zeros((n_steps, n + 1, n + 1))
     A[:, :n, :n] = F
     A[:, :n, n] = np.einsum("kij,kj->ki", G, u)
-    E = scipy.linalg.expm(A * dt_s)
+    E = _expm_stack(A * dt_s)
     x = np.empty((n_steps + 1, n))
     x[0] = x0
     for k in range(n_steps):

@@ -1,0 +1,55 @@
+"""``leosop reproduce TARGET``: a table or figure of the seed papers, ours beside theirs.
+
+Each target is one line of :data:`TARGETS`: ``name: ("module:function",
+help)``. The function lives in a study module, takes keyword-only options
+among ``seed``, ``scheduler``, ``full`` and ``out_dir`` (it receives those it
+declares) and returns the JSON document, with the paper's numbers under
+``"paper"``.
+"""
+
+import importlib
+import inspect
+import json
+import sys
+
+from ..errors import InputError
+from . import add_command
+
+#: Registry of reproducible targets.
+TARGETS = {
+    "align-fig2": ("leosop.ins.alignment_study:fig2", "seed 000 Fig. 1-2: max alignment errors vs pitch (Monte Carlo)"),
+    "align-table1": ("leosop.ins.alignment_study:table1", "seed 000 Table 1: turntable alignment at 80 deg pitch"),
+    "errmodel-table3": ("leosop.ins.error_model_study:table3", "seed 001 Table 3: 150 s errors of the 9-state model"),
+}
+
+
+def register(subparsers):
+    p = add_command(subparsers, "reproduce", sys.modules[__name__],
+                    help="reproduce a table or figure of the seed papers beside the published numbers",
+                    description="Targets: " + "; ".join(f"{k}: {v[1]}" for k, v in TARGETS.items()))
+    p.add_argument("target", metavar="TARGET", help=f"one of: {', '.join(TARGETS)}")
+    p.add_argument("--seed", type=int, default=0, help="random seed of Monte Carlo targets (default 0)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler address for parallel targets (default: a local cluster; 'serial' runs "
+                        "in this process)")
+    p.add_argument("--full", action="store_true", help="the paper's full grid / more trials (slower)")
+
+
+def target_function(name):
+    """The study function registered as ``name``."""
+    if name not in TARGETS:
+        raise InputError(f"reproduce: unknown target {name!r}; expected one of {', '.join(TARGETS)}")
+    module, func = TARGETS[name][0].split(":")
+    return getattr(importlib.import_module(module), func)
+
+
+def run(args):
+    func = target_function(args.target)
+    options = {"seed": args.seed, "scheduler": args.scheduler, "full": args.full, "out_dir": args.out}
+    accepted = inspect.signature(func).parameters
+    doc = func(**{k: v for k, v in options.items() if k in accepted})
+    return {"target": args.target, **doc}
+
+
+def summary(doc):
+    return json.dumps(doc, indent=1)
