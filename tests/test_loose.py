@@ -1,0 +1,150 @@
+"""Loose INS/fix EKF: measurement model round trip, consistency, bias recovery, gaps, correction period.
+
+The truth is a short straight flight of the seed 004 kind; fixes are the
+truth plus white Gaussian errors drawn from the covariance handed to the
+filter, the case in which a correct filter must be consistent.
+"""
+
+import functools
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from leosop import earth, frames
+from leosop.constants import G0_MPS2
+from leosop.fusion import kalman, loose
+from leosop.ins import imu, strapdown, trajectory
+from leosop.ins.error_model import DPOS, DV, NABLA
+
+ARW = np.radians(0.01) / 60.0  # 0.01 deg/sqrt(h) in rad/sqrt(s)
+VRW = 1e-5 * G0_MPS2  # 1e-5 g/sqrt(Hz) in m/s^2/sqrt(Hz)
+FIX_SIGMA_M = np.array([15.0, 10.0, 25.0])  # ENU, like a snapshot Doppler fix
+FIX_SIGMA_MPS = np.array([0.3, 0.2, 0.5])
+
+
+@functools.lru_cache(maxsize=2)
+def _flight(duration_s):
+    return trajectory.flight([[34.342, 108.940], [34.363, 107.239]], alt_m=3000.0, speed_mps=200.0,
+                             rate_hz=100.0, duration_s=duration_s)
+
+
+def _settings(**kw):
+    base = dict(pos_sigma_m=(100.0,) * 3, vel_sigma_mps=(1.0,) * 3, att_sigma_rad=tuple(np.radians([0.01, 0.01, 0.05])),
+                gyro_bias_sigma_rad_per_s=np.radians(0.03) / 3600, accel_bias_sigma_mps2=1e-4 * G0_MPS2,
+                gyro_arw_rad_per_rt_s=ARW, accel_vrw_mps2_per_rt_hz=VRW)
+    base.update(kw)
+    return loose.FilterSettings(**base)
+
+
+def _case(seed, duration_s=120.0, accel_bias_g=1e-4):
+    """Start state, IMU, truth at 1 Hz and white fixes drawn from their covariance, all from one seed."""
+    rng = np.random.default_rng(seed)
+    truth = _flight(duration_s)
+    signs = rng.choice([-1.0, 1.0], size=(2, 3))
+    errors = imu.ImuErrors.from_quoted(gyro_bias_deg_per_h=0.03 * signs[0], gyro_arw_deg_per_rt_h=0.01,
+                                       accel_bias_g=accel_bias_g * signs[1], accel_vrw_g_per_rt_hz=1e-5)
+    dth, dvl = imu.corrupt(truth.dtheta_b_rad, truth.dvel_b_mps, truth.dt_s, errors, rng)
+    t1 = truth.resample(1.0)
+    C = frames.C_e_n(t1.lat_rad, t1.lon_rad)
+    cov_enu = np.zeros((6, 6))
+    cov_enu[:3, :3] = np.diag(FIX_SIGMA_M**2)
+    cov_enu[3:, 3:] = np.diag(FIX_SIGMA_MPS**2)
+    T = np.zeros((t1.t_s.size, 6, 6))  # ENU [pos, vel] -> ECEF [pos, vel]
+    T[:, :3, :3] = C
+    T[:, 3:, 3:] = C
+    cov = T @ cov_enu @ np.swapaxes(T, 1, 2)
+    e = rng.standard_normal((t1.t_s.size, 6)) * np.sqrt(np.diag(cov_enu))
+    pos_fix = t1.pos_ecef_m + np.einsum("kij,kj->ki", C, e[:, :3])
+    vel_fix = np.einsum("kij,kj->ki", C, t1.vel_enu_mps + e[:, 3:])
+    # Initial errors drawn from the filter's prior: 100 m and 1 m/s per axis.
+    lat, alt = t1.lat_rad[0], t1.alt_m[0]
+    R_M, R_N = earth.radii_m(lat)
+    dp, dv = 100.0 * rng.standard_normal(3), rng.standard_normal(3)
+    state0 = strapdown.NavState.from_dcm(lat + dp[1] / (R_M + alt), t1.lon_rad[0] + dp[0] / ((R_N + alt) * np.cos(lat)),
+                                         alt + dp[2], t1.vel_enu_mps[0] + dv, t1.C_n_b[0])
+    return state0, dth, dvl, truth.dt_s, (pos_fix, vel_fix, cov), t1, errors
+
+
+def _error_enu(result, t1):
+    dpos = frames.ecef_to_enu(result.pos_ecef_m - t1.pos_ecef_m, t1.lat_rad, t1.lon_rad)
+    return np.concatenate([result.vel_enu_mps - t1.vel_enu_mps, dpos], axis=1)
+
+
+def test_measurement_is_the_enu_difference_and_h_maps_the_error_state():
+    # A fix 12 m East, -7 m North, 30 m Up of the INS and 0.5 m/s slower East:
+    # z is the INS minus the fix in ENU, and H applied to the error state that
+    # moves the INS onto the fix gives the same numbers (to linearisation, mm).
+    lat, lon, alt = np.radians(34.3), np.radians(108.5), 3000.0
+    state = strapdown.NavState.from_dcm(lat, lon, alt, [-200.0, 5.0, 0.0], np.eye(3))
+    d_enu = np.array([12.0, -7.0, 30.0])
+    pos_fix = frames.geodetic_to_ecef(lat, lon, alt) + frames.enu_to_ecef(d_enu, lat, lon)
+    vel_fix = frames.enu_to_ecef(state.vel_enu_mps - [0.5, 0.0, 0.0], lat, lon)
+    cov = np.diag([4.0, 9.0, 16.0, 0.01, 0.04, 0.09])
+    z, H, R = loose.measurement(state, pos_fix, vel_fix, cov)
+    np.testing.assert_allclose(z[:3], [0.5, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(z[3:], -d_enu, atol=1e-3)
+    R_M, R_N = earth.radii_m(lat)
+    x = np.zeros(15)
+    x[DV] = [0.5, 0.0, 0.0]
+    x[DPOS] = [-d_enu[1] / (R_M + alt), -d_enu[0] / ((R_N + alt) * np.cos(lat)), -d_enu[2]]
+    np.testing.assert_allclose(H @ x, z, atol=1e-3)
+    # R is the fix covariance rotated: its trace (rotation invariant) survives.
+    assert np.trace(R) == pytest.approx(np.trace(cov), rel=1e-12)
+
+
+def test_filter_is_consistent_with_white_fixes_over_20_seeds():
+    nees, nis, white = [], [], []
+    for seed in range(20):
+        state0, dth, dvl, dt, fixes, t1, _ = _case(seed)
+        res = loose.run(state0, dth, dvl, dt, fixes, _settings())
+        nees.append(kalman.nees(_error_enu(res, t1)[1:], res.pos_vel_cov_enu()[1:]))
+        u = res.updated
+        nis.append(res.nis[u])
+        L = np.linalg.cholesky(res.innovation_cov[u])
+        white.append(np.linalg.solve(L, res.innovation[u][..., None])[..., 0])
+    nees, nis = np.concatenate(nees), np.concatenate(nis)
+    # Issue 6: mean NEES within [0.5, 2] of its dimension (6).
+    assert 0.5 * 6 <= nees.mean() <= 2.0 * 6
+    # NIS: mean of k chi-square(6) draws, 99.9 % two-sided interval.
+    k = nis.size
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], 6 * k) / k
+    assert lo <= nis.mean() <= hi
+    # Whiteness: lag-1 correlation of the whitened innovations; under the
+    # null it is ~N(0, 1/n) with n = 20 x 119 x 6 pairs, so |r| < 4/sqrt(n).
+    a = np.concatenate([w[:-1] for w in white]).ravel()
+    b = np.concatenate([w[1:] for w in white]).ravel()
+    assert abs(np.corrcoef(a, b)[0, 1]) < 4.0 / np.sqrt(a.size)
+
+
+def test_vertical_accelerometer_bias_is_recovered():
+    # A 1 mg vertical bias is observable through height (simulate and recover):
+    # the estimate must lie within 3 sigma of the truth and sigma must be
+    # far below the bias itself.
+    state0, dth, dvl, dt, fixes, t1, errors = _case(7, duration_s=300.0, accel_bias_g=1e-3)
+    res = loose.run(state0, dth, dvl, dt, fixes, _settings(accel_bias_sigma_mps2=1e-3 * G0_MPS2))
+    # Level flight: body Up is navigation Up to within the pitch/roll of a straight leg.
+    truth_up = errors.accel_bias_mps2[2]
+    sigma = np.sqrt(res.P[-1][NABLA, NABLA][2, 2])
+    assert abs(res.accel_bias_mps2[-1, 2] - truth_up) < 3 * sigma
+    assert sigma < 0.1 * abs(truth_up)
+
+
+def test_gap_in_fixes_is_bridged_and_the_filter_resumes():
+    state0, dth, dvl, dt, (pos, vel, cov), t1, _ = _case(3)
+    pos, vel, cov = pos.copy(), vel.copy(), cov.copy()
+    pos[40:70] = vel[40:70] = np.nan
+    cov[40:70] = np.nan
+    res = loose.run(state0, dth, dvl, dt, (pos, vel, cov), _settings())
+    assert np.all(np.isfinite(res.lat_rad)) and np.all(np.isfinite(res.vel_enu_mps))
+    assert not res.updated[40:70].any() and res.updated[70:].all()
+    # Without fixes the covariance grows, and the errors stay within it (4 sigma).
+    sig = np.sqrt(np.diagonal(res.pos_vel_cov_enu(), axis1=1, axis2=2))
+    assert np.all(sig[69, 3:] > sig[39, 3:])
+    assert np.all(np.abs(_error_enu(res, t1)[40:70]) < 4 * sig[40:70])
+
+
+def test_correction_period_spaces_the_updates():
+    state0, dth, dvl, dt, fixes, _, _ = _case(4)
+    res = loose.run(state0, dth, dvl, dt, fixes, _settings(correction_period_s=30.0))
+    assert np.flatnonzero(res.updated).tolist() == [30, 60, 90, 120]
