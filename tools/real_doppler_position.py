@@ -1,0 +1,105 @@
+"""Doppler positioning on the real data sets in ../shared/data, with the errors against their truth.
+
+    python tools/real_doppler_position.py [--data DIR] [--export DIR]
+
+DopTrack (Delfi-C3, 98 passes): one static fix per pass with the station
+height known, no start given (the solver's own starts); error per pass and
+the median. FOX-1D: the trimmed pass with each candidate catalogue number.
+GSDC: snapshot velocity, clock drift and position, and a static fix.
+``--export DIR`` also writes each data set as a DESIGN 4.3 table (plus the
+element sets) so that ``leosop position`` can be run on them.
+"""
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from leosop.frames import ecef_to_enu, geodetic_to_ecef
+from leosop.orbits import read_tle
+from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
+from leosop.positioning.measurements import write_measurements
+from leosop.positioning.solve import position_snapshots, position_static
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+FOX_SITE = (37.229976, -80.439627, 610.0)
+
+
+def doptrack(data, export):
+    passes = read_doptrack(data / "leo-doppler" / "doptrack_delfi-c3_2020-04")
+    print("DopTrack Delfi-C3, static fix per pass, height known (95 m), no start given")
+    print(f"{'pass':30s} {'maxel':>5s} {'rows':>5s} {'used':>5s} {'sigma':>6s} {'status':>13s} {'amb':>4s} "
+          f"{'east_m':>10s} {'north_m':>10s} {'err_m':>10s}")
+    errors = []
+    for p in passes:
+        res = position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m)
+        f = res.fixes
+        lat, lon = np.radians(p.station_lat_deg), np.radians(p.station_lon_deg)
+        d = ecef_to_enu(f.pos_ecef_m - p.station_pos_ecef_m, lat, lon)
+        errors.append(np.linalg.norm(d))
+        print(f"{p.name:30s} {p.max_elevation_deg:5.0f} {len(p.meas):5d} {f.n_used:5d} {res.sigma_hz_default:6.2f} "
+              f"{f.status.name:>13s} {str(f.ambiguous)[0]:>4s} {d[0]:10.0f} {d[1]:10.0f} {errors[-1]:10.0f}")
+        if export:
+            write_measurements(export / "doptrack" / f"{p.name}.csv", p.meas)
+            (export / "doptrack" / f"{p.name}.tle").write_text("\n".join(p.tle_lines) + "\n")
+    e = np.array(errors)
+    ok = np.isfinite(e)
+    print(f"median error {np.median(e[ok]):.0f} m over {ok.sum()} solved passes of {len(e)}; "
+          f"{(e[ok] < 100e3).sum()} within 100 km, median of those {np.median(e[ok & (e < 100e3)]):.0f} m")
+
+
+def fox1d(data, export):
+    folder = data / "leo-doppler" / "fox1d_vtgs_2018-01-13"
+    const = read_tle(folder / "pslv40_st.tle")
+    site = geodetic_to_ecef(np.radians(FOX_SITE[0]), np.radians(FOX_SITE[1]), FOX_SITE[2])
+    print("\nFOX-1D over VTGS, trimmed pass, static fix, height known (610 m)")
+    for sat_id in ("43135", "43136", "43137"):
+        meas = read_fox1d(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv", sat_id)
+        res = position_static(meas, constellation=const, alt_m=FOX_SITE[2])
+        d = ecef_to_enu(res.fixes.pos_ecef_m - site, np.radians(FOX_SITE[0]), np.radians(FOX_SITE[1]))
+        print(f"  as {sat_id}: rms {res.fixes.residual_rms_hz:6.2f} Hz  status {res.fixes.status.name}  "
+              f"ambiguous {res.fixes.ambiguous}  error E {d[0]:.0f} N {d[1]:.0f} m, {np.linalg.norm(d):.0f} m")
+        if export:
+            write_measurements(export / "fox1d" / f"fox1d_as_{sat_id}.csv", meas)
+    if export:
+        (export / "fox1d" / "pslv40_st.tle").write_bytes((folder / "pslv40_st.tle").read_bytes())
+
+
+def gsdc(data, export):
+    for sub in ("gsdc2022_2021-04-29_mtv", "gsdc2023_2023-09-07_pixel7pro"):
+        folder = data / "gnss-raw" / sub
+        g = read_gsdc(folder / "device_gnss.csv")
+        with open(folder / "ground_truth.csv", newline="") as fh:
+            gt = next(csv.DictReader(fh))
+        lat, lon = np.radians(float(gt["LatitudeDegrees"])), np.radians(float(gt["LongitudeDegrees"]))
+        truth = geodetic_to_ecef(lat, lon, float(gt["AltitudeMeters"]))
+        res = position_snapshots(g.meas)
+        f = res.fixes
+        pos_err = np.linalg.norm(f.pos_ecef_m - truth, axis=-1)
+        speed = np.linalg.norm(f.vel_ecef_mps, axis=-1)
+        clock_err = f.clock_offset_hz - g.clock_drift_hz[res.rows[:, 0]]
+        st = position_static(g.meas).fixes
+        print(f"\nGSDC {sub}: {len(res.t_s)} epochs, {res.n_sats.min()}-{res.n_sats.max()} L1/E1 satellites, "
+              f"GDOP {np.median(f.gdop):.0f}")
+        print(f"  snapshot |velocity| (truth 0): median {np.median(speed):.3f} m/s, max {speed.max():.3f} m/s")
+        print(f"  snapshot clock drift - phone's DriftNanosPerSecond: median |{np.median(np.abs(clock_err)):.2f}| Hz "
+              f"= {np.median(np.abs(clock_err)) * 299792458 / 1575.42e6:.3f} m/s")
+        print(f"  snapshot position error: median {np.median(pos_err):.0f} m, max {pos_err.max():.0f} m")
+        print(f"  static fix over all epochs: error {np.linalg.norm(st.pos_ecef_m - truth):.0f} m, {st.status.name}")
+        if export:
+            write_measurements(export / "gsdc" / f"{sub}.csv", g.meas)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=DATA)
+    parser.add_argument("--export", type=Path, help="write DESIGN 4.3 tables here (outside the repository)")
+    args = parser.parse_args()
+    doptrack(args.data, args.export)
+    fox1d(args.data, args.export)
+    gsdc(args.data, args.export)
+
+
+if __name__ == "__main__":
+    main()
