@@ -324,6 +324,9 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     vis = compute_visibility(constellation, times_utc, pos_rx, scenario.mask_deg, vel_rx_ecef_mps=vel_rx,
                              show_progress=progress is not None)
     n_visible = vis.n_visible
+    if not n_visible.any():
+        warnings.warn(f"{scenario.name}: no satellite rises above the {scenario.mask_deg:g} deg mask during the "
+                      "flight; the result is the INS alone", stacklevel=2)
     gdop = vis.doppler_gdop(carrier_hz)
     sat_offset_hz = rng_sat.uniform(0.0, scenario.leo.sat_doppler_offset_max_hz, len(constellation))
     orbit_err = orbit_error_m * rng_sat.standard_normal((len(constellation), 3))

@@ -30,11 +30,13 @@ def run(args):
     scenario = load_scenario(args.scenario)
     from ..progress import progress
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = run_scenario(scenario, level=args.level, correction_period_s=args.correction_period_s,
                               orbit_error_m=args.orbit_error_m, seed=args.seed, tle=args.tle,
                               coupling=args.coupling, progress=progress)
+    for w in caught:
+        print(f"leosop simulate: warning: {w.message}", file=sys.stderr)
     doc = metrics(result)
     if args.out:
         from ..plots import write_figures
