@@ -1,0 +1,197 @@
+"""``leosop doppler``: Doppler of the Starlink pilot comb per block of an IQ recording.
+
+SigMF recordings carry their own parameters; raw files need ``--dtype``,
+``--sample-rate-hz`` (and optionally ``--center-hz``, ``--start``). The
+recording is read one block at a time. ``ml`` and ``fmlef`` start from the
+STFT coarse track (seed 004); ``fast`` from the block's own FFT. A block
+without a detected comb gives null values and ``"status": "no pilot
+detected"``. When the recording holds ``leosop generate`` truth for the same
+blocks, each estimate also names the nearest true satellite and its Doppler.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..fileio import write_csv, write_json
+from ..progress import progress
+from ..signal.doppler import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, METHODS, coarse_stft, cubic_bias_hz, estimate_block
+from ..signal.iq import open_raw, open_sigmf
+from ..signal.pilot import PilotComb
+from ..timebase import format_utc
+from . import add_command
+from .options import positive
+
+_FIG_COLS = 1000  # time columns kept for the spectrogram figure
+_FIG_ROWS = 1024  # frequency rows kept
+
+
+def register(subparsers):
+    p = add_command(subparsers, "doppler", sys.modules[__name__],
+                    help="estimate the pilot comb's Doppler per block of an IQ recording")
+    p.add_argument("recording", metavar="FILE", help="FILE.sigmf-meta, or a raw cf32/ci16 file with --dtype")
+    p.add_argument("--block-s", type=float, default=0.1, help="block length in seconds (default 0.1)")
+    p.add_argument("--method", choices=METHODS, default="fast", help="fine estimator (default fast)")
+    p.add_argument("--resolution-hz", type=float, default=1e-3,
+                   help="final frequency step of ml and fmlef (default 1e-3)")
+    p.add_argument("--max-doppler-hz", type=float, default=MAX_DOPPLER_HZ,
+                   help=f"search half-width for the central tone (default {MAX_DOPPLER_HZ:g})")
+    p.add_argument("--max-rate-hz-per-s", type=float, default=MAX_RATE_HZ_PER_S,
+                   help=f"largest |Doppler rate| searched by fast (default {MAX_RATE_HZ_PER_S:g})")
+    raw = p.add_argument_group("raw files")
+    raw.add_argument("--dtype", choices=("cf32", "ci16"), help="sample format of a raw file")
+    raw.add_argument("--sample-rate-hz", type=float, help="sample rate of a raw file")
+    raw.add_argument("--center-hz", type=float, help="RF frequency of the comb's central tone (raw file)")
+    raw.add_argument("--start", metavar="ISO", help="UTC of the first sample (raw file)")
+
+
+def _open(args):
+    path = Path(args.recording)
+    if path.suffix in (".sigmf-meta", ".sigmf-data"):
+        return open_sigmf(path)
+    if args.dtype is None or args.sample_rate_hz is None:
+        raise InputError(f"{path}: not a .sigmf-meta file; a raw file needs --dtype and --sample-rate-hz")
+    return open_raw(path, dtype=args.dtype, sample_rate_hz=args.sample_rate_hz, center_hz=args.center_hz,
+                    start=args.start)
+
+
+def _truth(rec, block_len):
+    """{sample_start: [(sat_id, doppler_hz), ...]} from generate's annotations on the same blocks."""
+    out = {}
+    for a in rec.annotations:
+        if "leosop:doppler_hz" in a and a.get("core:sample_count") == block_len:
+            out.setdefault(a["core:sample_start"], []).append((a.get("leosop:sat_id"), a["leosop:doppler_hz"]))
+    return out
+
+
+def _reduce(power, rows, cols):
+    """Sum a spectrogram down to at most rows x cols cells."""
+    r = max(1, power.shape[0] // rows)
+    c = max(1, power.shape[1] // cols)
+    p = power[: power.shape[0] // r * r, : power.shape[1] // c * c]
+    return p.reshape(p.shape[0] // r, r, p.shape[1] // c, c).sum(axis=(1, 3)), r, c
+
+
+def run(args):
+    rec = _open(args)
+    fs = rec.sample_rate_hz
+    block_s = positive(args.block_s, "--block-s")
+    positive(args.resolution_hz, "--resolution-hz")
+    positive(args.max_doppler_hz, "--max-doppler-hz")
+    if not (np.isfinite(args.max_rate_hz_per_s) and args.max_rate_hz_per_s >= 0):
+        raise InputError(f"--max-rate-hz-per-s {args.max_rate_hz_per_s:g}: must be >= 0")
+    block_len = int(round(block_s * fs))
+    if block_len < 64:
+        raise InputError(f"--block-s {block_s:g}: {block_len} samples at {fs:g} Hz; need at least 64")
+    if block_len > rec.n_samples:
+        raise InputError(f"--block-s {block_s:g} ({block_len} samples) is longer than the recording "
+                         f"({rec.n_samples} samples, {rec.duration_s:.6g} s)")
+    comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
+                     tone_spacing_hz=rec.tone_spacing_hz)
+    truth = _truth(rec, block_len)
+    n_blocks = rec.n_samples // block_len
+    nperseg = min(4096, block_len // 4)
+    want_fig = args.out is not None
+    estimates, starts, fig_cols, fig_t, coarse_t, coarse_f = [], [], [], [], [], []
+    cols_per_block = max(1, _FIG_COLS // n_blocks)
+    for start, x in progress(rec.blocks(block_len), total=n_blocks, desc="doppler", unit="block"):
+        t_c = (start + 0.5 * (block_len - 1)) / fs
+        coarse_hz = err = None
+        if args.method != "fast" or want_fig:
+            t_f, d_f, f_hz, power = coarse_stft(x, fs, comb, nperseg=nperseg, max_doppler_hz=args.max_doppler_hz)
+            ok = np.isfinite(d_f)
+            if want_fig:
+                red, _, c = _reduce(power, _FIG_ROWS, cols_per_block)
+                fig_cols.append(red)
+                fig_t.extend((start / fs + t_f[: red.shape[1] * c].reshape(-1, c).mean(axis=1)).tolist())
+                coarse_t.extend((start / fs + t_f[ok]).tolist())
+                coarse_f.extend(d_f[ok].tolist())
+            if args.method != "fast":
+                # The frame nearest the block centre, good to about one bin.
+                coarse_hz = d_f[ok][np.argmin(np.abs(t_f[ok] - (t_c - start / fs)))] if np.any(ok) else np.nan
+                err = fs / nperseg
+        est = estimate_block(x, fs, method=args.method, comb=comb, resolution_hz=args.resolution_hz,
+                             coarse_hz=coarse_hz, coarse_error_hz=err, max_doppler_hz=args.max_doppler_hz,
+                             max_rate_hz_per_s=args.max_rate_hz_per_s)
+        entry = {
+            "t_s": t_c,
+            "time_utc": format_utc(rec.start_utc + np.timedelta64(int(round(t_c * 1e9)), "ns"))
+            if rec.start_utc is not None else None,
+            "doppler_hz": est["doppler_hz"],
+            "doppler_rate_hz_per_s": est["doppler_rate_hz_per_s"],
+            "cn0_dbhz": est["cn0_dbhz"],
+            "sigma_hz": est["sigma_hz"],
+            "status": "ok" if est["detected"] else "no pilot detected",
+        }
+        estimates.append(entry)
+        starts.append(start)
+    if args.method == "fast":
+        _correct_rate_change(estimates, block_len, fs)
+    for start, entry in zip(starts, estimates):
+        if start in truth and entry["status"] == "ok":
+            entry["truth_sat_id"], entry["truth_doppler_hz"] = min(
+                truth[start], key=lambda sd: abs(sd[1] - entry["doppler_hz"]))
+    doc = {"method": args.method, "estimates": estimates, "recording": str(rec.data_path),
+           "sample_rate_hz": fs, "block_s": block_len / fs, "n_blocks": len(estimates),
+           "n_detected": sum(e["status"] == "ok" for e in estimates)}
+    errs = [e["doppler_hz"] - e["truth_doppler_hz"] for e in estimates if "truth_doppler_hz" in e]
+    if errs:
+        doc["truth_rms_error_hz"] = float(np.sqrt(np.mean(np.square(errs))))
+    if args.out:
+        _write_outputs(Path(args.out), doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg)
+    return doc
+
+
+def _correct_rate_change(estimates, block_len, fs):
+    """Remove the bias of a rate change (cubic phase) using neighbouring blocks' rates.
+
+    Neighbours count when their Doppler continues this block's within 2 Hz
+    (same satellite); the rate change is their rates' slope.
+    """
+    ok = [e["status"] == "ok" for e in estimates]
+    t = np.array([e["t_s"] for e in estimates])
+    d = np.array([e["doppler_hz"] for e in estimates], dtype=float)
+    r = np.array([e["doppler_rate_hz_per_s"] for e in estimates], dtype=float)
+    for i, e in enumerate(estimates):
+        if not ok[i]:
+            continue
+        near = [j for j in (i - 1, i + 1) if 0 <= j < len(estimates) and ok[j]
+                and abs(d[j] - d[i] - r[i] * (t[j] - t[i])) < 2.0]
+        if near:
+            j0, j1 = (near[0], near[-1]) if len(near) == 2 else sorted((i, near[0]))
+            e["doppler_hz"] = d[i] - float(cubic_bias_hz((r[j1] - r[j0]) / (t[j1] - t[j0]), block_len, fs))
+
+
+def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg):
+    from ..signal.plots import plot_spectrogram
+
+    keys = ["t_s", "time_utc", "doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz", "status"]
+    write_csv(out / "doppler.csv", keys, [[e[k] for k in keys] for e in doc["estimates"]])
+    write_json(out / "doppler.json", doc)
+    power = np.concatenate(fig_cols, axis=1)
+    f_hz = (np.arange(nperseg) - nperseg // 2) * fs / nperseg
+    rows = nperseg // power.shape[0]
+    f_hz = f_hz[: power.shape[0] * rows].reshape(-1, rows).mean(axis=1)
+    ok = [e for e in doc["estimates"] if e["status"] == "ok"]
+    plot_spectrogram(out / "spectrogram.png", np.array(fig_t), f_hz, power,
+                     track_t_s=np.array([e["t_s"] for e in ok]), track_hz=np.array([e["doppler_hz"] for e in ok]),
+                     coarse_t_s=np.array(coarse_t), coarse_hz=np.array(coarse_f),
+                     title=f"{Path(doc['recording']).name}: pilot comb, method {doc['method']}")
+
+
+def summary(doc):
+    lines = [f"{doc['n_detected']}/{doc['n_blocks']} blocks with a pilot ({doc['method']}, {doc['block_s']:g} s blocks)"]
+    for e in doc["estimates"][:20]:
+        if e["status"] == "ok":
+            lines.append(f"  t={e['t_s']:.4f} s  Doppler {e['doppler_hz']:+.4f} Hz  rate "
+                         f"{e['doppler_rate_hz_per_s'] if e['doppler_rate_hz_per_s'] is not None else float('nan'):+.2f} Hz/s  "
+                         f"C/N0 {e['cn0_dbhz'] if e['cn0_dbhz'] is not None else float('nan'):.1f} dB-Hz")
+        else:
+            lines.append(f"  t={e['t_s']:.4f} s  no pilot detected")
+    if len(doc["estimates"]) > 20:
+        lines.append(f"  ... {len(doc['estimates']) - 20} more blocks (use --json or --out)")
+    if "truth_rms_error_hz" in doc:
+        lines.append(f"RMS error against the recording's truth: {doc['truth_rms_error_hz']:.4g} Hz")
+    return "\n".join(lines)

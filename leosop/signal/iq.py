@@ -1,0 +1,274 @@
+"""IQ recordings: SigMF (cf32_le, ci16_le) and raw files, read in blocks.
+
+Metadata go through the ``sigmf`` package (DESIGN 4.2); samples are
+memory-mapped with numpy, so a recording far larger than memory is only ever
+touched one block at a time. ci16 samples are scaled by 1/32768 (SigMF's
+convention); the estimators do not depend on the scale.
+"""
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
+from ..errors import InputError
+from ..fileio import atomic_path
+from ..timebase import format_utc, parse_utc
+
+__all__ = ["DATATYPES", "Recording", "open_sigmf", "open_raw", "write_sigmf"]
+
+#: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float).
+DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0)}
+_RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le"}
+
+
+@dataclass
+class Recording:
+    """A complex IQ recording on disk.
+
+    Attributes
+    ----------
+    data_path : Path
+    datatype : str
+        ``cf32_le`` or ``ci16_le``.
+    sample_rate_hz : float
+    center_hz : float or None
+        Nominal RF frequency of the pilot comb's central tone (baseband 0 Hz).
+    start_utc : numpy.datetime64 or None
+        UTC time of the first sample.
+    n_samples : int
+    n_tones, tone_spacing_hz : int, float
+        The comb as declared by the recording (defaults: Starlink).
+    annotations : list of dict
+        SigMF annotations (``leosop generate`` stores its truth there).
+    offset_bytes : int
+        Header bytes before the first sample.
+    """
+
+    data_path: Path
+    datatype: str
+    sample_rate_hz: float
+    center_hz: float | None
+    start_utc: np.datetime64 | None
+    n_samples: int
+    n_tones: int = STARLINK_N_TONES
+    tone_spacing_hz: float = STARLINK_TONE_SPACING_HZ
+    annotations: list = field(default_factory=list)
+    offset_bytes: int = 0
+
+    @property
+    def duration_s(self):
+        return self.n_samples / self.sample_rate_hz
+
+    def read(self, start, count):
+        """Samples ``start .. start+count-1`` as complex64, shape (count,).
+
+        Raises InputError if the range leaves the recording or holds NaN/inf.
+        """
+        if start < 0 or count < 0 or start + count > self.n_samples:
+            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
+                             f"{self.n_samples} samples of the recording")
+        comp, scale = DATATYPES[self.datatype]
+        mm = np.memmap(self.data_path, dtype=comp, mode="r", offset=self.offset_bytes + 2 * start * comp.itemsize,
+                       shape=(2 * count,))
+        raw = np.asarray(mm, dtype=np.float32)
+        del mm
+        if scale != 1.0:
+            raw *= scale
+        elif not np.all(np.isfinite(raw)):
+            bad = start + int(np.flatnonzero(~np.isfinite(raw))[0]) // 2
+            raise InputError(f"{self.data_path}: sample {bad} is NaN or inf")
+        return raw.view(np.complex64)
+
+    def blocks(self, block_len):
+        """Iterate ``(start, samples)`` over whole consecutive blocks of ``block_len`` samples."""
+        if block_len < 1 or block_len > self.n_samples:
+            raise InputError(f"block of {block_len} samples must be between 1 and the recording's "
+                             f"{self.n_samples} samples ({self.duration_s:.6g} s)")
+        for start in range(0, self.n_samples - block_len + 1, block_len):
+            yield start, self.read(start, block_len)
+
+
+def _check_rate(sample_rate_hz, where):
+    try:
+        fs = float(sample_rate_hz)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: sample rate {sample_rate_hz!r} is not a number") from None
+    if not np.isfinite(fs) or fs <= 0:
+        raise InputError(f"{where}: sample rate {sample_rate_hz!r} must be a finite number > 0 Hz")
+    return fs
+
+
+def _count_samples(data_path, datatype, offset_bytes, where):
+    sample_bytes = 2 * DATATYPES[datatype][0].itemsize
+    size = data_path.stat().st_size - offset_bytes
+    if size < 0 or size % sample_bytes:
+        raise InputError(f"{where}: {data_path} holds {size} bytes, not a whole number of "
+                         f"{sample_bytes}-byte {datatype} samples (truncated?)")
+    return size // sample_bytes
+
+
+def _sha512(path):
+    h = hashlib.sha512()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 22), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def open_sigmf(meta_path, *, verify=True):
+    """Open a SigMF recording (``.sigmf-meta`` beside its ``.sigmf-data``).
+
+    Parameters
+    ----------
+    meta_path : str or Path
+        The ``.sigmf-meta`` file (a ``.sigmf-data`` path is accepted too).
+    verify : bool
+        Check ``core:sha512`` when present (streamed; catches truncation).
+
+    Returns
+    -------
+    Recording
+    """
+    from sigmf import sigmffile
+    from sigmf.error import SigMFError
+
+    meta_path = Path(meta_path)
+    if meta_path.suffix == ".sigmf-data":
+        meta_path = meta_path.with_suffix(".sigmf-meta")
+    if meta_path.suffix != ".sigmf-meta":
+        raise InputError(f"{meta_path}: expected a .sigmf-meta file")
+    if not meta_path.is_file():
+        raise InputError(f"{meta_path}: no such SigMF metadata file")
+    data_path = meta_path.with_suffix(".sigmf-data")
+    if not data_path.is_file():
+        raise InputError(f"{data_path}: missing SigMF data file for {meta_path.name}")
+    try:
+        meta = sigmffile.fromfile(str(meta_path), skip_checksum=True)
+    except (SigMFError, json.JSONDecodeError, KeyError, ValueError) as exc:
+        raise InputError(f"{meta_path}: not valid SigMF metadata ({exc})".replace("\n", " ")) from None
+    info = meta.get_global_info()
+    datatype = info.get("core:datatype")
+    if datatype not in DATATYPES:
+        raise InputError(f"{meta_path}: core:datatype {datatype!r} is not supported; expected one of "
+                         f"{', '.join(DATATYPES)}")
+    if int(info.get("core:num_channels", 1)) != 1:
+        raise InputError(f"{meta_path}: core:num_channels must be 1")
+    fs = _check_rate(info.get("core:sample_rate"), f"{meta_path}: core:sample_rate")
+    captures = meta.get_captures()
+    cap = captures[0] if captures else {}
+    offset = int(cap.get("core:header_bytes", 0) or 0)
+    n = _count_samples(data_path, datatype, offset, str(meta_path))
+    if verify and info.get("core:sha512") and _sha512(data_path) != info["core:sha512"]:
+        raise InputError(f"{data_path}: contents do not match core:sha512 in {meta_path.name} (truncated or modified)")
+    start = cap.get("core:datetime")
+    try:
+        start_utc = parse_utc(start, name="core:datetime") if start else None
+    except ValueError as exc:
+        raise InputError(f"{meta_path}: {exc}") from None
+    annotations = meta.get_annotations()
+    end = max((a.get("core:sample_start", 0) + a.get("core:sample_count", 0) for a in annotations), default=0)
+    if end > n:
+        raise InputError(f"{meta_path}: annotations reach sample {end} but {data_path.name} holds {n} (truncated?)")
+    return Recording(
+        data_path=data_path,
+        datatype=datatype,
+        sample_rate_hz=fs,
+        center_hz=cap.get("core:frequency"),
+        start_utc=start_utc,
+        n_samples=int(n),
+        n_tones=int(info.get("leosop:n_tones", STARLINK_N_TONES)),
+        tone_spacing_hz=float(info.get("leosop:tone_spacing_hz", STARLINK_TONE_SPACING_HZ)),
+        annotations=annotations,
+        offset_bytes=offset,
+    )
+
+
+def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_bytes=0):
+    """Open a headerless interleaved I/Q file with explicit parameters.
+
+    Parameters
+    ----------
+    path : str or Path
+    dtype : {"cf32", "ci16", "cf32_le", "ci16_le"}
+    sample_rate_hz : float
+    center_hz : float, optional
+    start : str or datetime64, optional
+        UTC time of the first sample.
+    offset_bytes : int
+        Bytes to skip before the first sample.
+    """
+    path = Path(path)
+    datatype = _RAW_NAMES.get(dtype, dtype)
+    if datatype not in DATATYPES:
+        raise InputError(f"--dtype {dtype!r}: expected cf32 or ci16")
+    fs = _check_rate(sample_rate_hz, "--sample-rate-hz")
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        start_utc = parse_utc(start, name="--start") if start is not None else None
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    n = _count_samples(path, datatype, offset_bytes, str(path))
+    return Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
+
+
+def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc, datatype="cf32_le",
+                annotations=(), global_extra=None, ci16_full_scale=1.0):
+    """Write a SigMF recording from an iterable of complex sample chunks, atomically.
+
+    Parameters
+    ----------
+    meta_path : str or Path
+        Output ``.sigmf-meta``; the data go to the ``.sigmf-data`` beside it.
+    chunks : iterable of ndarray of complex
+        Consecutive samples; written as they come (never all in memory).
+    sample_rate_hz, center_hz : float
+    start_utc : datetime64 or str
+        UTC time of the first sample (``core:datetime``).
+    datatype : {"cf32_le", "ci16_le"}
+    annotations : iterable of (sample_start, sample_count, dict)
+    global_extra : dict, optional
+        Extra global keys (``leosop:n_tones``, ``core:description``, ...).
+    ci16_full_scale : float
+        Amplitude mapped to 32767 for ci16 (values beyond are clipped).
+
+    Returns
+    -------
+    n_samples : int
+    """
+    import sigmf
+    from sigmf import SigMFFile
+
+    meta_path = Path(meta_path)
+    if meta_path.suffix != ".sigmf-meta":
+        raise InputError(f"{meta_path}: output must end in .sigmf-meta")
+    if datatype not in DATATYPES:
+        raise InputError(f"datatype {datatype!r}: expected one of {', '.join(DATATYPES)}")
+    data_path = meta_path.with_suffix(".sigmf-data")
+    n = 0
+    with atomic_path(data_path) as tmp_data, atomic_path(meta_path) as tmp_meta:
+        with open(tmp_data, "wb") as fh:
+            for chunk in chunks:
+                c = np.asarray(chunk)
+                if datatype == "cf32_le":
+                    fh.write(c.astype("<c8").tobytes())
+                else:
+                    inter = np.empty(2 * c.size)
+                    inter[0::2], inter[1::2] = c.real, c.imag
+                    q = np.clip(np.round(inter * (32767.0 / ci16_full_scale)), -32768, 32767)
+                    fh.write(q.astype("<i2").tobytes())
+                n += c.size
+        info = {sigmf.DATATYPE_KEY: datatype, sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
+                sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(tmp_data)}
+        info.update(global_extra or {})
+        meta = SigMFFile(global_info=info)
+        meta.add_capture(0, metadata={sigmf.FREQUENCY_KEY: float(center_hz),
+                                      sigmf.DATETIME_KEY: format_utc(parse_utc(start_utc))})
+        for start, count, md in annotations:
+            meta.add_annotation(int(start), int(count), metadata=md)
+        tmp_meta.write_text(meta.dumps(pretty=True) + "\n")
+    return n

@@ -1,0 +1,48 @@
+"""Spectrogram of a recording with the Doppler track over it."""
+
+import numpy as np
+
+__all__ = ["plot_spectrogram"]
+
+
+def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, coarse_t_s=None,
+                     coarse_hz=None, title=""):
+    """Write a PNG: power in dB over time and frequency, tracks on top.
+
+    Parameters
+    ----------
+    path : str or Path
+    t_s : ndarray, (n_cols,)
+    f_hz : ndarray, (n_rows,), ascending
+    power : ndarray, (n_rows, n_cols)
+    track_t_s, track_hz : ndarray, optional
+        Fine Doppler of the central tone per block.
+    coarse_t_s, coarse_hz : ndarray, optional
+        STFT coarse track.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..fileio import atomic_path
+
+    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    db = 10.0 * np.log10(np.maximum(power, np.max(power) * 1e-12))
+    dt = t_s[1] - t_s[0] if len(t_s) > 1 else 1.0
+    extent = (t_s[0] - dt / 2, t_s[-1] + dt / 2, f_hz[0] / 1e3, f_hz[-1] / 1e3)
+    im = ax.imshow(db, origin="lower", aspect="auto", extent=extent, cmap="viridis",
+                   vmin=np.percentile(db, 50), vmax=np.max(db))
+    fig.colorbar(im, ax=ax, label="power [dB]")
+    if coarse_t_s is not None:
+        ax.plot(coarse_t_s, np.asarray(coarse_hz) / 1e3, "w.", ms=3, label="STFT coarse (central tone)")
+    if track_t_s is not None:
+        ax.plot(track_t_s, np.asarray(track_hz) / 1e3, "r-", lw=1.2, label="fine Doppler (central tone)")
+    ax.set_xlabel("time from first sample [s]")
+    ax.set_ylabel("baseband frequency [kHz]")
+    ax.set_title(title)
+    if coarse_t_s is not None or track_t_s is not None:
+        ax.legend(loc="upper right", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=120)
+    plt.close(fig)
