@@ -39,7 +39,7 @@ def _run(argv, capsys):
     return status, out, err
 
 
-@pytest.mark.parametrize("method", ["1", "2", "wahba"])
+@pytest.mark.parametrize("method", ["1", "2", "wahba", "inertial"])
 def test_align_recovers_a_simulated_static_attitude(tmp_path, capsys, method):
     traj = trajectory.static(34.25, 108.9, 380.0, 3.0, -2.0, 250.0, 120.0)
     path = _write_psins(tmp_path / "static.imu", traj, 34.25)

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import write_csv, write_json
 from ..ins import imu_io
-from ..ins.alignment import METHODS, MotionWarning, align_increments, motion_std_mps2
+from ..ins.alignment import INCREMENT_METHODS, MotionWarning, align_increments, motion_std_mps2
 from ..rotations import heading_from_yaw
 from . import add_command
 
@@ -29,8 +29,9 @@ def register(subparsers):
                         "_sf.csv (default: from the extension)")
     p.add_argument("--lat-deg", type=float, help="latitude [deg] (default: the file's header, PSINS only)")
     p.add_argument("--seconds", type=float, help="use the first S seconds (default: the whole log)")
-    p.add_argument("--method", choices=METHODS, default="wahba",
-                   help="seed 000 algorithm 1 or 2, or the optimal Wahba solution (default)")
+    p.add_argument("--method", choices=INCREMENT_METHODS, default="wahba",
+                   help="seed 000 algorithm 1 or 2, the optimal Wahba solution (default), or the inertial-frame "
+                        "alignment (robust to rocking; attitude at the end of the span)")
     p.add_argument("--window-s", type=float, help="also align every successive window of this length")
 
 

@@ -26,6 +26,14 @@ independent Gaussian errors on the two measured vectors: it minimises
 proper rotation and reads the pitch from the direction of ``f_b`` rather
 than from ``f_x / g``, so its pitch error does not grow as ``1 / cos(pitch)``
 and it does not depend on knowing ``|g|``.
+
+For real logs, :func:`align_inertial` (``"inertial"``) is the inertial-frame
+alignment: the gyros track every rotation of the body since the start
+(rocking, settling), the integrated specific force in that frozen body frame
+is fitted (orthogonal Procrustes) to the integrated gravity reaction, which
+turns with the Earth in the inertial frame frozen at the start. Rotations of
+a disturbed vehicle then do not leak into the heading, as they do when the
+mean gyro output is taken for the Earth rate.
 """
 
 import warnings
@@ -35,7 +43,7 @@ import numpy as np
 from ..constants import OMEGA_E_RAD_PER_S
 from ..earth import normal_gravity_mps2
 from ..errors import InputError
-from ..rotations import dcm_to_euler
+from ..rotations import dcm_to_euler, rotvec_to_dcm, skew
 
 __all__ = [
     "METHODS",
@@ -46,12 +54,16 @@ __all__ = [
     "wahba_dcm",
     "align",
     "align_increments",
+    "align_inertial",
+    "INCREMENT_METHODS",
     "motion_std_mps2",
     "MotionWarning",
 ]
 
-#: Alignment methods: seed 000 algorithms 1 and 2, and the optimal solution.
+#: Alignment methods from mean outputs: seed 000 algorithms 1 and 2, and the optimal solution.
 METHODS = ("1", "2", "wahba")
+#: Methods that need the increments themselves.
+INCREMENT_METHODS = METHODS + ("inertial",)
 
 #: ``v_RFU = P_RFU_FUR @ v_FUR``: toolkit body axes from the paper's.
 P_RFU_FUR = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -317,6 +329,64 @@ def _standard_error(increments, dt_s):
     return float(np.sqrt(np.mean(np.var(means, axis=0)) / means.shape[0]))
 
 
+def align_inertial(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, g_mps2=None, fit_every_s=1.0):
+    """Inertial-frame coarse alignment; the attitude at the end of the data.
+
+    With ``b0`` the body frame and ``i0`` the navigation frame frozen in
+    inertial space at the start:
+    ``V_b0(t) = int C_b0_b f_b dt`` (gyro-tracked ``C_b0_b``) and
+    ``V_i0(t) = int expm([w_ie x] tau) g_n dtau`` (closed form) satisfy
+    ``V_i0 = C_i0_b0 V_b0``; ``C_i0_b0`` is the orthogonal Procrustes fit
+    over samples every ``fit_every_s`` seconds, and
+    ``C_n_b(T) = expm([w_ie x] T)^T C_i0_b0 C_b0_b(T)``.
+
+    Parameters
+    ----------
+    dtheta_b_rad, dvel_b_mps : array_like, shape (n, 3)
+        Increments, body RFU.
+    dt_s : float
+    lat_rad : float
+    g_mps2 : float, optional
+    fit_every_s : float
+
+    Returns
+    -------
+    pitch_rad, roll_rad, yaw_rad : float
+    """
+    lat = _check_lat(lat_rad)
+    dtheta = _vec3("dtheta_b_rad", dtheta_b_rad)
+    dvel = _vec3("dvel_b_mps", dvel_b_mps)
+    n = dtheta.shape[0]
+    # Body attitude relative to b0: one rotation vector per sample (static
+    # rates make the non-commutativity error negligible).
+    steps = rotvec_to_dcm(dtheta)
+    C_b0_b = np.empty((n + 1, 3, 3))
+    C = np.eye(3)
+    C_b0_b[0] = C
+    for k in range(n):
+        C = C @ steps[k]
+        C_b0_b[k + 1] = C
+    # Velocity increments with the rotation correction, into b0, summed.
+    dv_b0 = np.einsum("kij,kj->ki", C_b0_b[:-1], dvel + 0.5 * np.cross(dtheta, dvel))
+    V_b0 = np.cumsum(dv_b0, axis=0)
+    t = dt_s * np.arange(1, n + 1)
+    g_n, w_n = _reference_vectors(lat, _nominal_g(lat, g_mps2))
+    W = float(np.linalg.norm(w_n))
+    K = skew(w_n)
+    # int_0^t expm(K tau) dtau = I t + (1 - cos W t) / W^2 K + (W t - sin W t) / W^3 K^2
+    a = (1.0 - np.cos(W * t)) / W**2
+    b = (W * t - np.sin(W * t)) / W**3
+    V_i0 = t[:, None] * g_n + a[:, None] * (K @ g_n) + b[:, None] * (K @ K @ g_n)
+    pick = slice(max(1, int(round(fit_every_s / dt_s))) - 1, None, max(1, int(round(fit_every_s / dt_s))))
+    B = V_i0[pick].T @ V_b0[pick]
+    U, _, Vt = np.linalg.svd(B)
+    d = np.sign(np.linalg.det(U @ Vt))
+    C_i0_b0 = U @ np.diag([1.0, 1.0, d]) @ Vt
+    T = t[-1]
+    R_T = np.eye(3) + np.sin(W * T) / W * K + (1.0 - np.cos(W * T)) / W**2 * (K @ K)
+    return tuple(float(x) for x in dcm_to_euler(R_T.T @ C_i0_b0 @ C_b0_b[-1]))
+
+
 def align_increments(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, method="2", g_mps2=None):
     """Coarse alignment from gyro and accelerometer increments of a static IMU.
 
@@ -332,12 +402,14 @@ def align_increments(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, method="2", g_m
     dt_s : float
         Sampling interval.
     lat_rad : float
-    method : {"1", "2", "wahba"}
+    method : {"1", "2", "wahba", "inertial"}
     g_mps2 : float, optional
 
     Returns
     -------
     pitch_rad, roll_rad, yaw_rad : float
+        The mean attitude over the data; for ``"inertial"`` the attitude at
+        the end of the data.
     """
     dtheta = _vec3("dtheta_b_rad", dtheta_b_rad)
     dvel = _vec3("dvel_b_mps", dvel_b_mps)
@@ -351,6 +423,8 @@ def align_increments(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, method="2", g_m
         warnings.warn(f"specific force varies by {std:.3g} m/s^2 (1 s means) > {MOTION_STD_LIMIT_MPS2}: "
                       "the vehicle does not look static, the coarse alignment will be poor",
                       MotionWarning, stacklevel=2)
+    if method == "inertial":
+        return align_inertial(dtheta, dvel, dt_s, lat_rad, g_mps2=g_mps2)
     w_b = dtheta.sum(axis=0) / duration_s
     f_b = dvel.sum(axis=0) / duration_s
     sigma_f = _standard_error(dvel, dt_s) or ACCEL_SIGMA_MPS2
