@@ -178,7 +178,7 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     j = int(np.argmax(smooth))
     stat = float(smooth[j])
     n_terms = width * g * comb.n_tones
-    thr = _threshold(n_terms, max(1, smooth.size // width), pfa)
+    thr = _threshold(n_terms, smooth.size, pfa)  # Bonferroni over every (overlapping) window
     # Central tone: its strongest bin within the window, interpolated.
     first = c_lo + j * g
     p_win = power[first - lo: first - lo + width * g]
@@ -318,10 +318,11 @@ def _phasors(a_cycles, b_cycles, half):
     return out
 
 
-def _newton(y, tau, ratio, delta_hz, rate, n_iter=3):
-    """Maximise J(f, r) = sum_k |sum_m y_mk exp(-j 2 pi s_k (f tau + r tau^2/2))|^2 by Newton steps.
+def _newton(y, tau, ratio, delta_hz, rate, known_cycles, n_iter=3):
+    """Maximise J(f, r) = sum_k |sum_m y_mk exp(-j 2 pi s_k (f tau + r tau^2/2 + c))|^2 by Newton steps.
 
-    ``s_k = 1 + k ratio`` (k = -half..half). Returns ``(f, r, Y)`` with ``Y``
+    ``s_k = 1 + k ratio`` (k = -half..half); ``c`` (B,) a known phase in
+    cycles (the cubic term of a predicted rate change). Returns ``(f, r, Y)`` with ``Y``
     (n_tones,) the phase-aligned sums at the optimum (to first order).
     """
     half = y.shape[1] // 2
@@ -332,7 +333,7 @@ def _newton(y, tau, ratio, delta_hz, rate, n_iter=3):
     theta = np.array([delta_hz, rate], dtype=float)
     step = np.zeros(2)
     for _ in range(n_iter):
-        phase = theta[0] * tau + 0.5 * theta[1] * tau**2
+        phase = theta[0] * tau + 0.5 * theta[1] * tau**2 + known_cycles
         m = (y * _phasors(phase, ratio * phase, half)).T @ tpow  # (K, 5): sum_m u tau^p
         y0 = m[:, 0]
         d = np.stack([-1j * a * m[:, 1], -1j * b * m[:, 2]])  # dY/dtheta, (2, K)
@@ -373,11 +374,11 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     max_rate_hz_per_s : float
         Bound on |rate|; 0 skips the rate search (the rate is still refined).
     doppler_accel_hz_per_s2 : float
-        Known (predicted) change of the rate. A cubic phase term
-        ``a tau^3 / 6`` projects onto the linear one and biases the frequency
-        by ``a/6 sum tau^4 / sum tau^2`` (= a T^2 / 40: 0.009 Hz at LEO's
-        ~37 Hz/s^2 for 0.1 s blocks, 0.9 Hz for 1 s blocks); it is removed.
-        Estimating ``a`` instead would cost a factor 2.5 in sigma.
+        Known (predicted) change of the rate, put into the phase model as
+        ``a tau^3 / 6``. Ignored, it biases the frequency by
+        :func:`cubic_bias_hz` (a T^2 / 40: 0.009 Hz at LEO's ~37 Hz/s^2 for
+        0.1 s blocks, ~0.9 Hz for 1 s blocks). Estimating ``a`` as a fourth
+        unknown would cost a factor 2.5 in sigma.
 
     Returns
     -------
@@ -414,14 +415,14 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
         nu = (nu + 0.5 / dt_dec) % (1.0 / dt_dec) - 0.5 / dt_dec
         rate = nu / (h * dt_dec)
     # Dechirp (s_k ~ 1 is close enough here) and find the residual frequency.
-    z = y * np.exp(-1j * np.pi * rate * tau**2)[:, None]
+    known = doppler_accel_hz_per_s2 / 6.0 * tau**3
+    z = y * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known))[:, None]
     n_fft = 2 * n_seg
     p = np.sum(_abs2(np.fft.fft(z, n_fft, axis=0)), axis=1)
     i = int(np.argmax(p))
     f_res = (i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec)
     f_res = (f_res + 0.5 / dt_dec) % (1.0 / dt_dec) - 0.5 / dt_dec
-    delta, rate, y_sum = _newton(y, tau, ratio, f_res, rate)
-    delta -= cubic_bias_hz(doppler_accel_hz_per_s2, n, fs)
+    delta, rate, y_sum = _newton(y, tau, ratio, f_res, rate, known)
     # Amplitudes and noise from the fit: y_mk = c_m A_k exp(j psi) + noise of
     # variance c_m sigma^2; the least-squares residual is sum|y|^2 - |Y|^2 / B.
     resid = max(float(np.sum(_abs2(y))) - float(np.sum(_abs2(y_sum))) / n_seg, 0.0)
