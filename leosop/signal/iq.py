@@ -8,6 +8,7 @@ convention); the estimators do not depend on the scale.
 
 import hashlib
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -147,7 +148,9 @@ def open_sigmf(meta_path, *, verify=True):
     if not data_path.is_file():
         raise InputError(f"{data_path}: missing SigMF data file for {meta_path.name}")
     try:
-        meta = sigmffile.fromfile(str(meta_path), skip_checksum=True)
+        with warnings.catch_warnings():  # sigmf warns about odd sizes; we raise below
+            warnings.simplefilter("ignore")
+            meta = sigmffile.fromfile(str(meta_path), skip_checksum=True)
     except (SigMFError, json.JSONDecodeError, KeyError, ValueError) as exc:
         raise InputError(f"{meta_path}: not valid SigMF metadata ({exc})".replace("\n", " ")) from None
     info = meta.get_global_info()

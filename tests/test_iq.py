@@ -1,0 +1,120 @@
+"""IQ recordings: SigMF round trips (checked with the sigmf package's own reader), raw files, bad files."""
+
+import json
+
+import numpy as np
+import pytest
+from sigmf import sigmffile
+
+from leosop.errors import InputError
+from leosop.signal.iq import open_raw, open_sigmf, write_sigmf
+
+FS = 1e6
+
+
+def _samples(n, seed=0):
+    rng = np.random.default_rng(seed)
+    return (rng.standard_normal(n) + 1j * rng.standard_normal(n)) * 0.2
+
+
+def _write(tmp_path, x, datatype="cf32_le", name="rec", chunk=1000, **kw):
+    meta = tmp_path / f"{name}.sigmf-meta"
+    chunks = (x[i:i + chunk] for i in range(0, x.size, chunk))
+    write_sigmf(meta, chunks, sample_rate_hz=FS, center_hz=11.325e9, start_utc="2025-01-01T19:40:00Z",
+                datatype=datatype, annotations=[(0, 100, {"leosop:sat_id": "70001", "leosop:doppler_hz": 1.5})],
+                global_extra={"leosop:n_tones": 9}, **kw)
+    return meta
+
+
+def test_cf32_round_trip(tmp_path):
+    x = _samples(5_000)
+    meta = _write(tmp_path, x)
+    rec = open_sigmf(meta)
+    assert (rec.n_samples, rec.datatype, rec.sample_rate_hz, rec.center_hz) == (5_000, "cf32_le", FS, 11.325e9)
+    assert rec.start_utc == np.datetime64("2025-01-01T19:40:00", "ns")
+    # cf32 stores complex64: exact round trip of the complex64 values.
+    np.testing.assert_array_equal(rec.read(0, 5_000), x.astype(np.complex64))
+    np.testing.assert_array_equal(rec.read(1234, 10), x[1234:1244].astype(np.complex64))
+    assert rec.annotations[0]["leosop:doppler_hz"] == 1.5
+    # The sigmf package's own reader (checksum verified) sees the same samples.
+    np.testing.assert_array_equal(sigmffile.fromfile(str(meta)).read_samples(), x.astype(np.complex64))
+    blocks = list(rec.blocks(2_000))
+    assert [s for s, _ in blocks] == [0, 2_000]  # whole blocks only
+
+
+def test_ci16_round_trip(tmp_path):
+    x = _samples(3_000)
+    meta = _write(tmp_path, x, datatype="ci16_le", ci16_full_scale=2.0)
+    got = open_sigmf(meta).read(0, 3_000)
+    # Read back in units of full scale (SigMF: ci16 / 32768); quantisation is half
+    # an LSB, 0.5/32767, plus the 32767-vs-32768 scale (3e-5 relative) and float32 rounding.
+    np.testing.assert_allclose(got.real, x.real / 2.0, atol=0.5 / 32767 + 3.1e-5 * 0.5 + 1e-6)
+    np.testing.assert_allclose(got.imag, x.imag / 2.0, atol=0.5 / 32767 + 3.1e-5 * 0.5 + 1e-6)
+    # The sigmf package scales ci16 by 1/32768 as we do.
+    np.testing.assert_allclose(sigmffile.fromfile(str(meta)).read_samples(), got, rtol=1e-6)
+
+
+@pytest.mark.parametrize("dtype", ["cf32", "ci16"])
+def test_raw(tmp_path, dtype):
+    x = _samples(2_000)
+    path = tmp_path / f"rec.{dtype}"
+    if dtype == "cf32":
+        x.astype("<c8").tofile(path)
+        expect = x.astype(np.complex64)
+    else:
+        q = np.round(np.stack([x.real, x.imag], axis=1) * 32768).astype("<i2")
+        q.tofile(path)
+        expect = (q[:, 0] + 1j * q[:, 1]) / 32768
+    rec = open_raw(path, dtype=dtype, sample_rate_hz=FS, center_hz=11.325e9, start="2025-01-01T00:00:00Z")
+    assert rec.n_samples == 2_000
+    np.testing.assert_allclose(rec.read(0, 2_000), expect, rtol=1e-6)
+
+
+def test_bad_files(tmp_path):
+    meta = _write(tmp_path, _samples(1_000))
+    data = meta.with_suffix(".sigmf-data")
+    doc = json.loads(meta.read_text())
+
+    with open(data, "ab") as fh:  # truncated/extended by a partial sample
+        fh.write(b"\0\0\0")
+    with pytest.raises(InputError, match="whole number"):
+        open_sigmf(meta)
+    data.write_bytes(data.read_bytes()[:-3 - 8 * 100])  # 100 whole samples short
+    with pytest.raises(InputError, match="sha512"):
+        open_sigmf(meta)
+
+    for key, value, match in [("core:datatype", "ri16_le", "datatype"), ("core:datatype", "cu8", "datatype"),
+                              ("core:sample_rate", 0, "sample rate"), ("core:sample_rate", -5.0, "sample rate")]:
+        bad = dict(doc, **{"global": dict(doc["global"], **{key: value})})
+        meta.write_text(json.dumps(bad))
+        with pytest.raises(InputError, match=match):
+            open_sigmf(meta, verify=False)
+
+    data.unlink()
+    with pytest.raises(InputError, match="missing SigMF data"):
+        open_sigmf(meta)
+    with pytest.raises(InputError, match="sample rate"):
+        open_raw(meta, dtype="cf32", sample_rate_hz=0)
+
+
+def test_nan_and_range(tmp_path):
+    x = _samples(1_000)
+    x[500] = np.nan
+    rec = open_sigmf(_write(tmp_path, x))
+    with pytest.raises(InputError, match="sample 500 is NaN"):
+        rec.read(0, 1_000)
+    with pytest.raises(InputError, match="outside"):
+        rec.read(900, 200)
+    with pytest.raises(InputError, match="block of 2000"):
+        next(rec.blocks(2_000))
+
+
+def test_write_is_atomic(tmp_path):
+    def failing():
+        yield _samples(100)
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError):
+        write_sigmf(tmp_path / "x.sigmf-meta", failing(), sample_rate_hz=FS, center_hz=1e9,
+                    start_utc="2025-01-01T00:00:00Z")
+    assert list(tmp_path.iterdir()) == []
