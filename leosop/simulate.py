@@ -13,7 +13,8 @@ table reproductions call it. For a scenario it
    level (the estimator's error model);
 4. solves a snapshot Doppler fix per epoch with 7 or more satellites, with
    satellite positions carrying a constant orbit error per satellite;
-5. runs the INS alone and the loose EKF (:mod:`leosop.fusion.loose`).
+5. runs the INS alone and the EKF: loose (:mod:`leosop.fusion.loose`, the
+   fixes) or tight (:mod:`leosop.fusion.tight`, the Doppler measurements).
 
 Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent
 streams for the IMU, the satellite offsets and orbit errors, and the

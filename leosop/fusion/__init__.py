@@ -1,5 +1,7 @@
-"""Fusion of inertial navigation with LEO fixes.
+"""Fusion of inertial navigation with LEO Doppler.
 
 :mod:`.kalman` is the filter core as plain functions; :mod:`.loose` couples
-the strapdown INS with Doppler position/velocity fixes (seed 004 eq. 13-16).
+the strapdown INS with Doppler position/velocity fixes (seed 004 eq. 13-16);
+:mod:`.tight` updates the INS with each satellite's Doppler and estimates the
+satellites' clock offsets and orbit errors (ours).
 """
