@@ -423,6 +423,8 @@ def align_increments(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, method="2", g_m
         warnings.warn(f"specific force varies by {std:.3g} m/s^2 (1 s means) > {MOTION_STD_LIMIT_MPS2}: "
                       "the vehicle does not look static, the coarse alignment will be poor",
                       MotionWarning, stacklevel=2)
+    if method not in INCREMENT_METHODS:
+        raise InputError(f"alignment method {method!r} must be one of {', '.join(INCREMENT_METHODS)}")
     if method == "inertial":
         return align_inertial(dtheta, dvel, dt_s, lat_rad, g_mps2=g_mps2)
     w_b = dtheta.sum(axis=0) / duration_s
