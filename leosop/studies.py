@@ -50,7 +50,7 @@ def _client(scheduler, n_chunks):
     if scheduler is None:
         n_workers = max(1, min(os.cpu_count() or 1, n_chunks))
         with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                          dashboard_address=None, silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+                          dashboard_address=":0", silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
             yield client
         return
     try:

@@ -16,7 +16,7 @@ def client():
     distributed = pytest.importorskip("distributed")
     # In-process cluster of two single-threaded workers: starts in well under a second.
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as c:
+                                  dashboard_address=":0") as cluster, distributed.Client(cluster) as c:
         yield c
 
 
