@@ -101,7 +101,8 @@ def attitude_errors(pitch_deg, roll_deg, heading_deg, n_shots, *, accel_sigma_mp
     w_meas = w_b[..., None, :] + rng.normal(0.0, gyro_sigma_rad_per_s, shape)
     out = {}
     for m in methods:
-        pe, re, ye = align(f_meas, w_meas, lat_rad, method=m, g_mps2=g)
+        pe, re, ye = align(f_meas, w_meas, lat_rad, method=m, g_mps2=g, accel_sigma_mps2=accel_sigma_mps2,
+                           gyro_sigma_rad_per_s=gyro_sigma_rad_per_s)
         out[m] = (_wrap_deg(np.degrees(pe) - p[..., None]), _wrap_deg(np.degrees(re) - r[..., None]),
                   _wrap_deg(-np.degrees(ye) - h[..., None]))
     return out
