@@ -136,3 +136,12 @@ def test_reproduce_align_table1(capsys):
 def test_reproduce_unknown_target_exit_2(capsys):
     status, _, err = _run(["reproduce", "table99", "--json"], capsys)
     assert status == 2 and "unknown target" in err
+
+
+def test_reproduce_errmodel_validate(capsys):
+    status, out, _ = _run(["reproduce", "errmodel-validate", "--json"], capsys)
+    assert status == 0
+    rel = json.loads(out)["relative_error"]
+    # The 15-state model follows the strapdown to a few percent on every axis
+    # (test_error_model checks the same run in detail).
+    assert max(abs(v) for v in rel["model15"]["vel"] + rel["model15"]["pos"]) < 0.05
