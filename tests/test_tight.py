@@ -46,18 +46,25 @@ def test_filter_is_consistent_on_short_flights():
     # within [0.5, 2] of its dimension (issue 6) and the NIS sum in the 99.9 %
     # interval of a chi-square with the total degrees of freedom.
     scenario = dataclasses.replace(XIAN_BAOJI, duration_s=90.0)
-    nees, nis, dof = [], [], []
+    nees, nis, dof, lag = [], [], [], []
     for seed in range(8):
         r = run_scenario(scenario, level="measurement", seed=seed, coupling="tight")
         nees.append(r.nees()[1:])
         a, b = r.nis()
         nis.append(a)
         dof.append(b)
+        d = np.sort(r.fused.doppler_innovation, order=("sat", "epoch"))
+        nxt = (d["sat"][1:] == d["sat"][:-1]) & (d["epoch"][1:] == d["epoch"][:-1] + 1)
+        lag.append(np.stack([d["normalized"][:-1][nxt], d["normalized"][1:][nxt]]))
     nees = np.concatenate(nees)
     assert 0.5 * 6 <= nees.mean() <= 2.0 * 6
     total = np.concatenate(dof).sum()
     lo, hi = stats.chi2.ppf([0.0005, 0.9995], total)
     assert lo <= np.concatenate(nis).sum() <= hi
+    # Whiteness: lag-1 correlation of each satellite's normalised innovations,
+    # ~N(0, 1/m) under the null with m ~ 6000 pairs here: |r| < 4/sqrt(m).
+    a, b = np.concatenate(lag, axis=1)
+    assert abs(np.corrcoef(a, b)[0, 1]) < 4.0 / np.sqrt(a.size)
 
 
 def test_tight_beats_loose_on_the_same_measurements():

@@ -78,6 +78,10 @@ class FusionResult:
     innovation, innovation_cov : ndarray, (n, 6), (n, 6, 6), or None
         Loose coupling: ``z - H x`` (velocity [m/s], position [m] ENU) and
         ``S`` at updates, NaN elsewhere; None for tight coupling.
+    doppler_innovation : structured ndarray or None
+        Tight coupling: one row per Doppler used, fields ``epoch``, ``sat``
+        and ``normalized`` (innovation over the square root of its variance
+        in ``S``); None for loose coupling.
     gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
         Accumulated bias estimates.
     """
@@ -97,6 +101,7 @@ class FusionResult:
     accel_bias_mps2: np.ndarray
     innovation: np.ndarray | None = None
     innovation_cov: np.ndarray | None = None
+    doppler_innovation: np.ndarray | None = None
 
     @property
     def pos_ecef_m(self):

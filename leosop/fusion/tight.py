@@ -165,8 +165,9 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
     Returns
     -------
     leosop.fusion.loose.FusionResult
-        ``innovation`` and ``innovation_cov`` are None; ``nis_dof`` is the
-        number of Doppler measurements of each update.
+        ``innovation`` and ``innovation_cov`` are None, ``doppler_innovation``
+        holds each Doppler's normalised innovation; ``nis_dof`` is the number
+        of Doppler measurements of each update.
     """
     per_step = int(round(settings.step_s / dt_s))
     if per_step < 2 or per_step % 2 or abs(per_step * dt_s - settings.step_s) > 1e-9:
@@ -181,6 +182,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
         ("lat", (n,)), ("lon", (n,)), ("alt", (n,)), ("vel", (n, 3)), ("C", (n, 3, 3)), ("P", (n, 15, 15)),
         ("nis", (n,)), ("eps", (n, 3)), ("nabla", (n, 3)))}
     dof = np.zeros(n, dtype=int)
+    records = []
     updated = np.zeros(n, dtype=bool)
     rejected = np.zeros(n, dtype=bool)
     state = state0
@@ -237,8 +239,12 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
                 last_update_s = t_s
                 out["nis"][k] = kalman.nis(y_used, S)
                 dof[k] = int(ok.sum())
+                for j, v in zip(measurements.sat_index[rows][ok], y_used / np.sqrt(np.diag(S))):
+                    records.append((k, j, v))
         out["lat"][k], out["lon"][k], out["alt"][k] = state.lat_rad, state.lon_rad, state.alt_m
         out["vel"][k], out["C"][k], out["P"][k] = state.vel_enu_mps, state.C_n_b, P[:_N_INS, :_N_INS]
         out["eps"][k], out["nabla"][k] = eps, nabla
+    innovations = np.array(records, dtype=[("epoch", int), ("sat", int), ("normalized", float)])
     return FusionResult(np.arange(n) * settings.step_s, out["lat"], out["lon"], out["alt"], out["vel"], out["C"],
-                        out["P"], updated, rejected, out["nis"], dof, out["eps"], out["nabla"])
+                        out["P"], updated, rejected, out["nis"], dof, out["eps"], out["nabla"],
+                        doppler_innovation=innovations)
