@@ -5,7 +5,7 @@ table reproductions call it. For a scenario it
 
 1. flies the truth trajectory and corrupts its ideal IMU increments
    (seed 004 Table 1; bias signs drawn per run);
-2. finds the visible satellites at 1 Hz (:mod:`leosop.orbits.visibility`)
+2. finds the visible satellites at the fix rate, 1 Hz (:mod:`leosop.orbits.visibility`)
    and their true Doppler, plus a constant clock-induced offset per satellite
    drawn uniformly in [0, max] and the receiver's fixed offset;
 3. measures every Doppler, either at signal level (a pilot block per
@@ -55,8 +55,6 @@ __all__ = ["SimulationResult", "run_scenario", "metrics", "LEVELS", "COUPLINGS"]
 
 LEVELS = ("signal", "measurement")
 COUPLINGS = ("loose", "tight")
-#: Fusion and fix rate of seed 004 (1 Hz).
-STEP_S = 1.0
 #: Initial attitude uncertainty of the filter (E, N, U) [deg]: the paper
 #: gives none; the truth starts without attitude error, these are the
 #: figures of a fine-aligned navigation-grade INS.
@@ -74,7 +72,7 @@ SEARCH_HZ = 20e3
 
 @dataclasses.dataclass(frozen=True)
 class SimulationResult:
-    """Everything a run produced, at the 1 Hz epochs ``t_s`` (n,).
+    """Everything a run produced, at the fix epochs ``t_s`` (n,), 1 Hz by default.
 
     Attributes
     ----------
@@ -177,7 +175,7 @@ def _filter_settings(scenario, errors, correction_period_s):
         accel_bias_sigma_mps2=max(float(np.abs(errors.accel_bias_mps2).max()), 1e-7),
         gyro_arw_rad_per_rt_s=float(errors.gyro_arw_rad_per_rt_s.max()),
         accel_vrw_mps2_per_rt_hz=float(errors.accel_vrw_mps_per_rt_s.max()),
-        correction_period_s=correction_period_s, step_s=STEP_S)
+        correction_period_s=correction_period_s, step_s=1.0 / scenario.leo.fix_rate_hz)
 
 
 def _initial_state(truth, init):
@@ -305,7 +303,11 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
                               rate_hz=scenario.imu.rate_hz, duration_s=scenario.duration_s)
     errors = _imu_errors(scenario.imu, rng_imu)
     dtheta, dvel = imu.corrupt(truth.dtheta_b_rad, truth.dvel_b_mps, truth.dt_s, errors, rng_imu)
-    per_step = int(round(STEP_S / truth.dt_s))
+    # Fixes and fusion at leo.fix_rate_hz (seed 004: 1 Hz), on the IMU's two-sample grid.
+    per_step = int(round(scenario.imu.rate_hz / scenario.leo.fix_rate_hz))
+    if per_step < 2 or per_step % 2 or abs(per_step * scenario.leo.fix_rate_hz - scenario.imu.rate_hz) > 1e-6:
+        raise InputError(f"{scenario.name}: leo.fix_rate_hz={scenario.leo.fix_rate_hz:g} must divide "
+                         f"imu.rate_hz={scenario.imu.rate_hz:g} into an even number of IMU samples")
     n_ep = (truth.t_s.size - 1) // per_step + 1
     truth1 = truth.at(truth.t_s[: (n_ep - 1) * per_step + 1: per_step])
     t_s = truth1.t_s
@@ -384,7 +386,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
 def metrics(result):
     """The ``simulate`` JSON document (DESIGN.md 4.1), every key present.
 
-    Means are over the 1 Hz output epochs after the start (t >= 1 s);
+    Means are over the output epochs (1 Hz by default) after the start;
     ``availability`` is the fraction of those epochs with a fused output.
     """
     err = result.errors()
@@ -414,7 +416,7 @@ def metrics(result):
 
 
 def solution_table(result):
-    """The solution CSV: header and rows, one per 1 Hz epoch.
+    """The solution CSV: header and rows, one per output epoch.
 
     Columns: time; truth, INS-only, LEO fix and fused position (deg, deg, m)
     and ENU velocity (m/s); the fused 1-sigma position (ENU m) and velocity
