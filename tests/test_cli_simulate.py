@@ -86,6 +86,7 @@ def test_human_summary_prints_metrics_and_runtime(tmp_path, capsys):
         ({}, ["--correction-period-s", "0"], ["--correction-period-s"]),
         ({}, ["--correction-period-s", "-5"], ["--correction-period-s"]),
         ({}, ["--orbit-error-m", "-1"], ["--orbit-error-m"]),
+        ({"leo": {"fix_rate_hz": 3}}, [], ["leo.fix_rate_hz=3", "even number"]),
     ],
 )
 def test_bad_input_exits_2_naming_the_problem(tmp_path, capsys, changes, argv, words):
