@@ -48,6 +48,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import scipy.fft as scipy_fft
 
 from ..errors import InputError
 from .crlb import crlb_frequency_hz2
@@ -81,6 +82,10 @@ MAX_DOPPLER_HZ = 300e3
 MAX_RATE_HZ_PER_S = 5e3
 #: False-alarm probability of the comb detector per block.
 PFA = 1e-3
+#: Tone positions decimated beyond each end of the comb to check the comb position.
+_EXTRA_TONES = 2
+#: Coarse margin (noise sigmas) above which the central tone is taken as sure.
+_SURE_SIGMA = 10.0
 
 
 @dataclass(frozen=True)
@@ -90,7 +95,9 @@ class CoarseEstimate:
     ``doppler_hz``: central tone at the strongest bin near the detected comb,
     interpolated; ``error_hz``: half-width of the interval it is good to
     (smear and smoothing included); ``statistic``/``threshold``: the comb
-    power over its noise mean and the detector threshold.
+    power over its noise mean and the detector threshold; ``margin_sigma``:
+    by how many noise standard deviations the comb beats the same comb
+    shifted by one tone spacing (how sure the central tone is).
     """
 
     doppler_hz: float
@@ -98,6 +105,7 @@ class CoarseEstimate:
     detected: bool
     statistic: float
     threshold: float
+    margin_sigma: float = np.nan
 
 
 @lru_cache(maxsize=64)
@@ -163,8 +171,12 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     if hi - lo + 1 >= n:
         raise InputError(f"the comb (+-{offsets_hz.max():.0f} Hz) with +-{max_doppler_hz:.0f} Hz of Doppler "
                          f"does not fit in the {sample_rate_hz:.0f} Hz sample rate")
-    band = np.concatenate([spectrum[lo % n:], spectrum[:hi + 1]]) if lo < 0 else spectrum[lo:hi + 1]
-    power = _abs2(band)
+    if lo < 0:
+        power = np.empty(hi - lo + 1, dtype=spectrum.real.dtype)
+        power[:-lo] = _abs2(spectrum[lo:])
+        power[-lo:] = _abs2(spectrum[:hi + 1])
+    else:
+        power = _abs2(spectrum[lo:hi + 1])
     # Noise mean from the median of a subsample of the band (the comb fills a
     # small fraction of it); exponential power: median = mean * ln 2.
     noise = float(np.median(power[::max(1, power.size // 8192)])) / np.log(2.0)
@@ -187,7 +199,10 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     doppler_hz = (b + _parabola_vertex(*p3)) * df
     # The strongest bin lies on the central tone's smeared track.
     error_hz = 0.5 * smear_hz + 2.0 * df
-    return CoarseEstimate(doppler_hz, error_hz, stat > thr, stat, thr)
+    step = int(round(comb.tone_spacing_hz / df / g))
+    rival = max((smooth[i] for i in (j - step, j + step) if 0 <= i < smooth.size), default=0.0)
+    margin = (stat - rival) * np.sqrt(n_terms / 2.0)
+    return CoarseEstimate(doppler_hz, error_hz, stat > thr, stat, thr, float(margin))
 
 
 def coarse_stft(iq, sample_rate_hz, comb=None, *, nperseg=4096, hop=None,
@@ -305,20 +320,12 @@ def _phasors(a_cycles, b_cycles, half):
     """
     base = np.exp(-2j * np.pi * (a_cycles - np.round(a_cycles)))
     z = np.exp(-2j * np.pi * (b_cycles - np.round(b_cycles)))
-    out = np.empty((base.size, 2 * half + 1), dtype=complex)
-    out[:, half] = base
-    up = base.copy()
-    down = base.copy()
-    zc = np.conj(z)
-    for k in range(1, half + 1):
-        up *= z
-        down *= zc
-        out[:, half + k] = up
-        out[:, half - k] = down
-    return out
+    up = np.cumprod(np.broadcast_to(z[:, None], (z.size, half)), axis=1)  # z^1 .. z^half
+    powers = np.concatenate([np.conj(up[:, ::-1]), np.ones((z.size, 1)), up], axis=1)
+    return powers * base[:, None]
 
 
-def _newton(y, tau, ratio, delta_hz, rate, known_cycles, n_iter=3):
+def _newton(y, tau, ratio, delta_hz, rate, known_cycles, n_iter=2):
     """Maximise J(f, r) = sum_k |sum_m y_mk exp(-j 2 pi s_k (f tau + r tau^2/2 + c))|^2 by Newton steps.
 
     ``s_k = 1 + k ratio`` (k = -half..half); ``c`` (B,) a known phase in
@@ -327,7 +334,8 @@ def _newton(y, tau, ratio, delta_hz, rate, known_cycles, n_iter=3):
     """
     half = y.shape[1] // 2
     scale = 1.0 + ratio * np.arange(-half, half + 1)
-    tpow = np.stack([tau**p for p in range(5)], axis=1)  # (B, 5)
+    tpow = np.cumprod(np.concatenate([np.ones((tau.size, 1)), np.repeat(tau[:, None], 4, axis=1)], axis=1),
+                      axis=1)  # (B, 5): tau^0 .. tau^4
     a = 2.0 * np.pi * scale  # dpsi/df = a tau
     b = np.pi * scale        # dpsi/dr = b tau^2
     theta = np.array([delta_hz, rate], dtype=float)
@@ -361,8 +369,53 @@ def cubic_bias_hz(doppler_accel_hz_per_s2, n_samples, sample_rate_hz):
     return np.asarray(doppler_accel_hz_per_s2) / 6.0 * (3.0 * n**2 - 7.0) / (20.0 * sample_rate_hz**2)
 
 
+def _wrap(f_hz, fs_hz):
+    return (f_hz + 0.5 * fs_hz) % fs_hz - 0.5 * fs_hz
+
+
+def _rate_dpt(y, dt_dec, pfa):
+    """Rate from ``y[m + h] conj(y[m])``, a tone at ``rate h dt_dec`` (discrete polynomial-phase
+    transform); None when its peak is not significant at false-alarm ``pfa``."""
+    h = y.shape[0] // 2
+    v = y[h:2 * h] * np.conj(y[:h])
+    p = np.sum(_abs2(scipy_fft.fft(v, 2 * h, axis=0)), axis=1)
+    i = int(np.argmax(p))
+    if p[i] / np.mean(p) < _threshold(y.shape[1], p.size, pfa):
+        return None
+    nu = (i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % p.size])) / (2 * h * dt_dec)
+    return _wrap(nu, 1.0 / dt_dec) / (h * dt_dec)
+
+
+def _dechirped_peak(y, tau, rate, known, dt_dec):
+    """Residual frequency of the tones after removing a rate: peak of the summed zero-padded spectra."""
+    z = y * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known))[:, None]  # s_k ~ 1 is close enough here
+    n_fft = 2 * y.shape[0]
+    p = np.sum(_abs2(scipy_fft.fft(z, n_fft, axis=0)), axis=1)
+    i = int(np.argmax(p))
+    return _wrap((i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec), 1.0 / dt_dec)
+
+
+def _rate_grid(y, tau, known, dt_dec, max_rate_hz_per_s, dur):
+    """(rate, frequency) of the largest dechirped comb power over rates 1/T^2 apart (low C/N0 fallback).
+
+    Pairs of segments are summed first: the band still holds the residual
+    tones and the search costs half as much.
+    """
+    m = y.shape[0] // 2 * 2
+    y2 = y[:m:2] + y[1:m:2]
+    t2 = 0.5 * (tau[:m:2] + tau[1:m:2])
+    k2 = 0.5 * (known[:m:2] + known[1:m:2])
+    dt2 = 2.0 * dt_dec
+    rates = np.arange(-max_rate_hz_per_s, max_rate_hz_per_s + 1.0 / dur**2, 1.0 / dur**2)
+    z = y2[None] * np.exp(-2j * np.pi * (0.5 * rates[:, None] * t2**2 + k2))[:, :, None]  # (J, B/2, K)
+    n_fft = 2 * y2.shape[0]
+    p = np.sum(_abs2(scipy_fft.fft(z, n_fft, axis=1)), axis=2)  # (J, n_fft)
+    j, i = np.unravel_index(int(np.argmax(p)), p.shape)
+    return float(rates[j]), _wrap(i / (n_fft * dt2), 1.0 / dt2)
+
+
 def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ_PER_S,
-              doppler_accel_hz_per_s2=0.0):
+              doppler_accel_hz_per_s2=0.0, pfa=PFA, resolve=True):
     """Joint comb ML of Doppler and Doppler rate on integrate-and-dump decimated tones.
 
     Parameters
@@ -379,6 +432,11 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
         :func:`cubic_bias_hz` (a T^2 / 40: 0.009 Hz at LEO's ~37 Hz/s^2 for
         0.1 s blocks, ~0.9 Hz for 1 s blocks). Estimating ``a`` as a fourth
         unknown would cost a factor 2.5 in sigma.
+    pfa : float
+        False-alarm probability of the rate transform's peak (below it, a rate grid is searched).
+    resolve : bool
+        Check the comb position (central tone) with the coherent tone powers
+        and re-estimate once if the coarse search was off by whole spacings.
 
     Returns
     -------
@@ -390,39 +448,43 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     half = comb.n_tones // 2
     ratio = comb.tone_spacing_hz / comb.carrier_hz
     # The decimated band must hold the coarse error and the smear with the
-    # integrate-and-dump sinc loss under ~2 % at its edge: fs_dec >= 10x.
+    # integrate-and-dump sinc loss under ~3 % at its edge: fs_dec >= 8x.
     bw_hz = coarse.error_hz + 0.5 * max_rate_hz_per_s * dur
-    n_seg, seg = _decimation(n, np.ceil(10.0 * bw_hz * dur))
+    n_seg, seg = _decimation(n, np.ceil(8.0 * bw_hz * dur))
     x = iq if n_seg * seg == n else np.concatenate([iq, np.zeros(n_seg * seg - n, dtype=iq.dtype)])
     # Tone k at f_k = k spacing + s_k D = D + k spacing (1 + D / f_c).
     d_c = coarse.doppler_hz
     spacing = comb.tone_spacing_hz * (1.0 + d_c / comb.carrier_hz)
     t_l = np.arange(seg) / fs
-    mix = _phasors(d_c * t_l, spacing * t_l, half).astype(np.complex64 if iq.dtype == np.complex64 else complex)
+    # When the coarse search is not sure of the central tone (weak comb), two
+    # more tone positions either side decide it once the fit is coherent.
+    resolve = resolve and not coarse.margin_sigma >= _SURE_SIGMA
+    extra = _EXTRA_TONES if resolve else 0
+    wide = half + extra
+    mix = _phasors(d_c * t_l, spacing * t_l, wide).astype(np.complex64 if iq.dtype == np.complex64 else complex)
     t_m = np.arange(n_seg) * (seg / fs)
-    y = (x.reshape(n_seg, seg) @ mix) * _phasors(d_c * t_m, spacing * t_m, half)
+    y_wide = (x.reshape(n_seg, seg) @ mix) * _phasors(d_c * t_m, spacing * t_m, wide)
+    y = y_wide[:, extra:y_wide.shape[1] - extra]
     counts = np.minimum(seg, n - np.arange(n_seg) * seg)
     tau = t_m + 0.5 * (counts - 1) / fs - 0.5 * (n - 1) / fs  # segment centres re block centre
     dt_dec = seg / fs
-    rate = 0.0
-    if max_rate_hz_per_s * dur**2 > 0.25:
-        # y[m + h] conj(y[m]) of a chirp is a tone at rate * h * dt_dec.
-        h = n_seg // 2
-        v = y[h:2 * h] * np.conj(y[:h])
-        p = np.sum(_abs2(np.fft.fft(v, 2 * h, axis=0)), axis=1)
-        i = int(np.argmax(p))
-        nu = (i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % p.size])) / (2 * h * dt_dec)
-        nu = (nu + 0.5 / dt_dec) % (1.0 / dt_dec) - 0.5 / dt_dec
-        rate = nu / (h * dt_dec)
-    # Dechirp (s_k ~ 1 is close enough here) and find the residual frequency.
     known = doppler_accel_hz_per_s2 / 6.0 * tau**3
-    z = y * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known))[:, None]
-    n_fft = 2 * n_seg
-    p = np.sum(_abs2(np.fft.fft(z, n_fft, axis=0)), axis=1)
-    i = int(np.argmax(p))
-    f_res = (i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec)
-    f_res = (f_res + 0.5 / dt_dec) % (1.0 / dt_dec) - 0.5 / dt_dec
+    rate, f_res = 0.0, None
+    if max_rate_hz_per_s * dur**2 > 0.25:
+        rate = _rate_dpt(y, dt_dec, pfa)
+        if rate is None:  # the product is too weak: search a grid of rates
+            rate, f_res = _rate_grid(y, tau, known, dt_dec, max_rate_hz_per_s, dur)
+    if f_res is None:
+        f_res = _dechirped_peak(y, tau, rate, known, dt_dec)
     delta, rate, y_sum = _newton(y, tau, ratio, f_res, rate, known)
+    if resolve:
+        phase = delta * tau + 0.5 * rate * tau**2 + known
+        power = _abs2(np.sum(y_wide * _phasors(phase, ratio * phase, wide), axis=0))
+        shift = int(np.argmax(np.convolve(power, np.ones(comb.n_tones), mode="valid"))) - extra
+        if shift:
+            moved = CoarseEstimate(d_c + delta + shift * spacing, 2.0 / dur, True, np.nan, np.nan)
+            return fine_fast(iq, fs, comb, moved, max_rate_hz_per_s=max_rate_hz_per_s,
+                             doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa, resolve=False)
     # Amplitudes and noise from the fit: y_mk = c_m A_k exp(j psi) + noise of
     # variance c_m sigma^2; the least-squares residual is sum|y|^2 - |Y|^2 / B.
     resid = max(float(np.sum(_abs2(y))) - float(np.sum(_abs2(y_sum))) / n_seg, 0.0)
@@ -452,11 +514,15 @@ def _check_iq(iq, sample_rate_hz):
     if not np.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
         raise InputError(f"sample_rate_hz={sample_rate_hz} must be a finite number > 0")
     iq = np.asarray(iq)
-    if not np.iscomplexobj(iq):
-        raise InputError(f"IQ samples must be complex, got dtype {iq.dtype}")
-    if not np.all(np.isfinite(iq.view(iq.real.dtype))):
-        raise InputError("IQ samples contain NaN or inf")
+    if iq.ndim != 1 or not np.iscomplexobj(iq):
+        raise InputError(f"IQ samples must be a 1-D complex array, got {iq.dtype} of shape {iq.shape}")
     return iq
+
+
+def _check_finite(value):
+    """A NaN or inf sample makes every FFT bin (and any sum) non-finite."""
+    if not np.isfinite(value):
+        raise InputError("IQ samples contain NaN or inf")
 
 
 def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_hz=1e-3,
@@ -497,11 +563,14 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     dur = iq.shape[-1] / sample_rate_hz
     if coarse_hz is None:
         smear = max_rate_hz_per_s * dur if method == "fast" else 0.0
-        coarse = coarse_fft(fft(iq), sample_rate_hz, comb, max_doppler_hz=max_doppler_hz,
+        spectrum = fft(iq, scratch=True)
+        _check_finite(spectrum[0])
+        coarse = coarse_fft(spectrum, sample_rate_hz, comb, max_doppler_hz=max_doppler_hz,
                             smear_hz=smear, pfa=pfa)
         if not coarse.detected:
             return out
     else:
+        _check_finite(np.sum(iq))
         if not np.isfinite(coarse_hz):
             return out
         err = coarse_error_hz if coarse_error_hz is not None else sample_rate_hz / iq.shape[-1]
@@ -509,7 +578,7 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     out["detected"] = True
     if method == "fast":
         d, r, c, s = fine_fast(iq, sample_rate_hz, comb, coarse, max_rate_hz_per_s=max_rate_hz_per_s,
-                               doppler_accel_hz_per_s2=doppler_accel_hz_per_s2)
+                               doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa)
         out.update(doppler_hz=d, doppler_rate_hz_per_s=r, cn0_dbhz=c, sigma_hz=s)
         return out
     # The paper's estimators start from the strongest bin of the central tone,

@@ -19,16 +19,18 @@ def _plan(n, dtype_str):
     return pyfftw.builders.fft(buf, threads=1, planner_effort="FFTW_ESTIMATE", avoid_copy=False)
 
 
-def fft(x):
+def fft(x, *, scratch=False):
     """FFT of a 1-D complex array (complex64 stays complex64).
 
-    Returns a new array (the plan's output buffer is copied only when the
-    next call would overwrite it, i.e. always: callers own the result).
+    With ``scratch=True`` the result is the plan's own output buffer, valid
+    until the next FFT of the same size and type (saves a copy); otherwise the
+    caller owns a new array.
     """
     x = np.asarray(x)
     dtype = np.complex64 if x.dtype == np.complex64 else np.complex128
     plan = _plan(x.shape[-1], np.dtype(dtype).str)
-    return plan(x.astype(dtype, copy=False)).copy()
+    out = plan(x.astype(dtype, copy=False))
+    return out if scratch else out.copy()
 
 
 def scipy_backend():
