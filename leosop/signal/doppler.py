@@ -179,8 +179,9 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
         power = _abs2(spectrum[lo:hi + 1])
     # Noise mean from the median of a subsample of the band (the comb fills a
     # small fraction of it); exponential power: median = mean * ln 2.
-    noise = float(np.median(power[::max(1, power.size // 8192)])) / np.log(2.0)
-    grouped = power.reshape(-1, g).sum(axis=1, dtype=float) if g > 1 else power.astype(float)
+    sub = power[::max(1, power.size // 8192)]
+    noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
+    grouped = (power.reshape(-1, g) @ np.ones(g, dtype=power.dtype)).astype(float) if g > 1 else power.astype(float)
     comb_power = np.zeros(n_groups)
     for og in og_k - og_k.min():
         comb_power += grouped[og:og + n_groups]
@@ -378,7 +379,7 @@ def _rate_dpt(y, dt_dec, pfa):
     transform); None when its peak is not significant at false-alarm ``pfa``."""
     h = y.shape[0] // 2
     v = y[h:2 * h] * np.conj(y[:h])
-    p = np.sum(_abs2(scipy_fft.fft(v, 2 * h, axis=0)), axis=1)
+    p = _abs2(scipy_fft.fft(v, 2 * h, axis=0)) @ np.ones(v.shape[1])  # summed over tones
     i = int(np.argmax(p))
     if p[i] / np.mean(p) < _threshold(y.shape[1], p.size, pfa):
         return None
@@ -390,7 +391,7 @@ def _dechirped_peak(y, tau, rate, known, dt_dec):
     """Residual frequency of the tones after removing a rate: peak of the summed zero-padded spectra."""
     z = y * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known))[:, None]  # s_k ~ 1 is close enough here
     n_fft = 2 * y.shape[0]
-    p = np.sum(_abs2(scipy_fft.fft(z, n_fft, axis=0)), axis=1)
+    p = _abs2(scipy_fft.fft(z, n_fft, axis=0)) @ np.ones(z.shape[1])  # summed over tones
     i = int(np.argmax(p))
     return _wrap((i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec), 1.0 / dt_dec)
 
