@@ -140,7 +140,8 @@ def run(args):
     if errs:
         doc["truth_rms_error_hz"] = float(np.sqrt(np.mean(np.square(errs))))
     if args.out:
-        _write_outputs(Path(args.out), doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg)
+        f_lim = min(0.5 * fs, args.max_doppler_hz + comb.offsets_hz.max() * 1.2)
+        _write_outputs(Path(args.out), doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim)
     return doc
 
 
@@ -164,7 +165,7 @@ def _correct_rate_change(estimates, block_len, fs):
             e["doppler_hz"] = d[i] - float(cubic_bias_hz((r[j1] - r[j0]) / (t[j1] - t[j0]), block_len, fs))
 
 
-def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg):
+def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim_hz):
     from ..signal.plots import plot_spectrogram
 
     keys = ["t_s", "time_utc", "doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz", "status"]
@@ -177,7 +178,7 @@ def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg):
     ok = [e for e in doc["estimates"] if e["status"] == "ok"]
     plot_spectrogram(out / "spectrogram.png", np.array(fig_t), f_hz, power,
                      track_t_s=np.array([e["t_s"] for e in ok]), track_hz=np.array([e["doppler_hz"] for e in ok]),
-                     coarse_t_s=np.array(coarse_t), coarse_hz=np.array(coarse_f),
+                     coarse_t_s=np.array(coarse_t), coarse_hz=np.array(coarse_f), f_lim_hz=f_lim_hz,
                      title=f"{Path(doc['recording']).name}: pilot comb, method {doc['method']}")
 
 

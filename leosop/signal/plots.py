@@ -6,7 +6,7 @@ __all__ = ["plot_spectrogram"]
 
 
 def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, coarse_t_s=None,
-                     coarse_hz=None, title=""):
+                     coarse_hz=None, f_lim_hz=None, title=""):
     """Write a PNG: power in dB over time and frequency, tracks on top.
 
     Parameters
@@ -19,6 +19,8 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
         Fine Doppler of the central tone per block.
     coarse_t_s, coarse_hz : ndarray, optional
         STFT coarse track.
+    f_lim_hz : float, optional
+        Show only |f| <= this.
     """
     import matplotlib
 
@@ -38,6 +40,8 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
         ax.plot(coarse_t_s, np.asarray(coarse_hz) / 1e3, "w.", ms=3, label="STFT coarse (central tone)")
     if track_t_s is not None:
         ax.plot(track_t_s, np.asarray(track_hz) / 1e3, "r-", lw=1.2, label="fine Doppler (central tone)")
+    if f_lim_hz is not None:
+        ax.set_ylim(-f_lim_hz / 1e3, f_lim_hz / 1e3)
     ax.set_xlabel("time from first sample [s]")
     ax.set_ylabel("baseband frequency [kHz]")
     ax.set_title(title)
