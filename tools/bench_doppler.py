@@ -116,14 +116,14 @@ def plot(path, results):
     comb_bound = doppler_sigma_hz(cn0, N / FS, sample_rate_hz=FS)
     tone_bound = doppler_sigma_hz(cn0, N / FS, method="fmlef", sample_rate_hz=FS)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True, constrained_layout=True)
-    styles = {"fast": "o-", "fast, a ignored": "x--", "fmlef": "s-", "ml": "^-"}
+    styles = {"fast": ("o-", "C0"), "fast, a ignored": ("x--", "C1"), "fmlef": ("s-", "C2"), "ml": ("^-", "C3")}
     for ax, (scenario, res) in zip(axes, results.items()):
         ax.semilogy(cn0, comb_bound, "k-", lw=2, label="CRLB, 9-tone comb")
         ax.semilogy(cn0, tone_bound, "k:", lw=2, label="CRLB, central tone")
-        for method, style in styles.items():
+        for method, (style, color) in styles.items():
             y = [res[c][method][0] for c in CN0S]
             if any(v is not None for v in y):
-                ax.semilogy(cn0, [np.nan if v is None else v for v in y], style, label=method)
+                ax.semilogy(cn0, [np.nan if v is None else v for v in y], style, color=color, label=method)
         ax.set_title(f"{scenario}: N = 3e5 at 2.5 MHz (0.12 s)")
         ax.set_xlabel("C/N0 per tone [dB-Hz]")
         ax.grid(True, which="both", alpha=0.3)
@@ -140,6 +140,7 @@ def main():
     p.add_argument("--slow-trials", type=int, default=25, help="of which for fmlef and ml (default 25)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=".", help="directory for bench_doppler.png/.json")
+    p.add_argument("--timing-only", action="store_true", help="part 1 only")
     args = p.parse_args()
 
     rows = timing(args.seed)
@@ -150,6 +151,8 @@ def main():
         print(f"{r['case']:>9} | {r['fft_s']:8.5f} | {r['fast_s']:8.5f} | {r['fmlef_1e-3_s']:10.4f} | "
               f"{r['fmlef_1e-4_s']:10.4f} | {r['fast_s'] / r['fft_s']:8.2f} | "
               f"{r['fmlef_1e-3_s'] / r['fast_s']:16.1f} | {r['fmlef_1e-4_s'] / r['fast_s']:16.1f}")
+    if args.timing_only:
+        return
 
     results = {s: monte_carlo(s, args.trials, args.slow_trials, args.seed + 1) for s in ("steady", "LEO pass")}
     print(f"\nPart 2: RMSE / CRLB (fast: 9-tone comb bound, {args.trials} blocks; fmlef 1e-3 Hz and ml 0.1 Hz: "
