@@ -28,11 +28,7 @@ offset) and the orbit error mapped through the Doppler's sensitivity to the
 satellite position.
 """
 
-import contextlib
-import ctypes
 import dataclasses
-import glob
-import os
 import time
 import warnings
 
@@ -187,30 +183,6 @@ def _initial_state(truth, init):
                                        alt + du, truth.vel_enu_mps[0] + np.asarray(init.vel_mps), truth.C_n_b[0])
 
 
-@contextlib.contextmanager
-def _one_blas_thread():
-    """Run the block estimates with one OpenBLAS thread.
-
-    The ``fast`` estimator's small matrix products run ~10x slower when
-    OpenBLAS spreads them over threads on a 2-core machine (measured: 23 ms
-    vs 2.1 ms per 10,000-sample block). numpy's bundled OpenBLAS exports its
-    thread setter; without it nothing changes.
-    """
-    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
-    lib = ctypes.CDLL(libs[0]) if libs else None
-    get = getattr(lib, "scipy_openblas_get_num_threads64_", None)
-    set_ = getattr(lib, "scipy_openblas_set_num_threads64_", None)
-    if get is None or set_ is None:
-        yield
-        return
-    before = get()
-    set_(1)
-    try:
-        yield
-    finally:
-        set_(before)
-
-
 def _doppler_rate_hz_per_s(pos_sv, vel_sv, pos_rx, vel_rx, carrier_hz):
     """Central-tone Doppler rate of each pair from the relative acceleration, (m,).
 
@@ -247,14 +219,13 @@ def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_db
     est = np.full(doppler_geom_hz.shape, np.nan)
     sigma = np.full(doppler_geom_hz.shape, np.nan)
     pairs = range(doppler_geom_hz.size)
-    with _one_blas_thread():
-        for i in (progress(pairs, desc="pilot blocks", unit="block") if progress else pairs):
-            geom = (doppler_geom_hz[i] - predicted_hz[i]) * tau + 0.5 * rate_hz_per_s[i] * tau**2
-            iq = add_noise(comb_baseband(comb, tau, geom, clock_hz[i] * tau), cn0_dbhz, SAMPLE_RATE_HZ, rng)
-            out = estimate_block(iq, SAMPLE_RATE_HZ, method="fast", comb=comb, max_doppler_hz=SEARCH_HZ)
-            if out["detected"]:
-                est[i] = predicted_hz[i] + out["doppler_hz"]
-                sigma[i] = out["sigma_hz"]
+    for i in (progress(pairs, desc="pilot blocks", unit="block") if progress else pairs):
+        geom = (doppler_geom_hz[i] - predicted_hz[i]) * tau + 0.5 * rate_hz_per_s[i] * tau**2
+        iq = add_noise(comb_baseband(comb, tau, geom, clock_hz[i] * tau), cn0_dbhz, SAMPLE_RATE_HZ, rng)
+        out = estimate_block(iq, SAMPLE_RATE_HZ, method="fast", comb=comb, max_doppler_hz=SEARCH_HZ)
+        if out["detected"]:
+            est[i] = predicted_hz[i] + out["doppler_hz"]
+            sigma[i] = out["sigma_hz"]
     return est, sigma
 
 
