@@ -23,7 +23,7 @@ def _inst_freq_poly(x, fs, deg):
 
 def test_blocks_follow_doppler_law():
     one = PilotComb(n_tones=1)
-    x = doppler_blocks(FS, 50_000, [1_234.5, -20_000.0], [3_000.0, -4_000.0], doppler_accel_hz_per_s3=[50.0, 0.0],
+    x = doppler_blocks(FS, 50_000, [1_234.5, -20_000.0], [3_000.0, -4_000.0], doppler_accel_hz_per_s2=[50.0, 0.0],
                        comb=one, dtype=np.complex128)
     for row, (d, r, a) in zip(x, [(1_234.5, 3_000.0, 50.0), (-20_000.0, -4_000.0, 0.0)]):
         p = _inst_freq_poly(row, FS, 3)  # cycles = a t^3/6 + r t^2/2 + d t + c

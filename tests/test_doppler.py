@@ -31,7 +31,7 @@ def test_fast_noise_free(doppler_hz, rate):
 def test_fast_rate_change_is_corrected():
     # A LEO rate change of -37 Hz/s^2 biases a (f, r) fit by a T^2 / 40.
     accel, n = -37.0, 1_000_000
-    x = doppler_blocks(FS, n, 5_000.0, -2_600.0, doppler_accel_hz_per_s3=accel)[0]
+    x = doppler_blocks(FS, n, 5_000.0, -2_600.0, doppler_accel_hz_per_s2=accel)[0]
     raw = estimate_block(x, FS)["doppler_hz"]
     # Closed form a T^2 / 40 holds while the cubic phase a T^3 / 48 is << 1 cycle;
     # here it is 0.77 cycle, so only the sign and size are checked (10 %).

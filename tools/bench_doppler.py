@@ -92,7 +92,7 @@ def monte_carlo(scenario, trials, slow_trials, seed):
         d, r, a = leo_pass(trials, rng)
     out = {}
     for cn0 in CN0S:
-        x = doppler_blocks(FS, N, d, r, cn0, doppler_accel_hz_per_s3=a, rng=rng)
+        x = doppler_blocks(FS, N, d, r, cn0, doppler_accel_hz_per_s2=a, rng=rng)
         err = {"fast": [], "fast, a ignored": [], "fmlef": [], "ml": []}
         for i, block in enumerate(x):
             err["fast"].append(estimate_block(block, FS, doppler_accel_hz_per_s2=a[i])["doppler_hz"] - d[i])

@@ -31,7 +31,7 @@ __all__ = ["doppler_blocks", "site_range_rates", "SiteChannel"]
 
 
 def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=0.0, cn0_dbhz=None, *,
-                   doppler_accel_hz_per_s3=0.0, comb=None, rng=None, dtype=np.complex64):
+                   doppler_accel_hz_per_s2=0.0, comb=None, rng=None, dtype=np.complex64):
     """Pilot comb blocks, one per row, with given Doppler at each block centre.
 
     The central tone's frequency over block i is
@@ -44,7 +44,7 @@ def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=
     ----------
     sample_rate_hz : float
     n_samples : int
-    doppler_hz, doppler_rate_hz_per_s, doppler_accel_hz_per_s3 : array_like, (n_blocks,) or scalar
+    doppler_hz, doppler_rate_hz_per_s, doppler_accel_hz_per_s2 : array_like, (n_blocks,) or scalar
     cn0_dbhz : array_like, (n_blocks,) or scalar, optional
         C/N0 per unit-amplitude tone; None for noise-free blocks.
     comb : PilotComb, optional
@@ -59,7 +59,7 @@ def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=
     """
     comb = comb or PilotComb()
     d, r, a = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=float))
-                                    for v in (doppler_hz, doppler_rate_hz_per_s, doppler_accel_hz_per_s3)))
+                                    for v in (doppler_hz, doppler_rate_hz_per_s, doppler_accel_hz_per_s2)))
     tau = (np.arange(int(n_samples)) - 0.5 * (n_samples - 1)) / sample_rate_hz
     cycles = d[:, None] * tau + r[:, None] * tau**2 / 2.0 + a[:, None] * tau**3 / 6.0
     phase = rng.uniform(0.0, 2.0 * np.pi, (d.size, 1)) if rng is not None else 0.0
