@@ -84,6 +84,15 @@ def test_gdop_passes_and_counts_are_consistent():
         rows = vis.epoch_index == e
         H = doppler_jacobian(vis.pos_sv_ecef_m[rows], vis.vel_sv_ecef_mps[rows], site, np.zeros(3), 11.325e9)
         assert g[e] == pytest.approx(np.sqrt(np.trace(np.linalg.inv(H.T @ H))), rel=1e-8)
+    # Range DOPs from the same pairs: G = [-u_enu, 1], direct inverse.
+    dops = vis.range_dops()
+    for e in np.flatnonzero(vis.n_visible >= 4)[::131]:
+        rows = vis.epoch_index == e
+        el, az = vis.elev_rad[rows], vis.az_rad[rows]
+        u = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], -1)
+        Q = np.linalg.inv(np.c_[-u, np.ones(len(u))].T @ np.c_[-u, np.ones(len(u))])
+        assert dops["gdop"][e] == pytest.approx(np.sqrt(np.trace(Q)), rel=1e-8)
+        assert dops["vdop"][e] == pytest.approx(np.sqrt(Q[2, 2]), rel=1e-8)
     passes = vis.passes()
     assert sum(len(x) for x in ids) == sum(
         int((p.set_utc - p.rise_utc) / np.timedelta64(1, "s")) + 1 for p in passes)

@@ -87,14 +87,19 @@ def _write_outputs(out, doc, vis, gdop, times, mask, source):
 
     t_s = seconds_since(times, times[0])
     write_json(out / "visibility.json", doc)
-    write_csv(out / "visibility.csv", ["time_utc", "t_s", "n_visible", "gdop"],
-              zip(doc["epochs_utc"], t_s, doc["n_visible"], ["" if g is None else g for g in doc["gdop"]]))
+    dops = vis.range_dops()
+    blank = lambda x: "" if not np.isfinite(x) else f"{x:.4f}"  # noqa: E731
+    write_csv(out / "visibility.csv",
+              ["time_utc", "t_s", "n_visible", "gdop_doppler", "gdop_range", "pdop_range", "hdop_range", "vdop_range"],
+              ([e, f"{t:.3f}", n, blank(g), blank(a), blank(b), blank(c), blank(d)] for e, t, n, g, a, b, c, d in
+               zip(doc["epochs_utc"], t_s, doc["n_visible"], gdop, dops["gdop"], dops["pdop"], dops["hdop"],
+                   dops["vdop"])))
     write_csv(out / "passes.csv", ["sat_id", "rise_utc", "culmination_utc", "set_utc", "max_elev_deg", "truncated"],
               ([p.sat_id, format_utc(p.rise_utc), format_utc(p.culmination_utc), format_utc(p.set_utc),
                 f"{p.max_elev_deg:.3f}", int(p.truncated)] for p in vis.passes()))
     title = f"{Path(source).name}, from {doc['epochs_utc'][0]}"
     with atomic_path(out / "visibility.png") as tmp:
-        plot_visibility(tmp, t_s, vis.n_visible, gdop, mask_deg=mask, title=title)
+        plot_visibility(tmp, t_s, vis.n_visible, gdop, dops["gdop"], mask_deg=mask, title=title)
     with atomic_path(out / "skyplot.png") as tmp:
         plot_skyplot(tmp, vis.az_rad, vis.elev_rad, vis.sat_index, mask_deg=mask, title=title)
 

@@ -14,8 +14,8 @@ def _pyplot():
     return plt
 
 
-def plot_visibility(path, t_s, n_visible, gdop, *, mask_deg, title=""):
-    """Visible satellites and Doppler GDOP against time, saved to ``path`` (PNG).
+def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title=""):
+    """Visible satellites, Doppler GDOP and range GDOP against time, saved to ``path`` (PNG).
 
     Parameters
     ----------
@@ -24,7 +24,9 @@ def plot_visibility(path, t_s, n_visible, gdop, *, mask_deg, title=""):
         Seconds from the start.
     n_visible : ndarray of int, (n_epochs,)
     gdop : ndarray, (n_epochs,)
-        NaN where undetermined (fewer than 7 satellites).
+        Doppler GDOP (seed 004 eq. 10); NaN below 7 satellites.
+    gdop_range : ndarray, (n_epochs,)
+        Classic pseudorange GDOP, for comparison; NaN below 4 satellites.
     """
     plt = _pyplot()
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
@@ -33,8 +35,10 @@ def plot_visibility(path, t_s, n_visible, gdop, *, mask_deg, title=""):
     ax1.set_ylabel(f"visible (mask {mask_deg:g} deg)")
     ax1.legend(loc="upper right", fontsize=8)
     ax1.set_title(title)
-    ax2.semilogy(t_s, gdop, color="C1")
-    ax2.set_ylabel("Doppler GDOP (eq. 10)")
+    ax2.semilogy(t_s, gdop, color="C1", label="Doppler, 7 states (seed 004 eq. 10)")
+    ax2.semilogy(t_s, gdop_range, color="C2", lw=0.8, label="pseudorange, 4 states")
+    ax2.set_ylabel("GDOP")
+    ax2.legend(loc="upper right", fontsize=8)
     ax2.set_xlabel("time since start [s]")
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)

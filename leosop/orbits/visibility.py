@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import C_e_n, ecef_to_geodetic, teme_to_ecef
-from ..positioning.dop import cofactor, doppler_jacobian
+from ..positioning.dop import cofactor, doppler_jacobian, range_dops
 from ..progress import progress
 from ..timebase import jd_ut1, jd_utc
 
@@ -114,6 +114,19 @@ class Visibility:
     def doppler_gdop(self, carrier_hz):
         """GDOP of Doppler positioning per epoch, NaN below 7 satellites; (n_epochs,)."""
         return np.sqrt(np.trace(self.doppler_cofactor(carrier_hz), axis1=-2, axis2=-1))
+
+    def range_dops(self):
+        """Classic pseudorange DOPs per epoch (NaN below 4 satellites).
+
+        Returns
+        -------
+        dict of ndarray, (n_epochs,)
+            ``gdop, pdop, hdop, vdop, tdop``.
+        """
+        ce = np.cos(self.elev_rad)
+        los = np.stack([ce * np.sin(self.az_rad), ce * np.cos(self.az_rad), np.sin(self.elev_rad)], axis=-1)
+        los = self.padded(los)
+        return range_dops(los, weights=np.isfinite(los[..., 0]).astype(float))
 
     def passes(self):
         """Passes (rise, culmination, set) of every satellite, by rise time."""
