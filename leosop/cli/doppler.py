@@ -7,6 +7,11 @@ STFT coarse track (seed 004); ``fast`` from the block's own FFT. A block
 without a detected comb gives null values and ``"status": "no pilot
 detected"``. When the recording holds ``leosop generate`` truth for the same
 blocks, each estimate also names the nearest true satellite and its Doppler.
+
+One comb per block: the strongest. With several satellites of equal power
+the estimate may move from one to another between blocks, and their tones
+leak into each other's decimated bands (integrate-and-dump has sinc
+sidelobes), which lowers the C/N0 estimate and can spoil a block.
 """
 
 import sys
