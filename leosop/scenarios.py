@@ -38,8 +38,13 @@ class LeoSpec:
     ``sat_doppler_offset_max_hz``: every satellite carries a constant clock-
     induced Doppler offset drawn uniformly in [0, max]. ``rx_freq_offset_hz``:
     the receiver's fixed frequency offset (estimated by every fix).
-    ``orbit_error_m``: standard deviation per ECEF axis of the satellite
-    position error, constant per satellite over a run. ``cn0_dbhz``: pilot
+    ``orbit_error_m``: size per ECEF axis of the satellite position error,
+    constant over a run; ``orbit_error_model`` says how it is drawn:
+    ``"independent"`` (each satellite its own error, standard deviation
+    ``orbit_error_m`` per axis) or ``"common"`` (every satellite shifted by
+    the same ``[E, E, E]``, E = ``orbit_error_m``: seed 004 Table 6's "orbit
+    error [E, E, E] m", whose position errors are close to sqrt(3) E). Optional
+    in scenario files, a compatible extension of DESIGN.md 4.1. ``cn0_dbhz``: pilot
     carrier-to-noise density (not given by the paper; 45 dB-Hz is a
     conservative figure for the Starlink pilot tone seen by a small dish).
     """
@@ -49,6 +54,7 @@ class LeoSpec:
     orbit_error_m: float = 1.0
     fix_rate_hz: float = 1.0
     cn0_dbhz: float = 45.0
+    orbit_error_model: str = "independent"
 
 
 @dataclass(frozen=True)
@@ -146,6 +152,8 @@ def _check_keys(doc, allowed, where):
         raise InputError(f"{where}: unknown key {unknown[0]!r} (expected one of {', '.join(sorted(allowed))})")
 
 
+#: Values of the string fields.
+_CHOICES = {"orbit_error_model": ("independent", "common")}
 # Limits of each numeric field: (low, high, low_open).
 _LIMITS = {
     "gyro_bias_deg_per_h": (0.0, 1e4, False),
@@ -168,6 +176,10 @@ def _section(cls, doc, base, where):
     for key, value in doc.items():
         if cls is InitError:
             values[key] = _vector3(value, f"{where}.{key}", -1e6, 1e6)
+        elif key in _CHOICES:
+            if value not in _CHOICES[key]:
+                raise InputError(f"{where}.{key}: expected one of {', '.join(_CHOICES[key])}, got {value!r}")
+            values[key] = value
         else:
             low, high, low_open = _LIMITS[key]
             values[key] = _number(value, f"{where}.{key}", low=low, high=high, low_open=low_open)

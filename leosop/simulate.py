@@ -12,20 +12,24 @@ table reproductions call it. For a scenario it
    satellite-epoch, estimated by the ``fast`` estimator) or at measurement
    level (the estimator's error model);
 4. solves a snapshot Doppler fix per epoch with 7 or more satellites, with
-   satellite positions carrying a constant orbit error per satellite;
+   satellite positions carrying a constant orbit error (one per satellite,
+   or one shift of all: ``leo.orbit_error_model``);
 5. runs the INS alone and the EKF: loose (:mod:`leosop.fusion.loose`, the
-   fixes) or tight (:mod:`leosop.fusion.tight`, the Doppler measurements).
+   fixes, with each fix's least-squares gain so that the filter can model
+   the satellites' constant errors behind them) or tight
+   (:mod:`leosop.fusion.tight`, the Doppler measurements).
 
 Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent
 streams for the IMU, the satellite offsets and orbit errors, and the
 measurement noise, so that the IMU errors of a seed are the same at both
 levels and for every correction period.
 
-The fix's weights (and so the ``R`` of the EKF) account for every error
-source the receiver knows the size of: estimator noise, the spread of the
-satellite offsets about their mean (the mean is absorbed by the receiver
-offset) and the orbit error mapped through the Doppler's sensitivity to the
-satellite position.
+The fix's weights account for every error source the receiver knows the
+size of: estimator noise, the spread of the satellite offsets about their
+mean (the mean is absorbed by the receiver offset) and the orbit error mapped
+through the Doppler's sensitivity to the satellite position. The loose EKF
+takes only the estimator noise as white (its ``R``) and the offsets and orbit
+errors as constant states (:func:`_fix_error_model`).
 """
 
 import dataclasses
@@ -229,8 +233,44 @@ def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_db
     return est, sigma
 
 
-def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_error_m=None, seed=0, tle=None,
-                 coupling="loose", progress=None):
+def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, carrier_hz, offset_max_hz,
+                     orbit_error_m, orbit_error_model):
+    """How each fix depends on the satellites' constant errors, and its white part.
+
+    The fix is the weighted least squares ``x = x_true + G e`` (to first order)
+    with ``G = cov H^T W`` at the solution, over the Doppler it used; ``e_j``
+    holds the satellite's offset, its orbit error ``dr_j`` seen through
+    ``h_j = dD/dr_rx`` (the Doppler depends on ``r_s - r_rx``, so a satellite
+    believed ``dr`` away acts as a receiver moved by ``-dr``) and the
+    estimator noise, the only white part.
+
+    Returns
+    -------
+    fix_errors : leosop.fusion.loose.FixErrorModel
+    cov_white : ndarray, (n_ep, 6, 6)
+        ``G_pv diag(sigma_est^2) G_pv^T`` (ECEF), NaN without a fix.
+    """
+    H = doppler_jacobian(vis.padded(pos_sv_known), vis.padded(vis.vel_sv_ecef_mps), fixes.pos_ecef_m,
+                         fixes.vel_ecef_mps, carrier_hz)
+    used = fixes.used & good[:, None]
+    w = np.where(used, 1.0 / np.nan_to_num(vis.padded(sigma_hz), nan=1.0) ** 2, 0.0)
+    G = np.nan_to_num(fixes.cov) @ np.swapaxes(np.nan_to_num(H) * w[..., None], 1, 2)  # (n_ep, 7, n_sv)
+    G_pv = G[:, :6, :]
+    sigma_white = np.nan_to_num(vis.padded(np.broadcast_to(sigma_est_hz, sigma_hz.shape)))
+    cov_white = np.einsum("kis,ks,kjs->kij", G_pv, sigma_white**2 * used, G_pv)
+    cov_white[~good] = np.nan
+    slot = np.arange(len(vis.epoch_index)) - np.searchsorted(vis.epoch_index, vis.epoch_index)
+    ep = vis.epoch_index
+    pair_used = used[ep, slot]
+    fix_errors = loose.FixErrorModel(
+        epoch_index=ep[pair_used], sat_index=vis.sat_index[pair_used], gain_ecef=G_pv[ep, :, slot][pair_used],
+        orbit_hz_per_m=H[ep, slot, :3][pair_used], offset_sigma_hz=offset_max_hz / np.sqrt(12.0),
+        orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
+    return fix_errors, cov_white
+
+
+def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_error_m=None, orbit_error_model=None,
+                 seed=0, tle=None, coupling="loose", progress=None):
     """Simulate one flight end to end.
 
     Parameters
@@ -242,11 +282,13 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     orbit_error_m : float, optional
         Satellite orbit error per ECEF axis (standard deviation, constant per
         satellite); default the scenario's.
+    orbit_error_model : {"independent", "common"}, optional
+        Default the scenario's (``leo.orbit_error_model``).
     seed : int
     tle : path, optional
         Element-set file; default the bundled constellation.
     coupling : {"loose", "tight"}
-        Only ``"loose"`` is implemented.
+        Loose: the EKF on the snapshot fixes; tight: on each Doppler.
     progress : callable, optional
         Wraps long loops (e.g. :func:`leosop.progress.progress`).
 
@@ -257,6 +299,9 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     tic = time.perf_counter()
     _check_options(level, coupling, correction_period_s, orbit_error_m)
     orbit_error_m = scenario.leo.orbit_error_m if orbit_error_m is None else float(orbit_error_m)
+    orbit_error_model = scenario.leo.orbit_error_model if orbit_error_model is None else orbit_error_model
+    if orbit_error_model not in loose.ORBIT_MODELS:
+        raise InputError(f"orbit error model {orbit_error_model!r}: expected one of {', '.join(loose.ORBIT_MODELS)}")
     rng_imu, rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
 
     constellation = load_constellation(tle)
@@ -304,6 +349,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     gdop = vis.doppler_gdop(carrier_hz)
     sat_offset_hz = rng_sat.uniform(0.0, scenario.leo.sat_doppler_offset_max_hz, len(constellation))
     orbit_err = orbit_error_m * rng_sat.standard_normal((len(constellation), 3))
+    if orbit_error_model == "common":
+        orbit_err = np.full((len(constellation), 3), orbit_error_m)
     ep, sat = vis.epoch_index, vis.sat_index
     range_rate = frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, pos_rx[ep], vel_rx[ep])
     doppler_geom = -range_rate * carrier_hz / C_MPS
@@ -335,8 +382,11 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
     if coupling == "loose":
-        fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, fix_cov[:, :6, :6]), settings,
-                          progress=progress)
+        fix_errors, cov_white = _fix_error_model(vis, fixes, good, sigma_hz, sigma_est, pos_sv_known, carrier_hz,
+                                                 scenario.leo.sat_doppler_offset_max_hz, orbit_error_m,
+                                                 orbit_error_model)
+        fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, cov_white), settings,
+                          fix_errors=fix_errors, progress=progress)
     else:
         offset_max = scenario.leo.sat_doppler_offset_max_hz
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max / 2, sat_offset_sigma_hz=offset_max / np.sqrt(12),
