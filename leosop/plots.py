@@ -1,37 +1,26 @@
 """Figures of a simulation, after seed 004's Fig. 4 (trajectory), 8 (errors), 9 (visible satellites), 10 (GDOP).
 
 Matplotlib is imported lazily with the Agg backend; every figure is written
-atomically (:func:`leosop.fileio.atomic_path`).
+atomically (:func:`leosop.figure.save_png`).
 """
 
 from pathlib import Path
 
 import numpy as np
 
-from .fileio import atomic_path
+from .figure import pyplot, save_png
 from .frames import ecef_to_geodetic
 
 __all__ = ["write_figures", "trajectory_figure", "errors_figure", "visible_figure", "gdop_figure"]
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _save(fig, path):
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
-    _pyplot().close(fig)
+    save_png(fig, path, bbox_inches="tight")
 
 
 def trajectory_figure(result, path):
     """Fig. 4: truth, INS-only and fused tracks in longitude/latitude and height."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 4.2), gridspec_kw={"width_ratios": [2, 1]})
     for label, pos, style in (("truth", result.truth_pos_ecef_m, "k-"), ("INS only", result.ins_pos_ecef_m, "C1--"),
                               ("Starlink/INS", result.fused.pos_ecef_m, "C0:")):
@@ -49,7 +38,7 @@ def trajectory_figure(result, path):
 
 def errors_figure(result, path):
     """Fig. 8: 3D position and velocity errors of INS only, LEO fixes and the fusion."""
-    plt = _pyplot()
+    plt = pyplot()
     err = result.errors()
     fig, axes = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
     for i, (ax, unit) in enumerate(zip(axes, ("position error [m]", "velocity error [m/s]"))):
@@ -67,7 +56,7 @@ def errors_figure(result, path):
 
 def visible_figure(result, path):
     """Fig. 9: number of visible satellites."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.2))
     ax.step(result.t_s, result.n_visible, where="mid")
     ax.axhline(7, color="C3", ls=":", label="7 needed for a snapshot fix")
@@ -79,7 +68,7 @@ def visible_figure(result, path):
 
 def gdop_figure(result, path):
     """Fig. 10: GDOP of Doppler positioning (eq. 10) along the flight."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.2))
     ax.semilogy(result.t_s, result.gdop)
     ax.set_xlabel("time [s]")

@@ -26,7 +26,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from leosop.fileio import atomic_path, write_json  # noqa: E402
+from leosop.figure import pyplot, save_png  # noqa: E402
+from leosop.fileio import write_json  # noqa: E402
 from leosop.frames import geodetic_to_ecef  # noqa: E402
 from leosop.orbits import load_constellation  # noqa: E402
 from leosop.signal.channel import SiteChannel, doppler_blocks, site_range_rates  # noqa: E402
@@ -107,10 +108,7 @@ def monte_carlo(scenario, trials, slow_trials, seed):
 
 
 def plot(path, results):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     cn0 = np.array(CN0S)
     comb_bound = doppler_sigma_hz(cn0, N / FS, sample_rate_hz=FS)
@@ -129,9 +127,7 @@ def plot(path, results):
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("Doppler RMSE [Hz]")
     axes[1].legend(fontsize=8)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)
 
 
 def main():

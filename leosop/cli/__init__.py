@@ -18,7 +18,12 @@ import math
 import os
 import sys
 
-from ..errors import ExternalError, InputError
+# The toolkit's matrix products are small and many (per-block decimation,
+# 15-state filters): a multi-threaded BLAS only adds contention, 10x slower
+# on a busy 2-core machine. Set before numpy loads; a user's setting wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from ..errors import ExternalError, InputError  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler",)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..fileio import atomic_path, write_csv, write_json
+from ..fileio import write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import CARRIERS, load_constellation
 from ..orbits.visibility import compute_visibility
@@ -98,10 +98,8 @@ def _write_outputs(out, doc, vis, gdop, times, mask, source):
               ([p.sat_id, format_utc(p.rise_utc), format_utc(p.culmination_utc), format_utc(p.set_utc),
                 f"{p.max_elev_deg:.3f}", int(p.truncated)] for p in vis.passes()))
     title = f"{Path(source).name}, from {doc['epochs_utc'][0]}"
-    with atomic_path(out / "visibility.png") as tmp:
-        plot_visibility(tmp, t_s, vis.n_visible, gdop, dops["gdop"], mask_deg=mask, title=title)
-    with atomic_path(out / "skyplot.png") as tmp:
-        plot_skyplot(tmp, vis.az_rad, vis.elev_rad, vis.sat_index, mask_deg=mask, title=title)
+    plot_visibility(out / "visibility.png", t_s, vis.n_visible, gdop, dops["gdop"], mask_deg=mask, title=title)
+    plot_skyplot(out / "skyplot.png", vis.az_rad, vis.elev_rad, vis.sat_index, mask_deg=mask, title=title)
 
 
 def summary(doc):

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..constants import G0_MPS2, OMEGA_E_RAD_PER_S
 from ..earth import normal_gravity_mps2
-from ..fileio import atomic_path, write_csv, write_json
+from ..figure import pyplot, save_png
+from ..fileio import write_csv, write_json
 from ..rotations import euler_to_dcm
 from ..studies import map_chunks
 from .alignment import align
@@ -155,11 +156,7 @@ def _grid(full):
 
 
 def _plot_fig2(path_pr, path_yaw, doc):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     p = doc["pitch_deg"]
     fig, ax = plt.subplots(figsize=(6, 4))
     for label in doc["max_pitch_err_deg"]:
@@ -168,9 +165,7 @@ def _plot_fig2(path_pr, path_yaw, doc):
     ax.set(xlabel="pitch [deg]", ylabel="max error [deg]", title="Seed 000 Fig. 1: pitch and roll alignment error")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    with atomic_path(path_pr) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
+    save_png(fig, path_pr)
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, y in doc["max_yaw_err_deg"].items():
         ax.semilogy(p, y, "o-", label=label)
@@ -178,9 +173,7 @@ def _plot_fig2(path_pr, path_yaw, doc):
     ax.set(xlabel="pitch [deg]", ylabel="max yaw error [deg]", title="Seed 000 Fig. 2: yaw alignment error")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    with atomic_path(path_yaw) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
+    save_png(fig, path_yaw)
 
 
 def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):

@@ -2,16 +2,9 @@
 
 import numpy as np
 
+from ..figure import pyplot, save_png
+
 __all__ = ["plot_visibility", "plot_skyplot"]
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title=""):
@@ -28,7 +21,7 @@ def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title="
     gdop_range : ndarray, (n_epochs,)
         Classic pseudorange GDOP, for comparison; NaN below 4 satellites.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
     ax1.step(t_s, n_visible, where="mid", color="C0")
     ax1.axhline(7, color="0.5", ls="--", lw=0.8, label="7 needed for a Doppler fix")
@@ -43,8 +36,7 @@ def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title="
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)
 
 
 def plot_skyplot(path, az_rad, elev_rad, track_id, *, mask_deg, title=""):
@@ -56,7 +48,7 @@ def plot_skyplot(path, az_rad, elev_rad, track_id, *, mask_deg, title=""):
     track_id : ndarray, (m,)
         Points with the same id are drawn as one track.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig = plt.figure(figsize=(6, 6))
     ax = fig.add_subplot(projection="polar")
     ax.set_theta_zero_location("N")
@@ -71,5 +63,4 @@ def plot_skyplot(path, az_rad, elev_rad, track_id, *, mask_deg, title=""):
     ax.set_rticks([0, 30, 60, 90 - mask_deg])
     ax.set_yticklabels(["90", "60", "30", f"{mask_deg:g}"])
     ax.set_title(title or f"{len(ids)} satellites above {mask_deg:g} deg")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)

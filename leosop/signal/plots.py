@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from ..figure import pyplot, save_png
+
 __all__ = ["plot_spectrogram"]
 
 
@@ -22,14 +24,7 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
     f_lim_hz : float, optional
         Show only |f| <= this.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..fileio import atomic_path
-
-    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    fig, ax = pyplot().subplots(figsize=(8, 4.5), constrained_layout=True)
     db = 10.0 * np.log10(np.maximum(power, np.max(power) * 1e-12))
     dt = t_s[1] - t_s[0] if len(t_s) > 1 else 1.0
     extent = (t_s[0] - dt / 2, t_s[-1] + dt / 2, f_hz[0] / 1e3, f_hz[-1] / 1e3)
@@ -47,6 +42,4 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
     ax.set_title(title)
     if coarse_t_s is not None or track_t_s is not None:
         ax.legend(loc="upper right", fontsize=8)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
+    save_png(fig, path)
