@@ -26,6 +26,7 @@ from .constants import (
     WGS84_F,
     WGS84_M,
 )
+from .shapes import as_vec3
 
 __all__ = [
     "normal_gravity_mps2",
@@ -100,9 +101,7 @@ def transport_rate_enu(lat_rad, alt_m, vel_enu_mps):
     -------
     omega_en_enu_rad_per_s : ndarray, shape (..., 3)
     """
-    vel = np.asarray(vel_enu_mps, dtype=float)
-    if vel.ndim == 0 or vel.shape[-1] != 3:
-        raise ValueError(f"vel_enu_mps must have 3 components in its last axis, got shape {vel.shape}")
+    vel = as_vec3(vel_enu_mps, "vel_enu_mps")
     lat = np.asarray(lat_rad, dtype=float)
     R_M, R_N = radii_m(lat)
     h = np.asarray(alt_m, dtype=float)

@@ -9,6 +9,7 @@ is East-North-Up (see :mod:`leosop`).
 import numpy as np
 
 from .constants import WGS84_A_M, WGS84_B_M, WGS84_E2
+from .shapes import as_vec3
 
 __all__ = [
     "geodetic_to_ecef",
@@ -23,13 +24,6 @@ __all__ = [
     "gmst1982",
     "teme_to_ecef",
 ]
-
-
-def _vec3(x, name):
-    x = np.asarray(x, dtype=float)
-    if x.ndim == 0 or x.shape[-1] != 3:
-        raise ValueError(f"{name} must have 3 components in its last axis, got shape {x.shape}")
-    return x
 
 
 def geodetic_to_ecef(lat_rad, lon_rad, alt_m):
@@ -67,7 +61,7 @@ def ecef_to_geodetic(pos_ecef_m):
     -------
     lat_rad, lon_rad, alt_m : ndarray, shape (...)
     """
-    pos = _vec3(pos_ecef_m, "pos_ecef_m")
+    pos = as_vec3(pos_ecef_m, "pos_ecef_m")
     x, y, z = pos[..., 0], pos[..., 1], pos[..., 2]
     p = np.hypot(x, y)
     lon = np.arctan2(y, x)
@@ -117,25 +111,25 @@ def ecef_to_enu(vec_ecef, lat_rad, lon_rad):
     -------
     vec_enu : ndarray, shape (..., 3)
     """
-    v = _vec3(vec_ecef, "vec_ecef")
+    v = as_vec3(vec_ecef, "vec_ecef")
     return np.einsum("...ji,...j->...i", C_e_n(lat_rad, lon_rad), v)
 
 
 def enu_to_ecef(vec_enu, lat_rad, lon_rad):
     """Rotate ENU vectors at (lat, lon) into ECEF; inverse of :func:`ecef_to_enu`."""
-    v = _vec3(vec_enu, "vec_enu")
+    v = as_vec3(vec_enu, "vec_enu")
     return np.einsum("...ij,...j->...i", C_e_n(lat_rad, lon_rad), v)
 
 
 def enu_to_ned(vec_enu):
     """ENU components to NED components, shape (..., 3)."""
-    v = _vec3(vec_enu, "vec_enu")
+    v = as_vec3(vec_enu, "vec_enu")
     return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
 
 
 def ned_to_enu(vec_ned):
     """NED components to ENU components, shape (..., 3)."""
-    v = _vec3(vec_ned, "vec_ned")
+    v = as_vec3(vec_ned, "vec_ned")
     return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
 
 
@@ -158,8 +152,8 @@ def azimuth_elevation_range(pos_sv_ecef_m, pos_rx_ecef_m):
         Elevation above the ellipsoid's tangent plane.
     range_m : ndarray
     """
-    sv = _vec3(pos_sv_ecef_m, "pos_sv_ecef_m")
-    rx = _vec3(pos_rx_ecef_m, "pos_rx_ecef_m")
+    sv = as_vec3(pos_sv_ecef_m, "pos_sv_ecef_m")
+    rx = as_vec3(pos_rx_ecef_m, "pos_rx_ecef_m")
     lat, lon, _ = ecef_to_geodetic(rx)
     los_enu = ecef_to_enu(sv - rx, lat, lon)
     range_m = np.linalg.norm(los_enu, axis=-1)
@@ -183,8 +177,8 @@ def range_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_mps=0.
     -------
     range_rate_mps : ndarray, shape (...)
     """
-    los = _vec3(pos_sv_ecef_m, "pos_sv_ecef_m") - _vec3(pos_rx_ecef_m, "pos_rx_ecef_m")
-    dv = _vec3(vel_sv_ecef_mps, "vel_sv_ecef_mps") - np.asarray(vel_rx_ecef_mps, dtype=float)
+    los = as_vec3(pos_sv_ecef_m, "pos_sv_ecef_m") - as_vec3(pos_rx_ecef_m, "pos_rx_ecef_m")
+    dv = as_vec3(vel_sv_ecef_mps, "vel_sv_ecef_mps") - np.asarray(vel_rx_ecef_mps, dtype=float)
     return np.sum(los * dv, axis=-1) / np.linalg.norm(los, axis=-1)
 
 
@@ -234,8 +228,8 @@ def teme_to_ecef(pos_teme_m, vel_teme_mps, jd_ut1, fr_ut1):
     -------
     pos_ecef_m, vel_ecef_mps : ndarray, shape (..., n_epochs, 3)
     """
-    r = _vec3(pos_teme_m, "pos_teme_m")
-    v = _vec3(vel_teme_mps, "vel_teme_mps")
+    r = as_vec3(pos_teme_m, "pos_teme_m")
+    v = as_vec3(vel_teme_mps, "vel_teme_mps")
     theta, theta_dot = gmst1982(jd_ut1, fr_ut1)
     c, s = np.cos(theta), np.sin(theta)
     x = c * r[..., 0] + s * r[..., 1]

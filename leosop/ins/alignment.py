@@ -44,6 +44,7 @@ from ..constants import OMEGA_E_RAD_PER_S
 from ..earth import normal_gravity_mps2
 from ..errors import InputError
 from ..rotations import dcm_to_euler, rotvec_to_dcm, skew
+from ..shapes import as_vec3
 
 __all__ = [
     "METHODS",
@@ -81,13 +82,6 @@ MOTION_STD_LIMIT_MPS2 = 0.05
 
 class MotionWarning(UserWarning):
     """The IMU data do not look static; the coarse alignment will be poor."""
-
-
-def _vec3(name, a):
-    a = np.asarray(a, dtype=float)
-    if a.ndim == 0 or a.shape[-1] != 3:
-        raise ValueError(f"{name} must have 3 components in its last axis, got shape {a.shape}")
-    return a
 
 
 def _check_lat(lat_rad):
@@ -144,7 +138,7 @@ def dual_vector_dcm_paper(f_fur, w_fur, lat_rad, *, algorithm, g_mps2=None):
         raise ValueError(f"{algorithm=} must be '1' or '2'")
     g_n, w_n = _reference_vectors(lat_rad, _nominal_g(lat_rad, g_mps2))
     e_n = _triad(g_n, w_n, algorithm)
-    e_b = _triad(_vec3("f_fur", f_fur), _vec3("w_fur", w_fur), algorithm)
+    e_b = _triad(as_vec3(f_fur, "f_fur"), as_vec3(w_fur, "w_fur"), algorithm)
     return np.linalg.solve(np.swapaxes(e_n, -1, -2), np.swapaxes(e_b, -1, -2))
 
 
@@ -165,8 +159,8 @@ def paper_angles(f_fur, w_fur, lat_rad, *, algorithm, g_mps2=None):
         Pitch, roll (right wing down) and azimuth clockwise from North in
         (-pi, pi].
     """
-    f = _vec3("f_fur", f_fur)
-    w = _vec3("w_fur", w_fur)
+    f = as_vec3(f_fur, "f_fur")
+    w = as_vec3(w_fur, "w_fur")
     lat = np.asarray(lat_rad, dtype=float)
     g = _nominal_g(lat, g_mps2)
     fx, fy, fz = np.moveaxis(f, -1, 0)
@@ -201,10 +195,10 @@ def paper_angle_errors(f_fur, w_fur, df_fur, dw_fur, lat_rad, *, algorithm, g_mp
     -------
     d_theta, d_phi, d_gamma : ndarray, shape (...)
     """
-    f = _vec3("f_fur", f_fur)
-    w = _vec3("w_fur", w_fur)
-    df = _vec3("df_fur", df_fur)
-    dw = _vec3("dw_fur", dw_fur)
+    f = as_vec3(f_fur, "f_fur")
+    w = as_vec3(w_fur, "w_fur")
+    df = as_vec3(df_fur, "df_fur")
+    dw = as_vec3(dw_fur, "dw_fur")
     lat = np.asarray(lat_rad, dtype=float)
     g = _nominal_g(lat, g_mps2)
     fx, fy, fz = np.moveaxis(f, -1, 0)
@@ -250,8 +244,8 @@ def wahba_dcm(f_b_mps2, w_ib_b_rad_per_s, lat_rad, *, g_mps2=None,
     -------
     C_n_b : ndarray, shape (..., 3, 3)
     """
-    f = _vec3("f_b_mps2", f_b_mps2)
-    w = _vec3("w_ib_b_rad_per_s", w_ib_b_rad_per_s)
+    f = as_vec3(f_b_mps2, "f_b_mps2")
+    w = as_vec3(w_ib_b_rad_per_s, "w_ib_b_rad_per_s")
     g_n, w_n = _reference_vectors(lat_rad, _nominal_g(lat_rad, g_mps2))
     B = (g_n[..., :, None] * f[..., None, :] / accel_sigma_mps2**2
          + w_n[..., :, None] * w[..., None, :] / gyro_sigma_rad_per_s**2)
@@ -292,8 +286,8 @@ def align(f_b_mps2, w_ib_b_rad_per_s, lat_rad, *, method="2", g_mps2=None,
     if method not in METHODS:
         raise InputError(f"alignment method {method!r} must be one of {', '.join(METHODS)}")
     to_fur = P_RFU_FUR.T
-    f_fur = _vec3("f_b_mps2", f_b_mps2) @ to_fur.T
-    w_fur = _vec3("w_ib_b_rad_per_s", w_ib_b_rad_per_s) @ to_fur.T
+    f_fur = as_vec3(f_b_mps2, "f_b_mps2") @ to_fur.T
+    w_fur = as_vec3(w_ib_b_rad_per_s, "w_ib_b_rad_per_s") @ to_fur.T
     theta, phi, gamma = paper_angles(f_fur, w_fur, lat, algorithm=method, g_mps2=g_mps2)
     return theta, phi, -gamma
 
@@ -311,7 +305,7 @@ def motion_std_mps2(dvel_b_mps, dt_s, *, window_s=1.0):
     Root of the summed per-axis variances; a static IMU shows only sensor
     noise averaged over the window (< 1e-3 m/s^2 for tactical grade).
     """
-    means = _window_means(_vec3("dvel_b_mps", dvel_b_mps), dt_s, window_s)
+    means = _window_means(as_vec3(dvel_b_mps, "dvel_b_mps"), dt_s, window_s)
     if means.shape[0] < 2:
         return 0.0
     return float(np.sqrt(np.sum(np.var(means, axis=0))))
@@ -354,8 +348,8 @@ def align_inertial(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, g_mps2=None, fit_
     pitch_rad, roll_rad, yaw_rad : float
     """
     lat = _check_lat(lat_rad)
-    dtheta = _vec3("dtheta_b_rad", dtheta_b_rad)
-    dvel = _vec3("dvel_b_mps", dvel_b_mps)
+    dtheta = as_vec3(dtheta_b_rad, "dtheta_b_rad")
+    dvel = as_vec3(dvel_b_mps, "dvel_b_mps")
     n = dtheta.shape[0]
     # Body attitude relative to b0: one rotation vector per sample (static
     # rates make the non-commutativity error negligible).
@@ -411,8 +405,8 @@ def align_increments(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, method="2", g_m
         The mean attitude over the data; for ``"inertial"`` the attitude at
         the end of the data.
     """
-    dtheta = _vec3("dtheta_b_rad", dtheta_b_rad)
-    dvel = _vec3("dvel_b_mps", dvel_b_mps)
+    dtheta = as_vec3(dtheta_b_rad, "dtheta_b_rad")
+    dvel = as_vec3(dvel_b_mps, "dvel_b_mps")
     if dtheta.ndim != 2 or dtheta.shape != dvel.shape or dtheta.shape[0] < 1:
         raise InputError(f"IMU increments must be two (n, 3) arrays of equal length, got {dtheta.shape} and {dvel.shape}")
     if not (dt_s > 0):

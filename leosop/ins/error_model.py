@@ -42,6 +42,7 @@ import scipy.linalg
 
 from ..earth import earth_rate_enu, normal_gravity_mps2, radii_m, transport_rate_enu
 from ..rotations import skew
+from ..shapes import as_dcm, as_vec3
 
 __all__ = [
     "PHI",
@@ -65,20 +66,6 @@ N_STATES = 15
 _DLAT, _DH = 1e-5, 10.0
 
 
-def _check_vec3(name, a):
-    a = np.asarray(a, dtype=float)
-    if a.ndim == 0 or a.shape[-1] != 3:
-        raise ValueError(f"{name} must have 3 components in its last axis, got shape {a.shape}")
-    return a
-
-
-def _check_dcm(C_n_b):
-    C = np.asarray(C_n_b, dtype=float)
-    if C.shape[-2:] != (3, 3):
-        raise ValueError(f"C_n_b must have shape (..., 3, 3), got {C.shape}")
-    return C
-
-
 def model15(C_n_b, f_n_mps2, vel_enu_mps, lat_rad, alt_m):
     """Continuous 15-state error model ``F``, ``G`` (seed 004 eq. 13).
 
@@ -97,9 +84,9 @@ def model15(C_n_b, f_n_mps2, vel_enu_mps, lat_rad, alt_m):
     G : ndarray, shape (..., 15, 6)
         Maps ``[w_gyro_b, w_accel_b]`` into the state derivative.
     """
-    C = _check_dcm(C_n_b)
-    f_n = _check_vec3("f_n_mps2", f_n_mps2)
-    v = _check_vec3("vel_enu_mps", vel_enu_mps)
+    C = as_dcm(C_n_b)
+    f_n = as_vec3(f_n_mps2, "f_n_mps2")
+    v = as_vec3(vel_enu_mps, "vel_enu_mps")
     lat = np.asarray(lat_rad, dtype=float)
     h = np.asarray(alt_m, dtype=float)
     shape = np.broadcast_shapes(C.shape[:-2], f_n.shape[:-1], v.shape[:-1], lat.shape, h.shape)
@@ -167,8 +154,8 @@ def model9(C_n_b, f_n_mps2):
     F : ndarray, shape (..., 9, 9)
     G : ndarray, shape (..., 9, 6)
     """
-    C = _check_dcm(C_n_b)
-    f_n = _check_vec3("f_n_mps2", f_n_mps2)
+    C = as_dcm(C_n_b)
+    f_n = as_vec3(f_n_mps2, "f_n_mps2")
     shape = np.broadcast_shapes(C.shape[:-2], f_n.shape[:-1])
     F = np.zeros(shape + (9, 9))
     F[..., 3:6, 0:3] = skew(f_n)
