@@ -30,6 +30,13 @@ def test_dict_round_trip_and_json_file(tmp_path):
     assert s.leo.orbit_error_m == 30.0
     assert s.leo.rx_freq_offset_hz == XIAN_BAOJI.leo.rx_freq_offset_hz  # missing keys: xian-baoji values
     assert s.waypoints == XIAN_BAOJI.waypoints and s.duration_s == 782.0
+    assert s.leo.orbit_error_model == "independent"  # optional key, default
+
+
+def test_orbit_error_model_is_an_optional_leo_key():
+    s = scenario_from_dict({"leo": {"orbit_error_m": 60, "orbit_error_model": "common"}})
+    assert (s.leo.orbit_error_m, s.leo.orbit_error_model) == (60.0, "common")
+    assert scenario_from_dict(to_dict(s)) == s
 
 
 def test_new_waypoints_drop_the_default_duration():
@@ -52,6 +59,7 @@ def test_new_waypoints_drop_the_default_duration():
         ({"init_error": {"pos_m": [1, 2]}}, ["init_error.pos_m"]),
         ({"leo": {"fix_rate_hz": 0}}, ["fix_rate_hz"]),
         ({"mask_deg": "40"}, ["mask_deg", "number"]),
+        ({"leo": {"orbit_error_model": "shared"}}, ["leo.orbit_error_model", "independent, common", "'shared'"]),
     ],
 )
 def test_bad_scenarios_are_refused_naming_the_field(doc, words):
