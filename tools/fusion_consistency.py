@@ -9,7 +9,12 @@ the whitened innovations (loose: the 6-vectors; tight: each satellite's
 normalised Doppler innovation at consecutive epochs) with its null 3-sigma
 bound.
 
-Usage: python tools/fusion_consistency.py [--seeds 20] [--duration-s 782] [--scheduler serial]
+The loose filter models the satellites' constant Doppler offsets and orbit
+errors behind each fix (leosop.fusion.loose), the tight one behind each
+Doppler; ``--orbit-error-m``/``--orbit-error-model`` run Table 6's cases.
+
+Usage: python tools/fusion_consistency.py [--seeds 20] [--duration-s 782] [--orbit-error-m 30]
+       [--orbit-error-model common] [--scheduler serial]
 """
 
 import argparse
@@ -24,9 +29,9 @@ from leosop.studies import map_chunks
 
 
 def one(chunk, rng):
-    coupling, seed, duration_s = chunk
+    coupling, seed, duration_s, orbit_error_m, orbit_error_model = chunk
     r = run_scenario(dataclasses.replace(XIAN_BAOJI, duration_s=duration_s), level="measurement", seed=seed,
-                     coupling=coupling)
+                     coupling=coupling, orbit_error_m=orbit_error_m, orbit_error_model=orbit_error_model)
     m = metrics(r)
     nis, dof = r.nis()
     if r.fused.innovation is not None:
@@ -45,12 +50,15 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--duration-s", type=float, default=782.0)
+    parser.add_argument("--orbit-error-m", type=float, help="default the scenario's (1 m per axis)")
+    parser.add_argument("--orbit-error-model", choices=("independent", "common"))
     parser.add_argument("--scheduler")
     args = parser.parse_args()
-    chunks = [(c, s, args.duration_s) for c in ("loose", "tight") for s in range(args.seeds)]
+    chunks = [(c, s, args.duration_s, args.orbit_error_m, args.orbit_error_model)
+              for c in ("loose", "tight") for s in range(args.seeds)]
     results = map_chunks(one, chunks, scheduler=args.scheduler, desc="runs")
     for coupling in ("loose", "tight"):
-        rs = [r for (c, _, _), r in zip(chunks, results) if c == coupling]
+        rs = [r for chunk, r in zip(chunks, results) if chunk[0] == coupling]
         pos = np.mean([r[0]["pos_err_mean_m"] for r in rs])
         vel = np.mean([r[0]["vel_err_mean_mps"] for r in rs])
         nees = np.concatenate([r[1] for r in rs])
