@@ -27,7 +27,7 @@ that is what this filter does when given a :class:`FixErrorModel`: each
 satellite in a fix adds a constant offset state (and three orbit-error
 states, or three shared by all satellites for a common orbit shift), which
 enter the measurement through the fix's gain; they are marginalised
-:data:`DROP_AFTER_S` after the last fix that used them. The filter stays
+:data:`DROP_AFTER_S` after the last fix that included them. The filter stays
 loose: one 6-value fix difference per update, no Doppler.
 
 After every update the estimated INS errors are fed back: the INS state is
@@ -57,7 +57,7 @@ __all__ = ["FilterSettings", "FusionResult", "FixErrorModel", "ORBIT_MODELS", "m
 #: (a wrong Doppler peak can give a fix hundreds of metres off); at 1 - 1e-6
 #: a consistent filter loses one good fix in a million.
 GATE_PROBABILITY = 1.0 - 1e-6
-#: A satellite's error states are dropped this long after the last fix that used it.
+#: A satellite's error states are dropped this long after the last fix that included it.
 DROP_AFTER_S = 30.0
 #: How the satellites' orbit errors are related: each its own, or one shift of all.
 ORBIT_MODELS = ("independent", "common")
@@ -189,7 +189,7 @@ class _Satellites:
         self.offset_var = offset_sigma_hz**2
         self.orbit_var = max(orbit_sigma_m, 1e-3) ** 2
         self.ids = []
-        self.last_used = []
+        self.last_seen = []
 
     def initial(self, P):
         """Grow the INS covariance by the common orbit states, if any."""
@@ -206,7 +206,7 @@ class _Satellites:
 
     def add(self, x_hat, P, j, t_s):
         self.ids.append(j)
-        self.last_used.append(t_s)
+        self.last_seen.append(t_s)
         n = P.shape[0]
         P_new = np.zeros((n + self.per_sat, n + self.per_sat))
         P_new[:n, :n] = P
@@ -215,15 +215,15 @@ class _Satellites:
         return np.concatenate([x_hat, np.zeros(self.per_sat)]), P_new
 
     def drop_stale(self, x_hat, P, t_s):
-        """Marginalise satellites unused for DROP_AFTER_S (they have set)."""
-        keep_sat = [t_s - t <= DROP_AFTER_S for t in self.last_used]
+        """Marginalise satellites in no fix for DROP_AFTER_S (they have set)."""
+        keep_sat = [t_s - t <= DROP_AFTER_S for t in self.last_seen]
         if all(keep_sat):
             return x_hat, P
         keep = np.ones(P.shape[0], dtype=bool)
         for i, k in enumerate(keep_sat):
             keep[self.first + self.per_sat * i: self.first + self.per_sat * (i + 1)] = k
         self.ids = [j for j, k in zip(self.ids, keep_sat) if k]
-        self.last_used = [t for t, k in zip(self.last_used, keep_sat) if k]
+        self.last_seen = [t for t, k in zip(self.last_seen, keep_sat) if k]
         return x_hat[keep], P[np.ix_(keep, keep)]
 
 
@@ -373,15 +373,20 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
             P = 0.5 * (P + P.T)
             hist = strapdown.integrate(state, dth, dvl, dt_s, out_every=per_step // 2)
             state = hist.state(-1)
+        have_fix = k > 0 and np.all(np.isfinite(pos_fix[k]))
+        if fix_errors is not None and have_fix:
+            # Bookkeeping at every fix, also between corrections, so that a
+            # satellite keeps its states while it stays in view.
+            rows = range(bounds[k], bounds[k + 1])
+            x_hat, P = sats.drop_stale(x_hat, P, t_s)
+            for j in fix_errors.sat_index[rows]:
+                if int(j) not in sats.ids:
+                    x_hat, P = sats.add(x_hat, P, int(j), t_s)
+                sats.last_seen[sats.ids.index(int(j))] = t_s
         due = t_s - last_update_s >= settings.correction_period_s - 1e-9
-        if k > 0 and due and np.all(np.isfinite(pos_fix[k])):
+        if have_fix and due:
             z, H, R = measurement(state, pos_fix[k], vel_fix[k], cov_fix[k])
             if fix_errors is not None:
-                rows = range(bounds[k], bounds[k + 1])
-                x_hat, P = sats.drop_stale(x_hat, P, t_s)
-                for j in fix_errors.sat_index[rows]:
-                    if int(j) not in sats.ids:
-                        x_hat, P = sats.add(x_hat, P, int(j), t_s)
                 H = np.hstack([H, _satellite_rows(state, sats, fix_errors, rows, P.shape[0])[:, _N_INS:]])
             x, P_post, y, S = kalman.update(x_hat, P, z, H, R)
             nis = kalman.nis(y, S)
@@ -392,9 +397,6 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
                 eps = eps + dx[EPS]
                 nabla = nabla + dx[NABLA]
                 x_hat = np.concatenate([np.zeros(_N_INS), x[_N_INS:]])
-                if fix_errors is not None:
-                    for j in fix_errors.sat_index[rows]:
-                        sats.last_used[sats.ids.index(int(j))] = t_s
                 updated[k] = True
                 last_update_s = t_s
                 out["y"][k], out["S"][k], out["nis"][k] = y, S, nis
