@@ -122,7 +122,9 @@ def _threshold(n_terms, n_cells, pfa):
 
 
 def _abs2(z):
-    return z.real * z.real + z.imag * z.imag
+    """|z|^2 in two passes (np.abs is vectorised; real*real + imag*imag costs four)."""
+    p = np.abs(z)
+    return np.multiply(p, p, out=p)
 
 
 def _parabola_vertex(y_minus, y0, y_plus):
@@ -319,14 +321,19 @@ def _decimation(n, target):
 def _phasors(a_cycles, b_cycles, half):
     """exp(-j 2 pi (a + k b)) for k = -half..half, shape (len(a), 2 half + 1).
 
-    Two exponentials per row and products for the rest: the tones of the
-    comb differ by whole multiples of one phase.
+    One exponential call for both phases and a product per further column:
+    the tones of the comb differ by whole multiples of one phase.
     """
-    base = np.exp(-2j * np.pi * (a_cycles - np.round(a_cycles)))
-    z = np.exp(-2j * np.pi * (b_cycles - np.round(b_cycles)))
-    up = np.cumprod(np.broadcast_to(z[:, None], (z.size, half)), axis=1)  # z^1 .. z^half
-    powers = np.concatenate([np.conj(up[:, ::-1]), np.ones((z.size, 1)), up], axis=1)
-    return powers * base[:, None]
+    n = a_cycles.size
+    e = np.exp(-2j * np.pi * np.concatenate([a_cycles - np.round(a_cycles), b_cycles - np.round(b_cycles)]))
+    z = e[n:]
+    out = np.empty((n, 2 * half + 1), dtype=complex)
+    out[:, half] = e[:n]
+    z_conj = np.conj(z)
+    for k in range(1, half + 1):
+        np.multiply(out[:, half + k - 1], z, out=out[:, half + k])
+        np.multiply(out[:, half - k + 1], z_conj, out=out[:, half - k])
+    return out
 
 
 @lru_cache(maxsize=32)
