@@ -397,54 +397,54 @@ def _wrap(f_hz, fs_hz):
 
 
 def _trimmed_sum(power):
-    """Sum over tones (last axis) without the largest at each bin.
+    """Sum over tones (axis -2, tones first: contiguous reductions) without the largest at each bin.
 
     Another satellite's tone falling into one tone band then cannot outvote
     the comb, which is present in all of them (cost: one of nine tones'
     energy, 0.5 dB, in the searches only; the final fit uses every tone).
     """
-    a = np.ascontiguousarray(np.moveaxis(power, -1, 0))  # tones first: fast reductions
-    return a.sum(axis=0) - a.max(axis=0) if a.shape[0] >= 5 else a.sum(axis=0)
+    return power.sum(axis=-2) - power.max(axis=-2) if power.shape[-2] >= 5 else power.sum(axis=-2)
 
 
-def _rate_dpt(y, dt_dec, pfa):
+def _rate_dpt(yt, dt_dec, pfa):
     """Rate from ``y[m + h] conj(y[m])``, a tone at ``rate h dt_dec`` (discrete polynomial-phase
-    transform); None when its peak is not significant at false-alarm ``pfa``."""
-    h = y.shape[0] // 2
-    v = y[h:2 * h] * np.conj(y[:h])
-    p = _trimmed_sum(_abs2(scipy_fft.fft(v, 2 * h, axis=0)))
+    transform); None when its peak is not significant at false-alarm ``pfa``. ``yt``: (K, B)."""
+    h = yt.shape[1] // 2
+    v = yt[:, h:2 * h] * np.conj(yt[:, :h])
+    p = _trimmed_sum(_abs2(scipy_fft.fft(v, 2 * h, axis=-1)))
     i = int(np.argmax(p))
-    k = y.shape[1]
+    k = yt.shape[0]
     if p[i] / np.mean(p) < _threshold(k - 1 if k >= 5 else k, p.size, pfa):  # Gamma(k-1): conservative
         return None
     nu = (i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % p.size])) / (2 * h * dt_dec)
     return _wrap(nu, 1.0 / dt_dec) / (h * dt_dec)
 
 
-def _dechirped_peak(y, tau, rate, known, dt_dec):
-    """Residual frequency of the tones after removing a rate: peak of the summed zero-padded spectra."""
-    z = y * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known))[:, None]  # s_k ~ 1 is close enough here
-    n_fft = 2 * y.shape[0]
-    p = _trimmed_sum(_abs2(scipy_fft.fft(z, n_fft, axis=0)))
+def _dechirped_peak(yt, tau, rate, known, dt_dec):
+    """Residual frequency of the tones after removing a rate: peak of the summed zero-padded spectra.
+    ``yt``: (K, B)."""
+    z = yt * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known)).astype(yt.dtype)  # s_k ~ 1 is close enough
+    n_fft = 2 * yt.shape[1]
+    p = _trimmed_sum(_abs2(scipy_fft.fft(z, n_fft, axis=-1)))
     i = int(np.argmax(p))
     return _wrap((i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec), 1.0 / dt_dec)
 
 
-def _rate_grid(y, tau, known, dt_dec, max_rate_hz_per_s, dur):
+def _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur):
     """(rate, frequency) of the largest dechirped comb power over rates 1/T^2 apart (low C/N0 fallback).
 
     Pairs of segments are summed first: the band still holds the residual
-    tones and the search costs half as much.
+    tones and the search costs half as much. ``yt``: (K, B).
     """
-    m = y.shape[0] // 2 * 2
-    y2 = y[:m:2] + y[1:m:2]
+    m = yt.shape[1] // 2 * 2
+    y2 = yt[:, :m:2] + yt[:, 1:m:2]
     t2 = 0.5 * (tau[:m:2] + tau[1:m:2])
     k2 = 0.5 * (known[:m:2] + known[1:m:2])
     dt2 = 2.0 * dt_dec
     rates = np.arange(-max_rate_hz_per_s, max_rate_hz_per_s + 1.0 / dur**2, 1.0 / dur**2)
-    z = y2[None] * np.exp(-2j * np.pi * (0.5 * rates[:, None] * t2**2 + k2))[:, :, None]  # (J, B/2, K)
-    n_fft = 2 * y2.shape[0]
-    p = _trimmed_sum(_abs2(scipy_fft.fft(z, n_fft, axis=1)))  # (J, n_fft)
+    z = y2 * np.exp(-2j * np.pi * (0.5 * rates[:, None] * t2**2 + k2))[:, None, :].astype(yt.dtype)  # (J, K, B/2)
+    n_fft = 2 * y2.shape[1]
+    p = _trimmed_sum(_abs2(scipy_fft.fft(z, n_fft, axis=-1)))  # (J, n_fft)
     j, i = np.unravel_index(int(np.argmax(p)), p.shape)
     return float(rates[j]), _wrap(i / (n_fft * dt2), 1.0 / dt2)
 
@@ -502,12 +502,14 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     dt_dec = seg / fs
     known = doppler_accel_hz_per_s2 / 6.0 * tpow[:, 3]  # known cubic phase [cycles]
     rate, f_res = 0.0, None
+    # The searches only start Newton: single precision, tones first (contiguous FFTs and sums).
+    yt = np.ascontiguousarray(y.T, dtype=np.complex64)
     if max_rate_hz_per_s * dur**2 > 0.25:
-        rate = _rate_dpt(y, dt_dec, pfa)
+        rate = _rate_dpt(yt, dt_dec, pfa)
         if rate is None:  # the product is too weak: search a grid of rates
-            rate, f_res = _rate_grid(y, tau, known, dt_dec, max_rate_hz_per_s, dur)
+            rate, f_res = _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur)
     if f_res is None:
-        f_res = _dechirped_peak(y, tau, rate, known, dt_dec)
+        f_res = _dechirped_peak(yt, tau, rate, known, dt_dec)
     delta, rate, y_sum = _newton(y, tau, tpow, ratio, f_res, rate, known)
     if resolve:
         phase = delta * tau + 0.5 * rate * tau**2 + known
