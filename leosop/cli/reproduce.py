@@ -4,12 +4,13 @@ Each target is one line of :data:`TARGETS`: ``name: ("module:function",
 help)``. The function lives in a study module, takes keyword-only options
 among ``seed``, ``scheduler``, ``full`` and ``out_dir`` (it receives those it
 declares) and returns the JSON document, with the paper's numbers under
-``"paper"``.
+``"paper"``. Without ``--json`` the document is printed as text: by the study
+module's ``format_table(doc)`` when it has one, else as a flat table of its
+``rows``.
 """
 
 import importlib
 import inspect
-import json
 import sys
 
 from ..errors import InputError
@@ -57,5 +58,33 @@ def run(args):
     return {"target": args.target, **doc}
 
 
+def _flat(obj, prefix=""):
+    """Nested dicts as ``{"a.b": value}``; lists of numbers joined with '/'."""
+    if isinstance(obj, dict):
+        out = {}
+        for k, v in obj.items():
+            out.update(_flat(v, f"{prefix}{k}."))
+        return out
+    if isinstance(obj, list):
+        obj = "/".join(_cell(v) for v in obj)
+    return {prefix[:-1]: obj}
+
+
+def _cell(v):
+    return "-" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
 def summary(doc):
-    return json.dumps(doc, indent=1)
+    module = importlib.import_module(TARGETS[doc["target"]][0].split(":")[0])
+    if hasattr(module, "format_table"):
+        return module.format_table(doc)
+    lines = [f"{doc['target']}: {TARGETS[doc['target']][1]}"]
+    rows = [_flat(r) for r in doc.get("rows", [])]
+    if rows:
+        cols = list(dict.fromkeys(k for r in rows for k in r))
+        table = [cols] + [[_cell(r.get(c)) for c in cols] for r in rows]
+        widths = [max(len(t[i]) for t in table) for i in range(len(cols))]
+        lines += ["  ".join(x.rjust(w) for x, w in zip(t, widths)) for t in table]
+    rest = {k: v for k, v in doc.items() if k not in ("target", "rows")}
+    lines += [f"{k}: {_cell(v)}" for k, v in _flat(rest).items()]
+    return "\n".join(lines)
