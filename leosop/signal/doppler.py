@@ -361,25 +361,31 @@ def _newton(y, tau, tpow, ratio, delta_hz, rate, known_cycles, n_iter=2):
     scale = 1.0 + ratio * np.arange(-half, half + 1)
     a = 2.0 * np.pi * scale  # dpsi/df = a tau
     b = np.pi * scale        # dpsi/dr = b tau^2
-    theta = np.array([delta_hz, rate], dtype=float)
-    step = np.zeros(2)
+    a2, ab, b2 = a * a, a * b, b * b
+    f, r = float(delta_hz), float(rate)
+    step_f = step_r = 0.0
     for _ in range(n_iter):
-        phase = theta[0] * tau + 0.5 * theta[1] * tau**2 + known_cycles
-        m = (y * _phasors(phase, ratio * phase, half)).T @ tpow  # (K, 5): sum_m u tau^p
-        y0 = m[:, 0]
-        d = np.stack([-1j * a * m[:, 1], -1j * b * m[:, 2]])  # dY/dtheta, (2, K)
-        dd = np.empty((2, 2, m.shape[0]), dtype=complex)
-        dd[0, 0] = -(a * a) * m[:, 2]
-        dd[0, 1] = dd[1, 0] = -(a * b) * m[:, 3]
-        dd[1, 1] = -(b * b) * m[:, 4]
-        grad = 2.0 * np.real(d @ np.conj(y0))
-        hess = 2.0 * np.real(np.conj(d) @ d.T + np.einsum("ijk,k->ij", dd, np.conj(y0)))
-        if not (np.all(np.isfinite(hess)) and hess[0, 0] < 0 and np.linalg.det(hess) > 0):
-            step = np.zeros(2)
+        phase = f * tau + (0.5 * r) * tpow[:, 2] + known_cycles
+        u = _phasors(phase, ratio * phase, half)
+        np.multiply(u, y, out=u)
+        # (5, K): sum_m u tau^p, as one real product on the interleaved parts.
+        m = (tpow.T @ u.view(float)).view(complex)
+        y0, m1, m2 = m[0], m[1], m[2]
+        q = m[1:] * np.conj(y0)  # m_p conj(Y), p = 1..4
+        # J = sum |Y_k|^2 with dY/df = -j a m1, dY/dr = -j b m2, d2Y/df2 = -a^2 m2, ...
+        g_f = 2.0 * np.dot(a, q[0].imag)
+        g_r = 2.0 * np.dot(b, q[1].imag)
+        h_ff = 2.0 * np.dot(a2, _abs2(m1) - q[1].real)
+        h_fr = 2.0 * np.dot(ab, (np.conj(m1) * m2).real - q[2].real)
+        h_rr = 2.0 * np.dot(b2, _abs2(m2) - q[3].real)
+        det = h_ff * h_rr - h_fr * h_fr
+        if not (np.isfinite(det) and h_ff < 0.0 and det > 0.0):
+            step_f = step_r = 0.0
             break
-        step = -np.linalg.solve(hess, grad)
-        theta = theta + step
-    return theta[0], theta[1], y0 + step @ d
+        step_f = -(h_rr * g_f - h_fr * g_r) / det
+        step_r = -(h_ff * g_r - h_fr * g_f) / det
+        f, r = f + step_f, r + step_r
+    return f, r, y0 - 1j * (step_f * a * m1 + step_r * b * m2)
 
 
 def cubic_bias_hz(doppler_accel_hz_per_s2, n_samples, sample_rate_hz):
