@@ -193,7 +193,8 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     for og in og_k - og_k.min():
         comb_power += grouped[og:og + n_groups]
     width = 2 * half_groups + 1
-    csum = np.concatenate([[0.0], np.cumsum(comb_power)])
+    csum = np.zeros(n_groups + 1)
+    np.cumsum(comb_power, out=csum[1:])
     smooth = (csum[width:] - csum[:-width]) / (width * g * comb.n_tones * noise)
     j = int(np.argmax(smooth))
     stat = float(smooth[j])
@@ -528,8 +529,9 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     # Amplitudes and noise from the fit: y_mk = c_m A_k exp(j psi) + noise of
     # variance c_m sigma^2; the least-squares residual is sum|y|^2 - |Y|^2 / B.
     # Per tone, so that another satellite's tone in one band does not count as noise.
-    resid = np.maximum(np.sum(_abs2(y), axis=0) - _abs2(y_sum) / n_seg, 0.0)
-    sigma2 = float(np.median(resid)) / ((n_seg - 1) * seg)
+    energy = (np.ones(n_seg) @ np.square(y.view(float))).reshape(-1, 2).sum(axis=1)  # sum_m |y_mk|^2
+    resid = np.sort(np.maximum(energy - _abs2(y_sum) / n_seg, 0.0))
+    sigma2 = 0.5 * float(resid[(resid.size - 1) // 2] + resid[resid.size // 2]) / ((n_seg - 1) * seg)  # median
     scale = comb.doppler_scale
     a2 = np.maximum(_abs2(y_sum) - n * sigma2, 0.0) / n**2
     cn0_k = a2 * fs / sigma2 if sigma2 > 0 else np.full(comb.n_tones, np.inf)
