@@ -337,6 +337,15 @@ def _phasors(a_cycles, b_cycles, half):
     return out
 
 
+def _interleaved(mix, dtype):
+    """Real (2L, 2K) matrix acting on interleaved (re, im) samples as the complex (L, K) ``mix``."""
+    m = np.empty((mix.shape[0], 2, mix.shape[1], 2), dtype=dtype)
+    m[:, 0, :, 0] = m[:, 1, :, 1] = mix.real
+    m[:, 0, :, 1] = mix.imag
+    m[:, 1, :, 0] = -mix.imag
+    return m.reshape(2 * mix.shape[0], 2 * mix.shape[1])
+
+
 @lru_cache(maxsize=32)
 def _segments(n, fs, n_seg, seg):
     """Decimation grid: sample times in a segment, segment start times, segment centres re the
@@ -503,8 +512,11 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     resolve = resolve and not coarse.margin_sigma >= _SURE_SIGMA
     extra = _EXTRA_TONES if resolve else 0
     wide = half + extra
-    mix = _phasors(d_c * t_l, spacing * t_l, wide).astype(np.complex64 if iq.dtype == np.complex64 else complex)
-    y_wide = (x.reshape(n_seg, seg) @ mix) * _phasors(d_c * t_m, spacing * t_m, wide)
+    mix = _phasors(d_c * t_l, spacing * t_l, wide)
+    # The one full-length pass: a real product on interleaved (re, im) samples
+    # runs ~15 % faster than the complex one (single precision for complex64).
+    xr = np.ascontiguousarray(x).view(x.real.dtype).reshape(n_seg, 2 * seg)
+    y_wide = (xr @ _interleaved(mix, xr.dtype)).view(x.dtype) * _phasors(d_c * t_m, spacing * t_m, wide)
     y = y_wide[:, extra:y_wide.shape[1] - extra]
     dt_dec = seg / fs
     known = doppler_accel_hz_per_s2 / 6.0 * tpow[:, 3]  # known cubic phase [cycles]
