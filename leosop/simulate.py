@@ -41,7 +41,7 @@ import numpy as np
 from . import earth, frames
 from .constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 from .errors import InputError
-from .fusion import kalman, loose, tight
+from .fusion import common, kalman, loose, tight
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, load_constellation
 from .orbits.visibility import compute_visibility
@@ -89,7 +89,7 @@ class SimulationResult:
     fix_pos_ecef_m, fix_vel_enu_mps : ndarray, (n, 3)
         LEO snapshot fixes; NaN where none.
     fix_cov : ndarray, (n, 7, 7)
-    fused : leosop.fusion.loose.FusionResult
+    fused : leosop.fusion.common.FusionResult
     n_visible : ndarray of int, (n,)
     gdop : ndarray, (n,)
         Eq. 10 along the true flight; NaN below 7 satellites.
@@ -114,7 +114,7 @@ class SimulationResult:
     fix_pos_ecef_m: np.ndarray
     fix_vel_enu_mps: np.ndarray
     fix_cov: np.ndarray
-    fused: loose.FusionResult
+    fused: common.FusionResult
     n_visible: np.ndarray
     gdop: np.ndarray
     tle_age_days: float
@@ -167,7 +167,7 @@ def _imu_errors(spec, rng):
 
 def _filter_settings(scenario, errors, correction_period_s):
     init = scenario.init_error
-    return loose.FilterSettings(
+    return common.FilterSettings(
         pos_sigma_m=tuple(max(abs(v), 1.0) for v in init.pos_m),
         vel_sigma_mps=tuple(max(abs(v), 0.01) for v in init.vel_mps),
         att_sigma_rad=tuple(np.radians(ATT_SIGMA_DEG)),
@@ -300,8 +300,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     _check_options(level, coupling, correction_period_s, orbit_error_m)
     orbit_error_m = scenario.leo.orbit_error_m if orbit_error_m is None else float(orbit_error_m)
     orbit_error_model = scenario.leo.orbit_error_model if orbit_error_model is None else orbit_error_model
-    if orbit_error_model not in loose.ORBIT_MODELS:
-        raise InputError(f"orbit error model {orbit_error_model!r}: expected one of {', '.join(loose.ORBIT_MODELS)}")
+    if orbit_error_model not in common.ORBIT_MODELS:
+        raise InputError(f"orbit error model {orbit_error_model!r}: expected one of {', '.join(common.ORBIT_MODELS)}")
     rng_imu, rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
 
     constellation = load_constellation(tle)

@@ -16,7 +16,7 @@ from scipy import stats
 
 from leosop import earth, frames
 from leosop.constants import G0_MPS2
-from leosop.fusion import kalman, loose
+from leosop.fusion import common, kalman, loose
 from leosop.ins import imu, strapdown, trajectory
 from leosop.ins.error_model import DPOS, DV, NABLA
 from leosop.scenarios import XIAN_BAOJI
@@ -39,7 +39,7 @@ def _settings(**kw):
                 gyro_bias_sigma_rad_per_s=np.radians(0.03) / 3600, accel_bias_sigma_mps2=1e-4 * G0_MPS2,
                 gyro_arw_rad_per_rt_s=ARW, accel_vrw_mps2_per_rt_hz=VRW)
     base.update(kw)
-    return loose.FilterSettings(**base)
+    return common.FilterSettings(**base)
 
 
 def _case(seed, duration_s=120.0, accel_bias_g=1e-4):

@@ -1,7 +1,8 @@
 """Fusion of inertial navigation with LEO Doppler.
 
-:mod:`.kalman` is the filter core as plain functions; :mod:`.loose` couples
-the strapdown INS with Doppler position/velocity fixes (seed 004 eq. 13-16);
-:mod:`.tight` updates the INS with each satellite's Doppler and estimates the
-satellites' clock offsets and orbit errors (ours).
+:mod:`.kalman` is the filter core as plain functions; :mod:`.common` holds
+what both couplings share (settings, output, INS prediction and feedback,
+the satellites' error states); :mod:`.loose` couples the strapdown INS with
+Doppler position/velocity fixes (seed 004 eq. 13-16); :mod:`.tight` updates
+the INS with each satellite's Doppler (ours).
 """

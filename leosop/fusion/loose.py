@@ -27,7 +27,7 @@ that is what this filter does when given a :class:`FixErrorModel`: each
 satellite in a fix adds a constant offset state (and three orbit-error
 states, or three shared by all satellites for a common orbit shift), which
 enter the measurement through the fix's gain; they are marginalised
-:data:`DROP_AFTER_S` after the last fix that included them. The filter stays
+``DROP_AFTER_S`` (:mod:`.common`) after the last fix that included them. The filter stays
 loose: one 6-value fix difference per update, no Doppler.
 
 After every update the estimated INS errors are fed back: the INS state is
@@ -45,105 +45,17 @@ import dataclasses
 import numpy as np
 from scipy import stats
 
-from .. import earth, frames
-from ..ins import error_model, strapdown
-from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+from .. import frames
+from ..ins.error_model import DPOS, DV
 from . import kalman
+from .common import N_INS, FeedbackIns, SatelliteStates, Track, initial_covariance, pos_jacobian
 
-__all__ = ["FilterSettings", "FusionResult", "FixErrorModel", "ORBIT_MODELS", "measurement", "initial_covariance",
-           "run", "DROP_AFTER_S"]
+__all__ = ["FixErrorModel", "measurement", "run"]
 
 #: Innovations whose NIS exceeds this chi-square(6) quantile are rejected
 #: (a wrong Doppler peak can give a fix hundreds of metres off); at 1 - 1e-6
 #: a consistent filter loses one good fix in a million.
 GATE_PROBABILITY = 1.0 - 1e-6
-#: A satellite's error states are dropped this long after the last fix that included it.
-DROP_AFTER_S = 30.0
-#: How the satellites' orbit errors are related: each its own, or one shift of all.
-ORBIT_MODELS = ("independent", "common")
-_N_INS = 15
-
-
-@dataclasses.dataclass(frozen=True)
-class FilterSettings:
-    """Filter tuning, in the units the names carry.
-
-    ``pos_sigma_m``, ``vel_sigma_mps``: initial uncertainty per ENU axis;
-    ``att_sigma_rad``: initial attitude uncertainty (E, N, U); ``gyro_bias_*``
-    and ``accel_bias_*``: initial bias uncertainty and white-noise densities.
-    """
-
-    pos_sigma_m: tuple
-    vel_sigma_mps: tuple
-    att_sigma_rad: tuple
-    gyro_bias_sigma_rad_per_s: float
-    accel_bias_sigma_mps2: float
-    gyro_arw_rad_per_rt_s: float
-    accel_vrw_mps2_per_rt_hz: float
-    correction_period_s: float = 1.0
-    step_s: float = 1.0
-    gate: bool = True
-
-
-@dataclasses.dataclass(frozen=True)
-class FusionResult:
-    """Filter output at every step epoch (n epochs, the first is the initial state).
-
-    Attributes
-    ----------
-    t_s : ndarray, (n,)
-    lat_rad, lon_rad, alt_m : ndarray, (n,)
-    vel_enu_mps : ndarray, (n, 3)
-    C_n_b : ndarray, (n, 3, 3)
-    P : ndarray, (n, 15, 15)
-        Covariance of the remaining INS errors (after feedback).
-    updated : ndarray of bool, (n,)
-        An update was made at this epoch.
-    rejected : ndarray of bool, (n,)
-        A fix was offered but failed the innovation gate.
-    nis : ndarray, (n,)
-        Normalised innovation squared of each update, NaN elsewhere.
-    nis_dof : ndarray of int, (n,)
-        Its degrees of freedom (measurements in the update; 0 without one).
-    innovation, innovation_cov : ndarray, (n, 6), (n, 6, 6), or None
-        Loose coupling: ``z - H x`` (velocity [m/s], position [m] ENU) and
-        ``S`` at updates, NaN elsewhere; None for tight coupling.
-    doppler_innovation : structured ndarray or None
-        Tight coupling: one row per Doppler used, fields ``epoch``, ``sat``
-        and ``normalized`` (innovation over the square root of its variance
-        in ``S``); None for loose coupling.
-    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
-        Accumulated bias estimates.
-    """
-
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    alt_m: np.ndarray
-    vel_enu_mps: np.ndarray
-    C_n_b: np.ndarray
-    P: np.ndarray
-    updated: np.ndarray
-    rejected: np.ndarray
-    nis: np.ndarray
-    nis_dof: np.ndarray
-    gyro_bias_rad_per_s: np.ndarray
-    accel_bias_mps2: np.ndarray
-    innovation: np.ndarray | None = None
-    innovation_cov: np.ndarray | None = None
-    doppler_innovation: np.ndarray | None = None
-
-    @property
-    def pos_ecef_m(self):
-        """ECEF position, (n, 3)."""
-        return frames.geodetic_to_ecef(self.lat_rad, self.lon_rad, self.alt_m)
-
-    def pos_vel_cov_enu(self):
-        """Covariance of ``[dv_enu, dpos_enu]`` in m/s and m, (n, 6, 6)."""
-        D = np.zeros((self.t_s.size, 6, 15))
-        D[:, 0:3, DV] = np.eye(3)
-        D[:, 3:6, DPOS] = _pos_jacobian(self.lat_rad, self.alt_m)
-        return D @ self.P @ np.swapaxes(D, 1, 2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -180,76 +92,6 @@ class FixErrorModel:
     orbit_model: str = "independent"
 
 
-class _Satellites:
-    """Bookkeeping of the satellite error states after the INS (and common orbit) states."""
-
-    def __init__(self, orbit_model, offset_sigma_hz, orbit_sigma_m):
-        self.per_sat = 4 if orbit_model == "independent" else 1
-        self.first = _N_INS + (0 if orbit_model == "independent" else 3)
-        self.offset_var = offset_sigma_hz**2
-        self.orbit_var = max(orbit_sigma_m, 1e-3) ** 2
-        self.ids = []
-        self.last_seen = []
-
-    def initial(self, P):
-        """Grow the INS covariance by the common orbit states, if any."""
-        n = self.first
-        P_new = np.zeros((n, n))
-        P_new[:_N_INS, :_N_INS] = P
-        P_new[_N_INS:, _N_INS:] = np.eye(n - _N_INS) * self.orbit_var
-        return np.zeros(n), P_new
-
-    def columns(self, j):
-        """Offset column and orbit columns of satellite j."""
-        c = self.first + self.per_sat * self.ids.index(j)
-        return c, (slice(c + 1, c + 4) if self.per_sat == 4 else slice(_N_INS, _N_INS + 3))
-
-    def add(self, x_hat, P, j, t_s):
-        self.ids.append(j)
-        self.last_seen.append(t_s)
-        n = P.shape[0]
-        P_new = np.zeros((n + self.per_sat, n + self.per_sat))
-        P_new[:n, :n] = P
-        P_new[n, n] = self.offset_var
-        P_new[n + 1:, n + 1:] = np.eye(self.per_sat - 1) * self.orbit_var
-        return np.concatenate([x_hat, np.zeros(self.per_sat)]), P_new
-
-    def drop_stale(self, x_hat, P, t_s):
-        """Marginalise satellites in no fix for DROP_AFTER_S (they have set)."""
-        keep_sat = [t_s - t <= DROP_AFTER_S for t in self.last_seen]
-        if all(keep_sat):
-            return x_hat, P
-        keep = np.ones(P.shape[0], dtype=bool)
-        for i, k in enumerate(keep_sat):
-            keep[self.first + self.per_sat * i: self.first + self.per_sat * (i + 1)] = k
-        self.ids = [j for j, k in zip(self.ids, keep_sat) if k]
-        self.last_seen = [t for t, k in zip(self.last_seen, keep_sat) if k]
-        return x_hat[keep], P[np.ix_(keep, keep)]
-
-
-def _pos_jacobian(lat_rad, alt_m):
-    """d(ENU metres)/d[dlat, dlon, dalt], shape (..., 3, 3)."""
-    lat = np.asarray(lat_rad, dtype=float)
-    R_M, R_N = earth.radii_m(lat)
-    J = np.zeros(lat.shape + (3, 3))
-    J[..., 0, 1] = (R_N + alt_m) * np.cos(lat)
-    J[..., 1, 0] = R_M + alt_m
-    J[..., 2, 2] = 1.0
-    return J
-
-
-def initial_covariance(settings, lat_rad, alt_m):
-    """Initial 15 x 15 covariance of the INS errors (position in rad, rad, m)."""
-    J_inv = np.linalg.inv(_pos_jacobian(lat_rad, alt_m))
-    P = np.zeros((15, 15))
-    P[PHI, PHI] = np.diag(np.square(settings.att_sigma_rad))
-    P[DV, DV] = np.diag(np.square(settings.vel_sigma_mps))
-    P[DPOS, DPOS] = J_inv @ np.diag(np.square(settings.pos_sigma_m)) @ J_inv.T
-    P[EPS, EPS] = np.eye(3) * settings.gyro_bias_sigma_rad_per_s**2
-    P[NABLA, NABLA] = np.eye(3) * settings.accel_bias_sigma_mps2**2
-    return P
-
-
 def _enu_from_ecef_pv(lat_rad, lon_rad):
     """``T`` mapping ECEF ``[pos, vel]`` to ENU ``[vel, pos]``, (6, 6)."""
     C_n_e = frames.C_e_n(lat_rad, lon_rad).T
@@ -282,7 +124,7 @@ def measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, cov_fix_pv_ecef):
     z = np.concatenate([state.vel_enu_mps - C_n_e @ vel_fix_ecef_mps, C_n_e @ (pos_ins - pos_fix_ecef_m)])
     H = np.zeros((6, 15))
     H[0:3, DV] = np.eye(3)
-    H[3:6, DPOS] = _pos_jacobian(lat, alt)
+    H[3:6, DPOS] = pos_jacobian(lat, alt)
     T = _enu_from_ecef_pv(lat, lon)
     return z, H, T @ np.asarray(cov_fix_pv_ecef) @ T.T
 
@@ -317,7 +159,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
         shapes (n, 3), (n, 3), (n, 6, 6); NaN rows where there is no fix.
         ``cov_pv`` is the covariance of the fix errors that are white in time
         (all of them when ``fix_errors`` is None).
-    settings : FilterSettings
+    settings : leosop.fusion.common.FilterSettings
     fix_errors : FixErrorModel, optional
         The satellites' constant errors behind the fixes, estimated as
         states (module docstring); None treats the fix errors as white.
@@ -326,85 +168,49 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
 
     Returns
     -------
-    FusionResult
+    leosop.fusion.common.FusionResult
     """
     pos_fix, vel_fix, cov_fix = fixes
-    per_step = int(round(settings.step_s / dt_s))
-    if per_step < 2 or per_step % 2 or abs(per_step * dt_s - settings.step_s) > 1e-9:
-        raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
-    n = min(len(pos_fix), dtheta_b_rad.shape[0] // per_step + 1)
-    Qc = np.concatenate([np.full(3, settings.gyro_arw_rad_per_rt_s**2),
-                         np.full(3, settings.accel_vrw_mps2_per_rt_hz**2)])
+    ins = FeedbackIns(state0, dtheta_b_rad, dvel_b_mps, dt_s, settings)
+    n = min(len(pos_fix), ins.n_epochs)
     gate = stats.chi2.ppf(GATE_PROBABILITY, 6) if settings.gate else np.inf
-
-    out = {k: np.full(shape, np.nan) for k, shape in (
-        ("lat", (n,)), ("lon", (n,)), ("alt", (n,)), ("vel", (n, 3)), ("C", (n, 3, 3)), ("P", (n, 15, 15)),
-        ("y", (n, 6)), ("S", (n, 6, 6)), ("nis", (n,)), ("eps", (n, 3)), ("nabla", (n, 3)))}
-    updated = np.zeros(n, dtype=bool)
-    rejected = np.zeros(n, dtype=bool)
-    state = state0
+    track = Track(n)
+    innovation, innovation_cov = np.full((n, 6), np.nan), np.full((n, 6, 6), np.nan)
     P = initial_covariance(settings, state0.lat_rad, state0.alt_m)
-    x_hat = np.zeros(_N_INS)  # only the satellite error states are kept (the INS errors are fed back)
+    x_hat = np.zeros(N_INS)  # only the satellite error states are kept (the INS errors are fed back)
     if fix_errors is not None:
-        sats = _Satellites(fix_errors.orbit_model, fix_errors.offset_sigma_hz, fix_errors.orbit_sigma_m)
-        x_hat, P = sats.initial(P)
+        # Offsets about their common mean, which the fix's receiver offset absorbs.
+        sats = SatelliteStates(N_INS, fix_errors.orbit_model, 0.0, fix_errors.offset_sigma_hz,
+                               fix_errors.orbit_sigma_m)
+        x_hat, P = sats.initial(x_hat, P)
         bounds = np.searchsorted(fix_errors.epoch_index, np.arange(n + 1))
-    eps = np.zeros(3)
-    nabla = np.zeros(3)
     last_update_s = 0.0  # corrections at P, 2P, ... (or the first fix after)
     epochs = range(n) if progress is None else progress(range(n))
     for k in epochs:
         t_s = k * settings.step_s
         if k > 0:
-            sl = slice((k - 1) * per_step, k * per_step)
-            dth = dtheta_b_rad[sl] - eps * dt_s
-            dvl = dvel_b_mps[sl] - nabla * dt_s
-            C0 = state.C_n_b
-            f_n = C0 @ (dvl.sum(axis=0) / settings.step_s)
-            F, G = error_model.model15(C0, f_n, state.vel_enu_mps, state.lat_rad, state.alt_m)
-            # Second-order series: the modes of F (Schuler, Earth rate, vertical) are
-            # below 2e-3 rad/s, so at 1 s the terms left out are ~1e-6 of those kept
-            # (and Van Loan's matrix exponential costs 8x more per step).
-            Phi, Qd = error_model.discretize(F, G, Qc, settings.step_s, method="series")
-            # The satellite error states are constant: only the INS block moves.
-            P[:_N_INS, :] = Phi @ P[:_N_INS, :]
-            P[:, :_N_INS] = P[:, :_N_INS] @ Phi.T
-            P[:_N_INS, :_N_INS] += Qd
-            P = 0.5 * (P + P.T)
-            hist = strapdown.integrate(state, dth, dvl, dt_s, out_every=per_step // 2)
-            state = hist.state(-1)
+            P = ins.predict(k, P)
         have_fix = k > 0 and np.all(np.isfinite(pos_fix[k]))
         if fix_errors is not None and have_fix:
             # Bookkeeping at every fix, also between corrections, so that a
             # satellite keeps its states while it stays in view.
             rows = range(bounds[k], bounds[k + 1])
-            x_hat, P = sats.drop_stale(x_hat, P, t_s)
-            for j in fix_errors.sat_index[rows]:
-                if int(j) not in sats.ids:
-                    x_hat, P = sats.add(x_hat, P, int(j), t_s)
-                sats.last_seen[sats.ids.index(int(j))] = t_s
+            x_hat, P = sats.see(x_hat, P, fix_errors.sat_index[rows], t_s)
         due = t_s - last_update_s >= settings.correction_period_s - 1e-9
         if have_fix and due:
-            z, H, R = measurement(state, pos_fix[k], vel_fix[k], cov_fix[k])
+            z, H, R = measurement(ins.state, pos_fix[k], vel_fix[k], cov_fix[k])
             if fix_errors is not None:
-                H = np.hstack([H, _satellite_rows(state, sats, fix_errors, rows, P.shape[0])[:, _N_INS:]])
+                H = np.hstack([H, _satellite_rows(ins.state, sats, fix_errors, rows, P.shape[0])[:, N_INS:]])
             x, P_post, y, S = kalman.update(x_hat, P, z, H, R)
             nis = kalman.nis(y, S)
             if nis <= gate:
                 P = P_post
-                dx = x - x_hat
-                state = state.corrected(dx[PHI], dx[DV], dx[DPOS])
-                eps = eps + dx[EPS]
-                nabla = nabla + dx[NABLA]
-                x_hat = np.concatenate([np.zeros(_N_INS), x[_N_INS:]])
-                updated[k] = True
+                ins.feedback(x - x_hat)
+                x_hat = np.concatenate([np.zeros(N_INS), x[N_INS:]])
+                track.updated[k] = True
                 last_update_s = t_s
-                out["y"][k], out["S"][k], out["nis"][k] = y, S, nis
+                innovation[k], innovation_cov[k], track.nis[k], track.nis_dof[k] = y, S, nis, 6
             else:
-                rejected[k] = True
-        out["lat"][k], out["lon"][k], out["alt"][k] = state.lat_rad, state.lon_rad, state.alt_m
-        out["vel"][k], out["C"][k], out["P"][k] = state.vel_enu_mps, state.C_n_b, P[:_N_INS, :_N_INS]
-        out["eps"][k], out["nabla"][k] = eps, nabla
-    return FusionResult(np.arange(n) * settings.step_s, out["lat"], out["lon"], out["alt"], out["vel"], out["C"],
-                        out["P"], updated, rejected, out["nis"], np.where(updated, 6, 0), out["eps"], out["nabla"],
-                        out["y"], out["S"])
+                track.rejected[k] = True
+        track.record(k, ins, P)
+    return track.result(settings.step_s, innovation=innovation, innovation_cov=innovation_cov)

@@ -2,22 +2,26 @@
 
 Seed 004 names tight coupling as future work; this is ours. The state is
 the 15 INS errors of :mod:`leosop.ins.error_model`, the receiver frequency
-offset ``T_u`` [Hz], and for every tracked satellite its constant clock-
-induced Doppler offset [Hz] and its constant orbit error (ECEF, m) — the two
-systematic errors of seed 004 Table 1 that a snapshot fix cannot separate
-from the receiver state, and that make a loosely coupled filter fed with
-1 Hz fixes overconfident (their errors persist from fix to fix). A
-satellite's states are added with their prior when it rises and dropped
-:data:`DROP_AFTER_S` after it was last seen.
+offset ``T_u`` [Hz], and the satellites' error states of
+:class:`leosop.fusion.common.SatelliteStates`: every tracked satellite's
+constant clock-induced Doppler offset [Hz] and the constant orbit errors
+(ECEF, m), three per satellite (``orbit_model="independent"``) or three
+shared by all (``"common"``, every satellite shifted by the same vector,
+seed 004 Table 6's [E, E, E]) — the two systematic errors of seed 004
+Table 1 that a snapshot fix cannot separate from the receiver state, and
+that make a loosely coupled filter fed with 1 Hz fixes overconfident (their
+errors persist from fix to fix). A satellite's states are added with their
+prior when it rises and dropped ``DROP_AFTER_S`` after it was last seen.
 
 Measurement of satellite j (the toolkit's Doppler sign)::
 
     doppler_j = -(f0/c) (v_s - v_r).(r_s - r_r)/|r_s - r_r| + T_u + o_j + noise,
 
 predicted at the INS state with the satellite position corrected by the
-estimated orbit error. Every state is an error state fed back after each
-update, as in :mod:`leosop.fusion.loose`. No minimum number of satellites:
-each Doppler is used as it comes.
+estimated orbit error (its own, or the common shift), which enters the row
+through the Doppler's sensitivity to the satellite position. Every state is
+an error state fed back after each update, as in :mod:`leosop.fusion.loose`.
+No minimum number of satellites: each Doppler is used as it comes.
 """
 
 import dataclasses
@@ -26,21 +30,17 @@ import numpy as np
 from scipy import stats
 
 from .. import frames
-from ..ins import error_model, strapdown
-from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+from ..ins.error_model import DPOS, DV
 from ..positioning.dop import doppler_jacobian
 from . import kalman
-from .loose import FusionResult, _pos_jacobian, initial_covariance
+from .common import N_INS, FeedbackIns, SatelliteStates, Track, initial_covariance, pos_jacobian
 
-__all__ = ["DopplerPriors", "DopplerMeasurements", "run", "DROP_AFTER_S"]
+__all__ = ["DopplerPriors", "DopplerMeasurements", "run"]
 
-#: A satellite's states are dropped this long after its last measurement.
-DROP_AFTER_S = 30.0
 #: Single Doppler innovations beyond this chi-square(1) quantile are not used
 #: (a wrong comb hypothesis is off by tens of Hz); 1 - 1e-6 is 4.9 sigma.
 GATE_PROBABILITY = 1.0 - 1e-6
-_N_INS = 15
-_T = 15  # index of the receiver offset
+_T = N_INS  # index of the receiver offset
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +50,9 @@ class DopplerPriors:
     ``sat_offset_mean_hz``/``sat_offset_sigma_hz``: prior of each satellite's
     offset (uniform in [0, max]: mean max/2, sigma max/sqrt(12));
     ``orbit_sigma_m``: orbit error per ECEF axis; ``rx_offset_sigma_hz``:
-    prior of the receiver offset; ``rx_offset_psd_hz2_per_s``: its random walk.
+    prior of the receiver offset; ``rx_offset_psd_hz2_per_s``: its random walk;
+    ``orbit_model``: one orbit error per satellite (``"independent"``) or one
+    shift of all (``"common"``).
     """
 
     sat_offset_mean_hz: float
@@ -59,6 +61,7 @@ class DopplerPriors:
     rx_offset_sigma_hz: float = 10.0
     rx_offset_psd_hz2_per_s: float = 1e-6
     carrier_hz: float = 11.325e9
+    orbit_model: str = "independent"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,52 +85,21 @@ class DopplerMeasurements:
     vel_sv_ecef_mps: np.ndarray
 
 
-class _Satellites:
-    """Bookkeeping of the per-satellite states: 4 per satellite after the 16 common ones."""
+def _rows(state, x_hat, columns, meas, rows, carrier_hz):
+    """Innovations and their Jacobian for measurement ``rows`` of one epoch.
 
-    def __init__(self):
-        self.ids = []
-        self.last_seen = []
-
-    def column(self, j):
-        return _N_INS + 1 + 4 * self.ids.index(j)
-
-    def add(self, x_hat, P, j, t_s, priors):
-        """Append satellite j's states with their prior; returns the grown (x_hat, P)."""
-        self.ids.append(j)
-        self.last_seen.append(t_s)
-        n = P.shape[0]
-        P_new = np.zeros((n + 4, n + 4))
-        P_new[:n, :n] = P
-        P_new[n, n] = priors.sat_offset_sigma_hz**2
-        P_new[n + 1:, n + 1:] = np.eye(3) * max(priors.orbit_sigma_m, 1e-3) ** 2
-        return np.concatenate([x_hat, [priors.sat_offset_mean_hz, 0.0, 0.0, 0.0]]), P_new
-
-    def drop_stale(self, x_hat, P, t_s):
-        """Remove satellites not seen for DROP_AFTER_S; returns (x_hat, P)."""
-        keep_sat = [t_s - seen <= DROP_AFTER_S for seen in self.last_seen]
-        if all(keep_sat):
-            return x_hat, P
-        keep = np.ones(P.shape[0], dtype=bool)
-        for i, k in enumerate(keep_sat):
-            if not k:
-                keep[_N_INS + 1 + 4 * i: _N_INS + 5 + 4 * i] = False
-        self.ids = [j for j, k in zip(self.ids, keep_sat) if k]
-        self.last_seen = [s for s, k in zip(self.last_seen, keep_sat) if k]
-        return x_hat[keep], P[np.ix_(keep, keep)]
-
-
-def _rows(state, x_hat, cols, meas, rows, carrier_hz):
-    """Innovations and their Jacobian for measurement ``rows`` of one epoch."""
+    ``columns`` holds each row's satellite offset column and orbit columns
+    (:meth:`leosop.fusion.common.SatelliteStates.columns`).
+    """
     lat, lon, alt = state.lat_rad, state.lon_rad, state.alt_m
     C = frames.C_e_n(lat, lon)
     r_rx = frames.geodetic_to_ecef(lat, lon, alt)
     v_rx = C @ state.vel_enu_mps
-    orbit = np.array([x_hat[c + 1: c + 4] for c in cols])
+    orbit = np.array([x_hat[o] for _, o in columns])
     r_sv = meas.pos_sv_ecef_m[rows] - orbit
     v_sv = meas.vel_sv_ecef_mps[rows]
     J = doppler_jacobian(r_sv, v_sv, r_rx, v_rx, carrier_hz)
-    offsets = np.array([x_hat[c] for c in cols])
+    offsets = np.array([x_hat[c] for c, _ in columns])
     predicted = np.einsum("mi,mi->m", J[:, 3:6], v_rx - v_sv) + x_hat[_T] + offsets
     # The ECEF velocity C_e_n v_enu also moves with the position through the
     # frame's rotation (dv_ecef/dlat, dv_ecef/dlon): 3e-4 m/s per 10 m at 200 m/s.
@@ -137,11 +109,11 @@ def _rows(state, x_hat, cols, meas, rows, carrier_hz):
     dv_dpos = np.column_stack([dC_dlat @ state.vel_enu_mps, dC_dlon @ state.vel_enu_mps, np.zeros(3)])
     H = np.zeros((len(rows), x_hat.size))
     H[:, DV] = -J[:, 3:6] @ C
-    H[:, DPOS] = -J[:, 0:3] @ C @ _pos_jacobian(lat, alt) - J[:, 3:6] @ dv_dpos
+    H[:, DPOS] = -J[:, 0:3] @ C @ pos_jacobian(lat, alt) - J[:, 3:6] @ dv_dpos
     H[:, _T] = 1.0
-    for i, c in enumerate(cols):
+    for i, (c, o) in enumerate(columns):
         H[i, c] = 1.0
-        H[i, c + 1: c + 4] = J[i, 0:3]
+        H[i, o] = J[i, 0:3]  # the satellite is believed at pos_sv - orbit
     return meas.doppler_hz[rows] - predicted, H
 
 
@@ -157,94 +129,59 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
     measurements : DopplerMeasurements
         Epoch k is at ``k * settings.step_s``.
     priors : DopplerPriors
-    settings : leosop.fusion.loose.FilterSettings
+    settings : leosop.fusion.common.FilterSettings
         INS priors and noise, step and correction period (gating always on).
     n_epochs : int
     progress : callable, optional
 
     Returns
     -------
-    leosop.fusion.loose.FusionResult
+    leosop.fusion.common.FusionResult
         ``innovation`` and ``innovation_cov`` are None, ``doppler_innovation``
         holds each Doppler's normalised innovation; ``nis_dof`` is the number
         of Doppler measurements of each update.
     """
-    per_step = int(round(settings.step_s / dt_s))
-    if per_step < 2 or per_step % 2 or abs(per_step * dt_s - settings.step_s) > 1e-9:
-        raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
-    n = min(n_epochs, dtheta_b_rad.shape[0] // per_step + 1)
-    Qc = np.concatenate([np.full(3, settings.gyro_arw_rad_per_rt_s**2),
-                         np.full(3, settings.accel_vrw_mps2_per_rt_hz**2)])
+    ins = FeedbackIns(state0, dtheta_b_rad, dvel_b_mps, dt_s, settings)
+    n = min(n_epochs, ins.n_epochs)
     gate = stats.chi2.ppf(GATE_PROBABILITY, 1)
     bounds = np.searchsorted(measurements.epoch_index, np.arange(n + 1))
-
-    out = {k: np.full(shape, np.nan) for k, shape in (
-        ("lat", (n,)), ("lon", (n,)), ("alt", (n,)), ("vel", (n, 3)), ("C", (n, 3, 3)), ("P", (n, 15, 15)),
-        ("nis", (n,)), ("eps", (n, 3)), ("nabla", (n, 3)))}
-    dof = np.zeros(n, dtype=int)
+    track = Track(n)
     records = []
-    updated = np.zeros(n, dtype=bool)
-    rejected = np.zeros(n, dtype=bool)
-    state = state0
-    P = np.zeros((_N_INS + 1, _N_INS + 1))
-    P[:_N_INS, :_N_INS] = initial_covariance(settings, state0.lat_rad, state0.alt_m)
+    P = np.zeros((N_INS + 1, N_INS + 1))
+    P[:N_INS, :N_INS] = initial_covariance(settings, state0.lat_rad, state0.alt_m)
     P[_T, _T] = priors.rx_offset_sigma_hz**2
-    x_hat = np.zeros(_N_INS + 1)  # only the non-INS entries are used: T_u, then per satellite
-    sats = _Satellites()
-    eps = np.zeros(3)
-    nabla = np.zeros(3)
+    x_hat = np.zeros(N_INS + 1)  # only the non-INS entries are used: T_u, then the satellites'
+    sats = SatelliteStates(N_INS + 1, priors.orbit_model, priors.sat_offset_mean_hz, priors.sat_offset_sigma_hz,
+                           priors.orbit_sigma_m)
+    x_hat, P = sats.initial(x_hat, P)
     last_update_s = 0.0  # corrections at P, 2P, ... (or the first fix after)
     epochs = range(n) if progress is None else progress(range(n))
     for k in epochs:
         t_s = k * settings.step_s
         if k > 0:
-            sl = slice((k - 1) * per_step, k * per_step)
-            dth = dtheta_b_rad[sl] - eps * dt_s
-            dvl = dvel_b_mps[sl] - nabla * dt_s
-            C0 = state.C_n_b
-            f_n = C0 @ (dvl.sum(axis=0) / settings.step_s)
-            F, G = error_model.model15(C0, f_n, state.vel_enu_mps, state.lat_rad, state.alt_m)
-            # Second-order series: the modes of F (Schuler, Earth rate, vertical) are
-            # below 2e-3 rad/s, so at 1 s the terms left out are ~1e-6 of those kept
-            # (and Van Loan's matrix exponential costs 8x more per step).
-            Phi, Qd = error_model.discretize(F, G, Qc, settings.step_s, method="series")
-            P[:_N_INS, :] = Phi @ P[:_N_INS, :]
-            P[:, :_N_INS] = P[:, :_N_INS] @ Phi.T
-            P[:_N_INS, :_N_INS] += Qd
+            P = ins.predict(k, P)
             P[_T, _T] += priors.rx_offset_psd_hz2_per_s * settings.step_s
-            P = 0.5 * (P + P.T)
-            state = strapdown.integrate(state, dth, dvl, dt_s, out_every=per_step // 2).state(-1)
         rows = np.arange(bounds[k], bounds[k + 1])
         rows = rows[np.isfinite(measurements.doppler_hz[rows]) & (measurements.sigma_hz[rows] > 0)]
-        x_hat, P = sats.drop_stale(x_hat, P, t_s)
-        for j in measurements.sat_index[rows]:
-            if j not in sats.ids:
-                x_hat, P = sats.add(x_hat, P, int(j), t_s, priors)
-            sats.last_seen[sats.ids.index(j)] = t_s
+        x_hat, P = sats.see(x_hat, P, measurements.sat_index[rows], t_s)
         due = t_s - last_update_s >= settings.correction_period_s - 1e-9
         if k > 0 and due and rows.size:
-            cols = [sats.column(j) for j in measurements.sat_index[rows]]
-            y, H = _rows(state, x_hat, cols, measurements, rows, priors.carrier_hz)
+            columns = [sats.columns(j) for j in measurements.sat_index[rows]]
+            y, H = _rows(ins.state, x_hat, columns, measurements, rows, priors.carrier_hz)
             R = np.diag(measurements.sigma_hz[rows] ** 2)
             S_diag = np.einsum("ij,jk,ik->i", H, P, H) + np.diag(R)
             ok = y**2 / S_diag <= gate
-            rejected[k] = not ok.all()
+            track.rejected[k] = not ok.all()
             if ok.any():
                 x, P, y_used, S = kalman.update(np.zeros(P.shape[0]), P, y[ok], H[ok], R[np.ix_(ok, ok)])
-                state = state.corrected(x[PHI], x[DV], x[DPOS])
-                eps = eps + x[EPS]
-                nabla = nabla + x[NABLA]
-                x_hat[_N_INS:] += x[_N_INS:]
-                updated[k] = True
+                ins.feedback(x)
+                x_hat[N_INS:] += x[N_INS:]
+                track.updated[k] = True
                 last_update_s = t_s
-                out["nis"][k] = kalman.nis(y_used, S)
-                dof[k] = int(ok.sum())
+                track.nis[k] = kalman.nis(y_used, S)
+                track.nis_dof[k] = int(ok.sum())
                 for j, v in zip(measurements.sat_index[rows][ok], y_used / np.sqrt(np.diag(S))):
                     records.append((k, j, v))
-        out["lat"][k], out["lon"][k], out["alt"][k] = state.lat_rad, state.lon_rad, state.alt_m
-        out["vel"][k], out["C"][k], out["P"][k] = state.vel_enu_mps, state.C_n_b, P[:_N_INS, :_N_INS]
-        out["eps"][k], out["nabla"][k] = eps, nabla
+        track.record(k, ins, P)
     innovations = np.array(records, dtype=[("epoch", int), ("sat", int), ("normalized", float)])
-    return FusionResult(np.arange(n) * settings.step_s, out["lat"], out["lon"], out["alt"], out["vel"], out["C"],
-                        out["P"], updated, rejected, out["nis"], dof, out["eps"], out["nabla"],
-                        doppler_innovation=innovations)
+    return track.result(settings.step_s, doppler_innovation=innovations)

@@ -1,0 +1,310 @@
+"""What the loose and tight INS/LEO filters share.
+
+Both are error-state EKFs with feedback correction around the strapdown INS:
+the same tuning (:class:`FilterSettings`), output (:class:`FusionResult`),
+initial covariance of the 15 INS errors of :mod:`leosop.ins.error_model`,
+prediction step and feedback (:class:`FeedbackIns`), and the same constant
+error states of the satellites in use (:class:`SatelliteStates`): each
+satellite's clock-induced Doppler offset and its orbit error, either three
+ECEF states per satellite (``"independent"``) or three shared by all
+(``"common"``: every satellite position shifted by the same vector).
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .. import earth, frames
+from ..ins import error_model, strapdown
+from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+
+__all__ = ["FilterSettings", "FusionResult", "FeedbackIns", "SatelliteStates", "Track", "pos_jacobian",
+           "initial_covariance", "ORBIT_MODELS", "DROP_AFTER_S", "N_INS"]
+
+#: How the satellites' orbit errors are related: each its own, or one shift of all.
+ORBIT_MODELS = ("independent", "common")
+#: A satellite's error states are dropped this long after it was last used.
+DROP_AFTER_S = 30.0
+#: Number of INS error states; they come first in every filter state.
+N_INS = 15
+
+
+@dataclasses.dataclass(frozen=True)
+class FilterSettings:
+    """Filter tuning, in the units the names carry.
+
+    ``pos_sigma_m``, ``vel_sigma_mps``: initial uncertainty per ENU axis;
+    ``att_sigma_rad``: initial attitude uncertainty (E, N, U); ``gyro_bias_*``
+    and ``accel_bias_*``: initial bias uncertainty and white-noise densities.
+    """
+
+    pos_sigma_m: tuple
+    vel_sigma_mps: tuple
+    att_sigma_rad: tuple
+    gyro_bias_sigma_rad_per_s: float
+    accel_bias_sigma_mps2: float
+    gyro_arw_rad_per_rt_s: float
+    accel_vrw_mps2_per_rt_hz: float
+    correction_period_s: float = 1.0
+    step_s: float = 1.0
+    gate: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class FusionResult:
+    """Filter output at every step epoch (n epochs, the first is the initial state).
+
+    Attributes
+    ----------
+    t_s : ndarray, (n,)
+    lat_rad, lon_rad, alt_m : ndarray, (n,)
+    vel_enu_mps : ndarray, (n, 3)
+    C_n_b : ndarray, (n, 3, 3)
+    P : ndarray, (n, 15, 15)
+        Covariance of the remaining INS errors (after feedback).
+    updated : ndarray of bool, (n,)
+        An update was made at this epoch.
+    rejected : ndarray of bool, (n,)
+        A fix (loose) or a Doppler (tight) was offered but failed the innovation gate.
+    nis : ndarray, (n,)
+        Normalised innovation squared of each update, NaN elsewhere.
+    nis_dof : ndarray of int, (n,)
+        Its degrees of freedom (measurements in the update; 0 without one).
+    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
+        Accumulated bias estimates.
+    innovation, innovation_cov : ndarray, (n, 6), (n, 6, 6), or None
+        Loose coupling: ``z - H x`` (velocity [m/s], position [m] ENU) and
+        ``S`` at updates, NaN elsewhere; None for tight coupling.
+    doppler_innovation : structured ndarray or None
+        Tight coupling: one row per Doppler used, fields ``epoch``, ``sat``
+        and ``normalized`` (innovation over the square root of its variance
+        in ``S``); None for loose coupling.
+    """
+
+    t_s: np.ndarray
+    lat_rad: np.ndarray
+    lon_rad: np.ndarray
+    alt_m: np.ndarray
+    vel_enu_mps: np.ndarray
+    C_n_b: np.ndarray
+    P: np.ndarray
+    updated: np.ndarray
+    rejected: np.ndarray
+    nis: np.ndarray
+    nis_dof: np.ndarray
+    gyro_bias_rad_per_s: np.ndarray
+    accel_bias_mps2: np.ndarray
+    innovation: np.ndarray | None = None
+    innovation_cov: np.ndarray | None = None
+    doppler_innovation: np.ndarray | None = None
+
+    @property
+    def pos_ecef_m(self):
+        """ECEF position, (n, 3)."""
+        return frames.geodetic_to_ecef(self.lat_rad, self.lon_rad, self.alt_m)
+
+    def pos_vel_cov_enu(self):
+        """Covariance of ``[dv_enu, dpos_enu]`` in m/s and m, (n, 6, 6)."""
+        D = np.zeros((self.t_s.size, 6, 15))
+        D[:, 0:3, DV] = np.eye(3)
+        D[:, 3:6, DPOS] = pos_jacobian(self.lat_rad, self.alt_m)
+        return D @ self.P @ np.swapaxes(D, 1, 2)
+
+
+def pos_jacobian(lat_rad, alt_m):
+    """d(ENU metres)/d[dlat, dlon, dalt], shape (..., 3, 3)."""
+    lat = np.asarray(lat_rad, dtype=float)
+    R_M, R_N = earth.radii_m(lat)
+    J = np.zeros(lat.shape + (3, 3))
+    J[..., 0, 1] = (R_N + alt_m) * np.cos(lat)
+    J[..., 1, 0] = R_M + alt_m
+    J[..., 2, 2] = 1.0
+    return J
+
+
+def initial_covariance(settings, lat_rad, alt_m):
+    """Initial 15 x 15 covariance of the INS errors (position in rad, rad, m)."""
+    J_inv = np.linalg.inv(pos_jacobian(lat_rad, alt_m))
+    P = np.zeros((N_INS, N_INS))
+    P[PHI, PHI] = np.diag(np.square(settings.att_sigma_rad))
+    P[DV, DV] = np.diag(np.square(settings.vel_sigma_mps))
+    P[DPOS, DPOS] = J_inv @ np.diag(np.square(settings.pos_sigma_m)) @ J_inv.T
+    P[EPS, EPS] = np.eye(3) * settings.gyro_bias_sigma_rad_per_s**2
+    P[NABLA, NABLA] = np.eye(3) * settings.accel_bias_sigma_mps2**2
+    return P
+
+
+class FeedbackIns:
+    """The strapdown INS a filter corrects: prediction of its errors and feedback.
+
+    The INS runs at the IMU rate on increments less the accumulated bias
+    estimates; the filter's epochs are ``k * settings.step_s``.
+
+    Parameters
+    ----------
+    state0 : leosop.ins.strapdown.NavState
+    dtheta_b_rad, dvel_b_mps : ndarray, (n_imu, 3)
+        Measured IMU increments at interval ``dt_s``.
+    dt_s : float
+    settings : FilterSettings
+
+    Attributes
+    ----------
+    state : leosop.ins.strapdown.NavState
+        The corrected INS state at the current epoch.
+    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (3,)
+        Accumulated bias estimates.
+    n_epochs : int
+        Epochs the IMU data cover (the first is the start).
+    """
+
+    def __init__(self, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings):
+        self.per_step = int(round(settings.step_s / dt_s))
+        if self.per_step < 2 or self.per_step % 2 or abs(self.per_step * dt_s - settings.step_s) > 1e-9:
+            raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
+        self.dtheta_b_rad, self.dvel_b_mps, self.dt_s, self.step_s = dtheta_b_rad, dvel_b_mps, dt_s, settings.step_s
+        self.n_epochs = dtheta_b_rad.shape[0] // self.per_step + 1
+        self.Qc = np.concatenate([np.full(3, settings.gyro_arw_rad_per_rt_s**2),
+                                  np.full(3, settings.accel_vrw_mps2_per_rt_hz**2)])
+        self.state = state0
+        self.gyro_bias_rad_per_s = np.zeros(3)
+        self.accel_bias_mps2 = np.zeros(3)
+
+    def predict(self, k, P):
+        """Move the INS from epoch k - 1 to k and propagate ``P`` (in place; returned).
+
+        Only the INS block moves: every state after the first :data:`N_INS` is constant.
+        """
+        sl = slice((k - 1) * self.per_step, k * self.per_step)
+        dth = self.dtheta_b_rad[sl] - self.gyro_bias_rad_per_s * self.dt_s
+        dvl = self.dvel_b_mps[sl] - self.accel_bias_mps2 * self.dt_s
+        state = self.state
+        f_n = state.C_n_b @ (dvl.sum(axis=0) / self.step_s)
+        F, G = error_model.model15(state.C_n_b, f_n, state.vel_enu_mps, state.lat_rad, state.alt_m)
+        # Second-order series: the modes of F (Schuler, Earth rate, vertical) are
+        # below 2e-3 rad/s, so at 1 s the terms left out are ~1e-6 of those kept
+        # (and Van Loan's matrix exponential costs 8x more per step).
+        Phi, Qd = error_model.discretize(F, G, self.Qc, self.step_s, method="series")
+        P[:N_INS, :] = Phi @ P[:N_INS, :]
+        P[:, :N_INS] = P[:, :N_INS] @ Phi.T
+        P[:N_INS, :N_INS] += Qd
+        P = 0.5 * (P + P.T)
+        self.state = strapdown.integrate(state, dth, dvl, self.dt_s, out_every=self.per_step // 2).state(-1)
+        return P
+
+    def feedback(self, dx):
+        """Correct the INS by the estimated errors ``dx[:N_INS]`` and accumulate the bias estimates."""
+        self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
+        self.gyro_bias_rad_per_s = self.gyro_bias_rad_per_s + dx[EPS]
+        self.accel_bias_mps2 = self.accel_bias_mps2 + dx[NABLA]
+
+
+class SatelliteStates:
+    """Bookkeeping of the satellites' constant error states, after the first ``n_before`` states.
+
+    Layout: under ``"common"`` three shared orbit-error states (ECEF, m)
+    come first, then one offset state [Hz] per satellite; under
+    ``"independent"`` each satellite has four, its offset and its own orbit
+    error. A satellite's states get their prior when it is first seen and
+    are marginalised :data:`DROP_AFTER_S` after it was last seen.
+
+    Parameters
+    ----------
+    n_before : int
+        States ahead of the satellite block (INS errors and any receiver state).
+    orbit_model : {"independent", "common"}
+    offset_mean_hz, offset_sigma_hz, orbit_sigma_m : float
+        Prior of each offset and of the orbit error per axis.
+    """
+
+    def __init__(self, n_before, orbit_model, offset_mean_hz, offset_sigma_hz, orbit_sigma_m):
+        if orbit_model not in ORBIT_MODELS:
+            raise ValueError(f"orbit_model {orbit_model!r}: expected one of {', '.join(ORBIT_MODELS)}")
+        self.common = orbit_model == "common"
+        self.n_before = n_before
+        self.per_sat = 1 if self.common else 4
+        self.first = n_before + (3 if self.common else 0)
+        self.offset_mean_hz = offset_mean_hz
+        self.offset_var = offset_sigma_hz**2
+        self.orbit_var = max(orbit_sigma_m, 1e-3) ** 2
+        self.ids = []
+        self.last_seen = []
+
+    def initial(self, x_hat, P):
+        """Append the shared orbit states (common model; zero mean); returns ``(x_hat, P)``."""
+        if not self.common:
+            return x_hat, P
+        return _grow(x_hat, P, np.zeros(3), np.full(3, self.orbit_var))
+
+    def columns(self, j):
+        """Offset column and orbit columns (a slice) of satellite j."""
+        c = self.first + self.per_sat * self.ids.index(j)
+        return c, (slice(self.n_before, self.n_before + 3) if self.common else slice(c + 1, c + 4))
+
+    def see(self, x_hat, P, sat_ids, t_s):
+        """Drop the stale satellites, add the new ones of ``sat_ids``, mark all of them seen at ``t_s``."""
+        x_hat, P = self._drop_stale(x_hat, P, t_s)
+        for j in sat_ids:
+            if j not in self.ids:
+                x_hat, P = self._add(x_hat, P, int(j), t_s)
+            self.last_seen[self.ids.index(j)] = t_s
+        return x_hat, P
+
+    def _add(self, x_hat, P, j, t_s):
+        self.ids.append(j)
+        self.last_seen.append(t_s)
+        mean = np.zeros(self.per_sat)
+        mean[0] = self.offset_mean_hz
+        var = np.full(self.per_sat, self.orbit_var)
+        var[0] = self.offset_var
+        return _grow(x_hat, P, mean, var)
+
+    def _drop_stale(self, x_hat, P, t_s):
+        keep_sat = [t_s - seen <= DROP_AFTER_S for seen in self.last_seen]
+        if all(keep_sat):
+            return x_hat, P
+        keep = np.ones(P.shape[0], dtype=bool)
+        for i, k in enumerate(keep_sat):
+            keep[self.first + self.per_sat * i: self.first + self.per_sat * (i + 1)] = k
+        self.ids = [j for j, k in zip(self.ids, keep_sat) if k]
+        self.last_seen = [s for s, k in zip(self.last_seen, keep_sat) if k]
+        return x_hat[keep], P[np.ix_(keep, keep)]
+
+
+def _grow(x_hat, P, mean, var):
+    """Append uncorrelated states of the given mean and variance."""
+    n, m = P.shape[0], len(mean)
+    P_new = np.zeros((n + m, n + m))
+    P_new[:n, :n] = P
+    P_new[n:, n:] = np.diag(var)
+    return np.concatenate([x_hat, mean]), P_new
+
+
+class Track:
+    """The filter's output epoch by epoch, made into a :class:`FusionResult` at the end.
+
+    ``updated``, ``rejected``, ``nis`` and ``nis_dof`` are (n,) arrays the filter sets at its updates.
+    """
+
+    def __init__(self, n):
+        self._out = {k: np.full(shape, np.nan) for k, shape in (
+            ("lat", (n,)), ("lon", (n,)), ("alt", (n,)), ("vel", (n, 3)), ("C", (n, 3, 3)),
+            ("P", (n, N_INS, N_INS)), ("eps", (n, 3)), ("nabla", (n, 3)))}
+        self.updated = np.zeros(n, dtype=bool)
+        self.rejected = np.zeros(n, dtype=bool)
+        self.nis = np.full(n, np.nan)
+        self.nis_dof = np.zeros(n, dtype=int)
+
+    def record(self, k, ins, P):
+        """Keep epoch k's INS state, bias estimates and INS-error covariance."""
+        o, s = self._out, ins.state
+        o["lat"][k], o["lon"][k], o["alt"][k] = s.lat_rad, s.lon_rad, s.alt_m
+        o["vel"][k], o["C"][k], o["P"][k] = s.vel_enu_mps, s.C_n_b, P[:N_INS, :N_INS]
+        o["eps"][k], o["nabla"][k] = ins.gyro_bias_rad_per_s, ins.accel_bias_mps2
+
+    def result(self, step_s, **innovations):
+        """The :class:`FusionResult`; ``innovations`` fills its coupling's innovation fields."""
+        o = self._out
+        return FusionResult(np.arange(self.updated.size) * step_s, o["lat"], o["lon"], o["alt"], o["vel"], o["C"],
+                            o["P"], self.updated, self.rejected, self.nis, self.nis_dof, o["eps"], o["nabla"],
+                            **innovations)
