@@ -17,7 +17,8 @@ table reproductions call it. For a scenario it
 5. runs the INS alone and the EKF: loose (:mod:`leosop.fusion.loose`, the
    fixes, with each fix's least-squares gain so that the filter can model
    the satellites' constant errors behind them) or tight
-   (:mod:`leosop.fusion.tight`, the Doppler measurements).
+   (:mod:`leosop.fusion.tight`, the Doppler measurements); both model the
+   orbit errors as the scenario draws them (independent or common).
 
 Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent
 streams for the IMU, the satellite offsets and orbit errors, and the
@@ -390,7 +391,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     else:
         offset_max = scenario.leo.sat_doppler_offset_max_hz
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max / 2, sat_offset_sigma_hz=offset_max / np.sqrt(12),
-                                     orbit_sigma_m=orbit_error_m, carrier_hz=carrier_hz)
+                                     orbit_sigma_m=orbit_error_m, carrier_hz=carrier_hz,
+                                     orbit_model=orbit_error_model)
         meas = tight.DopplerMeasurements(ep, sat, doppler_meas, np.broadcast_to(sigma_est, doppler_meas.shape),
                                          pos_sv_known, vis.vel_sv_ecef_mps)
         fused = tight.run(state0, dtheta, dvel, truth.dt_s, meas, priors, settings, n_ep, progress=progress)

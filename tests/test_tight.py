@@ -83,6 +83,35 @@ def test_filter_is_consistent_on_short_flights():
     assert abs(np.corrcoef(a, b)[0, 1]) < 4.0 / np.sqrt(a.size)
 
 
+def test_filter_is_consistent_under_the_common_orbit_shift():
+    # Table 6's [E, E, E] read as one shift of every satellite (E = 60 m, the
+    # largest case): the filter then carries three shared orbit-error states.
+    # The shift is nearly unobservable (it acts as a receiver displacement), so
+    # the position error stays near its prior (89 m over these runs) and
+    # consistency is the claim: NEES within [0.5, 2] x 6 (issue 6; 0.96 x 6
+    # measured; the same seeds with independent per-satellite orbit states
+    # give 3.8 x 6, as the shift then looks re-drawn with every new satellite),
+    # NIS sum and whiteness as in the independent case (0.988 per dof and
+    # lag-1 0.009 measured, against a 99.9 % interval of 0.943-1.059 and a
+    # 4 / sqrt(m) = 0.050 bound).
+    leo = dataclasses.replace(XIAN_BAOJI.leo, orbit_error_m=60.0, orbit_error_model="common")
+    scenario = dataclasses.replace(XIAN_BAOJI, duration_s=90.0, leo=leo)
+    nees, nis, dof, lag = [], [], [], []
+    for seed in range(8):
+        r = run_scenario(scenario, level="measurement", seed=seed, coupling="tight")
+        nees.append(r.nees()[1:])
+        a, b = r.nis()
+        nis.append(a)
+        dof.append(b)
+        lag.append(_lag1_pairs(r))
+    assert 0.5 * 6 <= np.concatenate(nees).mean() <= 2.0 * 6
+    total = np.concatenate(dof).sum()
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], total)
+    assert lo <= np.concatenate(nis).sum() <= hi
+    a, b = np.concatenate(lag, axis=1)
+    assert abs(np.corrcoef(a, b)[0, 1]) < 4.0 / np.sqrt(a.size)
+
+
 def test_tight_is_no_worse_than_loose_on_the_same_measurements():
     # Same seeds, same Doppler. Both filters model the satellites' offsets and
     # orbit errors; tight uses every Doppler, loose the fix (7 of the m values
