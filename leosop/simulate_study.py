@@ -13,7 +13,8 @@ satellite its own error of E m per axis, our default) and ``common`` (every
 satellite shifted by the same [E, E, E], which moves every fix by that
 vector: the paper's position errors, 50.24 and 93.33 m, are close to
 sqrt(3) E = 52 and 104 m and its velocity errors barely change). Both are
-shown; ``common`` is the paper-faithful one.
+shown; ``common`` is the paper-faithful one. Both filters model the orbit
+errors the way the run draws them (per satellite, or three shared states).
 """
 
 import numpy as np

@@ -4,14 +4,14 @@ Runs the default xian-baoji flight at measurement level for N seeds with
 both couplings (Dask-parallel through leosop.studies) and prints, per
 coupling: mean fused errors, mean NEES of position and velocity per
 dimension (goal: within [0.5, 2]), NIS per degree of freedom with its 99 %
-interval, and (loose only: 6-vector innovations) the lag-1 correlation of
-the whitened innovations (loose: the 6-vectors; tight: each satellite's
-normalised Doppler innovation at consecutive epochs) with its null 3-sigma
-bound.
+interval, and the lag-1 correlation of the whitened innovations (loose: the
+6-vectors; tight: each satellite's normalised Doppler innovation at
+consecutive epochs) with its null 3-sigma bound.
 
 The loose filter models the satellites' constant Doppler offsets and orbit
 errors behind each fix (leosop.fusion.loose), the tight one behind each
-Doppler; ``--orbit-error-m``/``--orbit-error-model`` run Table 6's cases.
+Doppler, both under the run's orbit-error model (per satellite, or one shift
+of all); ``--orbit-error-m``/``--orbit-error-model`` run Table 6's cases.
 
 Usage: python tools/fusion_consistency.py [--seeds 20] [--duration-s 782] [--orbit-error-m 30]
        [--orbit-error-model common] [--scheduler serial]
