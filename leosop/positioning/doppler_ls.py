@@ -10,9 +10,11 @@ Snapshot
     solves many epochs at once, each independently.
 Static
     a receiver at rest in ECEF observed over many epochs, state
-    ``[x, y, z, b0, b1]``: frequency offset ``b0`` [Hz] at the reference time
-    and its drift ``b1`` [Hz/s]; optionally a known ellipsoidal height as a
-    pseudo-measurement (the classic Argos-style fix).
+    ``[x, y, z, b0, b1, ...]``: frequency offset ``b0`` [Hz] at the reference
+    time, its drift ``b1`` [Hz/s] and optionally higher polynomial terms;
+    optionally a known ellipsoidal height as a pseudo-measurement (the
+    classic Argos-style fix). A single pass has two solutions, mirror images
+    across the ground track; both are returned.
 
 Both run one Levenberg-Marquardt iteration (Gauss-Newton eq. 11-12 with
 Marquardt damping on the Jacobi-scaled normal equations, so that a start
@@ -39,11 +41,14 @@ from .dop import N_DOPPLER_STATES, cofactor, doppler_jacobian
 __all__ = ["FixStatus", "SnapshotFixes", "StaticFix", "solve_snapshots", "solve_static",
            "subpoint_centroid_ecef_m", "N_STATIC_STATES"]
 
-#: States of a static batch fix: position, frequency offset, frequency drift.
+#: States of a static batch fix with a linear clock: position, frequency offset, frequency drift.
 N_STATIC_STATES = 5
-#: Step thresholds of convergence, per state: 0.1 mm, 1 um/s, 10 uHz (uHz/s).
+#: Step thresholds of convergence, per state: 0.1 mm, 1 um/s, 10 uHz (0.1 uHz/s; static
+#: higher clock terms 0.1 uHz/s divided by powers of the half span).
 _XTOL_SNAPSHOT = np.array([1e-4] * 3 + [1e-6] * 3 + [1e-5])
 _XTOL_STATIC = np.array([1e-4] * 3 + [1e-5, 1e-7])
+#: Cross-track offsets of the default static starts, in units of ``start_offset_m``.
+_START_FRACTIONS = np.array([0.0, 1 / 6, -1 / 6, 1 / 3, -1 / 3, 0.6, -0.6, 1.0, -1.0])
 #: Earth radius used to place a start on the ground [m].
 _R_GROUND_M = 6_371_000.0
 
@@ -119,10 +124,11 @@ class StaticFix:
     clock_offset_hz, clock_drift_hz_per_s : float
         Frequency offset at ``t_ref_s`` and its rate.
     t_ref_s : float
-    cov : ndarray, (5, 5)
-        Posterior covariance of ``[pos, b0, b1]``.
+    cov : ndarray, (4 + d, 4 + d)
+        Posterior covariance of ``[pos, clock polynomial]`` (d the clock
+        degree; 5 x 5 for offset and drift).
     gdop : float
-        ``sqrt(trace((H^T H)^-1))`` of the 5 states over the used Doppler rows
+        ``sqrt(trace((H^T H)^-1))`` of the states over the used Doppler rows
         (the height constraint enters with its weight relative to the median
         Doppler weight).
     residuals_hz : ndarray, (m,)
@@ -134,6 +140,16 @@ class StaticFix:
         Another start reached a different solution (beyond ``ambiguity_m``)
         that fits the data as well: typically the mirror image across the
         ground track of a single pass.
+    clock_poly_hz : ndarray, (d + 1,)
+        Frequency offset polynomial in ``t - t_ref`` [Hz/s^k], lowest first
+        (``clock_offset_hz``, ``clock_drift_hz_per_s``, ...).
+    mirror_pos_ecef_m : ndarray, (3,)
+        The best solution further than ``ambiguity_m`` from ``pos_ecef_m``
+        (with a single pass: the other side of the ground track), refined like
+        the fix; NaN when no start reached one.
+    mirror_chi2 : float
+        Its weighted residual sum over the rows the fix used: compare with
+        ``chi2``.
     """
 
     pos_ecef_m: np.ndarray
@@ -149,6 +165,9 @@ class StaticFix:
     chi2: float
     status: FixStatus
     ambiguous: bool = False
+    clock_poly_hz: np.ndarray = None
+    mirror_pos_ecef_m: np.ndarray = None
+    mirror_chi2: float = np.nan
 
     @property
     def residual_rms_hz(self):
@@ -367,11 +386,11 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     )
 
 
-def _starts(pos_sv_ecef_m, vel_sv_ecef_mps, pos0_ecef_m, offset_m):
-    """Starts of a static solve and their mirror images across the mean ground track.
+def _starts(pos_sv_ecef_m, vel_sv_ecef_mps, pos0_ecef_m, offsets_m):
+    """Starts of a static solve across the mean ground track.
 
-    Without ``pos0_ecef_m``: the sub-point centroid and ``offset_m`` either side
-    of it; with it: ``pos0_ecef_m`` and its reflection.
+    Without ``pos0_ecef_m``: ground points at ``offsets_m`` across the track
+    from the sub-point centroid; with it: ``pos0_ecef_m`` and its reflection.
     """
     centre = subpoint_centroid_ecef_m(pos_sv_ecef_m)
     lat, lon, _ = ecef_to_geodetic(centre)
@@ -382,17 +401,24 @@ def _starts(pos_sv_ecef_m, vel_sv_ecef_mps, pos0_ecef_m, offset_m):
     if pos0_ecef_m is not None:
         p0 = np.asarray(pos0_ecef_m, dtype=float).reshape(3)
         return np.array([p0, p0 - 2.0 * ((p0 - centre) @ across) * across])
-    starts = []
-    for side in (0.0, 1.0, -1.0):
-        la, lo, _ = ecef_to_geodetic(centre + side * offset_m * across)
-        starts.append(geodetic_to_ecef(la, lo, 0.0))
-    return np.array(starts)
+    la, lo, _ = ecef_to_geodetic(centre + np.multiply.outer(offsets_m, across))
+    return geodetic_to_ecef(la, lo, 0.0)
 
 
 def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, *, pos0_ecef_m=None,
-                 alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=50, alpha=1e-3, start_offset_m=1.0e6,
-                 ambiguity_m=10e3):
+                 alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3, start_offset_m=1.5e6,
+                 ambiguity_m=10e3, clock_degree=1, side_clock_degree=None):
     """Batch Doppler fix of a receiver at rest in ECEF.
+
+    The frequency offset is a polynomial of degree ``clock_degree`` in
+    ``t - t_ref``. The solve runs in two stages: every start is solved with a
+    polynomial of degree ``side_clock_degree`` and the solutions compete on
+    chi-square; the winner (and the best solution beyond ``ambiguity_m`` from
+    it, the mirror) is then refined with ``clock_degree``. Choosing
+    the side with a low degree keeps the small asymmetry between a pass's two
+    mirror solutions (the Earth turns under the pass) from being absorbed by
+    the higher clock terms; the refinement then absorbs a transmitter drift
+    that is not linear (DopTrack: thermal, ~0.1-1 mHz/s^2).
 
     Parameters
     ----------
@@ -406,8 +432,9 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         solutions that fit equally well (chi-square within 3 standard
         deviations of the best) the one nearest ``pos0_ecef_m`` is kept.
         Default: the ground point below the satellites' mean direction and
-        ``start_offset_m`` either side of it across the track; the lowest
-        chi-square wins.
+        points 1/6, 1/3, 0.6 and 1 times ``start_offset_m`` either side of it
+        across the track (a pass's cost has local minima between its mirror
+        solutions); the lowest chi-square wins.
     alt_m : float, optional
         Known height above the ellipsoid, added as a pseudo-measurement with
         standard deviation ``alt_sigma_m``.
@@ -418,11 +445,25 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     start_offset_m : float
     ambiguity_m : float
         Equally good solutions further apart than this flag the fix ``ambiguous``.
+    clock_degree : int or sequence of int
+        Degree of the frequency-offset polynomial (1: offset and drift), or
+        candidate degrees: each refines the chosen solution and its mirror,
+        and the lowest Bayesian information criterion
+        ``chi2 + n_states * ln(n_used)`` wins (degrees that leave the
+        states undetermined, e.g. a cubic over three epochs, drop out).
+    side_clock_degree : int, optional
+        Degree used to choose among the starts; default the lowest of
+        ``clock_degree``.
 
     Returns
     -------
     StaticFix
     """
+    degrees = sorted({int(d) for d in np.atleast_1d(clock_degree)})
+    deg_side = degrees[0] if side_clock_degree is None else int(side_clock_degree)
+    if degrees[0] < 0 or deg_side < 0:
+        raise ValueError("clock degrees must be non-negative")
+    deg = deg_side
     y = np.asarray(doppler_hz, dtype=float).ravel()
     n_rows = y.size
     r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n_rows, 3)
@@ -438,6 +479,7 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     v_s = np.where(m[:, None], v_s, 0.0)
     t_ref = 0.5 * (t[m].min() + t[m].max()) if m.any() else 0.0
     dt = t - t_ref
+    half_span_s = max(0.5 * np.ptp(t[m]) if m.any() else 0.0, 1.0)
     has_alt = alt_m is not None
     if has_alt:
         y = np.append(y, alt_m)
@@ -446,54 +488,93 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     fixed = np.zeros(y.size, bool)
     fixed[n_rows:] = True
 
-    def model(x, idx):
-        H = doppler_jacobian(r_s, v_s, x[:, :3], np.zeros((len(x), 3)), f0)
-        pred = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s) + x[:, 3:4] + x[:, 4:5] * dt
-        J = np.concatenate([H[..., :3], np.ones_like(pred)[..., None], np.broadcast_to(dt, pred.shape)[..., None]],
-                           axis=-1)
-        if has_alt:
-            lat, lon, h = ecef_to_geodetic(x[:, :3])
-            up = C_e_n(lat, lon)[..., 2]
-            pred = np.concatenate([pred, h[:, None]], axis=-1)
-            J = np.concatenate([J, np.concatenate([up, np.zeros((len(x), 2))], -1)[:, None, :]], axis=1)
-        return pred, J
+    def make_model(degree):
+        powers = dt[:, None] ** np.arange(degree + 1)
+
+        def model(x, idx):
+            H = doppler_jacobian(r_s, v_s, x[:, :3], np.zeros((len(x), 3)), f0)
+            pred = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s) + x[:, 3:] @ powers.T
+            J = np.concatenate([H[..., :3], np.broadcast_to(powers, pred.shape + (degree + 1,))], axis=-1)
+            if has_alt:
+                lat, lon, h = ecef_to_geodetic(x[:, :3])
+                up = C_e_n(lat, lon)[..., 2]
+                pred = np.concatenate([pred, h[:, None]], axis=-1)
+                J = np.concatenate([J, np.concatenate([up, np.zeros((len(x), degree + 1))], -1)[:, None, :]], axis=1)
+            return pred, J
+
+        xtol = np.concatenate([_XTOL_STATIC[:4], _XTOL_STATIC[4] / half_span_s ** np.arange(degree)])[:degree + 4]
+        return model, xtol, 4 + degree
+
+    def solve(degree, x0, alpha_):
+        model, xtol, n_states = make_model(degree)
+        k = len(x0)
+        ys, ss, ms = (np.broadcast_to(a, (k, y.size)) for a in (y, sigma, m))
+        return _solve_robust(model, x0, ys, ss, ms, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha_,
+                             fixed=fixed)
 
     if m[:n_rows].any():
-        starts = _starts(r_s[m[:n_rows]], v_s[m[:n_rows]], pos0_ecef_m, start_offset_m)
+        starts = _starts(r_s[m[:n_rows]], v_s[m[:n_rows]], pos0_ecef_m, start_offset_m * _START_FRACTIONS)
     else:
         starts = np.zeros((1, 3)) if pos0_ecef_m is None else np.reshape(pos0_ecef_m, (1, 3))
-    x0 = np.zeros((len(starts), N_STATIC_STATES))
+    x0 = np.zeros((len(starts), 4 + deg_side))
     x0[:, :3] = starts
-    ys, ss, ms = (np.broadcast_to(a, (len(starts), y.size)) for a in (y, sigma, m))
     # Choose among the starts' solutions on the same rows (before any exclusion), then clean outliers.
-    x, res, J, Q, used, iterations, chi2, status = _solve_robust(
-        model, x0, ys, ss, ms, N_STATIC_STATES, xtol=_XTOL_STATIC, max_iter=max_iter, alpha=None, fixed=fixed)
+    x, res, J, Q, used, iterations, chi2, status = solve(deg_side, x0, None)
     solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
     cost = np.where(solved, chi2, np.inf)
     best = int(np.argmin(cost))
     # Solutions whose chi-square is within 3 standard deviations of the best one fit the data
     # equally well (a single pass's mirror image): the start given decides between them.
-    dof = max(int(used[best].sum()) - N_STATIC_STATES, 1)
+    dof = max(int(used[best].sum()) - 4 - deg_side, 1)
     fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
     if pos0_ecef_m is not None and fits.sum() > 1:
         best = int(np.argmin(np.where(fits, np.linalg.norm(x[:, :3] - starts[0], axis=-1), np.inf)))
-    spread = np.linalg.norm(x[fits, :3] - x[best, :3], axis=-1)
-    ambiguous = bool((spread > ambiguity_m).any())
+    apart = solved & (np.linalg.norm(x[:, :3] - x[best, :3], axis=-1) > ambiguity_m)
+    ambiguous = bool((fits & apart).any())
+    other = int(np.argmin(np.where(apart, cost, np.inf))) if apart.any() else None
+    pair = [best] + ([other] if other is not None else [])
+    if degrees != [deg_side]:
+        # Refine the pair with each candidate degree; the Bayesian information criterion picks one.
+        refined = []
+        for degree in degrees:
+            x1 = np.zeros((len(pair), 4 + degree))
+            x1[:, :3] = x[pair, :3]
+            x1[:, 3:4 + min(degree, deg_side)] = x[pair, 3:4 + min(degree, deg_side)]
+            out = solve(degree, x1, None)
+            if out[-1][0] in (FixStatus.OK, FixStatus.INCONSISTENT):
+                refined.append((out[6][0] + (4 + degree) * np.log(max(out[4][0].sum(), 1)), degree, out))
+        if refined:
+            _, deg, (x, res, J, Q, used, it, chi2, status) = min(refined, key=lambda r: r[0])
+            iterations = iterations[pair] + it
+            pair = list(range(len(pair)))
+            best = 0
+            solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
+        else:
+            deg = deg_side
+    x_mirror = x[pair[1]:pair[1] + 1].copy() if other is not None and solved[pair[1]] else None
     if alpha is not None and solved[best]:
-        x, res, J, Q, used, it, chi2, status = _solve_robust(
-            model, x[best:best + 1], y[None], sigma[None], m[None], N_STATIC_STATES, xtol=_XTOL_STATIC,
-            max_iter=max_iter, alpha=alpha, fixed=fixed)
+        x, res, J, Q, used, it, chi2, status = solve(deg, x[best:best + 1], alpha)
         iterations = iterations[best:best + 1] + it
         best = 0
         solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
+    mirror_pos, mirror_chi2 = np.full(3, np.nan), np.nan
+    if x_mirror is not None and solved[best]:
+        # The mirror on the rows the fix kept, so that the two chi-squares compare.
+        model, xtol, n_states = make_model(deg)
+        xm, _, _, _, _, _, chi2_m, status_m = _solve_robust(
+            model, x_mirror, y[None], sigma[None], used[best:best + 1], n_states, xtol=xtol, max_iter=max_iter,
+            alpha=None)
+        if status_m[0] in (FixStatus.OK, FixStatus.INCONSISTENT):
+            mirror_pos, mirror_chi2 = xm[0, :3], float(chi2_m[0])
     w_rel = np.where(used[best], np.median(sigma[:n_rows][m[:n_rows]]) ** 2 / sigma**2, 0.0) if m[:n_rows].any() \
         else used[best].astype(float)
     gdop = float(np.sqrt(np.trace(cofactor(J[best], w_rel))))
-    xb = x[best] if solved[best] else np.full(N_STATIC_STATES, np.nan)
+    n_states = 4 + deg
+    xb = x[best] if solved[best] else np.full(n_states, np.nan)
     return StaticFix(
-        pos_ecef_m=xb[:3], clock_offset_hz=float(xb[3]), clock_drift_hz_per_s=float(xb[4]), t_ref_s=float(t_ref),
-        cov=Q[best] if solved[best] else np.full((5, 5), np.nan), gdop=gdop,
+        pos_ecef_m=xb[:3], clock_offset_hz=float(xb[3]), clock_drift_hz_per_s=float(xb[4]) if deg >= 1 else 0.0,
+        t_ref_s=float(t_ref), cov=Q[best] if solved[best] else np.full((n_states, n_states), np.nan), gdop=gdop,
         residuals_hz=res[best, :n_rows], used=used[best, :n_rows], n_used=int(used[best, :n_rows].sum()),
         iterations=int(iterations[best]), chi2=float(chi2[best]), status=FixStatus(int(status[best])),
-        ambiguous=ambiguous,
+        ambiguous=ambiguous, clock_poly_hz=xb[3:].copy(), mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
     )

@@ -193,7 +193,7 @@ def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_
 
 
 def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
-                    sigma_hz=None, alpha=1e-3):
+                    sigma_hz=None, alpha=1e-3, clock_degree=(1, 2, 3), side_clock_degree=1):
     """One batch fix of a receiver at rest from all rows.
 
     Parameters
@@ -208,6 +208,15 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
     sigma_hz : float, optional
         Sigma of rows without one; default estimated from the residuals.
     alpha : float or None
+    clock_degree : int or sequence of int
+        Degree(s) of the frequency-offset polynomial of the fix (several:
+        chosen by information criterion);
+    side_clock_degree : int
+        The degree that chooses between the starts' (mirror) solutions; see
+        :func:`~leosop.positioning.doppler_ls.solve_static`. The defaults
+        (up to cubic, side chosen with a linear drift) gave the best
+        single-pass fixes on the DopTrack passes
+        (tools/real_doppler_position.py).
 
     Returns
     -------
@@ -215,18 +224,20 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
     """
     pos, vel, reason, source = satellite_states(meas, constellation)
     usable = reason == ""
-    n_need = N_STATIC_STATES - (alt_m is not None)
+    n_states = N_STATIC_STATES - 1 + min(np.atleast_1d(clock_degree).min(), side_clock_degree)
+    n_need = n_states - (alt_m is not None)
     if usable.sum() < n_need:
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {n_need}"
                          + (f" (first problem: line {meas.line[~usable][0]}: {reason[~usable][0]})"
                             if (~usable).any() else ""))
-    kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable)
+    kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
+              clock_degree=clock_degree, side_clock_degree=side_clock_degree)
     # Light time is computed for the latest solution (the start at first).
     pos_lt = init_pos_ecef_m
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
         pilot = solve_static(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel, meas.carrier_hz,
                              meas.t_s, alpha=None, **kw)
-        sigma_hz = _robust_sigma(pilot.residuals_hz, N_STATIC_STATES)
+        sigma_hz = _robust_sigma(pilot.residuals_hz, 3 + len(pilot.clock_poly_hz))
         if not np.isfinite(sigma_hz) or sigma_hz <= 0:
             sigma_hz = 1.0
         if np.isfinite(pilot.pos_ecef_m).all():
