@@ -165,7 +165,7 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     offsets_hz = comb.offsets_hz
     # Tone k sits at k*spacing + s_k*D: the s_k - 1 part moves edge tones by
     # up to (n_tones // 2) * spacing / f_c * D relative to the centre.
-    scale_spread_hz = np.max(np.abs(comb.doppler_scale - 1.0)) * max_doppler_hz
+    scale_spread_hz = np.max(np.abs(offsets_hz)) / comb.carrier_hz * max_doppler_hz  # max |s_k - 1| D
     spread_bins = int(np.ceil((0.5 * smear_hz + scale_spread_hz) / df))
     # Powers are summed in groups of g bins (g = 1 for steady tones): tone
     # offsets are then rounded to whole groups, so the window grows by one
@@ -181,10 +181,11 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     if hi - lo + 1 >= n:
         raise InputError(f"the comb (+-{offsets_hz.max():.0f} Hz) with +-{max_doppler_hz:.0f} Hz of Doppler "
                          f"does not fit in the {sample_rate_hz:.0f} Hz sample rate")
-    if lo < 0:
+    if lo < 0:  # the band wraps around bin 0: |X| of both ends in place, then squared
         power = np.empty(hi - lo + 1, dtype=spectrum.real.dtype)
-        power[:-lo] = _abs2(spectrum[lo:])
-        power[-lo:] = _abs2(spectrum[:hi + 1])
+        np.abs(spectrum[lo:], out=power[:-lo])
+        np.abs(spectrum[:hi + 1], out=power[-lo:])
+        np.multiply(power, power, out=power)
     else:
         power = _abs2(spectrum[lo:hi + 1])
     # Noise mean from the median of a subsample of the band (the comb fills a
