@@ -192,3 +192,72 @@ def test_static_single_pass_mirror_is_flagged_and_start_decides():
     mirror = solve_static(*args, pos0_ecef_m=geodetic_to_ecef(mla + np.radians(0.5), mlo, 0.0), alt_m=50.0,
                           alt_sigma_m=1.0)
     assert mirror.ambiguous and np.linalg.norm(mirror.pos_ecef_m - station) > 500e3
+
+
+def _single_pass(offset_km=400.0, seed=11, sigma_hz=2.0, clock=(-300.0, -0.5, 2e-4, 1e-6)):
+    """One VHF pass ``offset_km`` beside a station, transmitter offset a cubic in time about mid-pass."""
+    f0 = 145.87e6
+    const = load_constellation().subset([0])
+    t = np.datetime64("2025-01-01T00:00:00") + np.arange(0, 600, 2).astype("timedelta64[s]")
+    pos, vel, _ = state_ecef(const, t)
+    lat_s, lon_s, _ = ecef_to_geodetic(pos[0, 150])
+    track = vel[0, 150] @ C_e_n(lat_s, lon_s)
+    across = np.array([track[1], -track[0], 0.0]) / np.hypot(track[0], track[1])
+    la, lo, _ = ecef_to_geodetic(geodetic_to_ecef(lat_s, lon_s, 0.0) + enu_to_ecef(across * offset_km * 1e3, lat_s,
+                                                                                    lon_s))
+    station = geodetic_to_ecef(la, lo, 50.0)
+    _, el, _ = azimuth_elevation_range(pos[0], station)
+    up = el > np.radians(5)
+    t_s = np.arange(0, 600, 2.0)[up]
+    dt = t_s - 0.5 * (t_s.min() + t_s.max())
+    dop = _doppler(pos[0, up][None], vel[0, up][None], station[None], np.zeros((1, 3)), np.zeros(1), f0)[0]
+    dop += np.polyval(clock[::-1], dt) + np.random.default_rng(seed).normal(0.0, sigma_hz, dop.shape)
+    return (dop, sigma_hz, pos[0, up], vel[0, up], f0, t_s), station
+
+
+def test_static_cubic_clock_is_recovered_and_chosen_by_bic():
+    """A transmitter whose offset is a cubic in time (DopTrack-like thermal drift)."""
+    clock = (-300.0, -0.5, 2e-4, 1e-6)
+    args, station = _single_pass(clock=clock)
+    cubic = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, clock_degree=3, side_clock_degree=1)
+    assert cubic.status == FixStatus.OK and cubic.clock_poly_hz.shape == (4,) and cubic.cov.shape == (7, 7)
+    # The model is right: the error is within 5 sigma of the posterior covariance, and each clock
+    # coefficient within 5 of its sigmas.
+    assert np.linalg.norm(cubic.pos_ecef_m - station) < 5 * np.sqrt(np.trace(cubic.cov[:3, :3]))
+    np.testing.assert_array_less(np.abs(cubic.clock_poly_hz - clock), 5 * np.sqrt(np.diag(cubic.cov)[3:]))
+    # A linear clock cannot follow (1e-6 Hz/s^3 over +-280 s is +-22 Hz): chi-square far above its
+    # degrees of freedom, and a position error of kilometres.
+    linear = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, alpha=None)
+    assert linear.clock_poly_hz.shape == (2,) and linear.chi2 > 3 * linear.n_used
+    assert np.linalg.norm(linear.pos_ecef_m - station) > 1e3
+    # Chosen among degrees 1-3 by the information criterion: the cubic, the same fix.
+    auto = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, clock_degree=(1, 2, 3), side_clock_degree=1)
+    assert auto.clock_poly_hz.shape == (4,)
+    np.testing.assert_allclose(auto.pos_ecef_m, cubic.pos_ecef_m, atol=ONE_MM)
+
+
+def test_static_bic_keeps_a_linear_clock_when_it_is_linear():
+    args, station = _single_pass(clock=(-300.0, -0.5), seed=5)
+    fix = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, clock_degree=(1, 2, 3), side_clock_degree=1)
+    # BIC's penalty ln(n) ~ 5.5 per state against a chi-square gain of ~1 per superfluous state
+    # (chi2 with 1 dof); a higher degree wins with probability < 1% each for this seed-fixed draw.
+    assert fix.clock_poly_hz.shape == (2,)
+    assert np.linalg.norm(fix.pos_ecef_m - station) < 5 * np.sqrt(np.trace(fix.cov[:3, :3]))
+
+
+def test_static_mirror_is_reported_with_its_chi_square():
+    args, station = _single_pass(seed=3, clock=(-300.0, -0.5))
+    fix = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0)
+    # The default starts span +-1,500 km across the track: both sides are solved. The reported fix and
+    # mirror are the station and its reflection ~800 km away (400 km either side of the track); the
+    # Earth's rotation makes the wrong side fit worse, but by less than the 3-sigma band of chi2 (~60
+    # for ~280 dof) here, hence ambiguous.
+    near, far = sorted([fix.pos_ecef_m, fix.mirror_pos_ecef_m], key=lambda p: np.linalg.norm(p - station))
+    assert np.linalg.norm(near - station) < 5 * np.sqrt(np.trace(fix.cov[:3, :3]))
+    assert 700e3 < np.linalg.norm(far - station) < 900e3
+    assert fix.ambiguous and np.isfinite(fix.mirror_chi2)
+    # chi2 of each solution is that of an independent fit started there: the same number from the mirror's
+    # own solve (on the same rows).
+    other = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, pos0_ecef_m=fix.mirror_pos_ecef_m, alpha=None)
+    assert np.linalg.norm(other.pos_ecef_m - fix.mirror_pos_ecef_m) < 1.0
+    assert other.chi2 == pytest.approx(fix.mirror_chi2, rel=1e-6)

@@ -18,15 +18,23 @@ from leosop.positioning.solve import position_snapshots, position_static
 
 def test_doptrack_single_pass_static_fixes():
     passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:20]
-    err = np.array([np.linalg.norm(position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m)
-                                   .fixes.pos_ecef_m - p.station_pos_ecef_m) for p in passes])
+    fixes = [position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m).fixes for p in passes]
+    truth = np.array([p.station_pos_ecef_m for p in passes])
+    err = np.linalg.norm(np.array([f.pos_ecef_m for f in fixes]) - truth, axis=-1)
+    mirror = np.linalg.norm(np.array([f.mirror_pos_ecef_m for f in fixes]) - truth, axis=-1)
     near = err < 100e3
-    # A single pass leaves the side of the ground track (and, with a linear transmitter drift, the
-    # along-track position) weakly determined: 11 of these 20 passes land within 100 km, with a median
-    # of 8.9 km (1-1.5 day old TLEs put ~1-5 km along-track errors in on their own). Bounds: 10 passes
-    # and 12 km.
+    # A single pass leaves the side of the ground track weakly determined (the Earth's rotation is the
+    # only asymmetry): 11 of these 20 passes land on the right side, with a median error of 4.9 km
+    # (1-1.5 day old TLEs put ~1-5 km along-track errors in on their own), 7 within 10 km. Bounds:
+    # 10 passes, 6.5 km, 6 passes. The data are fixed, so a loss of one pass or ~30% in the median is
+    # a regression, not noise.
     assert near.sum() >= 10
-    assert np.median(err[near]) < 12e3
+    assert np.median(err[near]) < 6.5e3
+    assert (err < 10e3).sum() >= 6
+    # The pair (fix, mirror) holds the station in 19 of 20 passes (the exception has lost most of its
+    # pass); 13 within 10 km. Bounds 18 and 11.
+    assert (np.fmin(err, mirror) < 100e3).sum() >= 18
+    assert (np.fmin(err, mirror) < 10e3).sum() >= 11
 
 
 def test_fox1d_pass_with_its_catalogue_number():

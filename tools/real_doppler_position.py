@@ -20,7 +20,7 @@ from leosop.frames import ecef_to_enu, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
 from leosop.positioning.measurements import write_measurements
-from leosop.positioning.solve import position_snapshots, position_static
+from leosop.positioning.solve import position_snapshots, position_static, satellite_states
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FOX_SITE = (37.229976, -80.439627, 610.0)
@@ -33,8 +33,9 @@ def doptrack(data, export):
           "dchi2 = its chi-square minus the fix's on the rows the fix used (< 0: the mirror fits better)")
     print(f"{'pass':30s} {'maxel':>5s} {'rows':>5s} {'used':>5s} {'sigma':>6s} {'status':>13s} {'amb':>4s} "
           f"{'east_m':>10s} {'north_m':>10s} {'err_m':>10s} {'mirror_m':>10s} {'dchi2':>8s}")
-    errors, mirrors = [], []
+    errors, mirrors, tca_lag = [], [], []
     for p in passes:
+        tca_lag.append(_tca_lag_s(p))
         res = position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m)
         f = res.fixes
         lat, lon = np.radians(p.station_lat_deg), np.radians(p.station_lon_deg)
@@ -54,6 +55,24 @@ def doptrack(data, export):
           f"{(e[ok] < 10e3).sum()} within 10 km, {(e[ok] < 100e3).sum()} within 100 km "
           f"(median of those {np.median(e[ok & (e < 100e3)]):.0f} m)")
     print(f"fix or its mirror: {(either < 10e3).sum()} within 10 km, {(either < 100e3).sum()} within 100 km")
+    lag = np.array(tca_lag)
+    q1, q2, q3 = np.nanpercentile(lag, [25, 50, 75])
+    print(f"time tags: range rate at the station crosses zero {q2:+.2f} s after the files' tca "
+          f"(median; quartiles {q1:+.2f}, {q3:+.2f} s; element sets and station as given)")
+
+
+def _tca_lag_s(p):
+    """Zero crossing of the element sets' range rate at the station minus the file's tca [s]."""
+    pos, vel, reason, _ = satellite_states(p.meas, p.constellation, p.station_pos_ecef_m)
+    ok = reason == ""
+    los = pos[ok] - p.station_pos_ecef_m
+    rate = np.einsum("ni,ni->n", los, vel[ok]) / np.linalg.norm(los, axis=-1)
+    t = p.meas.t_s[ok]
+    k = np.flatnonzero((rate[:-1] < 0) & (rate[1:] >= 0))
+    if k.size == 0:
+        return np.nan
+    t_zero = t[k[0]] - rate[k[0]] * (t[k[0] + 1] - t[k[0]]) / (rate[k[0] + 1] - rate[k[0]])
+    return t_zero - (p.tca_utc - p.meas.time_utc[0]).astype(np.int64) * 1e-9 - p.meas.t_s[0]
 
 
 def fox1d(data, export):
