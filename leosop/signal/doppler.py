@@ -56,7 +56,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import scipy.fft as scipy_fft
 
 from ..errors import InputError
 from .crlb import crlb_frequency_hz2
@@ -431,7 +430,7 @@ def _rate_dpt(yt, dt_dec, pfa):
     transform); None when its peak is not significant at false-alarm ``pfa``. ``yt``: (K, B)."""
     h = yt.shape[1] // 2
     v = yt[:, h:2 * h] * np.conj(yt[:, :h])
-    p = _trimmed_sum(_abs2(scipy_fft.fft(v, 2 * h, axis=-1)))
+    p = _trimmed_sum(_abs2(fft(v, 2 * h, scratch=True)))
     i = int(np.argmax(p))
     k = yt.shape[0]
     if p[i] / np.mean(p) < _threshold(k - 1 if k >= 5 else k, p.size, pfa):  # Gamma(k-1): conservative
@@ -445,7 +444,7 @@ def _dechirped_peak(yt, tau, rate, known, dt_dec):
     ``yt``: (K, B)."""
     z = yt * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known)).astype(yt.dtype)  # s_k ~ 1 is close enough
     n_fft = 2 * yt.shape[1]
-    p = _trimmed_sum(_abs2(scipy_fft.fft(z, n_fft, axis=-1)))
+    p = _trimmed_sum(_abs2(fft(z, n_fft, scratch=True)))
     i = int(np.argmax(p))
     return _wrap((i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec), 1.0 / dt_dec)
 
@@ -464,7 +463,7 @@ def _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur):
     rates = np.arange(-max_rate_hz_per_s, max_rate_hz_per_s + 1.0 / dur**2, 1.0 / dur**2)
     z = y2 * np.exp(-2j * np.pi * (0.5 * rates[:, None] * t2**2 + k2))[:, None, :].astype(yt.dtype)  # (J, K, B/2)
     n_fft = 2 * y2.shape[1]
-    p = _trimmed_sum(_abs2(scipy_fft.fft(z, n_fft, axis=-1)))  # (J, n_fft)
+    p = _trimmed_sum(_abs2(fft(z, n_fft, scratch=True)))  # (J, n_fft)
     j, i = np.unravel_index(int(np.argmax(p)), p.shape)
     return float(rates[j]), _wrap(i / (n_fft * dt2), 1.0 / dt2)
 
