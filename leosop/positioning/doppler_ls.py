@@ -34,12 +34,13 @@ from enum import IntEnum
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm as norm_dist
 
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from .dop import N_DOPPLER_STATES, cofactor, doppler_jacobian
 
-__all__ = ["FixStatus", "SnapshotFixes", "StaticFix", "solve_snapshots", "solve_static",
-           "subpoint_centroid_ecef_m", "N_STATIC_STATES"]
+__all__ = ["FixStatus", "SnapshotFixes", "StaticFix", "PassesFix", "solve_snapshots", "solve_static",
+           "solve_static_passes", "subpoint_centroid_ecef_m", "N_STATIC_STATES"]
 
 #: States of a static batch fix with a linear clock: position, frequency offset, frequency drift.
 N_STATIC_STATES = 5
@@ -178,14 +179,15 @@ class StaticFix:
 def _levenberg_marquardt(model, x0, y, w, xtol, max_iter):
     """Damped Gauss-Newton over independent problems.
 
-    ``model(x, idx)`` gives predictions (k, m) and Jacobians (k, m, n) of the
-    problems ``idx`` at states ``x`` (k, n); ``y``, ``w`` (P, m) are the
-    measurements and weights (0 drops a row). Returns ``x, iterations,
-    converged``.
+    ``model(x, idx, w)`` gives predictions (k, m) and Jacobians (k, m, n) of
+    the problems ``idx`` at states ``x`` (k, n) with row weights ``w`` (k, m)
+    (a model that eliminates linear states needs them); ``y``, ``w`` (P, m)
+    are the measurements and weights (0 drops a row). Returns ``x,
+    iterations, converged``.
     """
     n_prob, n = x0.shape
     x = x0.copy()
-    pred, J = model(x, np.arange(n_prob))
+    pred, J = model(x, np.arange(n_prob), w)
     r = np.where(w > 0, y - pred, 0.0)
     cost = np.einsum("pm,pm->p", w, r * r)
     lam = np.full(n_prob, 1e-3)
@@ -204,7 +206,7 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter):
         Ns = N / (d[:, :, None] * d[:, None, :]) + lam[active, None, None] * eye
         dx = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
         xt = x[active] + dx
-        pt, Jt = model(xt, active)
+        pt, Jt = model(xt, active, wa)
         rt = np.where(wa > 0, y[active] - pt, 0.0)
         ct = np.einsum("pm,pm->p", wa, rt * rt)
         accept = np.isfinite(ct) & (ct <= cost[active])
@@ -218,13 +220,33 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter):
     return x, iterations, converged
 
 
-def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, fixed=None, x_alt=None):
+def _group_argmax(values, groups):
+    """Index of the largest of ``values`` (k, m) within each group of ``groups`` (m,), -1 for an empty group.
+
+    Rows of group -1 belong to none. Returns (k, n_groups).
+    """
+    n_groups = int(groups.max()) + 1 if groups.size else 0
+    out = np.full((values.shape[0], n_groups), -1)
+    for g in range(n_groups):
+        rows = np.flatnonzero(groups == g)
+        if rows.size:
+            best = rows[np.argmax(values[:, rows], axis=-1)]
+            out[:, g] = np.where(np.isfinite(values[np.arange(len(values)), best]), best, -1)
+    return out
+
+
+def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, fixed=None, x_alt=None,
+                  groups=None):
     """LM, then chi-square test and w-test exclusions one at a time.
 
     Returns ``x, residuals, J, Q (weighted cofactor), used, iterations, chi2,
     status``; rows in ``fixed`` (bool, (m,)) are never excluded. Problems
     that do not converge or fail the test from ``x0`` are retried once from
-    ``x_alt`` (P, n) and keep the better solution.
+    ``x_alt`` (P, n) and keep the better solution. With ``groups`` (int,
+    (m,), e.g. the pass of each row) each round excludes the largest
+    standardised residual of every group whose largest one exceeds the
+    two-sided normal critical value at ``alpha`` (one row per pass at a time
+    instead of one in all), and stops when none does.
     """
     n_prob = x0.shape[0]
     used = used.copy()
@@ -238,11 +260,11 @@ def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha,
     converged = np.zeros(n_prob, dtype=bool)
     first = True
     while todo.size:
-        sub = lambda xs, i, todo=todo: model(xs, todo[i])  # noqa: E731
+        sub = lambda xs, i, w_, todo=todo: model(xs, todo[i], w_)  # noqa: E731
         w = np.where(used[todo], w_all[todo], 0.0)
         xs, it, conv = _levenberg_marquardt(sub, x[todo], y[todo], w, xtol, max_iter)
         iterations[todo] += it
-        pred, J = model(xs, todo)
+        pred, J = model(xs, todo, w)
         r = np.where(used[todo], y[todo] - pred, 0.0)
         chi2 = np.einsum("pm,pm->p", w, r * r)
         dof = used[todo].sum(-1) - n_states
@@ -252,10 +274,10 @@ def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha,
                 retry = ~conv | (chi2 > chi2_dist.isf(alpha or 1e-3, np.maximum(dof, 1)))
             if retry.any():
                 k = np.flatnonzero(retry)
-                sub2 = lambda xs, i, p=todo[k]: model(xs, p[i])  # noqa: E731
+                sub2 = lambda xs, i, w_, p=todo[k]: model(xs, p[i], w_)  # noqa: E731
                 xs2, it2, conv2 = _levenberg_marquardt(sub2, x_alt[todo[k]], y[todo[k]], w[k], xtol, max_iter)
                 iterations[todo[k]] += it2
-                pred2, J2 = model(xs2, todo[k])
+                pred2, J2 = model(xs2, todo[k], w[k])
                 r2 = np.where(used[todo[k]], y[todo[k]] - pred2, 0.0)
                 chi2_2 = np.einsum("pm,pm->p", w[k], r2 * r2)
                 better = conv2 & (~conv[k] | (chi2_2 < chi2[k]))
@@ -277,10 +299,17 @@ def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha,
         var_r = sigma[p] ** 2 - np.einsum("pmi,pij,pmj->pm", Jp, Qp, Jp)
         wstat = np.abs(r[can]) / np.sqrt(np.maximum(var_r, 1e-12 * sigma[p] ** 2))
         wstat = np.where(used[p] & ~fixed, wstat, -np.inf)
-        used[p, np.argmax(wstat, axis=-1)] = False
+        if groups is None:
+            used[p, np.argmax(wstat, axis=-1)] = False
+        else:
+            worst = _group_argmax(wstat, groups)
+            take = np.take_along_axis(wstat, np.maximum(worst, 0), -1) > norm_dist.isf(alpha / 2)
+            pi, gi = np.nonzero(take & (worst >= 0))
+            used[p[pi], worst[pi, gi]] = False
+            p = p[take.any(-1)]
         todo = p
-    pred, J = model(x, np.arange(n_prob))
     w = np.where(used, w_all, 0.0)
+    pred, J = model(x, np.arange(n_prob), w)
     residuals = np.where(used, y - pred, np.nan)
     chi2 = np.einsum("pm,pm->p", w, np.nan_to_num(residuals) ** 2)
     Q = cofactor(J, w)
@@ -363,7 +392,7 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     x_ground[:, :3] = np.nan_to_num(subpoint_centroid_ecef_m(r_s, m), nan=_R_GROUND_M)
     x0 = x_ground if x0 is None else np.broadcast_to(np.asarray(x0, dtype=float), (n_ep, N_DOPPLER_STATES)).copy()
 
-    def model(x, idx):
+    def model(x, idx, w):
         H = doppler_jacobian(r_s[idx], v_s[idx], x[:, :3], x[:, 3:6], f0[idx])
         pred = np.einsum("pmi,pmi->pm", H[..., 3:6], x[:, None, 3:6] - v_s[idx]) + x[:, 6:7]
         return pred, H
@@ -491,7 +520,7 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     def make_model(degree):
         powers = dt[:, None] ** np.arange(degree + 1)
 
-        def model(x, idx):
+        def model(x, idx, w):
             H = doppler_jacobian(r_s, v_s, x[:, :3], np.zeros((len(x), 3)), f0)
             pred = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s) + x[:, 3:] @ powers.T
             J = np.concatenate([H[..., :3], np.broadcast_to(powers, pred.shape + (degree + 1,))], axis=-1)
@@ -577,4 +606,261 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         residuals_hz=res[best, :n_rows], used=used[best, :n_rows], n_used=int(used[best, :n_rows].sum()),
         iterations=int(iterations[best]), chi2=float(chi2[best]), status=FixStatus(int(status[best])),
         ambiguous=ambiguous, clock_poly_hz=xb[3:].copy(), mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
+    )
+
+
+@dataclass(frozen=True)
+class PassesFix:
+    """Batch fix of a receiver at rest from several passes, each with its own transmitter frequency.
+
+    Attributes
+    ----------
+    pos_ecef_m : ndarray, (3,)
+    pass_ids : ndarray, (n_pass,)
+        The passes solved (those with enough usable rows), in the order of
+        the clock rows.
+    t_ref_s : ndarray, (n_pass,)
+        Mid-time of each pass, the origin of its polynomial.
+    clock_poly_hz : ndarray, (n_pass, d + 1)
+        Each pass's frequency offset polynomial in ``t - t_ref`` [Hz/s^k],
+        lowest first.
+    cov : ndarray, (3 + n_pass (d + 1),) * 2
+        Posterior covariance of ``[pos, clock_poly_hz.ravel()]``.
+    gdop : float
+        ``sqrt(trace((H^T W H)^-1))`` of the position with the clocks
+        eliminated, weights relative to the median Doppler weight.
+    residuals_hz : ndarray, (m,)
+    used : ndarray of bool, (m,)
+    n_used, iterations : int
+    chi2 : float
+    status : FixStatus
+    ambiguous : bool
+        Another start reached a solution beyond ``ambiguity_m`` that fits as
+        well (e.g. passes all on one side of the station).
+    mirror_pos_ecef_m : ndarray, (3,)
+        The best such solution, NaN when none; ``mirror_chi2`` its chi-square
+        on the rows the fix used.
+    mirror_chi2 : float
+    """
+
+    pos_ecef_m: np.ndarray
+    pass_ids: np.ndarray
+    t_ref_s: np.ndarray
+    clock_poly_hz: np.ndarray
+    cov: np.ndarray
+    gdop: float
+    residuals_hz: np.ndarray
+    used: np.ndarray
+    n_used: int
+    iterations: int
+    chi2: float
+    status: FixStatus
+    ambiguous: bool
+    mirror_pos_ecef_m: np.ndarray
+    mirror_chi2: float
+
+    @property
+    def clock_offset_hz(self):
+        """Each pass's frequency offset at its ``t_ref_s``, ndarray (n_pass,)."""
+        return self.clock_poly_hz[:, 0]
+
+    @property
+    def clock_drift_hz_per_s(self):
+        """Each pass's frequency drift at its ``t_ref_s``, ndarray (n_pass,)."""
+        return self.clock_poly_hz[:, 1] if self.clock_poly_hz.shape[1] > 1 else np.zeros(len(self.pass_ids))
+
+    @property
+    def residual_rms_hz(self):
+        """RMS of the used residuals [Hz]."""
+        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
+
+
+def _inverse_or_nan(N, rcond=1e-12):
+    """Inverse of a symmetric positive semi-definite matrix, judged on its unit-diagonal scaling; NaN if singular."""
+    diag = np.diagonal(N)
+    d = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+    lam, V = np.linalg.eigh(N * d[:, None] * d[None, :])
+    if not (diag > 0).all() or lam[0] <= rcond * abs(lam[-1]):
+        return np.full(N.shape, np.nan)
+    return (V / lam) @ V.T * d[:, None] * d[None, :]
+
+
+def _grid_starts(centre_ecef_m, offset_m):
+    """Ground points at ``centre`` and on a 5 x 5 east/north grid of half-width ``offset_m`` around it, (25, 3)."""
+    lat, lon, _ = ecef_to_geodetic(centre_ecef_m)
+    e, n = np.meshgrid(offset_m * np.array([0.0, -1.0, -1 / 3, 1 / 3, 1.0]),
+                       offset_m * np.array([0.0, -1.0, -1 / 3, 1 / 3, 1.0]))
+    enu = np.stack([e.ravel(), n.ravel(), np.zeros(e.size)], -1)
+    la, lo, _ = ecef_to_geodetic(centre_ecef_m + enu @ C_e_n(lat, lon).T)
+    return geodetic_to_ecef(la, lo, 0.0)
+
+
+def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
+                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3,
+                        clock_degree=3, start_offset_m=1.0e6, ambiguity_m=10e3):
+    """Batch Doppler fix of a receiver at rest from several passes, each with its own transmitter frequency.
+
+    The position is shared; each pass ``p`` has its own frequency offset, a
+    polynomial of degree ``clock_degree`` in ``t - t_ref[p]`` (the pass's
+    mid-time). The clock terms enter linearly and through a basis that does
+    not depend on the position, so they are eliminated exactly (variable
+    projection): each LM step solves, per pass, the weighted linear fit of
+    the clock to the residuals, and iterates on the position alone with the
+    projected Jacobian ``(I - B K) H``. The chi-square uses all states'
+    degrees of freedom; the covariance is that of the full state. Passes on
+    opposite sides of the station resolve the mirror ambiguity of a single
+    pass. Outliers are excluded one row per pass at a time (see
+    :func:`solve_static` for the test).
+
+    Parameters
+    ----------
+    doppler_hz, sigma_hz, carrier_hz, t_s : array_like, (m,)
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
+    pass_id : array_like, (m,)
+        Label of each row's pass (any sortable type). Passes with fewer than
+        ``clock_degree + 2`` usable rows are left out.
+    pos0_ecef_m : array_like, (3,) or (k, 3), optional
+        Start(s); the lowest chi-square wins. Default the ground point below
+        the satellites' mean direction and a 5 x 5 grid of
+        ``start_offset_m`` half-width around it.
+    alt_m : float, optional
+        Known height above the ellipsoid, standard deviation ``alt_sigma_m``.
+    mask : array_like of bool, (m,), optional
+    max_iter : int
+    alpha : float or None
+        Significance of the chi-square outlier test; None disables it.
+    clock_degree : int
+    start_offset_m, ambiguity_m : float
+
+    Returns
+    -------
+    PassesFix
+    """
+    deg = int(clock_degree)
+    if deg < 0:
+        raise ValueError("clock degree must be non-negative")
+    y = np.asarray(doppler_hz, dtype=float).ravel()
+    n = y.size
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n, 3)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(n, 3)
+    sigma = np.broadcast_to(np.asarray(sigma_hz, dtype=float), y.shape)
+    f0 = np.broadcast_to(np.asarray(carrier_hz, dtype=float), y.shape)
+    t = np.asarray(t_s, dtype=float).ravel()
+    labels, gi = np.unique(np.asarray(pass_id).ravel(), return_inverse=True)
+    m = np.ones(n, bool) if mask is None else np.asarray(mask, bool).ravel()
+    m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
+    m &= np.isfinite(t)
+    keep = np.bincount(gi[m], minlength=len(labels)) >= deg + 2
+    m &= keep[gi]
+    labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
+    gi[~m] = np.maximum(gi[~m], 0)
+    n_pass = len(labels)
+    # Rows in pass order internally (contiguous segments for the per-pass sums).
+    order = np.argsort(gi, kind="stable")
+    y, sigma, f0, t, m, gi, r_s, v_s = (a[order] for a in (y, sigma, f0, t, m, gi, r_s, v_s))
+    y, sigma, f0, t = (np.where(m, a, fill) for a, fill in ((y, 0.0), (sigma, 1.0), (f0, 1.0), (t, 0.0)))
+    r_s = np.where(m[:, None], r_s, [2e7, 0.0, 0.0])
+    v_s = np.where(m[:, None], v_s, 0.0)
+    seg = np.searchsorted(gi, np.arange(n_pass))
+    t_lo = np.array([t[gi == p][m[gi == p]].min() for p in range(n_pass)]) if n_pass else np.zeros(0)
+    t_hi = np.array([t[gi == p][m[gi == p]].max() for p in range(n_pass)]) if n_pass else np.zeros(0)
+    t_ref = 0.5 * (t_lo + t_hi)
+    half_span_s = np.maximum(0.5 * (t_hi - t_lo), 1.0)
+    # Clock basis in the scaled time u = (t - t_ref) / half_span, |u| <= 1, for conditioning.
+    basis = ((t - t_ref[gi]) / half_span_s[gi])[:, None] ** np.arange(deg + 1) if n_pass else np.zeros((n, deg + 1))
+    has_alt = alt_m is not None
+    if has_alt:
+        y, sigma, m = np.append(y, alt_m), np.append(sigma, alt_sigma_m), np.append(m, True)
+    fixed = np.zeros(y.size, bool)
+    fixed[n:] = True
+    groups = np.append(gi, [-1] * has_alt)
+
+    def pieces(x, w):
+        """Geometric prediction and Jacobian, and the per-pass clock fit (c, K H) to its residuals."""
+        H = doppler_jacobian(r_s, v_s, x, np.zeros((len(x), 3)), f0)
+        h, Hp = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s), H[..., :3]
+        wb = w[:, :n, None] * basis
+        G = np.add.reduceat(wb[..., :, None] * basis[:, None, :], seg, axis=1)
+        Ginv = np.linalg.pinv(G, hermitian=True)
+        c = np.einsum("pgij,pgj->pgi", Ginv, np.add.reduceat(wb * (y[:n] - h)[..., None], seg, axis=1))
+        KH = Ginv @ np.add.reduceat(wb[..., :, None] * Hp[..., None, :], seg, axis=1)
+        return h, Hp, c, KH, G
+
+    def model(x, idx, w):
+        h, Hp, c, KH, _ = pieces(x, w)
+        pred = h + np.einsum("mi,pmi->pm", basis, c[:, gi])
+        J = Hp - np.einsum("mi,pmij->pmj", basis, KH[:, gi])
+        if has_alt:
+            lat, lon, alt = ecef_to_geodetic(x)
+            pred = np.concatenate([pred, alt[:, None]], -1)
+            J = np.concatenate([J, C_e_n(lat, lon)[..., 2][:, None, :]], axis=1)
+        return pred, J
+
+    n_states = 3 + n_pass * (deg + 1)
+    xtol = _XTOL_STATIC[:3]
+
+    def solve(x0, used, alpha_):
+        k = len(x0)
+        ys, ss, ms = (np.broadcast_to(a, (k, y.size)) for a in (y, sigma, used))
+        return _solve_robust(model, x0, ys, ss, ms, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha_,
+                             fixed=fixed, groups=groups)
+
+    if pos0_ecef_m is not None:
+        starts = np.asarray(pos0_ecef_m, dtype=float).reshape(-1, 3)
+    elif m[:n].any():
+        starts = _grid_starts(subpoint_centroid_ecef_m(r_s[m[:n]]), start_offset_m)
+    else:
+        starts = np.zeros((1, 3))
+    x, res, J, Q, used, iterations, chi2, status = solve(starts, m, None)
+    solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
+    cost = np.where(solved, chi2, np.inf)
+    best = int(np.argmin(cost))
+    dof = max(int(used[best].sum()) - n_states, 1)
+    fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
+    apart = solved & (np.linalg.norm(x - x[best], axis=-1) > ambiguity_m)
+    ambiguous = bool((fits & apart).any())
+    other = int(np.argmin(np.where(apart, cost, np.inf))) if apart.any() else None
+    x_mirror = x[other:other + 1].copy() if other is not None else None
+    iterations = iterations[best:best + 1]
+    x, res, J, Q, used, chi2, status = x[best:best + 1], res[best:best + 1], J[best:best + 1], Q[best:best + 1], \
+        used[best:best + 1], chi2[best:best + 1], status[best:best + 1]
+    if alpha is not None and solved[best]:
+        x, res, J, Q, used, it, chi2, status = solve(x, used, alpha)
+        iterations = iterations + it
+    ok = status[0] in (FixStatus.OK, FixStatus.INCONSISTENT)
+    mirror_pos, mirror_chi2 = np.full(3, np.nan), np.nan
+    if x_mirror is not None and ok:
+        xm, _, _, _, _, _, chi2_m, status_m = solve(x_mirror, used, None)
+        if status_m[0] in (FixStatus.OK, FixStatus.INCONSISTENT):
+            mirror_pos, mirror_chi2 = xm[0], float(chi2_m[0])
+    # Full covariance [pos, clocks] from the normal equations' blocks at the solution.
+    w = np.where(used, 1.0 / sigma**2, 0.0)
+    _, Hp, c, _, G = pieces(x, w)
+    wd = w[:, :n]
+    N = np.zeros((n_states, n_states))
+    N[:3, :3] = np.einsum("mi,m,mj->ij", Hp[0], wd[0], Hp[0])
+    if has_alt:
+        lat, lon, _ = ecef_to_geodetic(x[0])
+        up = C_e_n(lat, lon)[:, 2]
+        N[:3, :3] += np.outer(up, up) * w[0, n]
+    cross = np.add.reduceat((wd[0, :, None] * basis)[:, :, None] * Hp[0][:, None, :], seg, axis=0)
+    N[3:, :3] = cross.reshape(-1, 3)
+    N[:3, 3:] = N[3:, :3].T
+    for p in range(n_pass):
+        sl = slice(3 + p * (deg + 1), 3 + (p + 1) * (deg + 1))
+        N[sl, sl] = G[0, p]
+    scale = np.concatenate([np.ones(3), (1.0 / half_span_s[:, None] ** np.arange(deg + 1)).ravel()])
+    cov = _inverse_or_nan(N) * scale[:, None] * scale[None, :] if ok else np.full((n_states, n_states), np.nan)
+    w_rel = np.where(used[0], np.median(sigma[:n][m[:n]]) ** 2 / sigma**2, 0.0) if m[:n].any() \
+        else used[0].astype(float)
+    gdop = float(np.sqrt(np.trace(cofactor(J[0], w_rel))))
+    back = np.empty(n, dtype=int)
+    back[order] = np.arange(n)
+    nan_unless = (lambda a: a if ok else np.full_like(a, np.nan))  # noqa: E731
+    return PassesFix(
+        pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref,
+        clock_poly_hz=nan_unless(c[0] * scale[3:].reshape(n_pass, deg + 1)), cov=cov, gdop=gdop,
+        residuals_hz=res[0, :n][back], used=used[0, :n][back], n_used=int(used[0, :n].sum()),
+        iterations=int(iterations[0]), chi2=float(chi2[0]), status=FixStatus(int(status[0])),
+        ambiguous=ambiguous, mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
     )
