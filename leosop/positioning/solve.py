@@ -21,11 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .doppler_ls import N_STATIC_STATES, solve_snapshots, solve_static, subpoint_centroid_ecef_m
+from .doppler_ls import N_STATIC_STATES, solve_snapshots, solve_static, solve_static_passes, subpoint_centroid_ecef_m
 from .dop import N_DOPPLER_STATES
 from .measurements import sv_states_from_tle
 
-__all__ = ["PositionResult", "position_snapshots", "position_static", "satellite_states"]
+__all__ = ["PositionResult", "position_snapshots", "position_static", "position_static_passes", "satellite_states"]
 
 #: MAD to standard deviation for Gaussian residuals.
 _MAD_TO_SIGMA = 1.4826
@@ -51,9 +51,13 @@ class PositionResult:
     unsolved : list of (float, datetime64 or None, str)
         Epochs (snapshot) without a fix and why.
     sigma_hz_default : float
-        Sigma given to rows without one (estimated when not supplied).
+        Sigma given to rows without one (estimated when not supplied; with
+        several passes the median of the passes' sigmas).
     sv_states : str
         ``"csv"`` or ``"tle"``.
+    sigma_hz_pass : ndarray, (n_pass,), or None
+        Several passes: the sigma given to each pass's rows without one, in
+        the order of ``fixes.pass_ids``.
     """
 
     fixes: object
@@ -65,6 +69,7 @@ class PositionResult:
     unsolved: list
     sigma_hz_default: float
     sv_states: str
+    sigma_hz_pass: np.ndarray = None
 
 
 def satellite_states(meas, constellation=None, pos_rx_ecef_m=None):
@@ -256,3 +261,69 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
     n_sats = np.array([len(np.unique(meas.sat_id[usable]))])
     return PositionResult(fix, t_ref, time_utc, n_sats, np.arange(len(meas)), _rejections(meas, reason), [],
                           sigma_default, source)
+
+
+def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
+                           sigma_hz=None, alpha=1e-3, clock_degree=3):
+    """One batch fix of a receiver at rest from several passes, a transmitter frequency polynomial per pass.
+
+    Rows without ``sigma_hz`` get the caller's sigma, or their own pass's:
+    the robust scale of that pass's residuals in a first joint solve with
+    unit weights (passes differ in signal-to-noise ratio, and in how well
+    their element sets fit the common position).
+
+    Parameters
+    ----------
+    meas : Measurements
+    pass_id : array_like, (n,)
+        Pass of each row.
+    constellation, init_pos_ecef_m, alt_m, alt_sigma_m, sigma_hz, alpha
+        As :func:`position_static`.
+    clock_degree : int
+        Degree of each pass's frequency-offset polynomial.
+
+    Returns
+    -------
+    PositionResult
+        ``fixes`` is a :class:`~leosop.positioning.doppler_ls.PassesFix`.
+    """
+    pass_id = np.asarray(pass_id)
+    pos, vel, reason, source = satellite_states(meas, constellation)
+    usable = reason == ""
+    if usable.sum() < 4 + clock_degree:
+        raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {4 + clock_degree}")
+    kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
+              clock_degree=clock_degree)
+    pos_lt = init_pos_ecef_m
+    sigma_pass = None
+    if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
+        pilot = solve_static_passes(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel,
+                                    meas.carrier_hz, meas.t_s, pass_id, alpha=None, **kw)
+        sigma_pass = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used], clock_degree + 1)
+                               for p in pilot.pass_ids])
+        sigma_pass = np.where(np.isfinite(sigma_pass) & (sigma_pass > 0), sigma_pass, 1.0)
+        if np.isfinite(pilot.pos_ecef_m).all():
+            pos_lt = pilot.pos_ecef_m
+            # The pilot searched the starts: the fix starts from its solution and the best other one.
+            kw["pos0_ecef_m"] = np.vstack([pilot.pos_ecef_m] + [pilot.mirror_pos_ecef_m] * bool(
+                np.isfinite(pilot.mirror_pos_ecef_m).all()))
+        lookup = dict(zip(pilot.pass_ids.tolist(), sigma_pass))
+        sigma_rows = np.array([lookup.get(p, np.nan) for p in pass_id.tolist()])
+        sigma_default = float(np.median(sigma_pass)) if sigma_pass.size else np.nan
+    else:
+        sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan
+        sigma_rows = np.full(len(meas), sigma_default)
+    sigma = np.where(np.isfinite(meas.sigma_hz), meas.sigma_hz, sigma_rows)
+    for _ in range(2 if source == "tle" else 1):
+        if source == "tle" and pos_lt is not None:
+            pos, vel, reason, _ = satellite_states(meas, constellation, pos_lt)
+        fix = solve_static_passes(meas.doppler_hz, sigma, pos, vel, meas.carrier_hz, meas.t_s, pass_id, alpha=alpha,
+                                  **kw)
+        if np.isfinite(fix.pos_ecef_m).all():
+            pos_lt = fix.pos_ecef_m
+    t_ref = fix.t_ref_s
+    time_utc = None if meas.time_utc is None else \
+        meas.epoch_utc + np.round(t_ref * 1e9).astype("timedelta64[ns]")
+    n_sats = np.array([len(np.unique(meas.sat_id[usable]))])
+    return PositionResult(fix, t_ref, time_utc, n_sats, np.arange(len(meas)), _rejections(meas, reason), [],
+                          sigma_default, source, sigma_pass)
