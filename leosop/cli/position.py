@@ -3,7 +3,11 @@
 Without ``--static`` one snapshot fix per epoch with at least 7 satellites
 (position, velocity, frequency offset); with ``--static`` one batch fix of a
 receiver at rest from all rows (position, frequency offset and drift),
-optionally with a known height (``--alt-m``). Besides the contract's
+optionally with a known height (``--alt-m``); when the table has a
+``pass_id`` column, each pass gets its own frequency offset polynomial
+(cubic) and the position is shared, and the JSON document lists the passes'
+polynomials under ``passes`` (the solution's ``t_s``, ``clock_offset_hz``
+and drift are those of the pass nearest the middle). Besides the contract's
 ``solutions``, the JSON document lists the ``rejected`` rows and
 ``unsolved`` epochs with their reasons; each solution carries a ``status``.
 """
@@ -18,7 +22,7 @@ from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.doppler_ls import FixStatus
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
-from ..positioning.solve import position_snapshots, position_static
+from ..positioning.solve import position_snapshots, position_static, position_static_passes
 from ..timebase import format_utc
 from . import add_command
 
@@ -33,7 +37,8 @@ def register(subparsers):
                    "(default: the bundled constellation)")
     p.add_argument("--carrier-hz", type=float, default=DEFAULT_CARRIER_HZ, metavar="F",
                    help="carrier of rows without carrier_hz (default %(default)g)")
-    p.add_argument("--static", action="store_true", help="one batch fix of a receiver at rest")
+    p.add_argument("--static", action="store_true", help="one batch fix of a receiver at rest; with a pass_id "
+                   "column (optional, extends DESIGN 4.3) a cubic frequency offset per pass, position shared")
     p.add_argument("--init", metavar="LAT_DEG,LON_DEG,ALT_M", help="start position (default: below the satellites)")
     p.add_argument("--alt-m", type=float, metavar="H", help="known height above the ellipsoid (with --static)")
     p.add_argument("--alt-sigma-m", type=float, default=10.0, metavar="S",
@@ -86,7 +91,25 @@ def run(args):
     constellation = None if meas.pos_sv_ecef_m is not None else load_constellation(args.tle)
     init = _site(args.init) if args.init else None
     alpha = args.alpha or None
-    if args.static:
+    passes = None
+    if args.static and meas.pass_id is not None:
+        res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,
+                                     alt_m=args.alt_m, alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz,
+                                     alpha=alpha)
+        f = res.fixes
+        mid = int(np.argmin(np.abs(res.t_s - 0.5 * (res.t_s.min() + res.t_s.max()))))
+        sol = _solution(res.t_s[mid], None if res.time_utc is None else res.time_utc[mid], f.pos_ecef_m,
+                        np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop, res.n_sats[0], f.n_used, f.iterations,
+                        f.residual_rms_hz, f.status, f.cov[:3, :3])
+        sol["clock_drift_hz_per_s"] = float(f.clock_drift_hz_per_s[mid])
+        solutions = [sol]
+        sigma_pass = res.sigma_hz_pass if res.sigma_hz_pass is not None else np.full(len(f.pass_ids), np.nan)
+        passes = [{"pass_id": str(pid), "t_s": float(t), "clock_poly_hz": [float(c) for c in poly],
+                   "sigma_hz": float(sg), "n_used": int(f.used[meas.pass_id == pid].sum())}
+                  for pid, t, poly, sg in zip(f.pass_ids, f.t_ref_s, f.clock_poly_hz, sigma_pass)]
+        residuals = [(int(meas.line[k]), meas.t_s[k], meas.sat_id[k], f.residuals_hz[k], bool(f.used[k]))
+                     for k in range(len(meas))]
+    elif args.static:
         res = position_static(meas, constellation=constellation, init_pos_ecef_m=init, alt_m=args.alt_m,
                               alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz, alpha=alpha)
         f = res.fixes
@@ -122,6 +145,8 @@ def run(args):
         "unsolved": [{"t_s": t, "time_utc": None if u is None else format_utc(u), "reason": why}
                      for t, u, why in res.unsolved],
     }
+    if passes is not None:
+        doc["passes"] = passes
     if args.out:
         write_json(f"{args.out}/position.json", doc)
         keys = list(solutions[0]) if solutions else []

@@ -3,7 +3,9 @@
 A table has a header row and one measurement per row: ``time_utc`` (ISO
 8601) or ``t_s``; ``sat_id``; ``doppler_hz``; optional ``sigma_hz``,
 ``carrier_hz`` and the satellite state ``x_sv_m, y_sv_m, z_sv_m, vx_sv_mps,
-vy_sv_mps, vz_sv_mps`` (ECEF at the measurement time). A missing column is an
+vy_sv_mps, vz_sv_mps`` (ECEF at the measurement time); optional ``pass_id``
+(a label: rows of one pass share a transmitter frequency offset in a static
+fix, an extension of DESIGN 4.3). A missing column is an
 error for the whole file; a bad row (empty, NaN or non-numeric value,
 non-positive sigma or carrier, duplicate of an earlier row) is set aside with
 its reason in :attr:`Measurements.rejected` so that the rest can be solved.
@@ -53,6 +55,8 @@ class Measurements:
         From the state columns, None without them.
     line : ndarray of int, (n,)
         Line number of each row in the file.
+    pass_id : ndarray of str, (n,), or None
+        From the optional ``pass_id`` column (empty fields read as ``""``).
     rejected : tuple of (int, str)
         Line number and reason of every row set aside.
     source : str
@@ -69,6 +73,7 @@ class Measurements:
     line: np.ndarray = None
     rejected: tuple = ()
     source: str = ""
+    pass_id: np.ndarray = None
 
     def __len__(self):
         return len(self.doppler_hz)
@@ -84,7 +89,8 @@ class Measurements:
         return replace(self, t_s=self.t_s[index], time_utc=pick(self.time_utc), sat_id=self.sat_id[index],
                        doppler_hz=self.doppler_hz[index], sigma_hz=self.sigma_hz[index],
                        carrier_hz=self.carrier_hz[index], pos_sv_ecef_m=pick(self.pos_sv_ecef_m),
-                       vel_sv_ecef_mps=pick(self.vel_sv_ecef_mps), line=self.line[index])
+                       vel_sv_ecef_mps=pick(self.vel_sv_ecef_mps), line=self.line[index],
+                       pass_id=pick(self.pass_id))
 
 
 def _floats(values):
@@ -203,7 +209,7 @@ def read_measurements(path, *, carrier_hz=None):
         doppler_hz=doppler[ok], sigma_hz=sigma[ok], carrier_hz=carrier[ok],
         pos_sv_ecef_m=None if state is None else state[ok, :3],
         vel_sv_ecef_mps=None if state is None else state[ok, 3:], line=lines[ok], rejected=rejected,
-        source=str(path),
+        source=str(path), pass_id=np.array(field("pass_id"), dtype=str)[ok] if "pass_id" in col else None,
     )
 
 
@@ -233,6 +239,9 @@ def write_measurements(path, meas):
         header += list(SV_STATE_COLUMNS)
         state = np.concatenate([meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps], axis=-1)
         cols += [[repr(float(v)) for v in state[:, j]] for j in range(6)]
+    if meas.pass_id is not None:
+        header.append("pass_id")
+        cols.append([str(v) for v in meas.pass_id])
     write_csv(path, header, zip(*cols))
 
 
