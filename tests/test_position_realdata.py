@@ -13,7 +13,9 @@ from leosop.frames import geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
 from leosop.positioning.doppler_ls import FixStatus
-from leosop.positioning.solve import position_snapshots, position_static
+from leosop.positioning.measurements import Measurements
+from leosop.positioning.solve import position_snapshots, position_static, position_static_passes, satellite_states
+from leosop.timebase import seconds_since
 
 
 def test_doptrack_single_pass_static_fixes():
@@ -35,6 +37,41 @@ def test_doptrack_single_pass_static_fixes():
     # pass); 13 within 10 km. Bounds 18 and 11.
     assert (np.fmin(err, mirror) < 100e3).sum() >= 18
     assert (np.fmin(err, mirror) < 10e3).sum() >= 11
+
+
+def _passes_fix(passes, pos_rx_ecef_m=None):
+    """Joint fix of DopTrack passes, states from each pass's own element set (light time for pos_rx_ecef_m)."""
+    states = [satellite_states(p.meas, p.constellation, pos_rx_ecef_m)[:2] for p in passes]
+    t = np.concatenate([p.meas.time_utc for p in passes])
+    cat = lambda name: np.concatenate([getattr(p.meas, name) for p in passes])  # noqa: E731
+    meas = Measurements(t_s=seconds_since(t, t.min()), time_utc=t, sat_id=cat("sat_id"), doppler_hz=cat("doppler_hz"),
+                        sigma_hz=cat("sigma_hz"), carrier_hz=cat("carrier_hz"),
+                        pos_sv_ecef_m=np.concatenate([s[0] for s in states]),
+                        vel_sv_ecef_mps=np.concatenate([s[1] for s in states]), line=np.arange(len(t)))
+    pass_id = np.repeat(np.arange(len(passes)), [len(p.meas) for p in passes])
+    return position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx_ecef_m).fixes
+
+
+def test_doptrack_passes_in_one_fix_resolve_the_side():
+    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:20]
+    truth = passes[0].station_pos_ecef_m
+    fix = _passes_fix(passes)  # no start given: a grid around the sub-satellite centroid
+    fix = _passes_fix(passes, fix.pos_ecef_m)  # light time at the first fix
+    err = np.linalg.norm(fix.pos_ecef_m - truth)
+    sigma = np.sqrt(np.trace(fix.cov[:3, :3]))
+    # The same 20 passes fixed one at a time land on the wrong side 9 times (median 7.9 km over all
+    # 98); together they give 2.5 km, no ambiguity (tools/real_doppler_position.py: all 98 passes
+    # 1.5 km). Bound 3.5 km: the data are fixed, a loss of ~40% is a regression.
+    assert fix.status in (FixStatus.OK, FixStatus.INCONSISTENT) and not fix.ambiguous
+    assert err < 3.5e3
+    assert fix.clock_poly_hz.shape == (20, 4)
+    # Each pass's sigma comes from the joint residuals, so chi-square per row is ~1 (achieved 1.03;
+    # bounds 0.9-1.2) ...
+    assert 0.9 < fix.chi2 / fix.n_used < 1.2
+    # ... yet the posterior sigma (~90 m) knows only the white Doppler noise: each pass's element set is
+    # off by ~1-5 km along track, a bias common to that pass's rows, and the error is ~28 sigma
+    # (achieved 27.7). A known shortfall, asserted so that a change in either shows: 5 < err/sigma < 100.
+    assert 5 < err / sigma < 100
 
 
 def test_fox1d_pass_with_its_catalogue_number():

@@ -4,7 +4,10 @@
 
 DopTrack (Delfi-C3, 98 passes): one static fix per pass with the station
 height known, no start given (the solver's own starts); error per pass and
-the median. FOX-1D: the trimmed pass with each candidate catalogue number.
+the median. Then fixes from several passes (a transmitter frequency
+polynomial per pass, position shared): all 98 passes, each day's passes, and
+sliding windows of N consecutive passes; errors against the station, the
+posterior sigma and their ratio. FOX-1D: the trimmed pass with each candidate catalogue number.
 GSDC: snapshot velocity, clock drift and position, and a static fix.
 ``--export DIR`` also writes each data set as a DESIGN 4.3 table (plus the
 element sets) so that ``leosop position`` can be run on them.
@@ -16,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from leosop.frames import ecef_to_enu, geodetic_to_ecef
+from leosop.frames import C_e_n, ecef_to_enu, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
-from leosop.positioning.measurements import write_measurements
-from leosop.positioning.solve import position_snapshots, position_static, satellite_states
+from leosop.positioning.measurements import Measurements, write_measurements
+from leosop.positioning.solve import position_snapshots, position_static, position_static_passes, satellite_states
+from leosop.progress import progress
+from leosop.timebase import seconds_since
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FOX_SITE = (37.229976, -80.439627, 610.0)
@@ -59,6 +64,74 @@ def doptrack(data, export):
     q1, q2, q3 = np.nanpercentile(lag, [25, 50, 75])
     print(f"time tags: range rate at the station crosses zero {q2:+.2f} s after the files' tca "
           f"(median; quartiles {q1:+.2f}, {q3:+.2f} s; element sets and station as given)")
+    doptrack_passes(passes)
+
+
+def combine_passes(passes, pos_rx_ecef_m=None):
+    """One table of several DopTrack passes, satellite states from each pass's own element set.
+
+    Light time for ``pos_rx_ecef_m`` (none without it). Returns the
+    Measurements (with the state columns) and each row's pass index.
+    """
+    parts = [(p.meas, *satellite_states(p.meas, p.constellation, pos_rx_ecef_m)[:2]) for p in passes]
+    time_utc = np.concatenate([m.time_utc for m, _, _ in parts])
+    cat = lambda name: np.concatenate([getattr(m, name) for m, _, _ in parts])  # noqa: E731
+    meas = Measurements(t_s=seconds_since(time_utc, time_utc.min()), time_utc=time_utc, sat_id=cat("sat_id"),
+                        doppler_hz=cat("doppler_hz"), sigma_hz=cat("sigma_hz"), carrier_hz=cat("carrier_hz"),
+                        pos_sv_ecef_m=np.concatenate([p for _, p, _ in parts]),
+                        vel_sv_ecef_mps=np.concatenate([v for _, _, v in parts]), line=np.arange(len(time_utc)),
+                        source="DopTrack passes")
+    return meas, np.repeat(np.arange(len(passes)), [len(m) for m, _, _ in parts])
+
+
+def fix_passes(passes):
+    """Multi-pass static fix, height known, no start given; light time recomputed at the first fix."""
+    pos_rx = None
+    for _ in range(2):
+        meas, pass_id = combine_passes(passes, pos_rx)
+        res = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx)
+        if not np.isfinite(res.fixes.pos_ecef_m).all():
+            break
+        pos_rx = res.fixes.pos_ecef_m
+    return res.fixes
+
+
+def _horizontal(fix, p):
+    """Horizontal error against the station and its posterior sigma [m]."""
+    lat, lon = np.radians(p.station_lat_deg), np.radians(p.station_lon_deg)
+    d = ecef_to_enu(fix.pos_ecef_m - p.station_pos_ecef_m, lat, lon)
+    C = C_e_n(lat, lon)
+    cov_enu = C.T @ fix.cov[:3, :3] @ C
+    return float(np.hypot(d[0], d[1])), float(np.sqrt(cov_enu[0, 0] + cov_enu[1, 1]))
+
+
+def doptrack_passes(passes, windows=(2, 3, 5)):
+    print("\nDopTrack, several passes in one fix: a cubic transmitter frequency per pass, position shared, height\n"
+          "known, starts on a grid around the sub-satellite centroid (no truth); sigma per pass from the\n"
+          "residuals of a first joint fit. err_h: horizontal error, sig_h: posterior horizontal sigma")
+    p0 = passes[0]
+    fix = fix_passes(passes)
+    err, sig = _horizontal(fix, p0)
+    print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {np.linalg.norm(fix.pos_ecef_m - p0.station_pos_ecef_m):.0f}"
+          f" m, sig_h {sig:.1f} m, err/sig {err / sig:.1f}, {fix.status.name}, {fix.n_used}/{len(fix.used)} rows, "
+          f"ambiguous {fix.ambiguous}")
+    days = np.array([str(p.meas.time_utc[0])[:10] for p in passes])
+    by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
+    sets = [("each day", by_day)] + [(f"{n} in a row", [passes[k:k + n] for k in range(len(passes) - n + 1)])
+                                     for n in windows]
+    print(f"{'set':>12s} {'fixes':>5s} {'passes':>6s} {'median_err_h':>12s} {'<10km':>6s} {'<5km':>5s} "
+          f"{'median_sig_h':>12s} {'median_err/sig':>14s} {'ambiguous':>9s}")
+    for name, subsets in sets:
+        stats = np.array([(*_horizontal(f, p0), f.ambiguous)
+                          for f in (fix_passes(s) for s in progress(subsets, desc=name))])
+        e, sg, amb = stats.T
+        n_pass = np.array([len(x) for x in subsets])
+        print(f"{name:>12s} {len(subsets):5d} {n_pass.mean():6.1f} {np.median(e):12.0f} {(e < 10e3).sum():6d} "
+              f"{(e < 5e3).sum():5d} {np.median(sg):12.1f} {np.median(e / sg):14.1f} {int(amb.sum()):9d}")
+        if name == "each day":
+            for k in np.unique(n_pass):
+                print(f"{'':>12s} days with {k} passes: {(n_pass == k).sum()}, median err_h "
+                      f"{np.median(e[n_pass == k]):.0f} m, median err/sig {np.median(e[n_pass == k] / sg[n_pass == k]):.1f}")
 
 
 def _tca_lag_s(p):
