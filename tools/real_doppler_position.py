@@ -112,8 +112,8 @@ def doptrack_passes(passes, windows=(2, 3, 5)):
     p0 = passes[0]
     fix = fix_passes(passes)
     err, sig = _horizontal(fix, p0)
-    print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {np.linalg.norm(fix.pos_ecef_m - p0.station_pos_ecef_m):.0f}"
-          f" m, sig_h {sig:.1f} m, err/sig {err / sig:.1f}, {fix.status.name}, {fix.n_used}/{len(fix.used)} rows, "
+    err_3d = np.linalg.norm(fix.pos_ecef_m - p0.station_pos_ecef_m)
+    print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {err_3d:.0f} m, sig_h {sig:.1f} m, err/sig {err / sig:.1f}, {fix.status.name}, {fix.n_used}/{len(fix.used)} rows, "
           f"ambiguous {fix.ambiguous}")
     days = np.array([str(p.meas.time_utc[0])[:10] for p in passes])
     by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
@@ -130,8 +130,9 @@ def doptrack_passes(passes, windows=(2, 3, 5)):
               f"{(e < 5e3).sum():5d} {np.median(sg):12.1f} {np.median(e / sg):14.1f} {int(amb.sum()):9d}")
         if name == "each day":
             for k in np.unique(n_pass):
-                print(f"{'':>12s} days with {k} passes: {(n_pass == k).sum()}, median err_h "
-                      f"{np.median(e[n_pass == k]):.0f} m, median err/sig {np.median(e[n_pass == k] / sg[n_pass == k]):.1f}")
+                day = n_pass == k
+                print(f"{'':>12s} days with {k} passes: {day.sum()}, median err_h {np.median(e[day]):.0f} m, "
+                      f"median err/sig {np.median(e[day] / sg[day]):.1f}")
 
 
 def _tca_lag_s(p):
