@@ -7,7 +7,7 @@ from leosop.constants import C_MPS
 from leosop.frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.doppler_ls import FixStatus, solve_snapshots, solve_static, solve_static_passes
+from leosop.positioning.doppler_ls import FixStatus, doppler_rate, solve_snapshots, solve_static, solve_static_passes
 from leosop.positioning.dop import doppler_jacobian
 
 F0_HZ = 11.325e9
@@ -328,3 +328,51 @@ def test_static_passes_flags_an_outlier_in_one_pass(two_passes):
     # the (Gaussian) rows pass the w-test at alpha = 1e-3 with high probability (seed fixed).
     assert not fix.used[bad] and fix.status == FixStatus.OK
     assert np.linalg.norm(fix.pos_ecef_m - station) < 5 * np.sqrt(np.trace(fix.cov[:3, :3]))
+
+
+def test_doppler_rate_matches_finite_differences_of_propagated_states():
+    """The time-bias column: d(doppler)/dt from SGP4 states 0.1 s apart, and its gradient by differences."""
+    f0 = 145.87e6
+    const = load_constellation().subset([0])
+    station = geodetic_to_ecef(np.radians(52.0), np.radians(4.37), 95.0)
+    t = np.datetime64("2025-01-01T00:00:00") + np.arange(0, 6000, 60).astype("timedelta64[s]")
+    dt = np.timedelta64(50, "ms")
+    (pos,), (vel,), _ = state_ecef(const, t)
+    (pos_p,), (vel_p,), _ = state_ecef(const, t + dt)
+    (pos_m,), (vel_m,), _ = state_ecef(const, t - dt)
+    rate, grad = doppler_rate(pos, vel, station, f0)
+    zero = np.zeros((1, 3))
+    fd = (_doppler(pos_p[None], vel_p[None], station[None], zero, np.zeros(1), f0)[0]
+          - _doppler(pos_m[None], vel_m[None], station[None], zero, np.zeros(1), f0)[0]) / 0.1
+    # Two-body + frame terms leave out J2 (up to ~1.5e-2 m/s^2 in low orbit, x f0/c = 0.49 Hz per m/s:
+    # ~7e-3 Hz/s; achieved 5.5e-3); the central difference errs by ~(0.05 s)^2/6 x the third derivative
+    # (<1e-4 Hz/s). Bound 1e-2 Hz/s on rates of up to ~35 Hz/s (a 0.03 % error of the time-bias column).
+    np.testing.assert_allclose(rate, fd, atol=1e-2)
+    # Gradient against central differences of the rate itself in 1 m steps (truncation ~1e-12 relative).
+    e = np.eye(3)
+    fd_grad = np.stack([(doppler_rate(pos, vel, station + e[i], f0)[0] - doppler_rate(pos, vel, station - e[i], f0)[0])
+                        / 2.0 for i in range(3)], -1)
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-5, atol=1e-12)
+
+
+def test_static_passes_recover_an_injected_time_offset_per_pass(two_passes):
+    (dop, pos, vel, f0, t_s, pass_id), station, clocks, t_ref = two_passes
+    dt_true = np.array([0.8, -1.5])
+    rate, _ = doppler_rate(pos, vel, station, f0)
+    biased = dop + dt_true[pass_id] * rate
+    # Noise-free, the model's own first-order time offset: recovered exactly (position to the 0.1 mm step
+    # threshold; offsets and clocks to what that leaves, ~1e-7 s and ~1e-9 Hz/s^k).
+    fix = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, time_bias=True)
+    assert fix.status == FixStatus.OK
+    assert np.linalg.norm(fix.pos_ecef_m - station) < ONE_MM
+    np.testing.assert_allclose(fix.time_bias_s, dt_true, atol=1e-6)
+    np.testing.assert_allclose(fix.clock_poly_hz, clocks, rtol=1e-6, atol=1e-8)
+    assert fix.cov.shape == (3 + 2 * 5, 3 + 2 * 5) and fix.chi2 < 1e-6
+    # With a prior the offsets are shrunk by the prior's weight relative to the data's: a 1e3 s prior
+    # changes nothing measurable; without the time bias the same rows are misfitted (km-level error).
+    prior = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0,
+                                time_bias=True, time_bias_sigma_s=1e3)
+    np.testing.assert_allclose(prior.time_bias_s, dt_true, atol=1e-4)
+    assert np.linalg.norm(prior.pos_ecef_m - station) < 0.1
+    plain = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, alpha=None)
+    assert np.linalg.norm(plain.pos_ecef_m - station) > 1e3 and plain.time_bias_s is None

@@ -84,12 +84,15 @@ def combine_passes(passes, pos_rx_ecef_m=None):
     return meas, np.repeat(np.arange(len(passes)), [len(m) for m, _, _ in parts])
 
 
-def fix_passes(passes):
-    """Multi-pass static fix, height known, no start given; light time recomputed at the first fix."""
+def fix_passes(passes, **kw):
+    """Multi-pass static fix, height known, no start given; light time recomputed at the first fix.
+
+    ``kw`` goes to position_static_passes (the time-bias options).
+    """
     pos_rx = None
     for _ in range(2):
         meas, pass_id = combine_passes(passes, pos_rx)
-        res = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx)
+        res = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx, **kw)
         if not np.isfinite(res.fixes.pos_ecef_m).all():
             break
         pos_rx = res.fixes.pos_ecef_m

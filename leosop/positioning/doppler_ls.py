@@ -36,11 +36,12 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm as norm_dist
 
+from ..constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from .dop import N_DOPPLER_STATES, cofactor, doppler_jacobian
 
 __all__ = ["FixStatus", "SnapshotFixes", "StaticFix", "PassesFix", "solve_snapshots", "solve_static",
-           "solve_static_passes", "subpoint_centroid_ecef_m", "N_STATIC_STATES"]
+           "solve_static_passes", "doppler_rate", "subpoint_centroid_ecef_m", "N_STATIC_STATES"]
 
 #: States of a static batch fix with a linear clock: position, frequency offset, frequency drift.
 N_STATIC_STATES = 5
@@ -624,8 +625,9 @@ class PassesFix:
     clock_poly_hz : ndarray, (n_pass, d + 1)
         Each pass's frequency offset polynomial in ``t - t_ref`` [Hz/s^k],
         lowest first.
-    cov : ndarray, (3 + n_pass (d + 1),) * 2
-        Posterior covariance of ``[pos, clock_poly_hz.ravel()]``.
+    cov : ndarray, (3 + n_pass (d + 1 + b),) * 2
+        Posterior covariance of ``[pos, clock_poly_hz.ravel(), time_bias_s]``
+        (``b`` 1 with time biases, else 0 and no ``time_bias_s`` states).
     gdop : float
         ``sqrt(trace((H^T W H)^-1))`` of the position with the clocks
         eliminated, weights relative to the median Doppler weight.
@@ -641,6 +643,9 @@ class PassesFix:
         The best such solution, NaN when none; ``mirror_chi2`` its chi-square
         on the rows the fix used.
     mirror_chi2 : float
+    time_bias_s : ndarray, (n_pass,), or None
+        Each pass's time offset of the satellite states (first order: an
+        along-track error of its element set) when modelled.
     """
 
     pos_ecef_m: np.ndarray
@@ -658,6 +663,7 @@ class PassesFix:
     ambiguous: bool
     mirror_pos_ecef_m: np.ndarray
     mirror_chi2: float
+    time_bias_s: np.ndarray = None
 
     @property
     def clock_offset_hz(self):
@@ -685,6 +691,41 @@ def _inverse_or_nan(N, rcond=1e-12):
     return (V / lam) @ V.T * d[:, None] * d[None, :]
 
 
+def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz):
+    """Rate of the Doppler seen by a receiver at rest in ECEF, and its gradient w.r.t. the receiver position.
+
+    The satellite's acceleration is two-body gravity plus the frame's
+    centrifugal and Coriolis terms (J2 changes it by ~0.1 %). The rate is
+    ``d(doppler)/d(dt)`` for a time offset ``dt`` of the satellite states.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
+    pos_rx_ecef_m : array_like, (..., 3)
+    carrier_hz : float or array_like, (m,)
+
+    Returns
+    -------
+    rate_hz_per_s : ndarray, (..., m)
+    grad_hz_per_s_m : ndarray, (..., m, 3)
+    """
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
+    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
+    a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
+           - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
+    dr = r_s - np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :]
+    rho = np.linalg.norm(dr, axis=-1, keepdims=True)
+    u = dr / rho
+    rho_dot = np.sum(u * v_s, axis=-1, keepdims=True)
+    u_a = np.sum(u * a_s, axis=-1, keepdims=True)
+    v2 = np.sum(v_s * v_s, axis=-1, keepdims=True)
+    k = -np.asarray(carrier_hz, dtype=float)[..., None] / C_MPS
+    rate = k * ((v2 - rho_dot**2) / rho + u_a)
+    grad = k * (2.0 * rho_dot * (v_s - u * rho_dot) / rho**2 + (v2 - rho_dot**2) * u / rho**2 - (a_s - u * u_a) / rho)
+    return rate[..., 0], grad
+
+
 def _grid_starts(centre_ecef_m, offset_m):
     """Ground points at ``centre`` and on a 5 x 5 east/north grid of half-width ``offset_m`` around it, (25, 3)."""
     lat, lon, _ = ecef_to_geodetic(centre_ecef_m)
@@ -697,20 +738,25 @@ def _grid_starts(centre_ecef_m, offset_m):
 
 def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
                         pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3,
-                        clock_degree=3, start_offset_m=1.0e6, ambiguity_m=10e3):
+                        clock_degree=3, time_bias=False, time_bias_sigma_s=None, start_offset_m=1.0e6,
+                        ambiguity_m=10e3):
     """Batch Doppler fix of a receiver at rest from several passes, each with its own transmitter frequency.
 
     The position is shared; each pass ``p`` has its own frequency offset, a
     polynomial of degree ``clock_degree`` in ``t - t_ref[p]`` (the pass's
-    mid-time). The clock terms enter linearly and through a basis that does
-    not depend on the position, so they are eliminated exactly (variable
-    projection): each LM step solves, per pass, the weighted linear fit of
-    the clock to the residuals, and iterates on the position alone with the
-    projected Jacobian ``(I - B K) H``. The chi-square uses all states'
-    degrees of freedom; the covariance is that of the full state. Passes on
-    opposite sides of the station resolve the mirror ambiguity of a single
-    pass. Outliers are excluded one row per pass at a time (see
-    :func:`solve_static` for the test).
+    mid-time), and optionally a time offset ``dt_p`` of its satellite states
+    (to first order the along-track error of its element set, or a time-tag
+    offset), entering each row through the Doppler rate
+    (:func:`doppler_rate`). These per-pass terms enter linearly, so they are
+    eliminated exactly (variable projection): each LM step solves, per pass,
+    the weighted linear fit of them to the residuals, and iterates on the
+    position alone with the projected Jacobian ``(I - A K) D``, ``D`` the
+    position derivative at fixed per-pass terms (which gives the exact
+    gradient even though the rate column depends on the position). The
+    chi-square uses all states' degrees of freedom; the covariance is that
+    of the full state. Passes on opposite sides of the station resolve the
+    mirror ambiguity of a single pass. Outliers are excluded one row per pass
+    at a time (see :func:`solve_static` for the test).
 
     Parameters
     ----------
@@ -718,7 +764,7 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
     pass_id : array_like, (m,)
         Label of each row's pass (any sortable type). Passes with fewer than
-        ``clock_degree + 2`` usable rows are left out.
+        one more usable row than per-pass terms are left out.
     pos0_ecef_m : array_like, (3,) or (k, 3), optional
         Start(s); the lowest chi-square wins. Default the ground point below
         the satellites' mean direction and a 5 x 5 grid of
@@ -730,6 +776,11 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     alpha : float or None
         Significance of the chi-square outlier test; None disables it.
     clock_degree : int
+    time_bias : bool
+        Estimate each pass's time offset ``dt_p`` [s].
+    time_bias_sigma_s : float, optional
+        Zero-mean prior standard deviation of each ``dt_p`` (a pseudo-row per
+        pass); None: no prior.
     start_offset_m, ambiguity_m : float
 
     Returns
@@ -739,6 +790,9 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     deg = int(clock_degree)
     if deg < 0:
         raise ValueError("clock degree must be non-negative")
+    tb = int(bool(time_bias))
+    has_prior = tb and time_bias_sigma_s is not None
+    n_lin = deg + 1 + tb
     y = np.asarray(doppler_hz, dtype=float).ravel()
     n = y.size
     r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n, 3)
@@ -750,7 +804,7 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     m = np.ones(n, bool) if mask is None else np.asarray(mask, bool).ravel()
     m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
     m &= np.isfinite(t)
-    keep = np.bincount(gi[m], minlength=len(labels)) >= deg + 2
+    keep = np.bincount(gi[m], minlength=len(labels)) >= n_lin + 1
     m &= keep[gi]
     labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
     gi[~m] = np.maximum(gi[~m], 0)
@@ -768,35 +822,51 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     half_span_s = np.maximum(0.5 * (t_hi - t_lo), 1.0)
     # Clock basis in the scaled time u = (t - t_ref) / half_span, |u| <= 1, for conditioning.
     basis = ((t - t_ref[gi]) / half_span_s[gi])[:, None] ** np.arange(deg + 1) if n_pass else np.zeros((n, deg + 1))
+    # Prior on each pass's time offset: a pseudo-row per pass (measured 0), after the Doppler rows.
+    prior = np.zeros(n_lin)
+    n_extra = 0
+    if has_prior:
+        prior[-1] = 1.0 / float(time_bias_sigma_s) ** 2
+        y, sigma, m = (np.append(a, np.full(n_pass, v)) for a, v in ((y, 0.0), (sigma, time_bias_sigma_s), (m, True)))
+        n_extra = n_pass
     has_alt = alt_m is not None
     if has_alt:
         y, sigma, m = np.append(y, alt_m), np.append(sigma, alt_sigma_m), np.append(m, True)
     fixed = np.zeros(y.size, bool)
     fixed[n:] = True
-    groups = np.append(gi, [-1] * has_alt)
+    groups = np.concatenate([gi, [-1] * (n_extra + has_alt)])
 
     def pieces(x, w):
-        """Geometric prediction and Jacobian, and the per-pass clock fit (c, K H) to its residuals."""
+        """Geometric prediction, per-pass basis A, position derivative D and the per-pass fit (c, K D, G)."""
         H = doppler_jacobian(r_s, v_s, x, np.zeros((len(x), 3)), f0)
-        h, Hp = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s), H[..., :3]
-        wb = w[:, :n, None] * basis
-        G = np.add.reduceat(wb[..., :, None] * basis[:, None, :], seg, axis=1)
+        h, D = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s), H[..., :3]
+        A = np.broadcast_to(basis, (len(x),) + basis.shape)
+        if tb:
+            rate, grad = doppler_rate(r_s, v_s, x, f0)
+            A = np.concatenate([A, rate[..., None]], -1)
+        wA = w[:, :n, None] * A
+        G = np.add.reduceat(wA[..., :, None] * A[..., None, :], seg, axis=1) + np.diag(prior)
         Ginv = np.linalg.pinv(G, hermitian=True)
-        c = np.einsum("pgij,pgj->pgi", Ginv, np.add.reduceat(wb * (y[:n] - h)[..., None], seg, axis=1))
-        KH = Ginv @ np.add.reduceat(wb[..., :, None] * Hp[..., None, :], seg, axis=1)
-        return h, Hp, c, KH, G
+        c = np.einsum("pgij,pgj->pgi", Ginv, np.add.reduceat(wA * (y[:n] - h)[..., None], seg, axis=1))
+        if tb:
+            D = D + c[:, gi, -1, None] * grad
+        KD = Ginv @ np.add.reduceat(wA[..., :, None] * D[..., None, :], seg, axis=1)
+        return h, A, D, c, KD, G
 
     def model(x, idx, w):
-        h, Hp, c, KH, _ = pieces(x, w)
-        pred = h + np.einsum("mi,pmi->pm", basis, c[:, gi])
-        J = Hp - np.einsum("mi,pmij->pmj", basis, KH[:, gi])
+        h, A, D, c, KD, _ = pieces(x, w)
+        pred = h + np.einsum("pmi,pmi->pm", A, c[:, gi])
+        J = D - np.einsum("pmi,pmij->pmj", A, KD[:, gi])
+        if has_prior:
+            pred = np.concatenate([pred, c[:, :, -1]], -1)
+            J = np.concatenate([J, -KD[:, :, -1]], axis=1)
         if has_alt:
             lat, lon, alt = ecef_to_geodetic(x)
             pred = np.concatenate([pred, alt[:, None]], -1)
             J = np.concatenate([J, C_e_n(lat, lon)[..., 2][:, None, :]], axis=1)
         return pred, J
 
-    n_states = 3 + n_pass * (deg + 1)
+    n_states = 3 + n_pass * n_lin
     xtol = _XTOL_STATIC[:3]
 
     def solve(x0, used, alpha_):
@@ -833,34 +903,40 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         xm, _, _, _, _, _, chi2_m, status_m = solve(x_mirror, used, None)
         if status_m[0] in (FixStatus.OK, FixStatus.INCONSISTENT):
             mirror_pos, mirror_chi2 = xm[0], float(chi2_m[0])
-    # Full covariance [pos, clocks] from the normal equations' blocks at the solution.
+    # Full covariance [pos, per-pass terms] from the normal equations' blocks at the solution (pass-major).
     w = np.where(used, 1.0 / sigma**2, 0.0)
-    _, Hp, c, _, G = pieces(x, w)
-    wd = w[:, :n]
+    _, A, D, c, _, G = pieces(x, w)
+    wd = w[0, :n]
     N = np.zeros((n_states, n_states))
-    N[:3, :3] = np.einsum("mi,m,mj->ij", Hp[0], wd[0], Hp[0])
+    N[:3, :3] = np.einsum("mi,m,mj->ij", D[0], wd, D[0])
     if has_alt:
         lat, lon, _ = ecef_to_geodetic(x[0])
         up = C_e_n(lat, lon)[:, 2]
-        N[:3, :3] += np.outer(up, up) * w[0, n]
-    cross = np.add.reduceat((wd[0, :, None] * basis)[:, :, None] * Hp[0][:, None, :], seg, axis=0)
+        N[:3, :3] += np.outer(up, up) * w[0, -1]
+    cross = np.add.reduceat((wd[:, None] * A[0])[:, :, None] * D[0][:, None, :], seg, axis=0)
     N[3:, :3] = cross.reshape(-1, 3)
     N[:3, 3:] = N[3:, :3].T
     for p in range(n_pass):
-        sl = slice(3 + p * (deg + 1), 3 + (p + 1) * (deg + 1))
+        sl = slice(3 + p * n_lin, 3 + (p + 1) * n_lin)
         N[sl, sl] = G[0, p]
-    scale = np.concatenate([np.ones(3), (1.0 / half_span_s[:, None] ** np.arange(deg + 1)).ravel()])
+    scale_lin = np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
+    scale = np.concatenate([np.ones(3), scale_lin.ravel()])
     cov = _inverse_or_nan(N) * scale[:, None] * scale[None, :] if ok else np.full((n_states, n_states), np.nan)
+    # Reorder to [pos, clock polynomials, time biases].
+    lin = np.arange(n_pass * n_lin).reshape(n_pass, n_lin)
+    perm = np.concatenate([np.arange(3), 3 + lin[:, :deg + 1].ravel(), 3 + lin[:, deg + 1:].ravel()])
+    cov = cov[np.ix_(perm, perm)]
     w_rel = np.where(used[0], np.median(sigma[:n][m[:n]]) ** 2 / sigma**2, 0.0) if m[:n].any() \
         else used[0].astype(float)
     gdop = float(np.sqrt(np.trace(cofactor(J[0], w_rel))))
     back = np.empty(n, dtype=int)
     back[order] = np.arange(n)
     nan_unless = (lambda a: a if ok else np.full_like(a, np.nan))  # noqa: E731
+    c_scaled = c[0] * scale_lin
     return PassesFix(
-        pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref,
-        clock_poly_hz=nan_unless(c[0] * scale[3:].reshape(n_pass, deg + 1)), cov=cov, gdop=gdop,
-        residuals_hz=res[0, :n][back], used=used[0, :n][back], n_used=int(used[0, :n].sum()),
+        pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref, clock_poly_hz=nan_unless(c_scaled[:, :deg + 1]),
+        cov=cov, gdop=gdop, residuals_hz=res[0, :n][back], used=used[0, :n][back], n_used=int(used[0, :n].sum()),
         iterations=int(iterations[0]), chi2=float(chi2[0]), status=FixStatus(int(status[0])),
         ambiguous=ambiguous, mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
+        time_bias_s=nan_unless(c_scaled[:, -1].copy()) if tb else None,
     )

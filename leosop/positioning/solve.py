@@ -264,7 +264,7 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
 
 
 def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
-                           sigma_hz=None, alpha=1e-3, clock_degree=3):
+                           sigma_hz=None, alpha=1e-3, clock_degree=3, time_bias=False, time_bias_sigma_s=None):
     """One batch fix of a receiver at rest from several passes, a transmitter frequency polynomial per pass.
 
     Rows without ``sigma_hz`` get the caller's sigma, or their own pass's:
@@ -281,6 +281,10 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
         As :func:`position_static`.
     clock_degree : int
         Degree of each pass's frequency-offset polynomial.
+    time_bias, time_bias_sigma_s
+        Estimate a time offset of each pass's satellite states (its element
+        set's along-track error), optionally with a prior; see
+        :func:`~leosop.positioning.doppler_ls.solve_static_passes`.
 
     Returns
     -------
@@ -293,13 +297,14 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
     if usable.sum() < 4 + clock_degree:
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {4 + clock_degree}")
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
-              clock_degree=clock_degree)
+              clock_degree=clock_degree, time_bias=time_bias, time_bias_sigma_s=time_bias_sigma_s)
     pos_lt = init_pos_ecef_m
     sigma_pass = None
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
         pilot = solve_static_passes(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel,
                                     meas.carrier_hz, meas.t_s, pass_id, alpha=None, **kw)
-        sigma_pass = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used], clock_degree + 1)
+        sigma_pass = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used],
+                                             clock_degree + 1 + bool(time_bias))
                                for p in pilot.pass_ids])
         sigma_pass = np.where(np.isfinite(sigma_pass) & (sigma_pass > 0), sigma_pass, 1.0)
         if np.isfinite(pilot.pos_ecef_m).all():
