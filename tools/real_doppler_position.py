@@ -7,7 +7,8 @@ height known, no start given (the solver's own starts); error per pass and
 the median. Then fixes from several passes (a transmitter frequency
 polynomial per pass, position shared): all 98 passes, each day's passes, and
 sliding windows of N consecutive passes; errors against the station, the
-posterior sigma and their ratio. FOX-1D: the trimmed pass with each candidate catalogue number.
+posterior sigma and their ratio; then the same with a time offset per pass
+(1 s prior). FOX-1D: the trimmed pass with each candidate catalogue number.
 GSDC: snapshot velocity, clock drift and position, and a static fix.
 ``--export DIR`` also writes each data set as a DESIGN 4.3 table (plus the
 element sets) so that ``leosop position`` can be run on them.
@@ -65,6 +66,8 @@ def doptrack(data, export):
     print(f"time tags: range rate at the station crosses zero {q2:+.2f} s after the files' tca "
           f"(median; quartiles {q1:+.2f}, {q3:+.2f} s; element sets and station as given)")
     doptrack_passes(passes)
+    # A time offset per pass (along-track error of its element set): consistent on all passes, worse on few.
+    doptrack_passes(passes, time_bias=True, time_bias_sigma_s=1.0)
 
 
 def combine_passes(passes, pos_rx_ecef_m=None):
@@ -108,34 +111,41 @@ def _horizontal(fix, p):
     return float(np.hypot(d[0], d[1])), float(np.sqrt(cov_enu[0, 0] + cov_enu[1, 1]))
 
 
-def doptrack_passes(passes, windows=(2, 3, 5)):
+def doptrack_passes(passes, windows=(2, 3, 5), **kw):
+    """Multi-pass fixes of all passes, each day's and sliding windows; ``kw`` to position_static_passes."""
     print("\nDopTrack, several passes in one fix: a cubic transmitter frequency per pass, position shared, height\n"
           "known, starts on a grid around the sub-satellite centroid (no truth); sigma per pass from the\n"
-          "residuals of a first joint fit. err_h: horizontal error, sig_h: posterior horizontal sigma")
+          "residuals of a first joint fit. err_h: horizontal error, sig_h: posterior horizontal sigma. "
+          f"Options: {kw or 'none'}")
     p0 = passes[0]
-    fix = fix_passes(passes)
+    fix = fix_passes(passes, **kw)
     err, sig = _horizontal(fix, p0)
     err_3d = np.linalg.norm(fix.pos_ecef_m - p0.station_pos_ecef_m)
-    print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {err_3d:.0f} m, sig_h {sig:.1f} m, err/sig {err / sig:.1f}, {fix.status.name}, {fix.n_used}/{len(fix.used)} rows, "
-          f"ambiguous {fix.ambiguous}")
+    print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {err_3d:.0f} m, sig_h {sig:.1f} m, "
+          f"err/sig {err / sig:.1f}, {fix.status.name}, {fix.n_used}/{len(fix.used)} rows, ambiguous {fix.ambiguous}")
+    if fix.time_bias_s is not None:
+        q1, q2, q3 = np.percentile(fix.time_bias_s, [25, 50, 75])
+        print(f"  time offsets per pass: median {q2:+.2f} s, quartiles {q1:+.2f}, {q3:+.2f} s")
     days = np.array([str(p.meas.time_utc[0])[:10] for p in passes])
     by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
     sets = [("each day", by_day)] + [(f"{n} in a row", [passes[k:k + n] for k in range(len(passes) - n + 1)])
                                      for n in windows]
-    print(f"{'set':>12s} {'fixes':>5s} {'passes':>6s} {'median_err_h':>12s} {'<10km':>6s} {'<5km':>5s} "
-          f"{'median_sig_h':>12s} {'median_err/sig':>14s} {'ambiguous':>9s}")
+    print(f"{'set':>12s} {'fixes':>5s} {'failed':>6s} {'passes':>6s} {'median_err_h':>12s} {'<10km':>6s} {'<5km':>5s} "
+          f"{'median_sig_h':>12s} {'median_err/sig':>14s} {'err/sig<3':>9s} {'ambiguous':>9s}")
     for name, subsets in sets:
         stats = np.array([(*_horizontal(f, p0), f.ambiguous)
-                          for f in (fix_passes(s) for s in progress(subsets, desc=name))])
+                          for f in (fix_passes(s, **kw) for s in progress(subsets, desc=name))])
         e, sg, amb = stats.T
+        r = e / sg
         n_pass = np.array([len(x) for x in subsets])
-        print(f"{name:>12s} {len(subsets):5d} {n_pass.mean():6.1f} {np.median(e):12.0f} {(e < 10e3).sum():6d} "
-              f"{(e < 5e3).sum():5d} {np.median(sg):12.1f} {np.median(e / sg):14.1f} {int(amb.sum()):9d}")
+        print(f"{name:>12s} {len(subsets):5d} {np.isnan(e).sum():6d} {n_pass.mean():6.1f} {np.nanmedian(e):12.0f} "
+              f"{(e < 10e3).sum():6d} {(e < 5e3).sum():5d} {np.nanmedian(sg):12.1f} {np.nanmedian(r):14.1f} "
+              f"{(r < 3).sum():9d} {int(amb.sum()):9d}")
         if name == "each day":
             for k in np.unique(n_pass):
                 day = n_pass == k
-                print(f"{'':>12s} days with {k} passes: {day.sum()}, median err_h {np.median(e[day]):.0f} m, "
-                      f"median err/sig {np.median(e[day] / sg[day]):.1f}")
+                print(f"{'':>12s} days with {k} passes: {day.sum()}, median err_h {np.nanmedian(e[day]):.0f} m, "
+                      f"median err/sig {np.nanmedian(r[day]):.1f}")
 
 
 def _tca_lag_s(p):
