@@ -12,8 +12,8 @@ import functools
 
 import numpy as np
 import pytest
-from scipy import stats
 
+from consistency import assert_filter_consistent
 from leosop import earth, frames
 from leosop.constants import G0_MPS2
 from leosop.fusion import common, kalman, loose
@@ -108,18 +108,10 @@ def test_filter_is_consistent_with_white_fixes_over_20_seeds():
         nis.append(res.nis[u])
         L = np.linalg.cholesky(res.innovation_cov[u])
         white.append(np.linalg.solve(L, res.innovation[u][..., None])[..., 0])
-    nees, nis = np.concatenate(nees), np.concatenate(nis)
-    # Issue 6: mean NEES within [0.5, 2] of its dimension (6).
-    assert 0.5 * 6 <= nees.mean() <= 2.0 * 6
-    # NIS: mean of k chi-square(6) draws, 99.9 % two-sided interval.
-    k = nis.size
-    lo, hi = stats.chi2.ppf([0.0005, 0.9995], 6 * k) / k
-    assert lo <= nis.mean() <= hi
-    # Whiteness: lag-1 correlation of the whitened innovations; under the
-    # null it is ~N(0, 1/n) with n = 20 x 119 x 6 pairs, so |r| < 4/sqrt(n).
-    a = np.concatenate([w[:-1] for w in white]).ravel()
-    b = np.concatenate([w[1:] for w in white]).ravel()
-    assert abs(np.corrcoef(a, b)[0, 1]) < 4.0 / np.sqrt(a.size)
+    nis = np.concatenate(nis)  # each update is a chi-square(6) draw
+    # Whiteness over n = 20 x 119 x 6 pairs of whitened innovations.
+    assert_filter_consistent(np.concatenate(nees), nis.sum(), 6 * nis.size,
+                             np.concatenate([w[:-1] for w in white]), np.concatenate([w[1:] for w in white]))
 
 
 def test_vertical_accelerometer_bias_is_recovered():
@@ -174,15 +166,9 @@ def test_filter_is_consistent_with_the_simulated_time_correlated_fixes():
         nees.append(r.nees()[1:])
         nis.append(r.nis()[0])
         white.append(_whitened(r))
-    nees, nis = np.concatenate(nees), np.concatenate(nis)
-    assert 0.5 * 6 <= nees.mean() <= 2.0 * 6
-    k = nis.size
-    lo, hi = stats.chi2.ppf([0.0005, 0.9995], 6 * k) / k
-    assert lo <= nis.mean() <= hi
-    # ~N(0, 1/n) under the null, n = 12 x 89 x 6 pairs: |r| < 4/sqrt(n).
-    a = np.concatenate([w[:-1] for w in white]).ravel()
-    b = np.concatenate([w[1:] for w in white]).ravel()
-    assert abs(np.corrcoef(a, b)[0, 1]) < 4.0 / np.sqrt(a.size)
+    nis = np.concatenate(nis)  # n = 12 x 89 x 6 whitened pairs below
+    assert_filter_consistent(np.concatenate(nees), nis.sum(), 6 * nis.size,
+                             np.concatenate([w[:-1] for w in white]), np.concatenate([w[1:] for w in white]))
 
 
 def test_common_orbit_shift_moves_the_fixes_and_the_filter_knows_it():
