@@ -167,23 +167,9 @@ def test_static_recovers_station_with_drift_and_altitude(sky):
 
 def test_static_single_pass_mirror_is_flagged_and_start_decides():
     """One VHF satellite pass 400 km beside a station (DopTrack-like): its mirror fits as well."""
-    f0 = 145.87e6
-    const = load_constellation().subset([0])
-    t = np.datetime64("2025-01-01T00:00:00") + np.arange(0, 600, 2).astype("timedelta64[s]")
-    pos, vel, _ = state_ecef(const, t)
-    lat_s, lon_s, _ = ecef_to_geodetic(pos[0, 150])
-    track = vel[0, 150] @ C_e_n(lat_s, lon_s)
-    across = np.array([track[1], -track[0], 0.0]) / np.hypot(track[0], track[1])
-    la, lo, _ = ecef_to_geodetic(geodetic_to_ecef(lat_s, lon_s, 0.0) + enu_to_ecef(across * 400e3, lat_s, lon_s))
-    station = geodetic_to_ecef(la, lo, 50.0)
-    mla, mlo, _ = ecef_to_geodetic(geodetic_to_ecef(lat_s, lon_s, 0.0) - enu_to_ecef(across * 400e3, lat_s, lon_s))
-    _, el, _ = azimuth_elevation_range(pos[0], station)
-    up = el > np.radians(5)
-    rng = np.random.default_rng(11)
-    dop = _doppler(pos[0, up][None], vel[0, up][None], station[None], np.zeros((1, 3)), np.array([-300.0]), f0)[0]
-    dop += rng.normal(0.0, 2.0, dop.shape)
-    t_s = np.arange(0, 600, 2.0)[up]
-    args = (dop, 2.0, pos[0, up], vel[0, up], f0, t_s)
+    args, station, mirror_site = _single_pass(clock=(-300.0,))
+    la, lo, _ = ecef_to_geodetic(station)
+    mla, mlo, _ = ecef_to_geodetic(mirror_site)
     near = geodetic_to_ecef(la + np.radians(0.5), lo, 0.0)  # ~55 km from the station, same side
     fix = solve_static(*args, pos0_ecef_m=near, alt_m=50.0, alt_sigma_m=1.0)
     assert fix.status == FixStatus.OK and fix.ambiguous
@@ -195,7 +181,10 @@ def test_static_single_pass_mirror_is_flagged_and_start_decides():
 
 
 def _single_pass(offset_km=400.0, seed=11, sigma_hz=2.0, clock=(-300.0, -0.5, 2e-4, 1e-6)):
-    """One VHF pass ``offset_km`` beside a station, transmitter offset a cubic in time about mid-pass."""
+    """One VHF pass ``offset_km`` beside a station, transmitter offset a polynomial in time about mid-pass.
+
+    Returns the solver arguments, the station and its mirror image across the ground track (ECEF).
+    """
     f0 = 145.87e6
     const = load_constellation().subset([0])
     t = np.datetime64("2025-01-01T00:00:00") + np.arange(0, 600, 2).astype("timedelta64[s]")
@@ -203,22 +192,22 @@ def _single_pass(offset_km=400.0, seed=11, sigma_hz=2.0, clock=(-300.0, -0.5, 2e
     lat_s, lon_s, _ = ecef_to_geodetic(pos[0, 150])
     track = vel[0, 150] @ C_e_n(lat_s, lon_s)
     across = np.array([track[1], -track[0], 0.0]) / np.hypot(track[0], track[1])
-    la, lo, _ = ecef_to_geodetic(geodetic_to_ecef(lat_s, lon_s, 0.0) + enu_to_ecef(across * offset_km * 1e3, lat_s,
-                                                                                    lon_s))
-    station = geodetic_to_ecef(la, lo, 50.0)
+    beside = enu_to_ecef(across * offset_km * 1e3, lat_s, lon_s)
+    station, mirror = (geodetic_to_ecef(*ecef_to_geodetic(geodetic_to_ecef(lat_s, lon_s, 0.0) + k * beside)[:2], 50.0)
+                       for k in (1.0, -1.0))
     _, el, _ = azimuth_elevation_range(pos[0], station)
     up = el > np.radians(5)
     t_s = np.arange(0, 600, 2.0)[up]
     dt = t_s - 0.5 * (t_s.min() + t_s.max())
     dop = _doppler(pos[0, up][None], vel[0, up][None], station[None], np.zeros((1, 3)), np.zeros(1), f0)[0]
     dop += np.polyval(clock[::-1], dt) + np.random.default_rng(seed).normal(0.0, sigma_hz, dop.shape)
-    return (dop, sigma_hz, pos[0, up], vel[0, up], f0, t_s), station
+    return (dop, sigma_hz, pos[0, up], vel[0, up], f0, t_s), station, mirror
 
 
 def test_static_cubic_clock_is_recovered_and_chosen_by_bic():
     """A transmitter whose offset is a cubic in time (DopTrack-like thermal drift)."""
     clock = (-300.0, -0.5, 2e-4, 1e-6)
-    args, station = _single_pass(clock=clock)
+    args, station, _ = _single_pass(clock=clock)
     cubic = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, clock_degree=3, side_clock_degree=1)
     assert cubic.status == FixStatus.OK and cubic.clock_poly_hz.shape == (4,) and cubic.cov.shape == (7, 7)
     # The model is right: the error is within 5 sigma of the posterior covariance, and each clock
@@ -237,7 +226,7 @@ def test_static_cubic_clock_is_recovered_and_chosen_by_bic():
 
 
 def test_static_bic_keeps_a_linear_clock_when_it_is_linear():
-    args, station = _single_pass(clock=(-300.0, -0.5), seed=5)
+    args, station, _ = _single_pass(clock=(-300.0, -0.5), seed=5)
     fix = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, clock_degree=(1, 2, 3), side_clock_degree=1)
     # BIC's penalty ln(n) ~ 5.5 per state against a chi-square gain of ~1 per superfluous state
     # (chi2 with 1 dof); a higher degree wins with probability < 1% each for this seed-fixed draw.
@@ -246,7 +235,7 @@ def test_static_bic_keeps_a_linear_clock_when_it_is_linear():
 
 
 def test_static_mirror_is_reported_with_its_chi_square():
-    args, station = _single_pass(seed=3, clock=(-300.0, -0.5))
+    args, station, _ = _single_pass(seed=3, clock=(-300.0, -0.5))
     fix = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0)
     # The default starts span +-1,500 km across the track: both sides are solved. The reported fix and
     # mirror are the station and its reflection ~800 km away (400 km either side of the track); the
