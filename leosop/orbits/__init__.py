@@ -2,10 +2,12 @@
 
 ``load_constellation(path)`` reads TLE (2-line or 3-line) and CelesTrak OMM
 (JSON, CSV) files; without a path it returns the bundled default, a
-Starlink-like Walker constellation (``tle/starlink_walker.tle``, epoch
+Starlink-like Walker constellation (``leosop/data/starlink_walker.tle``, shipped
+inside the package and linked from the top-level ``tle/``; epoch
 2025-01-01T00:00:00Z, made by ``tools/make_walker_tle.py``).
 """
 
+from importlib.resources import files
 from pathlib import Path
 
 from .constellation import CARRIERS, Constellation
@@ -14,8 +16,8 @@ from .tle import read_tle
 
 __all__ = ["DEFAULT_TLE", "CARRIERS", "Constellation", "load_constellation", "read_tle", "read_omm"]
 
-#: The bundled default constellation.
-DEFAULT_TLE = Path(__file__).resolve().parents[2] / "tle" / "starlink_walker.tle"
+#: The bundled default constellation (package data, so found from any install).
+DEFAULT_TLE = Path(str(files("leosop") / "data" / "starlink_walker.tle"))
 
 
 def load_constellation(path=None, *, skip_bad=False):
