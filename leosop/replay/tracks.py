@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Track"]
+__all__ = ["Detections", "Track", "Tracker"]
 
 
 @dataclass
@@ -38,3 +38,118 @@ class Track:
 
     def __len__(self):
         return len(self.t_s)
+
+
+@dataclass(frozen=True)
+class Detections:
+    """The combs found in one block, each field (n_found,)."""
+
+    doppler_hz: np.ndarray
+    doppler_rate_hz_per_s: np.ndarray
+    cn0_dbhz: np.ndarray
+    sigma_hz: np.ndarray
+
+    def __len__(self):
+        return len(self.doppler_hz)
+
+
+#: Doppler gate of the association [Hz]: a constant part for the estimates'
+#: errors, a part growing with the gap for an error of the track's rate, and
+#: one for the change of the rate itself (a Starlink pass changes its rate by
+#: up to ~50 Hz/s^2 near culmination at 11.3 GHz). Combs of different
+#: satellites are kHz apart almost always, so a generous gate costs nothing.
+GATE_HZ = 150.0
+GATE_HZ_PER_S = 60.0
+GATE_HZ_PER_S2 = 40.0
+#: Detections a track's prediction is fitted to.
+_FIT_POINTS = 8
+
+
+class Tracker:
+    """Joins each block's detections into tracks (global nearest neighbour).
+
+    A track predicts its Doppler at the next block from its last Doppler, its
+    rate and the change of rate between its last two blocks, so it crosses
+    capture gaps (snapshot recordings) as well as consecutive blocks. A
+    detection no track claims starts a tentative track, confirmed by
+    ``min_blocks`` detections no more than ``max_gap_tentative_s`` apart
+    (false alarms do not line up like that); a confirmed track not fed for
+    ``max_gap_s`` ends. Unconfirmed tracks are dropped.
+
+    Parameters
+    ----------
+    max_gap_s : float
+        Longest time without a detection before a confirmed track ends.
+    min_blocks : int
+        Detections that confirm a track.
+    max_gap_tentative_s : float
+        Longest gap inside a track before it is confirmed.
+    """
+
+    def __init__(self, *, max_gap_s=5.0, min_blocks=3, max_gap_tentative_s=2.5):
+        self.max_gap_s = float(max_gap_s)
+        self.min_blocks = int(min_blocks)
+        self.max_gap_tentative_s = float(max_gap_tentative_s)
+        self._active = []  # lists of rows (t_s, time_utc, f, rate, cn0, sigma)
+        self._done = []
+
+    def _predict(self, rows, t_s):
+        """Predicted Doppler at ``t_s`` and the gate around it.
+
+        From three detections on, a weighted quadratic (a line for three)
+        through the last few Doppler values: far better than one short
+        block's rate estimate. Before that, the last Doppler and its rate.
+        """
+        t_last, f_last, r_last = rows[-1][0], rows[-1][2], rows[-1][3]
+        dt = t_s - t_last
+        gate = GATE_HZ + GATE_HZ_PER_S * dt + GATE_HZ_PER_S2 * dt**2
+        if len(rows) >= 3:
+            recent = rows[-_FIT_POINTS:]
+            tau = np.array([r[0] for r in recent]) - t_last
+            f = np.array([r[2] for r in recent])
+            sigma = np.array([r[5] for r in recent])
+            w = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
+            deg = 1 if len(recent) == 3 or np.ptp(tau) == 0 else 2
+            return np.polyval(np.polyfit(tau, f, deg, w=w), dt), gate
+        return f_last + (r_last if np.isfinite(r_last) else 0.0) * dt, gate
+
+    def update(self, t_s, time_utc, det):
+        """Take the detections of the block centred at ``t_s`` (``time_utc``)."""
+        from scipy.optimize import linear_sum_assignment
+
+        keep = []
+        for rows in self._active:
+            confirmed = len(rows) >= self.min_blocks
+            if t_s - rows[-1][0] <= (self.max_gap_s if confirmed else self.max_gap_tentative_s):
+                keep.append(rows)
+            elif confirmed:
+                self._done.append(rows)
+        self._active = keep
+        claimed = np.zeros(len(det), bool)
+        if self._active and len(det):
+            pred, gate = np.array([self._predict(rows, t_s) for rows in self._active]).T
+            cost = np.abs(det.doppler_hz[None, :] - pred[:, None]) / gate[:, None]
+            big = 1e6
+            i, j = linear_sum_assignment(np.where(cost <= 1.0, cost, big))
+            for a, b in zip(i, j):
+                if cost[a, b] <= 1.0:
+                    self._active[a].append(self._row(t_s, time_utc, det, b))
+                    claimed[b] = True
+        for b in np.flatnonzero(~claimed):
+            self._active.append([self._row(t_s, time_utc, det, b)])
+
+    @staticmethod
+    def _row(t_s, time_utc, det, k):
+        return (t_s, time_utc, det.doppler_hz[k], det.doppler_rate_hz_per_s[k], det.cn0_dbhz[k], det.sigma_hz[k])
+
+    def finish(self):
+        """All tracks of at least ``min_blocks`` detections, in order of their first block."""
+        rows_all = sorted((r for r in self._done + self._active if len(r) >= self.min_blocks),
+                          key=lambda r: (r[0][0], r[0][2]))
+        self._active, self._done = [], []
+        tracks = []
+        for rows in rows_all:
+            t, utc, f, r, c, s = zip(*rows)
+            tracks.append(Track(np.array(t, float), np.array(utc, "datetime64[ns]"), np.array(f, float),
+                                np.array(r, float), np.array(c, float), np.array(s, float)))
+        return tracks

@@ -1,0 +1,75 @@
+"""Tracker: detections of several satellites joined into one track each.
+
+Doppler curves come from SGP4 (the bundled constellation seen from Xi'an), so
+the rates and their changes are those of real LEO passes.
+"""
+
+import numpy as np
+
+from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+from leosop.frames import geodetic_to_ecef
+from leosop.orbits import load_constellation
+from leosop.replay.tracks import Detections, Tracker
+from leosop.signal.channel import site_range_rates
+from leosop.scenarios import XIAN_BAOJI
+
+
+def _passes(n_sats, duration_s, step_s):
+    """Doppler and rate of the n_sats highest satellites, (n_sats, n_t), on a step_s grid."""
+    from leosop.frames import azimuth_elevation_range
+    from leosop.orbits.propagate import state_ecef
+
+    const = load_constellation()
+    pos_rx = geodetic_to_ecef(np.radians(34.342), np.radians(108.94), 400.0)
+    start = XIAN_BAOJI.start_utc
+    pos, _, _ = state_ecef(const, np.array([start]))
+    _, elev, _ = azimuth_elevation_range(pos[:, 0], pos_rx)
+    pick = const.subset(np.argsort(-np.nan_to_num(elev, nan=-9))[:n_sats])
+    t_nodes, rr = site_range_rates(pick, pos_rx, start, duration_s, node_step_s=step_s)
+    dop = -rr * STARLINK_PILOT_HZ / C_MPS
+    rate = np.gradient(dop, t_nodes, axis=1)
+    inside = (t_nodes >= 0) & (t_nodes <= duration_s)
+    return t_nodes[inside], dop[:, inside], rate[:, inside], start
+
+
+def test_snapshots_with_dropouts_and_clutter_give_one_track_per_satellite():
+    t, dop, rate, start = _passes(7, 150.0, 1.0)
+    rng = np.random.default_rng(3)
+    tracker = Tracker(max_gap_s=10.0, min_blocks=3)  # this seed misses one satellite 5 s in a row
+    owner = []  # per block, the satellite index of each detection (-1 clutter)
+    for k, t_k in enumerate(t):
+        seen = rng.random(7) > 0.2  # a fifth of the snapshots miss each satellite
+        idx = np.flatnonzero(seen)
+        # Noise of a 20 ms snapshot at ~45 dB-Hz per tone (comb CRLB with unknown
+        # rate): ~10 Hz on the Doppler, ~50 Hz/s on the rate.
+        f = dop[idx, k] + rng.normal(0, 10.0, idx.size)
+        r = rate[idx, k] + rng.normal(0, 50.0, idx.size)
+        clutter = rng.uniform(-3e5, 3e5, 1)  # one false alarm per block, never repeated
+        order = rng.permutation(idx.size + 1)
+        f_all = np.concatenate([f, clutter])[order]
+        r_all = np.concatenate([r, [0.0]])[order]
+        owner.append(np.concatenate([idx, [-1]])[order])
+        det = Detections(f_all, r_all, np.full(f_all.size, 45.0), np.full(f_all.size, 10.0))
+        tracker.update(t_k, start + np.timedelta64(int(t_k * 1e9), "ns"), det)
+    tracks = tracker.finish()
+    assert len(tracks) == 7
+    for tr in tracks:
+        # every detection of a track belongs to one satellite: compare with the truth curves
+        k = np.searchsorted(t, tr.t_s)
+        sat = np.argmin(np.abs(dop[:, k] - tr.doppler_hz[None, :]).sum(axis=1))
+        assert np.all(np.abs(tr.doppler_hz - dop[sat, k]) < 60.0)  # 6 sigma of the 10 Hz noise
+        n_true = sum(np.sum(o == sat) for o in owner)
+        # Only detections of a tentative start can be lost (gaps > 2.5 s before it is confirmed).
+        assert n_true - 5 <= len(tr) <= n_true
+
+
+def test_a_gap_longer_than_max_gap_splits_the_track():
+    t, dop, rate, start = _passes(1, 40.0, 1.0)
+    tracker = Tracker(max_gap_s=5.0, min_blocks=3)
+    for k, t_k in enumerate(t):
+        if 10 <= t_k < 20:  # 10 s outage
+            continue
+        det = Detections(dop[:, k], rate[:, k], np.array([45.0]), np.array([1.0]))
+        tracker.update(t_k, start + np.timedelta64(int(t_k * 1e9), "ns"), det)
+    tracks = tracker.finish()
+    assert [len(tr) for tr in tracks] == [10, 21]
