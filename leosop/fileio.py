@@ -12,7 +12,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_json", "write_csv"]
+__all__ = ["atomic_path", "atomic_outputs", "write_json", "write_csv"]
 
 
 @contextlib.contextmanager
@@ -32,6 +32,32 @@ def atomic_path(path):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+@contextlib.contextmanager
+def atomic_outputs(out_dir):
+    """Yield a staging directory; move every file in it into ``out_dir`` on success.
+
+    A command's set of output files is then all-or-nothing: an error while
+    any of them is being made leaves ``out_dir`` as it was.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        from .errors import InputError
+
+        raise InputError(f"--out {out_dir}: exists and is not a directory")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".stage.", suffix=".part", dir=out_dir))
+    try:
+        yield stage
+        for item in sorted(stage.iterdir()):
+            os.replace(item, out_dir / item.name)
+    finally:
+        for item in stage.iterdir() if stage.exists() else ():
+            with contextlib.suppress(OSError):
+                item.unlink()
+        with contextlib.suppress(OSError):
+            stage.rmdir()
 
 
 def write_json(path, obj):

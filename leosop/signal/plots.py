@@ -8,7 +8,7 @@ __all__ = ["plot_spectrogram"]
 
 
 def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, coarse_t_s=None,
-                     coarse_hz=None, f_lim_hz=None, title=""):
+                     coarse_hz=None, f_lim_hz=None, title="", labelled_tracks=()):
     """Write a PNG: power in dB over time and frequency, tracks on top.
 
     Parameters
@@ -23,6 +23,8 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
         STFT coarse track.
     f_lim_hz : float, optional
         Show only |f| <= this.
+    labelled_tracks : sequence of (t_s, doppler_hz, label)
+        Several satellites' central-tone tracks, each drawn and labelled.
     """
     fig, ax = pyplot().subplots(figsize=(8, 4.5), constrained_layout=True)
     db = 10.0 * np.log10(np.maximum(power, np.max(power) * 1e-12))
@@ -35,6 +37,11 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
         ax.plot(coarse_t_s, np.asarray(coarse_hz) / 1e3, "w.", ms=3, label="STFT coarse (central tone)")
     if track_t_s is not None:
         ax.plot(track_t_s, np.asarray(track_hz) / 1e3, "r-", lw=1.2, label="fine Doppler (central tone)")
+    for k, (t_k, f_k, label) in enumerate(labelled_tracks):
+        color = f"C{k % 10}"
+        ax.plot(t_k, np.asarray(f_k) / 1e3, ".-", color=color, ms=3, lw=0.8)
+        ax.annotate(label, (t_k[0], f_k[0] / 1e3), color=color, fontsize=8, xytext=(3, 3),
+                    textcoords="offset points", bbox=dict(boxstyle="round,pad=0.15", fc="white", alpha=0.7, lw=0))
     if f_lim_hz is not None:
         ax.set_ylim(-f_lim_hz / 1e3, f_lim_hz / 1e3)
     ax.set_xlabel("time from first sample [s]")

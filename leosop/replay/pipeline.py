@@ -1,0 +1,225 @@
+"""From a recording to tracks, identities, measurements and a fix.
+
+:func:`replay` streams the recording one block at a time (memory is bounded
+by the block, whatever the file size), finds every comb in each block
+(:func:`~leosop.signal.multicomb.find_combs`), joins the detections into
+tracks (:class:`~leosop.replay.tracks.Tracker`), identifies the tracks
+against the element sets (:func:`~leosop.replay.identify.identify_tracks`)
+and solves a static batch fix or per-block snapshot fixes from the identified
+tracks' Doppler (:mod:`leosop.positioning.solve`).
+
+Blocks never straddle a capture: a snapshot recording (DESIGN 4.2) gives one
+block per capture when the capture is shorter than the block length.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..positioning.measurements import Measurements
+from ..signal.doppler import cubic_bias_hz
+from ..signal.multicomb import find_combs
+from ..signal.pilot import PilotComb
+from .identify import identify_tracks
+from .tracks import Detections, Tracker
+
+__all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
+
+#: Columns of the spectrogram kept for the figure, and its frequency bins.
+SPECTRUM_COLUMNS = 600
+SPECTRUM_BINS = 1024
+
+
+@dataclass(frozen=True)
+class Block:
+    """One block of a recording: samples ``start .. start + n_samples - 1``.
+
+    ``t_s`` is the block centre in seconds from the recording's first sample
+    (capture gaps included); ``time_utc`` the same instant in UTC.
+    """
+
+    start: int
+    n_samples: int
+    t_s: float
+    time_utc: np.datetime64
+
+
+def block_plan(rec, block_s):
+    """The blocks of every capture, in time order.
+
+    A capture shorter than ``block_s`` is one block; a longer one is cut
+    into whole blocks (the remainder, shorter than a block, is left out).
+
+    Returns
+    -------
+    list of Block
+    """
+    if rec.start_utc is None:
+        raise InputError(f"{rec.data_path}: the recording has no core:datetime; replay needs the UTC time "
+                         "of its samples to compare them with the satellites")
+    fs = rec.sample_rate_hz
+    block_len = int(round(block_s * fs))
+    if block_len < 64:
+        raise InputError(f"--block-s {block_s:g}: {block_len} samples at {fs:g} Hz; need at least 64")
+    blocks = []
+    for cap in rec.captures:
+        n = min(block_len, cap.n_samples)
+        if n < 64:
+            continue
+        cap_t0_s = (cap.start_utc - rec.start_utc) / np.timedelta64(1, "s")
+        for k in range(cap.n_samples // n):
+            offset_s = (k * n + 0.5 * (n - 1)) / fs
+            blocks.append(Block(cap.sample_start + k * n, n, cap_t0_s + offset_s,
+                                cap.start_utc + np.timedelta64(int(round(offset_s * 1e9)), "ns")))
+    return blocks
+
+
+def _spectrum(iq):
+    """Mean periodogram of ``iq`` in SPECTRUM_BINS bins, DC in the middle."""
+    m = max(1, iq.size // SPECTRUM_BINS)
+    seg = np.resize(iq, (m, SPECTRUM_BINS)) if iq.size < SPECTRUM_BINS else iq[: m * SPECTRUM_BINS].reshape(m, -1)
+    return np.fft.fftshift(np.mean(np.abs(np.fft.fft(seg, axis=1)) ** 2, axis=0))
+
+
+def _correct_rate_change(track, n_samples, fs):
+    """Remove the Doppler bias a change of rate puts on each block (cubic phase).
+
+    ``n_samples`` (len(track),) are the lengths of the track's blocks.
+
+    The rate change is the slope of the track's own rates, which the track
+    measures far better than one block does.
+    """
+    if len(track) < 3 or not np.all(np.isfinite(track.doppler_rate_hz_per_s)):
+        return
+    accel = np.gradient(track.doppler_rate_hz_per_s, track.t_s)
+    track.doppler_hz = track.doppler_hz - cubic_bias_hz(accel, n_samples, fs)
+
+
+@dataclass
+class ReplayResult:
+    """What :func:`replay` found.
+
+    Attributes
+    ----------
+    tracks : list of Track
+        Every confirmed track, identified or not (``sat_id`` None).
+    identification : object
+        The result of :func:`~leosop.replay.identify.identify_tracks`.
+    measurements : Measurements or None
+        The identified tracks' Doppler (DESIGN 4.3 rows); None without any.
+    position : PositionResult or None
+        The fix (static) or fixes (snapshot); None when nothing could be solved.
+    blocks : list of Block
+    spectrum_t_s : ndarray, (n_cols,)
+    spectrum_f_hz : ndarray, (SPECTRUM_BINS,)
+    spectrum : ndarray, (SPECTRUM_BINS, n_cols)
+        Mean periodograms of a subset of the blocks, for the figure.
+    """
+
+    tracks: list
+    identification: object
+    measurements: Measurements | None
+    position: object
+    blocks: list
+    spectrum_t_s: np.ndarray
+    spectrum_f_hz: np.ndarray
+    spectrum: np.ndarray
+
+
+def track_measurements(tracks, carrier_hz):
+    """The identified tracks as measurement rows (DESIGN 4.3), time-ordered.
+
+    ``pass_id`` is the satellite: each satellite's rows share its clock and
+    orbit-error states in a static fix (``leosop position --static`` on the
+    written table solves the same fix).
+
+    Returns
+    -------
+    Measurements or None
+        None when no track is identified.
+    """
+    ids = [tr for tr in tracks if tr.sat_id is not None]
+    if not ids:
+        return None
+    time_utc = np.concatenate([tr.time_utc for tr in ids])
+    order = np.argsort(time_utc, kind="stable")
+    col = lambda name: np.concatenate([getattr(tr, name) for tr in ids])[order]  # noqa: E731
+    time_utc = time_utc[order]
+    t_s = (time_utc - time_utc.min()) / np.timedelta64(1, "s")
+    sat_id = np.concatenate([np.full(len(tr), tr.sat_id, dtype=object) for tr in ids])[order].astype(str)
+    n = len(t_s)
+    return Measurements(t_s=t_s, time_utc=time_utc, sat_id=sat_id, doppler_hz=col("doppler_hz"),
+                        sigma_hz=col("sigma_hz"), carrier_hz=np.full(n, float(carrier_hz)),
+                        line=np.arange(2, n + 2), source="replay", pass_id=sat_id.copy())
+
+
+def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True, mask_deg=10.0,
+           max_gap_s=None, show_progress=False):
+    """Find, track and identify the combs of a recording, then fix the receiver.
+
+    Parameters
+    ----------
+    rec : Recording
+        With ``start_utc`` and ``captures`` (:func:`leosop.signal.iq.open_sigmf`).
+    constellation : Constellation
+        The element sets the satellites are identified against.
+    block_s : float
+        Block length; captures shorter than this are one block each.
+    init_pos_ecef_m : array_like, (3,), optional
+        A prior receiver position (within ~100 km); None for a global search.
+    static : bool
+        One batch fix of a receiver at rest; else a snapshot fix per block.
+    mask_deg : float
+        Elevation mask for the identification's candidates.
+    max_gap_s : float, optional
+        Longest gap a track survives (default: 5 blocks or 5 capture periods).
+    show_progress : bool
+
+    Returns
+    -------
+    ReplayResult
+    """
+    from ..positioning.solve import position_snapshots, position_static_passes
+    from ..progress import progress
+
+    fs = rec.sample_rate_hz
+    comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
+                     tone_spacing_hz=rec.tone_spacing_hz)
+    blocks = block_plan(rec, block_s)
+    if not blocks:
+        raise InputError(f"{rec.data_path}: no capture holds a block of at least 64 samples")
+    if max_gap_s is None:
+        spacing = np.median(np.diff([b.t_s for b in blocks])) if len(blocks) > 1 else block_s
+        max_gap_s = 5.0 * max(spacing, block_s)
+    tracker = Tracker(max_gap_s=max_gap_s, max_gap_tentative_s=max(2.5, 2.5 * max_gap_s / 5.0))
+    every = max(1, int(np.ceil(len(blocks) / SPECTRUM_COLUMNS)))
+    spec_t, spec = [], []
+    block_len = {}
+    for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
+        iq = rec.read(b.start, b.n_samples)
+        found = find_combs(iq, fs, comb=comb)
+        det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
+        tracker.update(b.t_s, b.time_utc, det)
+        block_len[b.t_s] = b.n_samples
+        if k % every == 0:
+            spec_t.append(b.t_s)
+            spec.append(_spectrum(iq))
+    tracks = tracker.finish()
+    for tr in tracks:
+        _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
+    ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,
+                            carrier_hz=comb.carrier_hz) if tracks else None
+    meas = track_measurements(tracks, comb.carrier_hz)
+    position = None
+    if meas is not None:
+        start = getattr(ident, "pos_ecef_m", None)
+        start = init_pos_ecef_m if start is None or not np.all(np.isfinite(start)) else start
+        if static:
+            position = position_static_passes(meas, meas.sat_id, constellation=constellation,
+                                              init_pos_ecef_m=start)
+        else:
+            position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
+    f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
+    return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
+                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)))
