@@ -275,7 +275,7 @@ def two_passes():
 
 def test_static_passes_noise_free_recovers_station_and_each_clock(two_passes):
     (dop, pos, vel, f0, t_s, pass_id), station, clocks, t_ref = two_passes
-    fix = solve_static_passes(dop, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0)
+    fix = solve_static_passes(dop, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, time_bias=False)
     assert fix.status == FixStatus.OK and list(fix.pass_ids) == [0, 1]
     np.testing.assert_allclose(fix.t_ref_s, t_ref)
     # Noise-free: the step thresholds (0.1 mm) bound the position; each clock coefficient is then
@@ -288,7 +288,8 @@ def test_static_passes_noise_free_recovers_station_and_each_clock(two_passes):
 def test_static_passes_covariance_matches_the_dense_full_state_solution(two_passes):
     (dop, pos, vel, f0, t_s, pass_id), station, clocks, t_ref = two_passes
     noisy = dop + np.random.default_rng(4).normal(0.0, 2.0, dop.shape)
-    fix = solve_static_passes(noisy, 2.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, alpha=None)
+    fix = solve_static_passes(noisy, 2.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, alpha=None,
+                              time_bias=False)
     # Second implementation: the Jacobian of all 3 + 2 x 4 states written out densely, its (A^T W A)^-1.
     H = doppler_jacobian(pos, vel, fix.pos_ecef_m, np.zeros(3), f0)[:, :3]
     dt = t_s - fix.t_ref_s[pass_id]
@@ -351,7 +352,8 @@ def test_static_passes_recover_an_injected_time_offset_per_pass(two_passes):
     biased = dop + dt_true[pass_id] * rate
     # Noise-free, the model's own first-order time offset: recovered exactly (position to the 0.1 mm step
     # threshold; offsets and clocks to what that leaves, ~1e-7 s and ~1e-9 Hz/s^k).
-    fix = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, time_bias=True)
+    fix = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0,
+                              time_bias_sigma_s=None)
     assert fix.status == FixStatus.OK
     assert np.linalg.norm(fix.pos_ecef_m - station) < ONE_MM
     np.testing.assert_allclose(fix.time_bias_s, dt_true, atol=1e-6)
@@ -360,8 +362,9 @@ def test_static_passes_recover_an_injected_time_offset_per_pass(two_passes):
     # With a prior the offsets are shrunk by the prior's weight relative to the data's: a 1e3 s prior
     # changes nothing measurable; without the time bias the same rows are misfitted (km-level error).
     prior = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0,
-                                time_bias=True, time_bias_sigma_s=1e3)
+                                time_bias_sigma_s=1e3)
     np.testing.assert_allclose(prior.time_bias_s, dt_true, atol=1e-4)
     assert np.linalg.norm(prior.pos_ecef_m - station) < 0.1
-    plain = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, alpha=None)
+    plain = solve_static_passes(biased, 1.0, pos, vel, f0, t_s, pass_id, alt_m=95.0, alt_sigma_m=1.0, alpha=None,
+                                time_bias=False)
     assert np.linalg.norm(plain.pos_ecef_m - station) > 1e3 and plain.time_bias_s is None

@@ -31,6 +31,7 @@ Failures come back as data in ``status`` (:class:`FixStatus`).
 
 from dataclasses import dataclass
 from enum import IntEnum
+from math import comb
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
@@ -41,7 +42,8 @@ from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from .dop import N_DOPPLER_STATES, cofactor, doppler_jacobian
 
 __all__ = ["FixStatus", "SnapshotFixes", "StaticFix", "PassesFix", "solve_snapshots", "solve_static",
-           "solve_static_passes", "doppler_rate", "subpoint_centroid_ecef_m", "N_STATIC_STATES"]
+           "solve_static_passes", "doppler_rate", "subpoint_centroid_ecef_m", "N_STATIC_STATES",
+           "TIME_OFFSET_SIGMA_S", "SAT_OFFSET_SIGMA_HZ"]
 
 #: States of a static batch fix with a linear clock: position, frequency offset, frequency drift.
 N_STATIC_STATES = 5
@@ -53,6 +55,14 @@ _XTOL_STATIC = np.array([1e-4] * 3 + [1e-5, 1e-7])
 _START_FRACTIONS = np.array([0.0, 1 / 6, -1 / 6, 1 / 3, -1 / 3, 0.6, -0.6, 1.0, -1.0])
 #: Earth radius used to place a start on the ground [m].
 _R_GROUND_M = 6_371_000.0
+#: Default prior standard deviation of a pass's time offset of its satellite states [s]: an element
+#: set's along-track error of a few hundred metres to a few km at ~7.5 km/s.
+TIME_OFFSET_SIGMA_S = 0.5
+#: Default prior standard deviation of a satellite's own frequency offset, clock "common" [Hz]
+#: (Starlink: 0-5 Hz, [Shen 2024] Table 1).
+SAT_OFFSET_SIGMA_HZ = 5.0
+#: Multi-pass fixes also stop when a step is below this fraction of the posterior sigma along it.
+_STEP_SIGMA_TOL = 1e-3
 
 
 class FixStatus(IntEnum):
@@ -177,13 +187,17 @@ class StaticFix:
         return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
 
 
-def _levenberg_marquardt(model, x0, y, w, xtol, max_iter):
+def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
     """Damped Gauss-Newton over independent problems.
 
     ``model(x, idx, w)`` gives predictions (k, m) and Jacobians (k, m, n) of
     the problems ``idx`` at states ``x`` (k, n) with row weights ``w`` (k, m)
     (a model that eliminates linear states needs them); ``y``, ``w`` (P, m)
-    are the measurements and weights (0 drops a row). Returns ``x,
+    are the measurements and weights (0 drops a row). A problem has
+    converged when its step is below ``xtol`` (n,) in every state, or, with
+    ``step_sigma_tol``, when an accepted step's length in units of the
+    posterior sigma, ``sqrt(dx^T J^T W J dx)``, is below it (a weakly
+    determined direction then needs no sub-millimetre steps). Returns ``x,
     iterations, converged``.
     """
     n_prob, n = x0.shape
@@ -216,6 +230,8 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter):
         lam[active] = np.where(accept, np.maximum(lam[active] / 10, 1e-12), np.minimum(lam[active] * 10, 1e12))
         iterations[active] += 1
         done = np.all(np.abs(dx) <= xtol, axis=-1)
+        if step_sigma_tol is not None:
+            done |= accept & (np.einsum("pi,pij,pj->p", dx, N, dx) <= step_sigma_tol**2)
         converged[active[done]] = True
         active = active[~done]
     return x, iterations, converged
@@ -237,7 +253,7 @@ def _group_argmax(values, groups):
 
 
 def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, fixed=None, x_alt=None,
-                  groups=None):
+                  groups=None, step_sigma_tol=None):
     """LM, then chi-square test and w-test exclusions one at a time.
 
     Returns ``x, residuals, J, Q (weighted cofactor), used, iterations, chi2,
@@ -247,7 +263,8 @@ def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha,
     (m,), e.g. the pass of each row) each round excludes the largest
     standardised residual of every group whose largest one exceeds the
     two-sided normal critical value at ``alpha`` (one row per pass at a time
-    instead of one in all), and stops when none does.
+    instead of one in all), and stops when none does. ``step_sigma_tol``: see
+    :func:`_levenberg_marquardt`.
     """
     n_prob = x0.shape[0]
     used = used.copy()
@@ -263,7 +280,7 @@ def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha,
     while todo.size:
         sub = lambda xs, i, w_, todo=todo: model(xs, todo[i], w_)  # noqa: E731
         w = np.where(used[todo], w_all[todo], 0.0)
-        xs, it, conv = _levenberg_marquardt(sub, x[todo], y[todo], w, xtol, max_iter)
+        xs, it, conv = _levenberg_marquardt(sub, x[todo], y[todo], w, xtol, max_iter, step_sigma_tol)
         iterations[todo] += it
         pred, J = model(xs, todo, w)
         r = np.where(used[todo], y[todo] - pred, 0.0)
@@ -276,7 +293,8 @@ def _solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha,
             if retry.any():
                 k = np.flatnonzero(retry)
                 sub2 = lambda xs, i, w_, p=todo[k]: model(xs, p[i], w_)  # noqa: E731
-                xs2, it2, conv2 = _levenberg_marquardt(sub2, x_alt[todo[k]], y[todo[k]], w[k], xtol, max_iter)
+                xs2, it2, conv2 = _levenberg_marquardt(sub2, x_alt[todo[k]], y[todo[k]], w[k], xtol,
+                                                                 max_iter, step_sigma_tol)
                 iterations[todo[k]] += it2
                 pred2, J2 = model(xs2, todo[k], w[k])
                 r2 = np.where(used[todo[k]], y[todo[k]] - pred2, 0.0)
@@ -612,7 +630,7 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
 
 @dataclass(frozen=True)
 class PassesFix:
-    """Batch fix of a receiver at rest from several passes, each with its own transmitter frequency.
+    """Batch fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     Attributes
     ----------
@@ -624,10 +642,13 @@ class PassesFix:
         Mid-time of each pass, the origin of its polynomial.
     clock_poly_hz : ndarray, (n_pass, d + 1)
         Each pass's frequency offset polynomial in ``t - t_ref`` [Hz/s^k],
-        lowest first.
-    cov : ndarray, (3 + n_pass (d + 1 + b),) * 2
+        lowest first (clock ``"common"``: the receiver's polynomial moved to
+        the pass's ``t_ref`` plus the satellite's constant offset).
+    cov : ndarray, (n_states, n_states)
         Posterior covariance of ``[pos, clock_poly_hz.ravel(), time_bias_s]``
-        (``b`` 1 with time biases, else 0 and no ``time_bias_s`` states).
+        (clock ``"per_pass"``) or ``[pos, rx_clock_poly_hz, sat_offset_hz,
+        time_bias_s]`` (clock ``"common"``); no ``time_bias_s`` states
+        without time biases. Priors are included.
     gdop : float
         ``sqrt(trace((H^T W H)^-1))`` of the position with the clocks
         eliminated, weights relative to the median Doppler weight.
@@ -635,6 +656,7 @@ class PassesFix:
     used : ndarray of bool, (m,)
     n_used, iterations : int
     chi2 : float
+        Weighted residual sum of the Doppler rows and the priors' pseudo-rows.
     status : FixStatus
     ambiguous : bool
         Another start reached a solution beyond ``ambiguity_m`` that fits as
@@ -646,6 +668,14 @@ class PassesFix:
     time_bias_s : ndarray, (n_pass,), or None
         Each pass's time offset of the satellite states (first order: an
         along-track error of its element set) when modelled.
+    clock : str
+        ``"per_pass"`` or ``"common"``.
+    rx_clock_poly_hz : ndarray, (d + 1,), or None
+        Clock ``"common"``: the receiver's frequency offset polynomial in
+        ``t - rx_t_ref_s`` [Hz/s^k].
+    rx_t_ref_s : float
+    sat_offset_hz : ndarray, (n_pass,), or None
+        Clock ``"common"``: each satellite's constant frequency offset [Hz].
     """
 
     pos_ecef_m: np.ndarray
@@ -664,6 +694,10 @@ class PassesFix:
     mirror_pos_ecef_m: np.ndarray
     mirror_chi2: float
     time_bias_s: np.ndarray = None
+    clock: str = "per_pass"
+    rx_clock_poly_hz: np.ndarray = None
+    rx_t_ref_s: float = np.nan
+    sat_offset_hz: np.ndarray = None
 
     @property
     def clock_offset_hz(self):
@@ -736,27 +770,54 @@ def _grid_starts(centre_ecef_m, offset_m):
     return geodetic_to_ecef(la, lo, 0.0)
 
 
+def _shift_poly(coef, shift):
+    """Coefficients (..., d + 1) of ``p(s + shift)`` for ``p(s) = sum coef_k s^k``, lowest first."""
+    d = coef.shape[-1] - 1
+    k = np.arange(d + 1)
+    binom = np.array([[comb(j, i) if j >= i else 0 for j in k] for i in k], dtype=float)
+    powers = np.asarray(shift, dtype=float)[..., None, None] ** np.maximum(k[None, :] - k[:, None], 0)
+    return np.einsum("...j,ij,...ij->...i", coef, binom, powers)
+
+
 def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
                         pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3,
-                        clock_degree=3, time_bias=False, time_bias_sigma_s=None, start_offset_m=1.0e6,
+                        clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
+                        time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
                         ambiguity_m=10e3):
-    """Batch Doppler fix of a receiver at rest from several passes, each with its own transmitter frequency.
+    """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
-    The position is shared; each pass ``p`` has its own frequency offset, a
-    polynomial of degree ``clock_degree`` in ``t - t_ref[p]`` (the pass's
-    mid-time), and optionally a time offset ``dt_p`` of its satellite states
-    (to first order the along-track error of its element set, or a time-tag
-    offset), entering each row through the Doppler rate
-    (:func:`doppler_rate`). These per-pass terms enter linearly, so they are
-    eliminated exactly (variable projection): each LM step solves, per pass,
-    the weighted linear fit of them to the residuals, and iterates on the
-    position alone with the projected Jacobian ``(I - A K) D``, ``D`` the
-    position derivative at fixed per-pass terms (which gives the exact
-    gradient even though the rate column depends on the position). The
-    chi-square uses all states' degrees of freedom; the covariance is that
-    of the full state. Passes on opposite sides of the station resolve the
-    mirror ambiguity of a single pass. Outliers are excluded one row per pass
-    at a time (see :func:`solve_static` for the test).
+    The position is shared. Each pass ``p`` (one satellite's track) has
+    frequency terms and optionally a time offset ``dt_p`` of its satellite
+    states (to first order the along-track error of its element set, or a
+    time-tag offset), entering each row through the Doppler rate
+    (:func:`doppler_rate`), with a zero-mean prior ``time_bias_sigma_s``.
+    Clock models:
+
+    ``"per_pass"``
+        each pass its own frequency polynomial of degree ``clock_degree``
+        (default 3) in ``t - t_ref[p]`` (the pass's mid-time): one receiver
+        seeing one transmitter at a time (DopTrack), or an unknown drift per
+        transmitter.
+    ``"common"``
+        one receiver clock, a polynomial of degree ``clock_degree`` (default
+        1: offset and drift) in ``t - rx_t_ref_s`` shared by all passes, plus
+        each satellite's constant frequency offset with a zero-mean prior
+        ``sat_offset_sigma_hz`` (Starlink satellites' own offsets are 0-5 Hz,
+        [Shen 2024] Table 1): a multi-satellite receiver, which keeps the
+        geometry a free polynomial per pass would absorb.
+
+    All these terms enter linearly and are eliminated exactly (variable
+    projection): each LM step solves the weighted linear fit of them to the
+    residuals (block-diagonal per pass, the shared clock by its Schur
+    complement) and iterates on the position alone with the projected
+    Jacobian ``(I - A K) D``, ``D`` the position derivative at fixed linear
+    terms (the exact gradient even though the rate column depends on the
+    position). The iteration stops when a step is below 0.1 mm or 1e-3 of
+    the posterior sigma along it. Priors enter as pseudo-rows (never
+    excluded), so chi-square and degrees of freedom count them. The
+    covariance is that of the full state. Passes on opposite sides of the
+    station resolve the mirror ambiguity of a single pass. Outliers are
+    excluded one row per pass at a time (see :func:`solve_static`).
 
     Parameters
     ----------
@@ -775,24 +836,38 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     max_iter : int
     alpha : float or None
         Significance of the chi-square outlier test; None disables it.
-    clock_degree : int
+    clock : {"per_pass", "common"}
+    clock_degree : int, optional
+    sat_offset_sigma_hz : float
+        Clock ``"common"``: prior standard deviation of each satellite's offset [Hz].
     time_bias : bool
         Estimate each pass's time offset ``dt_p`` [s].
-    time_bias_sigma_s : float, optional
-        Zero-mean prior standard deviation of each ``dt_p`` (a pseudo-row per
-        pass); None: no prior.
+    time_bias_sigma_s : float or None
+        Zero-mean prior standard deviation of each ``dt_p``; None: no prior.
     start_offset_m, ambiguity_m : float
 
     Returns
     -------
     PassesFix
     """
-    deg = int(clock_degree)
+    if clock not in ("per_pass", "common"):
+        raise ValueError(f"clock {clock!r}: expected 'per_pass' or 'common'")
+    common = clock == "common"
+    deg = (1 if common else 3) if clock_degree is None else int(clock_degree)
     if deg < 0:
         raise ValueError("clock degree must be non-negative")
+    if common and not sat_offset_sigma_hz > 0:
+        raise ValueError("sat_offset_sigma_hz must be positive")
     tb = int(bool(time_bias))
-    has_prior = tb and time_bias_sigma_s is not None
-    n_lin = deg + 1 + tb
+    n_glob = deg + 1 if common else 0
+    n_loc = (1 if common else deg + 1) + tb
+    # Prior weights of the per-pass terms: [satellite offset | polynomial..., time offset].
+    prior = np.zeros(n_loc)
+    if common:
+        prior[0] = 1.0 / float(sat_offset_sigma_hz) ** 2
+    if tb and time_bias_sigma_s is not None:
+        prior[-1] = 1.0 / float(time_bias_sigma_s) ** 2
+    prior_cols = np.flatnonzero(prior > 0)
     y = np.asarray(doppler_hz, dtype=float).ravel()
     n = y.size
     r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n, 3)
@@ -804,7 +879,7 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     m = np.ones(n, bool) if mask is None else np.asarray(mask, bool).ravel()
     m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
     m &= np.isfinite(t)
-    keep = np.bincount(gi[m], minlength=len(labels)) >= n_lin + 1
+    keep = np.bincount(gi[m], minlength=len(labels)) >= n_loc + 1 - len(prior_cols)
     m &= keep[gi]
     labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
     gi[~m] = np.maximum(gi[~m], 0)
@@ -820,15 +895,15 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     t_hi = np.array([t[gi == p][m[gi == p]].max() for p in range(n_pass)]) if n_pass else np.zeros(0)
     t_ref = 0.5 * (t_lo + t_hi)
     half_span_s = np.maximum(0.5 * (t_hi - t_lo), 1.0)
-    # Clock basis in the scaled time u = (t - t_ref) / half_span, |u| <= 1, for conditioning.
-    basis = ((t - t_ref[gi]) / half_span_s[gi])[:, None] ** np.arange(deg + 1) if n_pass else np.zeros((n, deg + 1))
-    # Prior on each pass's time offset: a pseudo-row per pass (measured 0), after the Doppler rows.
-    prior = np.zeros(n_lin)
-    n_extra = 0
-    if has_prior:
-        prior[-1] = 1.0 / float(time_bias_sigma_s) ** 2
-        y, sigma, m = (np.append(a, np.full(n_pass, v)) for a, v in ((y, 0.0), (sigma, time_bias_sigma_s), (m, True)))
-        n_extra = n_pass
+    t_rx = 0.5 * (t_lo.min() + t_hi.max()) if n_pass else 0.0
+    half_rx_s = max(0.5 * (t_hi.max() - t_lo.min()), 1.0) if n_pass else 1.0
+    # Polynomial bases in scaled time (|u| <= 1) for conditioning: the shared clock's and the per-pass ones.
+    B_glob = ((t - t_rx) / half_rx_s)[:, None] ** np.arange(n_glob)
+    basis = np.ones((n, 1)) if common else ((t - t_ref[gi]) / half_span_s[gi])[:, None] ** np.arange(deg + 1)
+    # Priors: per prior'd per-pass term a pseudo-row per pass (measured 0), after the Doppler rows.
+    n_extra = n_pass * len(prior_cols)
+    sig_prior = np.repeat(1.0 / np.sqrt(prior[prior_cols]), n_pass)
+    y, sigma, m = np.append(y, np.zeros(n_extra)), np.append(sigma, sig_prior), np.append(m, np.ones(n_extra, bool))
     has_alt = alt_m is not None
     if has_alt:
         y, sigma, m = np.append(y, alt_m), np.append(sigma, alt_sigma_m), np.append(m, True)
@@ -836,44 +911,67 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     fixed[n:] = True
     groups = np.concatenate([gi, [-1] * (n_extra + has_alt)])
 
-    def pieces(x, w):
-        """Geometric prediction, per-pass basis A, position derivative D and the per-pass fit (c, K D, G)."""
+    def normal(x, w):
+        """Geometry (h, D, rate grad), the per-pass basis A and the linear normal matrix's blocks and solver."""
         H = doppler_jacobian(r_s, v_s, x, np.zeros((len(x), 3)), f0)
         h, D = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s), H[..., :3]
         A = np.broadcast_to(basis, (len(x),) + basis.shape)
+        grad = None
         if tb:
             rate, grad = doppler_rate(r_s, v_s, x, f0)
             A = np.concatenate([A, rate[..., None]], -1)
-        wA = w[:, :n, None] * A
-        G = np.add.reduceat(wA[..., :, None] * A[..., None, :], seg, axis=1) + np.diag(prior)
-        Ginv = np.linalg.pinv(G, hermitian=True)
-        c = np.einsum("pgij,pgj->pgi", Ginv, np.add.reduceat(wA * (y[:n] - h)[..., None], seg, axis=1))
+        wd = w[:, :n]
+        wA = wd[..., None] * A
+        G_ss = np.add.reduceat(wA[..., :, None] * A[..., None, :], seg, axis=1) + np.diag(prior)
+        Gi_ss = np.linalg.pinv(G_ss, hermitian=True)
+        G_gg = np.einsum("mi,pm,mj->pij", B_glob, wd, B_glob)
+        G_sg = np.add.reduceat(wA[..., :, None] * B_glob[None, :, None, :], seg, axis=1)  # (k, P, l, g)
+        S = G_gg - np.einsum("pqli,pqlj->pij", G_sg, Gi_ss @ G_sg)
+        Si = np.linalg.pinv(S, hermitian=True) if n_glob else S
+
+        def lin(rhs):
+            """Linear terms (global (k, g, q), per pass (k, P, l, q)) fitting rows ``rhs`` (k, n, q)."""
+            b_s = np.add.reduceat(wA[..., :, None] * rhs[..., None, :], seg, axis=1)
+            z_s = Gi_ss @ b_s
+            b_g = np.einsum("mi,pm,pmq->piq", B_glob, wd, rhs)
+            c_g = Si @ (b_g - np.einsum("pqli,pqlk->pik", G_sg, z_s))
+            return c_g, z_s - Gi_ss @ (G_sg @ c_g[:, None])
+
+        def fitted(c_g, c_s):
+            """Rows (k, n, q) of the linear terms."""
+            return np.einsum("mi,piq->pmq", B_glob, c_g) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
+
+        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss)
+
+    def pieces(x, w):
+        """Prediction, projected position Jacobian and the linear terms (global, per pass) at ``x``."""
+        h, D, grad, A, lin, fitted, blocks = normal(x, w)
+        c_g, c_s = lin((y[:n] - h)[..., None])
         if tb:
-            D = D + c[:, gi, -1, None] * grad
-        KD = Ginv @ np.add.reduceat(wA[..., :, None] * D[..., None, :], seg, axis=1)
-        return h, A, D, c, KD, G
+            D = D + c_s[:, gi, -1, 0, None] * grad
+        K_g, K_s = lin(D)
+        pred = h + fitted(c_g, c_s)[..., 0]
+        J = D - fitted(K_g, K_s)
+        return pred, J, D, A, c_g[..., 0], c_s[..., 0], K_s, blocks
 
     def model(x, idx, w):
-        h, A, D, c, KD, _ = pieces(x, w)
-        pred = h + np.einsum("pmi,pmi->pm", A, c[:, gi])
-        J = D - np.einsum("pmi,pmij->pmj", A, KD[:, gi])
-        if has_prior:
-            pred = np.concatenate([pred, c[:, :, -1]], -1)
-            J = np.concatenate([J, -KD[:, :, -1]], axis=1)
+        pred, J, _, _, _, c_s, K_s, _ = pieces(x, w)
+        pred = np.concatenate([pred] + [c_s[:, :, j] for j in prior_cols], -1)
+        J = np.concatenate([J] + [-K_s[:, :, j] for j in prior_cols], axis=1)
         if has_alt:
             lat, lon, alt = ecef_to_geodetic(x)
             pred = np.concatenate([pred, alt[:, None]], -1)
             J = np.concatenate([J, C_e_n(lat, lon)[..., 2][:, None, :]], axis=1)
         return pred, J
 
-    n_states = 3 + n_pass * n_lin
+    n_states = 3 + n_glob + n_pass * n_loc
     xtol = _XTOL_STATIC[:3]
 
     def solve(x0, used, alpha_):
         k = len(x0)
         ys, ss, ms = (np.broadcast_to(a, (k, y.size)) for a in (y, sigma, used))
         return _solve_robust(model, x0, ys, ss, ms, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha_,
-                             fixed=fixed, groups=groups)
+                             fixed=fixed, groups=groups, step_sigma_tol=_STEP_SIGMA_TOL)
 
     if pos0_ecef_m is not None:
         starts = np.asarray(pos0_ecef_m, dtype=float).reshape(-1, 3)
@@ -903,28 +1001,34 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         xm, _, _, _, _, _, chi2_m, status_m = solve(x_mirror, used, None)
         if status_m[0] in (FixStatus.OK, FixStatus.INCONSISTENT):
             mirror_pos, mirror_chi2 = xm[0], float(chi2_m[0])
-    # Full covariance [pos, per-pass terms] from the normal equations' blocks at the solution (pass-major).
+    # Full normal matrix of [pos, global terms, per-pass terms (pass-major)] at the solution, inverted.
     w = np.where(used, 1.0 / sigma**2, 0.0)
-    _, A, D, c, _, G = pieces(x, w)
-    wd = w[0, :n]
+    _, _, D, A, c_g, c_s, _, (G_gg, G_sg, G_ss) = pieces(x, w)
+    wd, D, A = w[0, :n], D[0], A[0]
     N = np.zeros((n_states, n_states))
-    N[:3, :3] = np.einsum("mi,m,mj->ij", D[0], wd, D[0])
+    N[:3, :3] = np.einsum("mi,m,mj->ij", D, wd, D)
     if has_alt:
         lat, lon, _ = ecef_to_geodetic(x[0])
         up = C_e_n(lat, lon)[:, 2]
         N[:3, :3] += np.outer(up, up) * w[0, -1]
-    cross = np.add.reduceat((wd[:, None] * A[0])[:, :, None] * D[0][:, None, :], seg, axis=0)
-    N[3:, :3] = cross.reshape(-1, 3)
-    N[:3, 3:] = N[3:, :3].T
+    g = slice(3, 3 + n_glob)
+    N[g, :3] = np.einsum("mi,m,mj->ij", B_glob, wd, D)
+    N[g, g] = G_gg[0]
+    N[3 + n_glob:, :3] = np.add.reduceat((wd[:, None] * A)[:, :, None] * D[:, None, :], seg, axis=0).reshape(-1, 3)
+    N[3 + n_glob:, g] = G_sg[0].reshape(n_pass * n_loc, n_glob)
     for p in range(n_pass):
-        sl = slice(3 + p * n_lin, 3 + (p + 1) * n_lin)
-        N[sl, sl] = G[0, p]
-    scale_lin = np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
-    scale = np.concatenate([np.ones(3), scale_lin.ravel()])
+        sl = slice(3 + n_glob + p * n_loc, 3 + n_glob + (p + 1) * n_loc)
+        N[sl, sl] = G_ss[0, p]
+    N = np.tril(N) + np.tril(N, -1).T
+    scale_glob = 1.0 / half_rx_s ** np.arange(n_glob)
+    scale_loc = np.ones((n_pass, n_loc)) if common else \
+        np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
+    scale = np.concatenate([np.ones(3), scale_glob, scale_loc.ravel()])
     cov = _inverse_or_nan(N) * scale[:, None] * scale[None, :] if ok else np.full((n_states, n_states), np.nan)
-    # Reorder to [pos, clock polynomials, time biases].
-    lin = np.arange(n_pass * n_lin).reshape(n_pass, n_lin)
-    perm = np.concatenate([np.arange(3), 3 + lin[:, :deg + 1].ravel(), 3 + lin[:, deg + 1:].ravel()])
+    # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
+    loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
+    n_clk = n_loc - tb
+    perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_clk].ravel(), loc[:, n_clk:].ravel()])
     cov = cov[np.ix_(perm, perm)]
     w_rel = np.where(used[0], np.median(sigma[:n][m[:n]]) ** 2 / sigma**2, 0.0) if m[:n].any() \
         else used[0].astype(float)
@@ -932,11 +1036,20 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     back = np.empty(n, dtype=int)
     back[order] = np.arange(n)
     nan_unless = (lambda a: a if ok else np.full_like(a, np.nan))  # noqa: E731
-    c_scaled = c[0] * scale_lin
+    c_loc = c_s[0] * scale_loc
+    rx_poly = c_g[0] * scale_glob
+    if common:
+        # Each pass's effective polynomial: the receiver's about the pass's mid-time, plus its satellite's offset.
+        poly = _shift_poly(np.broadcast_to(rx_poly, (n_pass, deg + 1)), t_ref - t_rx)
+        poly[:, 0] += c_loc[:, 0]
+    else:
+        poly = c_loc[:, :deg + 1]
     return PassesFix(
-        pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref, clock_poly_hz=nan_unless(c_scaled[:, :deg + 1]),
+        pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref, clock_poly_hz=nan_unless(poly),
         cov=cov, gdop=gdop, residuals_hz=res[0, :n][back], used=used[0, :n][back], n_used=int(used[0, :n].sum()),
         iterations=int(iterations[0]), chi2=float(chi2[0]), status=FixStatus(int(status[0])),
         ambiguous=ambiguous, mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
-        time_bias_s=nan_unless(c_scaled[:, -1].copy()) if tb else None,
+        time_bias_s=nan_unless(c_loc[:, -1].copy()) if tb else None, clock=clock,
+        rx_clock_poly_hz=nan_unless(rx_poly) if common else None, rx_t_ref_s=float(t_rx) if common else np.nan,
+        sat_offset_hz=nan_unless(c_loc[:, 0].copy()) if common else None,
     )
