@@ -1,14 +1,16 @@
 """Doppler positioning on the real data sets in ../shared/data, with the errors against their truth.
 
-    python tools/real_doppler_position.py [--data DIR] [--export DIR]
+    python tools/real_doppler_position.py [--data DIR] [--export DIR] [--windows 2,3,5] [--no-single]
 
 DopTrack (Delfi-C3, 98 passes): one static fix per pass with the station
 height known, no start given (the solver's own starts); error per pass and
 the median. Then fixes from several passes (a transmitter frequency
 polynomial per pass, position shared): all 98 passes, each day's passes, and
 sliding windows of N consecutive passes; errors against the station, the
-posterior sigma and their ratio; then the same with a time offset per pass
-(1 s prior). FOX-1D: the trimmed pass with each candidate catalogue number.
+posterior sigma and their ratio; without the per-pass time offsets of the
+satellite states (along-track errors of the element sets), then with them
+(the default, prior TIME_OFFSET_SIGMA_S). ``--windows ''`` and
+``--no-single`` shorten the run (the full one takes ~10 min). FOX-1D: the trimmed pass with each candidate catalogue number.
 GSDC: snapshot velocity, clock drift and position, and a static fix.
 ``--export DIR`` also writes each data set as a DESIGN 4.3 table (plus the
 element sets) so that ``leosop position`` can be run on them.
@@ -32,8 +34,16 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FOX_SITE = (37.229976, -80.439627, 610.0)
 
 
-def doptrack(data, export):
+def doptrack(data, export, windows=(2, 3, 5), single=True):
     passes = read_doptrack(data / "leo-doppler" / "doptrack_delfi-c3_2020-04")
+    if single:
+        doptrack_single(passes, export)
+    doptrack_passes(passes, windows, time_bias=False)
+    # A time offset per pass (along-track error of its element set), the default.
+    doptrack_passes(passes, windows)
+
+
+def doptrack_single(passes, export):
     print("DopTrack Delfi-C3, static fix per pass, height known (95 m), no start given; cubic transmitter\n"
           "frequency, side of the ground track chosen with a linear one. mirror: the other side's solution,\n"
           "dchi2 = its chi-square minus the fix's on the rows the fix used (< 0: the mirror fits better)")
@@ -65,9 +75,6 @@ def doptrack(data, export):
     q1, q2, q3 = np.nanpercentile(lag, [25, 50, 75])
     print(f"time tags: range rate at the station crosses zero {q2:+.2f} s after the files' tca "
           f"(median; quartiles {q1:+.2f}, {q3:+.2f} s; element sets and station as given)")
-    doptrack_passes(passes)
-    # A time offset per pass (along-track error of its element set): consistent on all passes, worse on few.
-    doptrack_passes(passes, time_bias=True, time_bias_sigma_s=1.0)
 
 
 def combine_passes(passes, pos_rx_ecef_m=None):
@@ -208,8 +215,11 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DATA)
     parser.add_argument("--export", type=Path, help="write DESIGN 4.3 tables here (outside the repository)")
+    parser.add_argument("--windows", default="2,3,5", help="sliding windows of N passes (comma list, '' none)")
+    parser.add_argument("--no-single", action="store_true", help="skip the single-pass DopTrack fixes")
     args = parser.parse_args()
-    doptrack(args.data, args.export)
+    windows = tuple(int(w) for w in args.windows.split(",") if w.strip())
+    doptrack(args.data, args.export, windows, not args.no_single)
     fox1d(args.data, args.export)
     gsdc(args.data, args.export)
 

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .doppler_ls import N_STATIC_STATES, solve_snapshots, solve_static, solve_static_passes, subpoint_centroid_ecef_m
+from .doppler_ls import (N_STATIC_STATES, SAT_OFFSET_SIGMA_HZ, TIME_OFFSET_SIGMA_S, solve_snapshots, solve_static,
+                         solve_static_passes, subpoint_centroid_ecef_m)
 from .dop import N_DOPPLER_STATES
 from .measurements import sv_states_from_tle
 
@@ -264,27 +265,34 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
 
 
 def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
-                           sigma_hz=None, alpha=1e-3, clock_degree=3, time_bias=False, time_bias_sigma_s=None):
-    """One batch fix of a receiver at rest from several passes, a transmitter frequency polynomial per pass.
+                           sigma_hz=None, alpha=1e-3, clock="per_pass", clock_degree=None,
+                           sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ, time_bias=True,
+                           time_bias_sigma_s=TIME_OFFSET_SIGMA_S):
+    """One batch fix of a receiver at rest from several passes (satellites), frequency terms per pass.
 
     Rows without ``sigma_hz`` get the caller's sigma, or their own pass's:
-    the robust scale of that pass's residuals in a first joint solve with
-    unit weights (passes differ in signal-to-noise ratio, and in how well
-    their element sets fit the common position).
+    the robust scale of that pass's residuals in a joint solve (passes
+    differ in signal-to-noise ratio, and in how well their element sets fit
+    the common position). That solve runs twice, first with unit weights,
+    then with the first one's sigmas from all starts again: with unit
+    weights a noisy pass can pull the choice among the starts to a wrong
+    solution whose residuals would then set every sigma.
 
     Parameters
     ----------
     meas : Measurements
     pass_id : array_like, (n,)
-        Pass of each row.
+        Pass (satellite track) of each row.
     constellation, init_pos_ecef_m, alt_m, alt_sigma_m, sigma_hz, alpha
         As :func:`position_static`.
-    clock_degree : int
-        Degree of each pass's frequency-offset polynomial.
+    clock, clock_degree, sat_offset_sigma_hz
+        Clock model: ``"per_pass"`` (a frequency polynomial per pass, degree
+        3 by default) or ``"common"`` (one receiver polynomial, degree 1 by
+        default, plus each satellite's constant offset with a prior); see
+        :func:`~leosop.positioning.doppler_ls.solve_static_passes`.
     time_bias, time_bias_sigma_s
         Estimate a time offset of each pass's satellite states (its element
-        set's along-track error), optionally with a prior; see
-        :func:`~leosop.positioning.doppler_ls.solve_static_passes`.
+        set's along-track error) with a zero-mean prior (None: no prior).
 
     Returns
     -------
@@ -294,26 +302,31 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
     pass_id = np.asarray(pass_id)
     pos, vel, reason, source = satellite_states(meas, constellation)
     usable = reason == ""
-    if usable.sum() < 4 + clock_degree:
-        raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {4 + clock_degree}")
-    kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
-              clock_degree=clock_degree, time_bias=time_bias, time_bias_sigma_s=time_bias_sigma_s)
+    n_loc = (1 if clock == "common" else 1 + (3 if clock_degree is None else clock_degree))
+    if usable.sum() < 3 + n_loc:
+        raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {3 + n_loc}")
+    kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable, clock=clock,
+              clock_degree=clock_degree, sat_offset_sigma_hz=sat_offset_sigma_hz, time_bias=time_bias,
+              time_bias_sigma_s=time_bias_sigma_s)
     pos_lt = init_pos_ecef_m
     sigma_pass = None
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
-        pilot = solve_static_passes(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel,
-                                    meas.carrier_hz, meas.t_s, pass_id, alpha=None, **kw)
-        sigma_pass = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used],
-                                             clock_degree + 1 + bool(time_bias))
-                               for p in pilot.pass_ids])
-        sigma_pass = np.where(np.isfinite(sigma_pass) & (sigma_pass > 0), sigma_pass, 1.0)
+        sigma_pilot = np.nan_to_num(meas.sigma_hz, nan=1.0)
+        for _ in range(2):
+            pilot = solve_static_passes(meas.doppler_hz, sigma_pilot, pos, vel, meas.carrier_hz, meas.t_s, pass_id,
+                                        alpha=None, **kw)
+            sigma_pass = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used],
+                                                 n_loc + bool(time_bias))
+                                   for p in pilot.pass_ids])
+            sigma_pass = np.where(np.isfinite(sigma_pass) & (sigma_pass > 0), sigma_pass, 1.0)
+            lookup = dict(zip(pilot.pass_ids.tolist(), sigma_pass))
+            sigma_rows = np.array([lookup.get(p, np.nan) for p in pass_id.tolist()])
+            sigma_pilot = np.where(np.isfinite(meas.sigma_hz), meas.sigma_hz, np.nan_to_num(sigma_rows, nan=1.0))
         if np.isfinite(pilot.pos_ecef_m).all():
             pos_lt = pilot.pos_ecef_m
             # The pilot searched the starts: the fix starts from its solution and the best other one.
             kw["pos0_ecef_m"] = np.vstack([pilot.pos_ecef_m] + [pilot.mirror_pos_ecef_m] * bool(
                 np.isfinite(pilot.mirror_pos_ecef_m).all()))
-        lookup = dict(zip(pilot.pass_ids.tolist(), sigma_pass))
-        sigma_rows = np.array([lookup.get(p, np.nan) for p in pass_id.tolist()])
         sigma_default = float(np.median(sigma_pass)) if sigma_pass.size else np.nan
     else:
         sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan
