@@ -1,0 +1,409 @@
+"""Every pilot comb in a block: successive interference cancellation.
+
+A Starlink recording carries the combs of several satellites interleaved in
+one band. :func:`find_combs` finds them one at a time, strongest first, with
+the single-comb ``fast`` machinery of :mod:`leosop.signal.doppler`, cancelling
+each comb once found [successive interference cancellation, as in the
+multi-satellite Starlink receivers of Humphreys 2023 and Kozhaya 2023]:
+
+1. One FFT of the block. The comb detector (:func:`~.doppler.coarse_fft`,
+   false-alarm probability ``pfa`` per search) runs on the spectrum with every
+   comb found so far subtracted.
+2. A detected comb is decimated from the raw samples exactly as ``fast`` does
+   (integrate-and-dump into B segments per tone, mixed at the coarse
+   frequency), the contributions of the combs already found are removed from
+   its (B, tones) matrix, and rate search, frequency search and Newton on the
+   joint ML cost follow (``fast``'s own helpers). The coherent tone powers
+   at two more tone positions either side then fix the comb position (always:
+   another satellite's strong tone next to an edge tone can make the
+   spectrum prefer the comb shifted by one spacing; it does not follow this
+   comb's chirp, so the coherent check sees through it).
+3. Per tone, the complex amplitude by least squares on the chirp model.
+   The comb is subtracted from the spectrum (tone by tone over a window of
+   ``B_s`` bins, from ``B_s`` samples of the model and one short FFT; exact
+   to the within-segment chirp curvature, ~1e-4 rad) and the search repeats.
+4. After the last detection, ``n_refine`` passes re-estimate every comb
+   (Newton from its estimate) with all the others removed from its decimated
+   tones, so early estimates lose the bias of combs found later.
+
+Contributions of one comb to another's decimated tones are closed forms: a
+tone at local frequency nu in segment m, seen by a channel mixed at f_c,
+gives its value at the segment centre times the Dirichlet kernel
+``sin(pi (nu - f_c) L / fs) / sin(pi (nu - f_c) / fs)`` and the channel's
+mixing phase. Only tones within ``4 fs_dec`` of a channel are counted (the
+integrate-and-dump sinc puts what aliases into the band near its nulls).
+
+Ambiguities
+-----------
+*Comb shifted by one spacing*: handled by the coherent check (step 2).
+*Nearly coinciding tones* (Doppler difference ``m * spacing + delta``): both
+combs are found and separated by the joint chirp model when ``|delta|`` or
+their rate difference times the block length leaves them distinguishable;
+a candidate within ``2 / T`` in Doppler (modulo the spacing) and ``4 / T^2``
+in rate of a comb already found is taken as that comb's residue and ends the
+search: such pairs are reported as one comb (their Doppler a power-weighted
+blend). Between those limits the estimates are unbiased but above the
+single-comb bound (the two tone sets share information).
+
+Output order is detection order (strongest first in the full search;
+predicted combs first, in the order given, in tracking mode).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .crlb import crlb_frequency_hz2
+from .doppler import (MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, _abs2, _decimation,
+                      _dechirped_peak, _interleaved, _newton, _phasors, _rate_dpt, _rate_grid, _segments,
+                      _threshold, coarse_fft)
+from .fft import fft
+from .pilot import PilotComb
+
+__all__ = ["Combs", "find_combs"]
+
+#: Tone positions decimated beyond each end of a comb for the coherent position check.
+_EXTRA = 2
+#: Channels count another comb's tone within this many decimated bandwidths.
+_LEAK_BANDS = 4.0
+
+
+@dataclass(frozen=True)
+class Combs:
+    """Combs found in one block, arrays of shape (n_found,) unless stated.
+
+    Attributes
+    ----------
+    doppler_hz : central-tone Doppler at the block centre [Hz].
+    doppler_rate_hz_per_s : its rate [Hz/s].
+    cn0_dbhz : mean C/N0 of the tones [dB-Hz].
+    sigma_hz : Cramér-Rao sigma of ``doppler_hz`` from the fitted tone C/N0s [Hz].
+    amplitudes : (n_found, n_tones) complex amplitude of each tone at the block
+        centre (sample units; ``|a|^2 fs / N0`` is the tone's C/N0).
+    statistic : coherent comb power over noise, mean over tones (~1 for noise only).
+    predicted_index : index into ``predicted_hz`` of the prediction a comb was
+        found at, -1 for a comb found by the search.
+    """
+
+    doppler_hz: np.ndarray
+    doppler_rate_hz_per_s: np.ndarray
+    cn0_dbhz: np.ndarray
+    sigma_hz: np.ndarray
+    amplitudes: np.ndarray
+    statistic: np.ndarray
+    predicted_index: np.ndarray
+
+    @property
+    def n_found(self):
+        return self.doppler_hz.size
+
+
+class _Grid:
+    """Shared decimation grid of one block (integrate-and-dump into ``n_seg`` segments)."""
+
+    def __init__(self, iq, fs, bw_hz):
+        n = iq.shape[-1]
+        self.n, self.fs = n, fs
+        self.n_seg, self.seg = _decimation(n, int(np.ceil(8.0 * bw_hz * n / fs)))
+        self.t_l, self.t_m, self.tau, self.tpow = _segments(n, fs, self.n_seg, self.seg)
+        self.counts = np.minimum(self.seg, n - np.arange(self.n_seg) * self.seg)
+        self.t_abs = self.tau + 0.5 * (n - 1) / fs  # segment centres from the first sample
+        pad = self.n_seg * self.seg - n
+        x = iq if pad == 0 else np.concatenate([iq, np.zeros(pad, dtype=iq.dtype)])
+        self.xr = np.ascontiguousarray(x).view(x.real.dtype).reshape(self.n_seg, 2 * self.seg)
+        self.cdtype = iq.dtype
+
+    @property
+    def fs_dec(self):
+        return self.n_seg * self.fs / self.n
+
+
+def _channels_hz(comb, d_c, wide):
+    """Mixing frequency of tone positions -wide..wide of a comb whose central tone is at ``d_c``."""
+    k = np.arange(-wide, wide + 1)
+    return k * comb.tone_spacing_hz * (1.0 + d_c / comb.carrier_hz) + d_c
+
+
+def _decimate(grid, comb, d_c, wide):
+    """Integrate-and-dump outputs of tone positions -wide..wide, (n_seg, 2 wide + 1), as ``fast``."""
+    spacing = comb.tone_spacing_hz * (1.0 + d_c / comb.carrier_hz)
+    mix = _phasors(d_c * grid.t_l, spacing * grid.t_l, wide)
+    y = (grid.xr @ _interleaved(mix, grid.xr.dtype)).view(grid.cdtype)
+    return y * _phasors(d_c * grid.t_m, spacing * grid.t_m, wide)
+
+
+def _frac(c):
+    return c - np.round(c)
+
+
+def _tones(comb, doppler_hz, rate, tau):
+    """Phase [cycles] and frequency [Hz] of every tone at times ``tau`` from the block centre, (len(tau), K)."""
+    k_hz = comb.offsets_hz
+    s = comb.doppler_scale
+    cycles = np.multiply.outer(tau, k_hz) + np.multiply.outer(doppler_hz * tau + 0.5 * rate * tau**2, s)
+    nu = k_hz + np.multiply.outer(doppler_hz + rate * tau, s)
+    return cycles, nu
+
+
+def _dirichlet(delta_hz, counts, fs):
+    """sum over a segment of ``counts`` samples, centred, of exp(j 2 pi delta t): real."""
+    x = np.pi * delta_hz / fs
+    sx = np.sin(x)
+    small = np.abs(sx) < 1e-12
+    return np.where(small, counts, np.sin(x * counts) / np.where(small, 1.0, sx))
+
+
+def _response(grid, comb, est, f_c, *, own=False):
+    """Decimated outputs that comb ``est`` (with its amplitudes) puts into channels mixed at ``f_c``.
+
+    With ``own`` the channels are the comb's own tones (unit amplitudes,
+    diagonal only): the least-squares regressors. Returns (n_seg, len(f_c)).
+    """
+    cycles, nu = _tones(comb, est.doppler_hz, est.rate, grid.tau)
+    if own:
+        ii = jj = np.arange(f_c.size)
+        amp = np.ones(f_c.size)
+    else:
+        ii, jj = np.nonzero(np.abs(nu[grid.n_seg // 2][:, None] - f_c) < _LEAK_BANDS * grid.fs_dec)
+        amp = est.amp[ii]
+        if ii.size == 0:
+            return None
+    phase = _frac(cycles[:, ii] - np.multiply.outer(grid.t_abs, f_c[jj]))
+    contrib = amp * np.exp(2j * np.pi * phase) * _dirichlet(nu[:, ii] - f_c[jj], grid.counts[:, None], grid.fs)
+    if own:
+        return contrib
+    out = np.zeros((grid.n_seg, f_c.size), dtype=complex)
+    for j in np.unique(jj):
+        out[:, j] = contrib[:, jj == j].sum(axis=1)
+    return out
+
+
+@dataclass
+class _Comb:
+    """Working state of one comb: decimated raw tones and current estimates."""
+
+    d_c: float          # mixing (coarse) central frequency
+    y_wide: np.ndarray  # (n_seg, K + 2 extra) raw decimated tones
+    doppler_hz: float = np.nan
+    rate: float = np.nan
+    amp: np.ndarray = None
+    cn0_dbhz: float = np.nan
+    sigma_hz: float = np.nan
+    statistic: float = np.nan
+    predicted_index: int = -1
+
+
+def _fit(grid, comb, c, z_wide, *, max_rate, pfa, start=None, resolve=True):
+    """``fast``'s fine stage on cleaned decimated tones ``z_wide``; fills ``c``. Returns the comb shift."""
+    half = comb.n_tones // 2
+    ratio = comb.tone_spacing_hz / comb.carrier_hz
+    extra = (z_wide.shape[1] - comb.n_tones) // 2
+    y = z_wide[:, extra:z_wide.shape[1] - extra]
+    tau, tpow = grid.tau, grid.tpow
+    dt_dec = grid.seg / grid.fs
+    dur = grid.n / grid.fs
+    known = np.zeros(grid.n_seg)
+    if start is None:
+        rate, f_res = 0.0, None
+        yt = np.ascontiguousarray(y.T, dtype=np.complex64)
+        if max_rate * dur**2 > 0.25:
+            rate = _rate_dpt(yt, dt_dec, pfa)
+            if rate is None:
+                rate, f_res = _rate_grid(yt, tau, known, dt_dec, max_rate, dur)
+        if f_res is None:
+            f_res = _dechirped_peak(yt, tau, rate, known, dt_dec)
+    else:
+        f_res, rate = start
+        if f_res is None:
+            yt = np.ascontiguousarray(y.T, dtype=np.complex64)
+            f_res = _dechirped_peak(yt, tau, rate, known, dt_dec)
+    delta, rate, y_sum = _newton(y, tau, tpow, ratio, f_res, rate, known)
+    if resolve and extra:
+        phase = delta * tau + 0.5 * rate * tau**2
+        power = _abs2(np.sum(z_wide * _phasors(phase, ratio * phase, half + extra), axis=0))
+        shift = int(np.argmax(np.convolve(power, np.ones(comb.n_tones), mode="valid"))) - extra
+        if shift:
+            return shift, c.d_c + delta
+    n, fs = grid.n, grid.fs
+    c.doppler_hz, c.rate = c.d_c + delta, rate
+    energy = np.sum(_abs2(y), axis=0)
+    resid = np.sort(np.maximum(energy - _abs2(y_sum) / grid.n_seg, 0.0))
+    sigma2 = 0.5 * float(resid[(resid.size - 1) // 2] + resid[resid.size // 2]) / ((grid.n_seg - 1) * grid.seg)
+    a2 = np.maximum(_abs2(y_sum) - n * sigma2, 0.0) / n**2
+    cn0_k = a2 * fs / sigma2 if sigma2 > 0 else np.full(comb.n_tones, np.inf)
+    w = np.sum(cn0_k * comb.doppler_scale**2)
+    c.sigma_hz = float(np.sqrt(crlb_frequency_hz2(10.0 * np.log10(w), n, fs))) if w > 0 else np.inf
+    mean_cn0 = np.mean(cn0_k)
+    c.cn0_dbhz = float(10.0 * np.log10(mean_cn0)) if mean_cn0 > 0 else -np.inf
+    c.statistic = float(np.mean(_abs2(y_sum)) / (n * sigma2)) if sigma2 > 0 else np.inf
+    g = _response(grid, comb, c, _channels_hz(comb, c.d_c, half), own=True)
+    c.amp = np.sum(y * np.conj(g), axis=0) / np.sum(_abs2(g), axis=0)
+    return 0, None
+
+
+def _cleaned(grid, comb, combs, j):
+    """Decimated tones of comb ``j`` with every other comb's contribution removed."""
+    c = combs[j]
+    half = comb.n_tones // 2
+    f_c = _channels_hz(comb, c.d_c, half + _EXTRA)
+    z = c.y_wide.astype(complex)
+    for i, other in enumerate(combs):
+        if i != j and other.amp is not None:
+            r = _response(grid, comb, other, f_c)
+            if r is not None:
+                z -= r
+    return z
+
+
+def _spectrum_grid(n, target):
+    """Segments B_s dividing n, nearest to ``target`` (n itself when n has no divisor in range)."""
+    div = [b for b in range(max(16, target // 2), min(4 * target, n // 4) + 1) if n % b == 0]
+    return min(div, key=lambda b: abs(b - target)) if div else n
+
+
+def _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s):
+    """Remove comb ``c`` from the block's FFT (in place) over ``n_seg_s`` bins around each tone."""
+    seg = n // n_seg_s
+    df = fs / n
+    _, _, tau, _ = _segments(n, fs, n_seg_s, seg)
+    cycles, nu = _tones(comb, c.doppler_hz, c.rate, tau)
+    vals = (c.amp * np.exp(2j * np.pi * _frac(cycles))).T  # (K, B_s)
+    dft = fft(vals)
+    nu0 = nu[n_seg_s // 2]
+    b = np.round(nu0 / df).astype(int)[:, None] + np.arange(-(n_seg_s // 2), n_seg_s - n_seg_s // 2)
+    # Sum over the segments of the segment-centre value times each segment's kernel and delay.
+    weight = _dirichlet(nu0[:, None] - b * df, seg, fs) * np.exp(-2j * np.pi * _frac(b * (0.5 * (seg - 1) / n)))
+    np.subtract.at(spectrum, b % n, (weight * dft[np.arange(comb.n_tones)[:, None], b % n_seg_s]).astype(spectrum.dtype))
+
+
+def _duplicate(comb, c, combs, dur):
+    """True when ``c`` lies within 2/T (modulo the spacing) and 4/T^2 of a comb already found."""
+    sp = comb.tone_spacing_hz
+    for o in combs:
+        dd = c.doppler_hz - o.doppler_hz
+        if abs(dd - sp * np.round(dd / sp)) < 2.0 / dur and abs(c.rate - o.rate) < 4.0 / dur**2:
+            return True
+    return False
+
+
+def _check(iq, fs, predicted_hz, predicted_rate):
+    if not np.isfinite(fs) or fs <= 0:
+        raise InputError(f"sample_rate_hz={fs} must be a finite number > 0")
+    iq = np.asarray(iq)
+    if iq.ndim != 1 or not np.iscomplexobj(iq):
+        raise InputError(f"IQ samples must be a 1-D complex array, got {iq.dtype} of shape {iq.shape}")
+    p = np.atleast_1d(np.asarray([] if predicted_hz is None else predicted_hz, dtype=float))
+    if p.ndim != 1:
+        raise InputError(f"predicted_hz must be 1-D, got shape {p.shape}")
+    pr = None
+    if predicted_rate is not None:
+        pr = np.broadcast_to(np.asarray(predicted_rate, dtype=float), p.shape)
+    return iq, p, pr
+
+
+def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_doppler_hz=MAX_DOPPLER_HZ,
+               max_rate_hz_per_s=MAX_RATE_HZ_PER_S, predicted_hz=None, predicted_rate_hz_per_s=None,
+               gate_hz=None, search=True, n_refine=2):
+    """Doppler, rate and C/N0 of every pilot comb in one block.
+
+    Parameters
+    ----------
+    iq : ndarray of complex, shape (n,)
+    sample_rate_hz : float
+    comb : PilotComb, optional
+    max_combs : int
+        Stop after this many combs.
+    pfa : float
+        False-alarm probability of each comb search (and of the rate
+        transform's peak, as in ``fast``). A noise-only block gives a
+        spurious comb with probability at most ``pfa``.
+    max_doppler_hz, max_rate_hz_per_s : float
+        Search limits (as :func:`~.doppler.estimate_block`).
+    predicted_hz : array_like, shape (n_pred,), optional
+        Tracking mode: central-tone Dopplers predicted from earlier blocks.
+        Each is fitted from its own decimated tones (no spectrum search);
+        kept when its coherent statistic passes the detector at ``pfa``.
+    predicted_rate_hz_per_s : array_like, shape (n_pred,) or scalar, optional
+        Predicted rates; given, the rate search is skipped (good to ~1/(2 T^2)).
+    gate_hz : float, optional
+        Half-width of the window around each prediction (default: the coarse
+        error of the full search, half the rate smear plus 2 bins).
+    search : bool
+        Also search the spectrum for combs not predicted (costs one FFT of
+        the block plus the searches).
+    n_refine : int
+        Re-estimation passes with all other combs removed.
+
+    Returns
+    -------
+    Combs
+        In detection order (see module docstring).
+    """
+    comb = comb or PilotComb()
+    fs = float(sample_rate_hz)
+    iq, pred, pred_rate = _check(iq, fs, predicted_hz, predicted_rate_hz_per_s)
+    if not np.all(np.isfinite(pred)):
+        raise InputError("predicted_hz contains NaN or inf")
+    n = iq.shape[-1]
+    dur = n / fs
+    df = fs / n
+    smear = max_rate_hz_per_s * dur
+    error_hz = 0.5 * smear + 2.0 * df
+    gate = error_hz if gate_hz is None else float(gate_hz)
+    grid = _Grid(iq, fs, max(error_hz, gate) + 0.5 * max_rate_hz_per_s * dur)
+    half = comb.n_tones // 2
+    wide = half + _EXTRA
+    combs = []
+
+    def fit_new(d_c, start, index):
+        c = _Comb(d_c, _decimate(grid, comb, d_c, wide), predicted_index=index)
+        combs.append(c)
+        j = len(combs) - 1
+        shift, centre = _fit(grid, comb, c, _cleaned(grid, comb, combs, j), max_rate=max_rate_hz_per_s,
+                             pfa=pfa, start=start)
+        if shift:
+            c.d_c = centre + shift * comb.tone_spacing_hz * (1.0 + centre / comb.carrier_hz)
+            c.y_wide = _decimate(grid, comb, c.d_c, wide)
+            _fit(grid, comb, c, _cleaned(grid, comb, combs, j), max_rate=max_rate_hz_per_s, pfa=pfa,
+                 start=(0.0, c.rate if np.isfinite(c.rate) else 0.0) if start is not None else None,
+                 resolve=False)
+        return c
+
+    # Tracking: each prediction from its own tones; kept if the coherent power passes the detector.
+    n_cells = grid.n_seg * max(1, int(np.ceil(2.0 * max_rate_hz_per_s * dur**2)))
+    thr = _threshold(comb.n_tones, n_cells, pfa)
+    for i, p in enumerate(pred[:max_combs]):
+        start = (None, float(pred_rate[i])) if pred_rate is not None else None
+        c = fit_new(float(p), start, i)
+        if not (c.statistic > thr and abs(c.doppler_hz - p) <= gate + 2.0 * df) or _duplicate(comb, c, combs[:-1], dur):
+            combs.pop()
+
+    if search and len(combs) < max_combs:
+        spectrum = fft(iq)
+        if not np.isfinite(spectrum[0]):
+            raise InputError("IQ samples contain NaN or inf")
+        n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * dur)))
+        for c in combs:
+            _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
+        while len(combs) < max_combs:
+            coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa)
+            if not coarse.detected:
+                break
+            c = fit_new(coarse.doppler_hz, None, -1)
+            if _duplicate(comb, c, combs[:-1], dur):
+                combs.pop()
+                break
+            _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
+
+    for _ in range(n_refine if len(combs) > 1 else 0):
+        for j, c in enumerate(combs):
+            _fit(grid, comb, c, _cleaned(grid, comb, combs, j), max_rate=max_rate_hz_per_s, pfa=pfa,
+                 start=(c.doppler_hz - c.d_c, c.rate), resolve=False)
+
+    def col(name, dtype=float):
+        return np.array([getattr(c, name) for c in combs], dtype=dtype)
+
+    amps = np.array([c.amp for c in combs]) if combs else np.zeros((0, comb.n_tones), dtype=complex)
+    return Combs(col("doppler_hz"), col("rate"), col("cn0_dbhz"), col("sigma_hz"), amps, col("statistic"),
+                 col("predicted_index", int))
