@@ -125,12 +125,16 @@ def _channels_hz(comb, d_c, wide):
     return k * comb.tone_spacing_hz * (1.0 + d_c / comb.carrier_hz) + d_c
 
 
-def _decimate(grid, comb, d_c, wide):
-    """Integrate-and-dump outputs of tone positions -wide..wide, (n_seg, 2 wide + 1), as ``fast``."""
+def _decimate(grid, comb, c, wide):
+    """Fill ``c.y_wide``: integrate-and-dump outputs of tone positions -wide..wide, (n_seg, 2 wide + 1),
+    as ``fast``; and the channels' mixing frequencies and phasors at the segment centres."""
+    d_c = c.d_c
+    c.f_c = _channels_hz(comb, d_c, wide)
+    c.mix = np.exp(-2j * np.pi * _frac(np.multiply.outer(grid.t_abs, c.f_c)))
     spacing = comb.tone_spacing_hz * (1.0 + d_c / comb.carrier_hz)
     mix = _phasors(d_c * grid.t_l, spacing * grid.t_l, wide)
     y = (grid.xr @ _interleaved(mix, grid.xr.dtype)).view(grid.cdtype)
-    return y * _phasors(d_c * grid.t_m, spacing * grid.t_m, wide)
+    c.y_wide = y * _phasors(d_c * grid.t_m, spacing * grid.t_m, wide)
 
 
 def _frac(c):
@@ -154,25 +158,19 @@ def _dirichlet(delta_hz, counts, fs):
     return np.where(small, counts, np.sin(x * counts) / np.where(small, 1.0, sx))
 
 
-def _response(grid, comb, est, f_c, *, own=False):
-    """Decimated outputs that comb ``est`` (with its amplitudes) puts into channels mixed at ``f_c``.
+def _model(grid, comb, c):
+    """Cache on ``c`` its tones' values (with amplitudes) and frequencies at the segment centres, (n_seg, K)."""
+    cycles, c.nu = _tones(comb, c.doppler_hz, c.rate, grid.tau)
+    c.val = c.amp * np.exp(2j * np.pi * _frac(cycles))
 
-    With ``own`` the channels are the comb's own tones (unit amplitudes,
-    diagonal only): the least-squares regressors. Returns (n_seg, len(f_c)).
-    """
-    cycles, nu = _tones(comb, est.doppler_hz, est.rate, grid.tau)
-    if own:
-        ii = jj = np.arange(f_c.size)
-        amp = np.ones(f_c.size)
-    else:
-        ii, jj = np.nonzero(np.abs(nu[grid.n_seg // 2][:, None] - f_c) < _LEAK_BANDS * grid.fs_dec)
-        amp = est.amp[ii]
-        if ii.size == 0:
-            return None
-    phase = _frac(cycles[:, ii] - np.multiply.outer(grid.t_abs, f_c[jj]))
-    contrib = amp * np.exp(2j * np.pi * phase) * _dirichlet(nu[:, ii] - f_c[jj], grid.counts[:, None], grid.fs)
-    if own:
-        return contrib
+
+def _response(grid, c, f_c, mix):
+    """Decimated outputs that comb ``c`` puts into channels mixed at ``f_c`` (mixing phasors ``mix``,
+    (n_seg, len(f_c))): None when no tone of ``c`` is within reach. Returns (n_seg, len(f_c))."""
+    ii, jj = np.nonzero(np.abs(c.nu[grid.n_seg // 2][:, None] - f_c) < _LEAK_BANDS * grid.fs_dec)
+    if ii.size == 0:
+        return None
+    contrib = c.val[:, ii] * mix[:, jj] * _dirichlet(c.nu[:, ii] - f_c[jj], grid.counts[:, None], grid.fs)
     out = np.zeros((grid.n_seg, f_c.size), dtype=complex)
     for j in np.unique(jj):
         out[:, j] = contrib[:, jj == j].sum(axis=1)
@@ -185,6 +183,10 @@ class _Comb:
 
     d_c: float          # mixing (coarse) central frequency
     y_wide: np.ndarray  # (n_seg, K + 2 extra) raw decimated tones
+    f_c: np.ndarray = None  # (K + 2 extra,) mixing frequencies
+    mix: np.ndarray = None  # (n_seg, K + 2 extra) exp(-j 2 pi f_c t) at the segment centres
+    val: np.ndarray = None  # (n_seg, K) tone values at the segment centres
+    nu: np.ndarray = None   # (n_seg, K) tone frequencies there
     doppler_hz: float = np.nan
     rate: float = np.nan
     amp: np.ndarray = None
@@ -237,20 +239,21 @@ def _fit(grid, comb, c, z_wide, *, max_rate, pfa, start=None, resolve=True):
     mean_cn0 = np.mean(cn0_k)
     c.cn0_dbhz = float(10.0 * np.log10(mean_cn0)) if mean_cn0 > 0 else -np.inf
     c.statistic = float(np.mean(_abs2(y_sum)) / (n * sigma2)) if sigma2 > 0 else np.inf
-    g = _response(grid, comb, c, _channels_hz(comb, c.d_c, half), own=True)
+    cycles, nu = _tones(comb, c.doppler_hz, c.rate, grid.tau)
+    k = slice(extra, extra + comb.n_tones)
+    g = np.exp(2j * np.pi * _frac(cycles)) * c.mix[:, k] * _dirichlet(nu - c.f_c[k], grid.counts[:, None], grid.fs)
     c.amp = np.sum(y * np.conj(g), axis=0) / np.sum(_abs2(g), axis=0)
+    _model(grid, comb, c)
     return 0, None
 
 
 def _cleaned(grid, comb, combs, j):
     """Decimated tones of comb ``j`` with every other comb's contribution removed."""
     c = combs[j]
-    half = comb.n_tones // 2
-    f_c = _channels_hz(comb, c.d_c, half + _EXTRA)
     z = c.y_wide.astype(complex)
     for i, other in enumerate(combs):
-        if i != j and other.amp is not None:
-            r = _response(grid, comb, other, f_c)
+        if i != j and other.val is not None:
+            r = _response(grid, other, c.f_c, c.mix)
             if r is not None:
                 z -= r
     return z
@@ -357,14 +360,15 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     combs = []
 
     def fit_new(d_c, start, index):
-        c = _Comb(d_c, _decimate(grid, comb, d_c, wide), predicted_index=index)
+        c = _Comb(d_c, None, predicted_index=index)
+        _decimate(grid, comb, c, wide)
         combs.append(c)
         j = len(combs) - 1
         shift, centre = _fit(grid, comb, c, _cleaned(grid, comb, combs, j), max_rate=max_rate_hz_per_s,
                              pfa=pfa, start=start)
         if shift:
             c.d_c = centre + shift * comb.tone_spacing_hz * (1.0 + centre / comb.carrier_hz)
-            c.y_wide = _decimate(grid, comb, c.d_c, wide)
+            _decimate(grid, comb, c, wide)
             _fit(grid, comb, c, _cleaned(grid, comb, combs, j), max_rate=max_rate_hz_per_s, pfa=pfa,
                  start=(0.0, c.rate if np.isfinite(c.rate) else 0.0) if start is not None else None,
                  resolve=False)
