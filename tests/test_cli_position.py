@@ -129,8 +129,10 @@ def test_static_with_pass_id_column_solves_passes_jointly(capsys, tmp_path):
     s = doc["solutions"][0]
     assert s["status"] == "ok" and s["n_used"] == n
     assert [p["pass_id"] for p in doc["passes"]] == ["a", "b"]
-    # Each pass's offset within 5 sigma (~0.1 Hz for ~100 rows of 1 Hz) of its truth; the position
-    # within 5 of its posterior horizontal sigmas (constant clocks fitted by cubics).
-    np.testing.assert_allclose([p["clock_poly_hz"][0] for p in doc["passes"]], [-300.0, 200.0], atol=0.5)
+    # Each pass's offset near its truth: ~0.1 Hz sigma for ~100 rows of 1 Hz with the clock alone; the
+    # per-pass time offsets (on by default) share the offset's information near closest approach (the
+    # Doppler rate column), achieved 0.06 and 0.59 Hz; bound 1.5 Hz. The position within 5 of its posterior
+    # horizontal sigmas (constant clocks fitted by cubics).
+    np.testing.assert_allclose([p["clock_poly_hz"][0] for p in doc["passes"]], [-300.0, 200.0], atol=1.5)
     err = np.linalg.norm(geodetic_to_ecef(np.radians(s["lat_deg"]), np.radians(s["lon_deg"]), s["alt_m"]) - rx)
     assert err < 5 * np.linalg.norm(s["sigma_enu_m"])

@@ -39,6 +39,9 @@ def register(subparsers):
                    help="carrier of rows without carrier_hz (default %(default)g)")
     p.add_argument("--static", action="store_true", help="one batch fix of a receiver at rest; with a pass_id "
                    "column (optional, extends DESIGN 4.3) a cubic frequency offset per pass, position shared")
+    p.add_argument("--clock", choices=("per_pass", "common"), default="per_pass",
+                   help="with --static and pass_id: a frequency polynomial per pass (default), or one receiver "
+                   "clock (offset, drift) plus a constant offset per satellite (multi-satellite receiver)")
     p.add_argument("--init", metavar="LAT_DEG,LON_DEG,ALT_M", help="start position (default: below the satellites)")
     p.add_argument("--alt-m", type=float, metavar="H", help="known height above the ellipsoid (with --static)")
     p.add_argument("--alt-sigma-m", type=float, default=10.0, metavar="S",
@@ -95,7 +98,7 @@ def run(args):
     if args.static and meas.pass_id is not None:
         res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,
                                      alt_m=args.alt_m, alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz,
-                                     alpha=alpha)
+                                     alpha=alpha, clock=args.clock)
         f = res.fixes
         mid = int(np.argmin(np.abs(res.t_s - 0.5 * (res.t_s.min() + res.t_s.max()))))
         sol = _solution(res.t_s[mid], None if res.time_utc is None else res.time_utc[mid], f.pos_ecef_m,
