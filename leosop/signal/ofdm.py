@@ -132,13 +132,17 @@ def pss_time():
     return np.concatenate([-useful[-N_CP:], useful])
 
 
+def _qam4_codes(raw, index):
+    """Unit-power 4QAM symbols numbered ``index`` from random bytes (two bits per symbol)."""
+    b = ((raw[index // 4] >> (2 * (index % 4)).astype(np.uint8)) & 3).astype(np.int8)
+    return ((1 - 2 * (b & 1)) + 1j * (1 - 2 * (b >> 1))) / np.sqrt(2.0)
+
+
 def _qam4(rng, shape):
-    """Unit-power 4QAM symbols from random bytes (two bits per symbol)."""
+    """Unit-power 4QAM symbols of ``shape`` from ``rng``'s bytes."""
     n = int(np.prod(shape))
     raw = np.frombuffer(rng.bytes((n + 3) // 4), dtype=np.uint8)
-    bits = (raw[:, None] >> np.array([0, 2, 4, 6], dtype=np.uint8)) & 3
-    b = bits.ravel()[:n].astype(np.int8)
-    return (((1 - 2 * (b & 1)) + 1j * (1 - 2 * (b >> 1))) / np.sqrt(2.0)).reshape(shape)
+    return _qam4_codes(raw, np.arange(n)).reshape(shape)
 
 
 def data_symbols(rng, n_symbols=N_DATA_SYMBOLS):
@@ -242,14 +246,26 @@ class OfdmDownlink:
         k = np.arange(-N_FFT // 2, N_FFT // 2)
         return k[np.abs((k + 0.5) * SUBCARRIER_SPACING_HZ) < band / 2.0]
 
-    def frame_spectra(self, frame_index):
-        """Spectra of frame ``frame_index``'s 302 symbols, FFT-bin order, (302, 1024).
+    def frame_spectra(self, frame_index, bins=None):
+        """Spectra of frame ``frame_index``'s 302 symbols, (302, n_bins), columns ``bins`` (FFT-bin order, default all).
 
         The PSS row is the spectrum of its useful part (its prefix is negated
-        rather than cyclic; :meth:`samples` handles that).
+        rather than cyclic; :meth:`samples` handles that). The data are those
+        of :func:`data_symbols` with the frame's generator, decoded only for
+        the bins asked for.
         """
+        bins = np.arange(N_FFT) if bins is None else np.asarray(bins)
         rng = np.random.default_rng((int(self.seed), int(frame_index) + _FRAME_SEED_SHIFT))
-        return np.vstack([_pss_spectrum(), _sss_spectrum(), data_symbols(rng)])
+        active = active_subcarriers()
+        raw = np.frombuffer(rng.bytes((N_DATA_SYMBOLS * active.size + 3) // 4), dtype=np.uint8)
+        column = np.full(N_FFT, -1)
+        column[active % N_FFT] = np.arange(active.size)
+        col = column[bins]
+        is_active = col >= 0
+        index = np.arange(N_DATA_SYMBOLS)[:, None] * active.size + col[is_active]
+        data = np.zeros((N_DATA_SYMBOLS, bins.size), dtype=complex)
+        data[:, is_active] = _qam4_codes(raw, index)
+        return np.vstack([_pss_spectrum()[bins], _sss_spectrum()[bins], data])
 
     def samples(self, t_s, geom_cycles, clock_cycles=0.0, *, phase_rad=0.0):
         """Received complex baseband at sample times ``t_s``, complex128, shape of ``t_s`` (1-D).
@@ -296,7 +312,7 @@ class OfdmDownlink:
         frames = np.unique(frame_idx[live])
         table = np.zeros((frames.size * N_SYMBOLS_PER_FRAME + 1, columns.size), dtype=complex)
         for i, m in enumerate(frames):
-            table[i * N_SYMBOLS_PER_FRAME:(i + 1) * N_SYMBOLS_PER_FRAME] = self.frame_spectra(m)[:, columns]
+            table[i * N_SYMBOLS_PER_FRAME:(i + 1) * N_SYMBOLS_PER_FRAME] = self.frame_spectra(m, columns)
         row = np.searchsorted(frames, frame_idx) * N_SYMBOLS_PER_FRAME + sym
         return table, np.where(live, row, table.shape[0] - 1)  # guard samples read the zero row
 
@@ -391,6 +407,34 @@ def _window_sums(cum, starts, runs):
     return total
 
 
+#: Zero-padded length of the PSS periodograms of the frequency refinement.
+_CFO_FFT = 16 * N_FFT
+#: Half-width of the residual frequency search after the lag-128 estimate [Hz]
+#: (its error is ~4 kHz rms at 0 dB SNR and 8 frames, ~25 kHz at -10 dB).
+_CFO_SEARCH_HZ = 100e3
+
+
+def _residual_cfo_hz(x, starts, cfo_hz):
+    """Residual frequency from the PSS's useful parts with the known sequence wiped off.
+
+    Sum over frames of the zero-padded periodograms of ``x conj(pss)``
+    (1024 samples each), peak within +-_CFO_SEARCH_HZ, parabolic interpolation.
+    """
+    ref = np.conj(np.sqrt(N_FFT) * pss_time()[N_CP:])
+    first = np.round(starts).astype(np.int64) + N_CP
+    first = first[first + N_FFT <= x.size]
+    n = first[:, None] + np.arange(N_FFT)
+    wiped = x[n] * ref * np.exp(-2j * np.pi * (cfo_hz / FS_HZ) * n)
+    power = np.sum(np.abs(scipy.fft.fft(wiped, _CFO_FFT, axis=-1)) ** 2, axis=0)
+    f_hz = scipy.fft.fftfreq(_CFO_FFT, 1.0 / FS_HZ)
+    power[np.abs(f_hz) > _CFO_SEARCH_HZ] = 0.0
+    peak = int(np.argmax(power))
+    y0, y1, y2 = power[peak - 1], power[peak], power[(peak + 1) % _CFO_FFT]
+    denom = y0 - 2.0 * y1 + y2
+    frac = 0.5 * (y0 - y2) / denom if denom < 0 else 0.0
+    return float(f_hz[peak] + frac * FS_HZ / _CFO_FFT)
+
+
 def acquire_pss(iq, sample_rate_hz=FS_HZ, *, center_offset_hz=OFDM_CENTER_OFFSET_HZ, refine_samples=48):
     """Frame timing and carrier frequency offset from the PSS of a 240 MS/s snippet.
 
@@ -468,6 +512,7 @@ def acquire_pss(iq, sample_rate_hz=FS_HZ, *, center_offset_hz=OFDM_CENTER_OFFSET
         frac = 0.5 * (y0 - y2) / denom if denom < 0 else 0.0
         starts.append(lo + peak + frac)
         numbers.append(int(round((t0 - tau[0]) / FRAME_SAMPLES)))
+    cfo_hz += _residual_cfo_hz(x, np.array(starts), cfo_hz)
     starts_s = np.array(starts) / FS_HZ
     numbers = np.array(numbers, dtype=np.int64)
     period = float(np.polyfit(numbers, starts_s, 1)[0]) if numbers.size > 1 else float("nan")
