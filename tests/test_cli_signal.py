@@ -22,7 +22,7 @@ def _run(capsys, argv):
 def recording(tmp_path_factory):
     path = tmp_path_factory.mktemp("rec") / "one.sigmf-meta"
     assert main(["generate", "-o", str(path), "--sat", SAT, "--duration-s", "0.4", "--sample-rate-hz", "1e6",
-                 "--cn0-dbhz", "45", "--seed", "1", "--json"]) == 0
+                 "--cn0-dbhz", "45", "--cn0-model", "constant", "--seed", "1", "--json"]) == 0
     return path
 
 

@@ -30,7 +30,7 @@ from leosop.figure import pyplot, save_png  # noqa: E402
 from leosop.fileio import write_json  # noqa: E402
 from leosop.frames import geodetic_to_ecef  # noqa: E402
 from leosop.orbits import load_constellation  # noqa: E402
-from leosop.signal.channel import SiteChannel, doppler_blocks, site_range_rates  # noqa: E402
+from leosop.signal.channel import SiteChannel, doppler_blocks, site_geometry  # noqa: E402
 from leosop.signal.doppler import coarse_fft, doppler_sigma_hz, estimate_block, fine_fmlef  # noqa: E402
 from leosop.signal.fft import fft  # noqa: E402
 from leosop.signal.pilot import PilotComb  # noqa: E402
@@ -54,8 +54,8 @@ def leo_pass(trials, rng):
     const = load_constellation().select_ids(["71585"])
     xian = geodetic_to_ecef(np.radians(34.342), np.radians(108.940), 400.0)
     start = np.datetime64("2025-01-01T19:40:00", "ns")
-    t_nodes, rr = site_range_rates(const, xian, start, 240.0, node_step_s=0.5)
-    ch = SiteChannel(t_nodes, rr, FS, 45.0, 5.0)
+    t_nodes, range_m, _ = site_geometry(const, xian, start, 240.0, node_step_s=0.5)
+    ch = SiteChannel(t_nodes, range_m, FS, 45.0, 5.0)
     t = rng.uniform(0.0, 240.0, trials)
     d = ch.doppler_hz(t)[0]
     r = ch.doppler_rate_hz_per_s(t)[0]

@@ -1,10 +1,23 @@
 """``leosop generate``: a SigMF recording of Starlink pilot combs as received at a site.
 
 The satellites above the mask at the start (or ``--sat`` IDs) are propagated
-with SGP4; each one's comb follows its range at every sample (DESIGN 4.2),
-with a per-satellite clock offset drawn uniformly in [0, --sat-offset-max-hz]
-(seed 004 Table 1: 0-5 Hz) plus the receiver's offset. The truth (Doppler at
-each block centre, its rate, satellite id) goes into the SigMF annotations.
+with SGP4; each one's comb follows its exact light-time range at every
+sample (:mod:`leosop.signal.channel`, DESIGN 4.2), with
+
+- its own C/N0: by default from the geometry (``--cn0-dbhz`` holds for a
+  satellite at zenith at 550 km; free-space loss with range and the cosine
+  pattern of a flat receive array, :func:`~leosop.signal.channel.cn0_geometry_dbhz`;
+  silent below the horizon), or ``--cn0-model constant`` (one value for all,
+  or one per ``--sat``);
+- a clock offset drawn uniformly in [0, --sat-offset-max-hz] (seed 004
+  Table 1: 0-5 Hz) plus the receiver's offset;
+- optionally an orbit error (truth differs from the TLE the receiver will
+  use): along-track, radial and cross-track errors drawn per satellite.
+
+``--snapshot-s S --period-s P`` records only S seconds every P seconds, one
+SigMF capture per snapshot; the signal's phase runs on through the gaps.
+The truth (Doppler at each block centre, its rate, C/N0, satellite id) goes
+into the SigMF annotations, the per-satellite draws into ``leosop:satellites``.
 """
 
 import sys
@@ -19,7 +32,7 @@ from ..frames import azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..progress import progress
 from ..scenarios import XIAN_BAOJI
-from ..signal.channel import SiteChannel, site_range_rates
+from ..signal.channel import OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
 from ..signal.iq import write_sigmf
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
@@ -41,11 +54,17 @@ def register(subparsers):
                    help=f"UTC of the first sample (default {format_utc(XIAN_BAOJI.start_utc)}, the xian-baoji start)")
     p.add_argument("--duration-s", type=float, default=1.0, help="length in seconds (default 1)")
     p.add_argument("--sample-rate-hz", type=float, default=2.5e6, help="complex sample rate (default 2.5e6)")
-    p.add_argument("--cn0-dbhz", type=float, default=45.0, help="C/N0 of each tone [dB-Hz] (default 45)")
+    p.add_argument("--cn0-model", choices=("geometry", "constant"), default="geometry",
+                   help="geometry: C/N0 from range and elevation, --cn0-dbhz at zenith at 550 km; "
+                        "constant: --cn0-dbhz for every satellite (default geometry)")
+    p.add_argument("--cn0-dbhz", type=float, nargs="+", default=[45.0], metavar="C",
+                   help="C/N0 of each tone [dB-Hz] (default 45); with --cn0-model constant one value per --sat "
+                        "is accepted")
     p.add_argument("--sat", nargs="+", action="extend", metavar="ID",
                    help="NORAD ids to include (default: all above --mask-deg at the start)")
     p.add_argument("--mask-deg", type=float, default=40.0, help="elevation mask for the default choice (default 40)")
-    p.add_argument("--seed", type=int, default=0, help="seed of noise, phases and clock offsets (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of noise, phases, clock offsets and orbit errors (default 0)")
     p.add_argument("--datatype", choices=("cf32_le", "ci16_le"), default="cf32_le", help="sample format")
     p.add_argument("--truth-step-s", type=float, default=0.1,
                    help="block length of the truth annotations (default 0.1, as leosop doppler --block-s)")
@@ -53,6 +72,13 @@ def register(subparsers):
                    help="per-satellite clock offsets drawn in [0, this] (default 5, seed 004 Table 1)")
     p.add_argument("--rx-offset-hz", type=float, default=5.0,
                    help="receiver frequency offset (default 5, seed 004 Table 1)")
+    for axis in ("along", "radial", "cross"):
+        p.add_argument(f"--orbit-error-{axis}-m", type=float, default=0.0, metavar="SIGMA",
+                       help=f"standard deviation of the {axis}-track orbit error drawn per satellite [m] (default 0)"
+                       .replace("radial-track", "radial"))
+    p.add_argument("--snapshot-s", type=float, metavar="S",
+                   help="record only S seconds every --period-s (one SigMF capture each)")
+    p.add_argument("--period-s", type=float, metavar="P", help="snapshot period (with --snapshot-s)")
 
 
 def _select(const, pos_rx, start, ids, mask):
@@ -68,6 +94,61 @@ def _select(const, pos_rx, start, ids, mask):
     return const.subset(np.flatnonzero(keep))
 
 
+def _captures(args, n, fs):
+    """Sample index on the signal's timeline and length of each capture, ((n_cap,), (n_cap,))."""
+    if (args.snapshot_s is None) != (args.period_s is None):
+        raise InputError("--snapshot-s and --period-s go together")
+    if args.snapshot_s is None:
+        return np.array([0]), np.array([n])
+    snap = positive(args.snapshot_s, "--snapshot-s")
+    period = positive(args.period_s, "--period-s")
+    if snap > period:
+        raise InputError(f"--snapshot-s {snap:g} is longer than --period-s {period:g}")
+    n_snap = int(round(snap * fs))
+    if n_snap < 1:
+        raise InputError(f"--snapshot-s {snap:g}: shorter than one sample at {fs:g} Hz")
+    starts = np.round(np.arange(int(np.floor(n / fs / period)) + 1) * period * fs).astype(np.int64)
+    starts = starts[starts + n_snap <= n]
+    if starts.size == 0:
+        raise InputError(f"--duration-s {n / fs:g} holds no whole snapshot of --snapshot-s {snap:g}")
+    return starts, np.full(starts.size, n_snap)
+
+
+def _cn0(args, const, t_nodes, range_m, elev_rad):
+    """C/N0 per satellite at every node, (n_sats, n_nodes)."""
+    values = np.asarray(args.cn0_dbhz, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"--cn0-dbhz {args.cn0_dbhz}: must be finite numbers")
+    if values.size not in (1, len(const)) or (values.size > 1 and args.cn0_model != "constant"):
+        raise InputError(f"--cn0-dbhz: {values.size} values; give one, or one per satellite "
+                         f"({len(const)}) with --cn0-model constant")
+    if args.cn0_model == "constant":
+        return np.broadcast_to(np.broadcast_to(values, (len(const),))[:, None], range_m.shape)
+    return cn0_geometry_dbhz(values[0], range_m, elev_rad)
+
+
+def _truth_blocks(cap_file_starts, cap_signal_starts, cap_lengths, n_step, fs):
+    """File start, signal start and length of every truth block (whole blocks within each capture)."""
+    rows = []
+    for f0, s0, m in zip(cap_file_starts, cap_signal_starts, cap_lengths):
+        step = min(n_step, m)
+        offs = np.arange(0, m - step + 1, step)
+        rows.append(np.stack([f0 + offs, s0 + offs, np.full(offs.size, step)], axis=1))
+    return np.concatenate(rows)
+
+
+def _num(x):
+    """JSON number, or None for +-inf / NaN."""
+    return float(x) if np.isfinite(x) else None
+
+
+def _chunks(channel, signal_starts, lengths, rng):
+    """Received samples of every capture, chunk by chunk (bounded memory)."""
+    pieces = [(s + i, min(_CHUNK, m - i)) for s, m in zip(signal_starts, lengths) for i in range(0, m, _CHUNK)]
+    for start, count in progress(pieces, desc="generate", unit="chunk"):
+        yield channel.samples(start, count, rng)
+
+
 def run(args):
     lat, lon, alt = parse_site(args.site)
     start = parse_time(args.start) if args.start else XIAN_BAOJI.start_utc
@@ -75,10 +156,14 @@ def run(args):
     fs = positive(args.sample_rate_hz, "--sample-rate-hz")
     step = positive(args.truth_step_s, "--truth-step-s")
     mask = mask_deg(args.mask_deg)
-    if not np.isfinite(args.cn0_dbhz):
-        raise InputError(f"--cn0-dbhz {args.cn0_dbhz}: must be a finite number")
     if not (np.isfinite(args.sat_offset_max_hz) and args.sat_offset_max_hz >= 0):
         raise InputError(f"--sat-offset-max-hz {args.sat_offset_max_hz}: must be >= 0")
+    sigma_orbit_m = {}
+    for axis in ("along", "radial", "cross"):
+        value = getattr(args, f"orbit_error_{axis}_m")
+        if not (np.isfinite(value) and value >= 0):
+            raise InputError(f"--orbit-error-{axis}-m {value}: must be a standard deviation >= 0 m")
+        sigma_orbit_m[f"{axis}_sigma_m"] = value
     out = Path(args.output)
     if out.suffix != ".sigmf-meta":
         raise InputError(f"-o {out}: the output must end in .sigmf-meta")
@@ -89,50 +174,65 @@ def run(args):
     comb = PilotComb()
     if fs <= 2.0 * comb.offsets_hz.max():
         raise InputError(f"--sample-rate-hz {fs:g}: must exceed the comb's width, {2 * comb.offsets_hz.max():.0f} Hz")
+    signal_starts, lengths = _captures(args, n, fs)
+    file_starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
 
     rng = np.random.default_rng(args.seed)
     pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     const = _select(load_constellation(args.tle), pos_rx, start, args.sat, mask)
-    t_nodes, range_rate = site_range_rates(const, pos_rx, start, n / fs)
     clock = rng.uniform(0.0, args.sat_offset_max_hz, len(const)) + args.rx_offset_hz
-    channel = SiteChannel(t_nodes, range_rate, fs, args.cn0_dbhz, clock, comb=comb,
-                          phase_rad=rng.uniform(0.0, 2.0 * np.pi, len(const)))
+    phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
+    speed = inertial_speed_mps(const, start)
+    orbit_error = OrbitError.draw(rng, speed, **sigma_orbit_m)
+    t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=orbit_error)
+    channel = SiteChannel(t_nodes, range_m, fs, _cn0(args, const, t_nodes, range_m, elev), clock, comb=comb,
+                          phase_rad=phase)
 
-    starts = np.arange(0, n - n_step + 1, n_step)
-    t_c = (starts + 0.5 * (n_step - 1)) / fs
-    dop = channel.doppler_hz(t_c)
-    rate = channel.doppler_rate_hz_per_s(t_c)
+    blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
+    t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
+    dop, rate, cn0 = channel.doppler_hz(t_c), channel.doppler_rate_hz_per_s(t_c), channel.cn0_at(t_c)
     annotations = [
-        (s, n_step, {"core:label": str(sid), "leosop:sat_id": str(sid), "leosop:t_s": float(t_c[j]),
-                     "leosop:doppler_hz": float(dop[i, j]), "leosop:doppler_rate_hz_per_s": float(rate[i, j]),
-                     "leosop:cn0_dbhz": float(channel.cn0_dbhz[i])})
-        for j, s in enumerate(starts) for i, sid in enumerate(const.sat_ids)
+        (f0, m, {"core:label": str(sid), "leosop:sat_id": str(sid), "leosop:t_s": float(t_c[j]),
+                 "leosop:doppler_hz": float(dop[i, j]), "leosop:doppler_rate_hz_per_s": float(rate[i, j]),
+                 "leosop:cn0_dbhz": float(cn0[i, j])})
+        for j, (f0, _, m) in enumerate(blocks) for i, sid in enumerate(const.sat_ids) if np.isfinite(cn0[i, j])
+    ]
+    cn0_start = channel.cn0_at([0.0])[:, 0]
+    satellites = [
+        {"sat_id": str(sid), "doppler_hz_start": float(channel.doppler_hz([0.0])[i, 0]),
+         "doppler_rate_hz_per_s_start": float(channel.doppler_rate_hz_per_s([0.0])[i, 0]),
+         "clock_offset_hz": float(clock[i]), "cn0_dbhz": _num(cn0_start[i]),
+         "orbit_error_along_s": float(orbit_error.along_s[i]),
+         "orbit_error_along_m": float(orbit_error.along_s[i] * speed[i]),
+         "orbit_error_radial_m": float(orbit_error.radial_m[i]), "orbit_error_cross_m": float(orbit_error.cross_m[i])}
+        for i, sid in enumerate(const.sat_ids)
     ]
     # Full scale for ci16: tones add to at most sum of amplitudes; noise is
     # Gaussian. Four noise sigmas above the comb's peak keeps clipping ~1e-7.
     full_scale = comb.n_tones * len(const) + 4.0 * channel.noise_sigma() / np.sqrt(2.0)
-    chunks = (channel.samples(i, min(_CHUNK, n - i), rng)
-              for i in progress(range(0, n, _CHUNK), desc="generate", unit="chunk"))
+    cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
     extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
+             "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites,
              "core:description": f"leosop generate: Starlink pilot combs of {len(const)} satellite(s) "
                                  f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
              "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]}}
-    write_sigmf(out, chunks, sample_rate_hz=fs, center_hz=STARLINK_PILOT_HZ, start_utc=start,
-                datatype=args.datatype, annotations=annotations, global_extra=extra, ci16_full_scale=full_scale)
+    n_written = write_sigmf(out, _chunks(channel, signal_starts, lengths, rng), sample_rate_hz=fs,
+                            center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
+                            datatype=args.datatype, annotations=annotations, global_extra=extra,
+                            ci16_full_scale=full_scale)
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
         "datatype": args.datatype,
-        "n_samples": n,
+        "n_samples": n_written,
         "sample_rate_hz": fs,
         "start_utc": format_utc(start),
         "duration_s": n / fs,
-        "satellites": [
-            {"sat_id": str(sid), "doppler_hz_start": float(channel.doppler_hz([0.0])[i, 0]),
-             "doppler_rate_hz_per_s_start": float(channel.doppler_rate_hz_per_s([0.0])[i, 0]),
-             "clock_offset_hz": float(clock[i]), "cn0_dbhz": float(channel.cn0_dbhz[i])}
-            for i, sid in enumerate(const.sat_ids)
-        ],
+        "n_captures": int(signal_starts.size),
+        "snapshot_s": None if args.snapshot_s is None else float(lengths[0] / fs),
+        "period_s": args.period_s,
+        "cn0_model": args.cn0_model,
+        "satellites": satellites,
     }
     if args.out:
         write_json(Path(args.out) / "generate.json", doc)
@@ -140,10 +240,14 @@ def run(args):
 
 
 def summary(doc):
+    snap = (f", {doc['n_captures']} snapshots of {doc['snapshot_s']:g} s every {doc['period_s']:g} s"
+            if doc["snapshot_s"] else "")
     lines = [f"wrote {doc['meta']} ({doc['n_samples']} {doc['datatype']} samples at {doc['sample_rate_hz']:g} Hz, "
-             f"{doc['duration_s']:g} s from {doc['start_utc']})"]
+             f"{doc['duration_s']:g} s from {doc['start_utc']}{snap}; C/N0 model {doc['cn0_model']})"]
     for s in doc["satellites"]:
+        cn0 = "below horizon" if s["cn0_dbhz"] is None else f"{s['cn0_dbhz']:.1f} dB-Hz"
         lines.append(f"  sat {s['sat_id']}: Doppler {s['doppler_hz_start']:+.1f} Hz, rate "
                      f"{s['doppler_rate_hz_per_s_start']:+.1f} Hz/s, clock {s['clock_offset_hz']:.2f} Hz, "
-                     f"C/N0 {s['cn0_dbhz']:g} dB-Hz")
+                     f"C/N0 {cn0}, orbit error along {s['orbit_error_along_m']:+.1f} m, "
+                     f"radial {s['orbit_error_radial_m']:+.1f} m, cross {s['orbit_error_cross_m']:+.1f} m")
     return "\n".join(lines)

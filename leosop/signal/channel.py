@@ -1,4 +1,4 @@
-"""From geometry to received samples: Doppler, Doppler rate, clocks, noise.
+"""From geometry to received samples: Doppler, Doppler rate, clocks, C/N0, noise.
 
 Two entry points:
 
@@ -7,15 +7,27 @@ Two entry points:
     (and its change) and C/N0 at the block centres, as ``leosop simulate``
     needs once per satellite and epoch.
 :class:`SiteChannel`
-    Real geometry. SGP4 range rates from a static site on a node grid,
-    joined by a cubic spline (error ~h^4 |d4 rr/dt4| / 384, far below a
-    micrometre per second at 0.1 s nodes for LEO); each tone's phase is
-    ``-f_k / c`` times the spline's exact integral, so the instantaneous
-    Doppler at every sample is the range rate. (SGP4's velocity is not
-    exactly the derivative of its position: they differ by ~1 cm/s, 0.3 Hz,
-    so the phase must come from one of them alone.) Clock offsets (per satellite, seed
-    004 Table 1: 0-5 Hz, and the receiver's) add a common frequency to every
-    tone; several satellites are summed and complex white noise is added.
+    Real geometry. The received phase of the central tone at reception time
+    t is ``-f_c / c`` times the light-time range rho(t) = c tau(t) =
+    |R_z(omega_e tau) r_sv(t - tau) - r_rx|: the satellite's SGP4 position at
+    emission, rotated into the Earth-fixed frame of reception (Sagnac), to
+    the receiver at t (:func:`light_time_positions`, the same physics as
+    :func:`leosop.positioning.measurements.sv_states_from_tle`). rho is
+    solved exactly (iterated tau) on a node grid and joined by a cubic spline
+    (error ~h^4 |d4 rho/dt4| / 384, ~1e-8 m at 0.1 s nodes for LEO); each
+    tone's phase is ``-f_k / c`` times the spline, so the Doppler at every
+    sample is ``-f_k / c`` times its exact derivative, the truth written to
+    the annotations. (d rho/dt is the range rate at emission times
+    (1 - rho'/c) plus a Sagnac-rate term: it differs from the range rate at
+    reception by ~rate x 3 ms, several Hz.) Clock offsets (per satellite,
+    seed 004 Table 1: 0-5 Hz, and the receiver's) add a common frequency to
+    every tone; several satellites are summed, each with its own C/N0 at
+    every node (:func:`cn0_geometry_dbhz`, or constant), and complex white
+    noise is added.
+
+An :class:`OrbitError` makes the truth orbit differ from the element sets
+the receiver will use: an along-track time offset and a constant radial /
+cross-track shift per satellite.
 """
 
 from dataclasses import dataclass, field
@@ -23,11 +35,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..constants import C_MPS
+from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
-__all__ = ["doppler_blocks", "site_range_rates", "SiteChannel"]
+__all__ = ["doppler_blocks", "site_range_rates", "OrbitError", "light_time_positions", "site_geometry",
+           "cn0_geometry_dbhz", "inertial_speed_mps", "CN0_REF_RANGE_M", "SiteChannel"]
+
+#: Range of the reference geometry of :func:`cn0_geometry_dbhz`: a Starlink shell (550 km) at zenith [m].
+CN0_REF_RANGE_M = 550e3
 
 
 def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=0.0, cn0_dbhz=None, *,
@@ -99,6 +115,175 @@ def site_range_rates(constellation, pos_rx_ecef_m, start_utc, duration_s, *, nod
     return t_nodes, np.sum(los * vel, axis=-1) / np.linalg.norm(los, axis=-1)
 
 
+def _rotate_z(vec, angle_rad):
+    """Components of ``vec`` (..., 3) in a frame turned by ``angle_rad`` (...,) about z."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    x, y = vec[..., 0], vec[..., 1]
+    return np.stack([c * x + s * y, -s * x + c * y, vec[..., 2]], axis=-1)
+
+
+def _inertial_velocity(pos_ecef_m, vel_ecef_mps):
+    """ECEF velocity plus omega_e x r: the inertial velocity in ECEF axes, (..., 3)."""
+    x, y = pos_ecef_m[..., 0], pos_ecef_m[..., 1]
+    return vel_ecef_mps + OMEGA_E_RAD_PER_S * np.stack([-y, x, np.zeros_like(x)], axis=-1)
+
+
+@dataclass(frozen=True)
+class OrbitError:
+    """Truth orbit minus the element sets' orbit, per satellite.
+
+    Attributes
+    ----------
+    along_s : ndarray, (n_sats,)
+        Along-track time offset: the truth position at t is SGP4's inertial
+        position at ``t + along_s``.
+    radial_m, cross_m : ndarray, (n_sats,)
+        Constant shift along the radial and cross-track (r x v, inertial v)
+        axes of the satellite's RTN frame.
+    """
+
+    along_s: np.ndarray
+    radial_m: np.ndarray
+    cross_m: np.ndarray
+
+    def __post_init__(self):
+        arrays = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=float))
+                                       for v in (self.along_s, self.radial_m, self.cross_m)))
+        for name, value in zip(("along_s", "radial_m", "cross_m"), arrays):
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def draw(cls, rng, speed_mps, *, along_sigma_m=0.0, radial_sigma_m=0.0, cross_sigma_m=0.0):
+        """Gaussian errors, one per satellite; along-track metres become a time offset.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+        speed_mps : array_like, (n_sats,)
+            Inertial speed of each satellite (time offset = metres / speed).
+        along_sigma_m, radial_sigma_m, cross_sigma_m : float
+        """
+        speed = np.atleast_1d(np.asarray(speed_mps, dtype=float))
+        sigma_m = np.array([along_sigma_m, radial_sigma_m, cross_sigma_m], dtype=float)[:, None]
+        err_m = rng.standard_normal((3, speed.size)) * sigma_m
+        return cls(err_m[0] / speed, err_m[1], err_m[2])
+
+
+def inertial_speed_mps(constellation, time_utc):
+    """Inertial speed of every satellite at one instant, (n_sats,) (NaN where SGP4 fails)."""
+    from ..orbits.propagate import state_ecef
+
+    pos, vel, _ = state_ecef(constellation, np.array([time_utc], dtype="datetime64[ns]"))
+    return np.linalg.norm(_inertial_velocity(pos[:, 0], vel[:, 0]), axis=-1)
+
+
+def light_time_positions(constellation, pos_rx_ecef_m, times_utc, *, orbit_error=None, n_iter=3):
+    """Satellite positions at emission, in the ECEF frame of reception, and the light time.
+
+    Solves tau = |R_z(omega_e tau) r_sv(t - tau) - r_rx| / c by fixed-point
+    iteration: each pass multiplies the error by |range rate| / c ~ 3e-5, so
+    three passes leave ~1e-12 s (a range error ~1e-8 m). SGP4 takes
+    nanosecond times; the sub-nanosecond remainder is added along the velocity.
+
+    Parameters
+    ----------
+    constellation : Constellation
+    pos_rx_ecef_m : array_like, (3,)
+        Static receiver.
+    times_utc : array_like of datetime64, (n,)
+        Reception times.
+    orbit_error : OrbitError, optional
+        Truth minus element sets; None for the element sets' own orbit.
+    n_iter : int
+
+    Returns
+    -------
+    pos_sv_ecef_m : ndarray, (n_sats, n, 3)
+        NaN where SGP4 fails.
+    tau_s : ndarray, (n_sats, n)
+    """
+    from ..orbits.propagate import state_ecef_pairs
+
+    t_rx = np.atleast_1d(np.asarray(times_utc, dtype="datetime64[ns]"))
+    n_sats, n = len(constellation), t_rx.size
+    err = orbit_error or OrbitError(np.zeros(n_sats), 0.0, 0.0)
+    along_s, radial_m, cross_m = (np.repeat(np.broadcast_to(v, (n_sats,)), n)
+                                  for v in (err.along_s, err.radial_m, err.cross_m))
+    rx = np.asarray(pos_rx_ecef_m, dtype=float)
+    sat = np.repeat(np.arange(n_sats), n)
+    t_all = np.tile(t_rx, n_sats)
+    tau = np.zeros(n_sats * n)
+    for _ in range(n_iter):
+        delta_s = along_s - tau  # SGP4 time minus reception time
+        delta_ns = np.round(delta_s * 1e9)
+        p, v, _ = state_ecef_pairs(constellation, sat, t_all + delta_ns.astype("timedelta64[ns]"))
+        p = p + v * (delta_s - delta_ns * 1e-9)[:, None]
+        if np.any(radial_m) or np.any(cross_m):
+            h = np.cross(p, _inertial_velocity(p, v))
+            p = (p + radial_m[:, None] * p / np.linalg.norm(p, axis=-1, keepdims=True)
+                 + cross_m[:, None] * h / np.linalg.norm(h, axis=-1, keepdims=True))
+        p = _rotate_z(p, -OMEGA_E_RAD_PER_S * delta_s)
+        tau = np.linalg.norm(p - rx, axis=-1) / C_MPS
+    return p.reshape(n_sats, n, 3), tau.reshape(n_sats, n)
+
+
+def site_geometry(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_step_s=0.1, orbit_error=None):
+    """Light-time range and elevation of every satellite seen from a static site, on a node grid.
+
+    Parameters
+    ----------
+    constellation : Constellation
+    pos_rx_ecef_m : array_like, (3,)
+    start_utc : datetime64
+    duration_s : float
+    node_step_s : float
+    orbit_error : OrbitError, optional
+
+    Returns
+    -------
+    t_nodes_s : ndarray, (n_nodes,)
+        From ``start_utc``; one node before the start and two beyond the end.
+    range_m : ndarray, (n_sats, n_nodes)
+        c tau (:func:`light_time_positions`); NaN where SGP4 fails.
+    elev_rad : ndarray, (n_sats, n_nodes)
+        Elevation of the emission-time position.
+    """
+    from ..frames import azimuth_elevation_range
+
+    n_nodes = int(np.ceil(duration_s / node_step_s)) + 3
+    t_nodes = (np.arange(n_nodes) - 1) * node_step_s
+    times = np.datetime64(start_utc, "ns") + np.round(t_nodes * 1e9).astype("timedelta64[ns]")
+    pos, tau = light_time_positions(constellation, pos_rx_ecef_m, times, orbit_error=orbit_error)
+    _, elev, _ = azimuth_elevation_range(pos, np.asarray(pos_rx_ecef_m, dtype=float))
+    return t_nodes, tau * C_MPS, elev
+
+
+def cn0_geometry_dbhz(cn0_ref_dbhz, range_m, elev_rad, *, ref_range_m=CN0_REF_RANGE_M):
+    """C/N0 from free-space loss and a flat receive array's elevation pattern.
+
+    ``cn0 = cn0_ref + 20 log10(ref_range / range) + 10 log10(sin(elev))``:
+    ``cn0_ref`` holds for a satellite at zenith at ``ref_range_m``; the
+    pattern is the projected aperture of a flat phased array facing zenith
+    (gain proportional to the cosine of the zenith angle), like a Starlink
+    user terminal. Below the horizon the Earth blocks the signal (-inf).
+
+    Parameters
+    ----------
+    cn0_ref_dbhz : float or array_like broadcastable to range_m
+    range_m, elev_rad : array_like, same shape
+    ref_range_m : float
+
+    Returns
+    -------
+    cn0_dbhz : ndarray, shape of range_m
+    """
+    sin_el = np.sin(np.asarray(elev_rad, dtype=float))
+    up = sin_el > 0
+    pattern_db = np.full(sin_el.shape, -np.inf)
+    pattern_db[up] = 10.0 * np.log10(sin_el[up])
+    return cn0_ref_dbhz + 20.0 * np.log10(ref_range_m / np.asarray(range_m, dtype=float)) + pattern_db
+
+
 @dataclass
 class SiteChannel:
     """Pilot combs of several satellites received at a static site.
@@ -106,11 +291,12 @@ class SiteChannel:
     Attributes
     ----------
     t_nodes_s : ndarray, (n_nodes,)
-    range_rate_mps : ndarray, (n_sats, n_nodes)
-        From :func:`site_range_rates`.
+    range_m : ndarray, (n_sats, n_nodes)
+        Light-time range at the nodes (:func:`site_geometry`).
     sample_rate_hz : float
-    cn0_dbhz : ndarray, (n_sats,)
-        C/N0 per tone of each satellite.
+    cn0_dbhz : ndarray, (n_sats,) or (n_sats, n_nodes)
+        C/N0 per tone of each satellite, constant or at every node (-inf: silent).
+        Stored as (n_sats, n_nodes); linear in amplitude between nodes.
     clock_offset_hz : ndarray, (n_sats,)
         Clock-induced frequency offset of each satellite plus the receiver's.
     comb : PilotComb
@@ -119,7 +305,7 @@ class SiteChannel:
     """
 
     t_nodes_s: np.ndarray
-    range_rate_mps: np.ndarray
+    range_m: np.ndarray
     sample_rate_hz: float
     cn0_dbhz: np.ndarray
     clock_offset_hz: np.ndarray
@@ -127,46 +313,65 @@ class SiteChannel:
     phase_rad: np.ndarray | None = None
 
     def __post_init__(self):
-        if not np.all(np.isfinite(self.range_rate_mps)):
+        if not np.all(np.isfinite(self.range_m)):
             raise InputError("SGP4 failed for a satellite over the recording (decayed or bad elements)")
-        n_sats = self.range_rate_mps.shape[0]
-        self.cn0_dbhz = np.broadcast_to(np.asarray(self.cn0_dbhz, dtype=float), (n_sats,))
+        n_sats = self.range_m.shape[0]
+        cn0 = np.asarray(self.cn0_dbhz, dtype=float)
+        cn0 = cn0[:, None] if cn0.ndim == 1 else cn0
+        self.cn0_dbhz = np.broadcast_to(cn0, self.range_m.shape)
+        finite = np.isfinite(self.cn0_dbhz)
+        if not finite.any() or np.any(self.cn0_dbhz[~finite] != -np.inf):
+            raise InputError("C/N0 must be finite (or -inf for silence) and finite somewhere")
         self.clock_offset_hz = np.broadcast_to(np.asarray(self.clock_offset_hz, dtype=float), (n_sats,))
         self.phase_rad = np.zeros(n_sats) if self.phase_rad is None else np.asarray(self.phase_rad, dtype=float)
-        self._rr = CubicSpline(self.t_nodes_s, self.range_rate_mps, axis=1)
-        self._range = self._rr.antiderivative()
+        self._range = CubicSpline(self.t_nodes_s, self.range_m, axis=1)
         self._range0 = self._range(0.0)
+        self._cn0_ref = float(np.max(self.cn0_dbhz[finite]))
+        self._amp = 10.0 ** ((self.cn0_dbhz - self._cn0_ref) / 20.0)
 
     @property
     def n_sats(self):
-        return self.range_rate_mps.shape[0]
+        return self.range_m.shape[0]
 
     def doppler_hz(self, t_s):
         """Central-tone Doppler of each satellite, clocks included, (n_sats, n)."""
-        rr = self._rr(np.asarray(t_s, dtype=float))
+        rr = self._range(np.asarray(t_s, dtype=float), 1)
         return -rr * self.comb.carrier_hz / C_MPS + self.clock_offset_hz[:, None]
 
     def doppler_rate_hz_per_s(self, t_s):
         """Rate of the central-tone Doppler, (n_sats, n)."""
-        return -self._rr(np.asarray(t_s, dtype=float), 1) * self.comb.carrier_hz / C_MPS
+        return -self._range(np.asarray(t_s, dtype=float), 2) * self.comb.carrier_hz / C_MPS
+
+    def amplitude(self, t_s):
+        """Tone amplitude of each satellite (1 at the strongest node of all), (n_sats, n)."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        k = np.clip(np.searchsorted(self.t_nodes_s, t, side="right") - 1, 0, self.t_nodes_s.size - 2)
+        w = (t - self.t_nodes_s[k]) / (self.t_nodes_s[k + 1] - self.t_nodes_s[k])
+        return self._amp[:, k] * (1.0 - w) + self._amp[:, k + 1] * w
+
+    def cn0_at(self, t_s):
+        """C/N0 per tone of each satellite [dB-Hz], -inf when silent, (n_sats, n)."""
+        with np.errstate(divide="ignore"):
+            return self._cn0_ref + 20.0 * np.log10(self.amplitude(t_s))
 
     def noise_sigma(self):
-        """Complex noise standard deviation per sample (the strongest satellite has unit tones)."""
-        return noise_sigma(np.max(self.cn0_dbhz), self.sample_rate_hz)
+        """Complex noise standard deviation per sample (the strongest node has unit tones)."""
+        return noise_sigma(self._cn0_ref, self.sample_rate_hz)
 
     def samples(self, start, count, rng=None):
         """Received samples ``start .. start+count-1`` (complex128, (count,)), with noise if ``rng``.
 
-        Successive calls continue the same phases, so a recording can be made
-        chunk by chunk.
+        Sample i is at ``i / sample_rate_hz`` seconds after the channel's
+        t = 0; any calls, adjacent or far apart, continue the same phases, so a
+        recording can be made chunk by chunk or snapshot by snapshot.
         """
         t = (start + np.arange(int(count))) / self.sample_rate_hz
         geom = -(self._range(t) - self._range0[:, None]) * self.comb.carrier_hz / C_MPS
-        amp = 10.0 ** ((self.cn0_dbhz - np.max(self.cn0_dbhz)) / 20.0)
+        amp = self.amplitude(t)
         iq = np.zeros(t.size, dtype=complex)
-        for i in range(self.n_sats):
+        for i in np.flatnonzero(np.any(amp > 0, axis=1)):
             iq += amp[i] * comb_baseband(self.comb, t, geom[i], self.clock_offset_hz[i] * t,
                                          phase_rad=self.phase_rad[i])
         if rng is not None:
-            iq = add_noise(iq, np.max(self.cn0_dbhz), self.sample_rate_hz, rng)
+            iq = add_noise(iq, self._cn0_ref, self.sample_rate_hz, rng)
         return iq

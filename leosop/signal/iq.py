@@ -19,11 +19,31 @@ from ..errors import InputError
 from ..fileio import atomic_path
 from ..timebase import format_utc, parse_utc
 
-__all__ = ["DATATYPES", "Recording", "open_sigmf", "open_raw", "write_sigmf"]
+__all__ = ["DATATYPES", "Capture", "Recording", "open_sigmf", "open_raw", "write_sigmf"]
 
 #: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float).
 DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0)}
 _RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le"}
+#: Slack of the capture overlap check: writers may round core:datetime to the microsecond.
+_OVERLAP_TOL_S = 1e-6
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One contiguous stretch of samples (a SigMF capture segment).
+
+    Attributes
+    ----------
+    sample_start : int
+        Index of its first sample in the recording.
+    n_samples : int
+    start_utc : numpy.datetime64 or None
+        UTC time of its first sample (``core:datetime``), None when not given.
+    """
+
+    sample_start: int
+    n_samples: int
+    start_utc: np.datetime64 | None
 
 
 @dataclass
@@ -47,6 +67,9 @@ class Recording:
         SigMF annotations (``leosop generate`` stores its truth there).
     offset_bytes : int
         Header bytes before the first sample.
+    captures : list of Capture
+        Contiguous stretches in sample order (snapshot recordings have one per
+        snapshot); default one capture of the whole recording at ``start_utc``.
     """
 
     data_path: Path
@@ -59,6 +82,11 @@ class Recording:
     tone_spacing_hz: float = STARLINK_TONE_SPACING_HZ
     annotations: list = field(default_factory=list)
     offset_bytes: int = 0
+    captures: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if not self.captures:
+            self.captures = [Capture(0, int(self.n_samples), self.start_utc)]
 
     @property
     def duration_s(self):
@@ -147,31 +175,27 @@ def open_sigmf(meta_path, *, verify=True):
     data_path = meta_path.with_suffix(".sigmf-data")
     if not data_path.is_file():
         raise InputError(f"{data_path}: missing SigMF data file for {meta_path.name}")
+    _check_structure(meta_path)
     try:
         with warnings.catch_warnings():  # sigmf warns about odd sizes; we raise below
             warnings.simplefilter("ignore")
             meta = sigmffile.fromfile(str(meta_path), skip_checksum=True)
-    except (SigMFError, json.JSONDecodeError, KeyError, ValueError) as exc:
+    except (SigMFError, json.JSONDecodeError, KeyError, ValueError, TypeError, AttributeError) as exc:
         raise InputError(f"{meta_path}: not valid SigMF metadata ({exc})".replace("\n", " ")) from None
     info = meta.get_global_info()
     datatype = info.get("core:datatype")
     if datatype not in DATATYPES:
         raise InputError(f"{meta_path}: core:datatype {datatype!r} is not supported; expected one of "
                          f"{', '.join(DATATYPES)}")
-    if int(info.get("core:num_channels", 1)) != 1:
+    if info.get("core:num_channels", 1) != 1:
         raise InputError(f"{meta_path}: core:num_channels must be 1")
     fs = _check_rate(info.get("core:sample_rate"), f"{meta_path}: core:sample_rate")
-    captures = meta.get_captures()
-    cap = captures[0] if captures else {}
-    offset = int(cap.get("core:header_bytes", 0) or 0)
+    raw_caps = meta.get_captures() or [{}]
+    offset = _int_field(raw_caps[0], "core:header_bytes", 0, f"{meta_path}: capture 0")
     n = _count_samples(data_path, datatype, offset, str(meta_path))
+    captures, center_hz = _captures(raw_caps, n, fs, meta_path)
     if verify and info.get("core:sha512") and _sha512(data_path) != info["core:sha512"]:
         raise InputError(f"{data_path}: contents do not match core:sha512 in {meta_path.name} (truncated or modified)")
-    start = cap.get("core:datetime")
-    try:
-        start_utc = parse_utc(start, name="core:datetime") if start else None
-    except ValueError as exc:
-        raise InputError(f"{meta_path}: {exc}") from None
     annotations = meta.get_annotations()
     end = max((a.get("core:sample_start", 0) + a.get("core:sample_count", 0) for a in annotations), default=0)
     if end > n:
@@ -180,14 +204,85 @@ def open_sigmf(meta_path, *, verify=True):
         data_path=data_path,
         datatype=datatype,
         sample_rate_hz=fs,
-        center_hz=cap.get("core:frequency"),
-        start_utc=start_utc,
+        center_hz=center_hz,
+        start_utc=captures[0].start_utc,
         n_samples=int(n),
         n_tones=int(info.get("leosop:n_tones", STARLINK_N_TONES)),
         tone_spacing_hz=float(info.get("leosop:tone_spacing_hz", STARLINK_TONE_SPACING_HZ)),
         annotations=annotations,
         offset_bytes=offset,
+        captures=captures,
     )
+
+
+def _format_utc_ns(time_utc):
+    """ISO 8601 UTC text to the nanosecond, trailing zeros of the fraction dropped (at least seconds)."""
+    text = np.datetime_as_string(parse_utc(time_utc), unit="ns")
+    return text.rstrip("0").rstrip(".") + "Z" if "." in text else text + "Z"
+
+
+def _check_structure(meta_path):
+    """Refuse metadata whose JSON has the wrong shape (top-level list, captures not objects, ...)."""
+    try:
+        doc = json.loads(meta_path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{meta_path}: not valid JSON ({exc})".replace("\n", " ")) from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("global"), dict):
+        raise InputError(f"{meta_path}: expected a JSON object with a 'global' object (SigMF metadata)")
+    for key in ("captures", "annotations"):
+        items = doc.get(key, [])
+        if not isinstance(items, list) or not all(isinstance(c, dict) for c in items):
+            raise InputError(f"{meta_path}: '{key}' must be a list of objects")
+
+
+def _int_field(cap, key, default, where):
+    value = cap.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise InputError(f"{where}: {key} {value!r} must be an integer >= 0")
+    return value
+
+
+def _captures(raw_caps, n_samples, sample_rate_hz, meta_path):
+    """Validated :class:`Capture` list and the common ``core:frequency`` of SigMF capture segments."""
+    caps, freqs = [], []
+    for k, cap in enumerate(raw_caps):
+        where = f"{meta_path}: capture {k}"
+        start = _int_field(cap, "core:sample_start", 0 if k == 0 else None, where)
+        if k and _int_field(cap, "core:header_bytes", 0, where):
+            raise InputError(f"{where}: core:header_bytes is only supported on the first capture")
+        if k == 0 and start != 0:
+            raise InputError(f"{where}: core:sample_start {start} must be 0 for the first capture")
+        if k and start <= caps[-1][0]:
+            raise InputError(f"{where}: core:sample_start {start} does not increase (previous {caps[-1][0]})")
+        if start >= n_samples:
+            raise InputError(f"{where}: core:sample_start {start} is beyond the {n_samples} samples of the data "
+                             "file (truncated?)")
+        freq = cap.get("core:frequency")
+        if freq is not None and (isinstance(freq, bool) or not isinstance(freq, (int, float))
+                                 or not np.isfinite(freq)):
+            raise InputError(f"{where}: core:frequency {freq!r} must be a number")
+        if k and freq != freqs[0]:
+            raise InputError(f"{where}: core:frequency {freq!r} differs from capture 0's {freqs[0]!r}")
+        text = cap.get("core:datetime")
+        if text is not None and not isinstance(text, str):
+            raise InputError(f"{where}: core:datetime {text!r} must be an ISO 8601 string")
+        try:
+            start_utc = parse_utc(text, name="core:datetime") if text else None
+        except ValueError as exc:
+            raise InputError(f"{where}: {exc}") from None
+        caps.append((start, start_utc))
+        freqs.append(freq)
+    ends = [s for s, _ in caps[1:]] + [n_samples]
+    out = [Capture(int(s), int(e - s), t) for (s, t), e in zip(caps, ends)]
+    for k in range(1, len(out)):
+        prev, cap = out[k - 1], out[k]
+        if prev.start_utc is None or cap.start_utc is None:
+            continue
+        gap_s = (cap.start_utc - prev.start_utc) / np.timedelta64(1, "s") - prev.n_samples / sample_rate_hz
+        if gap_s < -_OVERLAP_TOL_S:
+            raise InputError(f"{meta_path}: capture {k}: core:datetime {format_utc(cap.start_utc)} is before the end "
+                             f"of capture {k - 1} ({-gap_s:.6g} s overlap)")
+    return out, (None if freqs[0] is None else float(freqs[0]))
 
 
 def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_bytes=0):
@@ -219,8 +314,8 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
     return Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
 
 
-def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc, datatype="cf32_le",
-                annotations=(), global_extra=None, ci16_full_scale=1.0):
+def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc=None, datatype="cf32_le",
+                annotations=(), global_extra=None, ci16_full_scale=1.0, captures=None):
     """Write a SigMF recording from an iterable of complex sample chunks, atomically.
 
     Parameters
@@ -230,14 +325,20 @@ def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc, data
     chunks : iterable of ndarray of complex
         Consecutive samples; written as they come (never all in memory).
     sample_rate_hz, center_hz : float
-    start_utc : datetime64 or str
-        UTC time of the first sample (``core:datetime``).
+    start_utc : datetime64 or str, optional
+        UTC time of the first sample (``core:datetime``) of a single-capture
+        recording; give either this or ``captures``.
     datatype : {"cf32_le", "ci16_le"}
     annotations : iterable of (sample_start, sample_count, dict)
     global_extra : dict, optional
         Extra global keys (``leosop:n_tones``, ``core:description``, ...).
     ci16_full_scale : float
         Amplitude mapped to 32767 for ci16 (values beyond are clipped).
+    captures : sequence of (int, datetime64 or str), optional
+        ``(sample_start, UTC of that sample)`` of each capture, the first at
+        sample 0, starts increasing (snapshot recordings: one per snapshot,
+        DESIGN 4.2); all share ``center_hz``. Times are written to the
+        nanosecond.
 
     Returns
     -------
@@ -251,6 +352,12 @@ def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc, data
         raise InputError(f"{meta_path}: output must end in .sigmf-meta")
     if datatype not in DATATYPES:
         raise InputError(f"datatype {datatype!r}: expected one of {', '.join(DATATYPES)}")
+    if (start_utc is None) == (captures is None):
+        raise InputError("write_sigmf: give exactly one of start_utc and captures")
+    captures = [(0, start_utc)] if captures is None else [(int(s), t) for s, t in captures]
+    starts = [s for s, _ in captures]
+    if starts[0] != 0 or np.any(np.diff(starts) <= 0):
+        raise InputError(f"write_sigmf: capture starts {starts[:5]}... must begin at 0 and increase")
     data_path = meta_path.with_suffix(".sigmf-data")
     n = 0
     with atomic_path(data_path) as tmp_data, atomic_path(meta_path) as tmp_meta:
@@ -269,8 +376,11 @@ def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc, data
                 sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(tmp_data)}
         info.update(global_extra or {})
         meta = SigMFFile(global_info=info)
-        meta.add_capture(0, metadata={sigmf.FREQUENCY_KEY: float(center_hz),
-                                      sigmf.DATETIME_KEY: format_utc(parse_utc(start_utc))})
+        if starts[-1] >= n:
+            raise InputError(f"write_sigmf: capture at sample {starts[-1]} but only {n} samples were written")
+        for start, t in captures:
+            meta.add_capture(start, metadata={sigmf.FREQUENCY_KEY: float(center_hz),
+                                              sigmf.DATETIME_KEY: _format_utc_ns(t)})
         for start, count, md in annotations:
             meta.add_annotation(int(start), int(count), metadata=md)
         tmp_meta.write_text(meta.dumps(pretty=True) + "\n")
