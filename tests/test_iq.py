@@ -7,7 +7,7 @@ import pytest
 from sigmf import sigmffile
 
 from leosop.errors import InputError
-from leosop.signal.iq import open_raw, open_sigmf, write_sigmf
+from leosop.signal.iq import Capture, open_raw, open_sigmf, write_sigmf
 
 FS = 1e6
 
@@ -118,3 +118,86 @@ def test_write_is_atomic(tmp_path):
         write_sigmf(tmp_path / "x.sigmf-meta", failing(), sample_rate_hz=FS, center_hz=1e9,
                     start_utc="2025-01-01T00:00:00Z")
     assert list(tmp_path.iterdir()) == []
+
+
+T0 = np.datetime64("2025-01-01T19:40:00", "ns")
+
+
+def _write_captures(tmp_path, n_total=3_500):
+    x = _samples(n_total)
+    meta = tmp_path / "snap.sigmf-meta"
+    # Snapshots of 1000 samples (1 ms) every second; the third starts 0.5 us after a whole second.
+    caps = [(0, T0), (1_000, T0 + np.timedelta64(1, "s")), (2_000, T0 + np.timedelta64(2_000_000_500, "ns"))]
+    write_sigmf(meta, (x[i:i + 700] for i in range(0, n_total, 700)), sample_rate_hz=FS, center_hz=11.325e9,
+                captures=caps)
+    return meta, x
+
+
+def test_captures_round_trip(tmp_path):
+    meta, x = _write_captures(tmp_path)
+    rec = open_sigmf(meta)
+    assert [(c.sample_start, c.n_samples) for c in rec.captures] == [(0, 1_000), (1_000, 1_000), (2_000, 1_500)]
+    assert [c.start_utc for c in rec.captures] == [T0, T0 + np.timedelta64(1, "s"),
+                                                   T0 + np.timedelta64(2_000_000_500, "ns")]  # ns kept
+    assert rec.start_utc == T0 and rec.n_samples == 3_500 and rec.center_hz == 11.325e9
+    np.testing.assert_array_equal(rec.read(1_995, 10), x[1_995:2_005].astype(np.complex64))
+    # The sigmf package sees the same three segments and samples.
+    other = sigmffile.fromfile(str(meta))
+    assert [c["core:sample_start"] for c in other.get_captures()] == [0, 1_000, 2_000]
+    np.testing.assert_array_equal(other.read_samples(), x.astype(np.complex64))
+    # Single-capture and raw recordings: one capture of everything.
+    single = open_sigmf(_write(tmp_path, x, name="one"))
+    assert single.captures == [Capture(0, 3_500, T0)]
+    x.astype("<c8").tofile(tmp_path / "r.cf32")
+    assert open_raw(tmp_path / "r.cf32", dtype="cf32", sample_rate_hz=FS).captures == [Capture(0, 3_500, None)]
+
+
+def test_write_captures_refused(tmp_path):
+    with pytest.raises(InputError, match="begin at 0 and increase"):
+        write_sigmf(tmp_path / "a.sigmf-meta", [_samples(10)], sample_rate_hz=FS, center_hz=1e9,
+                    captures=[(0, T0), (0, T0)])
+    with pytest.raises(InputError, match="only 10 samples"):
+        write_sigmf(tmp_path / "a.sigmf-meta", [_samples(10)], sample_rate_hz=FS, center_hz=1e9,
+                    captures=[(0, T0), (10, T0 + np.timedelta64(1, "s"))])
+    assert list(tmp_path.iterdir()) == []
+
+
+def _edit(meta, case):
+    doc = json.loads(meta.read_text())
+    caps = doc["captures"]
+    if case == "frequency":
+        caps[1]["core:frequency"] = 11.3e9
+    elif case == "frequency type":
+        caps[0]["core:frequency"] = "11.325e9"
+    elif case == "overlap":  # capture 0 lasts 1 ms; capture 1 starts 0.5 ms after it began
+        caps[1]["core:datetime"] = "2025-01-01T19:40:00.0005Z"
+    elif case == "order":
+        caps[2]["core:sample_start"] = 1_000
+    elif case == "start type":
+        caps[1]["core:sample_start"] = "1000"
+    elif case == "datetime type":
+        caps[1]["core:datetime"] = 5
+    elif case == "beyond data":
+        caps[2]["core:sample_start"] = 5_000
+    elif case == "top-level list":
+        doc = [doc]
+    elif case == "truncated":
+        data = meta.with_suffix(".sigmf-data")
+        data.write_bytes(data.read_bytes()[:8 * 1_500])
+    meta.write_text(json.dumps(doc))
+
+
+@pytest.mark.parametrize("case, match", [
+    ("frequency", "capture 1: core:frequency"), ("frequency type", "capture 0: core:frequency"),
+    ("overlap", "capture 1: core:datetime .* before the end of capture 0"),
+    ("order", "capture 2: core:sample_start 1000 does not increase"),
+    ("start type", "capture 1: core:sample_start '1000'"), ("datetime type", "capture 1: core:datetime 5"),
+    ("beyond data", "capture 2: core:sample_start 5000 is beyond"), ("top-level list", "JSON object"),
+    ("truncated", "capture 2: core:sample_start 2000 is beyond the 1500 samples"),
+])
+def test_capture_refusals(tmp_path, case, match):
+    meta, _ = _write_captures(tmp_path)
+    _edit(meta, case)
+    with pytest.raises(InputError, match=match) as exc:
+        open_sigmf(meta, verify=False)
+    assert str(meta) in str(exc.value) and "\n" not in str(exc.value)
