@@ -17,7 +17,7 @@ import sys
 import numpy as np
 
 from ..errors import InputError
-from ..fileio import write_csv, write_json
+from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.doppler_ls import FixStatus
@@ -88,55 +88,78 @@ def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iteration
     }
 
 
-def run(args):
-    _check(args)
-    meas = read_measurements(args.meas, carrier_hz=args.carrier_hz)
-    constellation = None if meas.pos_sv_ecef_m is not None else load_constellation(args.tle)
-    init = _site(args.init) if args.init else None
-    alpha = args.alpha or None
+def solutions_doc(res, meas):
+    """The JSON solutions of a PositionResult, its passes (several passes) and its residual rows.
+
+    Returns
+    -------
+    solutions : list of dict
+        The contract's keys (DESIGN 4.1) plus ``status`` and ``sigma_enu_m``.
+    passes : list of dict or None
+        Each pass's frequency polynomial, for fixes from several passes.
+    residuals : list of tuple
+        ``(line, t_s, sat_id, residual_hz, used)`` per measurement.
+    """
+    from ..positioning.doppler_ls import PassesFix, StaticFix
+
+    f = res.fixes
+    utc = (lambda k: None) if res.time_utc is None else (lambda k: res.time_utc[k])  # noqa: E731
     passes = None
-    if args.static and meas.pass_id is not None:
-        res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,
-                                     alt_m=args.alt_m, alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz,
-                                     alpha=alpha, clock=args.clock)
-        f = res.fixes
+    if isinstance(f, PassesFix):
         mid = int(np.argmin(np.abs(res.t_s - 0.5 * (res.t_s.min() + res.t_s.max()))))
-        sol = _solution(res.t_s[mid], None if res.time_utc is None else res.time_utc[mid], f.pos_ecef_m,
-                        np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop, res.n_sats[0], f.n_used, f.iterations,
-                        f.residual_rms_hz, f.status, f.cov[:3, :3])
+        sol = _solution(res.t_s[mid], utc(mid), f.pos_ecef_m, np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop,
+                        res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz, f.status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = float(f.clock_drift_hz_per_s[mid])
         solutions = [sol]
         sigma_pass = res.sigma_hz_pass if res.sigma_hz_pass is not None else np.full(len(f.pass_ids), np.nan)
         passes = [{"pass_id": str(pid), "t_s": float(t), "clock_poly_hz": [float(c) for c in poly],
                    "sigma_hz": float(sg), "n_used": int(f.used[meas.pass_id == pid].sum())}
                   for pid, t, poly, sg in zip(f.pass_ids, f.t_ref_s, f.clock_poly_hz, sigma_pass)]
-        residuals = [(int(meas.line[k]), meas.t_s[k], meas.sat_id[k], f.residuals_hz[k], bool(f.used[k]))
-                     for k in range(len(meas))]
-    elif args.static:
-        res = position_static(meas, constellation=constellation, init_pos_ecef_m=init, alt_m=args.alt_m,
-                              alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz, alpha=alpha)
-        f = res.fixes
-        sol = _solution(res.t_s[0], None if res.time_utc is None else res.time_utc[0], f.pos_ecef_m, np.zeros(3),
-                        f.clock_offset_hz, f.gdop, res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz,
-                        f.status, f.cov[:3, :3])
+    elif isinstance(f, StaticFix):
+        sol = _solution(res.t_s[0], utc(0), f.pos_ecef_m, np.zeros(3), f.clock_offset_hz, f.gdop, res.n_sats[0],
+                        f.n_used, f.iterations, f.residual_rms_hz, f.status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = f.clock_drift_hz_per_s
         solutions = [sol]
-        residuals = [(int(meas.line[k]), meas.t_s[k], meas.sat_id[k], f.residuals_hz[k], bool(f.used[k]))
-                     for k in range(len(meas))]
     else:
-        res = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=init, sigma_hz=args.sigma_hz,
-                                 alpha=alpha)
-        f = res.fixes
         rms = f.residual_rms_hz
         solutions = [
-            _solution(res.t_s[k], None if res.time_utc is None else res.time_utc[k], f.pos_ecef_m[k],
-                      f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k], res.n_sats[k], f.n_used[k],
-                      f.iterations[k], rms[k], f.status[k], f.cov[k, :3, :3])
+            _solution(res.t_s[k], utc(k), f.pos_ecef_m[k], f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k],
+                      res.n_sats[k], f.n_used[k], f.iterations[k], rms[k], f.status[k], f.cov[k, :3, :3])
             for k in np.flatnonzero(res.n_sats >= 7)
         ]
         ep, sl = np.nonzero(res.rows >= 0)
         residuals = [(int(meas.line[i]), meas.t_s[i], meas.sat_id[i], f.residuals_hz[e, s], bool(f.used[e, s]))
                      for e, s, i in zip(ep, sl, res.rows[ep, sl])]
+        return solutions, passes, residuals
+    residuals = [(int(meas.line[k]), meas.t_s[k], meas.sat_id[k], f.residuals_hz[k], bool(f.used[k]))
+                 for k in range(len(meas))]
+    return solutions, passes, residuals
+
+
+def fixes_csv_rows(solutions):
+    """Header and rows of fixes.csv: the solution keys, ``sigma_enu_m`` split into three columns."""
+    keys = [k for k in solutions[0] if k != "sigma_enu_m"] if solutions else []
+    header = keys + ["sigma_e_m", "sigma_n_m", "sigma_u_m"]
+    return header, [[s[k] for k in keys] + [float(v) for v in s["sigma_enu_m"]] for s in solutions]
+
+
+def run(args):
+    _check(args)
+    meas = read_measurements(args.meas, carrier_hz=args.carrier_hz)
+    constellation = None if meas.pos_sv_ecef_m is not None else load_constellation(args.tle)
+    init = _site(args.init) if args.init else None
+    alpha = args.alpha or None
+    if args.static and meas.pass_id is not None:
+        res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,
+                                     alt_m=args.alt_m, alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz,
+                                     alpha=alpha, clock=args.clock)
+    elif args.static:
+        res = position_static(meas, constellation=constellation, init_pos_ecef_m=init, alt_m=args.alt_m,
+                              alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz, alpha=alpha)
+    else:
+        res = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=init, sigma_hz=args.sigma_hz,
+                                 alpha=alpha)
+    solutions, passes, residuals = solutions_doc(res, meas)
     for line, reason in res.rejected:
         print(f"leosop position: warning: {meas.source}:{line}: {reason}", file=sys.stderr)
     doc = {
@@ -151,10 +174,10 @@ def run(args):
     if passes is not None:
         doc["passes"] = passes
     if args.out:
-        write_json(f"{args.out}/position.json", doc)
-        keys = list(solutions[0]) if solutions else []
-        write_csv(f"{args.out}/fixes.csv", keys, [[s[k] for k in keys] for s in solutions])
-        write_csv(f"{args.out}/residuals.csv", ["line", "t_s", "sat_id", "residual_hz", "used"], residuals)
+        with atomic_outputs(args.out) as stage:
+            write_json(stage / "position.json", doc)
+            write_csv(stage / "fixes.csv", *fixes_csv_rows(solutions))
+            write_csv(stage / "residuals.csv", ["line", "t_s", "sat_id", "residual_hz", "used"], residuals)
     return doc
 
 

@@ -70,8 +70,9 @@ def run(args):
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
                  show_progress=True)
-    solutions, extra = ([], {}) if res.position is None else solutions_doc(res.position, res.measurements,
-                                                                          static=args.static)
+    solutions, passes, _ = ([], None, None) if res.position is None else solutions_doc(res.position,
+                                                                                        res.measurements)
+    extra = {} if passes is None else {"passes": passes}
     doc = {"tracks": [_track_doc(tr) for tr in res.tracks], "solutions": solutions,
            "recording": str(path), "n_blocks": len(res.blocks),
            "n_identified": sum(tr.sat_id is not None for tr in res.tracks),
@@ -85,6 +86,7 @@ def run(args):
 
 def _write_outputs(out, doc, res, name):
     from ..signal.plots import plot_spectrogram
+    from .position import fixes_csv_rows
 
     with atomic_outputs(out) as stage:
         write_json(stage / "replay.json", _clean(doc))
@@ -94,9 +96,7 @@ def _write_outputs(out, doc, res, name):
         if res.measurements is not None:
             write_measurements(stage / "measurements.csv", res.measurements)
         if doc["solutions"]:
-            keys = [k for k in doc["solutions"][0] if k != "sigma_enu_m"]
-            write_csv(stage / "fixes.csv", keys + ["sigma_e_m", "sigma_n_m", "sigma_u_m"],
-                      [[s[k] for k in keys] + list(s["sigma_enu_m"]) for s in doc["solutions"]])
+            write_csv(stage / "fixes.csv", *fixes_csv_rows(doc["solutions"]))
         if res.spectrum.shape[1]:
             labelled = [(tr.t_s, tr.doppler_hz, tr.sat_id or "unidentified") for tr in res.tracks]
             plot_spectrogram(stage / "spectrogram.png", res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,

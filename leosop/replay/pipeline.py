@@ -216,8 +216,10 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         start = getattr(ident, "pos_ecef_m", None)
         start = init_pos_ecef_m if start is None or not np.all(np.isfinite(start)) else start
         if static:
+            # One receiver clock (offset and drift) and each satellite's small
+            # offset and along-track time offset: the physics of one receiver.
             position = position_static_passes(meas, meas.sat_id, constellation=constellation,
-                                              init_pos_ecef_m=start)
+                                              init_pos_ecef_m=start, clock="common")
         else:
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
