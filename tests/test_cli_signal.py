@@ -119,3 +119,92 @@ def test_bundled_example(capsys):
     # Five blocks at the bound (0.023 Hz at 45 dB-Hz, 0.1 s, 1 MHz): RMS below
     # 2.5 sigma fails by chance with probability ~1e-5 (chi-square, 5 dof).
     assert doc["truth_rms_error_hz"] < 2.5 * doppler_sigma_hz(45.0, 0.1, sample_rate_hz=1e6)
+
+
+def test_snapshot_recording_end_to_end(tmp_path, capsys):
+    from leosop.signal.iq import open_sigmf
+
+    meta = tmp_path / "snap.sigmf-meta"
+    status, out, _ = _run(capsys, ["generate", "-o", str(meta), "--snapshot-s", "0.02", "--period-s", "1",
+                                   "--duration-s", "10", "--orbit-error-along-m", "100", "--seed", "3", "--json"])
+    assert status == 0
+    doc = json.loads(out)
+    fs = 2.5e6
+    assert doc["n_captures"] == 10 and doc["snapshot_s"] == 0.02 and doc["n_samples"] == 10 * 50_000
+    rec = open_sigmf(meta)
+    start = np.datetime64("2025-01-01T19:40:00", "ns")
+    assert [(c.sample_start, c.n_samples) for c in rec.captures] == [(50_000 * k, 50_000) for k in range(10)]
+    assert [c.start_utc for c in rec.captures] == [start + np.timedelta64(k, "s") for k in range(10)]
+    assert meta.with_suffix(".sigmf-data").stat().st_size == 10 * 50_000 * 8  # cf32: sum of the snapshots
+    sats = doc["satellites"]
+    assert len(sats) >= 7 and all(abs(s["orbit_error_along_m"]) > 0 for s in sats)
+    # One truth block per snapshot and satellite (the 0.1 s truth step is longer than a snapshot).
+    assert len(rec.annotations) == 10 * len(sats)
+    # Every satellite whose comb is clear of the others' (tones > 5 kHz apart modulo the
+    # 43.95 kHz spacing: closer tones bias the estimator's noise floor, a property of the
+    # estimator, not of the recording): Doppler at its truth within 4.5 CRLB sigmas (false
+    # failure ~1e-5 each), C/N0 within 1 dB (estimator spread ~0.1 dB over 20 ms at
+    # 40 dB-Hz; the other nine combs raise the noise floor by up to ~0.5 dB).
+    checked = 0
+    for k, cap in enumerate(rec.captures):
+        iq = rec.read(cap.sample_start, cap.n_samples)
+        truth = [a for a in rec.annotations if a["core:sample_start"] == cap.sample_start]
+        assert all(a["leosop:t_s"] == pytest.approx(k + 24_999.5 / fs) for a in truth)  # phases run on in gaps
+        checked += _check_truth(iq, fs, truth, 0.02, cn0_tol_db=1.0)
+    assert checked >= 3
+
+
+def _check_truth(iq, fs, truth, block_s, cn0_tol_db):
+    """Estimate every clear comb of ``iq`` near its truth annotation; return how many were checked."""
+    from leosop.signal.doppler import estimate_block
+
+    spacing = 43_949.5
+    dop = np.array([a["leosop:doppler_hz"] for a in truth])
+    n = 0
+    for i, a in enumerate(truth):
+        if np.min(np.abs((dop[i] - np.delete(dop, i) + spacing / 2) % spacing - spacing / 2), initial=np.inf) < 5e3:
+            continue
+        est = estimate_block(iq, fs, coarse_hz=dop[i], coarse_error_hz=150.0)
+        bound = doppler_sigma_hz(a["leosop:cn0_dbhz"], block_s, sample_rate_hz=fs)
+        assert abs(est["doppler_hz"] - dop[i]) < 4.5 * bound, a
+        assert abs(est["cn0_dbhz"] - a["leosop:cn0_dbhz"]) < cn0_tol_db, a
+        n += 1
+    return n
+
+
+def test_per_satellite_cn0_and_orbit_error(tmp_path, capsys):
+    from leosop.signal.iq import open_sigmf
+
+    meta = tmp_path / "three.sigmf-meta"
+    sats = ["71585", "70524", "71563"]  # combs 6.6-21 kHz apart modulo the tone spacing
+    status, out, _ = _run(capsys, ["generate", "-o", str(meta), "--sat", *sats, "--cn0-model", "constant",
+                                   "--cn0-dbhz", "45", "39", "42", "--sample-rate-hz", "1e6", "--duration-s", "0.3",
+                                   "--orbit-error-along-m", "100", "--orbit-error-radial-m", "30",
+                                   "--orbit-error-cross-m", "30", "--seed", "2", "--json"])
+    assert status == 0
+    doc = json.loads(out)
+    assert [s["cn0_dbhz"] for s in doc["satellites"]] == [45.0, 39.0, 42.0]
+    rec = open_sigmf(meta)
+    drawn = {s["sat_id"]: s for s in json.loads(meta.read_text())["global"]["leosop:satellites"]}
+    for s in doc["satellites"]:  # the draws in the JSON are those in the metadata, and nonzero
+        assert drawn[s["sat_id"]] == s and min(abs(s[f"orbit_error_{k}"]) for k in ("along_m", "radial_m", "cross_m")) > 0
+    # Three 0.1 s blocks x 3 satellites at the bound; C/N0 within 1 dB (spread ~0.05 dB
+    # at 39-45 dB-Hz over 0.1 s; a comb 6 dB stronger in the band lifts the estimator's
+    # noise floor by ~0.6 dB).
+    for start in (0, 100_000, 200_000):
+        truth = [a for a in rec.annotations if a["core:sample_start"] == start]
+        assert _check_truth(rec.read(start, 100_000), 1e6, truth, 0.1, cn0_tol_db=1.0) == 3
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--snapshot-s", "0.02"], "--snapshot-s and --period-s"),
+    (["--snapshot-s", "2", "--period-s", "1"], "longer than --period-s"),
+    (["--cn0-dbhz", "40", "41"], "--cn0-dbhz: 2 values"),
+    (["--orbit-error-radial-m", "-1"], "--orbit-error-radial-m"),
+])
+def test_generate_bad_options(tmp_path, capsys, argv, match):
+    meta = tmp_path / "x.sigmf-meta"
+    status, out, err = _run(capsys, ["generate", "-o", str(meta), "--duration-s", "0.2", "--sat", SAT,
+                                     "--out", str(tmp_path / "out")] + argv)
+    assert status == 2 and out == "" and err.count("\n") == 1 and match in err
+    assert list(tmp_path.iterdir()) == []  # no recording, no output folder

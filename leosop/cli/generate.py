@@ -169,7 +169,7 @@ def run(args):
         raise InputError(f"-o {out}: the output must end in .sigmf-meta")
     n = int(round(duration * fs))
     n_step = int(round(step * fs))
-    if n_step > n:
+    if n_step > n and args.snapshot_s is None:
         raise InputError(f"--truth-step-s {step:g} is longer than --duration-s {duration:g}")
     comb = PilotComb()
     if fs <= 2.0 * comb.offsets_hz.max():
