@@ -34,6 +34,7 @@ def snapshot_recording(tmp_path_factory):
 
 
 def _replay(capsys, *argv):
+    capsys.readouterr()  # drop what came before (e.g. generate's summary)
     code = main(["replay", *argv, "--json"])
     out = capsys.readouterr()
     return code, (json.loads(out.out) if code == 0 else None), out.err
@@ -62,6 +63,7 @@ def test_measurements_csv_reproduces_the_fix_with_leosop_position(snapshot_recor
     path, _ = snapshot_recording
     code, doc, err = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static", "--out", str(tmp_path))
     assert code == 0, err
+    capsys.readouterr()
     code = main(["position", str(tmp_path / "measurements.csv"), "--static", "--clock", "common",
                  "--init", "34.98,109.71,0", "--json"])
     pos_doc = json.loads(capsys.readouterr().out)

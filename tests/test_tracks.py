@@ -73,3 +73,19 @@ def test_a_gap_longer_than_max_gap_splits_the_track():
         tracker.update(t_k, start + np.timedelta64(int(t_k * 1e9), "ns"), det)
     tracks = tracker.finish()
     assert [len(tr) for tr in tracks] == [10, 21]
+
+
+def test_remove_outliers_takes_exactly_the_injected_sidelobe_locks():
+    from leosop.replay.tracks import Track, remove_outliers
+
+    t, dop, rate, start = _passes(3, 150.0, 1.0)
+    rng = np.random.default_rng(11)
+    for s in range(3):  # three real curves, incl. the highest pass's fast rate change
+        f = dop[s] + rng.normal(0, 0.5, t.size)
+        bad = rng.choice(t.size, 6, replace=False)
+        bad[:2] = [0, t.size - 1]  # ends too, where the local cubic extrapolates
+        f[bad] += rng.choice([-1, 1], 6) * rng.uniform(40, 150, 6)  # 1-3 bins of a 20 ms block
+        tr = Track(t, start + (t * 1e9).astype("timedelta64[ns]"), f, rate[s], np.full(t.size, 45.0),
+                   np.full(t.size, 0.5))
+        clean = remove_outliers(tr)
+        assert set(np.round(clean.t_s)) == set(np.round(np.delete(t, bad)))

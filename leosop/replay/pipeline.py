@@ -22,7 +22,7 @@ from ..signal.doppler import cubic_bias_hz
 from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
-from .tracks import Detections, Tracker
+from .tracks import Detections, Tracker, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
 
@@ -205,7 +205,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         if k % every == 0:
             spec_t.append(b.t_s)
             spec.append(_spectrum(iq))
-    tracks = tracker.finish()
+    tracks = [remove_outliers(tr) for tr in tracker.finish()]
     for tr in tracks:
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,

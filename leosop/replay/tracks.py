@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Detections", "Track", "Tracker"]
+__all__ = ["Detections", "Track", "Tracker", "remove_outliers"]
 
 
 @dataclass
@@ -153,3 +153,61 @@ class Tracker:
             tracks.append(Track(np.array(t, float), np.array(utc, "datetime64[ns]"), np.array(f, float),
                                 np.array(r, float), np.array(c, float), np.array(s, float)))
         return tracks
+
+
+#: Neighbours of each detection in the local cubic that predicts it: a LEO
+#: Doppler curve's quartic term over ~10 s is well below a hertz.
+_NEIGHBOURS = 10
+#: An estimate further than this many predicted sigmas (plus the model's
+#: slack) from its neighbours' cubic is an outlier: a fine search that
+#: locked on a sidelobe (another comb's tone within a few bins) is off by
+#: tens to hundreds of hertz.
+OUTLIER_SIGMAS = 6.0
+OUTLIER_SLACK_HZ = 2.0
+
+
+def _neighbour_residuals(t, f, sigma):
+    """Residual of each point from a cubic through its nearest neighbours, and its sigma, (n,) each."""
+    n = len(t)
+    k = min(_NEIGHBOURS, n - 1)
+    idx = np.argsort(np.abs(t[:, None] - t[None, :]), axis=1, kind="stable")[:, 1:k + 1]  # (n, k), self excluded
+    dt = t[idx] - t[:, None]
+    scale = np.maximum(np.max(np.abs(dt), axis=1, keepdims=True), 1e-9)
+    deg = min(3, k - 2)
+    A = (dt / scale)[..., None] ** np.arange(deg + 1)  # (n, k, deg+1)
+    w = 1.0 / sigma[idx] ** 2
+    N = np.einsum("nki,nk,nkj->nij", A, w, A)
+    b = np.einsum("nki,nk,nk->ni", A, w, f[idx])
+    coef = np.linalg.solve(N, b[..., None])[..., 0]
+    pred_var = np.linalg.inv(N)[:, 0, 0]  # prediction at dt = 0 is the constant term
+    return f - coef[:, 0], np.sqrt(sigma**2 + pred_var)
+
+
+def remove_outliers(track):
+    """The track without the detections that do not follow its curve.
+
+    One at a time, the detection furthest (in its predicted sigma) from a
+    cubic through its nearest neighbours is removed while it exceeds
+    ``OUTLIER_SIGMAS`` sigmas plus ``OUTLIER_SLACK_HZ``; so one outlier never
+    condemns its neighbours.
+
+    Returns
+    -------
+    Track
+        A new track (the same one if nothing is removed); short tracks
+        (fewer than 5 detections) are returned as they are.
+    """
+    keep = np.ones(len(track), bool)
+    sigma = np.where(np.isfinite(track.sigma_hz) & (track.sigma_hz > 0), track.sigma_hz, 1.0)
+    while keep.sum() >= 5:
+        i = np.flatnonzero(keep)
+        r, s = _neighbour_residuals(track.t_s[i], track.doppler_hz[i], sigma[i])
+        score = np.abs(r) / (OUTLIER_SIGMAS * s + OUTLIER_SLACK_HZ)
+        worst = np.argmax(score)
+        if score[worst] <= 1.0:
+            break
+        keep[i[worst]] = False
+    if keep.all():
+        return track
+    return Track(track.t_s[keep], track.time_utc[keep], track.doppler_hz[keep], track.doppler_rate_hz_per_s[keep],
+                 track.cn0_dbhz[keep], track.sigma_hz[keep], track.sat_id, track.match_rms_hz)
