@@ -92,6 +92,14 @@ def _bad(tmp_path, recording, case):
         raw.tofile(data)
         doc["global"].pop("core:sha512")
         meta.write_text(json.dumps(doc))
+    elif case in ("capture frequency", "capture overlap", "top-level list"):
+        second = dict(doc["captures"][0], **{"core:sample_start": 200_000})
+        if case == "capture frequency":
+            second["core:frequency"] = "11.325e9"
+        else:  # 0.1 s into the first capture's 0.4 s
+            second["core:datetime"] = "2025-01-01T19:40:00.1Z"
+        doc["captures"].append(second)
+        meta.write_text(json.dumps([doc] if case == "top-level list" else doc))
     elif case == "raw rate":
         raw = tmp_path / "rec.cf32"
         data.rename(raw)
@@ -99,7 +107,8 @@ def _bad(tmp_path, recording, case):
     return args
 
 
-@pytest.mark.parametrize("case", ["missing data", "datatype", "truncated", "rate", "block", "nan", "raw rate"])
+@pytest.mark.parametrize("case", ["missing data", "datatype", "truncated", "rate", "block", "nan", "raw rate",
+                                  "capture frequency", "capture overlap", "top-level list"])
 def test_bad_input(recording, tmp_path, capsys, case):
     args = _bad(tmp_path, recording, case) + ["--out", str(tmp_path / "out")]
     status, out, err = _run(capsys, args)
