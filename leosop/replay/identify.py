@@ -44,7 +44,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 from scipy.stats import chi2 as chi2_dist
 
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S, STARLINK_PILOT_HZ, WGS84_A_M
@@ -67,8 +66,12 @@ _FEATURES = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 1.0], [-0.5, 1.0, -0.5]])
 _MAX_SAMPLES = 120
 #: Largest light time, bounding its effect in the cell vote [s].
 _LIGHT_TIME_MAX_S = 0.012
-#: Pairs evaluated at once in the cell vote (memory bound).
-_CHUNK_PAIRS = 1_500_000
+#: Largest Doppler rate of a LEO satellite at Ku band, a bound for the screen [Hz/s].
+_RATE_MAX_HZ_PER_S = 5e3
+#: Candidates per track fitted in the identification (nearest in Doppler at the track's middle).
+_ID_CANDIDATES = 24
+#: Cells voted at once (memory bound).
+_CHUNK_CELLS = 400
 
 
 @dataclass
@@ -235,35 +238,30 @@ class _Search:
         self.t_c = float(np.mean([tr.t_mid_s for tr in tracks]))
         sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
         cos_m = np.sqrt(1 - sin_m**2)
-        # Per track: unit vectors of the satellites at its middle time and footprint half-angles.
-        self.unit, self.half_angle, self.trees = [], [], []
-        for tr in tracks:
-            p, _ = eph.state(np.arange(len(eph.ok)), tr.t_mid_s)
-            r = np.linalg.norm(p, axis=-1)
-            u = p / np.where(r > 0, r, 1.0)[:, None]
-            lam = np.arccos(np.clip(WGS84_A_M * cos_m / np.where(eph.ok, r, 1e12), -1, 1)) - np.arcsin(sin_m)
-            lam = np.where(eph.ok, lam, -1.0)
-            self.unit.append(u)
-            self.half_angle.append(lam)
-            self.trees.append(cKDTree(u))
+        n_sats = len(eph.ok)
+        # States of every satellite at each track's reference times and 0.5 s either side,
+        # (n_tracks, n_sats, 3 offsets, 3 ref times, 3); the vote only indexes them.
+        t_ref = np.array([tr.t_ref_s for tr in tracks])
+        t_eval = t_ref[:, None, :] + np.array([0.0, -0.5, 0.5])[:, None]  # (n_tracks, 3, 3)
+        self.ref_pos, self.ref_vel = eph.state(np.arange(n_sats)[None, :, None, None], t_eval[:, None])
+        # Unit vectors of the satellites at each track's middle time and their footprint half-angles.
+        p = self.ref_pos[:, :, 0, 1]
+        r = np.linalg.norm(p, axis=-1)
+        self.unit = p / np.where(r > 0, r, 1.0)[..., None]
+        lam = np.arccos(np.clip(WGS84_A_M * cos_m / np.where(eph.ok, r, 1e12), -1, 1)) - np.arcsin(sin_m)
+        self.half_angle = np.where(eph.ok, lam, -1.0)
 
     def _pairs(self, cells, radius_m):
-        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell."""
+        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3)."""
         cu = cells / np.linalg.norm(cells, axis=1)[:, None]
         out = []
         for k in range(len(self.tracks)):
-            lam = self.half_angle[k]
-            reach = lam.max() + radius_m / WGS84_A_M
-            lists = self.trees[k].query_ball_point(cu, 2 * np.sin(reach / 2))
-            sizes = np.fromiter((len(x) for x in lists), int, len(lists))
-            if sizes.sum() == 0:
-                continue
-            c = np.repeat(np.arange(len(cells)), sizes)
-            s = np.fromiter((j for x in lists for j in x), int, sizes.sum())
-            ang = np.arccos(np.clip(np.sum(cu[c] * self.unit[k][s], axis=1), -1, 1))
-            keep = ang <= lam[s] + radius_m / WGS84_A_M
-            out.append(np.stack([c[keep], np.full(keep.sum(), k), s[keep]], axis=1))
-        return np.concatenate(out) if out else np.zeros((0, 3), int)
+            ok = self.half_angle[k] > 0
+            sats = np.flatnonzero(ok)
+            cos_reach = np.cos(self.half_angle[k][sats] + radius_m / WGS84_A_M)
+            c, j = np.nonzero(cu @ self.unit[k][sats].T >= cos_reach)
+            out.append(np.stack([c, np.full(len(c), k), sats[j]], axis=1))
+        return np.concatenate(out)
 
     def vote(self, cells, radius_m):
         """Score cells.
@@ -283,10 +281,8 @@ class _Search:
         cost = np.full(n_cells, np.inf)
         assign = np.full((n_cells, n_tr), -1)
         clock = np.zeros(n_cells)
-        pairs_per_cell = max(1, len(self._pairs(cells[:1], radius_m)))
-        step = max(1, _CHUNK_PAIRS // pairs_per_cell)
-        for a in range(0, n_cells, step):
-            sl = slice(a, min(a + step, n_cells))
+        for a in range(0, n_cells, _CHUNK_CELLS):
+            sl = slice(a, min(a + _CHUNK_CELLS, n_cells))
             count[sl], cost[sl], assign[sl], clock[sl] = self._vote_chunk(cells[sl], radius_m)
         return count, cost, assign, clock
 
@@ -298,19 +294,24 @@ class _Search:
         t_ref = np.array([tr.t_ref_s for tr in self.tracks])[k]  # (m, 3)
         f_ref = np.array([tr.f_ref_hz for tr in self.tracks])[k]
         span = np.maximum(t_ref[:, 2] - t_ref[:, 0], 1e-3)
+        # Cheap screen at the middle time: the offset must fit the clock range.
+        o_ = self.o
+        reach = _LINEAR_MARGIN * (radius_m + o_["cross_track_max_m"] + o_["alt_tol_m"])
+        dt_max = o_["along_track_max_m"] / 7000.0 + _LIGHT_TIME_MAX_S
+        dm, gm = _doppler(self.ref_pos[k, s, 0, 1], self.ref_vel[k, s, 0, 1], cells[c], self.k)
+        near = np.abs(f_ref[:, 1] - dm) <= (o_["clock_search_hz"] + reach * np.linalg.norm(gm, axis=1)
+                                            + dt_max * _RATE_MAX_HZ_PER_S + o_["sat_offset_max_hz"]
+                                            + o_["clock_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
+        c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
         pos_rx = cells[c][:, None, :]
-        p, v = self.eph.state(s[:, None], t_ref)
-        dop, grad = _doppler(p, v, pos_rx, self.k)
-        p2, v2 = self.eph.state(s[:, None], t_ref + 0.5)
-        p1, v1 = self.eph.state(s[:, None], t_ref - 0.5)
-        rate = _doppler(p2, v2, pos_rx, self.k)[0] - _doppler(p1, v1, pos_rx, self.k)[0]
+        p, v = self.ref_pos[k, s], self.ref_vel[k, s]  # (m, 3 offsets, 3 ref times, 3)
+        dop, grad = _doppler(p[:, 0], v[:, 0], pos_rx, self.k)
+        rate = _doppler(p[:, 2], v[:, 2], pos_rx, self.k)[0] - _doppler(p[:, 1], v[:, 1], pos_rx, self.k)[0]
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
         feat = ((f_ref - dop) @ _FEATURES.T) * scale
         feat_grad = np.linalg.norm(np.einsum("fr,mrx->mfx", _FEATURES, grad), axis=-1) * scale
         feat_rate = np.abs(rate @ _FEATURES.T) * scale
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
-        reach = _LINEAR_MARGIN * (radius_m + o["cross_track_max_m"] + o["alt_tol_m"])
-        dt_max = o["along_track_max_m"] / 7000.0 + _LIGHT_TIME_MAX_S
         drift = o["clock_drift_max_hz_per_s"]
         t_mid = t_ref[:, 1]
         extra = np.stack([o["sat_offset_max_hz"] + drift * np.abs(t_mid - self.t_c), np.full_like(span, drift),
@@ -443,13 +444,13 @@ class _Search:
                 pr[2 * m + r] = -(axis @ x[:3]) / s
             A = np.vstack([J, P])
             y = np.concatenate([res, pr])
-            dx, *_ = np.linalg.lstsq(A, y, rcond=None)
+            dx = np.linalg.solve(A.T @ A, A.T @ y)
             x += dx
             if np.linalg.norm(dx[:3]) < 0.05 and abs(dx[3]) < 0.01:
                 break
         if not np.all(np.isfinite(x)):
             return None
-        cov = np.linalg.pinv(A.T @ A)
+        cov = np.linalg.inv(A.T @ A)
         nrms = np.sqrt(np.bincount(which, res**2, m) / np.bincount(which, minlength=m))
         return {"pos": pos0 + x[:3], "cov": cov[:3, :3], "clock": x[3], "drift": x[4], "used": used,
                 "nrms_used": nrms, "chi2": float(res @ res)}
@@ -473,6 +474,14 @@ class _Search:
             los = p_mid - pos
             el_ok = (los @ up) / np.linalg.norm(los, axis=1) >= sin_mask
             cand = np.flatnonzero(el_ok & self.eph.ok)
+            # Only the candidates nearest in Doppler at the middle (rate-scaled) can fit; the rest
+            # are kHz away and would only add to the cost.
+            pm, vm = self.eph.state(cand, tr.t_mid_s)
+            dm = _doppler(pm, vm, pos, self.k)[0]
+            pm2, vm2 = self.eph.state(cand, tr.t_mid_s + 1.0)
+            slope = np.abs(_doppler(pm2, vm2, pos, self.k)[0] - dm)
+            off = np.abs(tr.f_ref_hz[1] - sol["clock"] - sol["drift"] * (tr.t_mid_s - self.t_c) - dm)
+            cand = cand[np.argsort(off / (10.0 + slope * o["along_track_sigma_m"] / 7000.0))[:_ID_CANDIDATES]]
             idx = tr.sample
             t, f = tr.t_s[idx], tr.doppler_hz[idx]
             sig2 = tr.sigma_hz[idx] ** 2 + o["model_sigma_hz"] ** 2
