@@ -159,23 +159,23 @@ def _dirichlet(delta_hz, counts, fs):
     return np.where(small, counts, np.sin(x * counts) / np.where(small, 1.0, sx))
 
 
-def _model(grid, comb, c):
-    """Cache on ``c`` its tones' values (with amplitudes) and frequencies at the segment centres, (n_seg, K)."""
-    cycles, c.nu = _tones(comb, c.doppler_hz, c.rate, grid.tau)
-    c.val = c.amp * np.exp(2j * np.pi * _frac(cycles))
-
-
-def _response(grid, c, f_c, mix):
-    """Decimated outputs that comb ``c`` puts into channels mixed at ``f_c`` (mixing phasors ``mix``,
-    (n_seg, len(f_c))): None when no tone of ``c`` is within reach. Returns (n_seg, len(f_c))."""
-    ii, jj = np.nonzero(np.abs(c.nu[grid.n_seg // 2][:, None] - f_c) < _LEAK_BANDS * grid.fs_dec)
+def _leakage(grid, others, f_c, mix):
+    """Decimated outputs that the combs ``others`` put into channels mixed at ``f_c`` (mixing phasors
+    ``mix``, (n_seg, len(f_c))), all in one product: None when no tone is within reach.
+    Returns (n_seg, len(f_c))."""
+    others = [o for o in others if o.val is not None]
+    if not others:
+        return None
+    nu_mid = np.concatenate([o.nu[grid.n_seg // 2] for o in others])
+    ii, jj = np.nonzero(np.abs(nu_mid[:, None] - f_c) < _LEAK_BANDS * grid.fs_dec)
     if ii.size == 0:
         return None
-    contrib = c.val[:, ii] * mix[:, jj] * _dirichlet(c.nu[:, ii] - f_c[jj], grid.counts[:, None], grid.fs)
-    out = np.zeros((grid.n_seg, f_c.size), dtype=complex)
-    for j in np.unique(jj):
-        out[:, j] = contrib[:, jj == j].sum(axis=1)
-    return out
+    val = np.hstack([o.val for o in others])[:, ii]
+    nu = np.hstack([o.nu for o in others])[:, ii]
+    val *= _dirichlet(nu - f_c[jj], grid.counts[:, None], grid.fs)
+    to_channel = np.zeros((ii.size, f_c.size))
+    to_channel[np.arange(ii.size), jj] = 1.0
+    return (val @ to_channel) * mix
 
 
 @dataclass
@@ -240,24 +240,20 @@ def _fit(grid, comb, c, z_wide, *, max_rate, pfa, start=None, resolve=True):
     mean_cn0 = np.mean(cn0_k)
     c.cn0_dbhz = float(10.0 * np.log10(mean_cn0)) if mean_cn0 > 0 else -np.inf
     c.statistic = float(np.mean(_abs2(y_sum)) / (n * sigma2)) if sigma2 > 0 else np.inf
-    cycles, nu = _tones(comb, c.doppler_hz, c.rate, grid.tau)
+    cycles, c.nu = _tones(comb, c.doppler_hz, c.rate, grid.tau)
     k = slice(extra, extra + comb.n_tones)
-    g = np.exp(2j * np.pi * _frac(cycles)) * c.mix[:, k] * _dirichlet(nu - c.f_c[k], grid.counts[:, None], grid.fs)
+    e = np.exp(2j * np.pi * _frac(cycles))
+    g = e * c.mix[:, k] * _dirichlet(c.nu - c.f_c[k], grid.counts[:, None], grid.fs)
     c.amp = np.sum(y * np.conj(g), axis=0) / np.sum(_abs2(g), axis=0)
-    _model(grid, comb, c)
+    c.val = np.multiply(e, c.amp, out=e)
     return 0, None
 
 
 def _cleaned(grid, comb, combs, j):
     """Decimated tones of comb ``j`` with every other comb's contribution removed."""
     c = combs[j]
-    z = c.y_wide.astype(complex)
-    for i, other in enumerate(combs):
-        if i != j and other.val is not None:
-            r = _response(grid, other, c.f_c, c.mix)
-            if r is not None:
-                z -= r
-    return z
+    r = _leakage(grid, combs[:j] + combs[j + 1:], c.f_c, c.mix)
+    return c.y_wide.astype(complex) if r is None else c.y_wide - r
 
 
 def _spectrum_grid(n, target):
