@@ -152,19 +152,18 @@ def _tones(comb, doppler_hz, rate, tau):
 
 
 def _dirichlet(delta_hz, counts, fs):
-    """sum over a segment of ``counts`` samples, centred, of exp(j 2 pi delta t): real.
+    """sum over a segment of ``counts`` samples, centred, of exp(j 2 pi delta t): real, float32.
 
-    The numerator's sine in single precision (~1e-7 absolute, far below the
-    noise of any segment; float64 sines cost 5x more); the denominator
-    ``sin(x)``, |x| = pi |delta| / fs <= ~0.05 here, by its Taylor series to x^7
-    (relative error below 1e-12).
+    Single precision (~1e-7 relative, far below the noise of any segment;
+    float64 sines cost 5x more): ``sin(x L) / sin(x)`` with x = pi delta / fs,
+    here |x| <= ~0.05 and |x L| <= ~15 (tones within a few decimated bands),
+    the denominator by its Taylor series to x^5.
     """
-    x = (np.pi / fs) * delta_hz
-    num = np.sin((2.0 * np.pi * _frac(x * counts / (2.0 * np.pi))).astype(np.float32))
-    x2 = x * x
-    den = x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0)))
-    small = np.abs(den) < 1e-12
-    return np.where(small, counts, num / np.where(small, 1.0, den))
+    x = (delta_hz * (np.pi / fs)).astype(np.float32)
+    num = np.sin(x * np.asarray(counts, dtype=np.float32))
+    den = x * (1.0 - x * x * np.float32(1.0 / 6.0))
+    full = np.broadcast_to(np.asarray(counts, dtype=np.float32), num.shape)
+    return np.divide(num, den, out=np.array(full), where=den != 0.0)
 
 
 def _cis(cycles):
