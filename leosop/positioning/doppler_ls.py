@@ -7,7 +7,9 @@ Measurement model (the toolkit's Doppler sign, see :mod:`leosop`)::
 Snapshot
     one epoch, state ``[x, y, z, vx, vy, vz, T_u]`` (ECEF m, m/s, receiver
     frequency offset Hz), at least 7 satellites. :func:`solve_snapshots`
-    solves many epochs at once, each independently.
+    solves many epochs at once, each independently. Rows of several
+    constellations (``clock_group``) get one ``T_u`` per constellation:
+    ``6 + k`` states and measurements for k constellations.
 Static
     a receiver at rest in ECEF observed over many epochs, state
     ``[x, y, z, b0, b1, ...]``: frequency offset ``b0`` [Hz] at the reference
@@ -87,12 +89,19 @@ class SnapshotFixes:
     ----------
     pos_ecef_m, vel_ecef_mps : ndarray, (n_ep, 3)
     clock_offset_hz : ndarray, (n_ep,)
-        Receiver frequency offset ``T_u``.
-    cov : ndarray, (n_ep, 7, 7)
-        Posterior covariance of ``[pos, vel, T_u]`` from the given sigmas.
+        Receiver frequency offset ``T_u`` (several clocks: that of the first
+        clock present at the epoch, in the order of ``clock_labels``).
+    cov : ndarray, (n_ep, 6 + k, 6 + k)
+        Posterior covariance of ``[pos, vel, T_u...]`` from the given sigmas
+        (k = 1 without clock groups); NaN rows and columns for a clock absent
+        at the epoch.
     gdop, pos_dop, vel_dop : ndarray, (n_ep,)
         Eq. 10 ``sqrt(trace((H^T H)^-1))`` over the used satellites, and the
-        square roots of the position and velocity blocks of that trace.
+        square roots of the position and velocity blocks of that trace. The
+        trace covers position [m^2/Hz^2], velocity [(m/s)^2/Hz^2] and every
+        clock present at the epoch [Hz^2/Hz^2, i.e. 1] with unit weights, as
+        eq. 10 adds them: one number of mixed units, so a mixed set's GDOP
+        counts one clock term per constellation.
     residuals_hz : ndarray, (n_ep, n_sv)
         Measured minus modelled Doppler at the solution; NaN where masked.
     used : ndarray of bool, (n_ep, n_sv)
@@ -102,6 +111,10 @@ class SnapshotFixes:
         Weighted residual sum of squares.
     status : ndarray of int, (n_ep,)
         :class:`FixStatus` values; states are NaN unless OK or INCONSISTENT.
+    clock_offsets_hz : ndarray, (n_ep, k)
+        Each receiver clock's frequency offset, NaN where absent.
+    clock_labels : tuple, (k,)
+        The ``clock_group`` value of each clock; ``()`` without groups.
     """
 
     pos_ecef_m: np.ndarray
@@ -117,6 +130,8 @@ class SnapshotFixes:
     iterations: np.ndarray
     chi2: np.ndarray
     status: np.ndarray
+    clock_offsets_hz: np.ndarray = None
+    clock_labels: tuple = ()
 
     @property
     def residual_rms_hz(self):
@@ -162,6 +177,12 @@ class StaticFix:
     mirror_chi2 : float
         Its weighted residual sum over the rows the fix used: compare with
         ``chi2``.
+    clock_polys_hz : ndarray, (k, d + 1)
+        Each receiver clock's polynomial (k clock groups; row 0 is
+        ``clock_poly_hz``); the covariance is of ``[pos, clock 0 terms,
+        clock 1 terms, ...]``.
+    clock_labels : tuple, (k,)
+        The ``clock_group`` value of each clock; ``()`` without groups.
     """
 
     pos_ecef_m: np.ndarray
@@ -180,6 +201,8 @@ class StaticFix:
     clock_poly_hz: np.ndarray = None
     mirror_pos_ecef_m: np.ndarray = None
     mirror_chi2: float = np.nan
+    clock_polys_hz: np.ndarray = None
+    clock_labels: tuple = ()
 
     @property
     def residual_rms_hz(self):
@@ -367,7 +390,7 @@ def subpoint_centroid_ecef_m(pos_sv_ecef_m, mask=None):
 
 
 def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, mask=None, x0=None, *,
-                    max_iter=50, alpha=1e-3):
+                    max_iter=50, alpha=1e-3, clock_group=None):
     """Snapshot Doppler fixes of many epochs at once (seed 004 eq. 4-12).
 
     Parameters
@@ -381,13 +404,23 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     mask : array_like of bool, (n_ep, n_sv), optional
         False drops a measurement (padding, below the mask, ...); non-finite
         inputs are dropped too.
-    x0 : array_like, (n_ep, 7) or (7,), optional
-        Start ``[pos, vel, T_u]``; default the ground point below the
+    x0 : array_like, (n_ep, 6 + k) or (6 + k,), optional
+        Start ``[pos, vel, T_u...]`` (k receiver clocks; a 7-column start
+        gives every clock its offset); default the ground point below the
         satellites' mean direction, at rest, no offset.
     max_iter : int
         Iteration cap of each solve.
     alpha : float or None
         Significance of the chi-square outlier test; None disables it.
+    clock_group : array_like of int, broadcastable to (n_ep, n_sv), optional
+        Receiver clock of each measurement (e.g. its constellation): each
+        distinct value among the unmasked rows gets its own frequency offset
+        state ``T_u[g]`` (the k clocks sorted by value). An epoch estimates
+        ``6 + k_e`` states, ``k_e`` the clocks present among its rows, and
+        needs as many measurements; an absent clock's state is held at its
+        start by a pseudo-row that is never excluded (outlier tests, degrees
+        of freedom and GDOP are those of the ``6 + k_e`` states). None: one
+        clock (seed 004's 7 states).
 
     Returns
     -------
@@ -407,31 +440,76 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     f0 = np.where(m, f0, 1.0)
     r_s = np.where(m[..., None], r_s, [2e7, 0.0, 0.0])
     v_s = np.where(m[..., None], v_s, 0.0)
-    x_ground = np.zeros((n_ep, N_DOPPLER_STATES))
+    # Receiver clocks: one offset state per distinct group among the unmasked rows.
+    groups = np.zeros(y.shape, int) if clock_group is None else np.broadcast_to(np.asarray(clock_group), y.shape)
+    clock_labels, g_idx = np.unique(groups[m], return_inverse=True)
+    n_clk = max(len(clock_labels), 1)
+    n_states = 6 + n_clk
+    gi = np.zeros(y.shape, int)
+    gi[m] = g_idx.ravel()
+    onehot = (gi[..., None] == np.arange(n_clk)) & m[..., None]
+    present = onehot.any(-2) if n_clk > 1 else np.ones((n_ep, 1), bool)
+    x_ground = np.zeros((n_ep, n_states))
     x_ground[:, :3] = np.nan_to_num(subpoint_centroid_ecef_m(r_s, m), nan=_R_GROUND_M)
-    x0 = x_ground if x0 is None else np.broadcast_to(np.asarray(x0, dtype=float), (n_ep, N_DOPPLER_STATES)).copy()
+    if x0 is None:
+        x0 = x_ground
+    else:
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape[-1] == N_DOPPLER_STATES and n_clk > 1:
+            x0 = np.concatenate([x0[..., :6], np.repeat(x0[..., 6:], n_clk, -1)], -1)
+        x0 = np.broadcast_to(x0, (n_ep, n_states)).copy()
+    fixed = None
+    if n_clk > 1:
+        # Pseudo-rows "clock g = start" for the clocks absent at an epoch (measured 0, weight 1, never excluded).
+        x0[:, 6:] = np.where(present, x0[:, 6:], 0.0)
+        y = np.concatenate([y, np.zeros((n_ep, n_clk))], -1)
+        sigma = np.concatenate([sigma, np.ones((n_ep, n_clk))], -1)
+        m = np.concatenate([m, ~present], -1)
+        fixed = np.arange(n_sv + n_clk) >= n_sv
+        pseudo = np.eye(n_states)[6:]
+        clk_cols = onehot.astype(float)
 
     def model(x, idx, w):
         H = doppler_jacobian(r_s[idx], v_s[idx], x[:, :3], x[:, 3:6], f0[idx])
-        pred = np.einsum("pmi,pmi->pm", H[..., 3:6], x[:, None, 3:6] - v_s[idx]) + x[:, 6:7]
-        return pred, H
+        pred = np.einsum("pmi,pmi->pm", H[..., 3:6], x[:, None, 3:6] - v_s[idx])
+        if n_clk == 1:
+            return pred + x[:, 6:7], H
+        pred = np.concatenate([pred + np.einsum("pmk,pk->pm", clk_cols[idx], x[:, 6:]), x[:, 6:]], -1)
+        J = np.concatenate([np.concatenate([H[..., :6], clk_cols[idx]], -1),
+                            np.broadcast_to(pseudo, (len(x),) + pseudo.shape)], 1)
+        return pred, J
 
     x, res, H, Q, used, iterations, chi2, status = _solve_robust(
-        model, x0, y, sigma, m, N_DOPPLER_STATES, xtol=_XTOL_SNAPSHOT, max_iter=max_iter, alpha=alpha,
-        x_alt=x_ground)
+        model, x0, y, sigma, m, n_states, xtol=_xtol_snapshot(n_clk), max_iter=max_iter, alpha=alpha,
+        x_alt=x_ground, fixed=fixed)
     good = (status == FixStatus.OK) | (status == FixStatus.INCONSISTENT)
     x[~good] = np.nan
     Q[~good] = np.nan
     Q0 = cofactor(H, used)
     d0 = np.diagonal(Q0, axis1=-2, axis2=-1)
+    clocks = x[:, 6:]
+    if n_clk > 1:
+        # Absent clocks are no states of their epoch: no offset, no covariance, outside the GDOP's trace.
+        keep = np.concatenate([np.ones((n_ep, 6), bool), present], -1)
+        Q = np.where(keep[:, :, None] & keep[:, None, :], Q, np.nan)
+        d0 = np.where(keep, d0, 0.0)
+        clocks = np.where(present, clocks, np.nan)
+        res, used = res[:, :n_sv], used[:, :n_sv]
     with np.errstate(invalid="ignore"):
         gdop = np.sqrt(d0.sum(-1))
         pos_dop, vel_dop = np.sqrt(d0[:, :3].sum(-1)), np.sqrt(d0[:, 3:6].sum(-1))
+    first = np.argmax(present, axis=-1)
     return SnapshotFixes(
-        pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6], clock_offset_hz=x[:, 6], cov=Q,
+        pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6], clock_offset_hz=clocks[np.arange(n_ep), first], cov=Q,
         gdop=gdop, pos_dop=pos_dop, vel_dop=vel_dop, residuals_hz=res, used=used,
-        n_used=used.sum(-1), iterations=iterations, chi2=chi2, status=status,
+        n_used=used.sum(-1), iterations=iterations, chi2=chi2, status=status, clock_offsets_hz=clocks,
+        clock_labels=tuple(clock_labels.tolist()) if clock_group is not None else (),
     )
+
+
+def _xtol_snapshot(n_clk):
+    """Step thresholds of a snapshot state with ``n_clk`` receiver clocks."""
+    return _XTOL_SNAPSHOT if n_clk == 1 else np.concatenate([_XTOL_SNAPSHOT, np.repeat(_XTOL_SNAPSHOT[6:], n_clk - 1)])
 
 
 def _starts(pos_sv_ecef_m, vel_sv_ecef_mps, pos0_ecef_m, offsets_m):
@@ -455,7 +533,7 @@ def _starts(pos_sv_ecef_m, vel_sv_ecef_mps, pos0_ecef_m, offsets_m):
 
 def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, *, pos0_ecef_m=None,
                  alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3, start_offset_m=1.5e6,
-                 ambiguity_m=10e3, clock_degree=1, side_clock_degree=None):
+                 ambiguity_m=10e3, clock_degree=1, side_clock_degree=None, clock_group=None):
     """Batch Doppler fix of a receiver at rest in ECEF.
 
     The frequency offset is a polynomial of degree ``clock_degree`` in
@@ -502,6 +580,11 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     side_clock_degree : int, optional
         Degree used to choose among the starts; default the lowest of
         ``clock_degree``.
+    clock_group : array_like of int, (m,), optional
+        Receiver clock of each row (e.g. its constellation): each distinct
+        value among the unmasked rows gets its own polynomial (offset and
+        drift at degree 1), so the state has ``3 + k (d + 1)`` terms for k
+        clocks. None: one clock.
 
     Returns
     -------
@@ -528,6 +611,12 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     t_ref = 0.5 * (t[m].min() + t[m].max()) if m.any() else 0.0
     dt = t - t_ref
     half_span_s = max(0.5 * np.ptp(t[m]) if m.any() else 0.0, 1.0)
+    groups = np.zeros(n_rows, int) if clock_group is None else np.broadcast_to(np.asarray(clock_group), (n_rows,))
+    clock_labels, g_idx = np.unique(groups[m], return_inverse=True)
+    n_clk = max(len(clock_labels), 1)
+    gi = np.zeros(n_rows, int)
+    gi[m] = g_idx.ravel()
+    onehot = (gi[:, None] == np.arange(n_clk)).astype(float)
     has_alt = alt_m is not None
     if has_alt:
         y = np.append(y, alt_m)
@@ -538,20 +627,25 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
 
     def make_model(degree):
         powers = dt[:, None] ** np.arange(degree + 1)
+        if n_clk > 1:
+            # Each clock's polynomial on its own rows: columns [clock 0 terms, clock 1 terms, ...].
+            powers = (onehot[:, :, None] * powers[:, None, :]).reshape(n_rows, n_clk * (degree + 1))
+        n_poly = powers.shape[1]
 
         def model(x, idx, w):
             H = doppler_jacobian(r_s, v_s, x[:, :3], np.zeros((len(x), 3)), f0)
             pred = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s) + x[:, 3:] @ powers.T
-            J = np.concatenate([H[..., :3], np.broadcast_to(powers, pred.shape + (degree + 1,))], axis=-1)
+            J = np.concatenate([H[..., :3], np.broadcast_to(powers, pred.shape + (n_poly,))], axis=-1)
             if has_alt:
                 lat, lon, h = ecef_to_geodetic(x[:, :3])
                 up = C_e_n(lat, lon)[..., 2]
                 pred = np.concatenate([pred, h[:, None]], axis=-1)
-                J = np.concatenate([J, np.concatenate([up, np.zeros((len(x), degree + 1))], -1)[:, None, :]], axis=1)
+                J = np.concatenate([J, np.concatenate([up, np.zeros((len(x), n_poly))], -1)[:, None, :]], axis=1)
             return pred, J
 
         xtol = np.concatenate([_XTOL_STATIC[:4], _XTOL_STATIC[4] / half_span_s ** np.arange(degree)])[:degree + 4]
-        return model, xtol, 4 + degree
+        xtol = np.concatenate([xtol[:3], np.tile(xtol[3:], n_clk)])
+        return model, xtol, 3 + n_poly
 
     def solve(degree, x0, alpha_):
         model, xtol, n_states = make_model(degree)
@@ -564,7 +658,7 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         starts = _starts(r_s[m[:n_rows]], v_s[m[:n_rows]], pos0_ecef_m, start_offset_m * _START_FRACTIONS)
     else:
         starts = np.zeros((1, 3)) if pos0_ecef_m is None else np.reshape(pos0_ecef_m, (1, 3))
-    x0 = np.zeros((len(starts), 4 + deg_side))
+    x0 = np.zeros((len(starts), 3 + n_clk * (1 + deg_side)))
     x0[:, :3] = starts
     # Choose among the starts' solutions on the same rows (before any exclusion), then clean outliers.
     x, res, J, Q, used, iterations, chi2, status = solve(deg_side, x0, None)
@@ -573,7 +667,7 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     best = int(np.argmin(cost))
     # Solutions whose chi-square is within 3 standard deviations of the best one fit the data
     # equally well (a single pass's mirror image): the start given decides between them.
-    dof = max(int(used[best].sum()) - 4 - deg_side, 1)
+    dof = max(int(used[best].sum()) - 3 - n_clk * (1 + deg_side), 1)
     fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
     if pos0_ecef_m is not None and fits.sum() > 1:
         best = int(np.argmin(np.where(fits, np.linalg.norm(x[:, :3] - starts[0], axis=-1), np.inf)))
@@ -585,12 +679,15 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         # Refine the pair with each candidate degree; the Bayesian information criterion picks one.
         refined = []
         for degree in degrees:
-            x1 = np.zeros((len(pair), 4 + degree))
+            x1 = np.zeros((len(pair), 3 + n_clk * (1 + degree)))
             x1[:, :3] = x[pair, :3]
-            x1[:, 3:4 + min(degree, deg_side)] = x[pair, 3:4 + min(degree, deg_side)]
+            low = min(degree, deg_side) + 1
+            x1[:, 3:].reshape(len(pair), n_clk, 1 + degree)[..., :low] = \
+                x[pair, 3:].reshape(len(pair), n_clk, 1 + deg_side)[..., :low]
             out = solve(degree, x1, None)
             if out[-1][0] in (FixStatus.OK, FixStatus.INCONSISTENT):
-                refined.append((out[6][0] + (4 + degree) * np.log(max(out[4][0].sum(), 1)), degree, out))
+                n_st = 3 + n_clk * (1 + degree)
+                refined.append((out[6][0] + n_st * np.log(max(out[4][0].sum(), 1)), degree, out))
         if refined:
             _, deg, (x, res, J, Q, used, it, chi2, status) = min(refined, key=lambda r: r[0])
             iterations = iterations[pair] + it
@@ -617,14 +714,16 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     w_rel = np.where(used[best], np.median(sigma[:n_rows][m[:n_rows]]) ** 2 / sigma**2, 0.0) if m[:n_rows].any() \
         else used[best].astype(float)
     gdop = float(np.sqrt(np.trace(cofactor(J[best], w_rel))))
-    n_states = 4 + deg
+    n_states = 3 + n_clk * (1 + deg)
     xb = x[best] if solved[best] else np.full(n_states, np.nan)
+    polys = xb[3:].reshape(n_clk, 1 + deg)
     return StaticFix(
         pos_ecef_m=xb[:3], clock_offset_hz=float(xb[3]), clock_drift_hz_per_s=float(xb[4]) if deg >= 1 else 0.0,
         t_ref_s=float(t_ref), cov=Q[best] if solved[best] else np.full((n_states, n_states), np.nan), gdop=gdop,
         residuals_hz=res[best, :n_rows], used=used[best, :n_rows], n_used=int(used[best, :n_rows].sum()),
         iterations=int(iterations[best]), chi2=float(chi2[best]), status=FixStatus(int(status[best])),
-        ambiguous=ambiguous, clock_poly_hz=xb[3:].copy(), mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
+        ambiguous=ambiguous, clock_poly_hz=polys[0].copy(), mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
+        clock_polys_hz=polys.copy(), clock_labels=tuple(clock_labels.tolist()) if clock_group is not None else (),
     )
 
 
@@ -676,6 +775,14 @@ class PassesFix:
     rx_t_ref_s : float
     sat_offset_hz : ndarray, (n_pass,), or None
         Clock ``"common"``: each satellite's constant frequency offset [Hz].
+    rx_clock_polys_hz : ndarray, (k, d + 1), or None
+        Clock ``"common"``: each receiver clock's polynomial (k clock
+        groups, row 0 is ``rx_clock_poly_hz``); the covariance's receiver
+        block is ``[clock 0 terms, clock 1 terms, ...]``.
+    clock_labels : tuple, (k,)
+        The ``clock_group`` value of each receiver clock; ``()`` without.
+    pass_clock : ndarray of int, (n_pass,), or None
+        Index of each pass's receiver clock.
     """
 
     pos_ecef_m: np.ndarray
@@ -698,6 +805,9 @@ class PassesFix:
     rx_clock_poly_hz: np.ndarray = None
     rx_t_ref_s: float = np.nan
     sat_offset_hz: np.ndarray = None
+    rx_clock_polys_hz: np.ndarray = None
+    clock_labels: tuple = ()
+    pass_clock: np.ndarray = None
 
     @property
     def clock_offset_hz(self):
@@ -783,7 +893,7 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
                         pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3,
                         clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
                         time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
-                        ambiguity_m=10e3):
+                        ambiguity_m=10e3, clock_group=None):
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has
@@ -845,6 +955,11 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     time_bias_sigma_s : float or None
         Zero-mean prior standard deviation of each ``dt_p``; None: no prior.
     start_offset_m, ambiguity_m : float
+    clock_group : array_like of int, (m,), optional
+        Clock ``"common"``: receiver clock of each row (e.g. its
+        constellation); each distinct value among the unmasked rows gets its
+        own receiver polynomial (a pass takes the clock of its first row).
+        Ignored by ``"per_pass"`` (every pass has its own terms already).
 
     Returns
     -------
@@ -883,10 +998,19 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     m &= keep[gi]
     labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
     gi[~m] = np.maximum(gi[~m], 0)
+    # Receiver clocks (clock "common"): one polynomial per distinct group among the rows kept.
+    grp = np.zeros(n, int) if clock_group is None or not common else np.broadcast_to(np.asarray(clock_group), (n,))
+    clock_labels, g_idx = np.unique(grp[m], return_inverse=True)
+    n_clk = max(len(clock_labels), 1)
+    clk = np.zeros(n, int)
+    clk[m] = g_idx.ravel()
+    n_glob *= n_clk
     n_pass = len(labels)
     # Rows in pass order internally (contiguous segments for the per-pass sums).
     order = np.argsort(gi, kind="stable")
-    y, sigma, f0, t, m, gi, r_s, v_s = (a[order] for a in (y, sigma, f0, t, m, gi, r_s, v_s))
+    y, sigma, f0, t, m, gi, r_s, v_s, clk = (a[order] for a in (y, sigma, f0, t, m, gi, r_s, v_s, clk))
+    pass_clk = np.zeros(len(labels), int)
+    pass_clk[gi[m]] = clk[m]
     y, sigma, f0, t = (np.where(m, a, fill) for a, fill in ((y, 0.0), (sigma, 1.0), (f0, 1.0), (t, 0.0)))
     r_s = np.where(m[:, None], r_s, [2e7, 0.0, 0.0])
     v_s = np.where(m[:, None], v_s, 0.0)
@@ -898,7 +1022,9 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     t_rx = 0.5 * (t_lo.min() + t_hi.max()) if n_pass else 0.0
     half_rx_s = max(0.5 * (t_hi.max() - t_lo.min()), 1.0) if n_pass else 1.0
     # Polynomial bases in scaled time (|u| <= 1) for conditioning: the shared clock's and the per-pass ones.
-    B_glob = ((t - t_rx) / half_rx_s)[:, None] ** np.arange(n_glob)
+    B_glob = ((t - t_rx) / half_rx_s)[:, None] ** np.arange(n_glob // n_clk)
+    if n_clk > 1:
+        B_glob = ((clk[:, None] == np.arange(n_clk))[:, :, None] * B_glob[:, None, :]).reshape(n, n_glob)
     basis = np.ones((n, 1)) if common else ((t - t_ref[gi]) / half_span_s[gi])[:, None] ** np.arange(deg + 1)
     # Priors: per prior'd per-pass term a pseudo-row per pass (measured 0), after the Doppler rows.
     n_extra = n_pass * len(prior_cols)
@@ -1020,15 +1146,15 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         sl = slice(3 + n_glob + p * n_loc, 3 + n_glob + (p + 1) * n_loc)
         N[sl, sl] = G_ss[0, p]
     N = np.tril(N) + np.tril(N, -1).T
-    scale_glob = 1.0 / half_rx_s ** np.arange(n_glob)
+    scale_glob = np.tile(1.0 / half_rx_s ** np.arange(n_glob // n_clk), n_clk)
     scale_loc = np.ones((n_pass, n_loc)) if common else \
         np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
     scale = np.concatenate([np.ones(3), scale_glob, scale_loc.ravel()])
     cov = _inverse_or_nan(N) * scale[:, None] * scale[None, :] if ok else np.full((n_states, n_states), np.nan)
     # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
     loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
-    n_clk = n_loc - tb
-    perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_clk].ravel(), loc[:, n_clk:].ravel()])
+    n_poly_loc = n_loc - tb
+    perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_poly_loc].ravel(), loc[:, n_poly_loc:].ravel()])
     cov = cov[np.ix_(perm, perm)]
     w_rel = np.where(used[0], np.median(sigma[:n][m[:n]]) ** 2 / sigma**2, 0.0) if m[:n].any() \
         else used[0].astype(float)
@@ -1037,10 +1163,12 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     back[order] = np.arange(n)
     nan_unless = (lambda a: a if ok else np.full_like(a, np.nan))  # noqa: E731
     c_loc = c_s[0] * scale_loc
-    rx_poly = c_g[0] * scale_glob
+    rx_polys = (c_g[0] * scale_glob).reshape(n_clk, -1)
+    rx_poly = rx_polys[0]
     if common:
-        # Each pass's effective polynomial: the receiver's about the pass's mid-time, plus its satellite's offset.
-        poly = _shift_poly(np.broadcast_to(rx_poly, (n_pass, deg + 1)), t_ref - t_rx)
+        # Each pass's effective polynomial: its receiver clock's about the pass's mid-time, plus its satellite's offset.
+        poly = _shift_poly(rx_polys[pass_clk] if n_clk > 1 else np.broadcast_to(rx_poly, (n_pass, deg + 1)),
+                           t_ref - t_rx)
         poly[:, 0] += c_loc[:, 0]
     else:
         poly = c_loc[:, :deg + 1]
@@ -1052,4 +1180,7 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         time_bias_s=nan_unless(c_loc[:, -1].copy()) if tb else None, clock=clock,
         rx_clock_poly_hz=nan_unless(rx_poly) if common else None, rx_t_ref_s=float(t_rx) if common else np.nan,
         sat_offset_hz=nan_unless(c_loc[:, 0].copy()) if common else None,
+        rx_clock_polys_hz=nan_unless(rx_polys.copy()) if common else None,
+        clock_labels=tuple(clock_labels.tolist()) if common and clock_group is not None else (),
+        pass_clock=pass_clk.copy() if common else None,
     )
