@@ -271,20 +271,24 @@ class _Search:
         count : ndarray of int, (n_cells,)
             Tracks agreeing on one clock offset.
         cost : ndarray, (n_cells,)
-            Sum of the agreeing tracks' normalised squared feature errors.
+            Chi-square of a linearised fit of position offset, clock and drift to the
+            agreeing tracks' features.
         assign : ndarray of int, (n_cells, n_tracks)
             Best satellite per track (-1 for none).
         clock_hz : ndarray, (n_cells,)
+        moved_ecef_m : ndarray, (n_cells, 3)
+            Cell centres moved by the fitted position offset (at most 1.5 radii).
         """
         n_cells, n_tr = len(cells), len(self.tracks)
         count = np.zeros(n_cells, int)
         cost = np.full(n_cells, np.inf)
         assign = np.full((n_cells, n_tr), -1)
         clock = np.zeros(n_cells)
+        moved = cells.copy()
         for a in range(0, n_cells, _CHUNK_CELLS):
             sl = slice(a, min(a + _CHUNK_CELLS, n_cells))
-            count[sl], cost[sl], assign[sl], clock[sl] = self._vote_chunk(cells[sl], radius_m)
-        return count, cost, assign, clock
+            count[sl], cost[sl], assign[sl], clock[sl], moved[sl] = self._vote_chunk(cells[sl], radius_m)
+        return count, cost, assign, clock, moved
 
     def _vote_chunk(self, cells, radius_m):
         o = self.o
@@ -309,18 +313,24 @@ class _Search:
         rate = _doppler(p[:, 2], v[:, 2], pos_rx, self.k)[0] - _doppler(p[:, 1], v[:, 1], pos_rx, self.k)[0]
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
         feat = ((f_ref - dop) @ _FEATURES.T) * scale
-        feat_grad = np.linalg.norm(np.einsum("fr,mrx->mfx", _FEATURES, grad), axis=-1) * scale
+        feat_jac = np.einsum("fr,mrx->mfx", _FEATURES, grad) * scale[..., None]  # d feature / d pos, negated
+        feat_grad = np.linalg.norm(feat_jac, axis=-1)
         feat_rate = np.abs(rate @ _FEATURES.T) * scale
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
         drift = o["clock_drift_max_hz_per_s"]
         t_mid = t_ref[:, 1]
         extra = np.stack([o["sat_offset_max_hz"] + drift * np.abs(t_mid - self.t_c), np.full_like(span, drift),
                           np.zeros_like(span)], axis=1)
-        tol = reach * feat_grad + dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
+        tol_other = dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
+        tol = reach * feat_grad + tol_other
+        # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
+        # and the curvature of the Doppler across the cell (cell radius / range ~ radius / 1000 km).
+        sig_fit = 0.5 * tol_other + (radius_m / 1e6) * radius_m * feat_grad
         b_max = o["clock_search_hz"]
         ok = (np.abs(feat[:, 1]) <= tol[:, 1]) & (np.abs(feat[:, 2]) <= tol[:, 2]) & \
              (np.abs(feat[:, 0]) <= b_max + tol[:, 0])
         c, k, s, feat, tol = c[ok], k[ok], s[ok], feat[ok], tol[ok]
+        feat_jac, sig_fit, t_mid = feat_jac[ok], sig_fit[ok], t_mid[ok]
         # Clock vote on bins: each pair covers [offset - tol, offset + tol].
         width = max(50.0, 2 * b_max / 400)
         n_bins = int(np.ceil(2 * b_max / width)) + 1
@@ -346,11 +356,45 @@ class _Search:
         kc = key[chosen]
         assign = np.full(n_cells * n_tr, -1)
         assign[kc] = s[agree][chosen]
-        best_cost = np.zeros(n_cells * n_tr)
-        best_cost[kc] = cost2[agree][chosen]
         assign = assign.reshape(n_cells, n_tr)
         count = (assign >= 0).sum(axis=1)
-        return count, best_cost.reshape(n_cells, n_tr).sum(axis=1), assign, clock
+        pick = np.flatnonzero(agree)[chosen]
+        chi2, moved = self._linear_fit(cells, radius_m, c[pick], k[pick], feat[pick], feat_jac[pick], sig_fit[pick],
+                                       t_mid[pick], clock)
+        return count, chi2, assign, clock, moved
+
+    def _linear_fit(self, cells, radius_m, c, k, feat, feat_jac, sig, t_mid, clock):
+        """Each cell's position offset, clock and drift fitted to its chosen pairs' features (linearised).
+
+        Returns the fit's chi-square (n_cells,) and the moved cell centres (n_cells, 3).
+        """
+        o = self.o
+        n_cells, n_tr = len(cells), len(self.tracks)
+        lat, lon, _ = ecef_to_geodetic(cells)
+        en = C_e_n(lat, lon)[:, :, :2]  # (n_cells, 3, 2)
+        rows = np.zeros((n_cells, n_tr, 3, 4))
+        rows[c, k, :, :2] = np.einsum("mfx,mxy->mfy", feat_jac, en[c])
+        rows[c, k, 0, 2] = 1.0
+        rows[c, k, 0, 3] = t_mid - self.t_c
+        rows[c, k, 1, 3] = 1.0
+        y = np.zeros((n_cells, n_tr, 3))
+        y[c, k] = feat
+        w = np.zeros((n_cells, n_tr, 3))
+        w[c, k] = 1.0 / sig**2
+        A, y, w = rows.reshape(n_cells, -1, 4), y.reshape(n_cells, -1), w.reshape(n_cells, -1)
+        prior = np.array([radius_m, radius_m, o["clock_search_hz"], o["clock_drift_max_hz_per_s"]]) ** -2.0
+        N = np.einsum("cri,cr,crj->cij", A, w, A) + np.diag(prior)
+        x0 = np.stack([np.zeros(n_cells), np.zeros(n_cells), clock, np.zeros(n_cells)], axis=1)
+        rhs = np.einsum("cri,cr,cr->ci", A, w, y) + prior * x0
+        x = np.linalg.solve(N, rhs[..., None])[..., 0]
+        res = y - np.einsum("cri,ci->cr", A, x)
+        chi2 = np.einsum("cr,cr,cr->c", res, w, res) + np.sum(prior * (x - x0) ** 2, axis=1)
+        d_en = x[:, :2]
+        norm = np.linalg.norm(d_en, axis=1, keepdims=True)
+        d_en = d_en * np.minimum(1.0, 1.5 * radius_m / np.maximum(norm, 1e-9))
+        moved = cells + np.einsum("cxy,cy->cx", en, d_en)
+        lat2, lon2, _ = ecef_to_geodetic(moved)
+        return chi2, geodetic_to_ecef(lat2, lon2, o["alt_m"])
 
     def search_cells(self, cells, spacing_m, keep):
         """Vote, keep the best cells, split them 3 x 3, until the spacing is ~1 km.
@@ -362,16 +406,16 @@ class _Search:
         alt = self.o["alt_m"]
         radius = spacing_m / np.sqrt(2)
         while True:
-            count, cost, assign, clock = self.vote(cells, radius)
+            count, cost, assign, clock, moved = self.vote(cells, radius)
             order = np.lexsort((cost, -count))
             top = order[:keep]
             top = top[count[top] >= count[order[0]] - 1]
             if spacing_m <= self.o["final_spacing_m"]:
-                return [(cells[i], assign[i], clock[i]) for i in top[: self.o["n_final"]]]
+                return [(moved[i], assign[i], clock[i]) for i in top[: self.o["n_final"]]]
             spacing_m /= 3
             radius = spacing_m / np.sqrt(2)
             offsets = spacing_m * np.array([(e, n) for e in (-1, 0, 1) for n in (-1, 0, 1)], float)
-            cells = _grid_around(cells[top], offsets, alt)
+            cells = _grid_around(moved[top], offsets, alt)
 
     # Joint least squares -------------------------------------------------
 
@@ -549,7 +593,7 @@ _DEFAULTS = dict(
 
 
 def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ,
-                    clock_search_hz=25e3, prior_radius_m=150e3, alt_m=None, global_spacing_m=60e3,
+                    clock_search_hz=25e3, prior_radius_m=150e3, alt_m=None, global_spacing_m=150e3,
                     keep_cells=None, **options):
     """Identify Doppler tracks against element sets; sets ``track.sat_id`` and ``track.match_rms_hz`` in place.
 
@@ -574,7 +618,7 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
     global_spacing_m : float
         First cell spacing of the global search.
     keep_cells : int, optional
-        Cells kept per refinement level (default 40 with a prior, 400 without).
+        Cells kept per refinement level (default 40 with a prior, 300 without).
     **options
         Tolerances and thresholds; see ``_DEFAULTS`` in this module.
 
@@ -617,7 +661,7 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
         prior_sigma = prior_radius_m
     else:
         cells = _fibonacci_cells(global_spacing_m, opts["alt_m"])
-        finals = search.search_cells(cells, global_spacing_m * 1.1, keep_cells or 400)
+        finals = search.search_cells(cells, global_spacing_m * 1.1, keep_cells or 300)
         prior_sigma = 20e3
     best = None
     for cell, assign, clock in finals:
