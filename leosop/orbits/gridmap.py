@@ -490,7 +490,10 @@ def write_netcdf(ds, path):
     from ..fileio import atomic_path
 
     encoding = {
-        "time": {"units": "seconds since 1970-01-01T00:00:00Z", "calendar": "proleptic_gregorian", "dtype": "f8"},
+        "time": {"units": "seconds since 1970-01-01T00:00:00Z", "calendar": "proleptic_gregorian", "dtype": "f8",
+                 "_FillValue": None},
+        "lat": {"_FillValue": None},
+        "lon": {"_FillValue": None},
         "gdop": {"_FillValue": np.float32(np.nan)},
         "n_visible": {"_FillValue": None},
     }

@@ -1,0 +1,110 @@
+"""``leosop study gdop-map``: visible count and Doppler GDOP over a global grid and time.
+
+Writes ``DIR/gdop_map.nc`` (NetCDF 3 through xarray's scipy backend) and map
+figures; every output is complete or absent (:func:`leosop.fileio.atomic_outputs`).
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..orbits import CARRIERS
+from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
+from ..timebase import format_utc
+from . import add_command
+from .options import mask_deg, parse_time, positive
+
+# Output values (epochs x cells) above which a run would not fit in memory.
+_MAX_VALUES = 400_000_000
+
+
+def register(subparsers):
+    p = add_command(subparsers, "study", sys.modules[__name__], help="grid studies (gdop-map)")
+    sub = p.add_subparsers(dest="study", metavar="STUDY", required=True)
+    g = sub.add_parser("gdop-map", help="visible satellites and Doppler GDOP over a lat/lon grid and time, "
+                                        "to NetCDF and world maps")
+    g.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    g.add_argument("--out", metavar="DIR", required=True, help="directory for gdop_map.nc and the figures")
+    g.add_argument("--tle", metavar="FILE", help="TLE or OMM file (default: bundled Walker set)")
+    g.add_argument("--start", metavar="ISO", help="UTC start (default: the median element-set epoch)")
+    g.add_argument("--duration-s", type=float, default=3600.0, help="span in seconds (default 3600)")
+    g.add_argument("--step-s", type=float, default=60.0, help="epoch step in seconds (default 60)")
+    g.add_argument("--grid-deg", type=float, default=5.0, help="grid step, dividing 180 (default 5)")
+    g.add_argument("--mask-deg", type=float, default=40.0, help="elevation mask (default 40)")
+    g.add_argument("--constellation", nargs="+", choices=sorted(CARRIERS), metavar="NAME",
+                   help=f"only these families of a mixed file ({', '.join(sorted(CARRIERS))})")
+    g.add_argument("--skip-bad", action="store_true", help="skip malformed TLE records with a warning")
+    g.add_argument("--scheduler", metavar="ADDR",
+                   help="Dask scheduler address (default: a local cluster; 'serial' runs in this process)")
+    g.set_defaults(_module=sys.modules[__name__])
+
+
+def run(args):
+    duration = positive(args.duration_s, "--duration-s")
+    step = positive(args.step_s, "--step-s")
+    mask = mask_deg(args.mask_deg)
+    grid_deg = check_grid_deg(args.grid_deg)
+    n_epochs = int(np.floor(duration / step + 1e-9)) + 1
+    n_cells = (round(180 / grid_deg) + 1) * round(360 / grid_deg)
+    if n_epochs * n_cells > _MAX_VALUES:
+        raise InputError(f"--duration-s/--step-s/--grid-deg: {n_epochs} epochs x {n_cells} cells is too many "
+                         f"(at most {_MAX_VALUES:,} values)")
+    source = ConstellationSource(args.tle, tuple(args.constellation or ()), args.skip_bad)
+    const = source.load()
+    if args.start:
+        start = parse_time(args.start)
+    else:
+        start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
+    times = np.datetime64(start, "ns") + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
+    ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler)
+    out = Path(args.out)
+    from ..fileio import atomic_outputs
+
+    with atomic_outputs(out) as stage:
+        write_netcdf(ds, stage / "gdop_map.nc")
+        _figures(stage, ds, Path(const.source).name if const.source else "bundled Walker set")
+    fix = np.isfinite(ds["gdop"].values)
+    n_vis = ds["n_visible"].values
+    return {
+        "study": "gdop-map",
+        "netcdf": str(out / "gdop_map.nc"),
+        "n_satellites": len(const),
+        "n_epochs": n_epochs,
+        "grid_deg": grid_deg,
+        "mask_deg": mask,
+        "start_utc": format_utc(times[0]),
+        "end_utc": format_utc(times[-1]),
+        "n_visible_mean": float(n_vis.mean()),
+        "n_visible_max": int(n_vis.max()),
+        "fix_fraction": float(fix.mean()),
+        "gdop_median": float(np.median(ds["gdop"].values[fix])) if fix.any() else float("nan"),
+    }
+
+
+def _figures(stage, ds, label):
+    from ..maps import plot_fix_fraction, plot_small_multiples
+
+    lat, lon = ds["lat"].values, ds["lon"].values
+    gdop = ds["gdop"].values
+    title = f"{label}, {ds.attrs['n_satellites']} satellites, mask {ds.attrs['elevation_mask_deg']:g} deg"
+    plot_fix_fraction(stage / "fix_fraction.png", lat, lon, np.isfinite(gdop).mean(axis=0),
+                      title=f"{title}, {len(ds['time'])} epochs")
+    pick = np.unique(np.linspace(0, len(ds["time"]) - 1, min(6, len(ds["time"]))).round().astype(int))
+    labels = [format_utc(t) for t in ds["time"].values[pick]]
+    plot_small_multiples(stage / "n_visible_maps.png", lat, lon, ds["n_visible"].values[pick].astype(float), labels,
+                         cbar_label="visible satellites", vmin=0, title=title)
+    finite = gdop[pick][np.isfinite(gdop[pick])]
+    vmax = float(np.percentile(finite, 95)) if finite.size else 1.0
+    plot_small_multiples(stage / "gdop_maps.png", lat, lon, gdop[pick], labels, cbar_label="Doppler GDOP",
+                         vmin=0, vmax=vmax, cmap="magma_r", title=title + " (blank: < 7 satellites)")
+
+
+def summary(doc):
+    return "\n".join([
+        f"{doc['netcdf']}: {doc['n_epochs']} epochs {doc['start_utc']} .. {doc['end_utc']}, "
+        f"{doc['grid_deg']:g} deg grid, {doc['n_satellites']} satellites, mask {doc['mask_deg']:g} deg",
+        f"visible satellites: mean {doc['n_visible_mean']:.1f}, max {doc['n_visible_max']}",
+        f"cell-epochs with a Doppler fix (>= 7): {doc['fix_fraction']:.1%}; median GDOP {doc['gdop_median']:.1f}",
+    ])

@@ -1,0 +1,83 @@
+"""World-map figures of gridded studies (``leosop study gdop-map``).
+
+Plate carree (longitude, latitude in degrees) with the bundled Natural Earth
+1:110m coastline (``leosop/data/coastline_110m.npz``, public domain; see the
+README there). Matplotlib is loaded only here, through :mod:`leosop.figure`.
+"""
+
+import functools
+from importlib.resources import files
+
+import numpy as np
+
+from .figure import pyplot, save_png
+
+__all__ = ["coastline_lon_lat_deg", "plot_fix_fraction", "plot_small_multiples"]
+
+
+@functools.lru_cache(maxsize=1)
+def coastline_lon_lat_deg():
+    """Coastline polylines, NaN-separated: ndarray (n, 2) of lon, lat in degrees."""
+    with np.load(str(files("leosop") / "data" / "coastline_110m.npz")) as data:
+        return data["lon_lat_deg"].astype(float)
+
+
+def _world_axes(ax):
+    xy = coastline_lon_lat_deg()
+    ax.plot(xy[:, 0], xy[:, 1], color="k", lw=0.5)
+    ax.set_xlim(-180, 180)
+    ax.set_ylim(-90, 90)
+    ax.set_aspect("equal")
+    ax.set_xticks(np.arange(-180, 181, 60))
+    ax.set_yticks(np.arange(-90, 91, 30))
+    ax.tick_params(labelsize=7)
+
+
+def plot_fix_fraction(path, lat_deg, lon_deg, fix_fraction, *, title=""):
+    """Fraction of epochs with a Doppler fix (>= 7 satellites) per cell.
+
+    Parameters
+    ----------
+    lat_deg : ndarray, (n_lat,)
+    lon_deg : ndarray, (n_lon,)
+    fix_fraction : ndarray, (n_lat, n_lon)
+    """
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(9, 5))
+    mesh = ax.pcolormesh(lon_deg, lat_deg, fix_fraction, shading="nearest", cmap="viridis", vmin=0, vmax=1)
+    _world_axes(ax)
+    fig.colorbar(mesh, ax=ax, shrink=0.7, label="fraction of time with >= 7 satellites")
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("longitude [deg]")
+    ax.set_ylabel("latitude [deg]")
+    save_png(fig, path)
+
+
+def plot_small_multiples(path, lat_deg, lon_deg, values, labels, *, cbar_label, vmin=None, vmax=None,
+                         cmap="viridis", title=""):
+    """One world map per selected epoch, shared colour scale.
+
+    Parameters
+    ----------
+    values : ndarray, (n_panels, n_lat, n_lon)
+    labels : list of str, (n_panels,)
+    """
+    plt = pyplot()
+    n = len(values)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows + 0.6), squeeze=False)
+    finite = values[np.isfinite(values)]
+    vmin = vmin if vmin is not None else (float(finite.min()) if finite.size else 0.0)
+    vmax = vmax if vmax is not None else (float(finite.max()) if finite.size else 1.0)
+    mesh = None
+    for ax, v, label in zip(axes.ravel(), values, labels):
+        mesh = ax.pcolormesh(lon_deg, lat_deg, v, shading="nearest", cmap=cmap, vmin=vmin, vmax=vmax)
+        _world_axes(ax)
+        ax.set_title(label, fontsize=8)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    if mesh is not None:
+        fig.colorbar(mesh, ax=axes.ravel().tolist(), shrink=0.8, label=cbar_label)
+    fig.suptitle(title, fontsize=9)
+    save_png(fig, path)
