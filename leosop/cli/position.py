@@ -10,6 +10,15 @@ polynomials under ``passes`` (the solution's ``t_s``, ``clock_offset_hz``
 and drift are those of the pass nearest the middle). Besides the contract's
 ``solutions``, the JSON document lists the ``rejected`` rows and
 ``unsolved`` epochs with their reasons; each solution carries a ``status``.
+
+Rows of several constellations may be mixed (DESIGN 4.3): a row's carrier is
+its ``carrier_hz``, else its satellite's family's (the ``--tle`` names, the
+carrier table), else ``--carrier-hz``; each constellation gets its own
+receiver clock (a snapshot epoch then needs 6 + one satellite per
+constellation it sees). Solutions of such files carry ``clock_offsets_hz``
+(and with ``--static`` ``clock_drifts_hz_per_s``), a mapping from the
+constellation (or ``"<carrier> Hz"`` for rows of no known family) to its
+clock; ``clock_offset_hz`` is then that of the first one present.
 """
 
 import sys
@@ -35,8 +44,9 @@ def register(subparsers):
     p.add_argument("meas", metavar="MEAS.csv", help="Doppler measurements (DESIGN 4.3 columns)")
     p.add_argument("--tle", metavar="FILE", help="element sets for rows without satellite state columns "
                    "(default: the bundled constellation)")
-    p.add_argument("--carrier-hz", type=float, default=DEFAULT_CARRIER_HZ, metavar="F",
-                   help="carrier of rows without carrier_hz (default %(default)g)")
+    p.add_argument("--carrier-hz", type=float, metavar="F",
+                   help="carrier of rows without carrier_hz and of no known constellation (default "
+                   f"{DEFAULT_CARRIER_HZ:g} unless the file mixes carriers)")
     p.add_argument("--static", action="store_true", help="one batch fix of a receiver at rest; with a pass_id "
                    "column (optional, extends DESIGN 4.3) a cubic frequency offset per pass, position shared")
     p.add_argument("--clock", choices=("per_pass", "common"), default="per_pass",
@@ -110,6 +120,11 @@ def solutions_doc(res, meas):
         sol = _solution(res.t_s[mid], utc(mid), f.pos_ecef_m, np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop,
                         res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz, f.status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = float(f.clock_drift_hz_per_s[mid])
+        if len(res.clock_labels) > 1 and f.rx_clock_polys_hz is not None:
+            names = [res.clock_labels[j] for j in f.clock_labels]
+            sol["clock_offsets_hz"] = dict(zip(names, _floats(f.rx_clock_polys_hz[:, 0])))
+            if f.rx_clock_polys_hz.shape[1] > 1:
+                sol["clock_drifts_hz_per_s"] = dict(zip(names, _floats(f.rx_clock_polys_hz[:, 1])))
         solutions = [sol]
         sigma_pass = res.sigma_hz_pass if res.sigma_hz_pass is not None else np.full(len(f.pass_ids), np.nan)
         passes = [{"pass_id": str(pid), "t_s": float(t), "clock_poly_hz": [float(c) for c in poly],
@@ -119,14 +134,24 @@ def solutions_doc(res, meas):
         sol = _solution(res.t_s[0], utc(0), f.pos_ecef_m, np.zeros(3), f.clock_offset_hz, f.gdop, res.n_sats[0],
                         f.n_used, f.iterations, f.residual_rms_hz, f.status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = f.clock_drift_hz_per_s
+        if len(res.clock_labels) > 1 and f.clock_polys_hz is not None:
+            names = [res.clock_labels[j] for j in f.clock_labels]
+            sol["clock_offsets_hz"] = dict(zip(names, _floats(f.clock_polys_hz[:, 0])))
+            if f.clock_polys_hz.shape[1] > 1:
+                sol["clock_drifts_hz_per_s"] = dict(zip(names, _floats(f.clock_polys_hz[:, 1])))
         solutions = [sol]
     else:
         rms = f.residual_rms_hz
         solutions = [
             _solution(res.t_s[k], utc(k), f.pos_ecef_m[k], f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k],
                       res.n_sats[k], f.n_used[k], f.iterations[k], rms[k], f.status[k], f.cov[k, :3, :3])
-            for k in np.flatnonzero(res.n_sats >= 7)
+            for k in np.flatnonzero(res.n_sats >= (7 if res.n_need is None else res.n_need))
         ]
+        if len(res.clock_labels) > 1:
+            names = [res.clock_labels[j] for j in f.clock_labels]
+            for sol, k in zip(solutions, np.flatnonzero(res.n_sats >= res.n_need)):
+                sol["clock_offsets_hz"] = {n: v for n, v in zip(names, _floats(f.clock_offsets_hz[k]))
+                                           if v is not None}
         ep, sl = np.nonzero(res.rows >= 0)
         residuals = [(int(meas.line[i]), meas.t_s[i], meas.sat_id[i], f.residuals_hz[e, s], bool(f.used[e, s]))
                      for e, s, i in zip(ep, sl, res.rows[ep, sl])]
@@ -136,17 +161,35 @@ def solutions_doc(res, meas):
     return solutions, passes, residuals
 
 
+def _floats(values):
+    """JSON numbers of an array: floats, None for NaN."""
+    return [float(v) if np.isfinite(v) else None for v in values]
+
+
 def fixes_csv_rows(solutions):
-    """Header and rows of fixes.csv: the solution keys, ``sigma_enu_m`` split into three columns."""
-    keys = [k for k in solutions[0] if k != "sigma_enu_m"] if solutions else []
+    """Header and rows of fixes.csv: the solution keys, ``sigma_enu_m`` split into three columns.
+
+    Mappings per constellation (``clock_offsets_hz``, ...) become one column
+    per constellation, ``clock_offset_hz_<name>`` (``clock_drift_hz_per_s_<name>``).
+    """
+    keys = [k for k in solutions[0] if k != "sigma_enu_m" and not isinstance(solutions[0][k], dict)] \
+        if solutions else []
     header = keys + ["sigma_e_m", "sigma_n_m", "sigma_u_m"]
-    return header, [[s[k] for k in keys] + [float(v) for v in s["sigma_enu_m"]] for s in solutions]
+    maps = {"clock_offsets_hz": "clock_offset_hz", "clock_drifts_hz_per_s": "clock_drift_hz_per_s"}
+    extra = [(key, name) for key in maps for name in dict.fromkeys(n for s in solutions for n in s.get(key, {}))]
+    header += [f"{maps[key]}_{name.replace(' ', '_')}" for key, name in extra]
+    return header, [[s[k] for k in keys] + [float(v) for v in s["sigma_enu_m"]]
+                    + [s.get(key, {}).get(name) for key, name in extra] for s in solutions]
 
 
 def run(args):
     _check(args)
-    meas = read_measurements(args.meas, carrier_hz=args.carrier_hz)
-    constellation = None if meas.pos_sv_ecef_m is not None else load_constellation(args.tle)
+    # Element sets give the rows' families (carrier, receiver clock) and, without state columns, the states.
+    constellation = load_constellation(args.tle) if args.tle else None
+    meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
+    if meas.pos_sv_ecef_m is None and constellation is None:
+        constellation = load_constellation(None)
+        meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
     init = _site(args.init) if args.init else None
     alpha = args.alpha or None
     if args.static and meas.pass_id is not None:

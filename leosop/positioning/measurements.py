@@ -10,6 +10,16 @@ error for the whole file; a bad row (empty, NaN or non-numeric value,
 non-positive sigma or carrier, duplicate of an earlier row) is set aside with
 its reason in :attr:`Measurements.rejected` so that the rest can be solved.
 
+Carrier of a row: its ``carrier_hz`` value; else the default carrier of its
+satellite's family (:data:`~leosop.orbits.constellation.CARRIERS`, the family
+from the element sets' names); else the caller's ``carrier_hz``
+(``--carrier-hz``); else, when nothing in the file points to another carrier,
+:data:`DEFAULT_CARRIER_HZ`. A row left without a carrier in a file that mixes
+carriers is an error naming its line. Receiver clock of a row
+(:func:`clock_groups`): its family; rows of no known family (e.g. a table
+with state columns and no element sets) are grouped by carrier, one clock per
+distinct ``carrier_hz``.
+
 Satellite states from element sets include the light time: the state is
 taken at the transmit time ``t - |r_s - r_r| / c`` and rotated into the ECEF
 frame of the reception time (the Earth turns ``omega_e * tau`` meanwhile).
@@ -27,8 +37,8 @@ from ..fileio import write_csv
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import format_utc, seconds_since
 
-__all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states_from_tle",
-           "SV_STATE_COLUMNS", "DEFAULT_CARRIER_HZ", "MAX_TLE_AGE_DAYS"]
+__all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states_from_tle", "clock_groups",
+           "row_families", "SV_STATE_COLUMNS", "DEFAULT_CARRIER_HZ", "MAX_TLE_AGE_DAYS"]
 
 #: Satellite state columns, ECEF at the measurement time.
 SV_STATE_COLUMNS = ("x_sv_m", "y_sv_m", "z_sv_m", "vx_sv_mps", "vy_sv_mps", "vz_sv_mps")
@@ -57,6 +67,9 @@ class Measurements:
         Line number of each row in the file.
     pass_id : ndarray of str, (n,), or None
         From the optional ``pass_id`` column (empty fields read as ``""``).
+    family : ndarray of str, (n,), or None
+        Constellation of each row's satellite (a key of ``CARRIERS``, ``""``
+        unknown); None when read without element sets.
     rejected : tuple of (int, str)
         Line number and reason of every row set aside.
     source : str
@@ -74,6 +87,7 @@ class Measurements:
     rejected: tuple = ()
     source: str = ""
     pass_id: np.ndarray = None
+    family: np.ndarray = None
 
     def __len__(self):
         return len(self.doppler_hz)
@@ -90,7 +104,7 @@ class Measurements:
                        doppler_hz=self.doppler_hz[index], sigma_hz=self.sigma_hz[index],
                        carrier_hz=self.carrier_hz[index], pos_sv_ecef_m=pick(self.pos_sv_ecef_m),
                        vel_sv_ecef_mps=pick(self.vel_sv_ecef_mps), line=self.line[index],
-                       pass_id=pick(self.pass_id))
+                       pass_id=pick(self.pass_id), family=pick(self.family))
 
 
 def _floats(values):
@@ -104,15 +118,19 @@ def _floats(values):
     return out, ~np.isfinite(out)
 
 
-def read_measurements(path, *, carrier_hz=None):
+def read_measurements(path, *, carrier_hz=None, constellation=None):
     """Read a Doppler measurement CSV (DESIGN 4.3).
 
     Parameters
     ----------
     path : str or Path
     carrier_hz : float, optional
-        Carrier of rows without a ``carrier_hz`` value; default
-        :data:`DEFAULT_CARRIER_HZ`.
+        Carrier of rows with neither a ``carrier_hz`` value nor a satellite
+        of a known family; default :data:`DEFAULT_CARRIER_HZ` unless the
+        file mixes carriers (then such a row is an error).
+    constellation : Constellation, optional
+        Element sets whose names give each satellite's family (its carrier
+        and receiver clock).
 
     Returns
     -------
@@ -185,8 +203,13 @@ def read_measurements(path, *, carrier_hz=None):
     sigma = number("sigma_hz", default=np.nan)
     for k in np.flatnonzero(np.isfinite(sigma) & ~(sigma > 0) & (reason == "")):
         reason[k] = f"sigma_hz is {sigma[k]:g}, expected a positive number or an empty field"
-    default_carrier = DEFAULT_CARRIER_HZ if carrier_hz is None else float(carrier_hz)
-    carrier = number("carrier_hz", default=default_carrier, positive=True)
+    family = row_families(sat_id, constellation) if constellation is not None else np.full(len(body), "")
+    carrier = number("carrier_hz", default=0.0)
+    text_c = field("carrier_hz") if "carrier_hz" in col else [""] * len(body)
+    blank = np.array([t == "" for t in text_c], dtype=bool)
+    for k in np.flatnonzero(~blank & ~(carrier > 0) & (reason == "")):
+        reason[k] = f"carrier_hz is {text_c[k]!r}, expected a positive number"
+    carrier = _fill_carriers(path, carrier, blank, family, carrier_hz, lines, sat_id, reason)
     state = np.stack([number(c) for c in SV_STATE_COLUMNS], axis=-1) if state_given else None
 
     # Duplicates: the same satellite at the same time; the first row is kept.
@@ -210,7 +233,65 @@ def read_measurements(path, *, carrier_hz=None):
         pos_sv_ecef_m=None if state is None else state[ok, :3],
         vel_sv_ecef_mps=None if state is None else state[ok, 3:], line=lines[ok], rejected=rejected,
         source=str(path), pass_id=np.array(field("pass_id"), dtype=str)[ok] if "pass_id" in col else None,
+        family=family[ok] if constellation is not None else None,
     )
+
+
+def _fill_carriers(path, carrier, blank, family, carrier_hz, lines, sat_id, reason):
+    """Carriers of the rows without a value: family, caller, default (see the module notes)."""
+    from ..orbits.constellation import CARRIERS
+
+    carrier = carrier.copy()
+    fam = blank & (family != "")
+    carrier[fam] = [CARRIERS[f].default_hz for f in family[fam]]
+    rest = blank & ~fam & (reason == "")
+    if not rest.any():
+        return carrier
+    if carrier_hz is not None:
+        carrier[blank & ~fam] = float(carrier_hz)
+        return carrier
+    known = np.unique(carrier[~blank | fam][(reason == "")[~blank | fam]])
+    if known.size > 1 or (known.size == 1 and known[0] != DEFAULT_CARRIER_HZ):
+        k = np.flatnonzero(rest)[0]
+        shown = ", ".join(f"{f:g}" for f in known[:4]) + (" ..." if known.size > 4 else "")
+        raise InputError(f"{path}:{lines[k]}: carrier of satellite {sat_id[k]} cannot be determined (no carrier_hz, "
+                         f"no known constellation in the element sets, and the file has carriers {shown} Hz); "
+                         "give carrier_hz, --tle with its family, or --carrier-hz")
+    carrier[blank & ~fam] = DEFAULT_CARRIER_HZ
+    return carrier
+
+
+def row_families(sat_id, constellation):
+    """Family (key of ``CARRIERS``, ``""`` unknown) of each satellite id from the element sets' names, (n,)."""
+    ids = np.asarray(sat_id, dtype=str)
+    if constellation is None:
+        return np.full(ids.shape, "")
+    lookup = dict(zip(constellation.sat_ids.tolist(), constellation.families.tolist()))
+    return np.array([lookup.get(s, "") for s in ids.tolist()], dtype=object).astype(str).reshape(ids.shape)
+
+
+def clock_groups(meas, constellation=None):
+    """Receiver clock of each row: its constellation, else its carrier.
+
+    Parameters
+    ----------
+    meas : Measurements
+    constellation : Constellation, optional
+        Element sets for the families when ``meas.family`` is None.
+
+    Returns
+    -------
+    index : ndarray of int, (n,)
+        Clock of each row, into ``labels``.
+    labels : tuple of str
+        A family key, or ``"<carrier> Hz"`` for rows of no known family
+        (one clock per distinct carrier).
+    """
+    family = meas.family if meas.family is not None else row_families(meas.sat_id, constellation)
+    names = np.where(family != "", family, np.char.add(np.array([f"{f:.10g}" for f in meas.carrier_hz], dtype=str),
+                                                      " Hz") if len(meas) else family)
+    labels, index = np.unique(names.astype(str), return_inverse=True)
+    return index.ravel(), tuple(labels.tolist())
 
 
 def write_measurements(path, meas):

@@ -10,7 +10,10 @@ What ``leosop position`` does, as functions:
    the data: a first solve with unit weights, then the robust (MAD) scale of
    its residuals, corrected for the states the fit absorbs;
 4. :func:`~leosop.positioning.doppler_ls.solve_snapshots` or
-   :func:`~leosop.positioning.doppler_ls.solve_static`.
+   :func:`~leosop.positioning.doppler_ls.solve_static`, with one receiver
+   clock per constellation (:func:`~leosop.positioning.measurements.clock_groups`:
+   the satellite's family, else its carrier): a snapshot epoch needs
+   ``6 + k`` satellites for the k constellations it sees.
 
 Rows that cannot be used and epochs that cannot be solved are reported,
 never silently dropped; the rest is still solved.
@@ -21,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .doppler_ls import (N_STATIC_STATES, SAT_OFFSET_SIGMA_HZ, TIME_OFFSET_SIGMA_S, solve_snapshots, solve_static,
+from .doppler_ls import (SAT_OFFSET_SIGMA_HZ, TIME_OFFSET_SIGMA_S, solve_snapshots, solve_static,
                          solve_static_passes, subpoint_centroid_ecef_m)
 from .dop import N_DOPPLER_STATES
-from .measurements import sv_states_from_tle
+from .measurements import clock_groups, sv_states_from_tle
 
 __all__ = ["PositionResult", "position_snapshots", "position_static", "position_static_passes", "satellite_states"]
 
@@ -59,6 +62,11 @@ class PositionResult:
     sigma_hz_pass : ndarray, (n_pass,), or None
         Several passes: the sigma given to each pass's rows without one, in
         the order of ``fixes.pass_ids``.
+    clock_labels : tuple of str
+        Receiver clocks (constellations) in the order of the fixes' clock
+        states (see :func:`~leosop.positioning.measurements.clock_groups`).
+    n_need : ndarray of int, (n_ep,), or None
+        Snapshot: satellites an epoch needs, ``6 +`` its constellations.
     """
 
     fixes: object
@@ -71,6 +79,8 @@ class PositionResult:
     sigma_hz_default: float
     sv_states: str
     sigma_hz_pass: np.ndarray = None
+    clock_labels: tuple = ()
+    n_need: np.ndarray = None
 
 
 def satellite_states(meas, constellation=None, pos_rx_ecef_m=None):
@@ -125,12 +135,21 @@ def _robust_sigma(residuals_hz, n_states):
     return float(_MAD_TO_SIGMA * mad * np.sqrt(r.size / (r.size - n_states * n_fits)))
 
 
+def _clock_groups(meas, constellation, usable):
+    """Clock of each row among the constellations of the usable rows, and their labels (see ``clock_groups``)."""
+    group, labels = clock_groups(meas, constellation)
+    present = np.unique(group[usable])
+    remap = np.zeros(len(labels), int)
+    remap[present] = np.arange(present.size)
+    return remap[group], tuple(labels[i] for i in present) or labels[:1]
+
+
 def _rejections(meas, reason):
     return list(meas.rejected) + [(int(meas.line[k]), str(reason[k])) for k in np.flatnonzero(reason != "")]
 
 
 def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_hz=None, alpha=1e-3):
-    """One snapshot fix per epoch with at least 7 usable satellites.
+    """One snapshot fix per epoch with at least ``6 + k`` usable satellites of k constellations.
 
     Parameters
     ----------
@@ -159,22 +178,30 @@ def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_
     n_sats = mask.sum(-1)
     take = lambda a: np.where(mask[..., None] if a.ndim == 2 else mask, a[np.maximum(rows, 0)], np.nan)  # noqa: E731
     r_s, v_s = take(pos), take(vel)
+    group, labels = _clock_groups(meas, constellation, usable)
+    grp = np.where(mask, group[np.maximum(rows, 0)], -1)
+    n_clk = len(labels)
+    n_need = 6 + np.array([np.unique(g[g >= 0]).size for g in grp]).clip(min=1)
+    # Starts with one clock column: the solver gives it to every receiver clock.
+    x0 = np.zeros((n_ep, N_DOPPLER_STATES))
     if init_pos_ecef_m is not None:
-        x0 = np.zeros((n_ep, N_DOPPLER_STATES))
         x0[:, :3] = np.asarray(init_pos_ecef_m, float)
     else:
-        x0 = np.zeros((n_ep, N_DOPPLER_STATES))
         x0[:, :3] = np.nan_to_num(subpoint_centroid_ecef_m(r_s, mask))
     y, f0 = take(meas.doppler_hz), take(meas.carrier_hz)
     sigma_row = take(meas.sigma_hz)
-    enough = n_sats >= N_DOPPLER_STATES
+    enough = n_sats >= n_need
     if not enough.any():
-        raise InputError(f"{meas.source}: fewer than {N_DOPPLER_STATES} usable satellites at every epoch "
-                         f"(at most {n_sats.max()}); a snapshot fix needs {N_DOPPLER_STATES}")
+        k = int(np.argmax(n_sats - n_need))
+        raise InputError(f"{meas.source}: fewer than {n_need[k]} usable satellites at every epoch (at most "
+                         f"{n_sats[k]} where {n_need[k]} are needed); a snapshot fix needs 6 + one per "
+                         f"constellation seen ({N_DOPPLER_STATES} for one)")
+    # Clock group labels (all clocks, also those absent at an epoch): clock j of the fix is labels[j].
+    cg = np.where(mask, np.maximum(grp, 0), 0) if n_clk > 1 else None
     if sigma_hz is None and np.isnan(sigma_row[mask]).any():
         pilot = solve_snapshots(y, np.nan_to_num(sigma_row, nan=1.0), r_s, v_s, f0, mask & enough[:, None], x0,
-                                alpha=None)
-        sigma_hz = _robust_sigma(pilot.residuals_hz[enough], N_DOPPLER_STATES)
+                                alpha=None, clock_group=cg)
+        sigma_hz = _robust_sigma(pilot.residuals_hz[enough], int(np.median(n_need[enough])))
         if not np.isfinite(sigma_hz) or sigma_hz <= 0:
             sigma_hz = 1.0
     sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan
@@ -185,17 +212,18 @@ def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_
             rx = np.where(np.isfinite(x0[epoch, :3]), x0[epoch, :3], 0.0)
             pos, vel, reason, _ = satellite_states(meas, constellation, rx)
             r_s, v_s = take(pos), take(vel)
-        fixes = solve_snapshots(y, sigma, r_s, v_s, f0, mask & enough[:, None], x0, alpha=alpha)
+        fixes = solve_snapshots(y, sigma, r_s, v_s, f0, mask & enough[:, None], x0, alpha=alpha, clock_group=cg)
         solved = np.isfinite(fixes.pos_ecef_m).all(-1)
         x0 = np.where(solved[:, None], np.concatenate(
             [fixes.pos_ecef_m, fixes.vel_ecef_mps, fixes.clock_offset_hz[:, None]], -1), x0)
     t_s = meas.t_s[first]
     time_utc = None if meas.time_utc is None else meas.time_utc[first]
     unsolved = [(float(t_s[k]), None if time_utc is None else time_utc[k],
-                 f"only {n_sats[k]} usable satellites, a snapshot fix needs {N_DOPPLER_STATES}")
+                 f"only {n_sats[k]} usable satellites, a snapshot fix needs {n_need[k]}"
+                 + (f" (6 + {n_need[k] - 6} constellation clocks)" if n_clk > 1 else ""))
                 for k in np.flatnonzero(~enough)]
     return PositionResult(fixes, t_s, time_utc, n_sats, rows, _rejections(meas, reason), unsolved,
-                          sigma_default, source)
+                          sigma_default, source, clock_labels=labels, n_need=n_need)
 
 
 def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
@@ -230,20 +258,23 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
     """
     pos, vel, reason, source = satellite_states(meas, constellation)
     usable = reason == ""
-    n_states = N_STATIC_STATES - 1 + min(np.atleast_1d(clock_degree).min(), side_clock_degree)
+    group, labels = _clock_groups(meas, constellation, usable)
+    n_clk = len(labels)
+    n_states = 3 + n_clk * (1 + min(np.atleast_1d(clock_degree).min(), side_clock_degree))
     n_need = n_states - (alt_m is not None)
     if usable.sum() < n_need:
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {n_need}"
                          + (f" (first problem: line {meas.line[~usable][0]}: {reason[~usable][0]})"
                             if (~usable).any() else ""))
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
-              clock_degree=clock_degree, side_clock_degree=side_clock_degree)
+              clock_degree=clock_degree, side_clock_degree=side_clock_degree,
+              clock_group=group if len(labels) > 1 else None)
     # Light time is computed for the latest solution (the start at first).
     pos_lt = init_pos_ecef_m
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
         pilot = solve_static(meas.doppler_hz, np.nan_to_num(meas.sigma_hz, nan=1.0), pos, vel, meas.carrier_hz,
                              meas.t_s, alpha=None, **kw)
-        sigma_hz = _robust_sigma(pilot.residuals_hz, 3 + len(pilot.clock_poly_hz))
+        sigma_hz = _robust_sigma(pilot.residuals_hz, 3 + pilot.clock_polys_hz.size)
         if not np.isfinite(sigma_hz) or sigma_hz <= 0:
             sigma_hz = 1.0
         if np.isfinite(pilot.pos_ecef_m).all():
@@ -261,7 +292,7 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
         meas.epoch_utc + np.array([np.round(fix.t_ref_s * 1e9)], dtype="timedelta64[ns]")
     n_sats = np.array([len(np.unique(meas.sat_id[usable]))])
     return PositionResult(fix, t_ref, time_utc, n_sats, np.arange(len(meas)), _rejections(meas, reason), [],
-                          sigma_default, source)
+                          sigma_default, source, clock_labels=labels)
 
 
 def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
@@ -305,9 +336,12 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
     n_loc = (1 if clock == "common" else 1 + (3 if clock_degree is None else clock_degree))
     if usable.sum() < 3 + n_loc:
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {3 + n_loc}")
+    group, labels = _clock_groups(meas, constellation, usable)
+    if clock != "common":
+        labels = ()
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable, clock=clock,
               clock_degree=clock_degree, sat_offset_sigma_hz=sat_offset_sigma_hz, time_bias=time_bias,
-              time_bias_sigma_s=time_bias_sigma_s)
+              time_bias_sigma_s=time_bias_sigma_s, clock_group=group if len(labels) > 1 else None)
     pos_lt = init_pos_ecef_m
     sigma_pass = None
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
@@ -344,4 +378,4 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
         meas.epoch_utc + np.round(t_ref * 1e9).astype("timedelta64[ns]")
     n_sats = np.array([len(np.unique(meas.sat_id[usable]))])
     return PositionResult(fix, t_ref, time_utc, n_sats, np.arange(len(meas)), _rejections(meas, reason), [],
-                          sigma_default, source, sigma_pass)
+                          sigma_default, source, sigma_pass, clock_labels=labels)
