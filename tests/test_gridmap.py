@@ -1,0 +1,109 @@
+"""Grid visibility and Doppler GDOP maps: footprints against brute force, grid rules."""
+
+import math
+
+import numpy as np
+import pytest
+
+from leosop.errors import InputError
+from leosop.orbits import load_constellation
+from leosop.orbits.gridmap import (
+    FOOTPRINT_MARGIN_DEG, ConstellationSource, _normal_gdop, brute_force_epoch, check_grid_deg, epoch_maps,
+    footprint_pairs, gdop_map, make_grid, satellite_carriers_hz,
+)
+from leosop.orbits.propagate import state_ecef
+from leosop.positioning.dop import doppler_jacobian, gdop
+
+# Cholesky of the normal matrix against the eigen-decomposition of dop.cofactor:
+# both exact to rounding, conditioned geometries amplify it to ~1e-7.
+GDOP_RTOL = 1e-5
+START = np.datetime64("2025-01-01T00:00:00", "ns")
+
+
+@pytest.fixture(scope="module")
+def walker_states():
+    const = load_constellation()
+    times = START + np.array([0, 7, 23]) * np.timedelta64(60, "s")
+    pos, vel, _ = state_ecef(const, times)
+    return const, times, pos, vel, satellite_carriers_hz(const)
+
+
+@pytest.mark.parametrize("grid_deg, mask_deg", [(10.0, 40.0), (6.0, 10.0)])
+def test_footprints_match_brute_force(walker_states, grid_deg, mask_deg):
+    const, times, pos, vel, carrier = walker_states
+    grid = make_grid(grid_deg)
+    for j in range(len(times)):
+        n_f, g_f = epoch_maps(pos[:, j], vel[:, j], carrier, grid, mask_deg)
+        n_b, g_b = brute_force_epoch(pos[:, j], vel[:, j], carrier, grid, mask_deg)
+        np.testing.assert_array_equal(n_f.ravel(), n_b)
+        np.testing.assert_array_equal(np.isfinite(g_f.ravel()), np.isfinite(g_b))
+        np.testing.assert_allclose(g_f.ravel(), g_b, rtol=GDOP_RTOL)
+        assert n_b.max() >= 7 and np.isfinite(g_b).any()
+        if mask_deg >= 40:  # the sparse Walker set leaves cells without a fix
+            assert np.isnan(g_b).any()
+
+
+def test_candidates_are_a_tight_superset(walker_states):
+    const, times, pos, vel, carrier = walker_states
+    grid = make_grid(3.0)
+    sat, cell = footprint_pairs(pos[:, 0], grid, 40.0)
+    n_b, _ = brute_force_epoch(pos[:, 0], vel[:, 0], carrier, grid, 40.0)
+    assert len(np.unique(sat * grid.n_cells + cell)) == len(sat)  # each pair once
+    # Widening the ~5 deg cap by the margin grows it by about (1 + margin/cap)^2.
+    assert n_b.sum() <= len(sat) < 2.0 * n_b.sum()
+
+
+def test_footprint_over_the_pole_and_dateline():
+    grid = make_grid(5.0)
+    # A satellite 550 km above the north pole and one above lon 180 on the equator.
+    pos = np.array([[0.0, 0.0, 6_356_752.0 + 550e3], [-6_928_137.0, 0.0, 0.0]])
+    vel = np.array([[7_600.0, 0.0, 0.0], [0.0, 0.0, 7_600.0]])
+    carrier = np.full(2, 11.325e9)
+    n_f, _ = epoch_maps(pos, vel, carrier, grid, 10.0)
+    n_b, _ = brute_force_epoch(pos, vel, carrier, grid, 10.0)
+    np.testing.assert_array_equal(n_f.ravel(), n_b)
+    assert n_f[-1].all() and n_f[grid.shape[0] // 2, 0] == 1 and n_f[grid.shape[0] // 2, -1] == 1
+
+
+def test_normal_gdop_matches_dop_and_flags_singular():
+    rng = np.random.default_rng(3)
+    pos = rng.normal(size=(50, 9, 3)) * 1e6 + np.array([0, 0, 7e6])
+    vel = rng.normal(size=(50, 9, 3)) * 7e3
+    H = doppler_jacobian(pos, vel, np.zeros((50, 3)), np.zeros((50, 3)), 11.325e9)
+    normal = np.einsum("mki,mkj->mij", H, H)
+    np.testing.assert_allclose(_normal_gdop(normal), gdop(H), rtol=1e-9)
+    normal[0, :, 6] = normal[0, 6, :] = 0.0  # no clock information: singular
+    assert np.isnan(_normal_gdop(normal)[0]) and np.isfinite(_normal_gdop(normal)[1:]).all()
+
+
+@pytest.mark.parametrize("grid_deg", [1.0, 0.5, 2.5, 4.0, 7.5, 90.0])
+def test_valid_grid_steps(grid_deg):
+    grid = make_grid(grid_deg)
+    assert grid.lat_deg[0] == -90 and grid.lat_deg[-1] == 90 and grid.lon_deg[0] == -180
+    assert grid.lon_deg[-1] < 180 and math.isclose(grid.lon_deg[-1] + grid_deg, 180)
+
+
+@pytest.mark.parametrize("grid_deg, message", [
+    (7.0, "nearest valid: 6.92308 or 7.2"),
+    (0.7, "nearest valid: 0.697674 or 0.700389"),
+    (0.0, "must be in (0, 90]"),
+    (120.0, "must be in (0, 90]"),
+])
+def test_bad_grid_steps(grid_deg, message):
+    with pytest.raises(InputError, match=r"--grid-deg") as err:
+        check_grid_deg(grid_deg)
+    assert message in str(err.value)
+
+
+def test_empty_family_selection():
+    with pytest.raises(InputError, match="no oneweb satellites"):
+        ConstellationSource(None, ("oneweb",)).load()
+
+
+def test_dataset_layout_serial(walker_states):
+    const, times, _, _, _ = walker_states
+    ds = gdop_map(const, times[:2], 10.0, 40.0, scheduler="serial", epochs_per_task=1)
+    assert ds["n_visible"].dims == ("time", "lat", "lon") and ds["gdop"].shape == (2, 19, 36)
+    assert ds["lat"].attrs["units"] == "degrees_north" and ds["lon"].attrs["standard_name"] == "longitude"
+    np.testing.assert_array_equal(ds["time"].values, times[:2])
+    assert FOOTPRINT_MARGIN_DEG > 0.38  # two 0.19 deg ellipsoid effects, see the module docstring
