@@ -1,0 +1,107 @@
+"""``leosop ppp OBS --nav NAV --sp3 SP3 --clk CLK``: float precise point positioning.
+
+Dual-frequency ionosphere-free code and phase of GPS and Galileo with precise
+orbits (SP3) and clocks (RINEX clock), float ambiguities, estimated zenith
+wet delay (leosop.gnss.ppp). Without ``--static`` the position is re-estimated
+every epoch (kinematic); with ``--static`` it is one constant, and the JSON
+``summary`` gives the final position. ``--ar`` and ``--imu`` are reserved for
+ambiguity resolution and PPP/INS coupling, not built yet.
+"""
+
+import sys
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from ..fileio import atomic_outputs, write_csv, write_json
+from ..frames import ecef_to_geodetic
+from ..gnss.ppp import PppOptions, gps_to_utc, run_ppp
+from ..gnss.products import read_clk, read_sp3
+from ..gnss.rinex import check_nav, read_obs
+from ..timebase import format_utc
+from . import add_command
+
+_DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
+
+
+def register(subparsers):
+    p = add_command(subparsers, "ppp", sys.modules[__name__], help="float PPP from RINEX 3 observations, SP3 and CLK",
+                    description=_DESCRIPTION)
+    p.add_argument("obs", metavar="OBS", help="RINEX 3 observation file (plain, .gz or Hatanaka .crx[.gz])")
+    p.add_argument("--nav", metavar="NAV", required=True, help="RINEX 3 navigation file of the same day (checked)")
+    p.add_argument("--sp3", metavar="SP3", required=True, help="precise orbits, SP3-c/d")
+    p.add_argument("--clk", metavar="CLK", required=True, help="precise satellite clocks, RINEX clock")
+    p.add_argument("--static", action="store_true", help="receiver at rest: one position for the whole file")
+    p.add_argument("--systems", default="GE", help="GNSS letters to use (default %(default)s)")
+    p.add_argument("--mask-deg", type=float, default=10.0, metavar="D", help="elevation mask (default %(default)g)")
+    p.add_argument("--ar", action="store_true", help="ambiguity resolution (not available yet)")
+    p.add_argument("--imu", metavar="FILE", help="IMU log for PPP/INS coupling (not available yet)")
+    return p
+
+
+def run(args):
+    if args.ar:
+        raise InputError("--ar: ambiguity resolution is not implemented yet (float PPP only)")
+    if args.imu:
+        raise InputError("--imu: PPP/INS coupling is not implemented yet")
+    if not set(args.systems) <= {"G", "E"} or not args.systems:
+        raise InputError(f"--systems {args.systems!r}: expected letters among G, E")
+    if not 0.0 <= args.mask_deg < 90.0:
+        raise InputError(f"--mask-deg {args.mask_deg!r}: expected a value in [0, 90)")
+    t0 = time.perf_counter()
+    obs = read_obs(args.obs, systems=args.systems,
+                   codes={"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]})
+    nav_day = check_nav(args.nav)
+    day = obs.time_gps[0].astype("datetime64[D]")
+    if nav_day is not None and abs((nav_day - day).astype(int)) > 1:
+        raise InputError(f"{args.nav}: navigation records start {nav_day}, the observations {day}")
+    orbits = read_sp3(args.sp3, systems=args.systems)
+    clocks = read_clk(args.clk, systems=args.systems)
+    t_read = time.perf_counter() - t0
+    print(f"leosop ppp: read {len(obs.time_gps)} epochs in {t_read:.1f} s", file=sys.stderr)
+    res = run_ppp(obs, orbits, clocks, PppOptions(static=args.static, systems=args.systems,
+                                                   mask_deg=args.mask_deg))
+    runtime = time.perf_counter() - t0
+    times = format_utc(gps_to_utc(res.time_gps))
+    lat, lon, alt = ecef_to_geodetic(res.pos_ecef_m)
+    sols = []
+    for k in np.flatnonzero(np.isfinite(res.pos_ecef_m).all(axis=1)):
+        sols.append({"time_utc": times[k], "x_m": res.pos_ecef_m[k, 0], "y_m": res.pos_ecef_m[k, 1],
+                     "z_m": res.pos_ecef_m[k, 2], "lat_deg": np.degrees(lat[k]), "lon_deg": np.degrees(lon[k]),
+                     "alt_m": alt[k], "fixed": False, "sigma_enu_m": res.sigma_enu_m[k].tolist(),
+                     "zwd_m": res.zwd_m[k], "n_sats": int(res.n_used[k])})
+    if not sols:
+        raise InputError(f"{args.obs}: no epoch with 5 usable satellites")
+    summary = {"mode": "static" if args.static else "kinematic", "n_epochs": len(sols), "n_slips": res.n_slips,
+               "n_outliers": res.n_outliers, "read_s": t_read, "runtime_s": runtime}
+    if args.static:
+        last = sols[-1]
+        summary["position"] = {k: last[k] for k in ("time_utc", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m",
+                                                      "sigma_enu_m")}
+        hdr = obs.approx_pos_ecef_m
+        if np.any(hdr):
+            summary["minus_header_approx_m"] = (np.array([last["x_m"], last["y_m"], last["z_m"]]) - hdr).tolist()
+    doc = {"solutions": sols, "summary": summary}
+    if args.out:
+        with atomic_outputs(args.out) as stage:
+            write_json(stage / "ppp.json", doc)
+            write_csv(stage / "ppp.csv", ["time_utc", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m",
+                                         "sigma_e_m", "sigma_n_m", "sigma_u_m", "zwd_m", "n_sats"],
+                      [[s["time_utc"], s["x_m"], s["y_m"], s["z_m"], s["lat_deg"], s["lon_deg"], s["alt_m"],
+                        *s["sigma_enu_m"], s["zwd_m"], s["n_sats"]] for s in sols])
+    return doc
+
+
+def summary(doc):
+    s = doc["summary"]
+    lines = [f"{s['mode']} float PPP: {s['n_epochs']} epochs, {s['n_slips']} cycle slips, "
+             f"{s['n_outliers']} outliers, read {s['read_s']:.1f} s, total {s['runtime_s']:.1f} s"]
+    if "position" in s:
+        p = s["position"]
+        lines.append(f"position {p['lat_deg']:.9f} {p['lon_deg']:.9f} {p['alt_m']:.4f} m  "
+                     f"ECEF {p['x_m']:.4f} {p['y_m']:.4f} {p['z_m']:.4f}")
+        if "minus_header_approx_m" in s:
+            d = np.array(s["minus_header_approx_m"])
+            lines.append(f"minus header APPROX POSITION: {np.round(d, 4).tolist()} m (|d| {np.linalg.norm(d):.3f} m)")
+    return "\n".join(lines)

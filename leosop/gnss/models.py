@@ -1,0 +1,259 @@
+"""GNSS measurement models for PPP: troposphere, tides, wind-up, relativity, Sagnac.
+
+Every function is vectorised over leading axes; vectors keep three
+components in the last axis, ECEF (ITRF) metres. Time arguments ``jd_tt`` are
+Julian dates in TT (from GPS time: ``TT = GPST + 51.184 s``); the Sun and
+Moon are low-precision analytic ephemerides ([Montenbruck 2000], section
+3.3.2: ~0.1 deg Sun, a few arcmin Moon), ample for tides (mm) and the
+satellite attitude of the wind-up model.
+"""
+
+import numpy as np
+
+from ..constants import C_MPS, GM_M3_PER_S2, JD_J2000, OMEGA_E_RAD_PER_S, WGS84_A_M
+from ..frames import gmst1982
+
+__all__ = [
+    "saastamoinen_zhd_m", "niell_mapping", "sun_moon_ecef_m", "solid_tide_ecef_m", "windup_cycles",
+    "relativistic_clock_s", "sagnac_rotate", "shapiro_m", "TT_MINUS_GPST_S",
+]
+
+#: TT - GPST [s] (TAI - GPST = 19 s, TT - TAI = 32.184 s).
+TT_MINUS_GPST_S = 51.184
+#: GM of the Sun and the Moon over GM of the Earth (IERS Conventions 2010, table 1.1).
+GM_SUN_OVER_EARTH = 332_946.0482
+GM_MOON_OVER_EARTH = 0.0123000371
+_ARCSEC = np.pi / (180.0 * 3600.0)
+
+
+def saastamoinen_zhd_m(lat_rad, alt_m, pressure_hpa=None):
+    """Zenith hydrostatic delay [Saastamoinen 1972], formulation of [Davis 1985].
+
+    ``ZHD = 0.0022768 P / (1 - 0.00266 cos 2 lat - 0.28e-6 h)``. Without a
+    pressure the standard atmosphere gives it: ``P = 1013.25 (1 - 2.2557e-5
+    h)^5.2568`` hPa ([Berg 1948]).
+
+    Returns
+    -------
+    ndarray
+        Zenith hydrostatic delay [m]; 2.31 m at sea level, 45 deg.
+    """
+    alt_m = np.asarray(alt_m, float)
+    if pressure_hpa is None:
+        pressure_hpa = 1013.25 * (1.0 - 2.2557e-5 * alt_m) ** 5.2568
+    return 0.0022768 * pressure_hpa / (1.0 - 0.00266 * np.cos(2.0 * lat_rad) - 0.28e-6 * alt_m)
+
+
+# [Niell 1996] mapping function coefficients at latitudes 15, 30, 45, 60, 75 deg.
+_NMF_LAT = np.radians([15.0, 30.0, 45.0, 60.0, 75.0])
+_NMF_H_AVG = np.array([
+    [1.2769934e-3, 1.2683230e-3, 1.2465397e-3, 1.2196049e-3, 1.2045996e-3],
+    [2.9153695e-3, 2.9152299e-3, 2.9288445e-3, 2.9022565e-3, 2.9024912e-3],
+    [62.610505e-3, 62.837393e-3, 63.721774e-3, 63.824265e-3, 64.258455e-3]])
+_NMF_H_AMP = np.array([
+    [0.0, 1.2709626e-5, 2.6523662e-5, 3.4000452e-5, 4.1202191e-5],
+    [0.0, 2.1414979e-5, 3.0160779e-5, 7.2562722e-5, 11.723375e-5],
+    [0.0, 9.0128400e-5, 4.3497037e-5, 84.795348e-5, 170.37206e-5]])
+_NMF_W = np.array([
+    [5.8021897e-4, 5.6794847e-4, 5.8118019e-4, 5.9727542e-4, 6.1641693e-4],
+    [1.4275268e-3, 1.5138625e-3, 1.4572752e-3, 1.5007428e-3, 1.7599082e-3],
+    [4.3472961e-2, 4.6729510e-2, 4.3908931e-2, 4.4626982e-2, 5.4736038e-2]])
+_NMF_HT = (2.53e-5, 5.49e-3, 1.14e-3)
+
+
+def _marini(sin_el, a, b, c):
+    """Continued fraction of [Marini 1972] normalised to 1 at zenith."""
+    return (1.0 + a / (1.0 + b / (1.0 + c))) / (sin_el + a / (sin_el + b / (sin_el + c)))
+
+
+def niell_mapping(elev_rad, lat_rad, alt_m, doy):
+    """Hydrostatic and wet mapping functions of [Niell 1996].
+
+    Parameters
+    ----------
+    elev_rad, lat_rad, alt_m, doy : array_like, broadcastable
+        Elevation, geodetic latitude, height, day of year (UTC, fractional).
+
+    Returns
+    -------
+    m_dry, m_wet : ndarray
+        Both 1 at zenith, about 1/sin(elev) above 15 deg.
+    """
+    elev_rad, lat_rad, alt_m, doy = np.broadcast_arrays(*(np.asarray(v, float) for v in (elev_rad, lat_rad,
+                                                                                          alt_m, doy)))
+    alat = np.abs(lat_rad)
+    phase = 2.0 * np.pi * (doy - 28.0) / 365.25 + np.where(lat_rad < 0, np.pi, 0.0)
+    coef_h = [np.interp(alat, _NMF_LAT, _NMF_H_AVG[i]) - np.interp(alat, _NMF_LAT, _NMF_H_AMP[i]) * np.cos(phase)
+              for i in range(3)]
+    coef_w = [np.interp(alat, _NMF_LAT, _NMF_W[i]) for i in range(3)]
+    s = np.sin(elev_rad)
+    m_dry = _marini(s, *coef_h) + (1.0 / s - _marini(s, *_NMF_HT)) * alt_m * 1e-3
+    m_wet = _marini(s, *coef_w)
+    return m_dry, m_wet
+
+
+def _rot_ecl_to_eq(lon_rad, lat_rad, r_m, eps_rad):
+    cb = np.cos(lat_rad)
+    x, y, z = r_m * cb * np.cos(lon_rad), r_m * cb * np.sin(lon_rad), r_m * np.sin(lat_rad)
+    ce, se = np.cos(eps_rad), np.sin(eps_rad)
+    return np.stack([x, ce * y - se * z, se * y + ce * z], axis=-1)
+
+
+def sun_moon_ecef_m(jd_tt):
+    """Sun and Moon positions, low precision ([Montenbruck 2000], eq. 3.38-3.48).
+
+    Parameters
+    ----------
+    jd_tt : array_like, shape (n,)
+        Julian dates (TT). Earth rotation uses GMST with UT1 ~ TT - 69 s.
+
+    Returns
+    -------
+    sun_ecef_m, moon_ecef_m : ndarray, shape (n, 3)
+    """
+    jd_tt = np.atleast_1d(np.asarray(jd_tt, float))
+    T = (jd_tt - JD_J2000) / 36525.0
+    eps = np.radians(23.43929111)
+    M = np.radians(357.5256 + 35999.049 * T)
+    lam = np.radians(282.9400 + 1.3972 * T) + M + (6892.0 * np.sin(M) + 72.0 * np.sin(2 * M)) * _ARCSEC
+    r_sun = (149.619 - 2.499 * np.cos(M) - 0.021 * np.cos(2 * M)) * 1e9
+    sun = _rot_ecl_to_eq(lam, 0.0 * lam, r_sun, eps)
+    d = np.radians
+    L0 = d(218.31617 + 481267.88088 * T - 1.3972 * T)
+    l = d(134.96292 + 477198.86753 * T)
+    lp = d(357.52543 + 35999.04944 * T)
+    F = d(93.27283 + 483202.01873 * T)
+    D = d(297.85027 + 445267.11135 * T)
+    dlam = (22640 * np.sin(l) + 769 * np.sin(2 * l) - 4586 * np.sin(l - 2 * D) + 2370 * np.sin(2 * D)
+            - 668 * np.sin(lp) - 412 * np.sin(2 * F) - 212 * np.sin(2 * l - 2 * D) - 206 * np.sin(l + lp - 2 * D)
+            + 192 * np.sin(l + 2 * D) - 165 * np.sin(lp - 2 * D) + 148 * np.sin(l - lp) - 125 * np.sin(D)
+            - 110 * np.sin(l + lp) - 55 * np.sin(2 * F - 2 * D)) * _ARCSEC
+    lam_m = L0 + dlam
+    beta = (18520 * np.sin(F + lam_m - L0 + (412 * np.sin(2 * F) + 541 * np.sin(lp)) * _ARCSEC)
+            - 526 * np.sin(F - 2 * D) + 44 * np.sin(l + F - 2 * D) - 31 * np.sin(-l + F - 2 * D)
+            - 25 * np.sin(-2 * l + F) - 23 * np.sin(lp + F - 2 * D) + 21 * np.sin(-l + F)
+            + 11 * np.sin(-lp + F - 2 * D)) * _ARCSEC
+    r_moon = (385000 - 20905 * np.cos(l) - 3699 * np.cos(2 * D - l) - 2956 * np.cos(2 * D)
+              - 570 * np.cos(2 * l) + 246 * np.cos(2 * l - 2 * D) - 205 * np.cos(lp - 2 * D)
+              - 171 * np.cos(l + 2 * D) - 152 * np.cos(l + lp - 2 * D)) * 1e3
+    moon = _rot_ecl_to_eq(lam_m, beta, r_moon, eps)
+    jd_ut1 = jd_tt - 69.184 / 86400.0
+    theta = gmst1982(np.floor(jd_ut1), jd_ut1 - np.floor(jd_ut1))[0]
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+
+    def to_ecef(v):
+        return np.stack([c[:, 0] * v[:, 0] + s[:, 0] * v[:, 1], -s[:, 0] * v[:, 0] + c[:, 0] * v[:, 1], v[:, 2]],
+                        axis=-1)
+
+    return to_ecef(sun), to_ecef(moon)
+
+
+def solid_tide_ecef_m(pos_ecef_m, sun_ecef_m, moon_ecef_m):
+    """Solid Earth tide displacement, degree 2 ([IERS 2010] eq. 7.5, step 1).
+
+    Love numbers ``h2 = 0.6078 - 0.0006 P2(sin lat)``, ``l2 = 0.0847 + 0.0002
+    P2(sin lat)``; the result is the conventional tide-free displacement
+    (permanent tide included, as for ITRF coordinates). Radial amplitude up
+    to about 0.4 m.
+
+    Parameters
+    ----------
+    pos_ecef_m : array_like, shape (3,) or (n, 3)
+        Station.
+    sun_ecef_m, moon_ecef_m : array_like, shape (n, 3)
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+    """
+    r = np.asarray(pos_ecef_m, float)
+    rn = np.linalg.norm(r, axis=-1, keepdims=True)
+    u = r / rn
+    p2_lat = 1.5 * u[..., 2:3] ** 2 - 0.5  # P2(sin lat) with geocentric latitude
+    h2 = 0.6078 - 0.0006 * p2_lat
+    l2 = 0.0847 + 0.0002 * p2_lat
+    out = 0.0
+    for body, gm in ((np.asarray(sun_ecef_m), GM_SUN_OVER_EARTH), (np.asarray(moon_ecef_m), GM_MOON_OVER_EARTH)):
+        R = np.linalg.norm(body, axis=-1, keepdims=True)
+        e = body / R
+        d = np.sum(e * u, axis=-1, keepdims=True)
+        k = gm * WGS84_A_M**4 / R**3
+        out = out + k * (h2 * u * (1.5 * d**2 - 0.5) + 3.0 * l2 * d * (e - d * u))
+    return out
+
+
+def windup_cycles(pos_sv_ecef_m, pos_rx_ecef_m, sun_ecef_m, lat_rad, lon_rad):
+    """Carrier phase wind-up [Wu 1993], satellites in nominal yaw attitude.
+
+    Satellite body frame: z to the Earth's centre, y = z x (Sun - satellite),
+    x = y x z; receiver antenna dipoles East, North (boresight Up). Eclipse
+    yaw manoeuvres are not modelled.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m : ndarray, shape (n_epochs, n_sats, 3)
+    pos_rx_ecef_m : ndarray, shape (3,)
+    sun_ecef_m : ndarray, shape (n_epochs, 3)
+    lat_rad, lon_rad : float
+        Receiver.
+
+    Returns
+    -------
+    ndarray, shape (n_epochs, n_sats)
+        Wind-up in cycles, continuous in time per satellite (NaN where the
+        satellite position is NaN); subtract ``lambda * windup`` from phase.
+    """
+    rs = np.asarray(pos_sv_ecef_m, float)
+    z = -rs / np.linalg.norm(rs, axis=-1, keepdims=True)
+    y = np.cross(z, sun_ecef_m[:, None, :] - rs)
+    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    x = np.cross(y, z)
+    k = np.asarray(pos_rx_ecef_m) - rs
+    k /= np.linalg.norm(k, axis=-1, keepdims=True)
+    sl, cl, so, co = np.sin(lat_rad), np.cos(lat_rad), np.sin(lon_rad), np.cos(lon_rad)
+    xr = np.array([-so, co, 0.0])            # East
+    yr = np.array([-sl * co, -sl * so, cl])  # North
+    dot = lambda a, b: np.sum(a * b, axis=-1, keepdims=True)  # noqa: E731
+    Ds = x - k * dot(k, x) - np.cross(k, y)
+    Dr = xr - k * dot(k, xr) + np.cross(k, np.broadcast_to(yr, k.shape))
+    cosang = dot(Ds, Dr)[..., 0] / (np.linalg.norm(Ds, axis=-1) * np.linalg.norm(Dr, axis=-1))
+    ang = np.arccos(np.clip(cosang, -1.0, 1.0)) / (2 * np.pi)
+    sgn = np.sign(dot(k, np.cross(Ds, Dr))[..., 0])
+    w = np.where(sgn < 0, -ang, ang)
+    # Continuous in time: add the integer that keeps each step within half a cycle.
+    out = np.full_like(w, np.nan)
+    for j in range(w.shape[1]):
+        ok = np.isfinite(w[:, j])
+        if ok.any():
+            out[ok, j] = np.unwrap(w[ok, j], period=1.0)
+    return out
+
+
+def relativistic_clock_s(pos_sv_ecef_m, vel_sv_ecef_mps):
+    """Periodic relativistic satellite clock term ``-2 r.v / c^2`` [s] (IS-GPS-200 20.3.3.3.3.1).
+
+    Added to the precise clock (which excludes it) to get the satellite
+    clock offset. Shapes (..., 3) -> (...).
+    """
+    return -2.0 * np.sum(np.asarray(pos_sv_ecef_m) * np.asarray(vel_sv_ecef_mps), axis=-1) / C_MPS**2
+
+
+def sagnac_rotate(pos_sv_ecef_m, tau_s):
+    """Satellite position at transmission expressed in the ECEF frame at reception.
+
+    The Earth turns by ``OMEGA_E tau`` during the flight time ``tau``; the
+    position is rotated by that angle about z (the Sagnac correction).
+    Shapes (..., 3), (...) -> (..., 3).
+    """
+    p = np.asarray(pos_sv_ecef_m, float)
+    th = OMEGA_E_RAD_PER_S * np.asarray(tau_s, float)
+    c, s = np.cos(th), np.sin(th)
+    return np.stack([c * p[..., 0] + s * p[..., 1], -s * p[..., 0] + c * p[..., 1], p[..., 2]], axis=-1)
+
+
+def shapiro_m(pos_sv_ecef_m, pos_rx_ecef_m):
+    """Relativistic path delay ``2 GM / c^2 ln((rs + rr + rho) / (rs + rr - rho))`` [m] (IS-GPS-200)."""
+    rs = np.linalg.norm(pos_sv_ecef_m, axis=-1)
+    rr = np.linalg.norm(pos_rx_ecef_m, axis=-1)
+    rho = np.linalg.norm(np.asarray(pos_sv_ecef_m) - np.asarray(pos_rx_ecef_m), axis=-1)
+    return 2.0 * GM_M3_PER_S2 / C_MPS**2 * np.log((rs + rr + rho) / (rs + rr - rho))

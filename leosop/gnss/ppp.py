@@ -1,0 +1,409 @@
+"""Float precise point positioning (PPP), static or kinematic, GPS + Galileo.
+
+Observations: dual-frequency ionosphere-free (IF) code and phase, GPS
+C1W/C2W (C1C when C1W is missing) with L1C/L2W, Galileo C1C/C5Q with
+L1C/L5Q, the pairs of the IGS / MGEX clock products. Undifferenced
+formulation: the receiver clock of each system is a state, re-estimated
+every epoch with no memory (white noise), which for float ambiguities is
+equivalent to the between-satellite single differences of [Liu 2016] (the
+clock eliminated) without the bookkeeping of reference-satellite changes;
+ambiguities are undifferenced float IF ambiguities, one state per
+satellite, reset on a cycle slip or a new arc.
+
+State ``x``: ``[x, y, z (marker, ECEF m), clk_G, clk_E (m), ZWD (m),
+N_1 .. N_n (IF ambiguities, m)]``.
+
+Models (``leosop.gnss.models``): precise orbit and clock interpolation,
+relativistic clock term, Sagnac rotation, Shapiro delay, Saastamoinen
+hydrostatic delay with the Niell mapping functions and an estimated zenith
+wet delay (random walk), phase wind-up, solid Earth tide, antenna reference
+point height from the RINEX header. Not modelled (no ANTEX file with the
+data): satellite and receiver antenna phase-centre offsets and variations,
+ocean loading, eclipse yaw manoeuvres; their effect is in the measured
+errors reported by ``tools/bench_ppp.py``.
+
+Weights: ``sigma = sigma_0 / sin(elev)``, code:phase standard deviations
+100:1 (0.3 m : 3 mm) as in [Liu 2016]. Cycle slips: Melbourne-Wuebbena
+jump against its running arc mean and geometry-free phase jump between
+epochs, plus the receiver's loss-of-lock flag. Outliers: normalised
+innovations above ``k_outlier`` are removed one at a time (a phase outlier
+resets that satellite's ambiguity, a code outlier drops the code).
+
+Time: GPS time inside (``t_s`` seconds since the first epoch's day in GPS
+time); UTC at the output (GPS - UTC = 18 s from 2017).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import C_MPS
+from ..errors import InputError
+from ..frames import C_e_n, ecef_to_geodetic
+from . import models
+from .products import Clocks, Orbits, seconds_gps
+from .rinex import ObsData
+
+__all__ = ["SIGNALS", "PppOptions", "PppResult", "run_ppp", "gps_to_utc", "spp_position"]
+
+F_L1_HZ, F_L2_HZ, F_L5_HZ = 1575.42e6, 1227.60e6, 1176.45e6
+
+#: Per system: (first codes in order of preference, second code, first phase, second phase, f1, f2).
+SIGNALS = {
+    "G": (("C1W", "C1C"), "C2W", "L1C", "L2W", F_L1_HZ, F_L2_HZ),
+    "E": (("C1C",), "C5Q", "L1C", "L5Q", F_L1_HZ, F_L5_HZ),
+}
+_LEAPS = [(np.datetime64("2006-01-01"), 14), (np.datetime64("2009-01-01"), 15), (np.datetime64("2012-07-01"), 16),
+          (np.datetime64("2015-07-01"), 17), (np.datetime64("2017-01-01"), 18)]
+
+
+def gps_to_utc(time_gps):
+    """GPS time -> UTC (``datetime64[ns]``), leap seconds from 2006 on."""
+    t = np.asarray(time_gps, "datetime64[ns]")
+    if np.any(t < _LEAPS[0][0]):
+        raise InputError("epochs before 2006 are not supported (leap-second table)")
+    leap = np.zeros(t.shape, np.int64)
+    for day, n in _LEAPS:
+        leap = np.where(t >= day + np.timedelta64(n, "s"), n, leap)
+    return t - leap.astype("timedelta64[s]")
+
+
+@dataclass(frozen=True)
+class PppOptions:
+    """Filter settings (SI units)."""
+
+    static: bool = True
+    systems: str = "GE"
+    mask_deg: float = 10.0
+    sigma_code_m: float = 0.3
+    sigma_phase_m: float = 0.003
+    zwd_rw_m_per_rt_s: float = 1e-4
+    kin_pos_sigma_m: float = 100.0
+    init_pos_sigma_m: float = 100.0
+    init_amb_sigma_m: float = 30.0
+    clk_sigma_m: float = 100.0
+    k_outlier: float = 5.0
+    gf_slip_m: float = 0.05
+    mw_slip_cycles: float = 4.0
+    max_gap_s: float = 300.0
+
+
+@dataclass
+class PppResult:
+    """Per-epoch solutions, shapes (n_epochs, ...)."""
+
+    time_gps: np.ndarray
+    pos_ecef_m: np.ndarray
+    sigma_enu_m: np.ndarray
+    zwd_m: np.ndarray
+    clock_m: np.ndarray
+    n_used: np.ndarray
+    sv: list
+    n_slips: int
+    n_outliers: int
+
+
+def _pick(obs, s, codes):
+    for c in codes:
+        key = f"{s}:{c}"
+        if key in obs.obs and np.isfinite(obs.obs[key]).any():
+            return key
+    return None
+
+
+def _if_observations(obs, systems):
+    """IF code/phase [m], MW [cycles of the wide lane], GF [m] and slip flags per (epoch, sat)."""
+    n_ep, n_sv = len(obs.time_gps), len(obs.sv)
+    out = {k: np.full((n_ep, n_sv), np.nan) for k in ("P", "L", "MW", "GF", "lam_nl", "lam_wl")}
+    out["lli"] = np.zeros((n_ep, n_sv), bool)
+    sysof = np.array([s[0] for s in obs.sv])
+    found = False
+    for s in systems:
+        cols = sysof == s
+        if not cols.any():
+            continue
+        c1s, c2, l1, l2, f1, f2 = SIGNALS[s]
+        keys = [_pick(obs, s, c1s), _pick(obs, s, (c2,)), _pick(obs, s, (l1,)), _pick(obs, s, (l2,))]
+        if None in keys:
+            missing = [n for n, k in zip((f"{'/'.join(c1s)}", c2, l1, l2), keys) if k is None]
+            raise InputError(f"{obs.path}: system {s} lacks {', '.join(missing)} for the ionosphere-free "
+                             "combination (SYS / # / OBS TYPES)")
+        found = True
+        P1, P2 = obs.obs[keys[0]][:, cols], obs.obs[keys[1]][:, cols]
+        lam1, lam2 = C_MPS / f1, C_MPS / f2
+        L1, L2 = obs.obs[keys[2]][:, cols] * lam1, obs.obs[keys[3]][:, cols] * lam2
+        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
+        out["P"][:, cols] = g1 * P1 - g2 * P2
+        out["L"][:, cols] = g1 * L1 - g2 * L2
+        lam_wl = C_MPS / (f1 - f2)
+        out["MW"][:, cols] = ((f1 * L1 - f2 * L2) / (f1 - f2) - (f1 * P1 + f2 * P2) / (f1 + f2)) / lam_wl
+        out["GF"][:, cols] = L1 - L2
+        out["lam_nl"][:, cols] = C_MPS / (f1 + f2)
+        out["lam_wl"][:, cols] = lam_wl
+        out["lli"][:, cols] = ((obs.lli[keys[2]][:, cols] & 1) | (obs.lli[keys[3]][:, cols] & 1)).astype(bool)
+    if not found:
+        raise InputError(f"{obs.path}: no satellites of systems {systems!r}")
+    return out
+
+
+def _detect_slips(t_s, MW, GF, lli, ok, opt):
+    """New-arc flags per (epoch, sat): gap, LLI, MW jump vs arc mean, GF jump between epochs."""
+    n_ep, n_sv = MW.shape
+    new_arc = np.zeros((n_ep, n_sv), bool)
+    for j in range(n_sv):
+        idx = np.flatnonzero(ok[:, j])
+        last_t, mean, var, n, last_gf = -np.inf, 0.0, 0.0, 0, np.nan
+        for i in idx:
+            mw, gf = MW[i, j], GF[i, j]
+            slip = (t_s[i] - last_t > opt.max_gap_s) or lli[i, j]
+            if not slip and n >= 1:
+                sd = max(np.sqrt(var / n) if n > 1 else 0.0, 1.0)
+                slip = abs(mw - mean) > opt.mw_slip_cycles * sd or abs(gf - last_gf) > opt.gf_slip_m
+            if slip:
+                new_arc[i, j] = True
+                mean, var, n = mw, 0.0, 1
+            else:
+                n += 1
+                d = mw - mean
+                mean += d / n
+                var += d * (mw - mean)
+            last_t, last_gf = t_s[i], gf
+    return new_arc
+
+
+def spp_position(pos_sv_ecef_m, p_corr_m, *, iterations=8):
+    """Code-only least-squares position of one epoch (a priori for the models).
+
+    Parameters
+    ----------
+    pos_sv_ecef_m : ndarray, shape (m, 3)
+        Satellite positions (Sagnac applied or not: the metre level is enough).
+    p_corr_m : ndarray, shape (m,)
+        IF code plus satellite clock ``c dt_sv``.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+    """
+    x = np.zeros(4)
+    for _ in range(iterations):
+        rs = models.sagnac_rotate(pos_sv_ecef_m, np.linalg.norm(pos_sv_ecef_m - x[:3], axis=1) / C_MPS)
+        rho = np.linalg.norm(rs - x[:3], axis=1)
+        H = np.hstack([(x[:3] - rs) / rho[:, None], np.ones((len(rho), 1))])
+        dx = np.linalg.lstsq(H, p_corr_m - rho - x[3], rcond=None)[0]
+        x += dx
+    return x[:3]
+
+
+def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions()):
+    """Corrected IF observations and geometry for every (epoch, satellite).
+
+    Returns
+    -------
+    dict
+        ``Pc, Lc`` (n_epochs, n_sats) IF code and phase with the satellite
+        clock, hydrostatic delay, Shapiro delay (and wind-up for phase)
+        removed, so that ``Pc = rho + clk + m_wet ZWD`` and ``Lc = Pc + N``;
+        ``RS`` (n_epochs, n_sats, 3) satellite positions (Sagnac applied),
+        ``elev``, ``m_wet``, ``ok`` (usable), ``new_arc``, ``tide``
+        (n_epochs, 3), ``arp_ecef`` (3,), ``x0`` a priori position, ``t_s``.
+    """
+    opt = options
+    ref = obs.time_gps[0].astype("datetime64[D]").astype("datetime64[ns]")
+    t_s = seconds_gps(obs.time_gps, ref)
+    sv = obs.sv
+    n_ep, n_sv = len(t_s), len(sv)
+    meas = _if_observations(obs, opt.systems)
+    # Products for the observation's satellites.
+    orb_idx = np.array([orbits.sv.index(s) if s in orbits.sv else -1 for s in sv])
+    clk_idx = np.array([clocks.sv.index(s) if s in clocks.sv else -1 for s in sv])
+    common = (orb_idx >= 0) & (clk_idx >= 0) & np.isfinite(meas["P"]).any(axis=0)
+    if not common.any():
+        raise InputError(f"{obs.path}: no satellite in common with {orbits.path} and {clocks.path}")
+    t_orb = seconds_gps(orbits.ref_gps + (orbits.t_s * 1e9).astype("timedelta64[ns]"), ref)
+    t_clk = seconds_gps(clocks.ref_gps + (clocks.t_s * 1e9).astype("timedelta64[ns]"), ref)
+    orbits = Orbits(orbits.path, ref, t_orb, orbits.sv, orbits.pos_ecef_m)
+    clocks = Clocks(clocks.path, ref, t_clk, clocks.sv, clocks.bias_s)
+    for prod, tp in ((orbits, t_orb), (clocks, t_clk)):
+        if tp[-1] < t_s[0] or tp[0] > t_s[-1]:
+            raise InputError(f"{prod.path}: line 1: product covers {str(ref + np.timedelta64(int(tp[0]), 's'))[:19]}"
+                             f" to {str(ref + np.timedelta64(int(tp[-1]), 's'))[:19]} GPST, the observations "
+                             f"{str(obs.time_gps[0])[:19]} to {str(obs.time_gps[-1])[:19]}")
+    # Satellite states at transmission time, all epochs at once.
+    ok = np.isfinite(meas["P"]) & np.isfinite(meas["L"]) & common[None, :]
+    ie, js = np.nonzero(ok)
+    t_tx = t_s[ie] - meas["P"][ie, js] / C_MPS
+    dts = clocks.bias(clk_idx[js], t_tx)
+    t_tx = t_tx - dts
+    pos_sv, vel_sv = orbits.state(orb_idx[js], t_tx)
+    dts = clocks.bias(clk_idx[js], t_tx) + models.relativistic_clock_s(pos_sv, vel_sv)
+    good = np.isfinite(dts) & np.isfinite(pos_sv).all(axis=1)
+    ie, js, pos_sv, dts = ie[good], js[good], pos_sv[good], dts[good]
+    ok[:] = False
+    ok[ie, js] = True
+    RS = np.full((n_ep, n_sv, 3), np.nan)
+    RS[ie, js] = pos_sv
+    DTS = np.full((n_ep, n_sv), np.nan)
+    DTS[ie, js] = dts
+    # A priori position: code-only fix of the first epochs with enough satellites.
+    x0 = None
+    for i in range(n_ep):
+        m = ok[i]
+        if m.sum() >= 6:
+            x0 = spp_position(RS[i, m], meas["P"][i, m] + C_MPS * DTS[i, m])
+            if np.isfinite(x0).all() and 6.3e6 < np.linalg.norm(x0) < 6.5e6:
+                break
+    if x0 is None or not np.isfinite(x0).all():
+        raise InputError(f"{obs.path}: no epoch with 6 satellites and products for a first fix")
+    lat0, lon0, alt0 = ecef_to_geodetic(x0)
+    up0 = C_e_n(lat0, lon0)[:, 2]
+    arp_ecef = obs.antenna_delta_hen_m[0] * up0  # ARP above the marker (E/N eccentricities are zero here)
+    arp_ecef = arp_ecef + C_e_n(lat0, lon0)[:, :2] @ obs.antenna_delta_hen_m[[1, 2]]
+    # Geometry-dependent models at the a priori position.
+    jd_tt = 2440587.5 + (seconds_gps(obs.time_gps, np.datetime64("1970-01-01")) + models.TT_MINUS_GPST_S) / 86400.0
+    sun, moon = models.sun_moon_ecef_m(jd_tt)
+    tide = models.solid_tide_ecef_m(x0, sun, moon)  # (n_ep, 3)
+    tau = np.linalg.norm(RS - x0, axis=-1) / C_MPS
+    RS = models.sagnac_rotate(RS, tau)
+    los = RS - x0
+    rng = np.linalg.norm(los, axis=-1)
+    elev = np.arcsin(np.clip(los @ up0 / rng, -1, 1))
+    doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
+    m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / 86400.0)[:, None])
+    zhd = models.saastamoinen_zhd_m(lat0, alt0)
+    wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
+    shap = models.shapiro_m(RS, x0)
+    corr = C_MPS * DTS - zhd * m_dry - shap  # add to observations: P + c dts - T_dry - shapiro
+    Pc = meas["P"] + corr
+    Lc = meas["L"] + corr - wind * meas["lam_nl"]
+    ok &= elev > np.radians(opt.mask_deg)
+    ok &= np.isfinite(Pc) & np.isfinite(Lc)
+    new_arc = _detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
+    return dict(Pc=Pc, Lc=Lc, RS=RS, elev=elev, m_wet=m_wet, ok=ok, new_arc=new_arc, tide=tide, arp_ecef=arp_ecef,
+                x0=x0, t_s=t_s, lat0=lat0, lon0=lon0)
+
+
+def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions()):
+    """Float PPP over every epoch of ``obs``.
+
+    Returns
+    -------
+    PppResult
+        ``pos_ecef_m`` is the marker (antenna height removed), NaN at epochs
+        with fewer than 5 usable satellites.
+    """
+    opt = options
+    d = prepare(obs, orbits, clocks, options)
+    Pc, Lc, RS, elev, m_wet, ok, new_arc = (d[k] for k in ("Pc", "Lc", "RS", "elev", "m_wet", "ok", "new_arc"))
+    tide, arp_ecef, x0, t_s, lat0, lon0 = (d[k] for k in ("tide", "arp_ecef", "x0", "t_s", "lat0", "lon0"))
+    sv = obs.sv
+    n_ep, n_sv = len(t_s), len(sv)
+    # Filter.
+    sysof = np.array([s[0] for s in sv])
+    clk_col = np.where(sysof == "E", 4, 3)
+    n_x = 6 + n_sv
+    x = np.zeros(n_x)
+    P = np.zeros((n_x, n_x))
+    x[:3] = x0
+    P[:3, :3] = np.eye(3) * opt.init_pos_sigma_m**2
+    x[5] = 0.1
+    P[5, 5] = 0.3**2
+    amb_on = np.zeros(n_sv, bool)
+    out_pos = np.full((n_ep, 3), np.nan)
+    out_sig = np.full((n_ep, 3), np.nan)
+    out_zwd = np.full(n_ep, np.nan)
+    out_clk = np.full((n_ep, 2), np.nan)
+    n_used = np.zeros(n_ep, int)
+    n_slips = n_outl = 0
+    C_en0 = C_e_n(lat0, lon0)
+    last_t = None
+    for i in range(n_ep):
+        js_i = np.flatnonzero(ok[i])
+        if len(js_i) < 5:
+            continue
+        dt = 0.0 if last_t is None else t_s[i] - last_t
+        last_t = t_s[i]
+        # Prediction: ZWD random walk, clocks white, position static or white (kinematic).
+        Q = np.zeros(n_x)
+        Q[5] = opt.zwd_rw_m_per_rt_s**2 * dt
+        x, P = x.copy(), P.copy()
+        if not opt.static:
+            P[:3, :] = 0.0
+            P[:, :3] = 0.0
+            P[[0, 1, 2], [0, 1, 2]] = opt.kin_pos_sigma_m**2
+        P[np.arange(n_x), np.arange(n_x)] += Q
+        # Ambiguities: new arcs and satellites (re)initialised from phase minus code.
+        rr = x[:3] + arp_ecef + tide[i]
+        los_i = RS[i, js_i] - rr
+        rho = np.linalg.norm(los_i, axis=1)
+        e_i = los_i / rho[:, None]
+        cs = clk_col[js_i]
+        for s_col in (3, 4):
+            sel = cs == s_col
+            P[s_col, :] = 0.0
+            P[:, s_col] = 0.0
+            P[s_col, s_col] = opt.clk_sigma_m**2
+            if sel.any():
+                x[s_col] = np.median(Pc[i, js_i[sel]] - rho[sel] - m_wet[i, js_i[sel]] * x[5])
+        reset = js_i[new_arc[i, js_i] | ~amb_on[js_i]]
+        n_slips += int(np.sum(amb_on[reset]))
+        for j in reset:
+            a = 6 + j
+            P[a, :] = 0.0
+            P[:, a] = 0.0
+            P[a, a] = opt.init_amb_sigma_m**2
+            x[a] = Lc[i, j] - Pc[i, j]
+            amb_on[j] = True
+        use_code = np.ones(len(js_i), bool)
+        use_phase = np.ones(len(js_i), bool)
+        sin_el = np.sin(elev[i, js_i])
+        for _ in range(8):
+            rows_c, rows_p = np.flatnonzero(use_code), np.flatnonzero(use_phase)
+            m = len(rows_c) + len(rows_p)
+            H = np.zeros((m, n_x))
+            z = np.empty(m)
+            r_var = np.empty(m)
+            for k, (rows, is_phase) in enumerate(((rows_c, False), (rows_p, True))):
+                off = 0 if k == 0 else len(rows_c)
+                sl = slice(off, off + len(rows))
+                jj = js_i[rows]
+                H[sl, :3] = -e_i[rows]
+                H[sl.start + np.arange(len(rows)), cs[rows]] = 1.0
+                H[sl, 5] = m_wet[i, jj]
+                pred = rho[rows] + x[cs[rows]] + m_wet[i, jj] * x[5]
+                if is_phase:
+                    H[sl.start + np.arange(len(rows)), 6 + jj] = 1.0
+                    z[sl] = Lc[i, jj] - pred - x[6 + jj]
+                    r_var[sl] = (opt.sigma_phase_m / sin_el[rows]) ** 2
+                else:
+                    z[sl] = Pc[i, jj] - pred
+                    r_var[sl] = (opt.sigma_code_m / sin_el[rows]) ** 2
+            PHt = P @ H.T
+            S = H @ PHt + np.diag(r_var)
+            w = np.abs(z) / np.sqrt(np.diag(S))
+            worst = int(np.argmax(w))
+            if w[worst] <= opt.k_outlier or m <= 8:
+                break
+            n_outl += 1
+            if worst < len(rows_c):
+                use_code[rows_c[worst]] = False
+            else:
+                j = js_i[rows_p[worst - len(rows_c)]]
+                a = 6 + j
+                P[a, :] = 0.0
+                P[:, a] = 0.0
+                P[a, a] = opt.init_amb_sigma_m**2
+                x[a] = Lc[i, j] - Pc[i, j]
+                n_slips += 1
+        K = np.linalg.solve(S, PHt.T).T
+        x = x + K @ z
+        IKH = np.eye(n_x) - K @ H
+        P = IKH @ P @ IKH.T + (K * r_var) @ K.T
+        P = 0.5 * (P + P.T)
+        out_pos[i] = x[:3]
+        out_sig[i] = np.sqrt(np.clip(np.diag(C_en0.T @ P[:3, :3] @ C_en0), 0, None))
+        out_zwd[i] = x[5]
+        out_clk[i] = x[3:5]
+        n_used[i] = len(js_i)
+    return PppResult(time_gps=obs.time_gps, pos_ecef_m=out_pos, sigma_enu_m=out_sig, zwd_m=out_zwd, clock_m=out_clk, n_used=n_used,
+                     sv=sv, n_slips=n_slips, n_outliers=n_outl)

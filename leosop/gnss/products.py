@@ -1,0 +1,240 @@
+"""Precise orbits (SP3-c/d) and clocks (RINEX clock 3) -> interpolated satellite states.
+
+Times inside are float seconds ``t_s`` since a stated GPS-time epoch
+``ref_gps`` (``datetime64[ns]``), both products and queries. SP3 positions
+are the satellites' centres of mass in the product's ITRF realisation.
+Orbits are interpolated with a sliding 11-point Lagrange polynomial
+(degree 10, the usual choice for 15-min orbits, [Schenewerk 2003]), clocks
+linearly between the 30 s records; a query more than one record spacing
+outside the product, or next to a missing record, returns NaN.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .rinex import read_text
+
+__all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps"]
+
+#: Lagrange interpolation points for SP3 orbits.
+N_LAGRANGE = 11
+
+
+def seconds_gps(times_gps, ref_gps):
+    """``datetime64`` GPS instants -> float seconds since ``ref_gps``."""
+    return (np.asarray(times_gps, "datetime64[ns]") - np.datetime64(ref_gps, "ns")).astype(np.int64) * 1e-9
+
+
+@dataclass
+class Orbits:
+    """SP3 orbit records.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n_records,)
+        Record epochs, seconds since ``ref_gps``, evenly spaced.
+    sv : list of str, length n_sats
+    pos_ecef_m : ndarray, shape (n_records, n_sats, 3)
+        Centre-of-mass positions, NaN where the record is missing.
+    """
+
+    path: str
+    ref_gps: np.datetime64
+    t_s: np.ndarray
+    sv: list
+    pos_ecef_m: np.ndarray
+
+    def position(self, sv_idx, t_s):
+        """Satellite positions at given times.
+
+        Parameters
+        ----------
+        sv_idx : ndarray of int, shape (n,)
+            Index into :attr:`sv`.
+        t_s : ndarray, shape (n,)
+            GPS time, seconds since ``ref_gps``.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            NaN outside the product (more than one spacing beyond its ends).
+        """
+        t_s = np.asarray(t_s, float)
+        sv_idx = np.asarray(sv_idx, int)
+        dt = self.t_s[1] - self.t_s[0]
+        n = len(self.t_s)
+        u = np.nan_to_num((t_s - self.t_s[0]) / dt, nan=-1e9)
+        start = np.clip(np.floor(u).astype(int) - N_LAGRANGE // 2 + 1, 0, n - N_LAGRANGE)
+        k = np.arange(N_LAGRANGE)
+        x = u[:, None] - (start[:, None] + k)  # query minus node, in spacings
+        # Lagrange basis: prod_{j != k} (u - u_j) / (u_k - u_j) on unit-spaced nodes.
+        diff = x[:, :, None] - x[:, None, :]  # (n, k, j): x_k - x_j = u_j - u_k
+        num = np.where(np.eye(N_LAGRANGE, dtype=bool), 1.0, x[:, None, :])
+        den = np.where(np.eye(N_LAGRANGE, dtype=bool), 1.0, -diff)
+        w = np.prod(num / den, axis=2)  # (n, k)
+        nodes = self.pos_ecef_m[start[:, None] + k, sv_idx[:, None]]  # (n, k, 3)
+        out = np.einsum("nk,nkc->nc", w, nodes)
+        out[(u < -1) | (u > n)] = np.nan
+        return out
+
+    def state(self, sv_idx, t_s, *, h_s=0.5):
+        """Positions and velocities (central difference over ``2 h_s``).
+
+        Returns
+        -------
+        pos_ecef_m, vel_ecef_mps : ndarray, shape (n, 3)
+        """
+        p = self.position(sv_idx, t_s)
+        v = (self.position(sv_idx, np.asarray(t_s) + h_s) - self.position(sv_idx, np.asarray(t_s) - h_s)) / (2 * h_s)
+        return p, v
+
+
+@dataclass
+class Clocks:
+    """RINEX clock satellite (``AS``) records.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n_records,)
+        Record epochs, seconds since ``ref_gps``, evenly spaced.
+    sv : list of str
+    bias_s : ndarray, shape (n_records, n_sats)
+        Satellite clock offsets [s], NaN where missing.
+    """
+
+    path: str
+    ref_gps: np.datetime64
+    t_s: np.ndarray
+    sv: list
+    bias_s: np.ndarray
+
+    def bias(self, sv_idx, t_s):
+        """Clock offsets [s] at given times, linear between records, shape (n,)."""
+        t_s = np.asarray(t_s, float)
+        dt = self.t_s[1] - self.t_s[0]
+        u = np.nan_to_num((t_s - self.t_s[0]) / dt, nan=-1e9)
+        i0 = np.clip(np.floor(u).astype(int), 0, len(self.t_s) - 2)
+        f = u - i0
+        out = (1 - f) * self.bias_s[i0, sv_idx] + f * self.bias_s[i0 + 1, sv_idx]
+        out[(u < -1) | (u > len(self.t_s))] = np.nan
+        return out
+
+
+def _epoch(line, a, path, lineno):
+    try:
+        f = line[a:].split()
+        y, mo, d, h, mi = (int(v) for v in f[:5])
+        s = float(f[5])
+    except (ValueError, IndexError):
+        raise InputError(f"{path}: line {lineno}: unreadable epoch") from None
+    return (np.datetime64(f"{y:04d}-{mo:02d}-{d:02d}", "ns") + np.timedelta64(h * 3600 + mi * 60, "s")
+            + np.timedelta64(int(round(s * 1e9)), "ns"))
+
+
+def _grid(times, path, what):
+    t = np.asarray(times)
+    if len(t) < 2:
+        raise InputError(f"{path}: fewer than two {what} epochs")
+    step = np.diff(t)
+    if np.any(step <= np.timedelta64(0)):
+        raise InputError(f"{path}: {what} epochs not increasing")
+    return t, np.median(step)
+
+
+def read_sp3(path, *, systems="GE", ref_gps=None):
+    """Read an SP3-c or SP3-d orbit file (plain or gzip).
+
+    Parameters
+    ----------
+    systems : str
+        System letters to keep.
+    ref_gps : datetime64, optional
+        Epoch of ``t_s``; default the first record.
+
+    Returns
+    -------
+    Orbits
+    """
+    lines = read_text(path)
+    path = str(path)
+    if not lines or lines[0][:1] != "#" or lines[0][1:2] not in "cd" or not lines[0][1:2]:
+        raise InputError(f"{path}: line 1: not an SP3-c/d orbit file")
+    if lines[0][2:3] not in ("P", "V"):
+        raise InputError(f"{path}: line 1: unknown SP3 position/velocity flag {lines[0][2:3]!r}")
+    epochs, recs = [], []
+    for i, line in enumerate(lines):
+        if line[:1] == "*":
+            epochs.append(_epoch(line, 1, path, i + 1))
+        elif line[:1] == "P" and epochs:
+            s = line[1:2]
+            if s not in systems:
+                continue
+            try:
+                x, y, z = float(line[4:18]), float(line[18:32]), float(line[32:46])
+            except ValueError:
+                raise InputError(f"{path}: line {i + 1}: unreadable position record") from None
+            recs.append((len(epochs) - 1, line[1:4].replace(" ", "0"), x, y, z))
+        elif line.startswith("EOF"):
+            break
+    if not recs:
+        raise InputError(f"{path}: no position records for systems {systems!r}")
+    t, step = _grid(epochs, path, "SP3")
+    if np.any(np.diff(t) != step):
+        raise InputError(f"{path}: SP3 epochs are not evenly spaced")
+    sv = sorted({r[1] for r in recs})
+    col = {s: k for k, s in enumerate(sv)}
+    pos = np.full((len(t), len(sv), 3), np.nan)
+    for e, s, x, y, z in recs:
+        if not (x == 0.0 and y == 0.0 and z == 0.0):
+            pos[e, col[s]] = (x * 1e3, y * 1e3, z * 1e3)
+    ref = t[0] if ref_gps is None else np.datetime64(ref_gps, "ns")
+    return Orbits(path=path, ref_gps=ref, t_s=seconds_gps(t, ref), sv=sv, pos_ecef_m=pos)
+
+
+def read_clk(path, *, systems="GE", ref_gps=None):
+    """Read the satellite (``AS``) records of a RINEX clock file (plain or gzip).
+
+    Returns
+    -------
+    Clocks
+    """
+    lines = read_text(path)
+    path = str(path)
+    if not lines or lines[0][60:].strip() != "RINEX VERSION / TYPE" or lines[0][20:21] != "C":
+        raise InputError(f"{path}: line 1: not a RINEX clock file")
+    end = next((i for i, line in enumerate(lines) if line[60:].strip() == "END OF HEADER"), None)
+    if end is None:
+        raise InputError(f"{path}: line {len(lines)}: no END OF HEADER (truncated file?)")
+    keys, svs, vals = {}, [], []
+    for i in range(end + 1, len(lines)):
+        line = lines[i]
+        if line[:2] != "AS" or line[3:4] not in systems:
+            continue
+        f = line[3:].split()
+        try:
+            key = tuple(int(v) for v in f[1:6]) + (float(f[6]),)
+            val = float(f[8])
+        except (ValueError, IndexError):
+            raise InputError(f"{path}: line {i + 1}: unreadable AS clock record") from None
+        keys.setdefault(key, (len(keys), i + 1))
+        svs.append((keys[key][0], f[0]))
+        vals.append(val)
+    if not vals:
+        raise InputError(f"{path}: no satellite clock records for systems {systems!r}")
+    times = [_epoch(" ".join(f"{v}" for v in k), 0, path, ln) for k, (_, ln) in keys.items()]
+    order = np.argsort(np.array(times))
+    t, step = _grid(np.array(times)[order], path, "clock")
+    rank = np.empty(len(order), int)
+    rank[order] = np.arange(len(order))
+    # Records on a regular grid (gaps become NaN rows).
+    idx = np.round((t - t[0]) / step).astype(int)
+    grid = t[0] + np.arange(idx[-1] + 1) * step
+    sv = sorted({s for _, s in svs})
+    col = {s: k for k, s in enumerate(sv)}
+    bias = np.full((len(grid), len(sv)), np.nan)
+    e = idx[rank[np.fromiter((k for k, _ in svs), int, len(svs))]]
+    bias[e, np.fromiter((col[s] for _, s in svs), int, len(svs))] = vals
+    ref = grid[0] if ref_gps is None else np.datetime64(ref_gps, "ns")
+    return Clocks(path=path, ref_gps=ref, t_s=seconds_gps(grid, ref), sv=sv, bias_s=bias)
