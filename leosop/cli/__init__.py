@@ -26,7 +26,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from ..errors import ExternalError, InputError  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "replay", "study")
+COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "replay", "study", "ppp")
 
 
 def add_command(subparsers, name, module, *, help, description=None):
