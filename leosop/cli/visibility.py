@@ -1,4 +1,12 @@
-"""``leosop visibility``: visible satellites and Doppler GDOP over time at a site."""
+"""``leosop visibility``: visible satellites and Doppler GDOP over time at a site.
+
+``--constellation`` takes one or several families of the carrier table. With
+several, every satellite transmits on its family's carrier, each family is a
+receiver clock of its own, and ``gdop`` is that of the mix (position,
+velocity and one clock per family seen: null below ``6 + k`` satellites of
+``k`` families); the JSON document adds ``families`` and
+``n_visible_by_family`` and the CSV a ``n_visible_<family>`` column each.
+"""
 
 import sys
 import warnings
@@ -34,8 +42,11 @@ def register(subparsers):
     p.add_argument("--step-s", type=float, default=1.0, help="epoch step in seconds (default 1)")
     p.add_argument("--mask-deg", type=float, default=DEFAULT_MASK_DEG, help="elevation mask (default 40)")
     p.add_argument("--tle", metavar="FILE", help="TLE or OMM (.json/.csv) file (default: bundled Walker set)")
-    p.add_argument("--constellation", choices=sorted(CARRIERS), help="use only this family of a mixed file")
-    p.add_argument("--carrier-hz", type=float, help="carrier for the Doppler GDOP (default: the family's)")
+    p.add_argument("--constellation", nargs="+", metavar="NAME",
+                   help=f"use only these families of a mixed file ({', '.join(sorted(CARRIERS))}); several: one "
+                   "receiver clock each, GDOP of the mix")
+    p.add_argument("--carrier-hz", type=float, help="carrier for the Doppler GDOP (default: the family's; one "
+                   "family only)")
     p.add_argument("--skip-bad", action="store_true", help="skip malformed TLE records with a warning")
     p.add_argument("--no-screen", action="store_true", help="propagate every satellite every epoch (slow)")
 
@@ -51,11 +62,16 @@ def run(args):
     if n_epochs > 5_000_000:
         raise InputError(f"--duration-s/--step-s: {n_epochs} epochs is too many (at most 5,000,000)")
 
+    families = _families(args.constellation)
+    if len(families) > 1 and args.carrier_hz is not None:
+        raise InputError("--carrier-hz applies to one constellation; with several each uses its own carrier "
+                         "from the carrier table")
     const = load_constellation(args.tle, skip_bad=args.skip_bad)
-    if args.constellation:
-        const = const.family(args.constellation)
-        if len(const) == 0:
-            raise InputError(f"{args.tle or 'bundled TLE'}: no {args.constellation} satellites in the file")
+    if families:
+        for fam in families:
+            if not (const.families == fam).any():
+                raise InputError(f"{args.tle or 'bundled TLE'}: no {fam} satellites in the file")
+        const = const.subset(np.isin(const.families, families))
     if args.start:
         start = parse_time(args.start)
     else:
@@ -64,22 +80,45 @@ def run(args):
     if age_days > _STALE_DAYS:
         warnings.warn(f"start {format_utc(start)} is {age_days:.0f} days from the nearest element-set epoch; "
                       "positions will be off by many kilometres", stacklevel=2)
-    family = args.constellation or next((f for f in const.families if f), "starlink")
+    family = families[0] if families else next((f for f in const.families if f), "starlink")
     carrier_hz = args.carrier_hz or CARRIERS[family].default_hz
+    clock_group = None
+    if len(families) > 1:
+        # Each satellite on its family's carrier, each family its own receiver clock.
+        clock_group = np.array([families.index(f) for f in const.families])
+        carrier_hz = np.array([CARRIERS[f].default_hz for f in const.families])
 
     times = start + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
     site = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     vis = compute_visibility(const, times, site, mask, screen=not args.no_screen)
-    gdop = vis.doppler_gdop(carrier_hz)
+    gdop = vis.doppler_gdop(carrier_hz, clock_group)
     doc = {
         "epochs_utc": format_utc(times),
         "n_visible": vis.n_visible.tolist(),
         "gdop": [None if not np.isfinite(g) else float(g) for g in gdop],
         "visible_ids": vis.visible_ids(),
     }
+    if len(families) > 1:
+        counts = vis.n_visible_by_group(clock_group)
+        doc["families"] = families
+        doc["n_visible_by_family"] = {f: counts[:, j].tolist() for j, f in enumerate(families)}
     if args.out:
         _write_outputs(Path(args.out), doc, vis, gdop, times, mask, const.source)
     return doc
+
+
+def _families(names):
+    """Requested families, validated against the carrier table, in order without repeats."""
+    if not names:
+        return []
+    out = []
+    for name in names:
+        for key in (k.strip().lower() for k in name.split(",") if k.strip()):
+            if key not in CARRIERS:
+                raise InputError(f"--constellation {key!r}: unknown constellation; known: {', '.join(sorted(CARRIERS))}")
+            if key not in out:
+                out.append(key)
+    return out
 
 
 def _write_outputs(out, doc, vis, gdop, times, mask, source):
@@ -89,11 +128,15 @@ def _write_outputs(out, doc, vis, gdop, times, mask, source):
     write_json(out / "visibility.json", doc)
     dops = vis.range_dops()
     blank = lambda x: "" if not np.isfinite(x) else f"{x:.4f}"  # noqa: E731
+    by_family = doc.get("n_visible_by_family", {})
+    per_family = list(zip(*by_family.values())) if by_family else [()] * len(t_s)
     write_csv(out / "visibility.csv",
-              ["time_utc", "t_s", "n_visible", "gdop_doppler", "gdop_range", "pdop_range", "hdop_range", "vdop_range"],
-              ([e, f"{t:.3f}", n, blank(g), blank(a), blank(b), blank(c), blank(d)] for e, t, n, g, a, b, c, d in
+              ["time_utc", "t_s", "n_visible", "gdop_doppler", "gdop_range", "pdop_range", "hdop_range", "vdop_range"]
+              + [f"n_visible_{f}" for f in by_family],
+              ([e, f"{t:.3f}", n, blank(g), blank(a), blank(b), blank(c), blank(d), *nf]
+               for e, t, n, g, a, b, c, d, nf in
                zip(doc["epochs_utc"], t_s, doc["n_visible"], gdop, dops["gdop"], dops["pdop"], dops["hdop"],
-                   dops["vdop"])))
+                   dops["vdop"], per_family)))
     write_csv(out / "passes.csv", ["sat_id", "rise_utc", "culmination_utc", "set_utc", "max_elev_deg", "truncated"],
               ([p.sat_id, format_utc(p.rise_utc), format_utc(p.culmination_utc), format_utc(p.set_utc),
                 f"{p.max_elev_deg:.3f}", int(p.truncated)] for p in vis.passes()))
@@ -109,8 +152,12 @@ def summary(doc):
     lines = [
         f"{len(n)} epochs from {doc['epochs_utc'][0]} to {doc['epochs_utc'][-1]}",
         f"visible satellites: min {n.min()}, median {np.median(n):g}, max {n.max()}",
-        f"epochs with >= 7 satellites (Doppler fix possible): {fixable.mean():.1%}",
+        f"epochs with >= 7 satellites (Doppler fix possible): {fixable.mean():.1%}" if "families" not in doc else
+        f"epochs with >= 6 + one per constellation seen (Doppler fix possible): {fixable.mean():.1%}",
     ]
+    for fam, counts in doc.get("n_visible_by_family", {}).items():
+        c = np.array(counts)
+        lines.append(f"  {fam}: min {c.min()}, median {np.median(c):g}, max {c.max()}")
     if fixable.any():
         lines.append(f"Doppler GDOP: median {np.median(g[fixable]):.1f}, max {g[fixable].max():.1f}")
     return "\n".join(lines)

@@ -100,20 +100,68 @@ class Visibility:
         out[self.epoch_index, slot] = values
         return out
 
-    def doppler_cofactor(self, carrier_hz):
+    def doppler_cofactor(self, carrier_hz, clock_group=None):
         """``(H^T H)^-1`` of Doppler positioning per epoch (seed 004 eq. 8-10).
 
-        Static or moving receiver as given; NaN at epochs with fewer than 7
-        satellites or a singular geometry. Returns (n_epochs, 7, 7).
+        Static or moving receiver as given; NaN at epochs with fewer
+        satellites than states or a singular geometry.
+
+        Parameters
+        ----------
+        carrier_hz : float or array_like, (n_sats,)
+            One carrier, or each satellite's (in the order of ``sat_ids``).
+        clock_group : array_like of int, (n_sats,), optional
+            Receiver clock of each satellite (its constellation): one
+            frequency-offset state per group, k groups in all (sorted by
+            value). An epoch's states are position, velocity and the clocks
+            of the groups it sees (``6 + k_e``, as many satellites needed);
+            an absent group's rows and columns are NaN. None: one clock.
+
+        Returns
+        -------
+        ndarray, (n_epochs, 6 + k, 6 + k)
+            k = 1 without ``clock_group``.
         """
         pos = self.padded(self.pos_sv_ecef_m)
         vel = self.padded(self.vel_sv_ecef_mps)
-        H = doppler_jacobian(pos, vel, self.pos_rx_ecef_m, self.vel_rx_ecef_mps, carrier_hz)
-        return cofactor(H, weights=np.isfinite(pos[..., 0]).astype(float))
+        f0 = carrier_hz if np.ndim(carrier_hz) == 0 else self.padded(np.asarray(carrier_hz, float)[self.sat_index])
+        H = doppler_jacobian(pos, vel, self.pos_rx_ecef_m, self.vel_rx_ecef_mps, f0)
+        w = np.isfinite(pos[..., 0]).astype(float)
+        if clock_group is None:
+            return cofactor(H, weights=w)
+        labels, code = np.unique(np.asarray(clock_group), return_inverse=True)
+        g = self.padded(code.ravel()[self.sat_index].astype(float))
+        onehot = (g[..., None] == np.arange(len(labels))) & (w[..., None] > 0)
+        present = onehot.any(-2)
+        n_states = 6 + len(labels)
+        # An absent clock is held by a pseudo-row of its own, so that it neither counts nor breaks the rank.
+        pseudo = np.broadcast_to(np.eye(n_states)[6:], present.shape + (n_states,))
+        Hk = np.concatenate([np.concatenate([H[..., :6], onehot.astype(float)], -1), pseudo], -2)
+        Q = cofactor(Hk, weights=np.concatenate([w, (~present).astype(float)], -1))
+        keep = np.concatenate([np.ones(present.shape[:-1] + (6,), bool), present], -1)
+        return np.where(keep[..., :, None] & keep[..., None, :], Q, np.nan)
 
-    def doppler_gdop(self, carrier_hz):
-        """GDOP of Doppler positioning per epoch, NaN below 7 satellites; (n_epochs,)."""
-        return np.sqrt(np.trace(self.doppler_cofactor(carrier_hz), axis1=-2, axis2=-1))
+    def doppler_gdop(self, carrier_hz, clock_group=None):
+        """GDOP of Doppler positioning per epoch, NaN with too few satellites; (n_epochs,).
+
+        ``sqrt`` of the trace of :meth:`doppler_cofactor` over position
+        [m^2/Hz^2], velocity [(m/s)^2/Hz^2] and the receiver clock of every
+        constellation seen [1] (eq. 10's mixed-unit sum): below ``6 + k_e``
+        satellites of ``k_e`` constellations it is NaN.
+        """
+        if clock_group is None:
+            return np.sqrt(np.trace(self.doppler_cofactor(carrier_hz), axis1=-2, axis2=-1))
+        d = np.diagonal(self.doppler_cofactor(carrier_hz, clock_group), axis1=-2, axis2=-1)
+        with np.errstate(invalid="ignore"):
+            return np.where(np.isfinite(d[..., 0]), np.sqrt(np.nansum(d, -1)), np.nan)
+
+    def n_visible_by_group(self, group):
+        """Visible satellites per epoch and group: ``group`` (n_sats,) int, returns (n_epochs, max(group) + 1)."""
+        g = np.asarray(group)[self.sat_index]
+        n_g = int(np.max(group, initial=-1)) + 1
+        out = np.zeros((len(self.times_utc), n_g), int)
+        np.add.at(out, (self.epoch_index, g), 1)
+        return out
 
     def range_dops(self):
         """Classic pseudorange DOPs per epoch (NaN below 4 satellites).
