@@ -32,7 +32,7 @@ from ..frames import azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..progress import progress
 from ..scenarios import XIAN_BAOJI
-from ..signal.channel import OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
+from ..signal.channel import WAVEFORMS, OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
 from ..signal.iq import write_sigmf
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
@@ -40,6 +40,7 @@ from . import add_command
 from .options import mask_deg, parse_site, parse_time, positive
 
 DEFAULT_SITE = "34.342,108.940,400"
+_WAVEFORM_TEXT = {"tones": "pilot combs", "ofdm": "OFDM downlink frames with pilot combs"}
 _CHUNK = 1 << 18
 
 
@@ -76,6 +77,10 @@ def register(subparsers):
         p.add_argument(f"--orbit-error-{axis}-m", type=float, default=0.0, metavar="SIGMA",
                        help=f"standard deviation of the {axis}-track orbit error drawn per satellite [m] (default 0)"
                        .replace("radial-track", "radial"))
+    p.add_argument("--waveform", choices=WAVEFORMS, default="tones",
+                   help="tones: the pilot comb alone; ofdm: the published OFDM downlink frame (240 MHz, "
+                        "N = 1024, PSS/SSS/data) with the comb at its centre, limited to the recording's band "
+                        "(default tones)")
     p.add_argument("--snapshot-s", type=float, metavar="S",
                    help="record only S seconds every --period-s (one SigMF capture each)")
     p.add_argument("--period-s", type=float, metavar="P", help="snapshot period (with --snapshot-s)")
@@ -186,7 +191,7 @@ def run(args):
     orbit_error = OrbitError.draw(rng, speed, **sigma_orbit_m)
     t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=orbit_error)
     channel = SiteChannel(t_nodes, range_m, fs, _cn0(args, const, t_nodes, range_m, elev), clock, comb=comb,
-                          phase_rad=phase)
+                          phase_rad=phase, waveform=args.waveform)
 
     blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
     t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
@@ -207,13 +212,16 @@ def run(args):
          "orbit_error_radial_m": float(orbit_error.radial_m[i]), "orbit_error_cross_m": float(orbit_error.cross_m[i])}
         for i, sid in enumerate(const.sat_ids)
     ]
-    # Full scale for ci16: tones add to at most sum of amplitudes; noise is
-    # Gaussian. Four noise sigmas above the comb's peak keeps clipping ~1e-7.
-    full_scale = comb.n_tones * len(const) + 4.0 * channel.noise_sigma() / np.sqrt(2.0)
+    # Full scale for ci16: tones add to at most sum of amplitudes; OFDM
+    # subcarriers and noise are Gaussian-like. Four sigmas above the comb's
+    # peak keeps clipping ~1e-7.
+    spread = np.hypot(channel.noise_sigma(), np.sqrt(channel.n_subcarriers * len(const))) / np.sqrt(2.0)
+    full_scale = comb.n_tones * len(const) + 4.0 * spread
     cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
     extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
-             "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites,
-             "core:description": f"leosop generate: Starlink pilot combs of {len(const)} satellite(s) "
+             "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites, "leosop:waveform": args.waveform,
+             "core:description": f"leosop generate: Starlink {_WAVEFORM_TEXT[args.waveform]} of {len(const)} "
+                                 f"satellite(s) "
                                  f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
              "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]}}
     n_written = write_sigmf(out, _chunks(channel, signal_starts, lengths, rng), sample_rate_hz=fs,
@@ -232,6 +240,7 @@ def run(args):
         "snapshot_s": None if args.snapshot_s is None else float(lengths[0] / fs),
         "period_s": args.period_s,
         "cn0_model": args.cn0_model,
+        "waveform": args.waveform,
         "satellites": satellites,
     }
     if args.out:
@@ -243,7 +252,8 @@ def summary(doc):
     snap = (f", {doc['n_captures']} snapshots of {doc['snapshot_s']:g} s every {doc['period_s']:g} s"
             if doc["snapshot_s"] else "")
     lines = [f"wrote {doc['meta']} ({doc['n_samples']} {doc['datatype']} samples at {doc['sample_rate_hz']:g} Hz, "
-             f"{doc['duration_s']:g} s from {doc['start_utc']}{snap}; C/N0 model {doc['cn0_model']})"]
+             f"{doc['duration_s']:g} s from {doc['start_utc']}{snap}; {_WAVEFORM_TEXT[doc['waveform']]}; "
+             f"C/N0 model {doc['cn0_model']})"]
     for s in doc["satellites"]:
         cn0 = "below horizon" if s["cn0_dbhz"] is None else f"{s['cn0_dbhz']:.1f} dB-Hz"
         lines.append(f"  sat {s['sat_id']}: Doppler {s['doppler_hz_start']:+.1f} Hz, rate "

@@ -77,6 +77,12 @@ def run(args):
            "recording": str(path), "n_blocks": len(res.blocks),
            "n_identified": sum(tr.sat_id is not None for tr in res.tracks),
            "mode": "static" if args.static else "snapshot", **extra}
+    if res.pss is not None:
+        acq, cap_utc = res.pss
+        doc["pss"] = {"detected": bool(acq.detected), "metric": float(acq.metric),
+                      "doppler_hz": float(acq.doppler_hz), "frame_period_s": float(acq.frame_period_s),
+                      "frame_start_utc": [format_utc(cap_utc + np.timedelta64(int(round(t * 1e9)), "ns"))
+                                          for t in acq.frame_start_s]}
     if not res.tracks:
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
     if args.out:
@@ -115,6 +121,11 @@ def summary(doc):
         sig_txt = "n/a" if None in sig else "/".join(f"{v:.1f}" for v in sig)
         lines.append(f"fix {s['time_utc']}: {s['lat_deg']:.6f} {s['lon_deg']:.6f} {s['alt_m']:.1f} m  "
                      f"sigma E/N/U {sig_txt} m  {s['n_used']} measurements used  {s['status']}")
+    if "pss" in doc:
+        p = doc["pss"]
+        lines.append(f"PSS: {'detected' if p['detected'] else 'not detected'} (metric {p['metric']:.2f}), "
+                     f"{len(p['frame_start_utc'])} frames from {p['frame_start_utc'][0] if p['frame_start_utc'] else 'n/a'}, "
+                     f"OFDM centre offset {p['doppler_hz']:+.0f} Hz")
     if len(doc["solutions"]) > 10:
         lines.append(f"... {len(doc['solutions']) - 10} more fixes (use --json or --out)")
     return "\n".join(lines)

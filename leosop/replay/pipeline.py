@@ -10,6 +10,13 @@ tracks' Doppler (:mod:`leosop.positioning.solve`).
 
 Blocks never straddle a capture: a snapshot recording (DESIGN 4.2) gives one
 block per capture when the capture is shorter than the block length.
+
+Wide recordings (a whole 240 MHz OFDM channel) are narrowed block by block
+to :data:`WORK_RATE_HZ` around the pilot comb (an exact band-limited
+decimation by an integer factor, in the frequency domain) before the comb
+search; at the full channel rate the frame timing and the OFDM centre's
+Doppler also come from the PSS of the first capture
+(:func:`~leosop.signal.ofdm.acquire_pss`).
 """
 
 from dataclasses import dataclass
@@ -26,6 +33,9 @@ from .tracks import Detections, Tracker, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
 
+#: Sample rate the comb search works at [Hz]: the comb (+-176 kHz) under
+#: +-300 kHz of Doppler fits with margin; wider recordings are narrowed to it.
+WORK_RATE_HZ = 2.5e6
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
 SPECTRUM_COLUMNS = 600
 SPECTRUM_BINS = 1024
@@ -75,6 +85,43 @@ def block_plan(rec, block_s):
     return blocks
 
 
+def narrow(iq, factor):
+    """Band-limited decimation by an integer ``factor``: the central 1/factor of the spectrum.
+
+    Output sample k is input sample ``k * factor`` of the band-limited
+    signal, so times and phases carry over exactly.
+
+    Parameters
+    ----------
+    iq : ndarray of complex, (n,)
+    factor : int
+
+    Returns
+    -------
+    ndarray of complex64, (n // factor,)
+    """
+    if factor == 1:
+        return iq
+    n = iq.size // factor * factor
+    m = n // factor
+    spec = np.fft.fft(iq[:n])
+    keep = np.concatenate([spec[: m - m // 2], spec[n - m // 2:]])
+    return (np.fft.ifft(keep) * (m / n)).astype(np.complex64)
+
+
+def _pss(rec, blocks):
+    """PSS acquisition on the first 10 ms of the first capture of a full-channel recording, or None."""
+    from ..signal.ofdm import FRAME_SAMPLES, FS_HZ, acquire_pss
+
+    if rec.sample_rate_hz != FS_HZ:
+        return None
+    cap = rec.captures[0]
+    n = min(cap.n_samples, int(round(0.01 * FS_HZ)))
+    if n < 2 * FRAME_SAMPLES:
+        return None
+    return acquire_pss(rec.read(cap.sample_start, n), FS_HZ), cap.start_utc
+
+
 def _spectrum(iq):
     """Mean periodogram of ``iq`` in SPECTRUM_BINS bins, DC in the middle."""
     m = max(1, iq.size // SPECTRUM_BINS)
@@ -114,7 +161,10 @@ class ReplayResult:
     spectrum_t_s : ndarray, (n_cols,)
     spectrum_f_hz : ndarray, (SPECTRUM_BINS,)
     spectrum : ndarray, (SPECTRUM_BINS, n_cols)
-        Mean periodograms of a subset of the blocks, for the figure.
+        Mean periodograms of a subset of the blocks (after narrowing), for the figure.
+    pss : (PssAcquisition, datetime64) or None
+        Full-channel OFDM recordings: the PSS acquisition on the first
+        capture and that capture's start time.
     """
 
     tracks: list
@@ -125,6 +175,7 @@ class ReplayResult:
     spectrum_t_s: np.ndarray
     spectrum_f_hz: np.ndarray
     spectrum: np.ndarray
+    pss: object = None
 
 
 def track_measurements(tracks, carrier_hz):
@@ -183,7 +234,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     from ..positioning.solve import position_snapshots, position_static_passes
     from ..progress import progress
 
-    fs = rec.sample_rate_hz
+    factor = max(1, int(rec.sample_rate_hz // WORK_RATE_HZ))
+    fs = rec.sample_rate_hz / factor
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     blocks = block_plan(rec, block_s)
@@ -197,11 +249,14 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     spec_t, spec = [], []
     block_len = {}
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
-        iq = rec.read(b.start, b.n_samples)
+        iq = narrow(rec.read(b.start, b.n_samples), factor)
         found = find_combs(iq, fs, comb=comb)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
-        tracker.update(b.t_s, b.time_utc, det)
-        block_len[b.t_s] = b.n_samples
+        # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
+        shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz
+        tracker.update(b.t_s - shift_s, b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns"), det,
+                       block_s=iq.size / fs)
+        block_len[b.t_s - shift_s] = iq.size
         if k % every == 0:
             spec_t.append(b.t_s)
             spec.append(_spectrum(iq))
@@ -224,4 +279,4 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
-                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)))
+                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec, blocks))

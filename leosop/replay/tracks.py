@@ -61,6 +61,10 @@ class Detections:
 GATE_HZ = 150.0
 GATE_HZ_PER_S = 60.0
 GATE_HZ_PER_S2 = 40.0
+#: Rate sigma over (Doppler sigma / block length) for a chirp's joint
+#: estimate: with the phase a + b tau + c tau^2 / 2 over a centred block of
+#: length T, var(c) / var(b) = 60 / T^2, so sigma_rate = sqrt(60) sigma_f / T.
+RATE_SIGMA_FACTOR = np.sqrt(60.0)
 #: Detections a track's prediction is fitted to.
 _FIT_POINTS = 8
 
@@ -96,25 +100,32 @@ class Tracker:
     def _predict(self, rows, t_s):
         """Predicted Doppler at ``t_s`` and the gate around it.
 
-        From three detections on, a weighted quadratic (a line for three)
-        through the last few Doppler values: far better than one short
-        block's rate estimate. Before that, the last Doppler and its rate.
+        One detection: its Doppler and rate, the gate widened by three
+        sigmas of the rate (a short block measures its rate poorly). Two: the
+        line through them. From three on, a weighted quadratic (a line for
+        three) through the last few Doppler values.
         """
-        t_last, f_last, r_last = rows[-1][0], rows[-1][2], rows[-1][3]
+        t_last, f_last, r_last, sigma_rate = rows[-1][0], rows[-1][2], rows[-1][3], rows[-1][6]
         dt = t_s - t_last
         gate = GATE_HZ + GATE_HZ_PER_S * dt + GATE_HZ_PER_S2 * dt**2
-        if len(rows) >= 3:
-            recent = rows[-_FIT_POINTS:]
-            tau = np.array([r[0] for r in recent]) - t_last
-            f = np.array([r[2] for r in recent])
-            sigma = np.array([r[5] for r in recent])
-            w = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
-            deg = 1 if len(recent) == 3 or np.ptp(tau) == 0 else 2
-            return np.polyval(np.polyfit(tau, f, deg, w=w), dt), gate
-        return f_last + (r_last if np.isfinite(r_last) else 0.0) * dt, gate
+        if len(rows) == 1:
+            r = r_last if np.isfinite(r_last) else 0.0
+            return f_last + r * dt, gate + 3.0 * sigma_rate * dt
+        recent = rows[-_FIT_POINTS:]
+        tau = np.array([r[0] for r in recent]) - t_last
+        f = np.array([r[2] for r in recent])
+        sigma = np.array([r[5] for r in recent])
+        w = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
+        deg = 1 if len(recent) <= 3 or np.ptp(tau) == 0 else 2
+        return np.polyval(np.polyfit(tau, f, deg, w=w), dt), gate
 
-    def update(self, t_s, time_utc, det):
-        """Take the detections of the block centred at ``t_s`` (``time_utc``)."""
+    def update(self, t_s, time_utc, det, block_s=None):
+        """Take the detections of the block centred at ``t_s`` (``time_utc``), ``block_s`` long.
+
+        The block length sets how well a detection's rate is known
+        (``RATE_SIGMA_FACTOR * sigma_hz / block_s``); without it the rate is
+        taken as exact.
+        """
         from scipy.optimize import linear_sum_assignment
 
         keep = []
@@ -133,14 +144,18 @@ class Tracker:
             i, j = linear_sum_assignment(np.where(cost <= 1.0, cost, big))
             for a, b in zip(i, j):
                 if cost[a, b] <= 1.0:
-                    self._active[a].append(self._row(t_s, time_utc, det, b))
+                    self._active[a].append(self._row(t_s, time_utc, det, b, block_s))
                     claimed[b] = True
         for b in np.flatnonzero(~claimed):
-            self._active.append([self._row(t_s, time_utc, det, b)])
+            self._active.append([self._row(t_s, time_utc, det, b, block_s)])
 
     @staticmethod
-    def _row(t_s, time_utc, det, k):
-        return (t_s, time_utc, det.doppler_hz[k], det.doppler_rate_hz_per_s[k], det.cn0_dbhz[k], det.sigma_hz[k])
+    def _row(t_s, time_utc, det, k, block_s):
+        sigma_rate = 0.0
+        if block_s and np.isfinite(det.sigma_hz[k]):
+            sigma_rate = RATE_SIGMA_FACTOR * det.sigma_hz[k] / block_s
+        return (t_s, time_utc, det.doppler_hz[k], det.doppler_rate_hz_per_s[k], det.cn0_dbhz[k], det.sigma_hz[k],
+                sigma_rate)
 
     def finish(self):
         """All tracks of at least ``min_blocks`` detections, in order of their first block."""
@@ -149,7 +164,7 @@ class Tracker:
         self._active, self._done = [], []
         tracks = []
         for rows in rows_all:
-            t, utc, f, r, c, s = zip(*rows)
+            t, utc, f, r, c, s, _ = zip(*rows)
             tracks.append(Track(np.array(t, float), np.array(utc, "datetime64[ns]"), np.array(f, float),
                                 np.array(r, float), np.array(c, float), np.array(s, float)))
         return tracks

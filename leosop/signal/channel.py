@@ -46,6 +46,11 @@ __all__ = ["doppler_blocks", "site_range_rates", "OrbitError", "light_time_posit
 CN0_REF_RANGE_M = 550e3
 
 
+#: Signal models of :class:`SiteChannel`.
+WAVEFORMS = ("tones", "ofdm")
+#: Doppler margin kept inside a narrow recording's band for OFDM subcarriers [Hz].
+_MAX_OFDM_DOPPLER_HZ = 300e3
+
 def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=0.0, cn0_dbhz=None, *,
                    doppler_accel_hz_per_s2=0.0, comb=None, rng=None, dtype=np.complex64):
     """Pilot comb blocks, one per row, with given Doppler at each block centre.
@@ -302,6 +307,13 @@ class SiteChannel:
     comb : PilotComb
     phase_rad : ndarray, (n_sats,)
         Carrier phase of each satellite at t = 0.
+    waveform : {"tones", "ofdm"}
+        The pilot comb alone, or the full OFDM downlink frame with the comb
+        at its channel centre (:class:`~leosop.signal.ofdm.OfdmDownlink`;
+        each subcarrier as strong as one pilot tone; each satellite's data
+        seeded by its index; frames aligned at transmission). In a narrow
+        recording only the subcarriers that stay inside the band under
+        +-300 kHz of Doppler are synthesised.
     """
 
     t_nodes_s: np.ndarray
@@ -311,6 +323,7 @@ class SiteChannel:
     clock_offset_hz: np.ndarray
     comb: PilotComb = field(default_factory=PilotComb)
     phase_rad: np.ndarray | None = None
+    waveform: str = "tones"
 
     def __post_init__(self):
         if not np.all(np.isfinite(self.range_m)):
@@ -328,6 +341,21 @@ class SiteChannel:
         self._range0 = self._range(0.0)
         self._cn0_ref = float(np.max(self.cn0_dbhz[finite]))
         self._amp = 10.0 ** ((self.cn0_dbhz - self._cn0_ref) / 20.0)
+        if self.waveform not in WAVEFORMS:
+            raise InputError(f"waveform={self.waveform!r} must be one of {', '.join(WAVEFORMS)}")
+        self._ofdm = None
+        if self.waveform == "ofdm":
+            from .ofdm import OfdmDownlink
+
+            band = self.sample_rate_hz - 2.0 * _MAX_OFDM_DOPPLER_HZ
+            band = band if band > 0 else self.sample_rate_hz
+            self._ofdm = [OfdmDownlink(self.sample_rate_hz, channel_hz=self.comb.carrier_hz, seed=i, comb=self.comb,
+                                       band_hz=band) for i in range(n_sats)]
+
+    @property
+    def n_subcarriers(self):
+        """OFDM subcarriers synthesised per satellite (0 for the tones alone)."""
+        return 0 if self._ofdm is None else int(self._ofdm[0].subcarriers.size)
 
     @property
     def n_sats(self):
@@ -370,8 +398,12 @@ class SiteChannel:
         amp = self.amplitude(t)
         iq = np.zeros(t.size, dtype=complex)
         for i in np.flatnonzero(np.any(amp > 0, axis=1)):
-            iq += amp[i] * comb_baseband(self.comb, t, geom[i], self.clock_offset_hz[i] * t,
-                                         phase_rad=self.phase_rad[i])
+            if self._ofdm is None:
+                iq += amp[i] * comb_baseband(self.comb, t, geom[i], self.clock_offset_hz[i] * t,
+                                             phase_rad=self.phase_rad[i])
+            else:
+                iq += amp[i] * self._ofdm[i].samples(t, geom[i], self.clock_offset_hz[i] * t,
+                                                     phase_rad=self.phase_rad[i])
         if rng is not None:
             iq = add_noise(iq, self._cn0_ref, self.sample_rate_hz, rng)
         return iq
