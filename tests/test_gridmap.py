@@ -45,7 +45,7 @@ def test_footprints_match_brute_force(walker_states, grid_deg, mask_deg):
 
 def test_candidates_are_a_tight_superset(walker_states):
     const, times, pos, vel, carrier = walker_states
-    grid = make_grid(3.0)
+    grid = make_grid(5.0)
     sat, cell = footprint_pairs(pos[:, 0], grid, 40.0)
     n_b, _ = brute_force_epoch(pos[:, 0], vel[:, 0], carrier, grid, 40.0)
     assert len(np.unique(sat * grid.n_cells + cell)) == len(sat)  # each pair once
@@ -107,3 +107,14 @@ def test_dataset_layout_serial(walker_states):
     assert ds["lat"].attrs["units"] == "degrees_north" and ds["lon"].attrs["standard_name"] == "longitude"
     np.testing.assert_array_equal(ds["time"].values, times[:2])
     assert FOOTPRINT_MARGIN_DEG > 0.38  # two 0.19 deg ellipsoid effects, see the module docstring
+
+
+def test_dask_matches_serial(walker_states):
+    distributed = pytest.importorskip("distributed")
+    const, times, _, _, _ = walker_states
+    serial = gdop_map(const, times, 10.0, 40.0, scheduler="serial")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=":0") as cluster, distributed.Client(cluster) as client:
+        par = gdop_map(ConstellationSource(), times, 10.0, 40.0, scheduler=client, epochs_per_task=1)
+    np.testing.assert_array_equal(par["n_visible"].values, serial["n_visible"].values)
+    np.testing.assert_array_equal(par["gdop"].values, serial["gdop"].values)

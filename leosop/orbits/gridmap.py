@@ -53,6 +53,8 @@ _BATCH_PAIRS = 400_000
 # Cells x satellites per brute-force block.
 _BRUTE_BLOCK = 2_000_000
 _IU, _JU = np.triu_indices(N_DOPPLER_STATES)
+# How long to try reaching a scheduler given by address.
+_CONNECT_TIMEOUT = "10s"
 
 
 @dataclass(frozen=True)
@@ -417,7 +419,7 @@ def _connect(scheduler):
     from distributed import Client
 
     try:
-        return Client(scheduler, timeout="10s")
+        return Client(scheduler, timeout=_CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
