@@ -1,5 +1,7 @@
 """Several constellations in one Doppler fix: one receiver clock per constellation (DESIGN 4.3)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -178,3 +180,176 @@ def test_static_one_group_vs_two_differ_when_clocks_differ(counts):
     one = solve_static(Y, 1.0, R, V, F, T, pos0_ecef_m=pos_rx, alpha=None)
     two = solve_static(Y, 1.0, R, V, F, T, pos0_ecef_m=pos_rx, clock_group=G, alpha=None)
     assert two.chi2 < 1e-6 < one.chi2
+
+
+# ---------------------------------------------------------------- visibility: GDOP of a mix
+
+def _visibility(r, v, pos_rx):
+    """A one-epoch Visibility of the given satellites (sat index = row)."""
+    from leosop.orbits.visibility import Visibility
+
+    n = len(r)
+    z = np.zeros(n)
+    return Visibility(times_utc=np.array(["2026-04-10T12:00"], dtype="datetime64[ns]"),
+                      sat_ids=np.arange(n).astype(str), epoch_index=np.zeros(n, int), sat_index=np.arange(n),
+                      az_rad=z, elev_rad=z, range_m=z, pos_sv_ecef_m=r, vel_sv_ecef_mps=v,
+                      pos_rx_ecef_m=pos_rx[None], vel_rx_ecef_mps=np.zeros((1, 3)))
+
+
+def test_visibility_mixed_gdop_is_that_of_the_explicit_jacobian():
+    """GDOP of two families = sqrt(trace(inv(H^T H))) with H [d/dr, d/dv, clock A, clock B] built here (rel 1e-9)."""
+    _, r, v, f0, grp, pos_rx, _ = _snapshot_set(10, {0: 5, 2: 4}, vel_rx=(0.0, 0.0, 0.0))
+    dr = pos_rx - r
+    rho = np.linalg.norm(dr, axis=-1, keepdims=True)
+    u = dr / rho
+    k = -f0[:, None] / C_MPS
+    H = np.concatenate([k * (-v - u * np.sum(u * -v, -1, keepdims=True)) / rho, k * u,
+                        (grp[:, None] == [0, 2]).astype(float)], -1)
+    expected = np.sqrt(np.trace(np.linalg.inv(H.T @ H)))
+    vis = _visibility(r, v, pos_rx)
+    np.testing.assert_allclose(vis.doppler_gdop(f0, grp), [expected], rtol=1e-9)
+    # One family absent from the epoch: the 7-state GDOP of the other one's satellites.
+    only = grp == 0
+    vis0 = _visibility(r[only], v[only], pos_rx)
+    np.testing.assert_allclose(vis0.doppler_gdop(f0[only], np.array([0] * 5 + [2] * 0)), vis0.doppler_gdop(f0[0]),
+                               rtol=1e-9)
+
+
+def test_visibility_mixed_rank_rule():
+    """Two families need 8 satellites: with 7 the GDOP is NaN, one clock with the same 7 is finite."""
+    _, r, v, f0, grp, pos_rx, _ = _snapshot_set(11, {0: 4, 1: 3}, vel_rx=(0.0, 0.0, 0.0))
+    vis = _visibility(r, v, pos_rx)
+    assert np.isnan(vis.doppler_gdop(f0, grp)[0])
+    assert np.isfinite(vis.doppler_gdop(f0)[0])
+    assert vis.n_visible_by_group(grp).tolist() == [[4, 3]]
+
+
+# ---------------------------------------------------------------- command line
+
+def _cli(capsys, *argv):
+    import json
+
+    from leosop.cli import main
+
+    status = main([*map(str, argv), "--json"])
+    out, err = capsys.readouterr()
+    return status, (json.loads(out) if status == 0 else None), err
+
+
+def _state_table(path, rows, carriers):
+    """A DESIGN 4.3 table with state columns; ``carriers`` per row (None: blank)."""
+    head = "t_s,sat_id,doppler_hz,carrier_hz,x_sv_m,y_sv_m,z_sv_m,vx_sv_mps,vy_sv_mps,vz_sv_mps\n"
+    body = "".join(f"0.0,{k},{float(y)!r},{'' if c is None else repr(float(c))},"
+                   f"{','.join(repr(float(a)) for a in (*p, *q))}\n"
+                   for k, (y, p, q, c) in enumerate(zip(*rows, carriers)))
+    path.write_text(head + body)
+
+
+def test_cli_position_mixed_carriers_by_column(capsys, tmp_path):
+    """Without families, rows are grouped by carrier: two clocks recovered from a start 1000 km off."""
+    y, r, v, f0, grp, pos_rx, vel_rx = _snapshot_set(12, {0: 6, 2: 5})
+    path = tmp_path / "mixed.csv"
+    _state_table(path, (y, r, v), f0)
+    lat, lon, alt = (np.degrees(SITE_LLA[0]), np.degrees(SITE_LLA[1]) + 12.0, 0.0)  # ~560 km west-east off
+    status, doc, err = _cli(capsys, "position", path, "--init", f"{lat},{lon},{alt}", "--sigma-hz", 1, "--alpha", 0)
+    assert status == 0, err
+    (s,) = doc["solutions"]
+    assert np.linalg.norm(np.array([s["x_m"], s["y_m"], s["z_m"]]) - pos_rx) < ONE_MM
+    assert np.linalg.norm(np.array([s["vx_mps"], s["vy_mps"], s["vz_mps"]]) - vel_rx) < VEL_TOL_MPS
+    offsets = s["clock_offsets_hz"]
+    assert set(offsets) == {f"{FAMILIES[0][0]:.10g} Hz", f"{FAMILIES[2][0]:.10g} Hz"}
+    np.testing.assert_allclose([offsets[f"{FAMILIES[g][0]:.10g} Hz"] for g in (0, 2)],
+                               [FAMILIES[0][2], FAMILIES[2][2]], atol=CLOCK_TOL_HZ)
+    assert s["n_used"] == 11 and s["status"] == "ok"
+
+
+def test_cli_position_one_satellite_short_is_exit_2(capsys, tmp_path):
+    """Two clocks, 7 satellites: one short of 6 + 2."""
+    y, r, v, f0, _, _, _ = _snapshot_set(13, {0: 4, 2: 3})
+    path = tmp_path / "short.csv"
+    _state_table(path, (y, r, v), f0)
+    status, _, err = _cli(capsys, "position", path)
+    assert status == 2 and "fewer than 8 usable satellites" in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_position_undeterminable_carrier_is_exit_2(capsys, tmp_path):
+    y, r, v, f0, _, _, _ = _snapshot_set(14, {0: 5, 2: 4})
+    carriers = list(f0)
+    carriers[3] = None
+    path = tmp_path / "blank.csv"
+    _state_table(path, (y, r, v), carriers)
+    status, _, err = _cli(capsys, "position", path)
+    assert status == 2 and f"{path}:5: carrier of satellite 3 cannot be determined" in err
+    assert len(err.strip().splitlines()) == 1
+    # --carrier-hz settles it (the row then belongs to that carrier's clock).
+    status, doc, err = _cli(capsys, "position", path, "--carrier-hz", FAMILIES[0][0])
+    assert status == 0, err
+
+
+def test_cli_visibility_unknown_family_lists_known(capsys):
+    status, _, err = _cli(capsys, "visibility", "--constellation", "starlink", "globalstar", "--duration-s", 60)
+    assert status == 2 and len(err.strip().splitlines()) == 1
+    assert "'globalstar'" in err and "iridium, oneweb, orbcomm, starlink" in err
+
+
+def test_cli_visibility_family_absent_from_file(capsys):
+    """The bundled Walker set is Starlink only."""
+    status, _, err = _cli(capsys, "visibility", "--constellation", "starlink", "oneweb", "--duration-s", 60)
+    assert status == 2 and len(err.strip().splitlines()) == 1 and "no oneweb satellites" in err
+
+
+TLE_2021 = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "active_3le_2021-08-06_atqlong.txt"
+TLE_2026 = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "active_3le_2026-04-10_Bochika.txt"
+
+
+@pytest.mark.skipif(not TLE_2021.is_file(), reason="shared TLE data absent")
+def test_cli_visibility_three_families_real_snapshot(capsys):
+    status, doc, err = _cli(capsys, "visibility", "--tle", TLE_2021, "--constellation", "starlink", "oneweb",
+                            "iridium", "--site", "65,25,0", "--start", "2021-08-06T12:00:00Z", "--duration-s", 600,
+                            "--step-s", 60, "--mask-deg", 25)
+    assert status == 0, err
+    by = doc["n_visible_by_family"]
+    assert doc["families"] == ["starlink", "oneweb", "iridium"]
+    counts = np.array([by[f] for f in doc["families"]])
+    assert (counts.sum(0) == np.array(doc["n_visible"])).all()
+    need = 6 + (counts > 0).sum(0)
+    gdop = np.array([np.nan if g is None else g for g in doc["gdop"]])
+    assert (np.isnan(gdop) == (np.array(doc["n_visible"]) < need)).all()
+    assert set(doc) >= {"epochs_utc", "n_visible", "gdop", "visible_ids"}
+
+
+@pytest.mark.skipif(not TLE_2026.is_file(), reason="shared TLE data absent")
+def test_cli_position_sgp4_starlink_oneweb_from_family_carriers(capsys, tmp_path):
+    """SGP4 states with light time, no carrier column: carriers and clocks from the families of --tle's names."""
+    from leosop.frames import azimuth_elevation_range
+    from leosop.orbits import CARRIERS, load_constellation
+    from leosop.orbits.propagate import state_ecef
+    from leosop.positioning.measurements import sv_states_from_tle
+
+    const = load_constellation(TLE_2026)
+    const = const.subset(np.isin(const.families, ["starlink", "oneweb"]))
+    pos_rx = geodetic_to_ecef(*SITE_LLA)
+    t = np.datetime64("2026-04-10T12:00:00", "ns") + np.arange(2).astype("timedelta64[s]")
+    pos, _, _ = state_ecef(const, t)
+    _, el, _ = azimuth_elevation_range(pos, pos_rx)
+    si, ti = np.nonzero(el > np.radians(30))
+    ids, tt, fam = const.sat_ids[si], t[ti], const.families[si]
+    p, v, _ = sv_states_from_tle(const, ids, tt, pos_rx)
+    f0 = np.array([CARRIERS[f].default_hz for f in fam])
+    clock = {"starlink": 1234.5, "oneweb": -3210.0}
+    y = _doppler(p, v, pos_rx, np.zeros(3), f0, np.array([clock[f] for f in fam]))
+    path = tmp_path / "sgp4.csv"
+    from leosop.timebase import format_utc
+    path.write_text("time_utc,sat_id,doppler_hz\n" + "".join(
+        f"{u},{i},{float(d)!r}\n" for u, i, d in zip(format_utc(tt), ids, y)))
+    lat, lon = np.degrees(SITE_LLA[0]), np.degrees(SITE_LLA[1]) + 20.0  # ~940 km east-west off
+    status, doc, err = _cli(capsys, "position", path, "--tle", TLE_2026, "--init", f"{lat},{lon},0",
+                            "--sigma-hz", 1, "--alpha", 0)
+    assert status == 0, err
+    assert len(doc["solutions"]) == 2
+    for s in doc["solutions"]:
+        # Light time recomputed at the first solution: sub-mm after the second pass; 1 cm bound.
+        assert np.linalg.norm(np.array([s["x_m"], s["y_m"], s["z_m"]]) - pos_rx) < 1e-2
+        assert np.linalg.norm([s["vx_mps"], s["vy_mps"], s["vz_mps"]]) < 1e-3
+        np.testing.assert_allclose([s["clock_offsets_hz"][f] for f in ("oneweb", "starlink")],
+                                   [clock["oneweb"], clock["starlink"]], atol=1e-3)
