@@ -1,0 +1,94 @@
+"""PPP models against closed forms and published values."""
+
+import numpy as np
+import pytest
+
+from leosop.constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
+from leosop.gnss import models
+
+ESBC_ECEF_M = np.array([3582105.2910, 532589.7313, 5232754.8054])  # RINEX header, ~1 m
+JD_TT_2020_177 = 2459025.5 + np.arange(0.0, 1.0, 1.0 / 96.0)  # 2020-06-25, 15 min
+
+
+def test_saastamoinen_standard_atmosphere():
+    # ZHD = 0.0022768 * 1013.25 hPa = 2.3070 m at sea level, 45 deg [Davis 1985]; 0.1 mm tolerance.
+    assert models.saastamoinen_zhd_m(np.radians(45.0), 0.0) == pytest.approx(2.3070, abs=1e-4)
+    # US Standard Atmosphere 1976 gives 505.0 hPa at 5.5 km: ZHD = 0.0022768 * 505.0 / (1 - 0.00154); 2 mm.
+    assert models.saastamoinen_zhd_m(np.radians(45.0), 5500.0) == pytest.approx(1.1515, abs=2e-3)
+
+
+def test_niell_mapping_limits():
+    m_dry, m_wet = models.niell_mapping(np.radians([90.0, 30.0, 5.0]), np.radians(55.0), 0.0, 177.0)
+    assert m_dry[0] == pytest.approx(1.0, abs=1e-12) and m_wet[0] == pytest.approx(1.0, abs=1e-12)
+    # Flat-Earth 1/sin(e) = 2 at 30 deg; curvature lowers it by < 0.5 %.
+    assert 1.99 < m_dry[1] < 2.0 and 1.99 < m_wet[1] < 2.0
+    # Published NMF values at 5 deg are ~10.1 (dry) and ~10.7 (wet) [Niell 1996, fig. 3]; 2 %.
+    assert m_dry[2] == pytest.approx(10.15, rel=0.02)
+    assert m_wet[2] == pytest.approx(10.7, rel=0.02)
+
+
+def test_sun_moon_distances():
+    sun, moon = models.sun_moon_ecef_m(JD_TT_2020_177)
+    r_sun = np.linalg.norm(sun, axis=1)
+    r_moon = np.linalg.norm(moon, axis=1)
+    # Near aphelion (2020-07-04: 1.01669 AU = 152.10e9 m); 0.1 %.
+    assert np.all(np.abs(r_sun / 152.08e9 - 1) < 1e-3)
+    assert np.all((356e6 < r_moon) & (r_moon < 407e6))
+    # Summer solstice + 4 days: the Sun's declination is 23.4 deg within 0.2 deg.
+    dec = np.degrees(np.arcsin(sun[:, 2] / r_sun))
+    assert np.all(np.abs(dec - 23.38) < 0.2)
+
+
+def test_solid_tide_amplitude_bounds():
+    sun, moon = models.sun_moon_ecef_m(JD_TT_2020_177)
+    d = models.solid_tide_ecef_m(ESBC_ECEF_M, sun, moon)
+    up = ESBC_ECEF_M / np.linalg.norm(ESBC_ECEF_M)
+    radial = d @ up
+    horiz = np.linalg.norm(d - radial[:, None] * up, axis=1)
+    # Radial body tide is at most ~0.4 m and horizontal ~0.05 m (IERS 2010 ch. 7); a day spans > 0.1 m.
+    assert np.all(np.abs(radial) < 0.4) and np.all(horiz < 0.06)
+    assert np.ptp(radial) > 0.1
+
+
+def test_relativistic_clock_closed_form():
+    # Keplerian orbit: r.v = sqrt(GM a) e sin(E), so the term is -2 sqrt(GM a) e sin(E) / c^2.
+    a, e, E = 26_560e3, 0.01, np.radians(90.0)
+    n = np.sqrt(GM_M3_PER_S2 / a**3)
+    r = np.array([a * (np.cos(E) - e), a * np.sqrt(1 - e**2) * np.sin(E), 0.0])
+    Edot = n / (1 - e * np.cos(E))
+    v = np.array([-a * np.sin(E) * Edot, a * np.sqrt(1 - e**2) * np.cos(E) * Edot, 0.0])
+    expected = -2 * np.sqrt(GM_M3_PER_S2 * a) * e * np.sin(E) / C_MPS**2
+    assert models.relativistic_clock_s(r, v) == pytest.approx(expected, rel=1e-12)
+    assert abs(expected) == pytest.approx(22.9e-9, rel=0.01)  # ~23 ns for e = 0.01 (IS-GPS-200)
+
+
+def test_sagnac_first_order():
+    rs = np.array([15_000e3, 10_000e3, 18_000e3])
+    rr = ESBC_ECEF_M
+    tau = np.linalg.norm(rs - rr) / C_MPS
+    rho_rot = np.linalg.norm(models.sagnac_rotate(rs, tau) - rr)
+    sagnac = OMEGA_E_RAD_PER_S / C_MPS * (rs[0] * rr[1] - rs[1] * rr[0])
+    # Range change equals omega/c (xs yr - ys xr) to ~1 mm at this size (second-order terms).
+    assert rho_rot - np.linalg.norm(rs - rr) == pytest.approx(sagnac, abs=1e-3)
+
+
+def test_shapiro_size():
+    rs = np.array([0.0, 0.0, 26_560e3])
+    # Zenith: rho = rs - rr, so the log argument is rs / rr; about 1.3 cm.
+    rr = np.array([0.0, 0.0, 6_371e3])
+    expected = 2 * GM_M3_PER_S2 / C_MPS**2 * np.log(26_560e3 / 6_371e3)
+    assert models.shapiro_m(rs, rr) == pytest.approx(expected, abs=1e-6)
+    assert 0.01 < expected < 0.02
+
+
+def test_windup_is_continuous_and_symmetric_overhead():
+    sun, _ = models.sun_moon_ecef_m(JD_TT_2020_177)
+    lat, lon = np.radians(55.49), np.radians(8.46)
+    up = ESBC_ECEF_M / np.linalg.norm(ESBC_ECEF_M)
+    # A satellite moving through the zenith region over 24 h of 15-min steps.
+    ang = np.linspace(-0.3, 0.3, len(sun))
+    east = np.array([-np.sin(lon), np.cos(lon), 0.0])
+    rs = (np.cos(ang)[:, None] * up + np.sin(ang)[:, None] * east) * 26_560e3
+    w = models.windup_cycles(rs[:, None, :], ESBC_ECEF_M, sun, lat, lon)
+    assert w.shape == (len(sun), 1)
+    assert np.all(np.abs(np.diff(w[:, 0])) < 0.5)  # unwrapped: no cycle jumps between steps

@@ -1,0 +1,185 @@
+"""Readers on the real ESBC00DNK day, a short static float PPP window, bad input."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leosop.cli import main
+from leosop.errors import InputError
+from leosop.gnss.ppp import PppOptions, gps_to_utc, run_ppp
+from leosop.gnss.products import read_clk, read_sp3
+from leosop.gnss.rinex import check_nav, read_obs, read_text
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rinex"
+DAY = DATA / "esbc_2020-177"
+OBS = DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
+NAV = DAY / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+SP3 = DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
+CLK = DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
+CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
+HEADER_ECEF_M = np.array([3582105.2910, 532589.7313, 5232754.8054])
+#: 24 h static GPS+Galileo float PPP of this module (`leosop ppp ... --static`, 2026-11 run); the GPS-only
+#: and Galileo-only 24 h solutions agree with it within 1 cm, the header APPROX POSITION (the receiver's
+#: own fix, written by sbf2rin) is 0.76 m away from all three.
+PPP_24H_ECEF_M = np.array([3582104.7687, 532590.1650, 5232755.1423])
+
+needs_data = pytest.mark.skipif(not all(p.exists() for p in (OBS, NAV, SP3, CLK)), reason="ESBC data absent")
+
+
+@pytest.fixture(scope="module")
+def day():
+    obs = read_obs(OBS, codes=CODES)
+    return obs, read_sp3(SP3), read_clk(CLK)
+
+
+def _window(obs, n):
+    return dataclasses.replace(obs, time_gps=obs.time_gps[:n], obs={k: v[:n] for k, v in obs.obs.items()},
+                               lli={k: v[:n] for k, v in obs.lli.items()})
+
+
+@needs_data
+def test_readers_on_real_files(day):
+    obs, orb, clk = day
+    assert obs.version == pytest.approx(3.05) and obs.marker == "ESBC00DNK"
+    assert len(obs.time_gps) == 2880 and obs.interval_s == 30.0
+    assert obs.time_gps[-1] == np.datetime64("2020-06-25T23:59:30")
+    np.testing.assert_allclose(obs.approx_pos_ecef_m, HEADER_ECEF_M, atol=1e-4)
+    assert obs.antenna_delta_hen_m[0] == pytest.approx(0.216)
+    # First epoch, E01 C1C as printed in the file: 27616185.992 m.
+    assert obs.obs["E:C1C"][0, obs.sv.index("E01")] == pytest.approx(27616185.992, abs=1e-3)
+    assert orb.pos_ecef_m.shape[0] == 96 and orb.t_s[1] - orb.t_s[0] == 900.0
+    # SP3 node reproduced exactly; the record: PE01 -11562.163582 14053.114306 23345.128269 km.
+    j = orb.sv.index("E01")
+    np.testing.assert_allclose(orb.position(np.array([j]), orb.t_s[:1])[0],
+                               [-11562163.582, 14053114.306, 23345128.269], atol=1e-6)
+    # Lagrange interpolation of the 30-min subset hits the dropped 15-min nodes within 10 cm.
+    sub = dataclasses.replace(orb, t_s=orb.t_s[::2], pos_ecef_m=orb.pos_ecef_m[::2])
+    tq = orb.t_s[11:80:2]
+    err = sub.position(np.full(len(tq), j), tq) - orb.pos_ecef_m[11:80:2, j]
+    assert np.abs(err).max() < 0.1
+    assert clk.bias_s.shape[0] == 2880
+    assert clk.bias(np.array([clk.sv.index("E01")]), np.array([0.0]))[0] == pytest.approx(-0.884707516318e-3,
+                                                                                          abs=1e-15)
+    assert check_nav(NAV) == np.datetime64("2020-06-25") or check_nav(NAV) <= np.datetime64("2020-06-25")
+
+
+@needs_data
+def test_static_window_converges(day):
+    obs, orb, clk = day
+    obs2 = _window(obs, 480)  # 4 h at 30 s
+    res = {s: run_ppp(obs2, orb, clk, PppOptions(static=True, systems=s)) for s in ("GE", "G", "E")}
+    final = {s: r.pos_ecef_m[-1] for s, r in res.items()}
+    # GPS-only and Galileo-only use disjoint satellites and clocks: agreement within 15 cm after 4 h.
+    assert np.linalg.norm(final["G"] - final["E"]) < 0.15
+    # Against the 24 h solution: within 10 cm after 4 h (measured 7.2 cm; < 5 cm from 6.9 h on).
+    assert np.linalg.norm(final["GE"] - PPP_24H_ECEF_M) < 0.10
+    # And against the header, which is a metre-level receiver fix.
+    assert np.linalg.norm(final["GE"] - HEADER_ECEF_M) < 1.0
+    z = res["GE"].zwd_m[-1]
+    assert 0.0 < z < 0.4  # zenith wet delay of a mid-latitude summer day
+
+
+def test_gps_to_utc():
+    assert gps_to_utc(np.datetime64("2020-06-25T00:00:18")) == np.datetime64("2020-06-25T00:00:00")
+
+
+def _head_lines(n):
+    return read_text(OBS)[:n]
+
+
+@needs_data
+def test_truncated_obs(tmp_path):
+    lines = _head_lines(100)
+    p = tmp_path / "trunc.rnx"
+    p.write_text("\n".join(lines[:70]) + "\n")  # cut inside an epoch
+    with pytest.raises(InputError, match=r"trunc\.rnx: line \d+: .*truncated"):
+        read_obs(p)
+
+
+@needs_data
+def test_mixed_version_obs(tmp_path):
+    lines = _head_lines(100)
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line)
+    rinex2_epoch = " 20  6 25  0  1  0.0000000  0  2G05G07"
+    p = tmp_path / "mixed.rnx"
+    p.write_text("\n".join(lines[:end + 1] + [rinex2_epoch] + lines[end + 1:]) + "\n")
+    with pytest.raises(InputError, match=rf"mixed\.rnx: line {end + 2}: expected an epoch record"):
+        read_obs(p)
+    p2 = tmp_path / "v2.rnx"
+    p2.write_text("     2.11" + lines[0][9:] + "\n" + "\n".join(lines[1:]) + "\n")
+    with pytest.raises(InputError, match=r"v2\.rnx: line 1: RINEX version 2.11"):
+        read_obs(p2)
+
+
+@needs_data
+def test_missing_frequency(tmp_path, day):
+    _, orb, clk = day
+    lines = _head_lines(400)
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line)
+    # Rename GPS C2W and L2W in the header: no second GPS frequency for the IF combination.
+    head = [line.replace("C2W", "C2X").replace("L2W", "L2X") if line.startswith("G   18") else line
+            for line in lines[:end + 1]]
+    p = tmp_path / "nol2.rnx"
+    stop = max(i for i, line in enumerate(lines) if line.startswith(">"))  # whole epochs only
+    p.write_text("\n".join(head + lines[end + 1:stop]) + "\n")
+    obs = read_obs(p, codes=CODES)
+    with pytest.raises(InputError, match=r"nol2\.rnx: system G lacks C2W, L2W"):
+        run_ppp(obs, orb, clk, PppOptions(systems="G"))
+
+
+@needs_data
+def test_products_of_another_day(day):
+    obs, _, _ = day
+    other_sp3 = DATA / "igs_2010-182" / "igs15904.sp3"
+    other_clk = DATA / "igs_2010-182" / "igs15904.clk"
+    if not other_sp3.exists():
+        pytest.skip("igs_2010-182 absent")
+    obs2 = _window(obs, 20)
+    with pytest.raises(InputError, match=r"igs15904\.sp3: line 1: product covers 2010-07-01"):
+        run_ppp(obs2, read_sp3(other_sp3, systems="G"), read_clk(other_clk, systems="G"), PppOptions(systems="G"))
+
+
+@needs_data
+def test_no_common_satellites(day):
+    obs, orb, clk = day
+    only_e = dataclasses.replace(orb, sv=[s for s in orb.sv if s[0] == "E"],
+                                 pos_ecef_m=orb.pos_ecef_m[:, [i for i, s in enumerate(orb.sv) if s[0] == "E"]])
+    with pytest.raises(InputError, match="no satellite in common"):
+        run_ppp(_window(obs, 20), only_e, clk, PppOptions(systems="G"))
+
+
+@needs_data
+def test_cli_bad_input_exit_2(tmp_path, capsys):
+    p = tmp_path / "empty.sp3"
+    p.write_text("not an sp3 file\n")
+    code = main(["ppp", str(OBS), "--nav", str(NAV), "--sp3", str(p), "--clk", str(CLK), "--static", "--json"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "empty.sp3: line 1: not an SP3" in err[0]
+    code = main(["ppp", str(OBS), "--nav", str(NAV), "--sp3", str(SP3), "--clk", str(CLK), "--ar"])
+    assert code == 2
+
+
+@needs_data
+def test_cli_json_contract(tmp_path, capsys, monkeypatch):
+    # A 1-hour observation file keeps the run short.
+    lines = read_text(OBS)
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line)
+    stop = next(i for i, line in enumerate(lines) if line.startswith("> 2020 06 25 01 00"))
+    p = tmp_path / "esbc_1h.rnx"
+    p.write_text("\n".join(lines[:stop]) + "\n")
+    assert end < stop
+    code = main(["ppp", str(p), "--nav", str(NAV), "--sp3", str(SP3), "--clk", str(CLK), "--static", "--json",
+                 "--out", str(tmp_path / "out")])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0
+    sol = doc["solutions"][-1]
+    for key in ("time_utc", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m", "fixed", "sigma_enu_m"):
+        assert key in sol
+    assert sol["time_utc"] == "2020-06-25T00:59:12.000000Z"  # 00:59:30 GPST - 18 s
+    assert sol["fixed"] is False and len(sol["sigma_enu_m"]) == 3
+    pos = doc["summary"]["position"]
+    assert np.linalg.norm(np.array([pos["x_m"], pos["y_m"], pos["z_m"]]) - PPP_24H_ECEF_M) < 0.3
+    assert (tmp_path / "out" / "ppp.json").exists() and (tmp_path / "out" / "ppp.csv").exists()
