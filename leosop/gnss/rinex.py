@@ -3,8 +3,8 @@
 Hatanaka-compressed files (``.crx``, ``.crx.gz``, ``.XXd``) are expanded by
 the maintained ``hatanaka`` package (0.3 s for the 24 h, 30 s ESBC00DNK day).
 The expanded text is then parsed here rather than by ``georinex``: georinex
-took 28-40 s for the GPS + Galileo part of that day (it merges an xarray per
-epoch), the minimal fixed-width parser below about 2 s; the numbers are
+took 113 s for the GPS + Galileo part of that day (it merges an xarray per
+epoch), the minimal fixed-width parser below 1.4-2 s; the numbers are
 printed by ``tools/bench_ppp_readers.py``. Only what PPP needs is read: the
 header fields below and the chosen systems' observables with their LLI flags.
 
