@@ -115,7 +115,8 @@ def _families(names):
     for name in names:
         for key in (k.strip().lower() for k in name.split(",") if k.strip()):
             if key not in CARRIERS:
-                raise InputError(f"--constellation {key!r}: unknown constellation; known: {', '.join(sorted(CARRIERS))}")
+                known = ", ".join(sorted(CARRIERS))
+                raise InputError(f"--constellation {key!r}: unknown constellation; known: {known}")
             if key not in out:
                 out.append(key)
     return out
