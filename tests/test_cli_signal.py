@@ -117,19 +117,6 @@ def test_bad_input(recording, tmp_path, capsys, case):
     assert not (tmp_path / "out").exists()  # no partial outputs
 
 
-def test_bundled_example(capsys):
-    from pathlib import Path
-
-    meta = Path(__file__).resolve().parents[1] / "signals" / "starlink_71585_xian.sigmf-meta"
-    status, out, _ = _run(capsys, ["doppler", str(meta), "--json"])
-    assert status == 0
-    doc = json.loads(out)
-    assert doc["n_detected"] == doc["n_blocks"] == 5
-    # Five blocks at the bound (0.023 Hz at 45 dB-Hz, 0.1 s, 1 MHz): RMS below
-    # 2.5 sigma fails by chance with probability ~1e-5 (chi-square, 5 dof).
-    assert doc["truth_rms_error_hz"] < 2.5 * doppler_sigma_hz(45.0, 0.1, sample_rate_hz=1e6)
-
-
 def test_snapshot_recording_end_to_end(tmp_path, capsys):
     from leosop.signal.iq import open_sigmf
 

@@ -132,3 +132,20 @@ def test_ofdm_snapshot_recording_is_identified_from_its_pilot_combs(tmp_path, ca
     # The OFDM subcarriers in band are interference to the combs; every identity given must be right
     # and most satellites heard.
     assert set(ids) <= truth and len(set(ids)) == len(ids) and len(ids) >= len(truth) - 3
+
+
+def test_bundled_example_identified_and_fixed_with_and_without_a_prior(capsys):
+    from pathlib import Path
+
+    meta = Path(__file__).resolve().parents[1] / "signals" / "starlink_xian_snapshots.sigmf-meta"
+    truth = {a["leosop:sat_id"] for a in json.loads(meta.read_text())["annotations"] if "leosop:sat_id" in a}
+    site = geodetic_to_ecef(np.radians(SITE[0]), np.radians(SITE[1]), SITE[2])
+    for prior in (["--init", "34.98,109.71,0"], []):
+        code, doc, err = _replay(capsys, str(meta), "--static", *prior)
+        assert code == 0, err
+        assert sorted(t["sat_id"] for t in doc["tracks"]) == sorted(truth)
+        s = doc["solutions"][0]
+        err_m = np.linalg.norm(np.array([s["x_m"], s["y_m"], s["z_m"]]) - site)
+        # 30 snapshots of 20 ms with 300 m (1 sigma) along-track errors: sigmas of ~10 m per axis;
+        # 5 sigma of the horizontal ones.
+        assert err_m < 5.0 * np.linalg.norm(s["sigma_enu_m"])
