@@ -285,6 +285,102 @@ def _cleaned(grid, comb, combs, j):
     return c.y_wide.astype(complex) if r is None else c.y_wide - r
 
 
+def _leakage_all(grid, f_c, mix, val, nu):
+    """What every comb's channels receive from all the other combs' tones, in one product.
+
+    ``f_c`` (C, W) mixing frequencies, ``mix`` (B, C, W) their phasors, ``val`` and
+    ``nu`` (B, C, K) tone values and frequencies at the segment centres. Returns (B, C, W).
+    """
+    n_seg, n_c, n_w = mix.shape
+    n_k = val.shape[2]
+    fc = f_c.reshape(-1)
+    near = np.abs(nu[n_seg // 2].reshape(-1) - fc[:, None]) < _LEAK_BANDS * grid.fs_dec  # (C W, C K)
+    near &= np.repeat(np.arange(n_c), n_w)[:, None] != np.repeat(np.arange(n_c), n_k)
+    jj, ii = np.nonzero(near)  # pairs grouped by channel
+    out = np.zeros((n_seg, n_c * n_w), dtype=complex)
+    if ii.size:
+        v = val.reshape(n_seg, -1)[:, ii] * _dirichlet(nu.reshape(n_seg, -1)[:, ii] - fc[jj], grid.counts[:, None],
+                                                        grid.fs)
+        first = np.flatnonzero(np.r_[True, jj[1:] != jj[:-1]])
+        out[:, jj[first]] = np.add.reduceat(v, first, axis=1) * mix.reshape(n_seg, -1)[:, jj[first]]
+    return out.reshape(n_seg, n_c, n_w)
+
+
+def _newton_all(y, tau, tpow, ratio, f, r, n_iter=2):
+    """:func:`~.doppler._newton` for C combs at once (no known phase): ``y`` (B, C, K), ``f``, ``r`` (C,)
+    start values. Returns ``(f, r, Y)``, Y (C, K) the phase-aligned sums at the optimum."""
+    n_seg, n_c, n_k = y.shape
+    half = n_k // 2
+    scale = 1.0 + ratio * np.arange(-half, half + 1)
+    a, b = 2.0 * np.pi * scale, np.pi * scale
+    f, r = np.array(f, dtype=float), np.array(r, dtype=float)
+    step_f, step_r = np.zeros(n_c), np.zeros(n_c)
+    live = np.ones(n_c, dtype=bool)
+    for _ in range(n_iter):
+        phase = np.multiply.outer(tau, f) + np.multiply.outer(0.5 * tpow[:, 2], r)  # (B, C)
+        u = _cis(-np.multiply.outer(phase, scale))
+        u *= y
+        m = (tpow.T @ u.reshape(n_seg, -1).view(float)).view(complex).reshape(5, n_c, n_k)
+        y0, m1, m2 = m[0], m[1], m[2]
+        q = m[1:] * np.conj(y0)
+        g_f = 2.0 * (q[0].imag @ a)
+        g_r = 2.0 * (q[1].imag @ b)
+        h_ff = 2.0 * ((_abs2(m1) - q[1].real) @ (a * a))
+        h_fr = 2.0 * (((np.conj(m1) * m2).real - q[2].real) @ (a * b))
+        h_rr = 2.0 * ((_abs2(m2) - q[3].real) @ (b * b))
+        det = h_ff * h_rr - h_fr * h_fr
+        live &= np.isfinite(det) & (h_ff < 0.0) & (det > 0.0)
+        safe = np.where(live, det, 1.0)
+        step_f = np.where(live, -(h_rr * g_f - h_fr * g_r) / safe, 0.0)
+        step_r = np.where(live, -(h_ff * g_r - h_fr * g_f) / safe, 0.0)
+        f += step_f
+        r += step_r
+    return f, r, y0 - 1j * (step_f[:, None] * a * m1 + step_r[:, None] * b * m2)
+
+
+def _refine_all(grid, comb, combs):
+    """One pass of re-estimation of every comb (Newton from its estimate) with all the others removed,
+    all combs at once (each from the others' previous estimates)."""
+    n, fs, n_k = grid.n, grid.fs, comb.n_tones
+    extra = (combs[0].f_c.size - n_k) // 2
+    k = slice(extra, extra + n_k)
+    f_c = np.array([c.f_c for c in combs])
+    mix = np.stack([c.mix for c in combs], axis=1)
+    d_c = np.array([c.d_c for c in combs])
+    z = np.stack([c.y_wide for c in combs], axis=1) - _leakage_all(
+        grid, f_c, mix, np.stack([c.val for c in combs], axis=1), np.stack([c.nu for c in combs], axis=1))
+    y = z[:, :, k]
+    delta, rate, y_sum = _newton_all(y, grid.tau, grid.tpow, comb.tone_spacing_hz / comb.carrier_hz,
+                                     [c.doppler_hz for c in combs] - d_c, [c.rate for c in combs])
+    doppler = d_c + delta
+    # Amplitudes, noise and C/N0 as _fit, per comb.
+    p_sum = _abs2(y_sum)
+    energy = np.sum(_abs2(y), axis=0)
+    resid = np.sort(np.maximum(energy - p_sum / grid.n_seg, 0.0), axis=1)
+    sigma2 = 0.5 * (resid[:, (n_k - 1) // 2] + resid[:, n_k // 2]) / ((grid.n_seg - 1) * grid.seg)
+    pos = sigma2 > 0
+    s2 = np.where(pos, sigma2, 1.0)[:, None]
+    cn0_k = np.where(pos[:, None], np.maximum(p_sum - n * s2, 0.0) / n**2 * fs / s2, np.inf)
+    w = cn0_k @ comb.doppler_scale**2
+    mean_cn0 = np.mean(cn0_k, axis=1)
+    statistic = np.where(pos, np.mean(p_sum, axis=1) / (n * s2[:, 0]), np.inf)
+    tau = grid.tau[:, None, None]
+    s = comb.doppler_scale
+    cycles = tau * comb.offsets_hz + (np.multiply.outer(grid.tau, doppler) + np.multiply.outer(0.5 * grid.tau**2, rate))[:, :, None] * s
+    nu = comb.offsets_hz + (doppler + np.multiply.outer(grid.tau, rate))[:, :, None] * s
+    e = _cis(cycles)
+    g = e * mix[:, :, k] * _dirichlet(nu - f_c[:, k], grid.counts[:, None, None], grid.fs)
+    amp = np.sum(y * np.conj(g), axis=0) / np.sum(_abs2(g), axis=0)
+    val = (e * amp).astype(np.complex64)
+    with np.errstate(divide="ignore"):
+        sigma_hz = np.where(w > 0, np.sqrt(crlb_frequency_hz2(10.0 * np.log10(np.where(w > 0, w, 1.0)), n, fs)), np.inf)
+        cn0_dbhz = np.where(mean_cn0 > 0, 10.0 * np.log10(np.where(mean_cn0 > 0, mean_cn0, 1.0)), -np.inf)
+    for j, c in enumerate(combs):
+        c.doppler_hz, c.rate = float(doppler[j]), float(rate[j])
+        c.sigma_hz, c.cn0_dbhz, c.statistic = float(sigma_hz[j]), float(cn0_dbhz[j]), float(statistic[j])
+        c.amp, c.val, c.nu = amp[j], val[:, j], nu[:, j]
+
+
 def _spectrum_grid(n, target):
     """Segments B_s dividing n, nearest to ``target`` (n itself when n has no divisor in range)."""
     div = [b for b in range(max(16, target // 2), min(4 * target, n // 4) + 1) if n % b == 0]
@@ -427,9 +523,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
             _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
 
     for _ in range(n_refine if len(combs) > 1 else 0):
-        for j, c in enumerate(combs):
-            _fit(grid, comb, c, _cleaned(grid, comb, combs, j), max_rate=max_rate_hz_per_s, pfa=pfa,
-                 start=(c.doppler_hz - c.d_c, c.rate), resolve=False)
+        _refine_all(grid, comb, combs)
 
     def col(name, dtype=float):
         return np.array([getattr(c, name) for c in combs], dtype=dtype)
