@@ -62,6 +62,8 @@ _LINEAR_MARGIN = 1.3
 #: Reference times per track: first, middle, last. Rows: offset at the
 #: middle, slope, curvature of the residual at those times.
 _FEATURES = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 1.0], [-0.5, 1.0, -0.5]])
+#: Half-width of the window that smooths a track's value at a reference time [s].
+_LOCAL_S = 0.25
 #: Samples per track in the least squares and the identification.
 _MAX_SAMPLES = 120
 #: Largest light time, bounding its effect in the cell vote [s].
@@ -70,6 +72,8 @@ _LIGHT_TIME_MAX_S = 0.012
 _RATE_MAX_HZ_PER_S = 5e3
 #: Candidates per track fitted in the identification (nearest in Doppler at the track's middle).
 _ID_CANDIDATES = 24
+#: Chi-square (3 features) above which a cell's linearised fit does not count a track.
+_TRACK_CHI2_GATE = 25.0
 #: Cells voted at once (memory bound).
 _CHUNK_CELLS = 400
 
@@ -179,8 +183,14 @@ class _Track:
 
 
 def _local_value(t, f, sigma, t0, m):
-    """Weighted straight line through the ``m`` samples nearest ``t0``: value and sigma at ``t0``."""
+    """Weighted straight line through the ``m`` samples nearest ``t0`` (within ``_LOCAL_S``): value, sigma at ``t0``.
+
+    The window is short so that the curve's own curvature (up to ~50 Hz/s^2) biases the value by
+    less than ~1 Hz: snapshot tracks (one capture a second) use the nearest sample alone.
+    """
     near = np.argsort(np.abs(t - t0))[:m]
+    near = near[np.abs(t[near] - t0) <= _LOCAL_S] if np.abs(t[near[0]] - t0) <= _LOCAL_S else near[:1]
+    m = len(near)
     if m == 1 or np.ptp(t[near]) == 0:
         w = 1.0 / sigma[near] ** 2
         return np.sum(w * f[near]) / np.sum(w), 1.0 / np.sqrt(np.sum(w))
@@ -233,7 +243,7 @@ def _grid_around(centre_ecef_m, offsets_m, alt_m):
 class _Search:
     """The state shared by the stages of one identification."""
 
-    def __init__(self, tracks, eph, hz_per_mps, opts):
+    def __init__(self, tracks, eph, hz_per_mps, opts, region=None):
         self.tracks, self.eph, self.k, self.o = tracks, eph, hz_per_mps, opts
         self.t_c = float(np.mean([tr.t_mid_s for tr in tracks]))
         sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
@@ -250,6 +260,10 @@ class _Search:
         self.unit = p / np.where(r > 0, r, 1.0)[..., None]
         lam = np.arccos(np.clip(WGS84_A_M * cos_m / np.where(eph.ok, r, 1e12), -1, 1)) - np.arcsin(sin_m)
         self.half_angle = np.where(eph.ok, lam, -1.0)
+        if region is not None:  # (centre ECEF, radius): satellites that no point of it sees are dropped
+            centre, radius_m = region
+            cos_sep = self.unit @ (centre / np.linalg.norm(centre))
+            self.half_angle[np.arccos(np.clip(cos_sep, -1, 1)) > self.half_angle + radius_m / WGS84_A_M] = -1.0
 
     def _pairs(self, cells, radius_m):
         """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3)."""
@@ -269,7 +283,7 @@ class _Search:
         Returns
         -------
         count : ndarray of int, (n_cells,)
-            Tracks agreeing on one clock offset.
+            Tracks agreeing on one clock offset and explained by the cell's linearised fit.
         cost : ndarray, (n_cells,)
             Chi-square of a linearised fit of position offset, clock and drift to the
             agreeing tracks' features.
@@ -324,8 +338,8 @@ class _Search:
         tol_other = dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
         tol = reach * feat_grad + tol_other
         # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
-        # and the curvature of the Doppler across the cell (cell radius / range ~ radius / 1000 km).
-        sig_fit = 0.5 * tol_other + (radius_m / 1e6) * radius_m * feat_grad
+        # and the curvature of the Doppler across the cell (~ radius^2 / range, range >= 550 km, over 2 sigma).
+        sig_fit = 0.5 * tol_other + ((radius_m / 3e5) * radius_m + 0.5 * o["cross_track_max_m"]) * feat_grad
         b_max = o["clock_search_hz"]
         ok = (np.abs(feat[:, 1]) <= tol[:, 1]) & (np.abs(feat[:, 2]) <= tol[:, 2]) & \
              (np.abs(feat[:, 0]) <= b_max + tol[:, 0])
@@ -357,44 +371,54 @@ class _Search:
         assign = np.full(n_cells * n_tr, -1)
         assign[kc] = s[agree][chosen]
         assign = assign.reshape(n_cells, n_tr)
-        count = (assign >= 0).sum(axis=1)
         pick = np.flatnonzero(agree)[chosen]
-        chi2, moved = self._linear_fit(cells, radius_m, c[pick], k[pick], feat[pick], feat_jac[pick], sig_fit[pick],
-                                       t_mid[pick], clock)
-        return count, chi2, assign, clock, moved
+        chi2, moved, inlier = self._linear_fit(cells, radius_m, c[pick], k[pick], feat[pick], feat_jac[pick],
+                                               sig_fit[pick], t_mid[pick], clock)
+        assign[~inlier] = -1
+        return inlier.sum(axis=1), chi2, assign, clock, moved
 
     def _linear_fit(self, cells, radius_m, c, k, feat, feat_jac, sig, t_mid, clock):
-        """Each cell's position offset, clock and drift fitted to its chosen pairs' features (linearised).
+        """Each cell's position offset (east, north, up), clock and drift fitted to its chosen pairs' features (linearised).
 
-        Returns the fit's chi-square (n_cells,) and the moved cell centres (n_cells, 3).
+        Returns the fit's chi-square over the tracks it explains (n_cells,), the moved cell
+        centres (n_cells, 3) and which tracks it explains (n_cells, n_tracks).
         """
         o = self.o
         n_cells, n_tr = len(cells), len(self.tracks)
         lat, lon, _ = ecef_to_geodetic(cells)
-        en = C_e_n(lat, lon)[:, :, :2]  # (n_cells, 3, 2)
-        rows = np.zeros((n_cells, n_tr, 3, 4))
-        rows[c, k, :, :2] = np.einsum("mfx,mxy->mfy", feat_jac, en[c])
-        rows[c, k, 0, 2] = 1.0
-        rows[c, k, 0, 3] = t_mid - self.t_c
-        rows[c, k, 1, 3] = 1.0
+        enu = C_e_n(lat, lon)  # (n_cells, 3, 3)
+        rows = np.zeros((n_cells, n_tr, 3, 5))
+        rows[c, k, :, :3] = np.einsum("mfx,mxy->mfy", feat_jac, enu[c])
+        rows[c, k, 0, 3] = 1.0
+        rows[c, k, 0, 4] = t_mid - self.t_c
+        rows[c, k, 1, 4] = 1.0
         y = np.zeros((n_cells, n_tr, 3))
         y[c, k] = feat
         w = np.zeros((n_cells, n_tr, 3))
         w[c, k] = 1.0 / sig**2
-        A, y, w = rows.reshape(n_cells, -1, 4), y.reshape(n_cells, -1), w.reshape(n_cells, -1)
-        prior = np.array([radius_m, radius_m, o["clock_search_hz"], o["clock_drift_max_hz_per_s"]]) ** -2.0
-        N = np.einsum("cri,cr,crj->cij", A, w, A) + np.diag(prior)
-        x0 = np.stack([np.zeros(n_cells), np.zeros(n_cells), clock, np.zeros(n_cells)], axis=1)
-        rhs = np.einsum("cri,cr,cr->ci", A, w, y) + prior * x0
-        x = np.linalg.solve(N, rhs[..., None])[..., 0]
-        res = y - np.einsum("cri,ci->cr", A, x)
-        chi2 = np.einsum("cr,cr,cr->c", res, w, res) + np.sum(prior * (x - x0) ** 2, axis=1)
+        A, y, w = rows.reshape(n_cells, -1, 5), y.reshape(n_cells, -1), w.reshape(n_cells, -1)
+        prior = np.array([radius_m, radius_m, o["alt_tol_m"], o["clock_search_hz"],
+                          o["clock_drift_max_hz_per_s"]]) ** -2.0
+        zero = np.zeros(n_cells)
+        x0 = np.stack([zero, zero, zero, clock, zero], axis=1)
+        present = np.zeros((n_cells, n_tr), bool)
+        present[c, k] = True
+        inlier = present
+        for _ in range(2):  # fit, then refit without the tracks it cannot explain (junk, wrong pairs)
+            wi = w * np.repeat(inlier, 3, axis=1)
+            N = np.einsum("cri,cr,crj->cij", A, wi, A) + np.diag(prior)
+            rhs = np.einsum("cri,cr,cr->ci", A, wi, y) + prior * x0
+            x = np.linalg.solve(N, rhs[..., None])[..., 0]
+            res = y - np.einsum("cri,ci->cr", A, x)
+            per_track = (w * res**2).reshape(n_cells, n_tr, 3).sum(axis=2)
+            inlier = present & (per_track <= _TRACK_CHI2_GATE)
+        chi2 = np.where(inlier, per_track, 0.0).sum(axis=1) + np.sum(prior * (x - x0) ** 2, axis=1)
         d_en = x[:, :2]
         norm = np.linalg.norm(d_en, axis=1, keepdims=True)
         d_en = d_en * np.minimum(1.0, 1.5 * radius_m / np.maximum(norm, 1e-9))
-        moved = cells + np.einsum("cxy,cy->cx", en, d_en)
+        moved = cells + np.einsum("cxy,cy->cx", enu[:, :, :2], d_en)
         lat2, lon2, _ = ecef_to_geodetic(moved)
-        return chi2, geodetic_to_ecef(lat2, lon2, o["alt_m"])
+        return chi2, geodetic_to_ecef(lat2, lon2, o["alt_m"]), inlier
 
     def search_cells(self, cells, spacing_m, keep):
         """Vote, keep the best cells, split them 3 x 3, until the spacing is ~1 km.
@@ -542,7 +566,10 @@ class _Search:
                 pa, va = self.eph.state(sat, t[None, :] + tau + 0.5)
                 pb, vb = self.eph.state(sat, t[None, :] + tau - 0.5)
                 rate = _doppler(pa, va, pos, self.k)[0] - _doppler(pb, vb, pos, self.k)[0]
-                var = sig2[None, :] + np.einsum("ntx,xy,nty->nt", grad, cov, grad)
+                # The fix's own uncertainty inflates the sigma, but only up to a cap: a fix too poor
+                # to test a candidate must not make every candidate pass.
+                var = sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
+                                                 o["pos_sigma_cap_hz"] ** 2)
                 r = base[None, :] - dop
                 w = 1 / var
                 # Weighted least squares for (c, dtau) with priors c ~ N(0, sig_c), tau ~ N(0, sig_tau).
@@ -581,14 +608,16 @@ class _Search:
             if len(ks) > 1:
                 keep = ks[np.argmin([ids[k]["chi2"] / ids[k]["n"] for k in ks])]
                 sat[ks[ks != keep]] = -1
+        if (sat >= 0).sum() < o["min_identified"]:  # a lone match is not evidence of the fix it rests on
+            sat[:] = -1
         return sat
 
 
 _DEFAULTS = dict(
-    mask_slack_deg=5.0, id_mask_slack_deg=2.0, cross_track_max_m=300.0, alt_tol_m=500.0,
+    mask_slack_deg=5.0, id_mask_slack_deg=2.0, cross_track_max_m=300.0, alt_tol_m=1000.0,
     along_track_max_m=1500.0, along_track_sigma_m=600.0, sat_offset_max_hz=30.0, sat_offset_sigma_hz=8.0,
     clock_drift_max_hz_per_s=5.0, model_sigma_hz=1.0, alt_sigma_m=300.0, track_gate=4.0, false_alarm=1e-4,
-    min_margin=25.0, final_spacing_m=1500.0, n_final=3,
+    min_margin=25.0, final_spacing_m=1500.0, n_final=3, pos_sigma_cap_hz=3.0, min_identified=2,
 )
 
 
@@ -650,7 +679,8 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
         opts["alt_m"] = float(ecef_to_geodetic(prior)[2]) if alt_m is None else float(alt_m)
     else:
         opts["alt_m"] = 0.0 if alt_m is None else float(alt_m)
-    search = _Search([prepared[k] for k in live], eph, float(carrier_hz) / C_MPS, opts)
+    region = None if init_pos_ecef_m is None else (prior, 1.5 * prior_radius_m)
+    search = _Search([prepared[k] for k in live], eph, float(carrier_hz) / C_MPS, opts, region)
     if init_pos_ecef_m is not None:
         spacing = prior_radius_m / 5
         n = int(np.ceil(prior_radius_m / spacing))
