@@ -68,7 +68,7 @@ from ..errors import InputError
 from .crlb import crlb_frequency_hz2
 from .doppler import (MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, _abs2, _decimation,
                       _dechirped_peak, _interleaved, _newton, _phasors, _rate_dpt, _rate_grid, _segments,
-                      _threshold, coarse_fft)
+                      _threshold, _trimmed_sum, _wrap, coarse_fft)
 from .fft import fft
 from .pilot import PilotComb
 
@@ -224,6 +224,7 @@ class _Comb:
     sigma_hz: float = np.nan
     statistic: float = np.nan
     predicted_index: int = -1
+    z_wide: np.ndarray = None  # (n_seg, K + 2 extra) the tones the last batched fit used
 
 
 def _fit(grid, comb, c, z_wide, *, max_rate, pfa, start=None, resolve=True):
@@ -338,17 +339,19 @@ def _newton_all(y, tau, tpow, ratio, f, r, n_iter=2):
     return f, r, y0 - 1j * (step_f[:, None] * a * m1 + step_r[:, None] * b * m2)
 
 
-def _refine_all(grid, comb, combs):
-    """One pass of re-estimation of every comb (Newton from its estimate) with all the others removed,
-    all combs at once (each from the others' previous estimates)."""
+def _refine_all(grid, comb, combs, clean=True):
+    """One pass of re-estimation of every comb (Newton from its estimate) with all the others removed
+    (``clean``), all combs at once (each from the others' previous estimates)."""
     n, fs, n_k = grid.n, grid.fs, comb.n_tones
     extra = (combs[0].f_c.size - n_k) // 2
     k = slice(extra, extra + n_k)
     f_c = np.array([c.f_c for c in combs])
     mix = np.stack([c.mix for c in combs], axis=1)
     d_c = np.array([c.d_c for c in combs])
-    z = np.stack([c.y_wide for c in combs], axis=1) - _leakage_all(
-        grid, f_c, mix, np.stack([c.val for c in combs], axis=1), np.stack([c.nu for c in combs], axis=1))
+    z = np.stack([c.y_wide for c in combs], axis=1)
+    if clean:
+        z = z - _leakage_all(grid, f_c, mix, np.stack([c.val for c in combs], axis=1),
+                             np.stack([c.nu for c in combs], axis=1))
     y = z[:, :, k]
     delta, rate, y_sum = _newton_all(y, grid.tau, grid.tpow, comb.tone_spacing_hz / comb.carrier_hz,
                                      [c.doppler_hz for c in combs] - d_c, [c.rate for c in combs])
@@ -376,9 +379,69 @@ def _refine_all(grid, comb, combs):
         sigma_hz = np.where(w > 0, np.sqrt(crlb_frequency_hz2(10.0 * np.log10(np.where(w > 0, w, 1.0)), n, fs)), np.inf)
         cn0_dbhz = np.where(mean_cn0 > 0, 10.0 * np.log10(np.where(mean_cn0 > 0, mean_cn0, 1.0)), -np.inf)
     for j, c in enumerate(combs):
+        c.z_wide = z[:, j]
         c.doppler_hz, c.rate = float(doppler[j]), float(rate[j])
         c.sigma_hz, c.cn0_dbhz, c.statistic = float(sigma_hz[j]), float(cn0_dbhz[j]), float(statistic[j])
         c.amp, c.val, c.nu = amp[j], val[:, j], nu[:, j]
+
+
+def _decimate_all(grid, comb, combs, wide):
+    """:func:`_decimate` for several combs in one matrix product."""
+    cols = []
+    for c in combs:
+        c.f_c = _channels_hz(comb, c.d_c, wide)
+        c.mix = _cis(-np.multiply.outer(grid.t_abs, c.f_c))
+        spacing = comb.tone_spacing_hz * (1.0 + c.d_c / comb.carrier_hz)
+        cols.append(_interleaved(_phasors(c.d_c * grid.t_l, spacing * grid.t_l, wide), grid.xr.dtype))
+    y = (grid.xr @ np.hstack(cols)).view(grid.cdtype)
+    n_w = 2 * wide + 1
+    for j, c in enumerate(combs):
+        spacing = comb.tone_spacing_hz * (1.0 + c.d_c / comb.carrier_hz)
+        c.y_wide = y[:, j * n_w:(j + 1) * n_w] * _phasors(c.d_c * grid.t_m, spacing * grid.t_m, wide)
+
+
+def _dechirped_peaks(y, tau, rate, dt_dec):
+    """:func:`~.doppler._dechirped_peak` of C combs at once: ``y`` (B, C, K), ``rate`` (C,). Returns (C,) [Hz]."""
+    n_seg = y.shape[0]
+    z = y.transpose(1, 2, 0) * _cis(-np.multiply.outer(0.5 * np.asarray(rate), tau**2))[:, None, :]
+    n_fft = 2 * n_seg
+    p = _trimmed_sum(_abs2(fft(z.astype(np.complex64), n_fft, scratch=True)))  # (C, n_fft)
+    i = np.argmax(p, axis=1)
+    rows = np.arange(p.shape[0])
+    pm, p0, pp = p[rows, i - 1], p[rows, i], p[rows, (i + 1) % n_fft]
+    den = pm - 2.0 * p0 + pp
+    vertex = np.clip(0.5 * (pm - pp) / np.where(den != 0.0, den, -1.0), -0.5, 0.5) * (den != 0.0)
+    return _wrap((i + vertex) / (n_fft * dt_dec), 1.0 / dt_dec)
+
+
+def _track(grid, comb, pred, pred_rate, wide, max_rate, pfa):
+    """Every predicted comb fitted at once from its own tones (no cancellation yet), the comb
+    position checked as in :func:`_fit` (a shifted comb is refitted alone). Returns the combs."""
+    half = comb.n_tones // 2
+    extra = wide - half
+    ratio = comb.tone_spacing_hz / comb.carrier_hz
+    combs = [_Comb(float(p), None, predicted_index=i) for i, p in enumerate(pred)]
+    _decimate_all(grid, comb, combs, wide)
+    y = np.stack([c.y_wide[:, extra:extra + comb.n_tones] for c in combs], axis=1)
+    f_res = _dechirped_peaks(y, grid.tau, pred_rate, grid.seg / grid.fs)
+    for c, f, r in zip(combs, f_res, pred_rate):
+        c.doppler_hz, c.rate = c.d_c + f, float(r)
+    _refine_all(grid, comb, combs, clean=False)
+    delta = np.array([c.doppler_hz - c.d_c for c in combs])
+    rate = np.array([c.rate for c in combs])
+    phase = np.multiply.outer(grid.tau, delta) + np.multiply.outer(0.5 * grid.tau**2, rate)
+    u = _cis(-np.multiply.outer(phase, 1.0 + ratio * np.arange(-wide, wide + 1)))
+    power = _abs2(np.sum(np.stack([c.y_wide for c in combs], axis=1) * u, axis=0))  # (C, W)
+    box = np.cumsum(np.pad(power, ((0, 0), (1, 0))), axis=1)
+    shift = np.argmax(box[:, comb.n_tones:] - box[:, :-comb.n_tones], axis=1) - extra
+    for c, sh in zip(combs, shift):
+        if sh:
+            centre = c.doppler_hz
+            c.d_c = centre + sh * comb.tone_spacing_hz * (1.0 + centre / comb.carrier_hz)
+            _decimate(grid, comb, c, wide)
+            _fit(grid, comb, c, c.y_wide.astype(complex), max_rate=max_rate, pfa=pfa, start=(0.0, c.rate),
+                 resolve=False)
+    return combs
 
 
 def _spectrum_grid(n, target):
@@ -429,7 +492,7 @@ def _check(iq, fs, predicted_hz, predicted_rate):
 
 def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_doppler_hz=MAX_DOPPLER_HZ,
                max_rate_hz_per_s=MAX_RATE_HZ_PER_S, predicted_hz=None, predicted_rate_hz_per_s=None,
-               gate_hz=None, search=True, n_refine=2):
+               gate_hz=None, search=True, n_refine=2, batch=True):
     """Doppler, rate and C/N0 of every pilot comb in one block.
 
     Parameters
@@ -499,11 +562,16 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     # Tracking: each prediction from its own tones; kept if the coherent power passes the detector.
     n_cells = grid.n_seg * max(1, int(np.ceil(2.0 * max_rate_hz_per_s * dur**2)))
     thr = _threshold(comb.n_tones, n_cells, pfa)
-    for i, p in enumerate(pred[:max_combs]):
-        start = (None, float(pred_rate[i])) if pred_rate is not None else None
-        c = fit_new(float(p), start, i)
-        if not (c.statistic > thr and abs(c.doppler_hz - p) <= gate + 2.0 * df) or _duplicate(comb, c, combs[:-1], dur):
-            combs.pop()
+    if pred_rate is not None and pred.size and batch:
+        for c in _track(grid, comb, pred[:max_combs], pred_rate[:max_combs], wide, max_rate_hz_per_s, pfa):
+            if c.statistic > thr and abs(c.doppler_hz - pred[c.predicted_index]) <= gate + 2.0 * df and not _duplicate(comb, c, combs, dur):
+                combs.append(c)
+    else:
+        for i, p in enumerate(pred[:max_combs]):
+            start = (None, float(pred_rate[i])) if pred_rate is not None else None
+            c = fit_new(float(p), start, i)
+            if not (c.statistic > thr and abs(c.doppler_hz - p) <= gate + 2.0 * df) or _duplicate(comb, c, combs[:-1], dur):
+                combs.pop()
 
     if search and len(combs) < max_combs:
         spectrum = fft(iq)
