@@ -24,7 +24,20 @@ multi-satellite Starlink receivers of Humphreys 2023 and Kozhaya 2023]:
    to the within-segment chirp curvature, ~1e-4 rad) and the search repeats.
 4. After the last detection, ``n_refine`` passes re-estimate every comb
    (Newton from its estimate) with all the others removed from its decimated
-   tones, so early estimates lose the bias of combs found later.
+   tones, so early estimates lose the bias of combs found later. Each pass
+   treats all combs at once (one leakage product, one batched Newton), each
+   cleaned with the others' estimates of the previous pass (Jacobi).
+
+Tracking (``predicted_hz`` and ``predicted_rate_hz_per_s`` given,
+``batch=True``): all predictions are decimated in one matrix product and
+fitted at once from their own tones (dechirped peak, Newton, position
+check), then the refinement passes clean them. ``batch=False`` fits them
+one after another as the search does; both end within ~0.03 sigma of each
+other (tests/test_multicomb.py). A replay that tracks should call with the
+previous block's estimates propagated (``doppler_hz + rate * block_s``,
+the rate) and ``search=False``, and with ``search=True`` every k-th block
+(and whenever a track is lost) to pick up rising satellites: the search
+costs ~2x the tracking fit.
 
 Contributions of one comb to another's decimated tones are closed forms: a
 tone at local frequency nu in segment m, seen by a channel mixed at f_c,
@@ -47,14 +60,14 @@ Not handled: ``delta`` of ~2-3/T with similar rates gives biased estimates
 ~1/T gives spurious combs (the pair looks like one ten-tone comb).
 
 Cost (tools/bench_multicomb.py, CPU time, one core, 7 combs, 0.1 s at 2.5 MS/s):
-~26 ms per block with the search, ~18 ms tracking (5.3x real time). Tracking
-time goes to the cross-comb leakage (~30 %: a Dirichlet kernel per pair of a
-tone and a channel within 4 decimated bands, ~3 per channel, at every
-segment, 21 cleanings), the fits' transcendentals and Newton (~35 %), and
-the decimation products (~15 %, seven (B, 2L) x (2L, 26) float32 products).
-Transcendentals are single precision (1e-7 rad). 20x needs the block's FFT
-to feed the channels (bins around each tone, a short inverse FFT) and a
-tapered band that limits the leakage reach; not done.
+see the commit log for the latest numbers; tracking ~12 ms per block (~8x real
+time), of which the cross-comb leakage ~3.5 ms (two passes; a Dirichlet kernel
+per pair of a tone and a channel within 4 decimated bands, ~460 pairs, at
+every segment), the decimation product ~2.6 ms, Newton ~1.8 ms, and the
+amplitude fits and per-comb bookkeeping the rest. Transcendentals are single
+precision (1e-7 rad). 20x needs the block's FFT to feed the channels (bins
+around each tone, a short inverse FFT) and a tapered band that limits the
+leakage reach; not done.
 
 Output order is detection order (strongest first in the full search;
 predicted combs first, in the order given, in tracking mode).
@@ -286,6 +299,19 @@ def _cleaned(grid, comb, combs, j):
     return c.y_wide.astype(complex) if r is None else c.y_wide - r
 
 
+def _comb_cis(a_cycles, b_cycles, half):
+    """exp(j 2 pi (a + k b)) for k = -half..half, shape a.shape + (2 half + 1,): two :func:`_cis`
+    calls and a product per further tone (as :func:`~.doppler._phasors`, single-precision phases)."""
+    e0, z = _cis(a_cycles), _cis(b_cycles)
+    out = np.empty(a_cycles.shape + (2 * half + 1,), dtype=complex)
+    out[..., half] = e0
+    zc = np.conj(z)
+    for k in range(1, half + 1):
+        np.multiply(out[..., half + k - 1], z, out=out[..., half + k])
+        np.multiply(out[..., half - k + 1], zc, out=out[..., half - k])
+    return out
+
+
 def _leakage_all(grid, f_c, mix, val, nu):
     """What every comb's channels receive from all the other combs' tones, in one product.
 
@@ -319,7 +345,7 @@ def _newton_all(y, tau, tpow, ratio, f, r, n_iter=2):
     live = np.ones(n_c, dtype=bool)
     for _ in range(n_iter):
         phase = np.multiply.outer(tau, f) + np.multiply.outer(0.5 * tpow[:, 2], r)  # (B, C)
-        u = _cis(-np.multiply.outer(phase, scale))
+        u = _comb_cis(-phase, -ratio * phase, half)
         u *= y
         m = (tpow.T @ u.reshape(n_seg, -1).view(float)).view(complex).reshape(5, n_c, n_k)
         y0, m1, m2 = m[0], m[1], m[2]
@@ -367,11 +393,12 @@ def _refine_all(grid, comb, combs, clean=True):
     w = cn0_k @ comb.doppler_scale**2
     mean_cn0 = np.mean(cn0_k, axis=1)
     statistic = np.where(pos, np.mean(p_sum, axis=1) / (n * s2[:, 0]), np.inf)
-    tau = grid.tau[:, None, None]
     s = comb.doppler_scale
-    cycles = tau * comb.offsets_hz + (np.multiply.outer(grid.tau, doppler) + np.multiply.outer(0.5 * grid.tau**2, rate))[:, :, None] * s
+    phase = np.multiply.outer(grid.tau, doppler) + np.multiply.outer(0.5 * grid.tau**2, rate)  # (B, C)
     nu = comb.offsets_hz + (doppler + np.multiply.outer(grid.tau, rate))[:, :, None] * s
-    e = _cis(cycles)
+    # Tone k: k spacing tau + s_k phase = phase + k (spacing tau + ratio phase).
+    ratio = comb.tone_spacing_hz / comb.carrier_hz
+    e = _comb_cis(phase, comb.tone_spacing_hz * grid.tau[:, None] + ratio * phase, n_k // 2)
     g = e * mix[:, :, k] * _dirichlet(nu - f_c[:, k], grid.counts[:, None, None], grid.fs)
     amp = np.sum(y * np.conj(g), axis=0) / np.sum(_abs2(g), axis=0)
     val = (e * amp).astype(np.complex64)
@@ -430,7 +457,7 @@ def _track(grid, comb, pred, pred_rate, wide, max_rate, pfa):
     delta = np.array([c.doppler_hz - c.d_c for c in combs])
     rate = np.array([c.rate for c in combs])
     phase = np.multiply.outer(grid.tau, delta) + np.multiply.outer(0.5 * grid.tau**2, rate)
-    u = _cis(-np.multiply.outer(phase, 1.0 + ratio * np.arange(-wide, wide + 1)))
+    u = _comb_cis(-phase, -ratio * phase, wide)
     power = _abs2(np.sum(np.stack([c.y_wide for c in combs], axis=1) * u, axis=0))  # (C, W)
     box = np.cumsum(np.pad(power, ((0, 0), (1, 0))), axis=1)
     shift = np.argmax(box[:, comb.n_tones:] - box[:, :-comb.n_tones], axis=1) - extra
@@ -522,6 +549,9 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         the block plus the searches).
     n_refine : int
         Re-estimation passes with all other combs removed.
+    batch : bool
+        Tracking with predicted rates: fit all predictions at once (default)
+        rather than one at a time (see module docstring).
 
     Returns
     -------
@@ -564,13 +594,15 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     thr = _threshold(comb.n_tones, n_cells, pfa)
     if pred_rate is not None and pred.size and batch:
         for c in _track(grid, comb, pred[:max_combs], pred_rate[:max_combs], wide, max_rate_hz_per_s, pfa):
-            if c.statistic > thr and abs(c.doppler_hz - pred[c.predicted_index]) <= gate + 2.0 * df and not _duplicate(comb, c, combs, dur):
+            near = abs(c.doppler_hz - pred[c.predicted_index]) <= gate + 2.0 * df
+            if c.statistic > thr and near and not _duplicate(comb, c, combs, dur):
                 combs.append(c)
     else:
         for i, p in enumerate(pred[:max_combs]):
             start = (None, float(pred_rate[i])) if pred_rate is not None else None
             c = fit_new(float(p), start, i)
-            if not (c.statistic > thr and abs(c.doppler_hz - p) <= gate + 2.0 * df) or _duplicate(comb, c, combs[:-1], dur):
+            near = abs(c.doppler_hz - p) <= gate + 2.0 * df
+            if not (c.statistic > thr and near) or _duplicate(comb, c, combs[:-1], dur):
                 combs.pop()
 
     if search and len(combs) < max_combs:
