@@ -364,62 +364,63 @@ class _Search:
         d_off = (feat[:, 0] - clock[c]) / (tol[:, 0] + 0.5 * width * (end - start)[c])
         cost2 = d_off**2 + (feat[:, 1] / tol[:, 1]) ** 2 + (feat[:, 2] / tol[:, 2]) ** 2
         agree = np.abs(d_off) <= 1.0
-        key = (c * n_tr + k)[agree]
-        order = np.lexsort((cost2[agree], key))
-        first = np.unique(key[order], return_index=True)[1]
-        chosen = order[first]
-        kc = key[chosen]
-        assign = np.full(n_cells * n_tr, -1)
-        assign[kc] = s[agree][chosen]
-        assign = assign.reshape(n_cells, n_tr)
-        pick = np.flatnonzero(agree)[chosen]
-        chi2, moved, inlier = self._linear_fit(cells, radius_m, c[pick], k[pick], feat[pick], feat_jac[pick],
-                                               sig_fit[pick], t_mid[pick], clock)
-        assign[~inlier] = -1
-        return inlier.sum(axis=1), chi2, assign, clock, moved
+        sel = np.flatnonzero(agree)
+        return self._linear_fit(cells, radius_m, c[sel], k[sel], s[sel], feat[sel], feat_jac[sel], sig_fit[sel],
+                                t_mid[sel], clock, cost2[sel])
 
-    def _linear_fit(self, cells, radius_m, c, k, feat, feat_jac, sig, t_mid, clock):
-        """Each cell's position offset (east, north, up), clock and drift fitted to its chosen pairs' features (linearised).
+    def _linear_fit(self, cells, radius_m, c, k, s, feat, feat_jac, sig, t_mid, clock, cost0):
+        """Each cell's position offset (east, north, up), clock and drift fitted to its pairs' features (linearised).
 
-        Returns the fit's chi-square over the tracks it explains (n_cells,), the moved cell
-        centres (n_cells, 3) and which tracks it explains (n_cells, n_tracks).
+        Every track starts with its pair of least ``cost0``; after each fit, each track takes the pair
+        its cell's fit explains best, and tracks no pair of which is explained are left out.
+
+        Returns
+        -------
+        count, chi2, assign, clock, moved
+            As :meth:`vote`.
         """
         o = self.o
         n_cells, n_tr = len(cells), len(self.tracks)
         lat, lon, _ = ecef_to_geodetic(cells)
         enu = C_e_n(lat, lon)  # (n_cells, 3, 3)
-        rows = np.zeros((n_cells, n_tr, 3, 5))
-        rows[c, k, :, :3] = np.einsum("mfx,mxy->mfy", feat_jac, enu[c])
-        rows[c, k, 0, 3] = 1.0
-        rows[c, k, 0, 4] = t_mid - self.t_c
-        rows[c, k, 1, 4] = 1.0
-        y = np.zeros((n_cells, n_tr, 3))
-        y[c, k] = feat
-        w = np.zeros((n_cells, n_tr, 3))
-        w[c, k] = 1.0 / sig**2
-        A, y, w = rows.reshape(n_cells, -1, 5), y.reshape(n_cells, -1), w.reshape(n_cells, -1)
+        A = np.zeros((len(c), 3, 5))
+        A[:, :, :3] = np.einsum("mfx,mxy->mfy", feat_jac, enu[c])
+        A[:, 0, 3] = 1.0
+        A[:, 0, 4] = t_mid - self.t_c
+        A[:, 1, 4] = 1.0
+        w = 1.0 / sig**2
         prior = np.array([radius_m, radius_m, o["alt_tol_m"], o["clock_search_hz"],
                           o["clock_drift_max_hz_per_s"]]) ** -2.0
         zero = np.zeros(n_cells)
         x0 = np.stack([zero, zero, zero, clock, zero], axis=1)
-        present = np.zeros((n_cells, n_tr), bool)
-        present[c, k] = True
-        inlier = present
-        for _ in range(2):  # fit, then refit without the tracks it cannot explain (junk, wrong pairs)
-            wi = w * np.repeat(inlier, 3, axis=1)
-            N = np.einsum("cri,cr,crj->cij", A, wi, A) + np.diag(prior)
-            rhs = np.einsum("cri,cr,cr->ci", A, wi, y) + prior * x0
+        key = c * n_tr + k
+        pair_cost = cost0
+        inlier_pair = np.ones(len(c), bool)
+        for _ in range(3):
+            order = np.lexsort((pair_cost, key))
+            chosen = order[np.unique(key[order], return_index=True)[1]]
+            chosen = chosen[inlier_pair[chosen]]
+            N = np.tile(np.diag(prior), (n_cells, 1, 1))
+            np.add.at(N, c[chosen], np.einsum("mfi,mf,mfj->mij", A[chosen], w[chosen], A[chosen]))
+            rhs = prior * x0
+            np.add.at(rhs, c[chosen], np.einsum("mfi,mf,mf->mi", A[chosen], w[chosen], feat[chosen]))
             x = np.linalg.solve(N, rhs[..., None])[..., 0]
-            res = y - np.einsum("cri,ci->cr", A, x)
-            per_track = (w * res**2).reshape(n_cells, n_tr, 3).sum(axis=2)
-            inlier = present & (per_track <= _TRACK_CHI2_GATE)
-        chi2 = np.where(inlier, per_track, 0.0).sum(axis=1) + np.sum(prior * (x - x0) ** 2, axis=1)
+            res = feat - np.einsum("mfi,mi->mf", A, x[c])
+            pair_cost = np.sum(w * res**2, axis=1)
+            inlier_pair = pair_cost <= _TRACK_CHI2_GATE
+        order = np.lexsort((pair_cost, key))
+        chosen = order[np.unique(key[order], return_index=True)[1]]
+        chosen = chosen[inlier_pair[chosen]]
+        assign = np.full(n_cells * n_tr, -1)
+        assign[key[chosen]] = s[chosen]
+        chi2 = np.bincount(c[chosen], pair_cost[chosen], n_cells) + np.sum(prior * (x - x0) ** 2, axis=1)
         d_en = x[:, :2]
         norm = np.linalg.norm(d_en, axis=1, keepdims=True)
         d_en = d_en * np.minimum(1.0, 1.5 * radius_m / np.maximum(norm, 1e-9))
         moved = cells + np.einsum("cxy,cy->cx", enu[:, :, :2], d_en)
         lat2, lon2, _ = ecef_to_geodetic(moved)
-        return chi2, geodetic_to_ecef(lat2, lon2, o["alt_m"]), inlier
+        assign = assign.reshape(n_cells, n_tr)
+        return (assign >= 0).sum(axis=1), chi2, assign, x[:, 3], geodetic_to_ecef(lat2, lon2, o["alt_m"])
 
     def search_cells(self, cells, spacing_m, keep):
         """Vote, keep the best cells, split them 3 x 3, until the spacing is ~1 km.
