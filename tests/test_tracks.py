@@ -89,3 +89,25 @@ def test_remove_outliers_takes_exactly_the_injected_sidelobe_locks():
                    np.full(t.size, 0.5))
         clean = remove_outliers(tr)
         assert set(np.round(clean.t_s)) == set(np.round(np.delete(t, bad)))
+
+
+def test_join_fragments_rejoins_a_comb_lost_for_a_while_and_keeps_others_apart():
+    from leosop.replay.tracks import Track, join_fragments
+
+    t, dop, rate, start = _passes(3, 60.0, 0.5)
+    rng = np.random.default_rng(5)
+
+    def piece(s, lo, hi):
+        k = (t >= lo) & (t < hi)
+        f = dop[s, k] + rng.normal(0, 0.1, k.sum())
+        return Track(t[k], start + (t[k] * 1e9).astype("timedelta64[ns]"), f, rate[s, k],
+                     np.full(k.sum(), 45.0), np.full(k.sum(), 0.1))
+
+    # Satellite 0 in three pieces (gaps of 3 s and 6 s), satellites 1 and 2 whole.
+    pieces = [piece(0, 0, 10), piece(0, 13, 30), piece(0, 36, 60), piece(1, 0, 60), piece(2, 5, 50)]
+    joined = join_fragments(pieces, max_gap_s=10.0)
+    assert sorted(len(tr) for tr in joined) == sorted([len(pieces[0]) + len(pieces[1]) + len(pieces[2]),
+                                                       len(pieces[3]), len(pieces[4])])
+    for tr in joined:
+        k = np.searchsorted(t, tr.t_s)
+        assert np.min(np.max(np.abs(dop[:, k] - tr.doppler_hz), axis=1)) < 1.0  # one satellite each

@@ -29,13 +29,19 @@ from ..signal.doppler import cubic_bias_hz
 from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
-from .tracks import Detections, Tracker, remove_outliers
+from .tracks import Detections, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
 
 #: Sample rate the comb search works at [Hz]: the comb (+-176 kHz) under
 #: +-300 kHz of Doppler fits with margin; wider recordings are narrowed to it.
 WORK_RATE_HZ = 2.5e6
+#: In a continuous recording, blocks between full spectrum searches: the
+#: others only fit the combs the tracks predict (tracking mode, about half
+#: the cost), so a rising satellite is picked up within this many blocks.
+SEARCH_EVERY = 10
+#: Longest gap between two tracks of one comb that are joined [s].
+JOIN_GAP_S = 10.0
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
 SPECTRUM_COLUMNS = 600
 SPECTRUM_BINS = 1024
@@ -250,7 +256,14 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     block_len = {}
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
         iq = narrow(rec.read(b.start, b.n_samples), factor)
-        found = find_combs(iq, fs, comb=comb)
+        # Tracking mode between full searches, where blocks follow each other.
+        contiguous = k > 0 and b.start == blocks[k - 1].start + blocks[k - 1].n_samples
+        pred = tracker.predictions(b.t_s) if contiguous else None
+        if pred is not None and k % SEARCH_EVERY:
+            found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
+                               search=False)
+        else:
+            found = find_combs(iq, fs, comb=comb)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
         shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz
@@ -260,7 +273,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         if k % every == 0:
             spec_t.append(b.t_s)
             spec.append(_spectrum(iq))
-    tracks = [remove_outliers(tr) for tr in tracker.finish()]
+    tracks = [remove_outliers(tr) for tr in join_fragments(tracker.finish(), max(JOIN_GAP_S, 2.0 * max_gap_s))]
     for tr in tracks:
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,

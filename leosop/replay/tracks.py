@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Detections", "Track", "Tracker", "remove_outliers"]
+__all__ = ["Detections", "Track", "Tracker", "join_fragments", "remove_outliers"]
 
 
 @dataclass
@@ -110,14 +110,32 @@ class Tracker:
         gate = GATE_HZ + GATE_HZ_PER_S * dt + GATE_HZ_PER_S2 * dt**2
         if len(rows) == 1:
             r = r_last if np.isfinite(r_last) else 0.0
-            return f_last + r * dt, gate + 3.0 * sigma_rate * dt
+            return f_last + r * dt, r, gate + 3.0 * sigma_rate * dt
         recent = rows[-_FIT_POINTS:]
         tau = np.array([r[0] for r in recent]) - t_last
         f = np.array([r[2] for r in recent])
         sigma = np.array([r[5] for r in recent])
         w = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
         deg = 1 if len(recent) <= 3 or np.ptp(tau) == 0 else 2
-        return np.polyval(np.polyfit(tau, f, deg, w=w), dt), gate
+        poly = np.polyfit(tau, f, deg, w=w)
+        return np.polyval(poly, dt), np.polyval(np.polyder(poly), dt), gate
+
+    def predictions(self, t_s):
+        """Doppler and rate at ``t_s`` of every track fed in the last block, (n,) each; None after a birth.
+
+        For tracking-mode estimation of the next block (the estimator then
+        fits each prediction instead of searching the spectrum). None when a
+        track was born in the last block (it has no reliable rate yet, and a
+        new comb calls for a full search anyway) or when there is no track.
+        """
+        if not self._active:
+            return None
+        t_last = max(rows[-1][0] for rows in self._active)
+        live = [rows for rows in self._active if rows[-1][0] == t_last]
+        if any(len(rows) < 2 for rows in live):
+            return None
+        f, r, _ = np.array([self._predict(rows, t_s) for rows in live]).T
+        return f, r
 
     def update(self, t_s, time_utc, det, block_s=None):
         """Take the detections of the block centred at ``t_s`` (``time_utc``), ``block_s`` long.
@@ -138,7 +156,7 @@ class Tracker:
         self._active = keep
         claimed = np.zeros(len(det), bool)
         if self._active and len(det):
-            pred, gate = np.array([self._predict(rows, t_s) for rows in self._active]).T
+            pred, _, gate = np.array([self._predict(rows, t_s) for rows in self._active]).T
             cost = np.abs(det.doppler_hz[None, :] - pred[:, None]) / gate[:, None]
             big = 1e6
             i, j = linear_sum_assignment(np.where(cost <= 1.0, cost, big))
@@ -226,3 +244,52 @@ def remove_outliers(track):
         return track
     return Track(track.t_s[keep], track.time_utc[keep], track.doppler_hz[keep], track.doppler_rate_hz_per_s[keep],
                  track.cn0_dbhz[keep], track.sigma_hz[keep], track.sat_id, track.match_rms_hz)
+
+
+def _extrapolate(t, f, sigma, t_new):
+    """Weighted quadratic (line for fewer than 4 points) through (t, f), evaluated at ``t_new``."""
+    t, f, sigma = t[-_FIT_POINTS:], f[-_FIT_POINTS:], sigma[-_FIT_POINTS:]
+    w = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
+    deg = 1 if t.size < 4 or np.ptp(t) == 0 else 2
+    return np.polyval(np.polyfit(t - t[-1], f, deg, w=w), np.asarray(t_new) - t[-1])
+
+
+def join_fragments(tracks, max_gap_s):
+    """Tracks that continue one another joined into one (a comb lost for a while and found again).
+
+    A later track B continues an earlier A when B starts after A ends, within
+    ``max_gap_s``, and A's curve extrapolated to B's first detections (and
+    B's curve back to A's last) falls within the tracker's gate. Each A is
+    joined to the B that fits best, repeatedly, so chains join too.
+
+    Returns
+    -------
+    list of Track
+        In order of their first block.
+    """
+    tracks = sorted(tracks, key=lambda tr: tr.t_s[0])
+    joined = True
+    while joined:
+        joined = False
+        for i, a in enumerate(tracks):
+            best, best_cost = None, 1.0
+            for j, b in enumerate(tracks):
+                dt = b.t_s[0] - a.t_s[-1]
+                if j == i or not 0 < dt <= max_gap_s or len(a) < 2 or len(b) < 2:
+                    continue
+                gate = GATE_HZ + GATE_HZ_PER_S * dt + GATE_HZ_PER_S2 * dt**2
+                fwd = _extrapolate(a.t_s, a.doppler_hz, a.sigma_hz, b.t_s[:3]) - b.doppler_hz[:3]
+                back = _extrapolate(b.t_s[:_FIT_POINTS], b.doppler_hz[:_FIT_POINTS], b.sigma_hz[:_FIT_POINTS],
+                                    a.t_s[-1]) - a.doppler_hz[-1]
+                cost = max(np.max(np.abs(fwd)), abs(float(back))) / gate
+                if cost < best_cost:
+                    best, best_cost = j, cost
+            if best is not None:
+                b = tracks[best]
+                cat = lambda name: np.concatenate([getattr(a, name), getattr(b, name)])  # noqa: E731
+                tracks[i] = Track(cat("t_s"), cat("time_utc"), cat("doppler_hz"), cat("doppler_rate_hz_per_s"),
+                                  cat("cn0_dbhz"), cat("sigma_hz"))
+                del tracks[best]
+                joined = True
+                break
+    return tracks

@@ -54,7 +54,8 @@ measured at 0.05 s blocks, 45 dB-Hz (tests/test_multicomb.py): with
 ``delta`` = 150 Hz (7.5/T) and rates 2 kHz/s apart both combs are found
 within 1 sigma; at the same rate and ``m = 0`` with ``delta`` = 0.5 Hz one
 comb is reported (a candidate within 2/T, modulo the spacing, and 4/T^2 in
-rate of a comb already found is taken as its residue and ends the search).
+rate of a comb already found is taken as its residue, subtracted and not
+reported; the search goes on, up to three residues per block).
 Not handled: ``delta`` of ~2-3/T with similar rates gives biased estimates
 (~6 sigma seen) or a third, spurious comb; ``m = +-1`` with ``delta`` below
 ~1/T gives spurious combs (the pair looks like one ten-tone comb).
@@ -492,6 +493,10 @@ def _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s):
     np.subtract.at(spectrum, b % n, (weight * dft[np.arange(comb.n_tones)[:, None], b % n_seg_s]).astype(spectrum.dtype))
 
 
+#: Residues of found combs removed in one search before it gives up.
+_MAX_RESIDUES = 3
+
+
 def _duplicate(comb, c, combs, dur):
     """True when ``c`` lies within 2/T (modulo the spacing) and 4/T^2 of a comb already found."""
     sp = comb.tone_spacing_hz
@@ -612,14 +617,20 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * dur)))
         for c in combs:
             _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
+        residues = 0
         while len(combs) < max_combs:
             coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa)
             if not coarse.detected:
                 break
             c = fit_new(coarse.doppler_hz, None, -1)
             if _duplicate(comb, c, combs[:-1], dur):
+                # The residue of a comb already found (nearly coinciding tones are
+                # not cancelled exactly): remove it too and search on, a few times
+                # at most, rather than miss the weaker combs behind it.
                 combs.pop()
-                break
+                residues += 1
+                if residues > _MAX_RESIDUES:
+                    break
             _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
 
     for _ in range(n_refine if len(combs) > 1 else 0):
