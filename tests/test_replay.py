@@ -149,3 +149,15 @@ def test_bundled_example_identified_and_fixed_with_and_without_a_prior(capsys):
         # 30 snapshots of 20 ms with 300 m (1 sigma) along-track errors: sigmas of ~10 m per axis;
         # 5 sigma of the horizontal ones.
         assert err_m < 5.0 * np.linalg.norm(s["sigma_enu_m"])
+
+
+def test_continuous_recording_in_tracking_mode_identifies_every_satellite(tmp_path, capsys):
+    path = tmp_path / "cont.sigmf-meta"
+    # Five satellites of the default set for 3 s: 30 blocks of 0.1 s, full searches at blocks 0, 10, 20
+    # and tracking mode (predicted combs only) in between.
+    _generate(path, "--duration-s", "3", "--sat", "70002", "70524", "71563", "71607", "72129")
+    code, doc, err = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static")
+    assert code == 0, err
+    ids = [t["sat_id"] for t in doc["tracks"]]
+    assert sorted(ids) == ["70002", "70524", "71563", "71607", "72129"]
+    assert all(t["n_blocks"] >= 28 for t in doc["tracks"])  # no block lost to tracking mode

@@ -257,7 +257,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
         iq = narrow(rec.read(b.start, b.n_samples), factor)
         # Tracking mode between full searches, where blocks follow each other.
-        contiguous = k > 0 and b.start == blocks[k - 1].start + blocks[k - 1].n_samples
+        # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
+        contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
         pred = tracker.predictions(b.t_s) if contiguous else None
         if pred is not None and k % SEARCH_EVERY:
             found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
