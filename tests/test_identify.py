@@ -72,6 +72,25 @@ def test_track_of_a_satellite_missing_from_the_snapshot_and_a_spurious_track_are
     assert tracks[0].match_rms_hz is None and tracks[-1].sat_id is None
 
 
+def test_interpolated_apparent_states_match_sgp4_with_light_time(walker):
+    from leosop.positioning.measurements import sv_states_from_tle
+    from leosop.replay.identify import _Ephemeris
+
+    rx = geodetic_to_ecef(0.6, 1.9, 300.0)
+    t0 = walker.epochs_utc[0] + np.timedelta64(3, "h")
+    eph = _Ephemeris(walker, t0, 100.0)
+    sats = np.arange(0, len(walker), 397)
+    t_s = np.linspace(3.0, 97.0, len(sats))  # off the 10 s nodes
+    want_p, want_v, _ = sv_states_from_tle(walker, walker.sat_ids[sats], t0 + (t_s * 1e9).astype("timedelta64[ns]"),
+                                           rx)
+    got_p, got_v = eph.state_received(sats, t_s, rx)
+    # Hermite interpolation over 10 s nodes: ~1 mm from the orbit's shape, plus ~1 cm because SGP4's own
+    # velocity (the node slopes) differs from the derivative of its positions by ~1 cm/s; the same
+    # difference bounds the velocities (sv_states_from_tle differentiates positions): 0.4 Hz at Ku band.
+    assert np.max(np.linalg.norm(got_p - want_p, axis=1)) < 0.05
+    assert np.max(np.linalg.norm(got_v - want_v, axis=1)) < 0.03
+
+
 def test_unknown_option_is_an_input_error(walker):
     with pytest.raises(InputError, match="tolerance_hz"):
         identify_tracks([], walker, tolerance_hz=3.0)

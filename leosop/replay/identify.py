@@ -149,12 +149,20 @@ class _Ephemeris:
         return pos, vel
 
     def state_received(self, sat, t_s, pos_rx_ecef_m):
-        """State at the transmit time, in the ECEF frame of the reception time ``t_s``."""
+        """Apparent state: position at the transmit time in the ECEF frame of the reception time
+        ``t_s``, velocity its derivative over reception time (as
+        :func:`~leosop.positioning.measurements.sv_states_from_tle`)."""
         pos, vel = self.state(sat, t_s)
         for _ in range(2):  # each pass gains |range rate| / c ~ 3e-5
             tau = np.linalg.norm(pos - pos_rx_ecef_m, axis=-1) / C_MPS
             pos, vel = self.state(sat, t_s - tau)
-        return _rotate_z(pos, OMEGA_E_RAD_PER_S * tau), _rotate_z(vel, OMEGA_E_RAD_PER_S * tau)
+        pos, vel = _rotate_z(pos, OMEGA_E_RAD_PER_S * tau), _rotate_z(vel, OMEGA_E_RAD_PER_S * tau)
+        # d/dt_rx of R(omega tau) r(t_rx - tau): the light time's rate tau_dot = range rate / c
+        # scales the velocity (up to ~6 Hz at Ku band) and turns the frame (< 0.5 Hz).
+        los = pos - pos_rx_ecef_m
+        tau_dot = np.sum(los * vel, axis=-1) / np.linalg.norm(los, axis=-1) / C_MPS
+        turn = np.stack([pos[..., 1], -pos[..., 0], np.zeros_like(tau)], axis=-1)
+        return pos, vel * (1 - tau_dot)[..., None] + (OMEGA_E_RAD_PER_S * tau_dot)[..., None] * turn
 
 
 def _doppler(pos_sv, vel_sv, pos_rx, hz_per_mps):
