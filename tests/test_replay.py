@@ -161,3 +161,29 @@ def test_continuous_recording_in_tracking_mode_identifies_every_satellite(tmp_pa
     ids = [t["sat_id"] for t in doc["tracks"]]
     assert sorted(ids) == ["70002", "70524", "71563", "71607", "72129"]
     assert all(t["n_blocks"] >= 28 for t in doc["tracks"])  # no block lost to tracking mode
+
+
+def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording, tmp_path, capsys):
+    from leosop.orbits import DEFAULT_TLE
+
+    path, _ = snapshot_recording
+    # The bundled set's epoch is 2025-01-01T00:00Z. Shifting every epoch by 6 days (the
+    # element sets themselves unchanged) makes them 6 days off: a warning, still a result.
+    def shifted(days):
+        lines = DEFAULT_TLE.read_text().splitlines()
+        out = []
+        for line in lines:
+            if line.startswith("1 "):
+                doy = float(line[20:32]) + days
+                line = line[:20] + f"{doy:012.8f}" + line[32:68]
+                line += str(sum(int(c) if c.isdigit() else (c == "-") for c in line) % 10)
+            out.append(line)
+        f = tmp_path / f"shift{days}.tle"
+        f.write_text("\n".join(out) + "\n")
+        return f
+
+    code, doc, err = _replay(capsys, str(path), "--tle", str(shifted(-6)), "--static")
+    assert code == 0 and "warning" in err and "6.8 days from the recording" in err
+    code, _, err = _replay(capsys, str(path), "--tle", str(shifted(-40)), "--static", "--out", str(tmp_path / "o"))
+    assert code == 2 and "no element set within 30 days" in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()

@@ -128,6 +128,37 @@ def _pss(rec, blocks):
     return acquire_pss(rec.read(cap.sample_start, n), FS_HZ), cap.start_utc
 
 
+#: Element sets older or newer than this against the recording are warned about [days]
+#: (along-track errors grow by ~km per day); beyond MAX_TLE_AGE_DAYS none is used.
+TLE_AGE_WARN_DAYS = 3.0
+
+
+def check_snapshot_age(rec, constellation):
+    """Warn when the element sets are far from the recording's date; refuse when none can be used.
+
+    Returns
+    -------
+    float
+        Median age of the element sets at the recording's start [days] (positive: older).
+    """
+    import sys
+
+    from ..positioning.measurements import MAX_TLE_AGE_DAYS
+
+    age_days = (rec.start_utc - constellation.epochs_utc) / np.timedelta64(1, "D")
+    usable = np.abs(age_days) <= MAX_TLE_AGE_DAYS
+    median = float(np.median(age_days))
+    name = getattr(constellation, "source", "") or "the element sets"
+    if not usable.any():
+        raise InputError(f"{name}: no element set within {MAX_TLE_AGE_DAYS:g} days of the recording "
+                         f"({np.datetime_as_string(rec.start_utc, unit='s')}Z; median age {median:+.1f} days): "
+                         "no satellite can be propagated to it")
+    if abs(median) > TLE_AGE_WARN_DAYS:
+        print(f"leosop replay: warning: {name}: the element sets are {median:+.1f} days from the recording "
+              f"(median); along-track errors of km per day make identification and fixes worse", file=sys.stderr)
+    return median
+
+
 def _spectrum(iq):
     """Mean periodogram of ``iq`` in SPECTRUM_BINS bins, DC in the middle."""
     m = max(1, iq.size // SPECTRUM_BINS)
@@ -245,6 +276,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     blocks = block_plan(rec, block_s)
+    check_snapshot_age(rec, constellation)
     if not blocks:
         raise InputError(f"{rec.data_path}: no capture holds a block of at least 64 samples")
     if max_gap_s is None:
