@@ -441,9 +441,11 @@ class _Search:
         radius = spacing_m / np.sqrt(2)
         while True:
             count, cost, assign, clock, moved = self.vote(cells, radius)
-            order = np.lexsort((cost, -count))
+            # A track the cell does not explain costs as much as the worst one it explains: junk
+            # tracks (spurious, or from satellites missing in the snapshot) then cannot pull the
+            # search to cells where they find chance partners.
+            order = np.argsort(cost + _TRACK_CHI2_GATE * (len(self.tracks) - count), kind="stable")
             top = order[:keep]
-            top = top[count[top] >= count[order[0]] - 1]
             if spacing_m <= self.o["final_spacing_m"]:
                 return [(moved[i], assign[i], clock[i]) for i in top[: self.o["n_final"]]]
             spacing_m /= 3
