@@ -24,7 +24,7 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
     f_lim_hz : float, optional
         Show only |f| <= this.
     labelled_tracks : sequence of (t_s, doppler_hz, label)
-        Several satellites' central-tone tracks, each drawn and labelled.
+        Several satellites' central-tone tracks, each drawn and labelled at its end.
     """
     fig, ax = pyplot().subplots(figsize=(8, 4.5), constrained_layout=True)
     db = 10.0 * np.log10(np.maximum(power, np.max(power) * 1e-12))
@@ -40,7 +40,7 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
     for k, (t_k, f_k, label) in enumerate(labelled_tracks):
         color = f"C{k % 10}"
         ax.plot(t_k, np.asarray(f_k) / 1e3, ".-", color=color, ms=3, lw=0.8)
-        ax.annotate(label, (t_k[0], f_k[0] / 1e3), color=color, fontsize=8, xytext=(3, 3),
+        ax.annotate(label, (t_k[-1], f_k[-1] / 1e3), color=color, fontsize=8, xytext=(3, 3),
                     textcoords="offset points", bbox=dict(boxstyle="round,pad=0.15", fc="white", alpha=0.7, lw=0))
     if f_lim_hz is not None:
         ax.set_ylim(-f_lim_hz / 1e3, f_lim_hz / 1e3)
