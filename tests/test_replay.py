@@ -182,7 +182,7 @@ def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording
         f.write_text("\n".join(out) + "\n")
         return f
 
-    code, doc, err = _replay(capsys, str(path), "--tle", str(shifted(-6)), "--static")
+    code, doc, err = _replay(capsys, str(path), "--tle", str(shifted(-6)), "--static", "--init", "34.98,109.71,0")
     assert code == 0 and "warning" in err and "6.8 days from the recording" in err
     code, _, err = _replay(capsys, str(path), "--tle", str(shifted(-40)), "--static", "--out", str(tmp_path / "o"))
     assert code == 2 and "no element set within 30 days" in err and err.count("\n") == 1
