@@ -6,11 +6,10 @@ the rates and their changes are those of real LEO passes.
 
 import numpy as np
 
-from leosop.constants import C_MPS, STARLINK_PILOT_HZ
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.replay.tracks import Detections, Tracker
-from leosop.signal.channel import site_range_rates
+from leosop.signal.channel import SiteChannel, site_geometry
 from leosop.scenarios import XIAN_BAOJI
 
 
@@ -25,11 +24,10 @@ def _passes(n_sats, duration_s, step_s):
     pos, _, _ = state_ecef(const, np.array([start]))
     _, elev, _ = azimuth_elevation_range(pos[:, 0], pos_rx)
     pick = const.subset(np.argsort(-np.nan_to_num(elev, nan=-9))[:n_sats])
-    t_nodes, rr = site_range_rates(pick, pos_rx, start, duration_s, node_step_s=step_s)
-    dop = -rr * STARLINK_PILOT_HZ / C_MPS
-    rate = np.gradient(dop, t_nodes, axis=1)
-    inside = (t_nodes >= 0) & (t_nodes <= duration_s)
-    return t_nodes[inside], dop[:, inside], rate[:, inside], start
+    t_nodes, range_m, _ = site_geometry(pick, pos_rx, start, duration_s)
+    channel = SiteChannel(t_nodes, range_m, 2.5e6, 45.0, 0.0)
+    t = np.arange(0.0, duration_s + 1e-9, step_s)
+    return t, channel.doppler_hz(t), channel.doppler_rate_hz_per_s(t), start
 
 
 def test_snapshots_with_dropouts_and_clutter_give_one_track_per_satellite():

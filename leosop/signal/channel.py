@@ -39,7 +39,7 @@ from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
-__all__ = ["doppler_blocks", "site_range_rates", "OrbitError", "light_time_positions", "site_geometry",
+__all__ = ["doppler_blocks", "OrbitError", "light_time_positions", "site_geometry",
            "cn0_geometry_dbhz", "inertial_speed_mps", "CN0_REF_RANGE_M", "SiteChannel"]
 
 #: Range of the reference geometry of :func:`cn0_geometry_dbhz`: a Starlink shell (550 km) at zenith [m].
@@ -90,34 +90,6 @@ def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=
             raise InputError("doppler_blocks: noise (cn0_dbhz) needs an rng")
         iq = add_noise(iq, np.broadcast_to(np.asarray(cn0_dbhz, dtype=float), d.shape), sample_rate_hz, rng)
     return iq.astype(dtype)
-
-
-def site_range_rates(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_step_s=0.1):
-    """Range rate of every satellite seen from a static site, on a node grid.
-
-    Parameters
-    ----------
-    constellation : Constellation
-    pos_rx_ecef_m : array_like, (3,)
-    start_utc : datetime64
-    duration_s : float
-    node_step_s : float
-
-    Returns
-    -------
-    t_nodes_s : ndarray, (n_nodes,)
-        From ``start_utc``; one node beyond each end.
-    range_rate_mps : ndarray, (n_sats, n_nodes)
-        NaN where SGP4 fails.
-    """
-    from ..orbits.propagate import state_ecef
-
-    n_nodes = int(np.ceil(duration_s / node_step_s)) + 3
-    t_nodes = (np.arange(n_nodes) - 1) * node_step_s
-    times = np.datetime64(start_utc, "ns") + np.round(t_nodes * 1e9).astype("timedelta64[ns]")
-    pos, vel, _ = state_ecef(constellation, times)
-    los = pos - np.asarray(pos_rx_ecef_m, dtype=float)
-    return t_nodes, np.sum(los * vel, axis=-1) / np.linalg.norm(los, axis=-1)
 
 
 def _rotate_z(vec, angle_rad):
