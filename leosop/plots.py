@@ -1,4 +1,4 @@
-"""Figures of a simulation, after seed 004's Fig. 4 (trajectory), 8 (errors), 9 (visible satellites), 10 (GDOP).
+"""Figures of a simulation, after [Shen 2024]'s Fig. 4 (trajectory), 8 (errors), 9 (visible satellites), 10 (GDOP).
 
 Matplotlib is imported lazily with the Agg backend; every figure is written
 atomically (:func:`leosop.figure.save_png`).

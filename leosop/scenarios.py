@@ -1,7 +1,7 @@
 """Simulation scenarios: the bundled ``xian-baoji`` flight and JSON files.
 
 A scenario says where and when the receiver flies, how bad its IMU is and
-how the LEO measurements are corrupted (DESIGN.md 4.1, seed 004 section 4.1
+how the LEO measurements are corrupted (DESIGN.md 4.1, [Shen 2024] section 4.1
 and Table 1). Scenario files are JSON objects with the keys of
 :data:`XIAN_BAOJI` (as :func:`to_dict` writes them); every key is optional
 and missing keys take the xian-baoji values. Unknown keys are refused.
@@ -22,7 +22,7 @@ __all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN
 
 @dataclass(frozen=True)
 class ImuSpec:
-    """IMU error figures, in the units their names carry (seed 004 Table 1)."""
+    """IMU error figures, in the units their names carry ([Shen 2024] Table 1)."""
 
     gyro_bias_deg_per_h: float = 0.03
     gyro_arw_deg_per_rt_h: float = 0.01
@@ -33,7 +33,7 @@ class ImuSpec:
 
 @dataclass(frozen=True)
 class LeoSpec:
-    """LEO measurement errors (seed 004 Table 1) and fix settings.
+    """LEO measurement errors ([Shen 2024] Table 1) and fix settings.
 
     ``sat_doppler_offset_max_hz``: every satellite carries a constant clock-
     induced Doppler offset drawn uniformly in [0, max]. ``rx_freq_offset_hz``:
@@ -42,7 +42,7 @@ class LeoSpec:
     constant over a run; ``orbit_error_model`` says how it is drawn:
     ``"independent"`` (each satellite its own error, standard deviation
     ``orbit_error_m`` per axis) or ``"common"`` (every satellite shifted by
-    the same ``[E, E, E]``, E = ``orbit_error_m``: seed 004 Table 6's "orbit
+    the same ``[E, E, E]``, E = ``orbit_error_m``: [Shen 2024] Table 6's "orbit
     error [E, E, E] m", whose position errors are close to sqrt(3) E). Optional
     in scenario files, a compatible extension of DESIGN.md 4.1. ``cn0_dbhz``: pilot
     carrier-to-noise density (not given by the paper; 45 dB-Hz is a
@@ -59,7 +59,7 @@ class LeoSpec:
 
 @dataclass(frozen=True)
 class InitError:
-    """Initial INS errors: ENU position [m] and velocity [m/s] (seed 004 Table 1)."""
+    """Initial INS errors: ENU position [m] and velocity [m/s] ([Shen 2024] Table 1)."""
 
     pos_m: tuple = (100.0, 100.0, 100.0)
     vel_mps: tuple = (1.0, 1.0, 1.0)
@@ -95,7 +95,7 @@ class Scenario:
     init_error: InitError
 
 
-#: Seed 004 section 4.1: Xi'an (34.342 N, 108.940 E) to Baoji (34.363 N,
+#: [Shen 2024] section 4.1: Xi'an (34.342 N, 108.940 E) to Baoji (34.363 N,
 #: 107.239 E) at 3 km and 200 m/s, 782 s, 40 deg mask.
 #: Start time: tools/search_start_time.py scanned starts every 60 s over
 #: 2025-01-01 (the bundled TLE epoch), counting satellites above 40 deg at

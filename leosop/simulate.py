@@ -1,10 +1,10 @@
-"""End-to-end simulation of seed 004's experiment: truth flight, IMU, LEO Doppler, fixes, loose EKF.
+"""End-to-end simulation of [Shen 2024]'s experiment: truth flight, IMU, LEO Doppler, fixes, loose EKF.
 
 :func:`run_scenario` is the one entry point; the ``simulate`` command and the
 table reproductions call it. For a scenario it
 
 1. flies the truth trajectory and corrupts its ideal IMU increments
-   (seed 004 Table 1; bias signs drawn per run);
+   ([Shen 2024] Table 1; bias signs drawn per run);
 2. finds the visible satellites at the fix rate, 1 Hz (:mod:`leosop.orbits.visibility`)
    and their true Doppler, plus a constant clock-induced offset per satellite
    drawn uniformly in [0, max] and the receiver's fixed offset;
@@ -159,7 +159,7 @@ def _check_options(level, coupling, correction_period_s, orbit_error_m):
 
 
 def _imu_errors(spec, rng):
-    """Seed 004 Table 1 errors with the constant biases' signs drawn per axis."""
+    """[Shen 2024] Table 1 errors with the constant biases' signs drawn per axis."""
     signs_g, signs_a = rng.choice([-1.0, 1.0], size=(2, 3))
     return imu.ImuErrors.from_quoted(
         gyro_bias_deg_per_h=signs_g * spec.gyro_bias_deg_per_h, gyro_arw_deg_per_rt_h=spec.gyro_arw_deg_per_rt_h,
@@ -320,7 +320,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
                               rate_hz=scenario.imu.rate_hz, duration_s=scenario.duration_s)
     errors = _imu_errors(scenario.imu, rng_imu)
     dtheta, dvel = imu.corrupt(truth.dtheta_b_rad, truth.dvel_b_mps, truth.dt_s, errors, rng_imu)
-    # Fixes and fusion at leo.fix_rate_hz (seed 004: 1 Hz), on the IMU's two-sample grid.
+    # Fixes and fusion at leo.fix_rate_hz ([Shen 2024]: 1 Hz), on the IMU's two-sample grid.
     per_step = int(round(scenario.imu.rate_hz / scenario.leo.fix_rate_hz))
     if per_step < 2 or per_step % 2 or abs(per_step * scenario.leo.fix_rate_hz - scenario.imu.rate_hz) > 1e-6:
         raise InputError(f"{scenario.name}: leo.fix_rate_hz={scenario.leo.fix_rate_hz:g} must divide "

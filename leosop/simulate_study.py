@@ -1,4 +1,4 @@
-"""Seed 004 Tables 4-6 reproduced: the xian-baoji flight over several seeds, ours beside the paper's.
+"""[Shen 2024] Tables 4-6 reproduced: the xian-baoji flight over several seeds, ours beside the paper's.
 
 Every table row is the mean over seeds of the mean 3D errors of
 :func:`leosop.simulate.metrics`, for both couplings (the paper's loose one and
@@ -25,11 +25,11 @@ from .studies import map_chunks
 
 __all__ = ["table4", "table5", "table6"]
 
-#: Seed 004 Table 4: mean errors [m, m/s].
+#: [Shen 2024] Table 4: mean errors [m, m/s].
 PAPER_TABLE4 = {"ins_only": (1595.11, 3.11), "fused": (24.35, 0.038)}
-#: Seed 004 Table 5: correction period [s] -> mean errors [m, m/s].
+#: [Shen 2024] Table 5: correction period [s] -> mean errors [m, m/s].
 PAPER_TABLE5 = {1: (24.35, 0.038), 30: (154.77, 0.16), 60: (207.64, 0.26), 100: (270.04, 0.47)}
-#: Seed 004 Table 6: orbit error per axis [m] -> mean errors [m, m/s].
+#: [Shen 2024] Table 6: orbit error per axis [m] -> mean errors [m, m/s].
 PAPER_TABLE6 = {1: (24.35, 0.038), 30: (50.24, 0.040), 60: (93.33, 0.044)}
 COUPLINGS = ("loose", "tight")
 

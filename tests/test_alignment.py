@@ -1,4 +1,4 @@
-"""Coarse alignment (seed 000) against closed forms, the paper's numbers and real data."""
+"""Coarse alignment ([Qu 2024]) against closed forms, the paper's numbers and real data."""
 
 import warnings
 
@@ -88,7 +88,7 @@ def test_error_equations_match_finite_perturbations(algorithm):
 
 
 def test_monte_carlo_at_80_deg_matches_the_paper():
-    # Seed 000: 1 mg, 0.1 deg/h, latitude 30, 100 shots per attitude; at 80 deg
+    # [Qu 2024]: 1 mg, 0.1 deg/h, latitude 30, 100 shots per attitude; at 80 deg
     # pitch the maximum yaw error is about 11 deg (alg. 1) and 2.2 deg (alg. 2).
     # A 30 deg yaw/roll grid samples the maxima a little less densely than the
     # paper's sweep: bounds are the paper's values -30 % / +40 %.
@@ -96,7 +96,7 @@ def test_monte_carlo_at_80_deg_matches_the_paper():
     yaw = {k: v[0] for k, v in res["max_yaw_err_deg"].items()}
     assert 7.7 < yaw["alg1"] < 15.4
     assert 1.5 < yaw["alg2"] < 3.1
-    # Seed 000: pitch and roll errors below 1.6 deg up to 80.5 deg pitch.
+    # [Qu 2024]: pitch and roll errors below 1.6 deg up to 80.5 deg pitch.
     assert res["max_pitch_err_deg"]["alg2"][0] < 1.6 and res["max_roll_err_deg"]["alg2"][0] < 1.6
 
 

@@ -88,7 +88,7 @@ def test_align_bad_file_exit_2(tmp_path, capsys):
 
 
 def test_align_warns_on_a_moving_vehicle(tmp_path, capsys):
-    # Seed 001's rolling flight is anything but static.
+    # [Chu 2009]'s rolling flight is anything but static.
     traj = trajectory.rolling_flight(duration_s=20.0, roll_rate_deg_s=30.0)
     path = _write_psins(tmp_path / "moving.imu", traj, 34.342)
     status, out, err = _run(["align", "--imu", str(path), "--json"], capsys)
@@ -102,7 +102,7 @@ def test_reproduce_errmodel_table3(capsys):
     rows = json.loads(out)["rows"]
     assert len(rows) == 6
     for r in rows:
-        # Seed 001 Table 3 to its printed precision (see test_error_model).
+        # [Chu 2009] Table 3 to its printed precision (see test_error_model).
         assert r["vel_err_mps"] == pytest.approx(r["paper"]["vel_err_mps"], rel=1e-6)
         assert r["pos_err_m"] == pytest.approx(r["paper"]["pos_err_m"], rel=1e-6)
         assert r["att_err_deg"] == pytest.approx(r["paper"]["att_err_deg"], rel=2e-5)

@@ -8,7 +8,7 @@ def test_text_table_shows_our_numbers_beside_the_papers(capsys):
     out = capsys.readouterr().out.splitlines()
     header = out[1].split()
     assert "att_err_deg" in header and "paper.pos_err_m" in header
-    # Seed 001 Table 3, 100 mg row: 147.1 m/s and 11032.5 m, ours and the paper's.
+    # [Chu 2009] Table 3, 100 mg row: 147.1 m/s and 11032.5 m, ours and the paper's.
     last = out[7].split()
     assert last[header.index("vel_err_mps")] == last[header.index("paper.vel_err_mps")] == "147.1"
     assert last[header.index("pos_err_m")] == last[header.index("paper.pos_err_m")] == "1.103e+04"

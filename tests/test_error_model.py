@@ -2,7 +2,7 @@
 
 References: the Jacobian of the nonlinear navigation equations taken by
 central differences (15-state F), closed-form discretisation of a double
-integrator (Van Loan), seed 001 Table 3 (9-state propagation) and the
+integrator (Van Loan), [Chu 2009] Table 3 (9-state propagation) and the
 difference of two strapdown runs (see the strapdown-based tests below).
 """
 
@@ -138,7 +138,7 @@ def test_models_against_two_strapdown_runs():
     # every axis (the small vertical error has nonlinear terms of ~2 %).
     assert np.all(np.abs(rel15["vel"]) < 0.05) and np.all(np.abs(rel15["pos"]) < 0.05)
     rel9 = res["relative_error"]["model9"]
-    # Seed 001's short-time model neglects Earth rate and transport rate: the
+    # [Chu 2009]'s short-time model neglects Earth rate and transport rate: the
     # paper finds < 20 % on its cross axis, < 4 % along; we find 8 % and 0.5 %
     # horizontally (its vertical error, ~0.06 m/s, is all transport-rate terms).
     assert np.all(np.abs(rel9["vel"][:2]) < 0.1) and np.all(np.abs(rel9["pos"][:2]) < 0.1)

@@ -1,6 +1,6 @@
 """Loose INS/fix EKF: measurement model round trip, consistency, bias recovery, gaps, correction period.
 
-The truth is a short straight flight of the seed 004 kind; fixes are the
+The truth is a short straight flight of the [Shen 2024] kind; fixes are the
 truth plus white Gaussian errors drawn from the covariance handed to the
 filter, the case in which a correct filter must be consistent. The last
 tests take the simulated fixes, whose errors come from the satellites'

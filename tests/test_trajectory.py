@@ -69,7 +69,7 @@ def test_rolling_flight_is_seed_001_table_2():
     tr = trajectory.rolling_flight(duration_s=2.0)
     roll = np.arctan2(-tr.C_n_b[:, 2, 0], tr.C_n_b[:, 2, 2])
     t_mid = 0.5 * (tr.t_s[1:] + tr.t_s[:-1])
-    # Seed 001: body rate [180, 0, 0] deg/s about its forward axis (our y);
+    # [Chu 2009]: body rate [180, 0, 0] deg/s about its forward axis (our y);
     # Earth and transport rates add < 1e-4 rad/s.
     np.testing.assert_allclose(tr.dtheta_b_rad / tr.dt_s, np.tile([0, np.pi, 0], (tr.t_s.size - 1, 1)), atol=1e-4)
     # Specific force [0, cos(180 t), -sin(180 t)] g in forward-up-right is

@@ -2,7 +2,7 @@
 
 Usage: python tools/bench_doppler.py [--trials N] [--slow-trials M] [--seed S] [--out DIR]
 
-Blocks of N = 3e5 samples at 2.5 MHz (0.12 s; seed 004's Table 2 size).
+Blocks of N = 3e5 samples at 2.5 MHz (0.12 s; [Shen 2024]'s Table 2 size).
 Part 1 times, in this process and on the same blocks: one pyfftw FFT of the
 block (the reference), ``fast`` (everything: comb search FFT, decimation,
 rate, Newton), ``fmlef`` at 1e-3 and 1e-4 Hz (fine stage only, from the same

@@ -1,7 +1,7 @@
 """Benchmark: the stacked matrix exponential of error_model.propagate against scipy.
 
 Times ``scipy.linalg.expm`` and ``leosop.ins.error_model._expm_stack`` on the
-15,000 augmented 10x10 step matrices of seed 001's 150 s rolling flight at
+15,000 augmented 10x10 step matrices of [Chu 2009]'s 150 s rolling flight at
 100 Hz, prints the ratio and the largest difference.
 
 Usage: python tools/bench_error_model.py

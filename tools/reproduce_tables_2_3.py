@@ -1,4 +1,4 @@
-"""Seed 004 Tables 2 and 3: grid ML vs FMLEF run time, ours beside the paper's, plus our fast estimator.
+"""[Shen 2024] Tables 2 and 3: grid ML vs FMLEF run time, ours beside the paper's, plus our fast estimator.
 
 Usage: python tools/reproduce_tables_2_3.py [--table 2|3|both] [--trials N] [--seed S] [--full]
 

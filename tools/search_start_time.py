@@ -1,6 +1,6 @@
 """Search the start time of the bundled xian-baoji scenario (issue 6).
 
-Seed 004's Fig. 9 shows 7 or more visible Starlink satellites for nearly the
+[Shen 2024]'s Fig. 9 shows 7 or more visible Starlink satellites for nearly the
 whole 782 s flight and a short thin stretch around 402-431 s. This script
 scans start times every 60 s over the day of the bundled TLE epoch, counts
 the satellites above the 40 deg mask at 1 Hz along the flight, and prints

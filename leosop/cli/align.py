@@ -1,4 +1,4 @@
-"""``leosop align``: static coarse alignment of a real IMU log (seed 000 and Wahba).
+"""``leosop align``: static coarse alignment of a real IMU log ([Qu 2024] and Wahba).
 
 Prints ``{"pitch_deg", "roll_deg", "heading_deg", "method"}`` (heading
 clockwise from true North in [0, 360), pitch nose up, roll right wing down)
@@ -30,7 +30,7 @@ def register(subparsers):
     p.add_argument("--lat-deg", type=float, help="latitude [deg] (default: the file's header, PSINS only)")
     p.add_argument("--seconds", type=float, help="use the first S seconds (default: the whole log)")
     p.add_argument("--method", choices=INCREMENT_METHODS, default="wahba",
-                   help="seed 000 algorithm 1 or 2, the optimal Wahba solution (default), or the inertial-frame "
+                   help="[Qu 2024] algorithm 1 or 2, the optimal Wahba solution (default), or the inertial-frame "
                         "alignment (robust to rocking; attitude at the end of the span)")
     p.add_argument("--window-s", type=float, help="also align every successive window of this length")
 

@@ -3,7 +3,7 @@
 SigMF recordings carry their own parameters; raw files need ``--dtype``,
 ``--sample-rate-hz`` (and optionally ``--center-hz``, ``--start``). The
 recording is read one block at a time. ``ml`` and ``fmlef`` start from the
-STFT coarse track (seed 004); ``fast`` from the block's own FFT. A block
+STFT coarse track ([Shen 2024]); ``fast`` from the block's own FFT. A block
 without a detected comb gives null values and ``"status": "no pilot
 detected"``. When the recording holds ``leosop generate`` truth for the same
 blocks, each estimate also names the nearest true satellite and its Doppler.

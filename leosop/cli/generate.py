@@ -9,7 +9,7 @@ sample (:mod:`leosop.signal.channel`, DESIGN 4.2), with
   pattern of a flat receive array, :func:`~leosop.signal.channel.cn0_geometry_dbhz`;
   silent below the horizon), or ``--cn0-model constant`` (one value for all,
   or one per ``--sat``);
-- a clock offset drawn uniformly in [0, --sat-offset-max-hz] (seed 004
+- a clock offset drawn uniformly in [0, --sat-offset-max-hz] ([Shen 2024]
   Table 1: 0-5 Hz) plus the receiver's offset;
 - optionally an orbit error (truth differs from the TLE the receiver will
   use): along-track, radial and cross-track errors drawn per satellite.
@@ -70,9 +70,9 @@ def register(subparsers):
     p.add_argument("--truth-step-s", type=float, default=0.1,
                    help="block length of the truth annotations (default 0.1, as leosop doppler --block-s)")
     p.add_argument("--sat-offset-max-hz", type=float, default=5.0,
-                   help="per-satellite clock offsets drawn in [0, this] (default 5, seed 004 Table 1)")
+                   help="per-satellite clock offsets drawn in [0, this] (default 5, [Shen 2024] Table 1)")
     p.add_argument("--rx-offset-hz", type=float, default=5.0,
-                   help="receiver frequency offset (default 5, seed 004 Table 1)")
+                   help="receiver frequency offset (default 5, [Shen 2024] Table 1)")
     for axis in ("along", "radial", "cross"):
         p.add_argument(f"--orbit-error-{axis}-m", type=float, default=0.0, metavar="SIGMA",
                        help=f"standard deviation of the {axis}-track orbit error drawn per satellite [m] (default 0)"

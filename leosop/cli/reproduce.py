@@ -18,15 +18,15 @@ from . import add_command
 
 #: Registry of reproducible targets.
 TARGETS = {
-    "align-fig2": ("leosop.ins.alignment_study:fig2", "seed 000 Fig. 1-2: max alignment errors vs pitch (Monte Carlo)"),
-    "align-table1": ("leosop.ins.alignment_study:table1", "seed 000 Table 1: turntable alignment at 80 deg pitch"),
-    "errmodel-table3": ("leosop.ins.error_model_study:table3", "seed 001 Table 3: 150 s errors of the 9-state model"),
-    "errmodel-validate": ("leosop.ins.error_model_study:validate", "seed 001 sec. 3: 9- and 15-state models vs the strapdown, 150 s"),
-    "table2": ("leosop.signal.tables:table2", "seed 004 Table 2: grid ML vs FMLEF (and fast) time per resolution, N = 3e5"),
-    "table3": ("leosop.signal.tables:table3", "seed 004 Table 3: grid ML vs FMLEF (and fast) time per block length"),
-    "table4": ("leosop.simulate_study:table4", "seed 004 Table 4: INS alone vs Starlink/INS on the Xi'an-Baoji flight"),
-    "table5": ("leosop.simulate_study:table5", "seed 004 Table 5: Starlink/INS errors vs correction period"),
-    "table6": ("leosop.simulate_study:table6", "seed 004 Table 6: Starlink/INS errors vs orbit error"),
+    "align-fig2": ("leosop.ins.alignment_study:fig2", "[Qu 2024] Fig. 1-2: max alignment errors vs pitch"),
+    "align-table1": ("leosop.ins.alignment_study:table1", "[Qu 2024] Table 1: turntable alignment at 80 deg pitch"),
+    "errmodel-table3": ("leosop.ins.error_model_study:table3", "[Chu 2009] Table 3: 150 s errors of the 9-state model"),
+    "errmodel-validate": ("leosop.ins.error_model_study:validate", "[Chu 2009] sec. 3: error models vs strapdown"),
+    "table2": ("leosop.signal.tables:table2", "[Shen 2024] Table 2: grid ML vs FMLEF (and fast) time, N = 3e5"),
+    "table3": ("leosop.signal.tables:table3", "[Shen 2024] Table 3: grid ML vs FMLEF (and fast) time per block length"),
+    "table4": ("leosop.simulate_study:table4", "[Shen 2024] Table 4: INS alone vs Starlink/INS, Xi'an-Baoji"),
+    "table5": ("leosop.simulate_study:table5", "[Shen 2024] Table 5: Starlink/INS errors vs correction period"),
+    "table6": ("leosop.simulate_study:table6", "[Shen 2024] Table 6: Starlink/INS errors vs orbit error"),
 }
 
 

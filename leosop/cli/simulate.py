@@ -1,4 +1,4 @@
-"""``leosop simulate``: seed 004's Starlink/INS flight end to end (the main job)."""
+"""``leosop simulate``: [Shen 2024]'s Starlink/INS flight end to end (the main job)."""
 
 import sys
 import warnings
@@ -12,7 +12,7 @@ from . import add_command
 
 def register(subparsers):
     p = add_command(subparsers, "simulate", sys.modules[__name__],
-                    help="simulate a Starlink/INS flight end to end (default: seed 004's Xi'an-Baoji flight)")
+                    help="simulate a Starlink/INS flight end to end (default: [Shen 2024]'s Xi'an-Baoji flight)")
     p.add_argument("--scenario", default="xian-baoji", metavar="NAME|FILE.json",
                    help="built-in scenario name or a scenario JSON file (default xian-baoji)")
     p.add_argument("--tle", metavar="FILE", help="TLE or OMM file (default: the bundled constellation)")

@@ -23,7 +23,7 @@ from ..timebase import format_utc, seconds_since
 from . import add_command
 from .options import mask_deg, parse_site, parse_time, positive
 
-#: Defaults of the bundled main job: Xi'an (seed 004's start point), one hour
+#: Defaults of the bundled main job: Xi'an ([Shen 2024]'s start point), one hour
 #: from the bundled element sets' epoch, the paper's 40 deg mask.
 DEFAULT_SITE = "34.342,108.940,400"
 DEFAULT_MASK_DEG = 40.0

@@ -3,6 +3,6 @@
 :mod:`.kalman` is the filter core as plain functions; :mod:`.common` holds
 what both couplings share (settings, output, INS prediction and feedback,
 the satellites' error states); :mod:`.loose` couples the strapdown INS with
-Doppler position/velocity fixes (seed 004 eq. 13-16); :mod:`.tight` updates
+Doppler position/velocity fixes ([Shen 2024] eq. 13-16); :mod:`.tight` updates
 the INS with each satellite's Doppler (ours).
 """

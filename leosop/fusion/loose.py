@@ -1,4 +1,4 @@
-"""Loosely coupled INS / LEO-fix EKF (seed 004 eq. 13-16) with feedback correction.
+"""Loosely coupled INS / LEO-fix EKF ([Shen 2024] eq. 13-16) with feedback correction.
 
 State: the 15 INS errors of :mod:`leosop.ins.error_model` (``phi``, ``dv``
 ENU, ``[dlat, dlon, dalt]``, gyro drift, accelerometer bias). Measurement:
@@ -8,7 +8,7 @@ position rows of ``H`` carry the radii that turn ``dlat, dlon`` into metres).
 
 Time-correlated fix errors. A snapshot fix is ``x_true + G_k e_k`` to first
 order, ``G_k`` the least-squares gain of epoch k and ``e_k`` the Doppler
-errors of its satellites: constant clock-induced offsets (seed 004 Table 1,
+errors of its satellites: constant clock-induced offsets ([Shen 2024] Table 1,
 uniform 0-5 Hz), constant orbit errors and white estimator noise. Measured on
 10 seeds of the xian-baoji flight (measurement level, 7,468 fixes): the fix
 error has NEES/6 = 1.02 against the fix covariance, but its lag-1 correlation
@@ -102,7 +102,7 @@ def _enu_from_ecef_pv(lat_rad, lon_rad):
 
 
 def measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, cov_fix_pv_ecef):
-    """INS-minus-fix measurement of seed 004 eq. 13.
+    """INS-minus-fix measurement of [Shen 2024] eq. 13.
 
     Parameters
     ----------

@@ -1,13 +1,13 @@
 """Tightly coupled INS / LEO-Doppler EKF: the filter updates with each satellite's Doppler.
 
-Seed 004 names tight coupling as future work; this is ours. The state is
+[Shen 2024] names tight coupling as future work; this is ours. The state is
 the 15 INS errors of :mod:`leosop.ins.error_model`, the receiver frequency
 offset ``T_u`` [Hz], and the satellites' error states of
 :class:`leosop.fusion.common.SatelliteStates`: every tracked satellite's
 constant clock-induced Doppler offset [Hz] and the constant orbit errors
 (ECEF, m), three per satellite (``orbit_model="independent"``) or three
 shared by all (``"common"``, every satellite shifted by the same vector,
-seed 004 Table 6's [E, E, E]) — the two systematic errors of seed 004
+[Shen 2024] Table 6's [E, E, E]) — the two systematic errors of [Shen 2024]
 Table 1 that a snapshot fix cannot separate from the receiver state, and
 that make a loosely coupled filter fed with 1 Hz fixes overconfident (their
 errors persist from fix to fix). A satellite's states are added with their

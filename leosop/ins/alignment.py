@@ -1,6 +1,6 @@
-"""Static coarse alignment: dual-vector (seed 000) and an optimal Wahba solution.
+"""Static coarse alignment: dual-vector ([Qu 2024]) and an optimal Wahba solution.
 
-Seed 000 (Qu et al. 2024) determines the attitude of a static IMU from the
+[Qu 2024] (Qu et al. 2024) determines the attitude of a static IMU from the
 averaged accelerometer (gravity reaction) and gyro (Earth rate) outputs. It
 works in its own frames: navigation East-North-Up with ``g^n = [0, 0, g]``
 (the reaction to gravity), body Forward-Up-Right ("FUR") and Euler order
@@ -61,7 +61,7 @@ __all__ = [
     "MotionWarning",
 ]
 
-#: Alignment methods from mean outputs: seed 000 algorithms 1 and 2, and the optimal solution.
+#: Alignment methods from mean outputs: [Qu 2024] algorithms 1 and 2, and the optimal solution.
 METHODS = ("1", "2", "wahba")
 #: Methods that need the increments themselves.
 INCREMENT_METHODS = METHODS + ("inertial",)
@@ -69,7 +69,7 @@ INCREMENT_METHODS = METHODS + ("inertial",)
 #: ``v_RFU = P_RFU_FUR @ v_FUR``: toolkit body axes from the paper's.
 P_RFU_FUR = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
-#: Default error levels weighting the Wahba solution (seed 000 simulation:
+#: Default error levels weighting the Wahba solution ([Qu 2024] simulation:
 #: accelerometer 1 mg, gyro 0.1 deg/h); only their ratio matters.
 ACCEL_SIGMA_MPS2 = 1e-3 * 9.80665
 GYRO_SIGMA_RAD_PER_S = np.radians(0.1) / 3600.0
@@ -266,7 +266,7 @@ def align(f_b_mps2, w_ib_b_rad_per_s, lat_rad, *, method="2", g_mps2=None,
         Mean angular rate in body RFU axes.
     lat_rad : array_like, shape (...)
     method : {"1", "2", "wahba"}
-        Seed 000 algorithm 1 or 2 (closed forms eq. 10-15) or the
+        [Qu 2024] algorithm 1 or 2 (closed forms eq. 10-15) or the
         maximum-likelihood solution :func:`wahba_dcm`.
     g_mps2 : float or array_like, optional
         Nominal gravity; default WGS84 normal gravity at ``lat_rad``.

@@ -1,13 +1,13 @@
-"""Seed 000 reproduced: Monte Carlo of the coarse alignment over all attitudes.
+"""[Qu 2024] reproduced: Monte Carlo of the coarse alignment over all attitudes.
 
 ``fig2``: for every pitch of the sweep, the attitude grid (yaw -180..180,
 roll 0..360) times ``n_shots`` random sensor errors (accelerometer 1 mg,
 gyro 0.1 deg/h, 1 sigma per axis, latitude 30 deg); the maximum absolute
 pitch, roll and yaw errors per pitch for algorithms 1, 2 and the Wahba
-solution (seed 000 Fig. 1-2). The three methods see the same errors.
+solution ([Qu 2024] Fig. 1-2). The three methods see the same errors.
 
 ``table1``: the turntable setting (gyro 1 deg/h, accelerometer 0.1 mg,
-pitch 80 deg, the 12 attitudes of seed 000 Table 1). The paper gives one
+pitch 80 deg, the 12 attitudes of [Qu 2024] Table 1). The paper gives one
 measured alignment per attitude; we give the spread of the yaw error per
 attitude and, comparable with the paper's "max yaw error 20 deg vs 7.5
 deg", the distribution of the maximum over the 12 attitudes of one trial.
@@ -32,7 +32,7 @@ LABELS = {"1": "alg1", "2": "alg2", "wahba": "wahba"}
 
 DEG_PER_H = np.radians(1.0) / 3600.0
 
-# Seed 000 section 2 (Fig. 1-2) and section 3 (Table 1), as published.
+# [Qu 2024] section 2 (Fig. 1-2) and section 3 (Table 1), as published.
 PAPER_FIG2 = {
     "max_yaw_err_at_80_deg": {"alg1": 11.0, "alg2": 2.2},
     "pitch_err_below_0p6_deg_up_to_pitch_deg": 64.6,
@@ -72,7 +72,7 @@ def attitude_errors(pitch_deg, roll_deg, heading_deg, n_shots, *, accel_sigma_mp
     Parameters
     ----------
     pitch_deg, roll_deg, heading_deg : array_like, broadcastable, shape (...)
-        True attitudes (heading clockwise from North, as seed 000's yaw).
+        True attitudes (heading clockwise from North, as [Qu 2024]'s yaw).
     n_shots : int
         Random error draws per attitude, common to all methods.
     accel_sigma_mps2, gyro_sigma_rad_per_s : float
@@ -82,7 +82,7 @@ def attitude_errors(pitch_deg, roll_deg, heading_deg, n_shots, *, accel_sigma_mp
     same_errors_for_all_attitudes : bool
         Draw one error vector per shot, fixed in the body frame and shared by
         all attitudes (one IMU rotated on a turntable); otherwise independent
-        draws per attitude (seed 000's simulation).
+        draws per attitude ([Qu 2024]'s simulation).
     methods : sequence of str
 
     Returns
@@ -125,7 +125,7 @@ def sweep(pitch_deg, yaw_deg, roll_deg, *, n_shots=100, accel_sigma_mps2=1e-3 * 
     Parameters
     ----------
     pitch_deg, yaw_deg, roll_deg : array_like, 1-D
-        Grid; yaw is seed 000's azimuth (clockwise from North).
+        Grid; yaw is [Qu 2024]'s azimuth (clockwise from North).
     n_shots : int
     accel_sigma_mps2, gyro_sigma_rad_per_s : float
     lat_rad : float
@@ -162,7 +162,7 @@ def _plot_fig2(path_pr, path_yaw, doc):
     for label in doc["max_pitch_err_deg"]:
         ax.semilogy(p, doc["max_pitch_err_deg"][label], "o-", label=f"pitch, {label}")
         ax.semilogy(p, doc["max_roll_err_deg"][label], "s--", label=f"roll, {label}")
-    ax.set(xlabel="pitch [deg]", ylabel="max error [deg]", title="Seed 000 Fig. 1: pitch and roll alignment error")
+    ax.set(xlabel="pitch [deg]", ylabel="max error [deg]", title="[Qu 2024] Fig. 1: pitch and roll alignment error")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     save_png(fig, path_pr)
@@ -170,14 +170,14 @@ def _plot_fig2(path_pr, path_yaw, doc):
     for label, y in doc["max_yaw_err_deg"].items():
         ax.semilogy(p, y, "o-", label=label)
     ax.plot([80, 80], [2.2, 11.0], "k*", ms=10, label="paper at 80 deg")
-    ax.set(xlabel="pitch [deg]", ylabel="max yaw error [deg]", title="Seed 000 Fig. 2: yaw alignment error")
+    ax.set(xlabel="pitch [deg]", ylabel="max yaw error [deg]", title="[Qu 2024] Fig. 2: yaw alignment error")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     save_png(fig, path_yaw)
 
 
 def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):
-    """Seed 000 Fig. 1-2: maximum alignment errors versus pitch (JSON document).
+    """[Qu 2024] Fig. 1-2: maximum alignment errors versus pitch (JSON document).
 
     The default grid (14 pitches, yaw and roll every 15 deg, 100 shots) runs
     in seconds; ``full`` uses every degree of pitch and 5 deg yaw/roll steps.
@@ -207,7 +207,7 @@ def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):
 
 
 def table1(*, seed=0, full=False, out_dir=None):
-    """Seed 000 Table 1 (turntable, pitch 80 deg) by Monte Carlo (JSON document).
+    """[Qu 2024] Table 1 (turntable, pitch 80 deg) by Monte Carlo (JSON document).
 
     ``n_shots`` trials (1000, or 10000 with ``full``) of the 12 attitudes
     with gyro 1 deg/h and accelerometer 0.1 mg errors (1 sigma per axis),

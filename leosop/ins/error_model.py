@@ -1,12 +1,12 @@
-"""Linear INS error models: 15-state (seed 004 eq. 13) and 9-state short-time (seed 001 eq. 21).
+"""Linear INS error models: 15-state ([Shen 2024] eq. 13) and 9-state short-time ([Chu 2009] eq. 21).
 
-Convention (PSINS / Yan Gongmin, seed 004 eq. 13)
+Convention (PSINS / Yan Gongmin, [Shen 2024] eq. 13)
 --------------------------------------------------
 * ``phi`` (rad) is the misalignment of the computed navigation frame:
   ``C_n_b_computed = (I - [phi x]) C_n_b_true``.
 * ``dv = v_computed - v_true`` in ENU [m/s].
 * 15-state position error ``[dlat, dlon, dalt]`` [rad, rad, m]; 9-state
-  position error in metres ENU (seed 001).
+  position error in metres ENU ([Chu 2009]).
 * Sensor errors are computed minus true: gyro drift ``eps_b`` [rad/s]
   (``omega_computed = omega_true + eps_b``), accelerometer bias ``nabla_b``
   [m/s^2].
@@ -29,7 +29,7 @@ As in Yan's blocks, the change of the radii of curvature with latitude is
 neglected in the transport-rate and position-rate terms (relative effect
 ``3 e^2 sin L cos L``, below 1 % of those terms).
 
-Seed 001 (Chu et al. 2009) drops Earth rate and transport rate for flights
+[Chu 2009] (Chu et al. 2009) drops Earth rate and transport rate for flights
 under ~10 min: ``psi_dot = -C_n_b eps_b``, ``dv_dot = [f_n x] psi + C_n_b
 nabla_b``, ``dX_dot = dv``. Its printed eq. 21 shows the ``F^n`` block with
 the opposite sign of its own eq. 19 with eq. 6; we follow eq. 19 (checked
@@ -67,7 +67,7 @@ _DLAT, _DH = 1e-5, 10.0
 
 
 def model15(C_n_b, f_n_mps2, vel_enu_mps, lat_rad, alt_m):
-    """Continuous 15-state error model ``F``, ``G`` (seed 004 eq. 13).
+    """Continuous 15-state error model ``F``, ``G`` ([Shen 2024] eq. 13).
 
     Parameters
     ----------
@@ -139,7 +139,7 @@ def model15(C_n_b, f_n_mps2, vel_enu_mps, lat_rad, alt_m):
 
 
 def model9(C_n_b, f_n_mps2):
-    """Seed 001's short-time 9-state model (eq. 21, sign of its eq. 19).
+    """[Chu 2009]'s short-time 9-state model (eq. 21, sign of its eq. 19).
 
     State ``[d_alpha, d_beta, d_gamma, dv_E, dv_N, dv_U, dX_E, dX_N, dX_U]``
     (rad, m/s, m), input ``u = [gyro drift_b (rad/s), accel bias_b (m/s^2)]``.

@@ -1,7 +1,7 @@
-"""Seed 001 reproduced: Table 3 of the short-time 9-state error model, and its check
+"""[Chu 2009] reproduced: Table 3 of the short-time 9-state error model, and its check
 against the full strapdown.
 
-``table3``: 150 s of seed 001's rolling flight as its Table 2 defines it
+``table3``: 150 s of [Chu 2009]'s rolling flight as its Table 2 defines it
 (body rate 180 deg/s about the forward axis, specific force of 1 g that
 stays vertical, no Earth rotation), flown East so that the paper's
 navigation X axis is the roll axis; gyro drift and accelerometer bias on the
@@ -15,7 +15,7 @@ propagated by :func:`leosop.ins.error_model.propagate`.
 (:mod:`leosop.ins.strapdown`) on the Earth-referenced rolling flight of
 :func:`leosop.ins.trajectory.rolling_flight`, with the IMU errors of seed
 001 Table 1; the relative error ``(model - strapdown) / strapdown`` per axis
-at the end (seed 001 eq. 22), next to the 15-state model's.
+at the end ([Chu 2009] eq. 22), next to the 15-state model's.
 """
 
 import numpy as np
@@ -31,7 +31,7 @@ __all__ = ["table3", "validate"]
 DEG_PER_H = np.radians(1.0) / 3600.0
 MG = 1e-3 * G0_MPS2
 
-# Seed 001 Table 3: gyro [deg/h], accelerometer [mg] -> attitude [deg],
+# [Chu 2009] Table 3: gyro [deg/h], accelerometer [mg] -> attitude [deg],
 # velocity [m/s], position [m] errors after 150 s. The last row prints its
 # position as 1032.481257; a digit is lost (a t^2 / 2 gives 11032.48).
 PAPER_TABLE3 = [
@@ -43,7 +43,7 @@ PAPER_TABLE3 = [
     (10, 100, -0.416670, 147.09975011, 11032.481257),
 ]
 
-# Seed 001 Table 1: IMU errors of the validation run, on the paper's body
+# [Chu 2009] Table 1: IMU errors of the validation run, on the paper's body
 # axes X forward, Y up, Z right -> ours (Right, Forward, Up).
 GYRO_DRIFT_FUR_DEG_PER_H = np.array([2.5, 9.0, 6.6])
 ACCEL_BIAS_FUR_MG = np.array([-10.0915, -4.9469, 0.78594])
@@ -54,7 +54,7 @@ ROLL_RATE_RAD_PER_S = np.radians(180.0)
 
 
 def _seed001_rolling(rate_hz):
-    """Attitude at step midpoints and ENU specific force of seed 001 Table 2, flown East."""
+    """Attitude at step midpoints and ENU specific force of [Chu 2009] Table 2, flown East."""
     dt = 1.0 / rate_hz
     t_mid = (np.arange(int(round(DURATION_S * rate_hz))) + 0.5) * dt
     C_n_b = euler_to_dcm(0.0, ROLL_RATE_RAD_PER_S * t_mid, np.radians(-90.0))
@@ -68,7 +68,7 @@ def _propagate9(C_n_b, f_n, dt, gyro_drift_b, accel_bias_b):
 
 
 def table3(*, rate_hz=100.0):
-    """Seed 001 Table 3 (JSON document ``{"rows": [...]}``).
+    """[Chu 2009] Table 3 (JSON document ``{"rows": [...]}``).
 
     ``rate_hz`` is the step rate of the propagation (the roll turns 0.18 deg
     per step at 100 Hz; the roll-axis rows are exact at any step).

@@ -129,7 +129,7 @@ class ImuErrors:
         )
 
 
-#: Seed 004 Table 1: gyro constant drift 0.03 deg/h, gyro random walk
+#: [Shen 2024] Table 1: gyro constant drift 0.03 deg/h, gyro random walk
 #: 0.01 deg/sqrt(h), accelerometer constant bias 1e-4 g, accelerometer random
 #: walk 1e-5 g/sqrt(Hz), on every axis.
 SEED004_TABLE1 = ImuErrors.from_quoted(gyro_bias_deg_per_h=0.03, gyro_arw_deg_per_rt_h=0.01, accel_bias_g=1e-4,

@@ -2,7 +2,7 @@
 
 Two-sample (dual-subsample) mechanization after Yan Gongmin, *Strapdown
 inertial navigation algorithm and integrated navigation principles* (2019),
-as seed 004 uses it: 100 Hz increments, one update per pair (50 Hz).
+as [Shen 2024] uses it: 100 Hz increments, one update per pair (50 Hz).
 
 Per update of length ``T = 2 dt`` with increments ``(dtheta_1, dv_1)``,
 ``(dtheta_2, dv_2)``:

@@ -2,7 +2,7 @@
 
 A trajectory is flown from a small set of smooth commands, piece by piece:
 horizontal ground speed, vertical speed, turn rate and an extra roll rate
-(seed 001's rolling flight). Each command ramps between its values at the
+([Chu 2009]'s rolling flight). Each command ramps between its values at the
 ends of a piece with the C2 quintic ``S(x) = 10x^3 - 15x^4 + 6x^5``, so body
 rates and accelerations are continuous. The kinematics
 
@@ -35,7 +35,7 @@ from ..rotations import dcm_to_euler, dcm_to_quat, euler_to_dcm, heading_from_ya
 
 __all__ = ["Trajectory", "Segment", "from_segments", "flight", "xian_baoji", "rolling_flight", "static"]
 
-#: Seed 004, section 4.1: Xi'an and Baoji [deg], 3 km, 200 m/s, 782 s.
+#: [Shen 2024], section 4.1: Xi'an and Baoji [deg], 3 km, 200 m/s, 782 s.
 XIAN_DEG = (34.342, 108.940)
 BAOJI_DEG = (34.363, 107.239)
 
@@ -311,9 +311,9 @@ def static(lat_deg, lon_deg, alt_m, pitch_deg, roll_deg, heading_deg, duration_s
 
 def rolling_flight(lat_deg=XIAN_DEG[0], lon_deg=XIAN_DEG[1], alt_m=3000.0, speed_mps=200.0, heading_deg=0.0,
                    roll_rate_deg_s=180.0, duration_s=150.0, rate_hz=100.0):
-    """Seed 001's rolling flight: constant height and speed, rolling about the forward axis.
+    """[Chu 2009]'s rolling flight: constant height and speed, rolling about the forward axis.
 
-    Seed 001 (Table 2) gives the body rate ``[180, 0, 0] deg/s`` and specific
+    [Chu 2009] (Table 2) gives the body rate ``[180, 0, 0] deg/s`` and specific
     force ``[0, cos(180 t), -sin(180 t)] g`` in its forward-up-right body
     frame over 150 s; in our Right-Forward-Up body that is a roll rate about
     the forward axis. The paper states no place, speed or heading; the
@@ -447,5 +447,5 @@ def _turn_towards(b, target_ecef, turn_max, roll_in_s):
 
 
 def xian_baoji(rate_hz=100.0):
-    """Seed 004's flight: Xi'an to Baoji at 3 km and 200 m/s for 782 s (section 4.1)."""
+    """[Shen 2024]'s flight: Xi'an to Baoji at 3 km and 200 m/s for 782 s (section 4.1)."""
     return flight([XIAN_DEG, BAOJI_DEG], alt_m=3000.0, speed_mps=200.0, rate_hz=rate_hz, duration_s=782.0)

@@ -46,13 +46,13 @@ class Carrier:
 
 #: Starlink Ku downlink: eight 240 MHz channels on a 250 MHz raster from
 #: 10.7 GHz; the pilot comb is seen at the channel centres 11.325 and
-#: 11.575 GHz (seed 004).
+#: 11.575 GHz ([Shen 2024]).
 _STARLINK_CHANNELS_HZ = tuple(10.7e9 + 250e6 * (k + 0.5) for k in range(8))
 
 CARRIERS = {
     "starlink": Carrier(
         "starlink", ("STARLINK",), STARLINK_PILOT_HZ, _STARLINK_CHANNELS_HZ,
-        "Ku downlink channels 10.825-12.575 GHz on a 250 MHz raster; pilot at 11.325 GHz (seed 004)",
+        "Ku downlink channels 10.825-12.575 GHz on a 250 MHz raster; pilot at 11.325 GHz ([Shen 2024])",
     ),
     "oneweb": Carrier(
         "oneweb", ("ONEWEB",), 11.7e9, tuple(10.7e9 + 250e6 * (k + 0.5) for k in range(8)),

@@ -17,7 +17,7 @@ def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title="
         Seconds from the start.
     n_visible : ndarray of int, (n_epochs,)
     gdop : ndarray, (n_epochs,)
-        Doppler GDOP (seed 004 eq. 10); NaN below 7 satellites.
+        Doppler GDOP ([Shen 2024] eq. 10); NaN below 7 satellites.
     gdop_range : ndarray, (n_epochs,)
         Classic pseudorange GDOP, for comparison; NaN below 4 satellites.
     """
@@ -28,7 +28,7 @@ def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title="
     ax1.set_ylabel(f"visible (mask {mask_deg:g} deg)")
     ax1.legend(loc="upper right", fontsize=8)
     ax1.set_title(title)
-    ax2.semilogy(t_s, gdop, color="C1", label="Doppler, 7 states (seed 004 eq. 10)")
+    ax2.semilogy(t_s, gdop, color="C1", label="Doppler, 7 states ([Shen 2024] eq. 10)")
     ax2.semilogy(t_s, gdop_range, color="C2", lw=0.8, label="pseudorange, 4 states")
     ax2.set_ylabel("GDOP")
     ax2.legend(loc="upper right", fontsize=8)

@@ -101,7 +101,7 @@ class Visibility:
         return out
 
     def doppler_cofactor(self, carrier_hz, clock_group=None):
-        """``(H^T H)^-1`` of Doppler positioning per epoch (seed 004 eq. 8-10).
+        """``(H^T H)^-1`` of Doppler positioning per epoch ([Shen 2024] eq. 8-10).
 
         Static or moving receiver as given; NaN at epochs with fewer
         satellites than states or a singular geometry.

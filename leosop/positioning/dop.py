@@ -1,4 +1,4 @@
-"""Dilution of precision: Doppler positioning (seed 004 eq. 8-10) and range-based.
+"""Dilution of precision: Doppler positioning ([Shen 2024] eq. 8-10) and range-based.
 
 Doppler model (the toolkit's sign, see :mod:`leosop`)::
 
@@ -76,7 +76,7 @@ def cofactor(H, weights=None, *, rcond=1e-12):
 
 
 def gdop(H, weights=None):
-    """GDOP ``sqrt(trace((H^T W H)^-1))`` (seed 004 eq. 10); NaN when undetermined.
+    """GDOP ``sqrt(trace((H^T W H)^-1))`` ([Shen 2024] eq. 10); NaN when undetermined.
 
     Parameters
     ----------

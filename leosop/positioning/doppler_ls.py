@@ -1,4 +1,4 @@
-"""Doppler least squares: snapshot fixes (seed 004 eq. 4-12) and static batch fixes.
+"""Doppler least squares: snapshot fixes ([Shen 2024] eq. 4-12) and static batch fixes.
 
 Measurement model (the toolkit's Doppler sign, see :mod:`leosop`)::
 
@@ -391,7 +391,7 @@ def subpoint_centroid_ecef_m(pos_sv_ecef_m, mask=None):
 
 def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, mask=None, x0=None, *,
                     max_iter=50, alpha=1e-3, clock_group=None):
-    """Snapshot Doppler fixes of many epochs at once (seed 004 eq. 4-12).
+    """Snapshot Doppler fixes of many epochs at once ([Shen 2024] eq. 4-12).
 
     Parameters
     ----------
@@ -420,7 +420,7 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
         needs as many measurements; an absent clock's state is held at its
         start by a pseudo-row that is never excluded (outlier tests, degrees
         of freedom and GDOP are those of the ``6 + k_e`` states). None: one
-        clock (seed 004's 7 states).
+        clock ([Shen 2024]'s 7 states).
 
     Returns
     -------

@@ -42,7 +42,7 @@ __all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states
 
 #: Satellite state columns, ECEF at the measurement time.
 SV_STATE_COLUMNS = ("x_sv_m", "y_sv_m", "z_sv_m", "vx_sv_mps", "vy_sv_mps", "vz_sv_mps")
-#: Carrier when neither the table nor the caller gives one (Starlink pilot, seed 004).
+#: Carrier when neither the table nor the caller gives one (Starlink pilot, [Shen 2024]).
 DEFAULT_CARRIER_HZ = STARLINK_PILOT_HZ
 #: Largest distance in time from an element set's epoch that is propagated [days].
 MAX_TLE_AGE_DAYS = 30.0

@@ -20,7 +20,7 @@ Two entry points:
     the annotations. (d rho/dt is the range rate at emission times
     (1 - rho'/c) plus a Sagnac-rate term: it differs from the range rate at
     reception by ~rate x 3 ms, several Hz.) Clock offsets (per satellite,
-    seed 004 Table 1: 0-5 Hz, and the receiver's) add a common frequency to
+    [Shen 2024] Table 1: 0-5 Hz, and the receiver's) add a common frequency to
     every tone; several satellites are summed, each with its own C/N0 at
     every node (:func:`cn0_geometry_dbhz`, or constant), and complex white
     noise is added.

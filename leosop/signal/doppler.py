@@ -4,7 +4,7 @@ One interface, :func:`estimate_block` (and :func:`estimate_blocks` for a
 batch), three fine methods:
 
 ``ml``
-    The classical grid maximum likelihood of seed 004 eq. 2 on the central
+    The classical grid maximum likelihood of [Shen 2024] eq. 2 on the central
     tone, ``I(f) = |sum x[n] exp(-j 2 pi f n / fs)|^2 / N``, evaluated at every
     point of a grid at the requested resolution over +-10 start steps around
     the coarse estimate (the span the paper's Table 2 implies: at 1 Hz its ML
@@ -262,7 +262,7 @@ def coarse_stft(iq, sample_rate_hz, comb=None, *, nperseg=4096, hop=None,
 
 
 def periodogram_grid(iq, sample_rate_hz, f_start_hz, step_hz, n_freqs):
-    """Seed 004 eq. 2 at ``f_start_hz + i * step_hz``, i < n_freqs, by direct summation.
+    """[Shen 2024] eq. 2 at ``f_start_hz + i * step_hz``, i < n_freqs, by direct summation.
 
     The exponentials of a uniform grid are advanced by one complex product per
     frequency (``exp(-j 2 pi step n / fs)``), the cheapest exact direct
@@ -297,7 +297,7 @@ def fine_ml(iq, sample_rate_hz, coarse_hz, resolution_hz, span_hz):
 
 
 def fine_fmlef(iq, sample_rate_hz, coarse_hz, resolution_hz, start_step_hz):
-    """FMLEF (seed 004 section 2.1): decade refinement with 21 points and a parabola per level."""
+    """FMLEF ([Shen 2024] section 2.1): decade refinement with 21 points and a parabola per level."""
     step = float(start_step_hz)
     f = float(coarse_hz)
     while True:

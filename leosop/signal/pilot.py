@@ -1,4 +1,4 @@
-"""The Starlink downlink pilot comb as complex baseband (seed 004, eq. 1).
+"""The Starlink downlink pilot comb as complex baseband ([Shen 2024], eq. 1).
 
 The pilot is ``n_tones`` unmodulated tones spaced ``tone_spacing_hz`` around
 the carrier ``carrier_hz`` (tone k = -(n-1)/2 .. (n-1)/2 at RF frequency

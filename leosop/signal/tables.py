@@ -1,4 +1,4 @@
-"""Seed 004 Tables 2 and 3: run time of grid ML vs FMLEF, with our fast estimator beside them.
+"""[Shen 2024] Tables 2 and 3: run time of grid ML vs FMLEF, with our fast estimator beside them.
 
 The paper times its estimators on a simulated pilot of N samples (Table 2:
 N = 3e5, resolution 1 .. 1e-4 Hz; Table 3: resolution 0.01 Hz, N = 1e5 ..
@@ -33,10 +33,10 @@ CN0_DBHZ = 45.0
 SPAN_HZ = 10.0
 ML_MAX_EVALS = 2_001
 
-#: Seed 004 Table 2 (N = 3e5): resolution [Hz] -> (ML s, FMLEF s).
+#: [Shen 2024] Table 2 (N = 3e5): resolution [Hz] -> (ML s, FMLEF s).
 PAPER_TABLE2 = {1.0: (0.041, 0.041), 0.1: (0.35, 0.091), 0.01: (3.49, 0.13), 0.001: (34.82, 0.16),
                 0.0001: (347.11, 0.20)}
-#: Seed 004 Table 3 (resolution 0.01 Hz): N -> (ML s, FMLEF s).
+#: [Shen 2024] Table 3 (resolution 0.01 Hz): N -> (ML s, FMLEF s).
 PAPER_TABLE3 = {100_000: (1.25, 0.044), 200_000: (2.38, 0.081), 300_000: (3.49, 0.13),
                 400_000: (4.77, 0.16), 500_000: (6.11, 0.22)}
 
@@ -98,7 +98,7 @@ def table2(*, seed=0, full=False, trials=3):
         row = {"resolution_hz": resolution, "paper_ml_s": ml_s, "paper_fmlef_s": fmlef_s}
         row.update(_row(x, truth, resolution, full))
         rows.append(row)
-    return {"paper": "seed 004 Table 2", "n_samples": 300_000, "sample_rate_hz": FS_HZ, "cn0_dbhz": CN0_DBHZ,
+    return {"paper": "[Shen 2024] Table 2", "n_samples": 300_000, "sample_rate_hz": FS_HZ, "cn0_dbhz": CN0_DBHZ,
             "trials": trials, "rows": rows}
 
 
@@ -110,7 +110,7 @@ def table3(*, seed=0, full=False, trials=3):
         row = {"n_samples": n, "paper_ml_s": ml_s, "paper_fmlef_s": fmlef_s}
         row.update(_row(x, truth, 0.01, full))
         rows.append(row)
-    return {"paper": "seed 004 Table 3", "resolution_hz": 0.01, "sample_rate_hz": FS_HZ, "cn0_dbhz": CN0_DBHZ,
+    return {"paper": "[Shen 2024] Table 3", "resolution_hz": 0.01, "sample_rate_hz": FS_HZ, "cn0_dbhz": CN0_DBHZ,
             "trials": trials, "rows": rows}
 
 
