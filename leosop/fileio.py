@@ -12,6 +12,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from .errors import InputError
+
 __all__ = ["atomic_path", "atomic_outputs", "write_json", "write_csv"]
 
 
@@ -43,8 +45,6 @@ def atomic_outputs(out_dir):
     """
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        from .errors import InputError
-
         raise InputError(f"--out {out_dir}: exists and is not a directory")
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".stage.", suffix=".part", dir=out_dir))

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
@@ -62,11 +61,7 @@ def run(args):
         lat, lon, alt = parse_site(args.init, "--init")
         init = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     path = Path(args.recording)
-    if path.suffix not in (".sigmf-meta", ".sigmf-data"):
-        raise InputError(f"{path}: replay reads SigMF recordings (.sigmf-meta)")
-    rec = open_sigmf(path)
-    if rec.start_utc is None:
-        raise InputError(f"{path}: no core:datetime; replay needs the UTC time of the samples")
+    rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
                  show_progress=True)

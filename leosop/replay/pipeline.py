@@ -19,12 +19,13 @@ Doppler also come from the PSS of the first capture
 (:func:`~leosop.signal.ofdm.acquire_pss`).
 """
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError
-from ..positioning.measurements import Measurements
+from ..positioning.measurements import MAX_TLE_AGE_DAYS, Measurements
 from ..signal.doppler import cubic_bias_hz
 from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
@@ -115,7 +116,7 @@ def narrow(iq, factor):
     return (np.fft.ifft(keep) * (m / n)).astype(np.complex64)
 
 
-def _pss(rec, blocks):
+def _pss(rec):
     """PSS acquisition on the first 10 ms of the first capture of a full-channel recording, or None."""
     from ..signal.ofdm import FRAME_SAMPLES, FS_HZ, acquire_pss
 
@@ -141,10 +142,6 @@ def check_snapshot_age(rec, constellation):
     float
         Median age of the element sets at the recording's start [days] (positive: older).
     """
-    import sys
-
-    from ..positioning.measurements import MAX_TLE_AGE_DAYS
-
     age_days = (rec.start_utc - constellation.epochs_utc) / np.timedelta64(1, "D")
     usable = np.abs(age_days) <= MAX_TLE_AGE_DAYS
     median = float(np.median(age_days))
@@ -325,4 +322,4 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
-                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec, blocks))
+                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec))
