@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
+from leosop.constants import OMEGA_E_RAD_PER_S
 from leosop.ins import trajectory
 
 from conftest import data_path
@@ -145,3 +146,47 @@ def test_reproduce_errmodel_validate(capsys):
     # The 15-state model follows the strapdown to a few percent on every axis
     # (test_error_model checks the same run in detail).
     assert max(abs(v) for v in rel["model15"]["vel"] + rel["model15"]["pos"]) < 0.05
+
+
+def test_align_default_is_auto_and_takes_the_inertial_method_on_the_real_log(capsys):
+    path = data_path("gnss-ins", "psins_lasergyro", "lasergyro.imu")
+    argv = ["align", "--imu", str(path), "--seconds", "300"]
+    status, out, _ = _run([*argv, "--json"], capsys)
+    assert status == 0
+    auto = json.loads(out)
+    assert auto["method_requested"] == "auto" and auto["method"] == "inertial"
+    status, out, _ = _run([*argv, "--method", "wahba", "--json"], capsys)
+    wahba = json.loads(out)
+    # The header's yaw -90.6 deg (heading 90.6 deg, "maybe inaccurate") is the
+    # only reference; the inertial method's five 60 s windows agree with it to
+    # 1.1 deg (test_alignment), the mean-rate heading is pulled off by the
+    # vehicle settling: the default must land nearer the header than wahba.
+    assert abs(auto["heading_deg"] - 90.6) < 1.5
+    assert abs(auto["heading_deg"] - 90.6) < abs(wahba["heading_deg"] - 90.6)
+    status, out, _ = _run(argv, capsys)
+    assert status == 0 and out.startswith("method inertial (auto):")
+
+
+def test_align_auto_takes_wahba_on_a_short_log(tmp_path, capsys):
+    from leosop.ins.alignment import AUTO_INERTIAL_MIN_S
+
+    traj = trajectory.static(34.25, 108.9, 380.0, 3.0, -2.0, 250.0, AUTO_INERTIAL_MIN_S / 2)
+    path = _write_psins(tmp_path / "short.imu", traj, 34.25)
+    status, out, _ = _run(["align", "--imu", str(path), "--json"], capsys)
+    assert status == 0
+    doc = json.loads(out)
+    assert doc["method"] == "wahba" and doc["method_requested"] == "auto"
+    # Noise-free but quantised: at most a gyro quantum per axis over the span
+    # is lost from the mean rate, heading error <= 2 q / T / (Omega_e cos L).
+    q_rad = np.radians(GYRO_Q_ARCSEC / 3600.0)
+    bound_deg = np.degrees(2 * q_rad / doc["duration_s"] / (OMEGA_E_RAD_PER_S * np.cos(np.radians(34.25))))
+    assert doc["heading_deg"] == pytest.approx(250.0, abs=bound_deg)
+
+
+def test_align_windows_name_their_method(capsys):
+    path = data_path("gnss-ins", "psins_lasergyro", "lasergyro.imu")
+    status, out, _ = _run(["align", "--imu", str(path), "--seconds", "60", "--window-s", "5", "--json"], capsys)
+    assert status == 0
+    doc = json.loads(out)
+    # 60 s span: inertial; 5 s windows are below AUTO_INERTIAL_MIN_S: wahba.
+    assert doc["method"] == "inertial" and doc["window_method"] == "wahba" and len(doc["windows"]) == 12

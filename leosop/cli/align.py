@@ -1,8 +1,9 @@
 """``leosop align``: static coarse alignment of a real IMU log ([Qu 2024] and Wahba).
 
 Prints ``{"pitch_deg", "roll_deg", "heading_deg", "method"}`` (heading
-clockwise from true North in [0, 360), pitch nose up, roll right wing down)
-plus the span used and the motion indicator; ``--window-s W`` adds the
+clockwise from true North in [0, 360), pitch nose up, roll right wing down;
+``method`` is the one that ran, ``method_requested`` what was asked, e.g.
+``auto``) plus the span used and the motion indicator; ``--window-s W`` adds the
 alignment of each successive W-second window (stability check).
 """
 
@@ -15,7 +16,8 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import write_csv, write_json
 from ..ins import imu_io
-from ..ins.alignment import INCREMENT_METHODS, MotionWarning, align_increments, motion_std_mps2
+from ..ins.alignment import (AUTO_INERTIAL_MIN_S, INCREMENT_METHODS, MotionWarning, align_increments,
+                             motion_std_mps2, resolve_method)
 from ..rotations import heading_from_yaw
 from . import add_command
 
@@ -29,9 +31,11 @@ def register(subparsers):
                         "_sf.csv (default: from the extension)")
     p.add_argument("--lat-deg", type=float, help="latitude [deg] (default: the file's header, PSINS only)")
     p.add_argument("--seconds", type=float, help="use the first S seconds (default: the whole log)")
-    p.add_argument("--method", choices=INCREMENT_METHODS, default="wahba",
-                   help="[Qu 2024] algorithm 1 or 2, the optimal Wahba solution (default), or the inertial-frame "
-                        "alignment (robust to rocking; attitude at the end of the span)")
+    p.add_argument("--method", choices=INCREMENT_METHODS, default="auto",
+                   help="[Qu 2024] algorithm 1 or 2, the optimal Wahba solution, the inertial-frame alignment "
+                        "(robust to rocking; attitude at the end of the span), or auto (default): inertial on "
+                        f"spans of {AUTO_INERTIAL_MIN_S:g} s or more, else wahba; the output names the method "
+                        "that ran")
     p.add_argument("--window-s", type=float, help="also align every successive window of this length")
 
 
@@ -74,22 +78,24 @@ def run(args):
     dtheta, dvel = log.dtheta_b_rad[:n], log.dvel_b_mps[:n]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MotionWarning)
-        pitch, roll, yaw = align_increments(dtheta, dvel, dt, lat, method=args.method)
+        method = resolve_method(args.method, n * dt)
+        pitch, roll, yaw = align_increments(dtheta, dvel, dt, lat, method=method)
     for w in caught:
         print(f"leosop align: warning: {args.imu}: {w.message}", file=sys.stderr)
-    doc = {**_angles_deg(pitch, roll, yaw), "method": args.method, "lat_deg": float(lat_deg),
-           "duration_s": float(n * dt), "motion_std_mps2": motion_std_mps2(dvel, dt)}
+    doc = {**_angles_deg(pitch, roll, yaw), "method": method, "method_requested": args.method,
+           "lat_deg": float(lat_deg), "duration_s": float(n * dt), "motion_std_mps2": motion_std_mps2(dvel, dt)}
     if args.window_s is not None:
         if not (np.isfinite(args.window_s) and args.window_s >= 1.0):
             raise InputError(f"--window-s {args.window_s:g}: must be at least 1 s")
         m = int(round(args.window_s / dt))
+        doc["window_method"] = window_method = resolve_method(args.method, m * dt)
         windows = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MotionWarning)  # reported once for the whole span above
             for k in range(n // m):
                 sl = slice(k * m, (k + 1) * m)
                 windows.append({"t0_s": float(k * m * dt),
-                                **_angles_deg(*align_increments(dtheta[sl], dvel[sl], dt, lat, method=args.method))})
+                                **_angles_deg(*align_increments(dtheta[sl], dvel[sl], dt, lat, method=window_method))})
         doc["windows"] = windows
     if args.out:
         out = Path(args.out)
@@ -101,8 +107,11 @@ def run(args):
 
 
 def summary(doc):
-    lines = [f"method {doc['method']}: pitch {doc['pitch_deg']:.4f} deg, roll {doc['roll_deg']:.4f} deg, "
+    chosen = " (auto)" if doc["method_requested"] == "auto" else ""
+    lines = [f"method {doc['method']}{chosen}: pitch {doc['pitch_deg']:.4f} deg, roll {doc['roll_deg']:.4f} deg, "
              f"heading {doc['heading_deg']:.3f} deg over {doc['duration_s']:.0f} s"]
+    if "windows" in doc:
+        lines.append(f"windows (method {doc['window_method']}):")
     for w in doc.get("windows", []):
         lines.append(f"  t0 {w['t0_s']:7.1f} s: pitch {w['pitch_deg']:.4f} roll {w['roll_deg']:.4f} "
                      f"heading {w['heading_deg']:.3f}")
