@@ -92,3 +92,19 @@ def test_windup_is_continuous_and_symmetric_overhead():
     w = models.windup_cycles(rs[:, None, :], ESBC_ECEF_M, sun, lat, lon)
     assert w.shape == (len(sun), 1)
     assert np.all(np.abs(np.diff(w[:, 0])) < 0.5)  # unwrapped: no cycle jumps between steps
+
+
+def test_etrf2000_drift_is_eurasian_plate_motion():
+    from leosop.gnss.etrf import etrf2000_to_itrf2014, itrf2014_to_etrf2000
+
+    # Round trip to 1e-9 m (two fixed-point steps of a 1e-7 relative correction).
+    p = itrf2014_to_etrf2000(ESBC_ECEF_M, 2020.5)
+    np.testing.assert_allclose(etrf2000_to_itrf2014(p, 2020.5), ESBC_ECEF_M, atol=1e-9)
+    # The yearly change of ETRF2000 - ITRF2014 is the Eurasian plate's rotation, independently published in
+    # the ITRF2014 plate motion model [Altamimi 2017]: omega = (-0.085, -0.531, 0.770) mas/yr. ETRF2000 is
+    # tied to the plate of the older ITRF2000 model, hence ~1 mm/yr between them: that is the tolerance.
+    rate = itrf2014_to_etrf2000(ESBC_ECEF_M, 2021.0) - itrf2014_to_etrf2000(ESBC_ECEF_M, 2020.0)
+    omega = np.radians(np.array([-0.085, -0.531, 0.770]) / 3.6e6)
+    plate = np.cross(omega, ESBC_ECEF_M)  # station velocity in ITRF2014
+    np.testing.assert_allclose(rate, -plate, atol=1.5e-3)
+    assert 0.02 < np.linalg.norm(plate) < 0.03  # ~2.5 cm/yr north-east in Denmark
