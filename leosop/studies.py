@@ -15,7 +15,8 @@ Where the work runs is chosen by ``scheduler``:
     a temporary ``distributed.LocalCluster`` of single-threaded worker
     processes on this machine (the default of the CLI);
 ``"tcp://host:port"``
-    an existing Dask scheduler;
+    an existing Dask scheduler (unreachable: :class:`leosop.errors.ExternalError`,
+    exit status 1);
 a ``distributed.Client``
     an existing client (tests use an in-process cluster).
 
@@ -29,10 +30,13 @@ import os
 
 import numpy as np
 
-from .errors import InputError
+from .errors import ExternalError
 from .progress import progress
 
 __all__ = ["chunk_generators", "map_chunks"]
+
+#: How long to try reaching a scheduler given by address.
+CONNECT_TIMEOUT = "10s"
 
 
 def chunk_generators(seed, n_chunks):
@@ -41,22 +45,24 @@ def chunk_generators(seed, n_chunks):
 
 
 @contextlib.contextmanager
-def _client(scheduler, n_chunks):
+def _client(scheduler, n_chunks, n_workers=None):
+    """A client for ``scheduler``; a local cluster gets ``n_workers`` (default: the cores) but no more than chunks."""
     from distributed import Client, LocalCluster
 
     if isinstance(scheduler, Client):
         yield scheduler
         return
     if scheduler is None:
-        n_workers = max(1, min(os.cpu_count() or 1, n_chunks))
+        n_workers = max(1, min(n_workers or os.cpu_count() or 1, n_chunks))
         with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                           dashboard_address=":0", silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
             yield client
         return
     try:
-        client = Client(scheduler, timeout="10s")
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise InputError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({exc})") from None
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
     with client:
         yield client
 

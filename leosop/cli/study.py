@@ -1,7 +1,12 @@
-"""``leosop study gdop-map``: visible count and Doppler GDOP over a global grid and time.
+"""``leosop study gdop-map|montecarlo``: studies at scale, results in NetCDF.
 
-Writes ``DIR/gdop_map.nc`` (NetCDF 3 through xarray's scipy backend) and map
-figures; every output is complete or absent (:func:`leosop.fileio.atomic_outputs`).
+``gdop-map``: visible count and Doppler GDOP over a global grid and time,
+``DIR/gdop_map.nc`` and map figures. ``montecarlo SPEC``: a grid of scenario
+parameters x seeds of the ``simulate`` flight (:mod:`leosop.montecarlo`),
+``DIR/montecarlo.nc`` and error-vs-parameter figures; finished chunks wait in
+``DIR/montecarlo-chunks-<digest>/`` until the study is complete, so the same
+command resumes an interrupted study. NetCDF 3 through xarray's scipy
+backend; every output is complete or absent (:func:`leosop.fileio.atomic_outputs`).
 """
 
 import sys
@@ -10,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..montecarlo import bundled_specs
 from ..orbits import CARRIERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
 from ..timebase import format_utc
@@ -21,7 +27,7 @@ _MAX_VALUES = 400_000_000
 
 
 def register(subparsers):
-    p = add_command(subparsers, "study", sys.modules[__name__], help="grid studies (gdop-map)")
+    p = add_command(subparsers, "study", sys.modules[__name__], help="studies at scale (gdop-map, montecarlo)")
     sub = p.add_subparsers(dest="study", metavar="STUDY", required=True)
     g = sub.add_parser("gdop-map", help="visible satellites and Doppler GDOP over a lat/lon grid and time, "
                                         "to NetCDF and world maps")
@@ -39,9 +45,23 @@ def register(subparsers):
     g.add_argument("--scheduler", metavar="ADDR",
                    help="Dask scheduler address (default: a local cluster; 'serial' runs in this process)")
     g.set_defaults(_module=sys.modules[__name__])
+    m = sub.add_parser("montecarlo", help="sweep scenario parameters x seeds of the simulate flight, to NetCDF and "
+                                          "error-vs-parameter figures",
+                       description="SPEC: a JSON spec file or a bundled spec name "
+                                   f"({', '.join(sorted(bundled_specs()))}); see leosop.montecarlo.spec.")
+    m.add_argument("spec", metavar="SPEC", help="JSON spec file or bundled spec name")
+    m.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    m.add_argument("--out", metavar="DIR", required=True,
+                   help="directory for montecarlo.nc, the figures and the chunks of an unfinished study")
+    m.add_argument("--workers", type=int, metavar="N", help="workers of the local Dask cluster (default: the cores)")
+    m.add_argument("--scheduler", metavar="ADDR",
+                   help="Dask scheduler address (default: a local cluster; 'serial' runs in this process)")
+    m.set_defaults(_module=sys.modules[__name__])
 
 
 def run(args):
+    if args.study == "montecarlo":
+        return _run_montecarlo(args)
     duration = positive(args.duration_s, "--duration-s")
     step = positive(args.step_s, "--step-s")
     mask = mask_deg(args.mask_deg)
@@ -101,7 +121,68 @@ def _figures(stage, ds, label):
                          vmin=0, vmax=vmax, cmap="magma_r", title=title + " (blank: < 7 satellites)")
 
 
+def _run_montecarlo(args):
+    from ..fileio import atomic_outputs
+    from ..montecarlo import cell_table, load_spec, run_study, to_dataset, write_netcdf
+    from ..montecarlo.figures import plot_study
+    from ..montecarlo.store import ChunkStore
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers {args.workers}: expected an integer >= 1")
+    spec = load_spec(args.spec)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a directory")
+    work_dir = out / f"montecarlo-chunks-{spec.digest()[:12]}"
+    result = run_study(spec, work_dir, scheduler=args.scheduler, n_workers=args.workers, desc=spec.name)
+    ds = to_dataset(spec, result.rows)
+    with atomic_outputs(out) as stage:
+        write_netcdf(ds, stage / "montecarlo.nc")
+        figures = plot_study(ds, stage, spec.name)
+    ChunkStore(work_dir, 0).remove()
+    return {
+        "study": "montecarlo",
+        "name": spec.name,
+        "netcdf": str(out / "montecarlo.nc"),
+        "figures": [str(out / f.name) for f in figures],
+        "parameters": {k: list(v) for k, v in spec.axes.items()},
+        "fixed": spec.fixed,
+        "n_seeds": spec.n_seeds,
+        "n_runs": spec.n_runs,
+        "n_chunks": result.n_chunks,
+        "n_chunks_resumed": result.n_resumed,
+        "n_workers": result.n_workers,
+        "elapsed_s": result.elapsed_s,
+        "cells": cell_table(ds),
+    }
+
+
+def _stat(s, fmt):
+    def num(v):
+        return "n/a" if v is None else format(v, fmt)
+
+    return f"{num(s['mean'])} ± {num(s['std'])} [{num(s['p10'])}, {num(s['p90'])}]"
+
+
+def _summary_montecarlo(doc):
+    where = f"{doc['n_workers']} Dask workers" if doc["n_workers"] else "this process"
+    lines = [f"{doc['netcdf']}: study {doc['name']}, {doc['n_runs']} runs ({doc['n_seeds']} seeds per cell) in "
+             f"{doc['n_chunks']} chunks, {doc['n_chunks_resumed']} resumed, {doc['elapsed_s']:.1f} s on {where}",
+             "fused error over seeds: mean ± std [10th, 90th percentile]"]
+    names = list(doc["parameters"])
+    table = [names + ["position m", "velocity m/s", "n"]]
+    for c in doc["cells"]:
+        p, v = c["fused_pos_err_mean_m"], c["fused_vel_err_mean_mps"]
+        table.append([f"{c['parameters'][k]:g}" if isinstance(c["parameters"][k], float) else str(c["parameters"][k])
+                      for k in names] + [_stat(p, ".2f"), _stat(v, ".4f"), str(p["n"])])
+    widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
+    lines += ["  ".join(x.rjust(w) for x, w in zip(r, widths)) for r in table]
+    return "\n".join(lines)
+
+
 def summary(doc):
+    if doc["study"] == "montecarlo":
+        return _summary_montecarlo(doc)
     return "\n".join([
         f"{doc['netcdf']}: {doc['n_epochs']} epochs {doc['start_utc']} .. {doc['end_utc']}, "
         f"{doc['grid_deg']:g} deg grid, {doc['n_satellites']} satellites, mask {doc['mask_deg']:g} deg",
