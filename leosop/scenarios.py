@@ -8,16 +8,18 @@ and missing keys take the xian-baoji values. Unknown keys are refused.
 """
 
 import json
-from dataclasses import asdict, dataclass, fields, replace
+from importlib.resources import files
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
+from .orbits import CARRIERS
 from .timebase import format_utc, parse_utc
 
 __all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN", "load_scenario",
-           "scenario_from_dict", "to_dict"]
+           "scenario_from_dict", "to_dict", "bundled_names", "BUNDLED_DIR"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,19 @@ class LeoSpec:
     in scenario files, a compatible extension of DESIGN.md 4.1. ``cn0_dbhz``: pilot
     carrier-to-noise density (not given by the paper; 45 dB-Hz is a
     conservative figure for the Starlink pilot tone seen by a small dish).
+
+    Several constellations (DESIGN.md 4.1 ``leo.constellations``, keys of
+    :data:`leosop.orbits.CARRIERS`): each family transmits on its own carrier
+    and is measured by its own receiver chain. ``rx_freq_offsets_hz`` gives
+    a family's receiver offset [Hz] (missing families: ``rx_freq_offset_hz``
+    scaled by the carrier ratio to Starlink's, one oscillator);
+    ``cn0_dbhz_by_family`` a family's C/N0 (missing:
+    :data:`leosop.simulate_families.FAMILY_MODELS`; Starlink's is
+    ``cn0_dbhz``). The satellites' offsets scale with the carrier the same way
+    (the same fractional oscillator error as Starlink's 0-5 Hz at 11.325 GHz).
+    ``outage_s``: ``[start, end]`` seconds of the flight during which only
+    the ``outage_max_sats`` highest satellites are tracked (a degraded sky:
+    foliage, banking, jamming of the other bands); None: no outage.
     """
 
     sat_doppler_offset_max_hz: float = 5.0
@@ -55,6 +70,11 @@ class LeoSpec:
     fix_rate_hz: float = 1.0
     cn0_dbhz: float = 45.0
     orbit_error_model: str = "independent"
+    constellations: tuple = ("starlink",)
+    rx_freq_offsets_hz: dict = field(default_factory=dict)
+    cn0_dbhz_by_family: dict = field(default_factory=dict)
+    outage_s: tuple | None = None
+    outage_max_sats: int = 3
 
 
 @dataclass(frozen=True)
@@ -82,6 +102,10 @@ class Scenario:
     imu : ImuSpec
     leo : LeoSpec
     init_error : InitError
+    tle : str or None
+        Element-set file of the scenario (an absolute path, or resolved
+        against the scenario file's folder); None: the bundled sky. The
+        ``--tle`` option overrides it.
     """
 
     name: str
@@ -93,6 +117,7 @@ class Scenario:
     imu: ImuSpec
     leo: LeoSpec
     init_error: InitError
+    tle: str | None = None
 
 
 #: [Shen 2024] section 4.1: Xi'an (34.342 N, 108.940 E) to Baoji (34.363 N,
@@ -116,6 +141,9 @@ XIAN_BAOJI = Scenario(
 
 #: Scenarios known by name.
 BUILTIN = {XIAN_BAOJI.name: XIAN_BAOJI}
+#: Bundled scenario files, known by their stem (the degraded-sky flights of
+#: the multi-constellation work; see their README.md).
+BUNDLED_DIR = Path(str(files("leosop") / "data" / "scenarios"))
 
 
 def to_dict(scenario):
@@ -124,6 +152,8 @@ def to_dict(scenario):
     doc["start_utc"] = format_utc(scenario.start_utc)
     doc["waypoints"] = [list(w) for w in scenario.waypoints]
     doc["init_error"] = {k: list(v) for k, v in doc["init_error"].items()}
+    doc["leo"]["constellations"] = list(scenario.leo.constellations)
+    doc["leo"]["outage_s"] = None if scenario.leo.outage_s is None else list(scenario.leo.outage_s)
     return doc
 
 
@@ -169,12 +199,58 @@ _LIMITS = {
 }
 
 
+def _families(value, where):
+    if not isinstance(value, (list, tuple)) or not value or not all(isinstance(v, str) for v in value):
+        raise InputError(f"{where}: expected a non-empty list of constellation names")
+    for name in value:
+        if name not in CARRIERS:
+            raise InputError(f"{where}: unknown constellation {name!r}; expected one of {', '.join(CARRIERS)}")
+    if len(set(value)) != len(value):
+        raise InputError(f"{where}: a constellation is listed twice")
+    return tuple(value)
+
+
+def _per_family(value, where, low, high):
+    _check_keys(value, CARRIERS, where)
+    return {k: _number(v, f"{where}.{k}", low=low, high=high) for k, v in value.items()}
+
+
+def _outage(value, where):
+    if value is None:
+        return None
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise InputError(f"{where}: expected [start_s, end_s] or null, got {value!r}")
+    start = _number(value[0], f"{where}[0]", low=0.0, high=86_400.0)
+    end = _number(value[1], f"{where}[1]", low=start, high=86_400.0, low_open=True)
+    return (start, end)
+
+
+def _leo_value(key, value, where):
+    """A validated value of one of the multi-constellation keys of ``leo``."""
+    if key == "constellations":
+        return _families(value, where)
+    if key == "rx_freq_offsets_hz":
+        return _per_family(value, where, -1e6, 1e6)
+    if key == "cn0_dbhz_by_family":
+        return _per_family(value, where, 0.0, 100.0)
+    if key == "outage_s":
+        return _outage(value, where)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 1000:
+        raise InputError(f"{where}: expected a whole number of satellites in [0, 1000], got {value!r}")
+    return value
+
+
+_LEO_KEYS = ("constellations", "rx_freq_offsets_hz", "cn0_dbhz_by_family", "outage_s", "outage_max_sats")
+
+
 def _section(cls, doc, base, where):
     names = [f.name for f in fields(cls)]
     _check_keys(doc, names, where)
     values = {}
     for key, value in doc.items():
-        if cls is InitError:
+        if key in _LEO_KEYS:
+            values[key] = _leo_value(key, value, f"{where}.{key}")
+        elif cls is InitError:
             values[key] = _vector3(value, f"{where}.{key}", -1e6, 1e6)
         elif key in _CHOICES:
             if value not in _CHOICES[key]:
@@ -208,7 +284,7 @@ def scenario_from_dict(doc, *, source="scenario", base=XIAN_BAOJI):
     InputError
         Naming ``source`` and the key for unknown keys and out-of-range values.
     """
-    top = ("name", "start_utc", "waypoints", "speed_mps", "mask_deg", "duration_s", "imu", "leo", "init_error")
+    top = ("name", "start_utc", "waypoints", "speed_mps", "mask_deg", "duration_s", "imu", "leo", "init_error", "tle")
     _check_keys(doc, top, source)
     values = {}
     if "name" in doc:
@@ -231,10 +307,19 @@ def scenario_from_dict(doc, *, source="scenario", base=XIAN_BAOJI):
             doc["duration_s"], f"{source}.duration_s", low=0.0, high=86_400.0, low_open=True)
     elif "waypoints" in doc or "speed_mps" in doc:
         values["duration_s"] = None  # the base flight's length no longer applies
+    if "tle" in doc:
+        if doc["tle"] is not None and (not isinstance(doc["tle"], str) or not doc["tle"].strip()):
+            raise InputError(f"{source}.tle: expected a file name or null")
+        values["tle"] = doc["tle"]
     for key, cls in (("imu", ImuSpec), ("leo", LeoSpec), ("init_error", InitError)):
         if key in doc:
             values[key] = _section(cls, doc[key], getattr(base, key), f"{source}.{key}")
     return replace(base, **values)
+
+
+def bundled_names():
+    """Names of every built-in scenario: ``xian-baoji`` and the files of :data:`BUNDLED_DIR`."""
+    return list(BUILTIN) + sorted(p.stem for p in BUNDLED_DIR.glob("*.json"))
 
 
 def load_scenario(name_or_path):
@@ -243,20 +328,27 @@ def load_scenario(name_or_path):
     Parameters
     ----------
     name_or_path : str or path-like
-        ``"xian-baoji"`` or the path of a JSON file.
+        ``"xian-baoji"``, the name of a bundled scenario file
+        (:data:`BUNDLED_DIR`, e.g. ``"urban-canyon"``) or the path of a JSON file.
 
     Returns
     -------
     Scenario
+        Its ``tle``, when given, resolved against the file's folder.
     """
     key = str(name_or_path)
     if key in BUILTIN:
         return BUILTIN[key]
-    path = Path(key)
-    if not path.suffix == ".json" and not path.exists():
-        raise InputError(f"--scenario: {key!r} is neither a built-in scenario ({', '.join(BUILTIN)}) "
-                         "nor a JSON file")
-    text = path.read_text()
+    path = BUNDLED_DIR / f"{key}.json"
+    if not path.exists():
+        path = Path(key)
+        if not path.suffix == ".json" and not path.exists():
+            raise InputError(f"--scenario: {key!r} is neither a built-in scenario ({', '.join(bundled_names())}) "
+                             "nor a JSON file")
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"--scenario: cannot read {path}: {exc.strerror}") from None
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -264,4 +356,6 @@ def load_scenario(name_or_path):
     scenario = scenario_from_dict(doc, source=str(path))
     if "name" not in doc:
         scenario = replace(scenario, name=path.stem)
+    if scenario.tle is not None:
+        scenario = replace(scenario, tle=str((path.parent / scenario.tle).resolve()))
     return scenario

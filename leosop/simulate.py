@@ -1,4 +1,4 @@
-"""End-to-end simulation of [Shen 2024]'s experiment: truth flight, IMU, LEO Doppler, fixes, loose EKF.
+"""End-to-end simulation of [Shen 2024]'s experiment: truth flight, IMU, LEO Doppler, fixes, loose or tight EKF.
 
 :func:`run_scenario` is the one entry point; the ``simulate`` command and the
 table reproductions call it. For a scenario it
@@ -10,8 +10,12 @@ table reproductions call it. For a scenario it
    drawn uniformly in [0, max] and the receiver's fixed offset;
 3. measures every Doppler, either at signal level (a pilot block per
    satellite-epoch, estimated by the ``fast`` estimator) or at measurement
-   level (the estimator's error model);
-4. solves a snapshot Doppler fix per epoch with 7 or more satellites, with
+   level (the estimator's error model); the families other than Starlink
+   (``leo.constellations``) always at measurement level, each on its own
+   carrier with its own receiver offset (:mod:`leosop.simulate_families`);
+   in an outage (``leo.outage_s``) only the highest few are tracked;
+4. solves a snapshot Doppler fix per epoch with 6 + k or more satellites
+   (one receiver clock per constellation seen), with
    satellite positions carrying a constant orbit error (one per satellite,
    or one shift of all: ``leo.orbit_error_model``);
 5. runs the INS alone and the EKF: loose (:mod:`leosop.fusion.loose`, the
@@ -36,6 +40,8 @@ errors as constant states (:func:`_fix_error_model`).
 import dataclasses
 import time
 import warnings
+from importlib.resources import files
+from pathlib import Path
 
 import numpy as np
 
@@ -44,12 +50,13 @@ from .constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 from .errors import InputError
 from .fusion import common, kalman, loose, tight
 from .ins import imu, strapdown, trajectory
-from .orbits import CARRIERS, load_constellation
+from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
 from .positioning.dop import doppler_jacobian
 from .positioning.doppler_ls import FixStatus, solve_snapshots
 from .signal.doppler import doppler_sigma_hz, estimate_block
 from .signal.pilot import PilotComb, add_noise, comb_baseband
+from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz
 from .timebase import format_utc, seconds_since
 
 __all__ = ["SimulationResult", "run_scenario", "metrics", "LEVELS", "COUPLINGS"]
@@ -69,6 +76,9 @@ STALE_TLE_DAYS = 14.0
 BLOCK_S = 0.01
 SAMPLE_RATE_HZ = 400e3
 SEARCH_HZ = 20e3
+#: The bundled sky of the other families (OneWeb, Iridium NEXT, Orbcomm Walker
+#: shells at the bundled Starlink set's epoch; tools/make_family_walker_tle.py).
+FAMILIES_TLE = Path(str(files("leosop") / "data" / "leo_families_walker.tle"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,9 +103,12 @@ class SimulationResult:
     fused : leosop.fusion.common.FusionResult
     n_visible : ndarray of int, (n,)
     gdop : ndarray, (n,)
-        Eq. 10 along the true flight; NaN below 7 satellites.
+        Eq. 10 along the true flight (one receiver clock per constellation
+        seen); NaN below 6 + k satellites of k constellations.
     tle_age_days : float
     runtime_s : float
+    n_visible_by_family : ndarray of int, (n, k)
+        Tracked satellites of each of the scenario's ``leo.constellations``.
     """
 
     scenario: object
@@ -120,6 +133,7 @@ class SimulationResult:
     gdop: np.ndarray
     tle_age_days: float
     runtime_s: float
+    n_visible_by_family: np.ndarray = None
 
     def errors(self):
         """3D position [m] and velocity [m/s] errors, dict of (n,) arrays per solution."""
@@ -234,16 +248,25 @@ def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_db
     return est, sigma
 
 
-def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, carrier_hz, offset_max_hz,
+def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, carrier_hz, family, offset_max_sat_hz,
                      orbit_error_m, orbit_error_model):
     """How each fix depends on the satellites' constant errors, and its white part.
 
     The fix is the weighted least squares ``x = x_true + G e`` (to first order)
-    with ``G = cov H^T W`` at the solution, over the Doppler it used; ``e_j``
-    holds the satellite's offset, its orbit error ``dr_j`` seen through
-    ``h_j = dD/dr_rx`` (the Doppler depends on ``r_s - r_rx``, so a satellite
-    believed ``dr`` away acts as a receiver moved by ``-dr``) and the
-    estimator noise, the only white part.
+    with ``G = cov H^T W`` at the solution, over the Doppler it used (``H``
+    with one receiver-clock column per family); ``e_j`` holds the satellite's
+    offset, its orbit error ``dr_j`` seen through ``h_j = dD/dr_rx`` (the
+    Doppler depends on ``r_s - r_rx``, so a satellite believed ``dr`` away
+    acts as a receiver moved by ``-dr``) and the estimator noise, the only
+    white part.
+
+    Parameters
+    ----------
+    carrier_hz : ndarray, (m,)
+    family : ndarray of int, (m,)
+        Clock group of each pair.
+    offset_max_sat_hz : ndarray, (n_sats,)
+        Each satellite's offset bound (offsets uniform in [0, max]).
 
     Returns
     -------
@@ -252,10 +275,13 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
         ``G_pv diag(sigma_est^2) G_pv^T`` (ECEF), NaN without a fix.
     """
     H = doppler_jacobian(vis.padded(pos_sv_known), vis.padded(vis.vel_sv_ecef_mps), fixes.pos_ecef_m,
-                         fixes.vel_ecef_mps, carrier_hz)
+                         fixes.vel_ecef_mps, vis.padded(carrier_hz))
+    n_clk = fixes.cov.shape[-1] - 6
+    onehot = np.nan_to_num(vis.padded(family.astype(float)), nan=-1.0)[..., None] == np.arange(n_clk)
+    H = np.concatenate([H[..., :6], onehot], -1)
     used = fixes.used & good[:, None]
     w = np.where(used, 1.0 / np.nan_to_num(vis.padded(sigma_hz), nan=1.0) ** 2, 0.0)
-    G = np.nan_to_num(fixes.cov) @ np.swapaxes(np.nan_to_num(H) * w[..., None], 1, 2)  # (n_ep, 7, n_sv)
+    G = np.nan_to_num(fixes.cov) @ np.swapaxes(np.nan_to_num(H) * w[..., None], 1, 2)  # (n_ep, 6 + k, n_sv)
     G_pv = G[:, :6, :]
     sigma_white = np.nan_to_num(vis.padded(np.broadcast_to(sigma_est_hz, sigma_hz.shape)))
     cov_white = np.einsum("kis,ks,kjs->kij", G_pv, sigma_white**2 * used, G_pv)
@@ -265,9 +291,72 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
     pair_used = used[ep, slot]
     fix_errors = loose.FixErrorModel(
         epoch_index=ep[pair_used], sat_index=vis.sat_index[pair_used], gain_ecef=G_pv[ep, :, slot][pair_used],
-        orbit_hz_per_m=H[ep, slot, :3][pair_used], offset_sigma_hz=offset_max_hz / np.sqrt(12.0),
+        orbit_hz_per_m=H[ep, slot, :3][pair_used], offset_sigma_hz=offset_max_sat_hz / np.sqrt(12.0),
         orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
     return fix_errors, cov_white
+
+
+def _constellation(families, tle):
+    """The transmitting satellites of ``families`` and each one's family index, (n_sats,) int.
+
+    Without ``tle``: the bundled Starlink-like set, plus the bundled sky of
+    the other families (:data:`FAMILIES_TLE`) when they are asked for. A file
+    without names (2-line TLEs) is taken whole as Starlink when only Starlink
+    is asked for.
+
+    Raises
+    ------
+    InputError
+        Naming a requested family of which the file holds no satellite.
+    """
+    if tle is None:
+        parts = [load_constellation()] + ([load_constellation(FAMILIES_TLE)] if set(families) - {"starlink"} else [])
+        every = Constellation(sum((c.names for c in parts), ()), np.concatenate([c.sat_ids for c in parts]),
+                              sum((c.satrecs for c in parts), ()), np.concatenate([c.epochs_utc for c in parts]),
+                              "bundled sky")
+    else:
+        every = load_constellation(tle)
+    if tuple(families) == ("starlink",) and not (every.families != "").any():
+        return every, np.zeros(len(every), int)
+    index = [np.flatnonzero(every.families == f) for f in families]
+    for f, idx in zip(families, index):
+        if idx.size == 0:
+            raise InputError(f"{every.source or tle}: no satellite of constellation {f!r} (leo.constellations)")
+    return every.subset(np.concatenate(index)), np.repeat(np.arange(len(families)), [i.size for i in index])
+
+
+def _family_models(leo):
+    """Per family of ``leo.constellations``: carrier, clock scale, receiver offset and measurement sigma.
+
+    Returns
+    -------
+    dict
+        ``carrier_hz``, ``clock_scale``, ``rx_offset_hz``, ``sigma_hz``:
+        ndarray (k,); ``starlink``: Starlink's index (-1 when absent).
+    """
+    fams = leo.constellations
+    cn0 = [leo.cn0_dbhz if f == "starlink" else leo.cn0_dbhz_by_family.get(f, FAMILY_MODELS[f].cn0_dbhz) for f in fams]
+    scale = np.array([carrier_ratio(f) for f in fams])
+    return {
+        "carrier_hz": np.array([CARRIERS[f].default_hz for f in fams]),
+        "clock_scale": scale,
+        "rx_offset_hz": np.array([leo.rx_freq_offsets_hz.get(f, leo.rx_freq_offset_hz * r) for f, r in zip(fams, scale)]),
+        "sigma_hz": tone_sigma_hz(cn0, [FAMILY_MODELS[f].integration_s for f in fams]),
+        "starlink": fams.index("starlink") if "starlink" in fams else -1,
+    }
+
+
+def _tracked(vis, t_s, outage_s, max_sats):
+    """The visible pairs the receiver tracks: all, except in the outage ``[start, end]`` the ``max_sats`` highest."""
+    if outage_s is None:
+        return vis
+    order = np.lexsort((-vis.elev_rad, vis.epoch_index))
+    rank = np.empty(order.size, int)
+    rank[order] = np.arange(order.size) - np.searchsorted(vis.epoch_index[order], vis.epoch_index[order])
+    t = t_s[vis.epoch_index]
+    keep = (t < outage_s[0]) | (t > outage_s[1]) | (rank < max_sats)
+    return dataclasses.replace(vis, **{f: getattr(vis, f)[keep] for f in (
+        "epoch_index", "sat_index", "az_rad", "elev_rad", "range_m", "pos_sv_ecef_m", "vel_sv_ecef_mps")})
 
 
 def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_error_m=None, orbit_error_model=None,
@@ -305,15 +394,14 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         raise InputError(f"orbit error model {orbit_error_model!r}: expected one of {', '.join(common.ORBIT_MODELS)}")
     rng_imu, rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
 
-    constellation = load_constellation(tle)
-    if tle is not None and len(constellation.family("starlink")):
-        constellation = constellation.family("starlink")
+    constellation, family_sat = _constellation(scenario.leo.constellations, tle if tle is not None else scenario.tle)
     tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / 86_400.0)
     if tle_age_days > STALE_TLE_DAYS:
         warnings.warn(f"scenario start {format_utc(scenario.start_utc)} is {tle_age_days:.0f} days from the "
                       "nearest element-set epoch; satellite positions will be off by many kilometres",
                       stacklevel=2)
-    carrier_hz = CARRIERS["starlink"].default_hz
+    models = _family_models(scenario.leo)
+    carrier_sat = models["carrier_hz"][family_sat]
 
     # 1. Truth and IMU.
     truth = trajectory.flight(np.asarray(scenario.waypoints), speed_mps=scenario.speed_mps,
@@ -340,42 +428,55 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     ins_pos = frames.geodetic_to_ecef(ins.lat_rad, ins.lon_rad, ins.alt_m)
     ins_vel_ecef = np.einsum("kij,kj->ki", frames.C_e_n(ins.lat_rad, ins.lon_rad), ins.vel_enu_mps)
 
-    # 3. Visibility and Doppler.
+    # 3. Visibility (the satellites tracked: all above the mask, or the highest few in an outage) and Doppler.
     vis = compute_visibility(constellation, times_utc, pos_rx, scenario.mask_deg, vel_rx_ecef_mps=vel_rx,
                              show_progress=progress is not None)
+    vis = _tracked(vis, t_s, scenario.leo.outage_s, scenario.leo.outage_max_sats)
     n_visible = vis.n_visible
+    n_families = len(scenario.leo.constellations)
     if not n_visible.any():
         warnings.warn(f"{scenario.name}: no satellite rises above the {scenario.mask_deg:g} deg mask during the "
                       "flight; the result is the INS alone", stacklevel=2)
-    gdop = vis.doppler_gdop(carrier_hz)
-    sat_offset_hz = rng_sat.uniform(0.0, scenario.leo.sat_doppler_offset_max_hz, len(constellation))
+    groups = None if n_families == 1 else family_sat
+    gdop = vis.doppler_gdop(carrier_sat, groups)
+    offset_max_sat = scenario.leo.sat_doppler_offset_max_hz * models["clock_scale"][family_sat]
+    sat_offset_hz = offset_max_sat * rng_sat.uniform(0.0, 1.0, len(constellation))
     orbit_err = orbit_error_m * rng_sat.standard_normal((len(constellation), 3))
     if orbit_error_model == "common":
         orbit_err = np.full((len(constellation), 3), orbit_error_m)
     ep, sat = vis.epoch_index, vis.sat_index
+    fam, carrier = family_sat[sat], carrier_sat[sat]
     range_rate = frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, pos_rx[ep], vel_rx[ep])
-    doppler_geom = -range_rate * carrier_hz / C_MPS
-    clock_hz = sat_offset_hz[sat] + scenario.leo.rx_freq_offset_hz
+    doppler_geom = -range_rate * carrier / C_MPS
+    clock_hz = sat_offset_hz[sat] + models["rx_offset_hz"][fam]
     pos_sv_known = vis.pos_sv_ecef_m + orbit_err[sat]
     H_known = doppler_jacobian(pos_sv_known[:, None], vis.vel_sv_ecef_mps[:, None], ins_pos[ep], ins_vel_ecef[ep],
-                               carrier_hz)[:, 0]
-    if level == "measurement":
-        sigma_est = doppler_sigma_hz(scenario.leo.cn0_dbhz, BLOCK_S, sample_rate_hz=SAMPLE_RATE_HZ)
-        doppler_meas = doppler_geom + clock_hz + sigma_est * rng_meas.standard_normal(doppler_geom.shape)
-    else:
-        # Prediction from the INS alone and the known orbits (range-rate part of the Jacobian).
-        predicted = np.einsum("mi,mi->m", H_known[:, 3:6], ins_vel_ecef[ep] - vis.vel_sv_ecef_mps)
-        rate = _doppler_rate_hz_per_s(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, pos_rx[ep], vel_rx[ep], carrier_hz)
-        doppler_meas, sigma_est = _signal_level(doppler_geom, rate, clock_hz, predicted, scenario.leo.cn0_dbhz,
-                                                rng_meas, progress)
+                               carrier[:, None])[:, 0]
+    # Measurement-level sigma of each family; Starlink's is the comb's (fast estimator).
+    sigma_est = np.where(fam == models["starlink"],
+                         doppler_sigma_hz(scenario.leo.cn0_dbhz, BLOCK_S, sample_rate_hz=SAMPLE_RATE_HZ),
+                         models["sigma_hz"][fam])
+    doppler_meas = np.full(doppler_geom.shape, np.nan)
+    comb = (fam == models["starlink"]) & (level == "signal")
+    if comb.any():
+        # Starlink at signal level: prediction from the INS alone and the known orbits (range-rate part of the Jacobian).
+        predicted = np.einsum("mi,mi->m", H_known[comb, 3:6], ins_vel_ecef[ep[comb]] - vis.vel_sv_ecef_mps[comb])
+        rate = _doppler_rate_hz_per_s(vis.pos_sv_ecef_m[comb], vis.vel_sv_ecef_mps[comb], pos_rx[ep[comb]],
+                                      vel_rx[ep[comb]], carrier[comb])
+        doppler_meas[comb], sigma_est[comb] = _signal_level(doppler_geom[comb], rate, clock_hz[comb], predicted,
+                                                            scenario.leo.cn0_dbhz, rng_meas, progress)
+    modelled = ~comb
+    doppler_meas[modelled] = (doppler_geom[modelled] + clock_hz[modelled]
+                              + sigma_est[modelled] * rng_meas.standard_normal(int(modelled.sum())))
 
-    # 4. Snapshot fixes from what the receiver knows: orbits with their errors.
-    sigma_hz = np.sqrt(sigma_est**2 + scenario.leo.sat_doppler_offset_max_hz**2 / 12.0
-                       + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
+    # 4. Snapshot fixes from what the receiver knows: orbits with their errors; 6 + k states for k families seen.
+    offset_max = offset_max_sat[sat]
+    sigma_hz = np.sqrt(sigma_est**2 + offset_max**2 / 12.0 + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
     x0 = np.concatenate([ins_pos, ins_vel_ecef, np.zeros((n_ep, 1))], axis=-1)
     fixes = solve_snapshots(vis.padded(doppler_meas), vis.padded(sigma_hz), vis.padded(pos_sv_known),
-                            vis.padded(vis.vel_sv_ecef_mps), carrier_hz, x0=x0)
-    good = (fixes.status == FixStatus.OK) & (n_visible >= 7)
+                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(carrier), x0=x0,
+                            clock_group=None if groups is None else np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
+    good = fixes.status == FixStatus.OK
     fix_pos = np.where(good[:, None], fixes.pos_ecef_m, np.nan)
     fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
     fix_cov = np.where(good[:, None, None], fixes.cov, np.nan)
@@ -383,18 +484,16 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
     if coupling == "loose":
-        fix_errors, cov_white = _fix_error_model(vis, fixes, good, sigma_hz, sigma_est, pos_sv_known, carrier_hz,
-                                                 scenario.leo.sat_doppler_offset_max_hz, orbit_error_m,
-                                                 orbit_error_model)
+        fix_errors, cov_white = _fix_error_model(vis, fixes, good, sigma_hz, sigma_est, pos_sv_known, carrier, fam,
+                                                 offset_max_sat, orbit_error_m, orbit_error_model)
         fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, cov_white), settings,
                           fix_errors=fix_errors, progress=progress)
     else:
-        offset_max = scenario.leo.sat_doppler_offset_max_hz
-        priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max / 2, sat_offset_sigma_hz=offset_max / np.sqrt(12),
-                                     orbit_sigma_m=orbit_error_m, carrier_hz=carrier_hz,
-                                     orbit_model=orbit_error_model)
-        meas = tight.DopplerMeasurements(ep, sat, doppler_meas, np.broadcast_to(sigma_est, doppler_meas.shape),
-                                         pos_sv_known, vis.vel_sv_ecef_mps)
+        priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2, sat_offset_sigma_hz=offset_max_sat / np.sqrt(12),
+                                     orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model,
+                                     n_clocks=n_families)
+        meas = tight.DopplerMeasurements(ep, sat, doppler_meas, sigma_est, pos_sv_known, vis.vel_sv_ecef_mps,
+                                         carrier_hz=carrier, clock_index=fam)
         fused = tight.run(state0, dtheta, dvel, truth.dt_s, meas, priors, settings, n_ep, progress=progress)
     fix_vel_enu = np.einsum("kji,kj->ki", C_e_n, fix_vel)
     return SimulationResult(
@@ -403,7 +502,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         truth_pos_ecef_m=pos_rx, truth_vel_enu_mps=truth1.vel_enu_mps, truth_lat_rad=truth1.lat_rad,
         truth_lon_rad=truth1.lon_rad, ins_pos_ecef_m=ins_pos, ins_vel_enu_mps=ins.vel_enu_mps,
         fix_pos_ecef_m=fix_pos, fix_vel_enu_mps=fix_vel_enu, fix_cov=fix_cov, fused=fused, n_visible=n_visible,
-        gdop=gdop, tle_age_days=tle_age_days, runtime_s=time.perf_counter() - tic)
+        gdop=gdop, tle_age_days=tle_age_days, runtime_s=time.perf_counter() - tic,
+        n_visible_by_family=vis.n_visible_by_group(family_sat) if len(family_sat) else np.zeros((n_ep, n_families), int))
 
 
 def metrics(result):

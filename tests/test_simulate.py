@@ -19,30 +19,36 @@ def test_fix_error_is_the_gain_times_the_satellite_errors():
     # Doppler with per-satellite offsets (uniform 0-5 Hz) and orbit errors
     # (30 m per axis) along the first 40 s of the xian-baoji flight: the fix
     # error must equal sum_j G_j (o_j + h_j . dr_j) from _fix_error_model.
+    # Two constellations (Starlink and OneWeb of the bundled sky, 35 deg mask):
+    # two carriers, two receiver clocks (5 and -40 Hz), 8 states per fix.
     truth = trajectory.flight(np.asarray(XIAN_BAOJI.waypoints), speed_mps=200.0, rate_hz=100.0,
                               duration_s=40.0).resample(1.0)
     times = XIAN_BAOJI.start_utc + (truth.t_s * 1e9).astype("timedelta64[ns]")
     C_e_n = frames.C_e_n(truth.lat_rad, truth.lon_rad)
     vel_rx = np.einsum("kij,kj->ki", C_e_n, truth.vel_enu_mps)
-    constellation = load_constellation()
-    vis = compute_visibility(constellation, times, truth.pos_ecef_m, 40.0, vel_rx_ecef_mps=vel_rx,
+    constellation, family_sat = simulate._constellation(("starlink", "oneweb"), None)
+    vis = compute_visibility(constellation, times, truth.pos_ecef_m, 35.0, vel_rx_ecef_mps=vel_rx,
                              show_progress=False)
-    f0 = CARRIERS["starlink"].default_hz
+    fam = family_sat[vis.sat_index]
+    f0 = np.array([CARRIERS["starlink"].default_hz, CARRIERS["oneweb"].default_hz])[fam]
     rng = np.random.default_rng(3)
     offset_hz = rng.uniform(0.0, 5.0, len(constellation))
     orbit_m = 30.0 * rng.standard_normal((len(constellation), 3))
     ep, sat = vis.epoch_index, vis.sat_index
     doppler = (-frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, truth.pos_ecef_m[ep], vel_rx[ep]) * f0
-               / C_MPS + offset_hz[sat] + 5.0)
+               / C_MPS + offset_hz[sat] + np.array([5.0, -40.0])[fam])
     pos_known = vis.pos_sv_ecef_m + orbit_m[sat]
-    h = doppler_jacobian(pos_known[:, None], vis.vel_sv_ecef_mps[:, None], truth.pos_ecef_m[ep], vel_rx[ep], f0)
+    h = doppler_jacobian(pos_known[:, None], vis.vel_sv_ecef_mps[:, None], truth.pos_ecef_m[ep], vel_rx[ep],
+                         f0[:, None])
     sigma = np.sqrt(0.05**2 + 25.0 / 12.0 + (np.linalg.norm(h[:, 0, :3], axis=-1) * 30.0) ** 2)
     x0 = np.concatenate([truth.pos_ecef_m + 50.0, vel_rx, np.zeros((vel_rx.shape[0], 1))], axis=-1)
     fixes = solve_snapshots(vis.padded(doppler), vis.padded(sigma), vis.padded(pos_known),
-                            vis.padded(vis.vel_sv_ecef_mps), f0, x0=x0)
-    good = (fixes.status == FixStatus.OK) & (vis.n_visible >= 7)
-    model, cov_white = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, 5.0, 30.0,
-                                                 "independent")
+                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(f0), x0=x0,
+                            clock_group=np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
+    good = fixes.status == FixStatus.OK
+    assert (vis.n_visible_by_group(family_sat)[good] > 0).all()  # both constellations in every fix
+    model, cov_white = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
+                                                 np.full(len(constellation), 5.0), 30.0, "independent")
     e_dopp = offset_hz[model.sat_index] + np.sum(model.orbit_hz_per_m * orbit_m[model.sat_index], axis=-1)
     predicted = np.zeros((vis.n_visible.size, 6))
     np.add.at(predicted, model.epoch_index, model.gain_ecef * e_dopp[:, None])

@@ -18,7 +18,8 @@ def test_jacobian_matches_the_change_of_the_predicted_doppler(orbit_model):
     # Feeding back an error state x must change the innovations by -H x (to
     # second order in x): an independent check of every column block, for
     # both layouts of the orbit-error states (per satellite, or one shift
-    # shared by the three satellites).
+    # shared by the three satellites), with two constellations (two receiver
+    # clocks, two carriers: Starlink and Iridium NEXT rows).
     lat, lon, alt = np.radians(34.3), np.radians(108.5), 3000.0
     state = strapdown.NavState.from_dcm(lat, lon, alt, [-200.0, 5.0, 1.0], np.eye(3))
     r_rx = frames.geodetic_to_ecef(lat, lon, alt)
@@ -26,29 +27,33 @@ def test_jacobian_matches_the_change_of_the_predicted_doppler(orbit_model):
     up = r_rx / np.linalg.norm(r_rx)
     pos_sv = r_rx + 700e3 * up + rng.uniform(-4e5, 4e5, (3, 3))
     vel_sv = np.cross([0.0, 0.0, 1.0], pos_sv) / np.linalg.norm(pos_sv, axis=1)[:, None] * 7.5e3
-    meas = tight.DopplerMeasurements(np.zeros(3, int), np.arange(3), rng.normal(0, 1e4, 3), np.ones(3), pos_sv, vel_sv)
-    sats = common.SatelliteStates(16, orbit_model, 2.5, 1.4, 30.0)
-    x_hat, P = sats.initial(np.zeros(16), np.eye(16))
+    meas = tight.DopplerMeasurements(np.zeros(3, int), np.arange(3), rng.normal(0, 1e4, 3), np.ones(3), pos_sv, vel_sv,
+                                     carrier_hz=np.array([11.325e9, 1626.2708e6, 1626.2708e6]),
+                                     clock_index=np.array([0, 1, 1]))
+    sats = common.SatelliteStates(17, orbit_model, 2.5, 1.4, 30.0)
+    x_hat, P = sats.initial(np.zeros(17), np.eye(17))
     x_hat, P = sats.see(x_hat, P, [0, 1, 2], 0.0)
     columns = [sats.columns(j) for j in range(3)]
     offsets = [c for c, _ in columns]
-    x_hat[15], x_hat[offsets] = 4.0, [1.0, 2.0, 3.0]
-    y0, H = tight._rows(state, x_hat, columns, meas, np.arange(3), 11.325e9)
+    x_hat[15:17], x_hat[offsets] = [4.0, -7.0], [1.0, 2.0, 3.0]
+    y0, H = tight._rows(state, x_hat, columns, meas, np.arange(3))
     x = np.zeros_like(x_hat)
     x[3:6] = [0.02, -0.01, 0.03]  # m/s
     x[6:9] = [1e-6, -2e-6, 3.0]  # rad, rad, m (about 6 and 11 m horizontally)
-    x[15] = 0.5
+    x[15:17] = [0.5, -0.25]
     x[offsets] = [0.3, -0.2, 0.1]  # Hz
     for _, o in columns:
         x[o] = [2.0, -1.0, 1.5]  # m
     moved = state.corrected(dvel_enu_mps=x[3:6], dpos=x[6:9])
-    y1, _ = tight._rows(moved, x_hat + np.r_[np.zeros(15), x[15:]], columns, meas, np.arange(3), 11.325e9)
-    # The response is 2-4 Hz; second-order terms are ~1e-4 Hz, while the
+    y1, _ = tight._rows(moved, x_hat + np.r_[np.zeros(15), x[15:]], columns, meas, np.arange(3))
+    # The response is 0.3-4 Hz; second-order terms are ~1e-4 Hz, while the
     # smallest first-order effect (the ENU frame turning with the position,
-    # 3e-4 m/s of ECEF velocity) is worth 0.012 Hz: 1e-3 Hz separates them.
+    # 3e-4 m/s of ECEF velocity) is worth 0.012 Hz at Ku: 1e-3 Hz separates them.
     np.testing.assert_allclose(y0 - y1, H @ x, atol=1e-3)
+    # Each row sees its own constellation's clock only.
+    np.testing.assert_array_equal(H[:, 15:17], [[1, 0], [0, 1], [0, 1]])
     # The layout: 4 states per satellite, or 3 shared and 1 per satellite.
-    assert x_hat.size == (16 + 12 if orbit_model == "independent" else 16 + 3 + 3)
+    assert x_hat.size == (17 + 12 if orbit_model == "independent" else 17 + 3 + 3)
 
 
 def _lag1_pairs(result):

@@ -213,8 +213,11 @@ class SatelliteStates:
     n_before : int
         States ahead of the satellite block (INS errors and any receiver state).
     orbit_model : {"independent", "common"}
-    offset_mean_hz, offset_sigma_hz, orbit_sigma_m : float
-        Prior of each offset and of the orbit error per axis.
+    offset_mean_hz, offset_sigma_hz : float or ndarray, (n_sats,)
+        Prior of each offset: one for all, or satellite j's at index j (the
+        families of a mixed sky have offsets of different sizes).
+    orbit_sigma_m : float
+        Prior of the orbit error per axis.
     """
 
     def __init__(self, n_before, orbit_model, offset_mean_hz, offset_sigma_hz, orbit_sigma_m):
@@ -224,8 +227,8 @@ class SatelliteStates:
         self.n_before = n_before
         self.per_sat = 1 if self.common else 4
         self.first = n_before + (3 if self.common else 0)
-        self.offset_mean_hz = offset_mean_hz
-        self.offset_var = offset_sigma_hz**2
+        self.offset_mean_hz = np.asarray(offset_mean_hz, dtype=float)
+        self.offset_var = np.asarray(offset_sigma_hz, dtype=float) ** 2
         self.orbit_var = max(orbit_sigma_m, 1e-3) ** 2
         self.ids = []
         self.last_seen = []
@@ -254,9 +257,9 @@ class SatelliteStates:
         self.ids.append(j)
         self.last_seen.append(t_s)
         mean = np.zeros(self.per_sat)
-        mean[0] = self.offset_mean_hz
+        mean[0] = self.offset_mean_hz if self.offset_mean_hz.ndim == 0 else self.offset_mean_hz[j]
         var = np.full(self.per_sat, self.orbit_var)
-        var[0] = self.offset_var
+        var[0] = self.offset_var if self.offset_var.ndim == 0 else self.offset_var[j]
         return _grow(x_hat, P, mean, var)
 
     def _drop_stale(self, x_hat, P, t_s):

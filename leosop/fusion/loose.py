@@ -35,8 +35,8 @@ corrected (:meth:`NavState.corrected`), the bias estimates are accumulated
 and removed from later IMU increments, and the INS error state returns to
 zero (the satellite error estimates are kept). The INS runs at the IMU
 rate; the filter predicts every ``step_s`` (1 s) and updates every
-``correction_period_s`` when a fix exists. When no fix exists (fewer than 7
-satellites) the INS carries the solution and the filter resumes at the next
+``correction_period_s`` when a fix exists. When no fix exists (fewer than the
+fix's 6 + k states for k constellations in view) the INS carries the solution and the filter resumes at the next
 fix, so every epoch has an output.
 """
 
@@ -76,9 +76,12 @@ class FixErrorModel:
         The pair's column of ``G``: d[pos, vel] (ECEF) / d(Doppler) [m/Hz, m/s/Hz].
     orbit_hz_per_m : ndarray, (m, 3)
         ``h_j``: d(Doppler error)/d(orbit error, ECEF) [Hz/m].
-    offset_sigma_hz, orbit_sigma_m : float
-        Prior of each offset about the common mean (which the fix's receiver
-        offset absorbs) and of the orbit error per axis.
+    offset_sigma_hz : float or ndarray, (n_sats,)
+        Prior of each offset about its constellation's mean (which the fix's
+        receiver offset of that constellation absorbs): one for all, or
+        satellite j's at index j.
+    orbit_sigma_m : float
+        Prior of the orbit error per axis.
     orbit_model : {"independent", "common"}
         One orbit error per satellite, or one shift shared by all.
     """
@@ -87,7 +90,7 @@ class FixErrorModel:
     sat_index: np.ndarray
     gain_ecef: np.ndarray
     orbit_hz_per_m: np.ndarray
-    offset_sigma_hz: float
+    offset_sigma_hz: float | np.ndarray
     orbit_sigma_m: float
     orbit_model: str = "independent"
 

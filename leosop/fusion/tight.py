@@ -2,7 +2,9 @@
 
 [Shen 2024] names tight coupling as future work; this is ours. The state is
 the 15 INS errors of :mod:`leosop.ins.error_model`, the receiver frequency
-offset ``T_u`` [Hz], and the satellites' error states of
+offset ``T_u[g]`` [Hz] of each constellation g (each family is received by its
+own chain: one clock state per family, whatever the number of its
+satellites in view), and the satellites' error states of
 :class:`leosop.fusion.common.SatelliteStates`: every tracked satellite's
 constant clock-induced Doppler offset [Hz] and the constant orbit errors
 (ECEF, m), three per satellite (``orbit_model="independent"``) or three
@@ -15,13 +17,15 @@ prior when it rises and dropped ``DROP_AFTER_S`` after it was last seen.
 
 Measurement of satellite j (the toolkit's Doppler sign)::
 
-    doppler_j = -(f0/c) (v_s - v_r).(r_s - r_r)/|r_s - r_r| + T_u + o_j + noise,
+    doppler_j = -(f0_j/c) (v_s - v_r).(r_s - r_r)/|r_s - r_r| + T_u[g_j] + o_j + noise,
 
 predicted at the INS state with the satellite position corrected by the
 estimated orbit error (its own, or the common shift), which enters the row
 through the Doppler's sensitivity to the satellite position. Every state is
 an error state fed back after each update, as in :mod:`leosop.fusion.loose`.
-No minimum number of satellites: each Doppler is used as it comes.
+No minimum number of satellites: each Doppler is used as it comes, one
+satellite of one constellation is enough for an update (where tight coupling
+beats a snapshot fix, which needs 6 + k).
 """
 
 import dataclasses
@@ -40,7 +44,7 @@ __all__ = ["DopplerPriors", "DopplerMeasurements", "run"]
 #: Single Doppler innovations beyond this chi-square(1) quantile are not used
 #: (a wrong comb hypothesis is off by tens of Hz); 1 - 1e-6 is 4.9 sigma.
 GATE_PROBABILITY = 1.0 - 1e-6
-_T = N_INS  # index of the receiver offset
+_T = N_INS  # index of the first receiver offset (constellation 0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,20 +52,21 @@ class DopplerPriors:
     """What the receiver knows about the Doppler errors.
 
     ``sat_offset_mean_hz``/``sat_offset_sigma_hz``: prior of each satellite's
-    offset (uniform in [0, max]: mean max/2, sigma max/sqrt(12));
-    ``orbit_sigma_m``: orbit error per ECEF axis; ``rx_offset_sigma_hz``:
-    prior of the receiver offset; ``rx_offset_psd_hz2_per_s``: its random walk;
-    ``orbit_model``: one orbit error per satellite (``"independent"``) or one
-    shift of all (``"common"``).
+    offset (uniform in [0, max]: mean max/2, sigma max/sqrt(12)), one float
+    for all or an array indexed by satellite; ``orbit_sigma_m``: orbit error
+    per ECEF axis; ``rx_offset_sigma_hz``: prior of each receiver offset;
+    ``rx_offset_psd_hz2_per_s``: its random walk; ``orbit_model``: one orbit
+    error per satellite (``"independent"``) or one shift of all
+    (``"common"``); ``n_clocks``: receiver clocks (constellations).
     """
 
-    sat_offset_mean_hz: float
-    sat_offset_sigma_hz: float
+    sat_offset_mean_hz: float | np.ndarray
+    sat_offset_sigma_hz: float | np.ndarray
     orbit_sigma_m: float
     rx_offset_sigma_hz: float = 10.0
     rx_offset_psd_hz2_per_s: float = 1e-6
-    carrier_hz: float = 11.325e9
     orbit_model: str = "independent"
+    n_clocks: int = 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +80,10 @@ class DopplerMeasurements:
         NaN rows are skipped.
     pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (m, 3)
         Satellite states as the receiver knows them (with orbit errors).
+    carrier_hz : ndarray, (m,)
+        Carrier of each row (its constellation's).
+    clock_index : ndarray of int, (m,)
+        Receiver clock of each row (its constellation), 0 .. n_clocks - 1.
     """
 
     epoch_index: np.ndarray
@@ -83,9 +92,11 @@ class DopplerMeasurements:
     sigma_hz: np.ndarray
     pos_sv_ecef_m: np.ndarray
     vel_sv_ecef_mps: np.ndarray
+    carrier_hz: np.ndarray
+    clock_index: np.ndarray
 
 
-def _rows(state, x_hat, columns, meas, rows, carrier_hz):
+def _rows(state, x_hat, columns, meas, rows):
     """Innovations and their Jacobian for measurement ``rows`` of one epoch.
 
     ``columns`` holds each row's satellite offset column and orbit columns
@@ -98,9 +109,10 @@ def _rows(state, x_hat, columns, meas, rows, carrier_hz):
     orbit = np.array([x_hat[o] for _, o in columns])
     r_sv = meas.pos_sv_ecef_m[rows] - orbit
     v_sv = meas.vel_sv_ecef_mps[rows]
-    J = doppler_jacobian(r_sv, v_sv, r_rx, v_rx, carrier_hz)
+    J = doppler_jacobian(r_sv, v_sv, r_rx, v_rx, meas.carrier_hz[rows])
     offsets = np.array([x_hat[c] for c, _ in columns])
-    predicted = np.einsum("mi,mi->m", J[:, 3:6], v_rx - v_sv) + x_hat[_T] + offsets
+    clock = _T + meas.clock_index[rows]
+    predicted = np.einsum("mi,mi->m", J[:, 3:6], v_rx - v_sv) + x_hat[clock] + offsets
     # The ECEF velocity C_e_n v_enu also moves with the position through the
     # frame's rotation (dv_ecef/dlat, dv_ecef/dlon): 3e-4 m/s per 10 m at 200 m/s.
     sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
@@ -110,7 +122,7 @@ def _rows(state, x_hat, columns, meas, rows, carrier_hz):
     H = np.zeros((len(rows), x_hat.size))
     H[:, DV] = -J[:, 3:6] @ C
     H[:, DPOS] = -J[:, 0:3] @ C @ pos_jacobian(lat, alt) - J[:, 3:6] @ dv_dpos
-    H[:, _T] = 1.0
+    H[np.arange(len(rows)), clock] = 1.0
     for i, (c, o) in enumerate(columns):
         H[i, c] = 1.0
         H[i, o] = J[i, 0:3]  # the satellite is believed at pos_sv - orbit
@@ -147,11 +159,12 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
     bounds = np.searchsorted(measurements.epoch_index, np.arange(n + 1))
     track = Track(n)
     records = []
-    P = np.zeros((N_INS + 1, N_INS + 1))
+    clocks = slice(_T, _T + priors.n_clocks)
+    P = np.zeros((clocks.stop, clocks.stop))
     P[:N_INS, :N_INS] = initial_covariance(settings, state0.lat_rad, state0.alt_m)
-    P[_T, _T] = priors.rx_offset_sigma_hz**2
-    x_hat = np.zeros(N_INS + 1)  # only the non-INS entries are used: T_u, then the satellites'
-    sats = SatelliteStates(N_INS + 1, priors.orbit_model, priors.sat_offset_mean_hz, priors.sat_offset_sigma_hz,
+    P[clocks, clocks] = np.eye(priors.n_clocks) * priors.rx_offset_sigma_hz**2
+    x_hat = np.zeros(clocks.stop)  # only the non-INS entries are used: the T_u, then the satellites'
+    sats = SatelliteStates(clocks.stop, priors.orbit_model, priors.sat_offset_mean_hz, priors.sat_offset_sigma_hz,
                            priors.orbit_sigma_m)
     x_hat, P = sats.initial(x_hat, P)
     last_update_s = 0.0  # corrections at P, 2P, ... (or the first fix after)
@@ -160,14 +173,14 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
         t_s = k * settings.step_s
         if k > 0:
             P = ins.predict(k, P)
-            P[_T, _T] += priors.rx_offset_psd_hz2_per_s * settings.step_s
+            P[clocks, clocks] += np.eye(priors.n_clocks) * priors.rx_offset_psd_hz2_per_s * settings.step_s
         rows = np.arange(bounds[k], bounds[k + 1])
         rows = rows[np.isfinite(measurements.doppler_hz[rows]) & (measurements.sigma_hz[rows] > 0)]
         x_hat, P = sats.see(x_hat, P, measurements.sat_index[rows], t_s)
         due = t_s - last_update_s >= settings.correction_period_s - 1e-9
         if k > 0 and due and rows.size:
             columns = [sats.columns(j) for j in measurements.sat_index[rows]]
-            y, H = _rows(ins.state, x_hat, columns, measurements, rows, priors.carrier_hz)
+            y, H = _rows(ins.state, x_hat, columns, measurements, rows)
             R = np.diag(measurements.sigma_hz[rows] ** 2)
             S_diag = np.einsum("ij,jk,ik->i", H, P, H) + np.diag(R)
             ok = y**2 / S_diag <= gate
