@@ -14,26 +14,135 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["atomic_path", "atomic_outputs", "write_json", "write_csv"]
+__all__ = ["atomic_path", "atomic_files", "atomic_outputs", "check_output_file", "check_output_dir", "write_json",
+           "write_csv"]
+
+
+def _missing_dirs(directory):
+    """``directory`` and its ancestors that do not exist yet, deepest first."""
+    missing, d = [], Path(directory)
+    while not d.exists() and not d.is_symlink() and d != d.parent:
+        missing.append(d)
+        d = d.parent
+    return missing
+
+
+def _remove_dirs(dirs):
+    """Remove directories we created (deepest first) if they are still empty."""
+    for d in dirs:
+        with contextlib.suppress(OSError):
+            d.rmdir()
+
+
+def _renamed(exc, tmp, path):
+    """``exc`` naming the user's ``path`` where it named the temporary ``tmp`` (or, before
+    ``tmp`` exists, a candidate temporary name of ``path``)."""
+    if not isinstance(exc, OSError) or exc.errno is None or exc.filename is None:
+        return exc
+    name = str(exc.filename)
+    if tmp is not None and (name == str(tmp) or name.startswith(f"{tmp}{os.sep}")):
+        return OSError(exc.errno, exc.strerror, str(path) + name[len(str(tmp)):])
+    if tmp is None and Path(name).name.startswith(f".{Path(path).name}."):
+        return OSError(exc.errno, exc.strerror, str(path))
+    return exc
+
+
+def check_output_file(path, option):
+    """Refuse an output file path that cannot be written atomically (InputError naming ``option``).
+
+    Empty paths, existing directories and devices (``/dev/null``) and paths
+    below a file are refused before any work is done.
+    """
+    text = str(path)
+    if not text.strip():
+        raise InputError(f"{option} {text!r}: empty path, expected a file name")
+    path = Path(text)
+    if path.exists() and not path.is_file():
+        raise InputError(f"{option} {path}: exists and is not a regular file")
+    _check_parent(path, path.parent, option)
+
+
+def check_output_dir(path, option="--out"):
+    """Refuse an output directory path that is empty, a file, a device or below a file."""
+    text = str(path)
+    if not text.strip():
+        raise InputError(f"{option} {text!r}: empty path, expected a directory")
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option} {path}: exists and is not a directory")
+    _check_parent(path, path, option)
+
+
+def _check_parent(path, directory, option):
+    for d in (directory, *directory.parents):
+        if d.exists():
+            if not d.is_dir():
+                raise InputError(f"{option} {path}: {d} is not a directory")
+            if not os.access(d, os.W_OK | os.X_OK):
+                raise InputError(f"{option} {path}: no permission to write in {d}")
+            return
+
+
+@contextlib.contextmanager
+def _staged(path):
+    """Yield a temporary file next to ``path``; on failure remove it and any directory made for it."""
+    if path.exists() and not path.is_file():
+        raise InputError(f"{path}: exists and is not a regular file")
+    created = _missing_dirs(path.parent)
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=path.parent)
+        os.close(fd)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        yield Path(tmp)
+    except BaseException as exc:
+        if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        _remove_dirs(created)
+        renamed = _renamed(exc, tmp, path)
+        if renamed is not exc:
+            raise renamed from None
+        raise
 
 
 @contextlib.contextmanager
 def atomic_path(path):
-    """Yield a temporary path next to ``path``; rename it onto ``path`` on success."""
+    """Yield a temporary path next to ``path``; rename it onto ``path`` on success.
+
+    Errors name ``path``, not the temporary file; a directory created for
+    ``path`` is removed again when the output is not made.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=path.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    try:
-        yield Path(tmp)
+    with _staged(path) as tmp:
+        yield tmp
         os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+
+
+@contextlib.contextmanager
+def atomic_files(paths):
+    """Yield temporary paths for several output files; all are moved into place on success, or none.
+
+    They are moved in the order given (a data file before the metadata that
+    describes it); should a move fail, the files already moved are removed.
+    """
+    paths = [Path(p) for p in paths]
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(_staged(p)) for p in paths]
+        yield tmps
+        moved = []
+        try:
+            for tmp, path in zip(tmps, paths):
+                os.replace(tmp, path)
+                moved.append(path)
+        except BaseException:
+            for path in moved:
+                with contextlib.suppress(OSError):
+                    path.unlink()
+            raise
 
 
 @contextlib.contextmanager
@@ -41,23 +150,38 @@ def atomic_outputs(out_dir):
     """Yield a staging directory; move every file in it into ``out_dir`` on success.
 
     A command's set of output files is then all-or-nothing: an error while
-    any of them is being made leaves ``out_dir`` as it was.
+    any of them is being made leaves ``out_dir`` as it was (not even created).
+    Errors name the file in ``out_dir``, not its staged copy.
     """
+    check_output_dir(out_dir)
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"--out {out_dir}: exists and is not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=".stage.", suffix=".part", dir=out_dir))
+    created = _missing_dirs(out_dir)
+    stage = None
     try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=".stage.", suffix=".part", dir=out_dir))
         yield stage
         for item in sorted(stage.iterdir()):
             os.replace(item, out_dir / item.name)
-    finally:
-        for item in stage.iterdir() if stage.exists() else ():
-            with contextlib.suppress(OSError):
-                item.unlink()
+    except BaseException as exc:
+        _clear(stage)
+        _remove_dirs(created)
+        renamed = _renamed(exc, stage, out_dir) if stage is not None else exc
+        if renamed is not exc:
+            raise renamed from None
+        raise
+    _clear(stage)
+
+
+def _clear(stage):
+    """Remove a staging directory and the files left in it."""
+    if stage is None or not stage.exists():
+        return
+    for item in stage.iterdir():
         with contextlib.suppress(OSError):
-            stage.rmdir()
+            item.unlink()
+    with contextlib.suppress(OSError):
+        stage.rmdir()
 
 
 def write_json(path, obj):

@@ -5,6 +5,13 @@ document on stdout and nothing else goes there; progress and logs go to
 stderr; ``--out DIR`` receives files; exit status 0 on success, 2 on bad input
 (one-line message on stderr), 1 otherwise.
 
+The shared layer here holds for every subcommand: option errors are one line
+(no usage block); option values may be negative numbers (``--site
+-33.9,18.4,0``); every ``float`` option must be finite; ``--seed`` must be
+>= 0; ``--out`` and ``-o`` are checked before any work; warnings become one
+line each (numpy's internal ``RuntimeWarning`` only with ``LEOSOP_DEBUG``);
+SIGTERM is handled like Ctrl-C, so staged output files are removed.
+
 Each subcommand lives in its own module of this package with two functions:
 ``register(subparsers)`` adds its parser (via :func:`add_command`) and
 ``run(args)`` returns the JSON document as a dict; an optional
@@ -12,11 +19,16 @@ Each subcommand lives in its own module of this package with two functions:
 """
 
 import argparse
+import contextlib
 import importlib
 import json
 import math
 import os
+import re
+import signal
 import sys
+import threading
+import warnings
 
 # The toolkit's matrix products are small and many (per-block decimation,
 # 15-state filters): a multi-threaded BLAS only adds contention, 10x slower
@@ -24,9 +36,25 @@ import sys
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from ..errors import ExternalError, InputError  # noqa: E402
+from ..fileio import check_output_dir, check_output_file  # noqa: E402
+from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "replay", "study", "ppp")
+COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "replay", "study", "ppp", "export")
+
+
+class _Parser(argparse.ArgumentParser):
+    """Argument parser with the shared rules: one-line errors, negative values, finite floats."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # Anything starting with '-' and a digit, '.digit', inf or nan is a value, not an option.
+        self._negative_number_matcher = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+        self.register("type", float, finite_float)
+
+    def error(self, message):
+        """Print one line (no usage block) and exit with status 2."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def add_command(subparsers, name, module, *, help, description=None):
@@ -42,7 +70,7 @@ def build_parser():
     """The ``leosop`` argument parser with every subcommand."""
     from .. import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="leosop", description="Navigation with LEO satellite signals of opportunity."
     )
     parser.add_argument("--version", action="version", version=f"leosop {__version__}")
@@ -65,6 +93,47 @@ def _clean(obj):
     return obj
 
 
+def _check_common(args):
+    """Checks of options several subcommands share, before any work is done."""
+    seed = getattr(args, "seed", None)
+    if isinstance(seed, int) and seed < 0:
+        raise InputError(f"--seed {seed}: must be an integer >= 0")
+    if getattr(args, "out", None) is not None:
+        check_output_dir(args.out, "--out")
+    if isinstance(getattr(args, "output", None), str):
+        check_output_file(args.output, "-o")
+
+
+def _show_warning(command):
+    """A ``warnings.showwarning`` printing one line per warning on stderr."""
+    debug = bool(os.environ.get("LEOSOP_DEBUG"))
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, UserWarning) and not debug:
+            return  # numpy/Python internals (RuntimeWarning, DeprecationWarning): not the user's business
+        text = " ".join(str(message).split())
+        print(f"leosop {command}: warning: {text}", file=sys.stderr)
+
+    return show
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """Handle SIGTERM like SIGINT (KeyboardInterrupt) so staged outputs are cleaned up."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv=None):
     """Entry point; returns the exit status."""
     parser = build_parser()
@@ -72,37 +141,52 @@ def main(argv=None):
     if args.command is None:
         parser.print_help(sys.stderr)
         return 2
+    with _sigterm_as_interrupt(), warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.showwarning = _show_warning(args.command)
+        return _run(args)
+
+
+def _run(args):
+    """Run the subcommand and print its output; every failure becomes an exit status."""
     module = args._module
     try:
+        _check_common(args)
         doc = _clean(module.run(args))
+        if args.json:
+            text = json.dumps(doc, allow_nan=False) + "\n"
+        else:
+            text = module.summary(doc) + "\n" if hasattr(module, "summary") else ""
     except InputError as exc:
-        print(f"leosop {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"leosop {args.command}: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
-        return 2
+        return _fail(args, f"error: {exc}", 2)
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError, FileExistsError) as exc:
+        return _fail(args, f"error: {exc.filename}: {exc.strerror}", 2)
+    except UnicodeDecodeError as exc:
+        return _fail(args, f"error: an input file is not UTF-8 text ({exc.reason} at byte {exc.start})", 2)
     except ExternalError as exc:
-        print(f"leosop {args.command}: error: {exc}", file=sys.stderr)
-        return 1
+        return _fail(args, f"error: {exc}", 1)
+    except OSError as exc:
+        if exc.filename is None:
+            return _fail(args, f"error: {exc.strerror or exc}", 1)
+        return _fail(args, f"error: {exc.filename}: {exc.strerror}", 1)
     except KeyboardInterrupt:
-        print(f"leosop {args.command}: interrupted", file=sys.stderr)
-        return 1
+        return _fail(args, "interrupted", 1)
     except Exception as exc:  # the one place where every failure becomes an exit status
         if os.environ.get("LEOSOP_DEBUG"):
             raise
-        print(f"leosop {args.command}: internal error: {type(exc).__name__}: {exc} "
-              "(set LEOSOP_DEBUG=1 for a traceback)", file=sys.stderr)
-        return 1
+        return _fail(args, f"internal error: {type(exc).__name__}: {exc} (set LEOSOP_DEBUG=1 for a traceback)", 1)
     try:
-        if args.json:
-            json.dump(doc, sys.stdout)
-            sys.stdout.write("\n")
-        elif hasattr(module, "summary"):
-            print(module.summary(doc))
+        sys.stdout.write(text)
         sys.stdout.flush()
     except BrokenPipeError:  # e.g. piped into `head`: the reader left, not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
+
+
+def _fail(args, message, status):
+    """Print ``leosop COMMAND: message`` as one line on stderr; return ``status``."""
+    print(f"leosop {args.command}: {' '.join(str(message).split())}", file=sys.stderr)
+    return status
 
 
 def main_exit():

@@ -1,5 +1,6 @@
 """Parsing and checking of option values shared by several subcommands."""
 
+import argparse
 import math
 
 import numpy as np
@@ -7,7 +8,22 @@ import numpy as np
 from ..errors import InputError
 from ..timebase import parse_utc
 
-__all__ = ["parse_site", "parse_time", "positive", "mask_deg"]
+__all__ = ["finite_float", "parse_site", "parse_time", "positive", "mask_deg"]
+
+
+def finite_float(text):
+    """Option value -> float; NaN and infinities are refused (every ``type=float`` option).
+
+    The command-line parser registers this for ``float``, so an option given
+    ``nan`` or ``1e999`` is an option error, not a silent NaN result.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 def parse_site(text, option="--site"):
