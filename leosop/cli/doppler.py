@@ -58,6 +58,8 @@ def _open(args):
         return open_sigmf(path)
     if args.dtype is None or args.sample_rate_hz is None:
         raise InputError(f"{path}: not a .sigmf-meta file; a raw file needs --dtype and --sample-rate-hz")
+    if args.center_hz is not None:
+        positive(args.center_hz, "--center-hz")
     return open_raw(path, dtype=args.dtype, sample_rate_hz=args.sample_rate_hz, center_hz=args.center_hz,
                     start=args.start)
 
@@ -93,7 +95,7 @@ def run(args):
     if block_len > rec.n_samples:
         raise InputError(f"--block-s {block_s:g} ({block_len} samples) is longer than the recording "
                          f"({rec.n_samples} samples, {rec.duration_s:.6g} s)")
-    comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
+    comb = PilotComb(carrier_hz=PilotComb.carrier_hz if rec.center_hz is None else rec.center_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     truth = _truth(rec, block_len)
     n_blocks = rec.n_samples // block_len

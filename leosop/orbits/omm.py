@@ -10,7 +10,7 @@ from sgp4.api import Satrec
 
 from ..errors import InputError
 from .constellation import Constellation
-from .tle import satrec_epoch_utc
+from .tle import check_elements, satrec_epoch_utc
 
 __all__ = ["read_omm"]
 
@@ -46,6 +46,8 @@ def read_omm(path):
         except json.JSONDecodeError as exc:
             raise InputError(f"{path}:{exc.lineno}: invalid JSON ({exc.msg})") from None
         records = [records] if isinstance(records, dict) else records
+        if not isinstance(records, list):
+            raise InputError(f"{path}: expected a JSON list of OMM objects, found {type(records).__name__}")
         where = [f"{path}: record {k + 1}" for k in range(len(records))]
     else:
         records = list(csv.DictReader(text.splitlines()))
@@ -63,8 +65,9 @@ def read_omm(path):
         sat = Satrec()
         try:
             omm.initialize(sat, fields)
-        except (ValueError, KeyError) as exc:
+        except (ValueError, KeyError, OverflowError) as exc:
             raise InputError(f"{at}: bad OMM field value ({exc})") from None
+        check_elements(sat, at)
         if sat.error:
             raise InputError(f"{at}: SGP4 rejects the element set (error code {sat.error})")
         names.append(fields["OBJECT_NAME"].strip())

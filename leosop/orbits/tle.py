@@ -3,11 +3,14 @@
 Accepts LF, CRLF, CR and the doubled CR-CR-LF line endings found in the wild,
 blank lines, ``#`` comment lines, and CelesTrak's optional ``0 `` prefix on name lines. Each record
 is checked for ASCII text, line numbers, the column layout, matching
-catalogue numbers and the modulo-10 checksums before SGP4 initialises it. A bad
+catalogue numbers and the modulo-10 checksums before SGP4 initialises it, then
+the element values for ones no orbit has (:func:`check_elements`: an
+inclination of 999 deg or a day of year 999 pass the checksum). A bad
 record raises :class:`~leosop.errors.InputError` naming the file and line,
 or, with ``skip_bad=True``, is skipped with a warning.
 """
 
+import math
 import warnings
 from pathlib import Path
 
@@ -17,9 +20,15 @@ from sgp4.api import Satrec
 from ..errors import InputError
 from .constellation import Constellation
 
-__all__ = ["read_tle", "parse_tle_lines", "tle_checksum", "satrec_epoch_utc"]
+__all__ = ["read_tle", "parse_tle_lines", "tle_checksum", "satrec_epoch_utc", "check_elements"]
 
 _NS_PER_DAY = 86_400 * 1_000_000_000
+_JD_UNIX_EPOCH = 2_440_587.5
+#: Element-set epochs outside these years cannot be right: two-digit TLE years
+#: cover 1957-2056, and datetime64[ns] ends in 2262.
+_EPOCH_YEARS = (1957, 2200)
+#: Largest mean motion [rev/day] of an orbit above the atmosphere (~16.5 at reentry).
+_MAX_REV_PER_DAY = 20.0
 # Columns (0-based) that must be blank in each line of a valid element set.
 _BLANKS = {"1": (1, 8, 17, 32, 43, 52, 61, 63), "2": (1, 7, 16, 25, 33, 42, 51)}
 
@@ -33,6 +42,37 @@ def satrec_epoch_utc(satrec):
     """Element-set epoch of a Satrec as datetime64[ns]."""
     days = int(round(satrec.jdsatepoch - 2_440_587.5))
     return np.datetime64(days * _NS_PER_DAY + int(round(satrec.jdsatepochF * _NS_PER_DAY)), "ns")
+
+
+def check_elements(sat, where):
+    """Refuse element values that no orbit has, naming ``where`` (file:line or record).
+
+    They pass checksums and often SGP4's own checks, then give NaN states or
+    satellites that are never visible without a word.
+
+    Raises
+    ------
+    InputError
+    """
+    year = 1970.0 + (sat.jdsatepoch + sat.jdsatepochF - _JD_UNIX_EPOCH) / 365.25
+    rev_per_day = sat.no_kozai * 1440.0 / (2.0 * math.pi)
+    angles = (("inclination", sat.inclo, 180.0), ("right ascension of the node", sat.nodeo, 360.0),
+              ("argument of perigee", sat.argpo, 360.0), ("mean anomaly", sat.mo, 360.0))
+    if not _EPOCH_YEARS[0] <= year <= _EPOCH_YEARS[1]:
+        raise InputError(f"{where}: epoch year {year:.0f} is outside {_EPOCH_YEARS[0]}..{_EPOCH_YEARS[1]}")
+    if not 1.0 <= sat.epochdays < 367.0:
+        raise InputError(f"{where}: epoch day of year {sat.epochdays:.8f} is outside 1..366")
+    for name, value, top in angles:
+        if not 0.0 <= math.degrees(value) <= top:
+            raise InputError(f"{where}: {name} {math.degrees(value):.4f} deg is outside [0, {top:g}]")
+    if not 0.0 <= sat.ecco < 1.0:
+        raise InputError(f"{where}: eccentricity {sat.ecco:g} is outside [0, 1)")
+    if not 0.0 < rev_per_day <= _MAX_REV_PER_DAY:
+        raise InputError(f"{where}: mean motion {rev_per_day:g} rev/day is outside (0, {_MAX_REV_PER_DAY:g}]")
+    for name, value in (("BSTAR", sat.bstar), ("mean motion derivative", sat.ndot),
+                        ("mean motion second derivative", sat.nddot)):
+        if not math.isfinite(value):
+            raise InputError(f"{where}: {name} {value} is not a finite number")
 
 
 def _check_line(text, expect, where):
@@ -107,6 +147,7 @@ def parse_tle_lines(lines, source="<text>", *, skip_bad=False):
                 sat = Satrec.twoline2rv(l1, l2)
             except Exception as exc:  # sgp4's parser raises ValueError/IndexError on bad fields
                 raise InputError(f"{source}:{n1}: unreadable element set ({exc})") from None
+            check_elements(sat, f"{source}:{n1}")
             if sat.error:
                 raise InputError(f"{source}:{n1}: SGP4 rejects the element set (error code {sat.error})")
         except InputError as exc:

@@ -221,11 +221,35 @@ def _format_utc_ns(time_utc):
     return text.rstrip("0").rstrip(".") + "Z" if "." in text else text + "Z"
 
 
+#: Types of the global keys read here: key -> (types, what the message says is expected).
+_NUMBER = ((int, float), "a number")
+_GLOBAL_TYPES = {"core:datatype": ((str,), "a string"), "core:sample_rate": _NUMBER,
+                 "core:num_channels": ((int,), "an integer"), "core:sha512": ((str,), "a hex string"),
+                 "leosop:n_tones": ((int,), "an odd integer >= 1"), "leosop:tone_spacing_hz": _NUMBER}
+#: Types of the annotation keys read here (``leosop generate``'s truth).
+_ANNOTATION_TYPES = {"core:sample_start": ((int,), "an integer >= 0"), "core:sample_count": ((int,), "an integer >= 0"),
+                     "leosop:sat_id": ((str,), "a string"), "leosop:t_s": _NUMBER, "leosop:doppler_hz": _NUMBER,
+                     "leosop:doppler_rate_hz_per_s": _NUMBER, "leosop:cn0_dbhz": _NUMBER}
+
+
+def _check_types(obj, types, where):
+    """Refuse values of the wrong JSON type (booleans are not numbers; numbers must be finite)."""
+    for key, (allowed, expected) in types.items():
+        if key not in obj:
+            continue
+        value = obj[key]
+        ok = isinstance(value, allowed) and not isinstance(value, bool)
+        if ok and isinstance(value, (int, float)):
+            ok = np.isfinite(value) and (allowed != (int,) or value >= 0)
+        if not ok:
+            raise InputError(f"{where}: {key} {value!r} must be {expected}")
+
+
 def _check_structure(meta_path):
-    """Refuse metadata whose JSON has the wrong shape (top-level list, captures not objects, ...)."""
+    """Refuse metadata whose JSON has the wrong shape or types (top-level list, string numbers, ...)."""
     try:
         doc = json.loads(meta_path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"{meta_path}: not valid JSON ({exc})".replace("\n", " ")) from None
     if not isinstance(doc, dict) or not isinstance(doc.get("global"), dict):
         raise InputError(f"{meta_path}: expected a JSON object with a 'global' object (SigMF metadata)")
@@ -233,6 +257,15 @@ def _check_structure(meta_path):
         items = doc.get(key, [])
         if not isinstance(items, list) or not all(isinstance(c, dict) for c in items):
             raise InputError(f"{meta_path}: '{key}' must be a list of objects")
+    _check_types(doc["global"], _GLOBAL_TYPES, f"{meta_path}: global")
+    n_tones = doc["global"].get("leosop:n_tones", 1)
+    spacing = doc["global"].get("leosop:tone_spacing_hz", 1.0)
+    if n_tones % 2 != 1:
+        raise InputError(f"{meta_path}: global: leosop:n_tones {n_tones} must be an odd integer >= 1")
+    if spacing <= 0:
+        raise InputError(f"{meta_path}: global: leosop:tone_spacing_hz {spacing!r} must be > 0 Hz")
+    for k, ann in enumerate(doc.get("annotations", [])):
+        _check_types(ann, _ANNOTATION_TYPES, f"{meta_path}: annotation {k}")
 
 
 def _int_field(cap, key, default, where):
@@ -259,8 +292,8 @@ def _captures(raw_caps, n_samples, sample_rate_hz, meta_path):
                              "file (truncated?)")
         freq = cap.get("core:frequency")
         if freq is not None and (isinstance(freq, bool) or not isinstance(freq, (int, float))
-                                 or not np.isfinite(freq)):
-            raise InputError(f"{where}: core:frequency {freq!r} must be a number")
+                                 or not np.isfinite(freq) or freq <= 0):
+            raise InputError(f"{where}: core:frequency {freq!r} must be a positive number [Hz]")
         if k and freq != freqs[0]:
             raise InputError(f"{where}: core:frequency {freq!r} differs from capture 0's {freqs[0]!r}")
         text = cap.get("core:datetime")
