@@ -40,3 +40,71 @@ def test_bad_input_one_line_and_nothing_written(tmp_path, capsys, monkeypatch, a
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not out.exists() or not any(out.iterdir())
+
+
+TINY_SPEC = {"scenario": {"duration_s": 10}, "fixed": {"level": "measurement"},
+             "parameters": {"correction_period_s": [1, 5], "coupling": ["loose", "tight"]}, "n_seeds": 3,
+             "runs_per_chunk": 4}
+
+
+def _spec_file(tmp_path, **changes):
+    path = tmp_path / "tiny.json"
+    path.write_text(json.dumps({**TINY_SPEC, **changes}))
+    return path
+
+
+def test_montecarlo_netcdf_table_and_figures(tmp_path, capsys):
+    out = tmp_path / "mc"
+    code = main(["study", "montecarlo", str(_spec_file(tmp_path)), "--scheduler", "serial", "--json", "--out", str(out)])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0 and doc["n_runs"] == 12 and doc["n_chunks"] == 3 and doc["n_chunks_resumed"] == 0
+    with xr.open_dataset(out / "montecarlo.nc", engine="scipy") as ds:
+        assert ds["fused_pos_err_mean_m"].dims == ("correction_period_s", "coupling", "seed")
+        assert ds["fused_pos_err_mean_m"].attrs["units"] == "m" and ds["correction_period_s"].attrs["units"] == "s"
+        assert list(ds["coupling"].values) == ["loose", "tight"] and ds.attrs["Conventions"] == "CF-1.8"
+        assert json.loads(ds.attrs["spec"])["n_seeds"] == 3 and ds["run_seed"].shape == (3,)
+        cell = ds["fused_pos_err_mean_m"].sel(correction_period_s=5.0, coupling="tight").values
+        assert doc["cells"][3]["parameters"] == {"correction_period_s": 5.0, "coupling": "tight"}
+        assert doc["cells"][3]["fused_pos_err_mean_m"]["mean"] == pytest.approx(cell.mean(), rel=1e-12)
+    assert sorted(p.name for p in out.iterdir()) == ["error_vs_correction_period_s.png", "error_vs_coupling.png",
+                                                      "montecarlo.nc"]  # the chunk directory is gone
+    assert main(["study", "montecarlo", str(_spec_file(tmp_path)), "--scheduler", "serial", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "correction_period_s  coupling" in text and text.count("\n") == 2 + 1 + 4
+
+
+def test_montecarlo_interrupted_then_resumed(tmp_path, capsys, monkeypatch):
+    from leosop.montecarlo import execute
+
+    real, calls = execute.run_chunk, []
+
+    def interrupt_third(runs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(runs)
+
+    monkeypatch.setattr(execute, "run_chunk", interrupt_third)
+    out, spec = tmp_path / "mc", _spec_file(tmp_path)
+    assert main(["study", "montecarlo", str(spec), "--scheduler", "serial", "--json", "--out", str(out)]) == 1
+    assert "interrupted" in capsys.readouterr().err
+    (work,) = out.iterdir()  # no montecarlo.nc, only the finished chunks
+    assert work.name.startswith("montecarlo-chunks-") and len(list(work.iterdir())) == 2
+    monkeypatch.setattr(execute, "run_chunk", real)
+    assert main(["study", "montecarlo", str(spec), "--scheduler", "serial", "--json", "--out", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["n_chunks_resumed"] == 2 and not work.exists()
+
+
+@pytest.mark.parametrize("changes, args, code, message", [
+    ({"parameters": {"cn0": [40]}}, [], 2, "tiny.json: parameters: unknown parameter 'cn0'"),
+    ({"parameters": {"cn0_dbhz": []}}, [], 2, "tiny.json: parameters.cn0_dbhz: expected a non-empty list"),
+    ({}, ["--workers", "0"], 2, "--workers 0: expected an integer >= 1"),
+    ({}, ["--scheduler", "tcp://127.0.0.1:9"], 1, "--scheduler tcp://127.0.0.1:9: cannot connect to a Dask scheduler"),
+])
+def test_montecarlo_bad_input(tmp_path, capsys, monkeypatch, changes, args, code, message):
+    monkeypatch.setattr("leosop.studies.CONNECT_TIMEOUT", "1s")
+    out = tmp_path / "mc"
+    assert main(["study", "montecarlo", str(_spec_file(tmp_path, **changes)), *args, "--out", str(out)]) == code
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (out / "montecarlo.nc").exists()

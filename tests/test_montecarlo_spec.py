@@ -1,0 +1,95 @@
+"""Monte Carlo study specs: one-line errors naming the field, the bundled specs, the seeds."""
+
+import json
+
+import numpy as np
+import pytest
+
+from leosop.errors import InputError
+from leosop.montecarlo import IMU_GRADES, bundled_specs, load_spec, run_seeds, spec_from_dict
+from leosop.montecarlo.parameters import apply
+from leosop.scenarios import XIAN_BAOJI
+from leosop.simulate_study import PAPER_TABLE5, PAPER_TABLE6
+
+GOOD = {"fixed": {"level": "measurement"}, "parameters": {"correction_period_s": [1, 30]}, "n_seeds": 2}
+
+
+def _with(**changes):
+    doc = json.loads(json.dumps(GOOD))
+    doc.update(changes)
+    return doc
+
+
+@pytest.mark.parametrize("doc, message", [
+    (_with(parameters={"foo_s": [1]}), "s.json: parameters: unknown parameter 'foo_s'"),
+    (_with(fixed={"cn0": 40}), "s.json: fixed: unknown parameter 'cn0'"),
+    (_with(parameters={"correction_period_s": []}), "parameters.correction_period_s: expected a non-empty list"),
+    (_with(parameters={}), "parameters: expected at least one parameter"),
+    (_with(parameters={"coupling": ["loose", "medium"]}), "parameters.coupling[1]: expected one of loose, tight"),
+    (_with(parameters={"correction_period_s": [1, 0]}), "parameters.correction_period_s[1]: 0 must be > 0 s"),
+    (_with(parameters={"cn0_dbhz": [45, 150]}), "parameters.cn0_dbhz[1]: scenario.leo.cn0_dbhz: 150.0 is outside"),
+    (_with(parameters={"mask_deg": [10, 10.0]}), "parameters.mask_deg: values repeat"),
+    (_with(fixed={"coupling": "loose"}, parameters={"coupling": ["tight"]}), "'coupling' is both fixed and swept"),
+    (_with(fixed={"gyro_bias_deg_per_h": 1.0}, parameters={"imu_grade": ["mems"]}),
+     "imu_grade and gyro_bias_deg_per_h both set the IMU errors"),
+    (_with(n_seeds=0), "n_seeds: expected an integer >= 1, got 0"),
+    (_with(runs_per_chunk=2.5), "runs_per_chunk: expected an integer >= 1"),
+    (_with(seeds=3), "s.json: unknown key 'seeds'"),
+    ({"parameters": {"coupling": ["loose"]}}, "s.json: missing key 'n_seeds'"),
+    (_with(scenario={"speed": 100}), "s.json: scenario: unknown key 'speed'"),
+    (_with(tle="missing.tle"), "s.json: tle: 'missing.tle' is not a file"),
+])
+def test_bad_specs_one_line_naming_the_field(doc, message, tmp_path):
+    with pytest.raises(InputError) as err:
+        spec_from_dict(doc, source="s.json", base_dir=tmp_path)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_spec_file_errors(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{\"n_seeds\": 2,")
+    with pytest.raises(InputError, match=r"bad.json: not valid JSON"):
+        load_spec(bad)
+    with pytest.raises(InputError, match=r"nope.json: no such spec file \(bundled specs: cn0_imu, table5, table6\)"):
+        load_spec(tmp_path / "nope.json")
+
+
+def test_grid_cells_and_scenarios():
+    spec = spec_from_dict(_with(parameters={"cn0_dbhz": [35, 55], "imu_grade": ["navigation", "mems"]}))
+    assert spec.shape == (2, 2, 2) and spec.n_runs == 8 and spec.name == "<dict>"
+    cells = spec.cells()
+    assert cells[1] == {"level": "measurement", "cn0_dbhz": 35.0, "imu_grade": "mems"}  # C order, fixed included
+    scenario, options = apply(XIAN_BAOJI, cells[1], "test")
+    assert options == {"level": "measurement"}
+    assert scenario.leo.cn0_dbhz == 35.0 and scenario.imu.gyro_bias_deg_per_h == IMU_GRADES["mems"]["gyro_bias_deg_per_h"]
+    assert scenario.imu.rate_hz == XIAN_BAOJI.imu.rate_hz and scenario.waypoints == XIAN_BAOJI.waypoints
+
+
+def test_navigation_grade_is_the_papers_table1():
+    nav = IMU_GRADES["navigation"]
+    assert all(getattr(XIAN_BAOJI.imu, k) == v for k, v in nav.items())
+
+
+def test_bundled_specs_are_the_papers_grids():
+    specs = {name: load_spec(name) for name in bundled_specs()}
+    t5, t6, cn0 = specs["table5"], specs["table6"], specs["cn0_imu"]
+    assert list(t5.axes["correction_period_s"]) == sorted(PAPER_TABLE5) and t5.axes["coupling"] == ("loose", "tight")
+    assert t5.fixed == {"level": "measurement", "orbit_error_m": 1.0}
+    assert list(t6.axes["orbit_error_m"]) == sorted(PAPER_TABLE6) and t6.fixed["correction_period_s"] == 1.0
+    assert set(t6.axes["orbit_error_model"]) == {"independent", "common"}
+    assert cn0.axes["imu_grade"] == tuple(IMU_GRADES) and len(cn0.axes["cn0_dbhz"]) == 5
+    assert {s.n_seeds for s in specs.values()} == {20} and all(s.scenario == XIAN_BAOJI for s in specs.values())
+
+
+def test_run_seeds_from_one_seed_sequence():
+    small, large = (spec_from_dict(_with(n_seeds=n, seed=7)) for n in (3, 5))
+    np.testing.assert_array_equal(run_seeds(small), run_seeds(large)[:3])  # adding seeds extends a study
+    assert len(set(run_seeds(large))) == 5 and run_seeds(large).max() < 2**31  # NetCDF 3 int32
+    assert not np.array_equal(run_seeds(small), run_seeds(spec_from_dict(_with(n_seeds=3, seed=8))))
+
+
+def test_digest_follows_what_the_results_depend_on():
+    a = spec_from_dict(GOOD)
+    assert a.digest() == spec_from_dict(GOOD).digest()
+    assert a.digest() != spec_from_dict(_with(n_seeds=3)).digest()
+    assert a.digest() != spec_from_dict(_with(scenario={"mask_deg": 30})).digest()
