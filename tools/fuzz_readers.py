@@ -223,15 +223,12 @@ def main():
     target, fuzzer_args = sys.argv[1], [sys.argv[0], *sys.argv[2:]]
     import atheris
 
+    import importlib
+
     with atheris.instrument_imports(include=["leosop", "sigmf"]):
-        import leosop.gnss.products  # noqa: F401
-        import leosop.gnss.rinex  # noqa: F401
-        import leosop.ins.imu_io  # noqa: F401
-        import leosop.orbits  # noqa: F401
-        import leosop.positioning.measurements  # noqa: F401
-        import leosop.scenarios  # noqa: F401
-        import leosop.signal.iq  # noqa: F401
-        import sigmf.sigmffile  # noqa: F401
+        for module in ("leosop.gnss.products", "leosop.gnss.rinex", "leosop.ins.imu_io", "leosop.orbits",
+                       "leosop.positioning.measurements", "leosop.scenarios", "leosop.signal.iq", "sigmf.sigmffile"):
+            importlib.import_module(module)
     out = CORPUS / target
     seen = set()
     tmp = tempfile.mkdtemp(prefix=f"fuzz_{target}_", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)

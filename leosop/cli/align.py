@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constants import G0_MPS2
 from ..errors import InputError
-from ..fileio import write_csv, write_json
+from ..fileio import atomic_outputs, write_csv, write_json
 from ..ins import imu_io
 from ..ins.alignment import (AUTO_INERTIAL_MIN_S, INCREMENT_METHODS, MotionWarning, align_increments,
                              motion_std_mps2, resolve_method)
@@ -57,6 +58,21 @@ def _angles_deg(pitch, roll, yaw):
             "heading_deg": float(np.degrees(heading_from_yaw(yaw)))}
 
 
+#: Mean specific force of a static log, as a fraction of g: outside it the log
+#: does not hold gravity (all zero, wrong units) and no attitude follows.
+_GRAVITY_RANGE = (0.5, 1.5)
+
+
+def _check_static(path, dtheta, dvel, span_s):
+    """Refuse logs without gravity in the accelerometers or without any gyro signal."""
+    f_mps2 = float(np.linalg.norm(dvel, axis=1).sum()) / span_s
+    if not _GRAVITY_RANGE[0] * G0_MPS2 <= f_mps2 <= _GRAVITY_RANGE[1] * G0_MPS2:
+        raise InputError(f"{path}: mean specific force {f_mps2:.4g} m/s^2 is not gravity ({G0_MPS2:.2f} m/s^2): "
+                         "not a static log with accelerometers in m/s^2 or g")
+    if not np.any(dtheta):
+        raise InputError(f"{path}: the gyro increments are all zero (no Earth rate): the heading is undefined")
+
+
 def run(args):
     log = _read(args.imu, args.format)
     lat_deg = args.lat_deg if args.lat_deg is not None else log.metadata.get("lat_deg")
@@ -76,6 +92,7 @@ def run(args):
         raise InputError(f"{args.imu}: at least 1 s of data is needed for an alignment, got {n * dt:.3f} s")
     lat = np.radians(lat_deg)
     dtheta, dvel = log.dtheta_b_rad[:n], log.dvel_b_mps[:n]
+    _check_static(args.imu, dtheta, dvel, n * dt)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MotionWarning)
         method = resolve_method(args.method, n * dt)
@@ -98,11 +115,11 @@ def run(args):
                                 **_angles_deg(*align_increments(dtheta[sl], dvel[sl], dt, lat, method=window_method))})
         doc["windows"] = windows
     if args.out:
-        out = Path(args.out)
-        write_json(out / "align.json", doc)
-        if "windows" in doc:
-            write_csv(out / "align_windows.csv", ["t0_s", "pitch_deg", "roll_deg", "heading_deg"],
-                      [[w["t0_s"], w["pitch_deg"], w["roll_deg"], w["heading_deg"]] for w in doc["windows"]])
+        with atomic_outputs(args.out) as out:
+            write_json(out / "align.json", doc)
+            if "windows" in doc:
+                write_csv(out / "align_windows.csv", ["t0_s", "pitch_deg", "roll_deg", "heading_deg"],
+                          [[w["t0_s"], w["pitch_deg"], w["roll_deg"], w["heading_deg"]] for w in doc["windows"]])
     return doc
 
 

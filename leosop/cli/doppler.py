@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..fileio import write_csv, write_json
+from ..fileio import atomic_outputs, write_csv, write_json
 from ..progress import progress
 from ..signal.doppler import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, METHODS, coarse_stft, cubic_bias_hz, estimate_block
 from ..signal.iq import open_raw, open_sigmf
@@ -148,7 +148,8 @@ def run(args):
         doc["truth_rms_error_hz"] = float(np.sqrt(np.mean(np.square(errs))))
     if args.out:
         f_lim = min(0.5 * fs, args.max_doppler_hz + comb.offsets_hz.max() * 1.2)
-        _write_outputs(Path(args.out), doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim)
+        with atomic_outputs(args.out) as stage:
+            _write_outputs(stage, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim)
     return doc
 
 

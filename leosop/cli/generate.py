@@ -20,6 +20,7 @@ The truth (Doppler at each block centre, its rate, C/N0, satellite id) goes
 into the SigMF annotations, the per-satellite draws into ``leosop:satellites``.
 """
 
+import json
 import sys
 from pathlib import Path
 
@@ -27,17 +28,17 @@ import numpy as np
 
 from ..constants import STARLINK_N_TONES, STARLINK_PILOT_HZ, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
-from ..fileio import write_json
+from ..fileio import atomic_files
 from ..frames import azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..progress import progress
 from ..scenarios import XIAN_BAOJI
 from ..signal.channel import WAVEFORMS, OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
-from ..signal.iq import write_sigmf
+from ..signal.iq import write_sigmf_files
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
 from . import add_command
-from .options import mask_deg, parse_site, parse_time, positive
+from .options import mask_deg, parse_site, parse_time, positive, warn_stale
 
 DEFAULT_SITE = "34.342,108.940,400"
 _WAVEFORM_TEXT = {"tones": "pilot combs", "ofdm": "OFDM downlink frames with pilot combs"}
@@ -184,7 +185,9 @@ def run(args):
 
     rng = np.random.default_rng(args.seed)
     pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
-    const = _select(load_constellation(args.tle), pos_rx, start, args.sat, mask)
+    const = load_constellation(args.tle)
+    warn_stale(const, start)
+    const = _select(const, pos_rx, start, args.sat, mask)
     clock = rng.uniform(0.0, args.sat_offset_max_hz, len(const)) + args.rx_offset_hz
     phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
     speed = inertial_speed_mps(const, start)
@@ -224,15 +227,11 @@ def run(args):
                                  f"satellite(s) "
                                  f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
              "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]}}
-    n_written = write_sigmf(out, _chunks(channel, signal_starts, lengths, rng), sample_rate_hz=fs,
-                            center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
-                            datatype=args.datatype, annotations=annotations, global_extra=extra,
-                            ci16_full_scale=full_scale)
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
         "datatype": args.datatype,
-        "n_samples": n_written,
+        "n_samples": int(lengths.sum()),
         "sample_rate_hz": fs,
         "start_utc": format_utc(start),
         "duration_s": n / fs,
@@ -243,8 +242,15 @@ def run(args):
         "waveform": args.waveform,
         "satellites": satellites,
     }
-    if args.out:
-        write_json(Path(args.out) / "generate.json", doc)
+    # All outputs or none: the data file, then its metadata, then generate.json.
+    paths = [out.with_suffix(".sigmf-data"), out] + ([Path(args.out) / "generate.json"] if args.out else [])
+    with atomic_files(paths) as tmps:
+        write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng), sample_rate_hz=fs,
+                          center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
+                          datatype=args.datatype, annotations=annotations, global_extra=extra,
+                          ci16_full_scale=full_scale)
+        if args.out:
+            tmps[2].write_text(json.dumps(doc, indent=2) + "\n")
     return doc
 
 

@@ -2,13 +2,18 @@
 
 import argparse
 import math
+import warnings
 
 import numpy as np
 
 from ..errors import InputError
-from ..timebase import parse_utc
+from ..timebase import format_utc, parse_utc, seconds_since
 
-__all__ = ["finite_float", "parse_site", "parse_time", "positive", "mask_deg"]
+#: Element sets older or newer than this at the start time earn a warning:
+#: SGP4 errors grow by kilometres per day from the epoch.
+STALE_DAYS = 14.0
+
+__all__ = ["STALE_DAYS", "finite_float", "parse_site", "parse_time", "positive", "mask_deg", "warn_stale"]
 
 
 def finite_float(text):
@@ -61,3 +66,11 @@ def mask_deg(value, option="--mask-deg"):
     if not (math.isfinite(value) and 0.0 <= value < 90.0):
         raise InputError(f"{option} {value:g}: elevation mask must be in [0, 90) deg")
     return value
+
+
+def warn_stale(const, start, what="start"):
+    """Warn when ``start`` is more than :data:`STALE_DAYS` from every element-set epoch of ``const``."""
+    age_days = np.abs(seconds_since(const.epochs_utc, start)).min() / 86_400.0
+    if age_days > STALE_DAYS:
+        warnings.warn(f"{what} {format_utc(start)} is {age_days:.0f} days from the nearest element-set epoch; "
+                      "positions will be off by many kilometres", stacklevel=3)

@@ -9,27 +9,23 @@ velocity and one clock per family seen: null below ``6 + k`` satellites of
 """
 
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from ..fileio import write_csv, write_json
+from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import CARRIERS, load_constellation
 from ..orbits.visibility import compute_visibility
 from ..timebase import format_utc, seconds_since
 from . import add_command
-from .options import mask_deg, parse_site, parse_time, positive
+from .options import mask_deg, parse_site, parse_time, positive, warn_stale
 
 #: Defaults of the bundled main job: Xi'an ([Shen 2024]'s start point), one hour
 #: from the bundled element sets' epoch, the paper's 40 deg mask.
 DEFAULT_SITE = "34.342,108.940,400"
 DEFAULT_MASK_DEG = 40.0
-# Element sets older or newer than this at the start time earn a warning:
-# SGP4 errors grow by kilometres per day from the epoch.
-_STALE_DAYS = 14.0
 
 
 def register(subparsers):
@@ -76,10 +72,7 @@ def run(args):
         start = parse_time(args.start)
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
-    age_days = np.abs(seconds_since(const.epochs_utc, start)).min() / 86_400.0
-    if age_days > _STALE_DAYS:
-        warnings.warn(f"start {format_utc(start)} is {age_days:.0f} days from the nearest element-set epoch; "
-                      "positions will be off by many kilometres", stacklevel=2)
+    warn_stale(const, start)
     family = families[0] if families else next((f for f in const.families if f), "starlink")
     carrier_hz = args.carrier_hz or CARRIERS[family].default_hz
     clock_group = None
@@ -123,9 +116,14 @@ def _families(names):
 
 
 def _write_outputs(out, doc, vis, gdop, times, mask, source):
+    t_s = seconds_since(times, times[0])
+    with atomic_outputs(out) as stage:
+        _write_files(stage, doc, vis, gdop, t_s, mask, source)
+
+
+def _write_files(out, doc, vis, gdop, t_s, mask, source):
     from ..orbits.plots import plot_skyplot, plot_visibility
 
-    t_s = seconds_since(times, times[0])
     write_json(out / "visibility.json", doc)
     dops = vis.range_dops()
     blank = lambda x: "" if not np.isfinite(x) else f"{x:.4f}"  # noqa: E731

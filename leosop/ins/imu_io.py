@@ -45,6 +45,8 @@ __all__ = ["ImuLog", "read_psins", "read_rtklib_csv", "read_rtklib_sf_csv", "DRI
 
 _GAP_FACTOR = 2.5
 _RATE_RANGE_HZ = (1.0, 10_000.0)
+#: GPST seconds since 1970 that a log can start at: 1970 .. 2100-01-01.
+_GPST_RANGE_S = (0.0, 4_102_444_800.0)
 
 # The data's repository gives the mounting as roll, pitch, yaw [deg] of the
 # sensor in its forward-right-down body, composed Rz(yaw) Ry(pitch) Rx(roll)
@@ -227,7 +229,15 @@ def _read_tag(path):
         raise InputError(f"{path}: not an RTKLIB time-tag file (60-byte TIMETAG header, start time, 8-byte records)")
     time_s, frac_s = struct.unpack("<Id", raw[64:76])
     last_tick_ms = struct.unpack("<I", raw[-8:-4])[0]
-    return time_s + frac_s, last_tick_ms / 1000.0
+    return _check_gpst(path, "start time", time_s + frac_s), last_tick_ms / 1000.0
+
+
+def _check_gpst(path, what, unix_style_gpst_s):
+    """Refuse a start time that is not GPST seconds since 1970 of the GPS era."""
+    if not _GPST_RANGE_S[0] <= unix_style_gpst_s <= _GPST_RANGE_S[1]:
+        raise InputError(f"{path}: {what} {float(unix_style_gpst_s):.6g} is not GPST seconds since 1970 "
+                         "(before 2100)")
+    return unix_style_gpst_s
 
 
 def _gpst_iso(unix_style_gpst_s):
@@ -273,7 +283,11 @@ def read_rtklib_sf_csv(path, *, C_b_s=np.eye(3)):
         ``epoch`` is the first sample's GPST time.
     """
     lines = _read_lines(path)
+    if len(lines) < 2:
+        raise InputError(f"{path}: {len(lines)} line(s); expected rows of 11 comma-separated values "
+                         "(t, accelerometer [g], gyro [rad/s], 4 unused)")
     data = _table(path, lines, 1, 11, ",")
     t = data[:, 0]
+    _check_gpst(path, "first time", t[0])
     metadata = {"format": "rtklib_sf_csv", "C_b_s": np.asarray(C_b_s, dtype=float).tolist()}
     return _from_rates(path, t - t[0], data[:, 1:4] * G0_MPS2, data[:, 4:7], 1, C_b_s, _gpst_iso(t[0]), metadata)

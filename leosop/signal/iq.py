@@ -16,10 +16,10 @@ import numpy as np
 
 from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
-from ..fileio import atomic_path
+from ..fileio import atomic_files
 from ..timebase import format_utc, parse_utc
 
-__all__ = ["DATATYPES", "Capture", "Recording", "open_sigmf", "open_raw", "write_sigmf"]
+__all__ = ["DATATYPES", "Capture", "Recording", "open_sigmf", "open_raw", "write_sigmf", "write_sigmf_files"]
 
 #: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float).
 DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0)}
@@ -347,14 +347,41 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
     return Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
 
 
-def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc=None, datatype="cf32_le",
-                annotations=(), global_extra=None, ci16_full_scale=1.0, captures=None):
+def write_sigmf(meta_path, chunks, **options):
     """Write a SigMF recording from an iterable of complex sample chunks, atomically.
+
+    The data file and then the metadata are moved into place only when both
+    are complete; on any error neither is left. Options as
+    :func:`write_sigmf_files`.
 
     Parameters
     ----------
     meta_path : str or Path
         Output ``.sigmf-meta``; the data go to the ``.sigmf-data`` beside it.
+    chunks : iterable of ndarray of complex
+
+    Returns
+    -------
+    n_samples : int
+    """
+    meta_path = Path(meta_path)
+    if meta_path.suffix != ".sigmf-meta":
+        raise InputError(f"{meta_path}: output must end in .sigmf-meta")
+    with atomic_files([meta_path.with_suffix(".sigmf-data"), meta_path]) as (tmp_data, tmp_meta):
+        return write_sigmf_files(tmp_data, tmp_meta, chunks, **options)
+
+
+def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz, start_utc=None, datatype="cf32_le",
+                annotations=(), global_extra=None, ci16_full_scale=1.0, captures=None):
+    """Write the data and metadata of a SigMF recording to the files given (not atomic).
+
+    For staged outputs (:func:`leosop.fileio.atomic_files`); most callers
+    want :func:`write_sigmf`.
+
+    Parameters
+    ----------
+    data_file, meta_file : str or Path
+        Where the samples and the metadata JSON go.
     chunks : iterable of ndarray of complex
         Consecutive samples; written as they come (never all in memory).
     sample_rate_hz, center_hz : float
@@ -380,9 +407,6 @@ def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc=None,
     import sigmf
     from sigmf import SigMFFile
 
-    meta_path = Path(meta_path)
-    if meta_path.suffix != ".sigmf-meta":
-        raise InputError(f"{meta_path}: output must end in .sigmf-meta")
     if datatype not in DATATYPES:
         raise InputError(f"datatype {datatype!r}: expected one of {', '.join(DATATYPES)}")
     if (start_utc is None) == (captures is None):
@@ -391,30 +415,28 @@ def write_sigmf(meta_path, chunks, *, sample_rate_hz, center_hz, start_utc=None,
     starts = [s for s, _ in captures]
     if starts[0] != 0 or np.any(np.diff(starts) <= 0):
         raise InputError(f"write_sigmf: capture starts {starts[:5]}... must begin at 0 and increase")
-    data_path = meta_path.with_suffix(".sigmf-data")
     n = 0
-    with atomic_path(data_path) as tmp_data, atomic_path(meta_path) as tmp_meta:
-        with open(tmp_data, "wb") as fh:
-            for chunk in chunks:
-                c = np.asarray(chunk)
-                if datatype == "cf32_le":
-                    fh.write(c.astype("<c8").tobytes())
-                else:
-                    inter = np.empty(2 * c.size)
-                    inter[0::2], inter[1::2] = c.real, c.imag
-                    q = np.clip(np.round(inter * (32767.0 / ci16_full_scale)), -32768, 32767)
-                    fh.write(q.astype("<i2").tobytes())
-                n += c.size
-        info = {sigmf.DATATYPE_KEY: datatype, sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
-                sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(tmp_data)}
-        info.update(global_extra or {})
-        meta = SigMFFile(global_info=info)
-        if starts[-1] >= n:
-            raise InputError(f"write_sigmf: capture at sample {starts[-1]} but only {n} samples were written")
-        for start, t in captures:
-            meta.add_capture(start, metadata={sigmf.FREQUENCY_KEY: float(center_hz),
-                                              sigmf.DATETIME_KEY: _format_utc_ns(t)})
-        for start, count, md in annotations:
-            meta.add_annotation(int(start), int(count), metadata=md)
-        tmp_meta.write_text(meta.dumps(pretty=True) + "\n")
+    with open(data_file, "wb") as fh:
+        for chunk in chunks:
+            c = np.asarray(chunk)
+            if datatype == "cf32_le":
+                fh.write(c.astype("<c8").tobytes())
+            else:
+                inter = np.empty(2 * c.size)
+                inter[0::2], inter[1::2] = c.real, c.imag
+                q = np.clip(np.round(inter * (32767.0 / ci16_full_scale)), -32768, 32767)
+                fh.write(q.astype("<i2").tobytes())
+            n += c.size
+    info = {sigmf.DATATYPE_KEY: datatype, sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
+            sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(data_file)}
+    info.update(global_extra or {})
+    meta = SigMFFile(global_info=info)
+    if starts[-1] >= n:
+        raise InputError(f"write_sigmf: capture at sample {starts[-1]} but only {n} samples were written")
+    for start, t in captures:
+        meta.add_capture(start, metadata={sigmf.FREQUENCY_KEY: float(center_hz),
+                                          sigmf.DATETIME_KEY: _format_utc_ns(t)})
+    for start, count, md in annotations:
+        meta.add_annotation(int(start), int(count), metadata=md)
+    Path(meta_file).write_text(meta.dumps(pretty=True) + "\n")
     return n
