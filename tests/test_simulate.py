@@ -1,13 +1,11 @@
 """simulate: the fix's dependence on the satellites' constant errors, and the common orbit-error model."""
 
-import dataclasses
-
 import numpy as np
 
 from leosop import frames, simulate
 from leosop.constants import C_MPS
 from leosop.ins import trajectory
-from leosop.orbits import CARRIERS, load_constellation
+from leosop.orbits import CARRIERS
 from leosop.orbits.visibility import compute_visibility
 from leosop.positioning.dop import doppler_jacobian
 from leosop.positioning.doppler_ls import FixStatus, solve_snapshots
