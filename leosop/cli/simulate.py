@@ -12,10 +12,13 @@ from . import add_command
 
 def register(subparsers):
     p = add_command(subparsers, "simulate", sys.modules[__name__],
-                    help="simulate a Starlink/INS flight end to end (default: [Shen 2024]'s Xi'an-Baoji flight)")
+                    help="simulate a LEO/INS flight end to end (default: [Shen 2024]'s Xi'an-Baoji flight, Starlink; "
+                         "scenario leo.constellations mixes OneWeb, Iridium NEXT and Orbcomm in)")
     p.add_argument("--scenario", default="xian-baoji", metavar="NAME|FILE.json",
-                   help="built-in scenario name or a scenario JSON file (default xian-baoji)")
-    p.add_argument("--tle", metavar="FILE", help="TLE or OMM file (default: the bundled constellation)")
+                   help="built-in scenario name (xian-baoji, or a bundled file: xian-baoji-multi, high-latitude, "
+                        "urban-canyon, outage) or a scenario JSON file (default xian-baoji)")
+    p.add_argument("--tle", metavar="FILE",
+                   help="TLE or OMM file (default: the scenario's, else the bundled sky)")
     p.add_argument("--correction-period-s", type=float, default=1.0, metavar="P",
                    help="seconds between EKF corrections of the INS (default 1)")
     p.add_argument("--orbit-error-m", type=float, metavar="E",
@@ -46,6 +49,10 @@ def run(args):
         write_csv(out / "solution.csv", header, rows)
         write_json(out / "metrics.json", doc)
         write_figures(result, out)
+        if len(scenario.leo.constellations) > 1:
+            from ..plots_families import visible_by_family_figure
+
+            visible_by_family_figure(result, out / "fig9_visible_by_family.png")
     return doc
 
 
