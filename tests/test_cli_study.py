@@ -31,6 +31,7 @@ def test_gdop_map_netcdf_and_figures(tmp_path, capsys):
     (["--grid-deg", "7"], 2, "--grid-deg 7: must divide 180 and 360 into whole steps; nearest valid: 6.92308 or 7.2"),
     (["--constellation", "oneweb"], 2, "--constellation: no oneweb satellites"),
     (["--mask-deg", "95"], 2, "--mask-deg 95: elevation mask must be in [0, 90)"),
+    (["--workers", "0"], 2, "--workers 0: expected an integer >= 1"),
     (["--scheduler", "tcp://127.0.0.1:9"], 1, "--scheduler tcp://127.0.0.1:9: cannot connect to a Dask scheduler"),
 ])
 def test_bad_input_one_line_and_nothing_written(tmp_path, capsys, monkeypatch, args, code, message):

@@ -42,6 +42,7 @@ def register(subparsers):
     g.add_argument("--constellation", nargs="+", choices=sorted(CARRIERS), metavar="NAME",
                    help=f"only these families of a mixed file ({', '.join(sorted(CARRIERS))})")
     g.add_argument("--skip-bad", action="store_true", help="skip malformed TLE records with a warning")
+    g.add_argument("--workers", type=int, metavar="N", help="workers of the local Dask cluster (default: the cores)")
     g.add_argument("--scheduler", metavar="ADDR",
                    help="Dask scheduler address (default: a local cluster; 'serial' runs in this process)")
     g.set_defaults(_module=sys.modules[__name__])
@@ -62,6 +63,7 @@ def register(subparsers):
 def run(args):
     if args.study == "montecarlo":
         return _run_montecarlo(args)
+    _check_workers(args.workers)
     duration = positive(args.duration_s, "--duration-s")
     step = positive(args.step_s, "--step-s")
     mask = mask_deg(args.mask_deg)
@@ -78,7 +80,7 @@ def run(args):
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
     times = np.datetime64(start, "ns") + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
-    ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler)
+    ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler, n_workers=args.workers)
     out = Path(args.out)
     from ..fileio import atomic_outputs
 
@@ -121,14 +123,18 @@ def _figures(stage, ds, label):
                          vmin=0, vmax=vmax, cmap="magma_r", title=title + " (blank: < 7 satellites)")
 
 
+def _check_workers(n_workers):
+    if n_workers is not None and n_workers < 1:
+        raise InputError(f"--workers {n_workers}: expected an integer >= 1")
+
+
 def _run_montecarlo(args):
     from ..fileio import atomic_outputs
     from ..montecarlo import cell_table, load_spec, run_study, to_dataset, write_netcdf
     from ..montecarlo.figures import plot_study
     from ..montecarlo.store import ChunkStore
 
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers {args.workers}: expected an integer >= 1")
+    _check_workers(args.workers)
     spec = load_spec(args.spec)
     out = Path(args.out)
     if out.exists() and not out.is_dir():

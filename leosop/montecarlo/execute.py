@@ -13,7 +13,9 @@ at a time (single-threaded workers), so its memory is that of one run. When a
 worker dies, the scheduler gives its chunks to another worker; they are pure
 functions of their runs, so the result is unchanged. Each finished chunk is
 written by the client to the work directory (:class:`ChunkStore`); a study
-run again with the same work directory skips those chunks.
+run again with the same work directory skips those chunks. On a remote
+cluster the element-set file (``spec.tle``) must be readable at the same path
+on every worker.
 """
 
 import dataclasses

@@ -40,8 +40,8 @@ __all__ = ["StudySpec", "load_spec", "spec_from_dict", "bundled_specs", "run_see
 
 _KEYS = ("name", "description", "scenario", "tle", "fixed", "parameters", "n_seeds", "seed", "runs_per_chunk")
 DEFAULT_RUNS_PER_CHUNK = 10
-#: Largest study accepted (runs): the results array and the chunk list stay small.
-MAX_RUNS = 10_000_000
+#: Largest study accepted (runs): the client's results array stays near 120 MB.
+MAX_RUNS = 1_000_000
 
 
 @dataclass(frozen=True)

@@ -376,7 +376,7 @@ def _epochs_per_task(n_sats, grid_deg, n_epochs, n_workers):
     return int(min(by_result, by_states, by_balance, 60))
 
 
-def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, epochs_per_task=None):
+def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers=None, epochs_per_task=None):
     """Visible count and Doppler GDOP over a global grid and time, as an ``xarray.Dataset``.
 
     Parameters
@@ -387,6 +387,8 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, epochs_pe
     grid_deg, mask_deg : float
     scheduler : None, "serial", str or distributed.Client
         As in :mod:`leosop.studies`; an unreachable address raises ExternalError.
+    n_workers : int, optional
+        Workers of the local cluster (``scheduler=None``); default the cores.
     epochs_per_task : int, optional
         Default: sized so that a task's output stays near 64 MB.
 
@@ -410,7 +412,8 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, epochs_pe
     else:
         if not isinstance(source, ConstellationSource):
             raise TypeError("a Dask run needs a ConstellationSource (SGP4 records do not pickle)")
-        _run_dask(source, times, grid.step_deg, mask_deg, scheduler, epochs_per_task, n_sats, counts, gdops)
+        _run_dask(source, times, grid.step_deg, mask_deg, scheduler, n_workers, epochs_per_task, n_sats, counts,
+                  gdops)
     return _dataset(times, grid, mask_deg, counts, gdops, const)
 
 
@@ -425,7 +428,7 @@ def _connect(scheduler):
         raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
 
 
-def _run_dask(source, times, grid_deg, mask_deg, scheduler, epochs_per_task, n_sats, counts, gdops):
+def _run_dask(source, times, grid_deg, mask_deg, scheduler, n_workers, epochs_per_task, n_sats, counts, gdops):
     import contextlib
     import os
 
@@ -437,10 +440,10 @@ def _run_dask(source, times, grid_deg, mask_deg, scheduler, epochs_per_task, n_s
     with contextlib.ExitStack() as stack:
         if isinstance(scheduler, str):
             scheduler = stack.enter_context(_connect(scheduler))
-        n_workers = os.cpu_count() or 1
+        n_workers = n_workers or os.cpu_count() or 1
         per = epochs_per_task or _epochs_per_task(n_sats, grid_deg, len(times), n_workers)
         starts = list(range(0, len(times), per))
-        client = stack.enter_context(_client(scheduler, len(starts)))
+        client = stack.enter_context(_client(scheduler, len(starts), n_workers))
         futures = client.map(_task, [(source, times[a:a + per], grid_deg, mask_deg) for a in starts], pure=False)
         where = {f.key: a for f, a in zip(futures, starts)}
         for future in progress(as_completed(futures), total=len(futures), desc="gdop-map", unit="task"):
