@@ -26,7 +26,7 @@ from .scenarios import load_scenario
 from .simulate import metrics, run_scenario
 from .studies import map_chunks
 
-__all__ = ["SCENARIOS", "run_case", "available", "multi", "format_table"]
+__all__ = ["SCENARIOS", "run_case", "available", "lag_pairs", "multi", "format_table"]
 
 #: Scenarios of the comparison (bundled files, by name).
 SCENARIOS = ("xian-baoji-multi", "high-latitude", "urban-canyon", "outage")
@@ -72,11 +72,16 @@ def run_case(chunk, rng=None):
         "n_fixes": m["leo_fix"]["n_fixes"],
         "window_pos": float(err[0][inside].mean()) if inside.any() else float("nan"),
         "window_vel": float(err[1][inside].mean()) if inside.any() else float("nan"),
-        "nees": r.nees()[1:], "nis": float(np.nansum(nis)), "nis_dof": int(dof.sum()), "lag": _lag_pairs(r),
+        "nees": r.nees()[1:], "nis": float(np.nansum(nis)), "nis_dof": int(dof.sum()), "lag": lag_pairs(r),
     }
 
 
-def _lag_pairs(result):
+def lag_pairs(result):
+    """Whitened innovations and their successors one update later, (2, m).
+
+    Loose: the 6-vectors whitened by their ``S``; tight: each satellite's
+    normalised Doppler innovation at consecutive epochs.
+    """
     f = result.fused
     if f.innovation is not None:
         u = f.updated

@@ -78,3 +78,36 @@ def test_unknown_name_and_bad_json(tmp_path):
     bad.write_text("{nope")
     with pytest.raises(InputError, match="not valid JSON"):
         load_scenario(bad)
+
+
+def test_multi_constellation_keys_validated_and_round_tripped():
+    doc = {"leo": {"constellations": ["starlink", "iridium"], "rx_freq_offsets_hz": {"iridium": -3},
+                   "cn0_dbhz_by_family": {"iridium": 52}, "outage_s": [10, 70], "outage_max_sats": 2}}
+    s = scenario_from_dict(doc)
+    assert s.leo.constellations == ("starlink", "iridium") and s.leo.outage_s == (10.0, 70.0)
+    assert s.leo.rx_freq_offsets_hz == {"iridium": -3.0} and s.leo.outage_max_sats == 2
+    assert scenario_from_dict(json.loads(json.dumps(to_dict(s)))) == s
+
+
+@pytest.mark.parametrize("leo, words", [
+    ({"constellations": ["starlink", "globalstar"]}, ["globalstar", "starlink, oneweb, iridium, orbcomm"]),
+    ({"constellations": []}, ["constellations", "non-empty"]),
+    ({"constellations": ["oneweb", "oneweb"]}, ["twice"]),
+    ({"rx_freq_offsets_hz": {"gps": 1.0}}, ["rx_freq_offsets_hz", "gps"]),
+    ({"outage_s": [100, 50]}, ["outage_s[1]"]),
+    ({"outage_max_sats": 2.5}, ["outage_max_sats", "whole number"]),
+])
+def test_bad_multi_constellation_keys_name_the_field(leo, words):
+    with pytest.raises(InputError) as exc:
+        scenario_from_dict({"leo": leo}, source="f.json")
+    assert all(w in str(exc.value) for w in words), str(exc.value)
+
+
+def test_bundled_scenarios_load_by_name_and_resolve_their_tle():
+    from leosop.scenarios import bundled_names
+
+    assert {"xian-baoji", "xian-baoji-multi", "high-latitude", "urban-canyon", "outage"} <= set(bundled_names())
+    s = load_scenario("high-latitude")
+    assert s.tle.endswith("shared/data/tle/active_3le_2021-08-06_atqlong.txt") and s.mask_deg == 25.0
+    assert load_scenario("urban-canyon").mask_deg == 60.0
+    assert load_scenario("outage").leo.outage_s == (300.0, 480.0)
