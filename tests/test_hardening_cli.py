@@ -1,0 +1,278 @@
+"""The command line as a hostile user meets it (issue 13): option errors,
+output paths, signals, warnings and all-or-nothing outputs."""
+
+import errno
+import http.server
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+from leosop import fileio
+from leosop.cli import main, tle
+
+
+#: A small recording: 10 ms of one satellite at 1 MS/s.
+SMALL = ["--duration-s", "0.01", "--truth-step-s", "0.01", "--sample-rate-hz", "1e6", "--sat", "70002"]
+
+
+def _run(capsys, *argv):
+    status = main(list(argv))
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def _one_line(err):
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def _leftovers(root):
+    """Hidden staging files or directories anywhere below ``root``."""
+    return [p for p in root.rglob(".*") if ".part" in p.name]
+
+
+@pytest.mark.parametrize("argv", [["visibility", "--bogus"], ["generate"], ["align", "--imu"],
+                                  ["doppler", "x.sigmf-meta", "--method", "nope"]])
+def test_option_errors_are_one_line(capsys, argv):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "error:" in line and "usage:" not in line
+
+
+def test_negative_numbers_are_option_values(capsys):
+    status, out, err = _run(capsys, "visibility", "--site", "-33.9,18.4,0", "--start", "2025-01-01T00:00:00Z",
+                            "--duration-s", "10", "--step-s", "5", "--json")
+    assert status == 0, err
+    assert len(json.loads(out)["epochs_utc"]) == 3
+
+
+def test_negative_sample_rate_is_refused_by_the_value_check(tmp_path, capsys):
+    status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "r.sigmf-meta"), "--sample-rate-hz", "-1e6")
+    assert status == 2
+    assert "--sample-rate-hz -1e+06: must be a positive number" in _one_line(err)
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["generate", "-o", "r.sigmf-meta", "--rx-offset-hz", "nan"], "--rx-offset-hz"),
+    (["visibility", "--duration-s", "inf"], "--duration-s"),
+    (["visibility", "--mask-deg", "-inf"], "--mask-deg"),
+    (["position", "m.csv", "--static", "--alt-m", "nan"], "--alt-m"),
+    (["doppler", "x.iq", "--dtype", "cf32", "--sample-rate-hz", "1e999"], "--sample-rate-hz"),
+])
+def test_non_finite_option_values_are_refused(capsys, argv, option):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    line = _one_line(capsys.readouterr().err)
+    assert option in line and "is not a finite number" in line
+
+
+def test_negative_seed_is_bad_input(tmp_path, capsys):
+    status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "r.sigmf-meta"), "--seed", "-1")
+    assert status == 2 and "--seed -1: must be an integer >= 0" in _one_line(err)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("target, message", [
+    ("file", "exists and is not a directory"),
+    ("file/below", "is not a directory"),
+    ("/dev/null", "exists and is not a directory"),
+    ("", "empty path"),
+])
+def test_out_that_cannot_be_a_directory(tmp_path, capsys, target, message):
+    (tmp_path / "file").write_text("keep")
+    out = target if target.startswith("/") or not target else str(tmp_path / target)
+    status, stdout, err = _run(capsys, "visibility", "--duration-s", "10", "--out", out)
+    assert status == 2 and stdout == ""
+    assert f"--out {out}".strip() in err or "--out ''" in err
+    assert message in _one_line(err)
+    assert (tmp_path / "file").read_text() == "keep"
+
+
+@pytest.mark.parametrize("target, message", [
+    ("dir", "exists and is not a regular file"),
+    ("file/below.sigmf-meta", "is not a directory"),
+    ("/dev/null", "exists and is not a regular file"),
+    ("", "empty path"),
+])
+def test_output_file_that_cannot_be_written(tmp_path, capsys, target, message):
+    (tmp_path / "file").write_text("keep")
+    (tmp_path / "dir").mkdir()
+    out = target if target.startswith("/") or not target else str(tmp_path / target)
+    status, _, err = _run(capsys, "generate", "-o", out, "--duration-s", "0.01")
+    assert status == 2 and message in _one_line(err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir", "file"]
+
+
+def test_errors_in_the_summary_are_caught(capsys, monkeypatch):
+    def broken(doc):
+        raise KeyError("epoch_min_utc")
+
+    monkeypatch.setattr(tle, "summary", broken)
+    status, out, err = _run(capsys, "tle", "info", str(fileio.Path(tle.__file__).parents[1] / "data" /
+                                                        "starlink_walker.tle"))
+    assert status == 1 and out == ""
+    assert "internal error: KeyError" in _one_line(err)
+
+
+def test_warnings_are_one_line_and_internals_hidden(capsys, monkeypatch):
+    real_run = tle.run
+
+    def noisy(args):
+        np.log(np.zeros(2))  # numpy RuntimeWarning: not for the user
+        warnings.warn("element sets are old\n  and this is the second line", UserWarning)
+        return real_run(args)
+
+    monkeypatch.delenv("LEOSOP_DEBUG", raising=False)
+    monkeypatch.setattr(tle, "run", noisy)
+    status, _, err = _run(capsys, "tle", "info", str(fileio.Path(tle.__file__).parents[1] / "data" /
+                                                      "starlink_walker.tle"))
+    assert status == 0
+    assert _one_line(err) == "leosop tle: warning: element sets are old and this is the second line"
+
+
+def test_atomic_write_errors_name_the_users_path(tmp_path):
+    target = tmp_path / "out.csv"
+    with pytest.raises(OSError) as info:
+        with fileio.atomic_path(target) as tmp:
+            raise OSError(errno.ENOSPC, "No space left on device", str(tmp))
+    assert info.value.filename == str(target) and info.value.errno == errno.ENOSPC
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_staged_output_errors_name_the_file_in_out_dir(tmp_path):
+    out = tmp_path / "new" / "out"
+    with pytest.raises(OSError) as info:
+        with fileio.atomic_outputs(out) as stage:
+            raise OSError(errno.EIO, "I/O error", str(stage / "fig.png"))
+    assert info.value.filename == str(out / "fig.png")
+    assert list(tmp_path.iterdir()) == []  # the directories made for it are gone too
+
+
+def test_atomic_files_all_or_nothing(tmp_path, monkeypatch):
+    a, b = tmp_path / "d" / "a.bin", tmp_path / "b.json"
+    real_replace = os.replace
+    calls = []
+
+    def second_fails(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise OSError(errno.EXDEV, "Invalid cross-device link", str(dst))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", second_fails)
+    with pytest.raises(OSError):
+        with fileio.atomic_files([a, b]) as (ta, tb):
+            ta.write_bytes(b"data")
+            tb.write_text("{}")
+    assert calls == [a, b]  # in the order given: data first
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_leaves_nothing_when_a_later_step_fails(tmp_path, capsys, monkeypatch):
+    from leosop.cli import generate
+
+    def chunks(*args):
+        yield np.zeros(1000, complex)
+        raise RuntimeError("disk went away")
+
+    monkeypatch.setattr(generate, "_chunks", chunks)
+    status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "rec" / "r.sigmf-meta"), *SMALL,
+                          "--out", str(tmp_path / "out"))
+    assert status == 1 and "disk went away" in _one_line(err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_outputs_together(tmp_path, capsys):
+    meta = tmp_path / "r.sigmf-meta"
+    status, _, err = _run(capsys, "generate", "-o", str(meta), *SMALL, "--out", str(tmp_path / "out"),
+                          "--json")
+    assert status == 0, err
+    assert meta.with_suffix(".sigmf-data").stat().st_size == 8 * 10_000
+    assert json.loads((tmp_path / "out" / "generate.json").read_text())["n_samples"] == 10_000
+    assert _leftovers(tmp_path) == []
+
+
+def test_generate_warns_about_old_element_sets(tmp_path, capsys):
+    status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "r.sigmf-meta"), *SMALL[:6], "--mask-deg", "10",
+                          "--start", "2025-03-01T00:00:00Z")
+    assert status == 0
+    assert "warning: start 2025-03-01T00:00:00.000000Z is 59 days from the nearest element-set epoch" in err
+
+
+def test_visibility_out_is_all_or_nothing(tmp_path, capsys, monkeypatch):
+    from leosop.orbits import plots
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no fonts")
+
+    monkeypatch.setattr(plots, "plot_skyplot", broken)
+    status, _, err = _run(capsys, "visibility", "--duration-s", "10", "--out", str(tmp_path / "vis"))
+    assert status == 1 and "no fonts" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_align_refuses_a_log_without_gravity(tmp_path, capsys):
+    path = tmp_path / "zero.imu"
+    rows = ["0 0 0 0 0 0", "34.0 108.0 400 0 10 9.79", "0.1 0.1 0.1 100 100 100"] + ["0 0 0 0 0 0"] * 300
+    path.write_text("\n".join(rows) + "\n")
+    status, _, err = _run(capsys, "align", "--imu", str(path))
+    assert status == 2 and "mean specific force 0 m/s^2 is not gravity" in _one_line(err)
+
+
+def test_doppler_center_hz_zero_is_refused(tmp_path, capsys):
+    raw = tmp_path / "x.iq"
+    raw.write_bytes(bytes(8 * 10_000))
+    status, _, err = _run(capsys, "doppler", str(raw), "--dtype", "cf32", "--sample-rate-hz", "1e6",
+                          "--center-hz", "0")
+    assert status == 2 and "--center-hz 0: must be a positive number" in _one_line(err)
+
+
+class _Garbage(http.server.BaseHTTPRequestHandler):
+    def do_GET(self):  # noqa: N802 (http.server's name)
+        body = b"this is not an element set\n"
+        self.send_response(200)
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args):
+        pass
+
+
+def test_failed_tle_fetch_leaves_no_directory(tmp_path, capsys):
+    server = http.server.HTTPServer(("127.0.0.1", 0), _Garbage)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        status, _, err = _run(capsys, "tle", "fetch", "starlink", "-o", str(tmp_path / "new" / "dir" / "s.tle"),
+                              "--url", f"http://127.0.0.1:{server.server_port}/gp.php")
+    finally:
+        server.shutdown()
+    assert status == 1 and "do not parse" in _one_line(err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sigterm_is_cleaned_up_like_sigint(tmp_path):
+    meta = tmp_path / "long.sigmf-meta"
+    proc = subprocess.Popen([sys.executable, "-m", "leosop", "generate", "-o", str(meta), "--duration-s", "60",
+                             "--sample-rate-hz", "1e6", "--sat", "70002"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not _leftovers(tmp_path) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert _leftovers(tmp_path), "the staged data file never appeared"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1 and err.strip().splitlines()[-1] == "leosop generate: interrupted"
+    assert list(tmp_path.iterdir()) == []
