@@ -47,7 +47,7 @@ from . import models
 from .products import Clocks, Orbits, seconds_gps
 from .rinex import ObsData
 
-__all__ = ["SIGNALS", "PppOptions", "PppResult", "run_ppp", "gps_to_utc", "spp_position"]
+__all__ = ["SIGNALS", "PppOptions", "PppResult", "run_ppp", "gps_to_utc", "spp_position", "detect_slips"]
 
 F_L1_HZ, F_L2_HZ, F_L5_HZ = 1575.42e6, 1227.60e6, 1176.45e6
 
@@ -149,8 +149,30 @@ def _if_observations(obs, systems):
     return out
 
 
-def _detect_slips(t_s, MW, GF, lli, ok, opt):
-    """New-arc flags per (epoch, sat): gap, LLI, MW jump vs arc mean, GF jump between epochs."""
+def detect_slips(t_s, MW, GF, lli, ok, opt):
+    """New-arc flags: a gap, the loss-of-lock flag, a Melbourne-Wuebbena or a geometry-free jump.
+
+    The MW combination (wide-lane phase minus narrow-lane code, in wide-lane
+    cycles) is compared with its running arc mean: a slip changing ``N1 -
+    N2`` moves it by whole cycles, beyond ``opt.mw_slip_cycles`` standard
+    deviations of the arc (at least 1 cycle). The geometry-free phase ``L1 -
+    L2`` [m] catches the slips MW cannot see (``dN1 = dN2``, 5.4 cm per
+    cycle on GPS L1/L2): a jump beyond ``opt.gf_slip_m`` between successive
+    epochs.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n_epochs,)
+    MW, GF : ndarray, shape (n_epochs, n_sats)
+    lli, ok : ndarray of bool, shape (n_epochs, n_sats)
+    opt : PppOptions
+        ``max_gap_s``, ``mw_slip_cycles``, ``gf_slip_m``.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_epochs, n_sats)
+        True at the first epoch of every arc.
+    """
     n_ep, n_sv = MW.shape
     new_arc = np.zeros((n_ep, n_sv), bool)
     for j in range(n_sv):
@@ -281,7 +303,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     Lc = meas["L"] + corr - wind * meas["lam_nl"]
     ok &= elev > np.radians(opt.mask_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
-    new_arc = _detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
+    new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
     return dict(Pc=Pc, Lc=Lc, RS=RS, elev=elev, m_wet=m_wet, ok=ok, new_arc=new_arc, tide=tide, arp_ecef=arp_ecef,
                 x0=x0, t_s=t_s, lat0=lat0, lon0=lon0)
 

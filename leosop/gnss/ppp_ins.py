@@ -1,0 +1,355 @@
+"""Tightly coupled PPP / INS filter with wide-lane then narrow-lane ambiguity resolution ([Liu 2016]).
+
+Error-state EKF around the toolkit's strapdown INS (:class:`leosop.fusion.
+common.FeedbackIns`: the 15 INS errors of :mod:`leosop.ins.error_model`,
+attitude, velocity, position, gyro and accelerometer biases, propagated
+with Q from the IMU's random walks, fed back after every update), augmented
+with the zenith wet delay (random walk) and the between-satellite single-
+differenced (SD) ionosphere-free ambiguities [m], one per satellite other
+than the reference. [Liu 2016] writes the INS errors in ECEF; here they are
+the toolkit's local-level errors, and the measurement rows map them to ECEF
+(``C_e_n`` and the position Jacobian), which is the same filter written in
+another frame.
+
+Measurements, every GNSS epoch, against the reference satellite (the
+highest when it is (re)chosen): SD ionosphere-free code and phase and SD
+Doppler range rate, predicted at the INS position and velocity (the
+receiver clock and its drift cancel). Weights: ``sigma / sin(elev)`` with
+code:phase 1:100 ([Liu 2016]); the SD covariance keeps the reference's
+shared term. A change of reference maps the SD ambiguities and their
+covariance (``x' = T x``, ``P' = T P T^T``); a cycle slip (loss-of-lock
+flag, Melbourne-Wuebbena and geometry-free tests of
+:func:`leosop.gnss.ppp.detect_slips`) or an outlier (normalised innovation
+above ``k_outlier``) restarts that satellite's ambiguity.
+
+Ambiguity resolution, each epoch, on the float filter ([Liu 2016]: no
+fix-and-hold): the SD wide-lane from the arc means of the Melbourne-
+Wuebbena combinations less the satellites' wide-lane biases, rounded when
+within ``wl_tol_cyc`` of an integer; then the narrow-lane
+``N1 = (B_IF - beta N_WL) / lambda_NL`` (``beta = c f2 / (f1^2 - f2^2)``)
+by LAMBDA with the ratio test and partial fixing
+(:mod:`leosop.gnss.lambda_`); the fixed ambiguities condition the state
+(a noise-free pseudo-observation on a copy) for the fixed solution.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import C_MPS
+from ..frames import C_e_n, geodetic_to_ecef
+from ..fusion import kalman
+from ..fusion.common import N_INS, FeedbackIns, initial_covariance, pos_jacobian
+from ..ins.error_model import DPOS, DV
+from . import models
+from .geometry import range_and_rate, satellite_clock
+from .lambda_ import partial_fix
+from .ppp import PppOptions, detect_slips
+from .simulate import F1_HZ, F2_HZ
+
+__all__ = ["PppInsOptions", "PppInsResult", "run", "if_combinations"]
+
+_ZWD = N_INS  # state index of the zenith wet delay; the SD ambiguities follow, one slot per satellite
+_A0 = N_INS + 1
+LAM_NL_M = C_MPS / (F1_HZ + F2_HZ)
+BETA_M = C_MPS * F2_HZ / (F1_HZ**2 - F2_HZ**2)  # IF ambiguity [m] = LAM_NL N1 + BETA N_WL
+
+
+@dataclass(frozen=True)
+class PppInsOptions:
+    """GNSS side of the filter (SI units; sigmas at zenith, ionosphere-free level)."""
+
+    mask_deg: float = 10.0
+    sigma_code_m: float = 0.9
+    sigma_phase_m: float = 0.009
+    sigma_rate_mps: float = 0.06
+    zwd0_m: float = 0.1
+    zwd_sigma_m: float = 0.1
+    zwd_rw_m_per_rt_s: float = 1e-4
+    amb_sigma_m: float = 5.0
+    k_outlier: float = 5.0
+    ar: bool = True
+    ratio_min: float = 3.0
+    min_fixed: int = 4
+    wl_tol_cyc: float = 0.25
+    wl_min_epochs: int = 20
+
+
+@dataclass
+class PppInsResult:
+    """Per-epoch output, shapes (n_epochs, ...).
+
+    Attributes
+    ----------
+    t_s : ndarray
+    pos_float_ecef_m, pos_fixed_ecef_m : ndarray, shape (n, 3)
+        Float solution (the INS after feedback) and the fixed one (NaN when
+        no subset passes the ratio test).
+    cov_pos_enu_m2 : ndarray, shape (n, 3, 3)
+        Covariance of the float position, ENU.
+    n_sats, n_fixed, n_wl : ndarray of int
+        Satellites used, narrow-lane and wide-lane ambiguities fixed.
+    ratio : ndarray
+    gnss : ndarray of bool
+        A GNSS update was made.
+    n_slips, n_outliers, n_ref_changes : int
+    """
+
+    t_s: np.ndarray
+    pos_float_ecef_m: np.ndarray
+    pos_fixed_ecef_m: np.ndarray
+    cov_pos_enu_m2: np.ndarray
+    n_sats: np.ndarray
+    n_fixed: np.ndarray
+    n_wl: np.ndarray
+    ratio: np.ndarray
+    gnss: np.ndarray
+    n_slips: int
+    n_outliers: int
+    n_ref_changes: int
+
+
+def if_combinations(P1_m, P2_m, L1_cyc, L2_cyc):
+    """Ionosphere-free code and phase [m], Melbourne-Wuebbena [wide-lane cycles], geometry-free phase [m].
+
+    Arrays of any one shape (GPS L1/L2).
+    """
+    f1, f2 = F1_HZ, F2_HZ
+    g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
+    L1, L2 = L1_cyc * C_MPS / f1, L2_cyc * C_MPS / f2
+    mw = ((f1 * L1 - f2 * L2) / (f1 - f2) - (f1 * P1_m + f2 * P2_m) / (f1 + f2)) / (C_MPS / (f1 - f2))
+    return g1 * P1_m - g2 * P2_m, g1 * L1 - g2 * L2, mw, L1 - L2
+
+
+def _sd_cov(var, ref_var):
+    """Covariance of SD measurements ``z_j - z_ref``: ``diag(var) + ref_var``."""
+    return np.diag(var) + ref_var
+
+
+class _Ambiguities:
+    """SD ambiguity slots: which are active, the reference, and the reference change."""
+
+    def __init__(self, n_sv):
+        self.on = np.zeros(n_sv, bool)
+        self.ref = -1
+
+    def drop(self, P, x, js):
+        for j in js:
+            a = _A0 + j
+            P[a, :] = 0.0
+            P[:, a] = 0.0
+            x[a] = 0.0
+            self.on[j] = False
+
+    def reset(self, P, x, js, values, sigma):
+        self.drop(P, x, js)
+        for j, v in zip(js, values):
+            P[_A0 + j, _A0 + j] = sigma**2
+            x[_A0 + j] = v
+            self.on[j] = True
+
+    def change_reference(self, P, x, new):
+        """SD states ``B_j - B_old`` -> ``B_j - B_new``; the old reference becomes ``B_old - B_new``."""
+        old = self.ref
+        n = x.size
+        T = np.eye(n)
+        for j in np.flatnonzero(self.on):
+            T[_A0 + j, _A0 + new] -= 1.0
+        if old >= 0:
+            T[_A0 + old, :] = 0.0
+            T[_A0 + old, _A0 + new] = -1.0
+            self.on[old] = True
+        T[_A0 + new, :] = 0.0
+        x[:] = T @ x
+        P[:] = T @ P @ T.T
+        self.on[new] = False
+        self.ref = new
+
+
+def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, options=PppInsOptions()):
+    """Run the tightly coupled PPP/INS filter.
+
+    Parameters
+    ----------
+    gnss : leosop.gnss.simulate.GnssSim
+        Observations (the fields ``t_s, sv, orb_idx, clk_idx, P1_m, P2_m,
+        L1_cyc, L2_cyc, rate_mps, lli, wsb_cyc``); epoch k is at
+        ``gnss.t_s[0] + k * settings.step_s``.
+    orbits, clocks : leosop.gnss.products.Orbits, Clocks
+    state0 : leosop.ins.strapdown.NavState
+        INS state at the first epoch.
+    dtheta_b_rad, dvel_b_mps : ndarray, shape (n_imu, 3)
+        Measured IMU increments from the first epoch on.
+    dt_s : float
+    settings : leosop.fusion.common.FilterSettings
+        INS priors and IMU noise; ``step_s`` is the GNSS interval.
+    options : PppInsOptions
+
+    Returns
+    -------
+    PppInsResult
+    """
+    o = options
+    ins = FeedbackIns(state0, dtheta_b_rad, dvel_b_mps, dt_s, settings)
+    n_ep = min(len(gnss.t_s), ins.n_epochs)
+    n_sv = len(gnss.sv)
+    Pc, Lc, MW, GF = if_combinations(gnss.P1_m[:n_ep], gnss.P2_m[:n_ep], gnss.L1_cyc[:n_ep], gnss.L2_cyc[:n_ep])
+    t = gnss.t_s[:n_ep]
+    have = np.isfinite(Pc) & np.isfinite(Lc)
+    new_arc = detect_slips(t, MW, GF, gnss.lli[:n_ep], have, PppOptions(max_gap_s=1.5 * settings.step_s))
+    n_x = _A0 + n_sv
+    day = np.datetime64(orbits.ref_gps, "D")
+    doy = float((day - day.astype("datetime64[Y]")).astype(int) + 1)
+    x = np.zeros(n_x)
+    P = np.zeros((n_x, n_x))
+    P[:N_INS, :N_INS] = initial_covariance(settings, state0.lat_rad, state0.alt_m)
+    x[_ZWD], P[_ZWD, _ZWD] = o.zwd0_m, o.zwd_sigma_m**2
+    amb = _Ambiguities(n_sv)
+    mw_sum, mw_n = np.zeros(n_sv), np.zeros(n_sv, int)
+    out = PppInsResult(t_s=t, pos_float_ecef_m=np.full((n_ep, 3), np.nan), pos_fixed_ecef_m=np.full((n_ep, 3), np.nan),
+                       cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan), n_sats=np.zeros(n_ep, int),
+                       n_fixed=np.zeros(n_ep, int), n_wl=np.zeros(n_ep, int), ratio=np.full(n_ep, np.nan),
+                       gnss=np.zeros(n_ep, bool), n_slips=0, n_outliers=0, n_ref_changes=0)
+    for k in range(n_ep):
+        if k > 0:
+            P = ins.predict(k, P)
+            P[_ZWD, _ZWD] += o.zwd_rw_m_per_rt_s**2 * settings.step_s
+        s = ins.state
+        C = C_e_n(s.lat_rad, s.lon_rad)
+        J = pos_jacobian(s.lat_rad, s.alt_m)
+        r_ins = geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
+        v_ins = C @ s.vel_enu_mps
+        js = np.flatnonzero(have[k])
+        if js.size >= 2:
+            rho, rate, los, _ = range_and_rate(orbits, gnss.orb_idx[js], t[k], r_ins, v_ins)
+            elev = np.arcsin(np.clip(los @ C[:, 2], -1.0, 1.0))
+            keep = elev > np.radians(o.mask_deg)
+            js, rho, rate, los, elev = js[keep], rho[keep], rate[keep], los[keep], elev[keep]
+        if js.size < 2:
+            amb.drop(P, x, np.flatnonzero(amb.on))
+            amb.ref = -1
+            mw_n[:] = 0
+            mw_sum[:] = 0.0
+            _record(out, k, ins, P, r_ins, C, J)
+            continue
+        clk_m, drift_mps = satellite_clock(orbits, clocks, gnss.orb_idx[js], gnss.clk_idx[js],
+                                           t[k] - gnss.P1_m[k, js] / C_MPS)
+        m_dry, m_wet = models.niell_mapping(elev, s.lat_rad, s.alt_m, doy + t[k] / 86400.0)
+        zhd = models.saastamoinen_zhd_m(s.lat_rad, s.alt_m) * m_dry
+        pc = Pc[k, js] + clk_m - zhd
+        lc = Lc[k, js] + clk_m - zhd
+        rr = gnss.rate_mps[k, js] + drift_mps
+        # Arcs: a slip or a new satellite restarts its MW mean and its ambiguity; satellites gone are dropped.
+        nw = new_arc[k, js]
+        out.n_slips += int(np.sum(nw & amb.on[js]))
+        fresh = np.ones(n_sv, bool)
+        fresh[js[~nw]] = False
+        mw_sum[fresh], mw_n[fresh] = 0.0, 0
+        mw_sum[js] += MW[k, js]
+        mw_n[js] += 1
+        if not (amb.ref in js and not new_arc[k, amb.ref]):
+            cand = [js[i] for i in np.argsort(-elev) if amb.on[js[i]] and not nw[i]]
+            if cand and amb.ref >= 0:
+                amb.change_reference(P, x, cand[0])
+                out.n_ref_changes += 1
+            else:
+                amb.drop(P, x, np.flatnonzero(amb.on))
+                amb.ref = js[int(np.argmax(elev))]
+        amb.drop(P, x, np.setdiff1d(np.flatnonzero(amb.on), js))
+        iref = int(np.flatnonzero(js == amb.ref)[0])
+        others = np.flatnonzero(js != amb.ref)
+        jo = js[others]
+        stale = others[nw[others] | ~amb.on[jo]]
+        amb.reset(P, x, js[stale], (lc - pc)[stale] - (lc - pc)[iref], o.amb_sigma_m)
+        # SD measurements: code, phase, range rate; rows per kind for the satellites in ``others``.
+        sin_el = np.sin(elev)
+        e_sd = los[others] - los[iref]
+        mw_sd = m_wet[others] - m_wet[iref]
+        use = [np.ones(others.size, bool) for _ in range(3)]
+        for _ in range(6):
+            rows_H, rows_y, blocks = [], [], []
+            for kind, (obs, pred, sig) in enumerate((
+                    (pc, rho + m_wet * x[_ZWD], o.sigma_code_m),
+                    (lc, rho + m_wet * x[_ZWD], o.sigma_phase_m),
+                    (rr, rate, o.sigma_rate_mps))):
+                u = use[kind]
+                H = np.zeros((u.sum(), n_x))
+                y = (obs[others] - obs[iref]) - (pred[others] - pred[iref])
+                if kind < 2:
+                    H[:, DPOS] = e_sd[u] @ C @ J
+                    H[:, _ZWD] = mw_sd[u]
+                else:
+                    H[:, DV] = e_sd[u] @ C
+                if kind == 1:
+                    H[np.arange(u.sum()), _A0 + jo[u]] = 1.0
+                    y = y - x[_A0 + jo]
+                var = (sig / sin_el) ** 2
+                rows_H.append(H)
+                rows_y.append(y[u])
+                blocks.append(_sd_cov(var[others][u], var[iref]))
+            H = np.vstack(rows_H)
+            y = np.concatenate(rows_y)
+            R = np.zeros((y.size, y.size))
+            off = 0
+            for b in blocks:
+                R[off:off + len(b), off:off + len(b)] = b
+                off += len(b)
+            S = H @ P @ H.T + R
+            w = np.abs(y) / np.sqrt(np.diag(S))
+            worst = int(np.argmax(w)) if w.size else 0
+            if not w.size or w[worst] <= o.k_outlier:
+                break
+            out.n_outliers += 1
+            sizes = np.cumsum([0] + [u.sum() for u in use])
+            kind = int(np.searchsorted(sizes, worst, side="right") - 1)
+            idx = np.flatnonzero(use[kind])[worst - sizes[kind]]
+            use[kind][idx] = False
+            if kind == 1:  # a phase outlier is a slip: restart that ambiguity
+                amb.reset(P, x, [jo[idx]], [(lc - pc)[others[idx]] - (lc - pc)[iref]], o.amb_sigma_m)
+                mw_sum[jo[idx]], mw_n[jo[idx]] = 0.0, 0
+        dx, P, _, _ = kalman.update(np.zeros(n_x), P, y, H, R)
+        ins.feedback(dx)
+        x[N_INS:] += dx[N_INS:]
+        s = ins.state
+        C = C_e_n(s.lat_rad, s.lon_rad)
+        J = pos_jacobian(s.lat_rad, s.alt_m)
+        r_ins = geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
+        _record(out, k, ins, P, r_ins, C, J)
+        out.gnss[k] = True
+        out.n_sats[k] = js.size
+        if o.ar:
+            _fix(out, k, ins, P, x, jo, amb.ref, mw_sum, mw_n, gnss.wsb_cyc, o)
+    return out
+
+
+def _record(out, k, ins, P, r_ins, C, J):
+    out.pos_float_ecef_m[k] = r_ins
+    out.cov_pos_enu_m2[k] = J @ P[DPOS, DPOS] @ J.T
+
+
+def _fix(out, k, ins, P, x, jo, ref, mw_sum, mw_n, wsb, o):
+    """Wide-lane rounding, narrow-lane LAMBDA; the fixed position into ``out`` when a subset passes."""
+    ok = (mw_n[jo] >= o.wl_min_epochs) & (mw_n[ref] >= o.wl_min_epochs)
+    jo = jo[ok]
+    if jo.size < o.min_fixed:
+        return
+    wl = mw_sum[jo] / mw_n[jo] - mw_sum[ref] / mw_n[ref] - (wsb[jo] - wsb[ref])
+    n_wl = np.round(wl)
+    good = np.abs(wl - n_wl) < o.wl_tol_cyc
+    jo, n_wl = jo[good], n_wl[good]
+    out.n_wl[k] = jo.size
+    if jo.size < o.min_fixed:
+        return
+    a = _A0 + jo
+    a_hat = (x[a] - BETA_M * n_wl) / LAM_NL_M
+    Q = P[np.ix_(a, a)] / LAM_NL_M**2
+    fixed, n1, ratio = partial_fix(a_hat, Q, ratio_min=o.ratio_min, min_fixed=o.min_fixed)
+    out.ratio[k] = ratio
+    if not fixed.any():
+        return
+    af = a[fixed]
+    b_fix = LAM_NL_M * n1[fixed] + BETA_M * n_wl[fixed]
+    dx = P[:, af] @ np.linalg.solve(P[np.ix_(af, af)], b_fix - x[af])
+    s = ins.state.corrected(dpos=dx[DPOS])
+    out.pos_fixed_ecef_m[k] = geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
+    out.n_fixed[k] = fixed.sum()
