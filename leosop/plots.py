@@ -1,5 +1,8 @@
 """Figures of a simulation, after [Shen 2024]'s Fig. 4 (trajectory), 8 (errors), 9 (visible satellites), 10 (GDOP).
 
+Every title names the run (scenario, coupling, level, seed) and every time
+axis its UTC origin. Besides the paper's four, ``errors_enu.png`` splits the
+fused position error into east, north and up with the filter's +-3 sigma.
 Matplotlib is imported lazily with the Agg backend; every figure is written
 atomically (:func:`leosop.figure.save_png`).
 """
@@ -9,13 +12,25 @@ from pathlib import Path
 import numpy as np
 
 from .figure import pyplot, save_png
-from .frames import ecef_to_geodetic
+from .frames import ecef_to_enu, ecef_to_geodetic
+from .timebase import format_utc
 
-__all__ = ["write_figures", "trajectory_figure", "errors_figure", "visible_figure", "gdop_figure"]
+__all__ = ["write_figures", "trajectory_figure", "errors_figure", "errors_enu_figure", "visible_figure",
+           "gdop_figure"]
 
 
 def _save(fig, path):
     save_png(fig, path, bbox_inches="tight")
+
+
+def _run_label(result):
+    """``scenario (loose coupling, signal level, seed 0)``: what was run, for titles."""
+    return f"{result.scenario.name} ({result.coupling} coupling, {result.level} level, seed {result.seed})"
+
+
+def _time_label(result):
+    """Time-axis label with the UTC origin (seconds up to a flight's length read better than clock times)."""
+    return f"time since {format_utc(result.times_utc[0])[:19]}Z [s]"
 
 
 def trajectory_figure(result, path):
@@ -29,9 +44,9 @@ def trajectory_figure(result, path):
         ax_h.plot(result.t_s, alt, style, label=label)
     ax.set_xlabel("longitude [deg]")
     ax.set_ylabel("latitude [deg]")
-    ax.set_title(f"{result.scenario.name}: flight trajectory")
+    ax.set_title(f"{_run_label(result)}: trajectory")
     ax.legend()
-    ax_h.set_xlabel("time [s]")
+    ax_h.set_xlabel(_time_label(result))
     ax_h.set_ylabel("height [m]")
     _save(fig, path)
 
@@ -48,9 +63,36 @@ def errors_figure(result, path):
         ax.set_ylabel(unit)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend()
-    axes[0].set_title(f"{result.scenario.name}: errors ({result.level} level, correction every "
-                      f"{result.correction_period_s:g} s)")
-    axes[1].set_xlabel("time [s]")
+    axes[0].set_title(f"{_run_label(result)}: 3D errors, correction every {result.correction_period_s:g} s")
+    axes[1].set_xlabel(_time_label(result))
+    _save(fig, path)
+
+
+def errors_enu_figure(result, path):
+    """Fused position error east, north, up with the filter's +-3 sigma bounds."""
+    plt = pyplot()
+    err = ecef_to_enu(result.fused.pos_ecef_m - result.truth_pos_ecef_m, result.truth_lat_rad, result.truth_lon_rad)
+    sigma = np.sqrt(np.diagonal(result.fused.pos_vel_cov_enu(), axis1=-2, axis2=-1))[:, 3:6]
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for k, (ax, name) in enumerate(zip(axes, ("east", "north", "up"))):
+        ax.fill_between(result.t_s, -3 * sigma[:, k], 3 * sigma[:, k], color="C0", alpha=0.2,
+                        label="filter +-3 sigma")
+        ax.plot(result.t_s, err[:, k], "C0-", lw=1, label="Starlink/INS error")
+        inside = np.mean(np.abs(err[1:, k]) <= 3 * sigma[1:, k])
+        ax.set_ylabel(f"{name} error [m]")
+        ax.text(0.99, 0.95, f"{inside:.1%} inside +-3 sigma", transform=ax.transAxes, ha="right", va="top",
+                fontsize="small")
+        ax.grid(True, alpha=0.3)
+    # Bound the axes by the bulk of the run, not the first seconds' large initial covariance.
+    skip = min(10, len(result.t_s) // 2)
+    bulk = np.abs(np.concatenate([3 * sigma[skip:], err[skip:]], axis=0))
+    for ax, col in zip(axes, bulk.T):
+        col = col[np.isfinite(col)]
+        if col.size and np.percentile(col, 99) > 0:
+            ax.set_ylim(-1.2 * np.percentile(col, 99), 1.2 * np.percentile(col, 99))
+    axes[0].legend(loc="lower right", fontsize="small")
+    axes[0].set_title(f"{_run_label(result)}: fused position error")
+    axes[-1].set_xlabel(_time_label(result))
     _save(fig, path)
 
 
@@ -60,28 +102,39 @@ def visible_figure(result, path):
     fig, ax = plt.subplots(figsize=(9, 3.2))
     ax.step(result.t_s, result.n_visible, where="mid")
     ax.axhline(7, color="C3", ls=":", label="7 needed for a snapshot fix")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("visible satellites")
+    ax.set_xlabel(_time_label(result))
+    ax.set_ylabel(f"visible satellites (mask {result.scenario.mask_deg:g} deg)")
+    ax.set_title(f"{_run_label(result)}: visible satellites")
     ax.legend()
     _save(fig, path)
 
 
 def gdop_figure(result, path):
-    """Fig. 10: GDOP of Doppler positioning (eq. 10) along the flight."""
+    """Fig. 10: GDOP of Doppler positioning (eq. 10) along the flight; epochs without a fix shaded."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(9, 3.2))
+    fig, ax = plt.subplots(figsize=(9, 3.4))
     ax.semilogy(result.t_s, result.gdop)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("GDOP")
+    gap = ~np.isfinite(result.gdop)
+    if gap.any():
+        ax.fill_between(result.t_s, 0, 1, where=gap, transform=ax.get_xaxis_transform(), color="0.85",
+                        step="mid", label="< 7 satellites: no fix")
+        ax.legend(loc="upper left", fontsize="small")
+    ax.set_xlabel(_time_label(result))
+    # [Shen 2024] eq. 10: root of the trace over position [m^2], velocity [(m/s)^2] and
+    # clock [Hz^2] per 1 Hz of Doppler noise; the position part dominates (docs/visibility.md).
+    ax.set_ylabel("Doppler GDOP\n[~m of position per Hz]")
+    ax.set_title(f"{_run_label(result)}: Doppler GDOP ([Shen 2024] eq. 10)")
+    ax.grid(True, which="both", alpha=0.3)
     _save(fig, path)
 
 
 def write_figures(result, out_dir):
-    """All four figures into ``out_dir``; returns their paths."""
+    """All five figures into ``out_dir``; returns their paths."""
     out = Path(out_dir)
     paths = []
     for name, func in (("fig4_trajectory.png", trajectory_figure), ("fig8_errors.png", errors_figure),
-                       ("fig9_visible.png", visible_figure), ("fig10_gdop.png", gdop_figure)):
+                       ("errors_enu.png", errors_enu_figure), ("fig9_visible.png", visible_figure),
+                       ("fig10_gdop.png", gdop_figure)):
         func(result, out / name)
         paths.append(out / name)
     return paths
