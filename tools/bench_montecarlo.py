@@ -10,7 +10,9 @@ memory, and prints the efficiency a cluster of W workers would reach with
 this study's chunks (whole chunks per worker, task overhead added).
 
 The machine is shared: the load average before and after is printed with
-the times.
+the times, and the CPU seconds the work took (of this process, or summed
+over the workers): on a busy machine the wall-time ratio understates the
+scaling, the CPU time shows whether the work itself grew.
 
     OPENBLAS_NUM_THREADS=1 python tools/bench_montecarlo.py [--spec table5] [--seeds 4] [--runs-per-chunk 2]
 """
@@ -33,6 +35,11 @@ def _peak_rss_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _cpu_s():
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    return use.ru_utime + use.ru_stime
+
+
 def _noop(x):
     return x
 
@@ -45,8 +52,8 @@ def _timed(spec, scheduler):
 
 
 def _on_cluster(spec, n_workers, n_empty=400):
-    """Study wall time on a local cluster (started beforehand), cluster start time, workers' peak RSS [MB],
-    and the scheduler's cost per task (round trips of empty tasks)."""
+    """Study wall time on a local cluster (started beforehand), the workers' CPU time in it, cluster start
+    time, workers' peak RSS [MB] and the scheduler's cost per task (round trips of empty tasks)."""
     import logging
 
     from distributed import Client, LocalCluster, wait
@@ -55,12 +62,14 @@ def _on_cluster(spec, n_workers, n_empty=400):
     with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
         start_s = time.perf_counter() - tic
+        cpu0 = sum(client.run(_cpu_s).values())
         t, run = _timed(spec, client)
+        cpu = sum(client.run(_cpu_s).values()) - cpu0
         rss = max(client.run(_peak_rss_mb).values())
         wait(client.map(_noop, range(8), pure=False))  # warm up
         tic = time.perf_counter()
         wait(client.map(_noop, range(n_empty), pure=False))
-        return t, run, start_s, rss, (time.perf_counter() - tic) / n_empty
+        return t, cpu, run, start_s, rss, (time.perf_counter() - tic) / n_empty
 
 
 def main():
@@ -77,16 +86,18 @@ def main():
     load0 = os.getloadavg()
     print(f"study {spec.name}: {spec.n_runs} runs in {math.ceil(spec.n_runs / spec.runs_per_chunk)} chunks of "
           f"{spec.runs_per_chunk}; {os.cpu_count()} cores; load average {load0[0]:.2f} (shared machine)")
+    cpu0 = _cpu_s()
     t_serial, serial = _timed(spec, "serial")
-    t_1, one, start_1, rss_1, _ = _on_cluster(spec, 1)
-    t_2, two, start_2, rss_2, task_s = _on_cluster(spec, 2)
+    cpu_serial = _cpu_s() - cpu0
+    t_1, cpu_1, one, start_1, rss_1, _ = _on_cluster(spec, 1)
+    t_2, cpu_2, two, start_2, rss_2, task_s = _on_cluster(spec, 2)
     cols = [list(METRICS).index(k) for k in REPRODUCIBLE]
     same = all(np.array_equal(r.rows[:, cols], serial.rows[:, cols], equal_nan=True) for r in (one, two))
     run_s = float(np.mean(serial.rows[:, list(METRICS).index("runtime_s")]))
-    print(f"{'where':<26}{'wall s':>8}{'runs/s':>8}")
-    for name, t in (("serial (this process)", t_serial), ("local cluster, 1 worker", t_1),
-                    ("local cluster, 2 workers", t_2)):
-        print(f"{name:<26}{t:8.1f}{spec.n_runs / t:8.2f}")
+    print(f"{'where':<26}{'wall s':>8}{'runs/s':>8}{'CPU s':>8}  (CPU: of the process or the workers)")
+    for name, t, cpu in (("serial (this process)", t_serial, cpu_serial), ("local cluster, 1 worker", t_1, cpu_1),
+                         ("local cluster, 2 workers", t_2, cpu_2)):
+        print(f"{name:<26}{t:8.1f}{spec.n_runs / t:8.2f}{cpu:8.1f}")
     print(f"speed-up 2 vs 1 worker: {t_1 / t_2:.2f}x (ideal 2.00); identical numbers in all three: {same}")
     print(f"cluster start (not in the times above): {start_1:.1f} s (1 worker), {start_2:.1f} s (2 workers); "
           f"load average after {os.getloadavg()[0]:.2f}")
