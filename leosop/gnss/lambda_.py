@@ -9,12 +9,17 @@ a depth-first search of a shrinking ellipsoid ([Chang 2005], "MLAMBDA"
 search), and mapped back with ``Z^-T``. Validation of the fix: the ratio of
 the second-best to the best squared norm ([Euler 1991] ratio test) and,
 when it fails, partial fixing, which drops the least precise ambiguity and
-tries again on the rest.
+tries again on the rest; optionally also a lower bound on the probability
+of a correct fix, the bootstrapped success rate of the decorrelated
+ambiguities ([Teunissen 1998]: ``prod_i erf(1 / (2 sqrt(2 D_i)))``, a sharp
+lower bound of the ILS success rate).
 """
 
 import numpy as np
 
-__all__ = ["ltdl", "decorrelate", "search", "ils", "partial_fix"]
+from scipy.special import erf
+
+__all__ = ["ltdl", "decorrelate", "search", "ils", "partial_fix", "bootstrap_success_rate"]
 
 
 def ltdl(Q):
@@ -172,12 +177,18 @@ def ils(a_hat, Q, n_cands=2):
     return np.round(a) + shift, norms
 
 
-def partial_fix(a_hat, Q, *, ratio_min=3.0, min_fixed=4):
-    """Fix the largest subset that passes the ratio test.
+def bootstrap_success_rate(D):
+    """Bootstrapped success rate from the conditional variances ``D`` (n,) of decorrelated ambiguities."""
+    return float(np.prod(erf(1.0 / (2.0 * np.sqrt(2.0 * np.asarray(D, float))))))
 
-    All ambiguities first; while ``sq_norm[1] / sq_norm[0] < ratio_min``,
-    the one with the largest variance is dropped (it is the least likely to
-    be fixed correctly), down to ``min_fixed``.
+
+def partial_fix(a_hat, Q, *, ratio_min=3.0, min_fixed=4, success_min=0.0):
+    """Fix the largest subset that passes the ratio test (and the success-rate bound).
+
+    All ambiguities first; while ``sq_norm[1] / sq_norm[0] < ratio_min`` or
+    the bootstrapped success rate is below ``success_min``, the one with
+    the largest variance is dropped (it is the least likely to be fixed
+    correctly), down to ``min_fixed``.
 
     Returns
     -------
@@ -194,9 +205,10 @@ def partial_fix(a_hat, Q, *, ratio_min=3.0, min_fixed=4):
     ratio = 0.0
     while keep.sum() >= max(min_fixed, 1):
         idx = np.flatnonzero(keep)
-        a, norms = ils(a_hat[idx], Q[np.ix_(idx, idx)])
+        Qs = Q[np.ix_(idx, idx)]
+        a, norms = ils(a_hat[idx], Qs)
         ratio = norms[1] / max(norms[0], 1e-12)
-        if ratio >= ratio_min:
+        if ratio >= ratio_min and (success_min <= 0.0 or bootstrap_success_rate(decorrelate(Qs)[2]) >= success_min):
             out = np.full(len(a_hat), np.nan)
             out[idx] = a[0]
             return keep, out, ratio

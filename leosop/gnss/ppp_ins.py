@@ -70,6 +70,7 @@ class PppInsOptions:
     k_outlier: float = 5.0
     ar: bool = True
     ratio_min: float = 3.0
+    success_min: float = 0.999
     min_fixed: int = 4
     wl_tol_cyc: float = 0.25
     wl_min_epochs: int = 20
@@ -343,7 +344,7 @@ def _fix(out, k, ins, P, x, jo, ref, mw_sum, mw_n, wsb, o):
     a = _A0 + jo
     a_hat = (x[a] - BETA_M * n_wl) / LAM_NL_M
     Q = P[np.ix_(a, a)] / LAM_NL_M**2
-    fixed, n1, ratio = partial_fix(a_hat, Q, ratio_min=o.ratio_min, min_fixed=o.min_fixed)
+    fixed, n1, ratio = partial_fix(a_hat, Q, ratio_min=o.ratio_min, min_fixed=o.min_fixed, success_min=o.success_min)
     out.ratio[k] = ratio
     if not fixed.any():
         return

@@ -45,12 +45,12 @@ class SimSettings:
     """Error budget of the simulated observations (raw, one frequency; SI units)."""
 
     mask_deg: float = 10.0
-    code_sigma_m: float = 0.3
-    phase_sigma_cyc: float = 0.015  # 3 mm on L1, code:phase 100:1 as [Liu 2016]
+    code_sigma_m: float = 0.15
+    phase_sigma_cyc: float = 0.008  # 1.5 mm on L1: code:phase 100:1 as [Liu 2016]
     rate_sigma_mps: float = 0.02
-    code_mp_sigma_m: float = 0.2
+    code_mp_sigma_m: float = 0.15
     phase_mp_sigma_cyc: float = 0.005
-    mp_tau_s: float = 60.0
+    mp_tau_s: float = 30.0
     zwd0_m: float = 0.12
     zwd_rw_m_per_rt_s: float = 3e-5
     vtec_l1_m: float = 4.0
