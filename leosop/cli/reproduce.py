@@ -27,6 +27,7 @@ TARGETS = {
     "table4": ("leosop.simulate_study:table4", "[Shen 2024] Table 4: INS alone vs Starlink/INS, Xi'an-Baoji"),
     "table5": ("leosop.simulate_study:table5", "[Shen 2024] Table 5: Starlink/INS errors vs correction period"),
     "table6": ("leosop.simulate_study:table6", "[Shen 2024] Table 6: Starlink/INS errors vs orbit error"),
+    "ppp-ins": ("leosop.gnss.ppp_ins_study:ppp_ins_table", "[Liu 2016] vehicle test, simulated: float vs fixed PPP/INS"),
     "multi": ("leosop.multi_study:multi", "multi-constellation LEO/INS in thin skies: loose vs tight, Starlink vs all"),
 }
 
