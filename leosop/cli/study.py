@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..chunkstore import ChunkStore
 from ..errors import InputError
 from ..montecarlo import bundled_specs
 from ..orbits import CARRIERS
@@ -132,7 +133,6 @@ def _run_montecarlo(args):
     from ..fileio import atomic_outputs
     from ..montecarlo import cell_table, load_spec, run_study, to_dataset, write_netcdf
     from ..montecarlo.figures import plot_study
-    from ..montecarlo.store import ChunkStore
 
     _check_workers(args.workers)
     spec = load_spec(args.spec)
@@ -145,7 +145,7 @@ def _run_montecarlo(args):
     with atomic_outputs(out) as stage:
         write_netcdf(ds, stage / "montecarlo.nc")
         figures = plot_study(ds, stage, spec.name)
-    ChunkStore(work_dir, 0).remove()
+    ChunkStore(work_dir).remove()
     return {
         "study": "montecarlo",
         "name": spec.name,

@@ -6,8 +6,8 @@
 - :mod:`.spec`: the JSON spec, checked field by field, and the seeds (one
   ``numpy.random.SeedSequence``);
 - :mod:`.runs`: one simulation reduced to a row of metrics;
-- :mod:`.store`: finished chunks on disk (resume after an interruption);
-- :mod:`.execute`: chunks run serially or on Dask, bounded in flight;
+- :mod:`.execute`: chunks run serially or on Dask, bounded in flight, each kept on
+  disk when finished (:mod:`leosop.chunkstore`: resume after an interruption);
 - :mod:`.dataset`: the xarray Dataset (parameter axes x seed) and its NetCDF file;
 - :mod:`.figures`: error against each parameter with its spread over seeds.
 """

@@ -12,8 +12,9 @@ bounded number of tasks however large the study; a worker runs one simulation
 at a time (single-threaded workers), so its memory is that of one run. When a
 worker dies, the scheduler gives its chunks to another worker; they are pure
 functions of their runs, so the result is unchanged. Each finished chunk is
-written by the client to the work directory (:class:`ChunkStore`); a study
-run again with the same work directory skips those chunks. On a remote
+written by the client to the work directory (:class:`leosop.chunkstore.ChunkStore`,
+``chunk-NNNNNN.npz``: its run indices and metric rows); a study run again with
+the same work directory skips those chunks. On a remote
 cluster the element-set file (``spec.tle``) must be readable at the same path
 on every worker.
 """
@@ -23,11 +24,11 @@ import time
 
 import numpy as np
 
+from ..chunkstore import ChunkStore
 from ..progress import progress
 from .parameters import apply
 from .runs import METRICS, run_chunk
 from .spec import run_seeds
-from .store import ChunkStore
 
 __all__ = ["StudyRun", "chunk_runs", "run_study"]
 
@@ -59,6 +60,23 @@ def chunk_runs(spec):
     """Run indices of each chunk: list of (n,) int arrays."""
     starts = range(0, spec.n_runs, spec.runs_per_chunk)
     return [np.arange(a, min(a + spec.runs_per_chunk, spec.n_runs)) for a in starts]
+
+
+def _name(index):
+    return f"chunk-{index:06d}"
+
+
+def _load(store, index, run_index):
+    """Rows of a finished chunk holding exactly ``run_index``, else None."""
+    data = store.load(_name(index))
+    if data is None or not np.array_equal(data.get("run_index"), run_index):
+        return None
+    rows = data.get("rows")
+    return rows if rows is not None and rows.shape == (len(run_index), len(METRICS)) else None
+
+
+def _save(store, index, run_index, rows):
+    store.save(_name(index), run_index=run_index, rows=rows)
 
 
 def _payloads(spec):
@@ -94,21 +112,21 @@ def run_study(spec, work_dir, *, scheduler=None, n_workers=None, desc="montecarl
     StudyRun
     """
     tic = time.perf_counter()
-    store = ChunkStore(work_dir, len(METRICS))
+    store = ChunkStore(work_dir)
     chunks = chunk_runs(spec)
-    todo = [i for i, runs in enumerate(chunks) if store.load(i, runs) is None]
+    todo = [i for i, runs in enumerate(chunks) if _load(store, i, runs) is None]
     payload = _payloads(spec)
     workers = 0
     with progress(total=len(todo), desc=desc, unit="chunk") as bar:
         if scheduler == "serial":
             for i in todo:
-                store.save(i, chunks[i], run_chunk(payload(chunks[i])))
+                _save(store, i, chunks[i], run_chunk(payload(chunks[i])))
                 bar.update(1)
         elif todo:
             workers = _run_dask(store, chunks, todo, payload, scheduler, n_workers, bar)
     rows = np.empty((spec.n_runs, len(METRICS)))
     for i, runs in enumerate(chunks):
-        done = store.load(i, runs)
+        done = _load(store, i, runs)
         if done is None:
             raise RuntimeError(f"chunk {i} missing from {store.folder} after the run")
         rows[runs] = done
@@ -136,7 +154,7 @@ def _run_dask(store, chunks, todo, payload, scheduler, n_workers, bar):
         running = as_completed([submit(i) for _, i in zip(range(window), queue)])
         for future in running:
             i = index.pop(future.key)
-            store.save(i, chunks[i], future.result())
+            _save(store, i, chunks[i], future.result())
             future.release()
             bar.update(1)
             nxt = next(queue, None)
