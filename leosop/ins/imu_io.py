@@ -198,7 +198,8 @@ def read_psins(path):
     if not 0.1 <= dt_ms <= 1000.0:
         raise InputError(f"{path}:{rows[1][0]}: sampling interval {dt_ms} ms is outside 0.1..1000 ms")
     if not 9.7 <= g <= 9.9 or not np.all(quanta > 0):
-        raise InputError(f"{path}:{rows[1][0]}: g={g} m/s^2 and the quanta {quanta} must be plausible and > 0")
+        shown = ", ".join(f"{q:g}" for q in quanta)
+        raise InputError(f"{path}:{rows[1][0]}: g={g} m/s^2 and the quanta [{shown}] must be plausible and > 0")
     first = rows[3][0]
     body = [text for _, text in rows[3:]]
     if rows[-1][0] - first + 1 != len(body):
