@@ -28,9 +28,21 @@ DEFAULT_SITE = "34.342,108.940,400"
 DEFAULT_MASK_DEG = 40.0
 
 
+#: What ``--help`` says about the outputs, the Doppler GDOP's meaning above all.
+_DESCRIPTION = (
+    "Visible satellites above the mask, their passes and the Doppler-positioning GDOP at a site over time. "
+    "Doppler GDOP ([Shen 2024] eq. 10) = sqrt(trace((H^T H)^-1)) over the 7 states position [m], velocity "
+    "[m/s] and receiver frequency offset [Hz], H in Hz per state unit: the root-sum-square of their standard "
+    "deviations for 1 Hz of Doppler noise. Position dominates, so GDOP x Doppler sigma [Hz] ~ 3D position error "
+    "[m]; empty/null below 7 satellites (6 + one per constellation). --out DIR writes visibility.csv "
+    "(n_visible, gdop_doppler and the unitless range DOPs per epoch), passes.csv (rise, culmination, set, "
+    "max elevation per pass), visibility.json, visibility.png and skyplot.png.")
+
+
 def register(subparsers):
     p = add_command(subparsers, "visibility", sys.modules[__name__],
-                    help="visible satellites and Doppler-positioning GDOP over time at a site")
+                    help="visible satellites and Doppler-positioning GDOP over time at a site",
+                    description=_DESCRIPTION)
     p.add_argument("--site", default=DEFAULT_SITE, metavar="LAT_DEG,LON_DEG,ALT_M",
                    help=f"receiver site (default {DEFAULT_SITE}, Xi'an)")
     p.add_argument("--start", metavar="ISO", help="UTC start (default: the median element-set epoch)")
@@ -158,5 +170,6 @@ def summary(doc):
         c = np.array(counts)
         lines.append(f"  {fam}: min {c.min()}, median {np.median(c):g}, max {c.max()}")
     if fixable.any():
-        lines.append(f"Doppler GDOP: median {np.median(g[fixable]):.1f}, max {g[fixable].max():.1f}")
+        lines.append(f"Doppler GDOP (m of position per Hz of Doppler noise): median {np.median(g[fixable]):.1f}, "
+                     f"max {g[fixable].max():.1f}")
     return "\n".join(lines)
