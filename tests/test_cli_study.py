@@ -109,3 +109,33 @@ def test_montecarlo_bad_input(tmp_path, capsys, monkeypatch, changes, args, code
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (out / "montecarlo.nc").exists()
+
+
+def test_gdop_map_interrupted_then_resumed(tmp_path, capsys, monkeypatch):
+    from leosop.orbits import gridmap
+
+    args = ["study", "gdop-map", "--start", "2025-01-01T00:00:00Z", "--duration-s", "240", "--step-s", "60",
+            "--grid-deg", "15", "--scheduler", "serial", "--json"]
+    assert main(args + ["--out", str(tmp_path / "whole")]) == 0
+    real, calls = gridmap.maps_for_times, []
+
+    def interrupt_second(const, times, *rest):
+        calls.append(len(times))
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(const, times, *rest)
+
+    monkeypatch.setattr(gridmap, "maps_for_times", interrupt_second)
+    out = tmp_path / "resumed"
+    assert main(args + ["--out", str(out)]) == 1
+    (work,) = out.iterdir()  # no gdop_map.nc, the first task's epochs only
+    assert work.name.startswith("gdop-map-chunks-") and calls == [2, 2] and len(list(work.iterdir())) == 1
+    calls.clear()
+    monkeypatch.setattr(gridmap, "maps_for_times", lambda const, times, *rest: calls.append(len(times)) or real(
+        const, times, *rest))
+    assert main(args + ["--out", str(out)]) == 0
+    assert sum(calls) == 3 and not work.exists()  # 5 epochs, 2 taken from the work directory
+    capsys.readouterr()
+    with xr.open_dataset(tmp_path / "whole" / "gdop_map.nc", engine="scipy") as a, \
+            xr.open_dataset(out / "gdop_map.nc", engine="scipy") as b:
+        xr.testing.assert_identical(a, b)

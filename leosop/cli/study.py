@@ -3,17 +3,21 @@
 ``gdop-map``: visible count and Doppler GDOP over a global grid and time,
 ``DIR/gdop_map.nc`` and map figures. ``montecarlo SPEC``: a grid of scenario
 parameters x seeds of the ``simulate`` flight (:mod:`leosop.montecarlo`),
-``DIR/montecarlo.nc`` and error-vs-parameter figures; finished chunks wait in
-``DIR/montecarlo-chunks-<digest>/`` until the study is complete, so the same
-command resumes an interrupted study. NetCDF 3 through xarray's scipy
-backend; every output is complete or absent (:func:`leosop.fileio.atomic_outputs`).
+``DIR/montecarlo.nc`` and error-vs-parameter figures. Finished chunks wait in
+``DIR/montecarlo-chunks-<digest>/`` (``DIR/gdop-map-chunks-<digest>/``) until
+the output is written, so the same command resumes an interrupted study.
+NetCDF 3 through xarray's scipy backend; every output is complete or absent
+(:func:`leosop.fileio.atomic_outputs`).
 """
 
+import hashlib
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
 from ..chunkstore import ChunkStore
 from ..errors import InputError
 from ..montecarlo import bundled_specs
@@ -81,13 +85,15 @@ def run(args):
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
     times = np.datetime64(start, "ns") + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
-    ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler, n_workers=args.workers)
-    out = Path(args.out)
+    out = _out_dir(args.out)
+    work_dir = out / f"gdop-map-chunks-{_gdop_digest(args, grid_deg, mask)[:12]}"
+    ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler, n_workers=args.workers, work_dir=work_dir)
     from ..fileio import atomic_outputs
 
     with atomic_outputs(out) as stage:
         write_netcdf(ds, stage / "gdop_map.nc")
         _figures(stage, ds, Path(const.source).name if const.source else "bundled Walker set")
+    ChunkStore(work_dir).remove()
     fix = np.isfinite(ds["gdop"].values)
     n_vis = ds["n_visible"].values
     return {
@@ -124,6 +130,23 @@ def _figures(stage, ds, label):
                          vmin=0, vmax=vmax, cmap="magma_r", title=title + " (blank: < 7 satellites)")
 
 
+def _out_dir(path):
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a directory")
+    return out
+
+
+def _gdop_digest(args, grid_deg, mask_deg):
+    """Hash of what a map's epochs depend on besides their times: satellites, grid, mask, leosop version."""
+    key = {"tle": str(Path(args.tle).resolve()) if args.tle else None, "families": sorted(args.constellation or ()),
+           "skip_bad": args.skip_bad, "grid_deg": grid_deg, "mask_deg": mask_deg, "version": __version__}
+    if args.tle:
+        stat = Path(args.tle).stat()
+        key["tle_file"] = [stat.st_size, stat.st_mtime_ns]
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
+
+
 def _check_workers(n_workers):
     if n_workers is not None and n_workers < 1:
         raise InputError(f"--workers {n_workers}: expected an integer >= 1")
@@ -136,9 +159,7 @@ def _run_montecarlo(args):
 
     _check_workers(args.workers)
     spec = load_spec(args.spec)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory")
+    out = _out_dir(args.out)
     work_dir = out / f"montecarlo-chunks-{spec.digest()[:12]}"
     result = run_study(spec, work_dir, scheduler=args.scheduler, n_workers=args.workers, desc=spec.name)
     ds = to_dataset(spec, result.rows)

@@ -19,7 +19,8 @@ of the visible satellites' Jacobian rows are scatter-added to their cells
 satellites are visible or the geometry is singular.
 
 :func:`gdop_map` splits the epochs into tasks run by :mod:`leosop.studies`'
-Dask client (local cluster, existing scheduler, or serial) and returns an
+Dask client (local cluster, existing scheduler, or serial), optionally keeps
+each finished task on disk so that an interrupted map resumes, and returns an
 ``xarray.Dataset`` with CF-style attributes; :func:`write_netcdf` writes it
 atomically.
 """
@@ -376,7 +377,8 @@ def _epochs_per_task(n_sats, grid_deg, n_epochs, n_workers):
     return int(min(by_result, by_states, by_balance, 60))
 
 
-def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers=None, epochs_per_task=None):
+def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers=None, epochs_per_task=None,
+             work_dir=None):
     """Visible count and Doppler GDOP over a global grid and time, as an ``xarray.Dataset``.
 
     Parameters
@@ -391,30 +393,64 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
         Workers of the local cluster (``scheduler=None``); default the cores.
     epochs_per_task : int, optional
         Default: sized so that a task's output stays near 64 MB.
+    work_dir : path-like, optional
+        Keep every finished task's maps there (:class:`leosop.chunkstore.ChunkStore`,
+        keyed by their epochs) and take the epochs already there instead of
+        computing them again: an interrupted map resumes. The caller names it
+        after the satellites, grid and mask, and removes it when done.
 
     Returns
     -------
     xarray.Dataset
         ``n_visible(time, lat, lon)`` int16, ``gdop(time, lat, lon)`` float32.
     """
-    from ..progress import progress
+    import os
+
+    from ..chunkstore import ChunkStore
 
     times = np.atleast_1d(np.asarray(times_utc, dtype="datetime64[ns]"))
     grid = make_grid(grid_deg)
     const = source.load() if isinstance(source, ConstellationSource) else source
-    n_sats = len(const)
     counts = np.empty((len(times),) + grid.shape, dtype=np.int16)
     gdops = np.empty((len(times),) + grid.shape, dtype=np.float32)
+    store = ChunkStore(work_dir) if work_dir is not None else None
+    done = _resume(store, times, grid, counts, gdops) if store else np.zeros(len(times), bool)
+    todo = np.flatnonzero(~done)
+    workers = 1 if scheduler == "serial" else (n_workers or os.cpu_count() or 1)
+    per = epochs_per_task or _epochs_per_task(len(const), grid.step_deg, len(todo), workers)
+    blocks = [todo[a:a + per] for a in range(0, len(todo), per)]
+
+    def keep(idx, block_counts, block_gdops):
+        counts[idx], gdops[idx] = block_counts, block_gdops
+        if store:
+            store.save(f"epochs-{times[idx[0]].astype(np.int64)}", time_ns=times[idx].astype(np.int64),
+                       n_visible=block_counts, gdop=block_gdops)
+
     if scheduler == "serial":
-        per = epochs_per_task or _epochs_per_task(n_sats, grid.step_deg, len(times), 1)
-        for a in progress(range(0, len(times), per), total=-(-len(times) // per), desc="gdop-map", unit="task"):
-            counts[a:a + per], gdops[a:a + per] = maps_for_times(const, times[a:a + per], grid.step_deg, mask_deg)
-    else:
+        from ..progress import progress
+
+        for idx in progress(blocks, total=len(blocks), desc="gdop-map", unit="task"):
+            keep(idx, *maps_for_times(const, times[idx], grid.step_deg, mask_deg))
+    elif blocks:
         if not isinstance(source, ConstellationSource):
             raise TypeError("a Dask run needs a ConstellationSource (SGP4 records do not pickle)")
-        _run_dask(source, times, grid.step_deg, mask_deg, scheduler, n_workers, epochs_per_task, n_sats, counts,
-                  gdops)
+        _run_dask(source, times, blocks, grid.step_deg, mask_deg, scheduler, n_workers, keep)
     return _dataset(times, grid, mask_deg, counts, gdops, const)
+
+
+def _resume(store, times, grid, counts, gdops):
+    """Fill ``counts`` and ``gdops`` from the chunks in ``store`` at matching epochs; (n_epochs,) bool of those filled."""
+    done = np.zeros(len(times), bool)
+    times_ns = times.astype(np.int64)
+    for name in store.names():
+        data = store.load(name)
+        if data is None or set(data) != {"time_ns", "n_visible", "gdop"} or data["n_visible"].shape[1:] != grid.shape:
+            continue
+        pos = np.searchsorted(times_ns, data["time_ns"]).clip(0, len(times) - 1)
+        hit = times_ns[pos] == data["time_ns"]
+        counts[pos[hit]], gdops[pos[hit]] = data["n_visible"][hit], data["gdop"][hit]
+        done[pos[hit]] = True
+    return done
 
 
 def _connect(scheduler):
@@ -428,9 +464,9 @@ def _connect(scheduler):
         raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
 
 
-def _run_dask(source, times, grid_deg, mask_deg, scheduler, n_workers, epochs_per_task, n_sats, counts, gdops):
+def _run_dask(source, times, blocks, grid_deg, mask_deg, scheduler, n_workers, keep):
+    """Run each block of epoch indices as a task; ``keep(idx, counts, gdops)`` as each finishes."""
     import contextlib
-    import os
 
     from distributed import as_completed
 
@@ -440,15 +476,11 @@ def _run_dask(source, times, grid_deg, mask_deg, scheduler, n_workers, epochs_pe
     with contextlib.ExitStack() as stack:
         if isinstance(scheduler, str):
             scheduler = stack.enter_context(_connect(scheduler))
-        n_workers = n_workers or os.cpu_count() or 1
-        per = epochs_per_task or _epochs_per_task(n_sats, grid_deg, len(times), n_workers)
-        starts = list(range(0, len(times), per))
-        client = stack.enter_context(_client(scheduler, len(starts), n_workers))
-        futures = client.map(_task, [(source, times[a:a + per], grid_deg, mask_deg) for a in starts], pure=False)
-        where = {f.key: a for f, a in zip(futures, starts)}
+        client = stack.enter_context(_client(scheduler, len(blocks), n_workers))
+        futures = client.map(_task, [(source, times[idx], grid_deg, mask_deg) for idx in blocks], pure=False)
+        where = {f.key: idx for f, idx in zip(futures, blocks)}
         for future in progress(as_completed(futures), total=len(futures), desc="gdop-map", unit="task"):
-            a = where[future.key]
-            counts[a:a + per], gdops[a:a + per] = future.result()
+            keep(where[future.key], *future.result())
             future.release()
 
 
