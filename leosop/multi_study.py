@@ -53,7 +53,7 @@ def run_case(chunk, rng=None):
     dict
         ``pos``, ``vel`` (fused mean errors, m and m/s), ``ins_pos``,
         ``availability``, ``n_fixes``, ``window_pos``/``window_vel`` (mean
-        over the scenario's outage window, else NaN), ``nees`` (n,) of
+        over the scenario's outage window, else NaN), ``window_end_pos`` (at its end), ``nees`` (n,) of
         position and velocity, ``nis``/``nis_dof`` sums, and ``lag``: the
         whitened innovations at consecutive updates (loose: the 6-vectors;
         tight: each satellite's normalised Doppler), (2, m).
@@ -72,6 +72,7 @@ def run_case(chunk, rng=None):
         "n_fixes": m["leo_fix"]["n_fixes"],
         "window_pos": float(err[0][inside].mean()) if inside.any() else float("nan"),
         "window_vel": float(err[1][inside].mean()) if inside.any() else float("nan"),
+        "window_end_pos": float(err[0][inside][-1]) if inside.any() else float("nan"),
         "nees": r.nees()[1:], "nis": float(np.nansum(nis)), "nis_dof": int(dof.sum()), "lag": lag_pairs(r),
     }
 

@@ -31,7 +31,8 @@ levels and for every correction period.
 
 The fix's weights account for every error source the receiver knows the
 size of: estimator noise, the spread of the satellite offsets about their
-mean (the mean is absorbed by the receiver offset) and the orbit error mapped
+mean (the mean is absorbed by the receiver offset of the satellite's
+constellation) and the orbit error mapped
 through the Doppler's sensitivity to the satellite position. The loose EKF
 takes only the estimator noise as white (its ``R``) and the offsets and orbit
 errors as constant states (:func:`_fix_error_model`).
