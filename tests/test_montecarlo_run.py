@@ -4,6 +4,7 @@ Tiny studies (a 10 s flight at measurement level, ~0.1 s per run) keep the
 module under 30 s including a two-process local cluster.
 """
 
+import logging
 import os
 import signal
 import threading
@@ -78,7 +79,7 @@ def test_worker_killed_mid_study_same_results(serial, tmp_path):
     rows = serial[1]
     outcome = {}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                  silence_logs=50) as cluster, distributed.Client(cluster) as client:
+                                  silence_logs=logging.CRITICAL) as cluster, distributed.Client(cluster) as client:
         pids = client.run(os.getpid)
 
         def study():
