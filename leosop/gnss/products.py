@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .rinex import read_text
 
-__all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps"]
+__all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps", "missing_for_ar"]
 
 #: Lagrange interpolation points for SP3 orbits.
 N_LAGRANGE = 11
@@ -238,3 +238,30 @@ def read_clk(path, *, systems="GE", ref_gps=None):
     bias[e, np.fromiter((col[s] for _, s in svs), int, len(svs))] = vals
     ref = grid[0] if ref_gps is None else np.datetime64(ref_gps, "ns")
     return Clocks(path=path, ref_gps=ref, t_s=seconds_gps(grid, ref), sv=sv, bias_s=bias)
+
+
+def missing_for_ar(clk_path):
+    """What a RINEX clock file lacks for wide-lane / narrow-lane ambiguity resolution, or None.
+
+    Integer-recovery clocks (the CNES GRG products, [Laurichesse 2009]) fix
+    the narrow-lane only together with the satellites' wide-lane biases,
+    which CNES distributes beside the clocks (a ``WSB`` or Bias-SINEX
+    ``OSB`` file), not inside them. A clock file is taken to carry them only
+    when its header declares phase biases (``SYS / PHASE BIAS``-like
+    records or comments naming WSB / wide-lane); none of the GRG files here
+    does.
+
+    Returns
+    -------
+    str or None
+        A one-line reason when the biases are missing.
+    """
+    lines = read_text(clk_path)
+    end = next((i for i, line in enumerate(lines) if line[60:].strip() == "END OF HEADER"), len(lines))
+    head = [line.upper() for line in lines[:end]]
+    if any("WSB" in h or "WIDE" in h or "PHASE BIAS" in h or "OSB" in h for h in head):
+        return None
+    dcb = [h[:60].split() for h in head if h[60:].strip() == "SYS / DCBS APPLIED"]
+    told = f" (it declares only code biases: {' '.join(dcb[0][1:3])})" if dcb else ""
+    return (f"{clk_path}: no satellite wide-lane biases{told}; wide-lane/narrow-lane fixing with these "
+            "integer clocks also needs the analysis centre's wide-lane bias file (WSB or OSB) of the same day")

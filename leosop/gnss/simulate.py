@@ -50,7 +50,7 @@ class SimSettings:
     rate_sigma_mps: float = 0.02
     code_mp_sigma_m: float = 0.15
     phase_mp_sigma_cyc: float = 0.005
-    mp_tau_s: float = 30.0
+    mp_tau_s: float = 2.0
     zwd0_m: float = 0.12
     zwd_rw_m_per_rt_s: float = 3e-5
     vtec_l1_m: float = 4.0
