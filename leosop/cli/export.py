@@ -84,13 +84,8 @@ def _column(path, header, body, name, kind=float):
     if kind is str:
         return np.array([r[j].strip() for r in body], dtype=object)
     if kind == "time":
-        out = []
-        for i, r in enumerate(body):
-            try:
-                out.append(parse_utc(r[j], name=f"{path}:{i + 2}: {name}"))
-            except InputError as exc:
-                raise InputError(str(exc)) from None
-        return np.array(out, dtype="datetime64[ns]")
+        return np.array([parse_utc(r[j], name=f"{path}:{i + 2}: {name}") for i, r in enumerate(body)],
+                        dtype="datetime64[ns]")
     out = np.empty(len(body))
     for i, r in enumerate(body):
         text = r[j].strip()
@@ -127,6 +122,8 @@ def _fixes(path, header, body):
     col = lambda name, kind=float: _column(path, header, body, name, kind)  # noqa: E731
     extra = [h for h in ("sigma_e_m", "sigma_n_m", "sigma_u_m", "n_used", "gdop") if h in header]
     values = {h: col(h) for h in extra}
+    if "n_used" in values and np.all(np.isfinite(values["n_used"])):
+        values["n_used"] = values["n_used"].astype(int)  # a count, not a measurement
     status = col("status", str)
     props = [{"status": status[i], **{h: values[h][i] for h in extra}} for i in range(len(body))]
     return [Layer("fixes", "points", col("lat_deg"), col("lon_deg"), col("alt_m"), col("time_utc", "time"),
