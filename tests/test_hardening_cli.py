@@ -276,3 +276,8 @@ def test_sigterm_is_cleaned_up_like_sigint(tmp_path):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 1 and err.strip().splitlines()[-1] == "leosop generate: interrupted"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_no_command_is_one_line(capsys):
+    status, _, err = _run(capsys)
+    assert status == 2 and "give a command: visibility, tle" in _one_line(err)

@@ -139,7 +139,7 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
-        parser.print_help(sys.stderr)
+        print(f"leosop: error: give a command: {', '.join(COMMANDS)} (see leosop --help)", file=sys.stderr)
         return 2
     with _sigterm_as_interrupt(), warnings.catch_warnings():
         warnings.simplefilter("default")
