@@ -2,7 +2,12 @@
 
 Every file the toolkit writes goes through :func:`atomic_path`: data are
 written to a temporary name in the same directory and renamed into place, so
-an error or an interrupt never leaves a half-written output.
+an error or an interrupt never leaves a half-written output. A command's set
+of outputs is all-or-nothing through :func:`atomic_files` (named files, moved
+in order) or :func:`atomic_outputs` (a staged ``--out`` directory). Errors
+name the user's path, never the temporary one, and directories made for an
+output that is not made are removed again. :func:`check_output_file` and
+:func:`check_output_dir` refuse impossible destinations before any work.
 """
 
 import contextlib
@@ -35,8 +40,11 @@ def _remove_dirs(dirs):
 
 
 def _renamed(exc, tmp, path):
-    """``exc`` naming the user's ``path`` where it named the temporary ``tmp`` (or, before
-    ``tmp`` exists, a candidate temporary name of ``path``)."""
+    """``exc`` naming the user's ``path`` where it named the temporary ``tmp``.
+
+    Before ``tmp`` exists (``tmp`` None), a candidate temporary name of
+    ``path`` is replaced too.
+    """
     if not isinstance(exc, OSError) or exc.errno is None or exc.filename is None:
         return exc
     name = str(exc.filename)
