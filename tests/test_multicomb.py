@@ -34,13 +34,41 @@ def test_single_comb_equals_estimate_block():
     ref = estimate_block(x, FS)
     got = find_combs(x, FS)
     assert got.n_found == 1
-    # Same coarse search, decimation and Newton; only BLAS rounding of a wider
-    # matrix product (two more tone positions) may differ: 1e-3 sigma.
-    tol = 1e-3 * ref["sigma_hz"]
+    # Same coarse search and Newton; the decimation keeps only the four aliased
+    # bands either side of each channel (estimate_block sums all of them), so
+    # ~4 % of the decimated noise power differs: estimates agree to a small
+    # fraction of sigma (0.03 sigma rms over 40 blocks). The noise estimate sees
+    # a different 4 % of the noise: C/N0 differs by ~0.1 dB per block (0.03 dB
+    # in the mean over 40 blocks, both within 0.05 dB of the truth).
+    tol = 0.1 * ref["sigma_hz"]
     assert abs(got.doppler_hz[0] - ref["doppler_hz"]) < tol
-    assert abs(got.doppler_rate_hz_per_s[0] - ref["doppler_rate_hz_per_s"]) < 1e-2
-    assert got.cn0_dbhz[0] == pytest.approx(ref["cn0_dbhz"], abs=1e-3)
-    assert got.sigma_hz[0] == pytest.approx(ref["sigma_hz"], rel=1e-3)
+    assert abs(got.doppler_rate_hz_per_s[0] - ref["doppler_rate_hz_per_s"]) < 1.0
+    assert got.cn0_dbhz[0] == pytest.approx(ref["cn0_dbhz"], abs=0.2)
+    assert got.sigma_hz[0] == pytest.approx(ref["sigma_hz"], rel=0.03)
+
+
+def test_frequency_domain_decimation_is_integrate_and_dump():
+    # Tones on the block's FFT bins within the kept aliases of a channel: the
+    # frequency-domain decimation equals the integrate-and-dump sum written out
+    # (segments of L samples, mixed at f_c). A channel on a bin: to float32
+    # rounding of the input. A channel eps off the bin grid is rotated at the
+    # segment centres: first-order error 2 pi eps (L / fs) times the tone's
+    # offset times L / fs, here <= 2 pi 10 Hz 0.25 ms * 1 kHz 0.25 ms = 4e-3.
+    from leosop.signal.multicomb import _Grid
+
+    n, fs = 125_000, 2.5e6
+    df = fs / n
+    rng = np.random.default_rng(3)
+    t = np.arange(n) / fs
+    n_seg = _Grid(np.zeros(n, dtype=np.complex64), fs, 500.0).n_seg
+    for f_c, reach, tol in ((200 * df, 4 * n_seg, 1e-5), (-55_551.2, 50, 4e-3)):
+        x = np.zeros(n, dtype=complex)
+        for k in rng.integers(-reach, reach, 5):
+            x += rng.normal() * np.exp(2j * np.pi * ((np.round(f_c / df) + k) * df * t + rng.uniform()))
+        grid = _Grid(x.astype(np.complex64), fs, 500.0)
+        got = grid.channels([f_c])[:, 0]
+        ref = (x * np.exp(-2j * np.pi * f_c * t)).reshape(n_seg, -1).sum(axis=1)
+        assert np.max(np.abs(got - ref)) < tol * np.max(np.abs(ref))
 
 
 def _seven(seed, n_blocks):

@@ -174,8 +174,12 @@ def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording
         out = []
         for line in lines:
             if line.startswith("1 "):
-                doy = float(line[20:32]) + days
-                line = line[:20] + f"{doy:012.8f}" + line[32:68]
+                year = 2000 + int(line[18:20])
+                epoch = np.datetime64(f"{year}-01-01") + np.timedelta64(
+                    int(round((float(line[20:32]) - 1.0 + days) * 86400e6)), "us")
+                year = epoch.astype("datetime64[Y]")
+                doy = (epoch - year) / np.timedelta64(1, "D") + 1.0
+                line = line[:18] + f"{int(str(year)) % 100:02d}{doy:012.8f}" + line[32:68]
                 line += str(sum(int(c) if c.isdigit() else (c == "-") for c in line) % 10)
             out.append(line)
         f = tmp_path / f"shift{days}.tle"

@@ -38,9 +38,17 @@ __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"
 #: +-300 kHz of Doppler fits with margin; wider recordings are narrowed to it.
 WORK_RATE_HZ = 2.5e6
 #: In a continuous recording, blocks between full spectrum searches: the
-#: others only fit the combs the tracks predict (tracking mode, about half
+#: others only fit the combs the tracks predict (tracking mode, a fifth of
 #: the cost), so a rising satellite is picked up within this many blocks.
 SEARCH_EVERY = 10
+#: Half-width of the window a tracked comb is fitted in around its
+#: prediction [Hz]: the tracks predict the next block to well below a hertz;
+#: the window sets the decimated band, so it is kept small. A comb outside
+#: it is lost for the block and picked up by the next full search.
+TRACK_GATE_HZ = 25.0
+#: Refinement passes in tracking mode: the predictions are good enough that
+#: one pass with the other combs removed reaches the bound (two in a search).
+TRACK_REFINE = 1
 #: Longest gap between two tracks of one comb that are joined [s].
 JOIN_GAP_S = 10.0
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
@@ -156,9 +164,13 @@ def check_snapshot_age(rec, constellation):
     return median
 
 
+#: Periodograms averaged per spectrogram column (a figure needs no more).
+SPECTRUM_AVERAGES = 16
+
+
 def _spectrum(iq):
-    """Mean periodogram of ``iq`` in SPECTRUM_BINS bins, DC in the middle."""
-    m = max(1, iq.size // SPECTRUM_BINS)
+    """Mean periodogram of (up to SPECTRUM_AVERAGES segments of) ``iq`` in SPECTRUM_BINS bins, DC in the middle."""
+    m = min(SPECTRUM_AVERAGES, max(1, iq.size // SPECTRUM_BINS))
     seg = np.resize(iq, (m, SPECTRUM_BINS)) if iq.size < SPECTRUM_BINS else iq[: m * SPECTRUM_BINS].reshape(m, -1)
     return np.fft.fftshift(np.mean(np.abs(np.fft.fft(seg, axis=1)) ** 2, axis=0))
 
@@ -291,7 +303,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         pred = tracker.predictions(b.t_s) if contiguous else None
         if pred is not None and k % SEARCH_EVERY:
             found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                               search=False)
+                               search=False, gate_hz=TRACK_GATE_HZ, n_refine=TRACK_REFINE)
         else:
             found = find_combs(iq, fs, comb=comb)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)

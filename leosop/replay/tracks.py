@@ -117,8 +117,11 @@ class Tracker:
         sigma = np.array([r[5] for r in recent])
         w = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
         deg = 1 if len(recent) <= 3 or np.ptp(tau) == 0 else 2
-        poly = np.polyfit(tau, f, deg, w=w)
-        return np.polyval(poly, dt), np.polyval(np.polyder(poly), dt), gate
+        # Weighted least squares in powers of tau (a small polyfit without its overhead).
+        a = tau[:, None] ** np.arange(deg + 1)
+        c = np.linalg.lstsq(a * w[:, None], f * w, rcond=None)[0]
+        rate = c[1] + (2.0 * c[2] * dt if deg == 2 else 0.0)
+        return float(np.polyval(c[::-1], dt)), float(rate), gate
 
     def predictions(self, t_s):
         """Doppler and rate at ``t_s`` of every track fed in the last block, (n,) each; None after a birth.
