@@ -73,7 +73,8 @@ class PppInsOptions:
     success_min: float = 0.999
     min_fixed: int = 4
     wl_tol_cyc: float = 0.25
-    wl_min_epochs: int = 20
+    wl_se_max_cyc: float = 0.1
+    wl_min_epochs: int = 5
 
 
 @dataclass
@@ -206,7 +207,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
     P[:N_INS, :N_INS] = initial_covariance(settings, state0.lat_rad, state0.alt_m)
     x[_ZWD], P[_ZWD, _ZWD] = o.zwd0_m, o.zwd_sigma_m**2
     amb = _Ambiguities(n_sv)
-    mw_sum, mw_n = np.zeros(n_sv), np.zeros(n_sv, int)
+    mw_sum, mw_sq, mw_n = np.zeros(n_sv), np.zeros(n_sv), np.zeros(n_sv, int)
     out = PppInsResult(t_s=t, pos_float_ecef_m=np.full((n_ep, 3), np.nan), pos_fixed_ecef_m=np.full((n_ep, 3), np.nan),
                        cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan), n_sats=np.zeros(n_ep, int),
                        n_fixed=np.zeros(n_ep, int), n_wl=np.zeros(n_ep, int), ratio=np.full(n_ep, np.nan),
@@ -245,8 +246,9 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         out.n_slips += int(np.sum(nw & amb.on[js]))
         fresh = np.ones(n_sv, bool)
         fresh[js[~nw]] = False
-        mw_sum[fresh], mw_n[fresh] = 0.0, 0
+        mw_sum[fresh], mw_sq[fresh], mw_n[fresh] = 0.0, 0.0, 0
         mw_sum[js] += MW[k, js]
+        mw_sq[js] += MW[k, js] ** 2
         mw_n[js] += 1
         if not (amb.ref in js and not new_arc[k, amb.ref]):
             cand = [js[i] for i in np.argsort(-elev) if amb.on[js[i]] and not nw[i]]
@@ -307,7 +309,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
             use[kind][idx] = False
             if kind == 1:  # a phase outlier is a slip: restart that ambiguity
                 amb.reset(P, x, [jo[idx]], [(lc - pc)[others[idx]] - (lc - pc)[iref]], o.amb_sigma_m)
-                mw_sum[jo[idx]], mw_n[jo[idx]] = 0.0, 0
+                mw_sum[jo[idx]], mw_sq[jo[idx]], mw_n[jo[idx]] = 0.0, 0.0, 0
         dx, P, _, _ = kalman.update(np.zeros(n_x), P, y, H, R)
         ins.feedback(dx)
         x[N_INS:] += dx[N_INS:]
@@ -319,7 +321,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         out.gnss[k] = True
         out.n_sats[k] = js.size
         if o.ar:
-            _fix(out, k, ins, P, x, jo, amb.ref, mw_sum, mw_n, gnss.wsb_cyc, o)
+            _fix(out, k, ins, P, x, jo, amb.ref, (mw_sum, mw_sq, mw_n), gnss.wsb_cyc, o)
     return out
 
 
@@ -328,15 +330,24 @@ def _record(out, k, ins, P, r_ins, C, J):
     out.cov_pos_enu_m2[k] = J @ P[DPOS, DPOS] @ J.T
 
 
-def _fix(out, k, ins, P, x, jo, ref, mw_sum, mw_n, wsb, o):
-    """Wide-lane rounding, narrow-lane LAMBDA; the fixed position into ``out`` when a subset passes."""
+def _fix(out, k, ins, P, x, jo, ref, mw, wsb, o):
+    """Wide-lane rounding, narrow-lane LAMBDA; the fixed position into ``out`` when a subset passes.
+
+    ``mw`` holds the running sums, sums of squares and counts of each
+    satellite's Melbourne-Wuebbena arc; a SD wide-lane is rounded when both
+    arcs have ``wl_min_epochs``, the standard error of the SD mean is below
+    ``wl_se_max_cyc`` and the rounding is below ``wl_tol_cyc``.
+    """
+    mw_sum, mw_sq, mw_n = mw
     ok = (mw_n[jo] >= o.wl_min_epochs) & (mw_n[ref] >= o.wl_min_epochs)
     jo = jo[ok]
     if jo.size < o.min_fixed:
         return
-    wl = mw_sum[jo] / mw_n[jo] - mw_sum[ref] / mw_n[ref] - (wsb[jo] - wsb[ref])
+    mean = mw_sum / np.maximum(mw_n, 1)
+    var_mean = np.maximum(mw_sq / np.maximum(mw_n, 1) - mean**2, 0.0) / np.maximum(mw_n - 1, 1)
+    wl = mean[jo] - mean[ref] - (wsb[jo] - wsb[ref])
     n_wl = np.round(wl)
-    good = np.abs(wl - n_wl) < o.wl_tol_cyc
+    good = (np.abs(wl - n_wl) < o.wl_tol_cyc) & (np.sqrt(var_mean[jo] + var_mean[ref]) < o.wl_se_max_cyc)
     jo, n_wl = jo[good], n_wl[good]
     out.n_wl[k] = jo.size
     if jo.size < o.min_fixed:

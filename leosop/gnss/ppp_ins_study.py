@@ -26,17 +26,32 @@ from . import ppp_ins
 from .products import read_clk, read_sp3
 from .simulate import SimSettings, simulate
 
-__all__ = ["PAPER", "IMU", "scenario", "ppp_ins_table", "format_table"]
+__all__ = ["PAPER", "GRADES", "filter_settings", "scenario", "statistics", "ppp_ins_table", "format_table"]
 
 #: [Liu 2016] table 2 and section 4.2.
 PAPER = {"float_rms_3d_m": 0.1514, "fixed_rms_3d_m": 0.0392, "first_fix_s": 600.0}
-IMU = ImuErrors.from_quoted(gyro_bias_deg_per_h=1.0, gyro_arw_deg_per_rt_h=0.07, accel_bias_g=3e-4,
-                            accel_vrw_g_per_rt_hz=5e-5)
-SETTINGS = FilterSettings(pos_sigma_m=(1.0, 1.0, 1.0), vel_sigma_mps=(0.05, 0.05, 0.05),
+#: IMU grades (quoted values): the paper does not state its IMU. "fog": a fibre-optic unit at the
+#: navigation / tactical boundary (the default); "navigation": a ring-laser unit; "mems-tactical": the
+#: class of [Petovello 2004].
+GRADES = {"fog": dict(gyro_bias_deg_per_h=0.1, gyro_arw_deg_per_rt_h=0.01, accel_bias_g=1e-4,
+                      accel_vrw_g_per_rt_hz=2e-5),
+          "navigation": dict(gyro_bias_deg_per_h=0.01, gyro_arw_deg_per_rt_h=0.002, accel_bias_g=2.5e-5,
+                             accel_vrw_g_per_rt_hz=5e-6),
+          "mems-tactical": dict(gyro_bias_deg_per_h=1.0, gyro_arw_deg_per_rt_h=0.07, accel_bias_g=3e-4,
+                                accel_vrw_g_per_rt_hz=5e-5)}
+
+
+def filter_settings(grade):
+    """Filter priors and Q from an IMU grade of :data:`GRADES` (the filter knows the IMU it has)."""
+    q = GRADES[grade]
+    return FilterSettings(pos_sigma_m=(1.0, 1.0, 1.0), vel_sigma_mps=(0.05, 0.05, 0.05),
                           att_sigma_rad=tuple(np.radians([0.02, 0.02, 0.3])),
-                          gyro_bias_sigma_rad_per_s=np.radians(1.0) / 3600.0, accel_bias_sigma_mps2=3e-4 * G0_MPS2,
-                          gyro_arw_rad_per_rt_s=np.radians(0.07) / 60.0, accel_vrw_mps2_per_rt_hz=5e-5 * G0_MPS2,
-                          step_s=1.0)
+                          gyro_bias_sigma_rad_per_s=np.radians(q["gyro_bias_deg_per_h"]) / 3600.0,
+                          accel_bias_sigma_mps2=q["accel_bias_g"] * G0_MPS2,
+                          gyro_arw_rad_per_rt_s=np.radians(q["gyro_arw_deg_per_rt_h"]) / 60.0,
+                          accel_vrw_mps2_per_rt_hz=q["accel_vrw_g_per_rt_hz"] * G0_MPS2, step_s=1.0)
+
+
 START_GPS_S = 6 * 3600.0
 ESBJERG_DEG = (55.4936, 8.4568, 60.0)
 OUTAGE_AT_S = 2400.0
@@ -63,7 +78,7 @@ def _trajectory(duration_s):
 
 
 def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None, ar=True, sim=SimSettings(),
-             imu=IMU):
+             grade="fog"):
     """Simulate one run and filter it.
 
     Returns
@@ -73,24 +88,31 @@ def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None,
     init_err : ndarray, shape (3,)
     """
     rng = np.random.default_rng(seed)
+    settings = filter_settings(grade)
+    # The true IMU: biases drawn from the filter's prior (one draw per run), noise as quoted.
+    q = GRADES[grade]
+    imu = ImuErrors.from_quoted(gyro_bias_deg_per_h=rng.normal(size=3) * q["gyro_bias_deg_per_h"],
+                                gyro_arw_deg_per_rt_h=q["gyro_arw_deg_per_rt_h"],
+                                accel_bias_g=rng.normal(size=3) * q["accel_bias_g"],
+                                accel_vrw_g_per_rt_hz=q["accel_vrw_g_per_rt_hz"])
     orbits, clocks = products or _products()
     traj = _trajectory(duration_s)
     n_imu = int(round(duration_s / traj.dt_s))
     gnss = simulate(traj, START_GPS_S, orbits, clocks, rng, dataclasses.replace(sim, outage_start_s=outage_at_s),
-                    step_s=SETTINGS.step_s)
-    n = int(duration_s / SETTINGS.step_s) + 1
+                    step_s=settings.step_s)
+    n = int(duration_s / settings.step_s) + 1
     dth, dvl = corrupt(traj.dtheta_b_rad[:n_imu], traj.dvel_b_mps[:n_imu], traj.dt_s, imu, rng)
     # Initial errors drawn from the filter's prior.
-    att = rng.normal(size=3) * np.array(SETTINGS.att_sigma_rad)
-    dv = rng.normal(size=3) * np.array(SETTINGS.vel_sigma_mps)
-    dpos_enu = rng.normal(size=3) * np.array(SETTINGS.pos_sigma_m)
+    att = rng.normal(size=3) * np.array(settings.att_sigma_rad)
+    dv = rng.normal(size=3) * np.array(settings.vel_sigma_mps)
+    dpos_enu = rng.normal(size=3) * np.array(settings.pos_sigma_m)
     from ..fusion.common import pos_jacobian
 
     dpos = np.linalg.solve(pos_jacobian(traj.lat_rad[0], traj.alt_m[0]), dpos_enu)
     true0 = strapdown.NavState.from_dcm(traj.lat_rad[0], traj.lon_rad[0], traj.alt_m[0], traj.vel_enu_mps[0],
                                         traj.C_n_b[0])
     state0 = true0.corrected(-att, -dv, -dpos)
-    res = ppp_ins.run(gnss, orbits, clocks, state0, dth, dvl, traj.dt_s, SETTINGS,
+    res = ppp_ins.run(gnss, orbits, clocks, state0, dth, dvl, traj.dt_s, settings,
                       ppp_ins.PppInsOptions(ar=ar))
     return gnss.pos_ecef_m[:n], res
 
