@@ -140,11 +140,15 @@ def _run(argv, capsys):
 
 @pytest.fixture(scope="module")
 def solution_csv(tmp_path_factory):
-    base = tmp_path_factory.mktemp("sim")
-    (base / "short.json").write_text(json.dumps({"name": "short", "duration_s": 30}))
-    assert main(["simulate", "--level", "measurement", "--scenario", str(base / "short.json"),
-                 "--out", str(base / "sim"), "--json"]) == 0
-    return base / "sim" / "solution.csv"
+    """The solution.csv ``leosop simulate --out`` writes (same table), of a 30 s flight, without its figures."""
+    from leosop.fileio import write_csv
+    from leosop.scenarios import scenario_from_dict
+    from leosop.simulate import run_scenario, solution_table
+
+    path = tmp_path_factory.mktemp("sim") / "solution.csv"
+    result = run_scenario(scenario_from_dict({"name": "short", "duration_s": 30}), level="measurement")
+    write_csv(path, *solution_table(result))
+    return path
 
 
 def test_export_solution_writes_all_three_that_parse_back(solution_csv, tmp_path, capsys):
