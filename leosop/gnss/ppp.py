@@ -230,7 +230,8 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         clock, hydrostatic delay, Shapiro delay (and wind-up for phase)
         removed, so that ``Pc = rho + clk + m_wet ZWD`` and ``Lc = Pc + N``;
         ``RS`` (n_epochs, n_sats, 3) satellite positions (Sagnac applied),
-        ``elev``, ``m_wet``, ``ok`` (usable), ``new_arc``, ``tide``
+        ``elev``, ``m_wet``, ``ok`` (usable), ``new_arc``, ``MW`` (Melbourne-Wuebbena,
+        wide-lane cycles), ``tide``
         (n_epochs, 3), ``arp_ecef`` (3,), ``x0`` a priori position, ``t_s``.
     """
     opt = options
@@ -305,7 +306,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
     return dict(Pc=Pc, Lc=Lc, RS=RS, elev=elev, m_wet=m_wet, ok=ok, new_arc=new_arc, tide=tide, arp_ecef=arp_ecef,
-                x0=x0, t_s=t_s, lat0=lat0, lon0=lon0)
+                x0=x0, t_s=t_s, lat0=lat0, lon0=lon0, MW=meas["MW"])
 
 
 def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions()):

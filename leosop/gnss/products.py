@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .rinex import read_text
 
-__all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps", "missing_for_ar"]
+__all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps", "read_wl_biases"]
 
 #: Lagrange interpolation points for SP3 orbits.
 N_LAGRANGE = 11
@@ -240,28 +240,35 @@ def read_clk(path, *, systems="GE", ref_gps=None):
     return Clocks(path=path, ref_gps=ref, t_s=seconds_gps(grid, ref), sv=sv, bias_s=bias)
 
 
-def missing_for_ar(clk_path):
-    """What a RINEX clock file lacks for wide-lane / narrow-lane ambiguity resolution, or None.
 
-    Integer-recovery clocks (the CNES GRG products, [Laurichesse 2009]) fix
-    the narrow-lane only together with the satellites' wide-lane biases,
-    which CNES distributes beside the clocks (a ``WSB`` or Bias-SINEX
-    ``OSB`` file), not inside them. A clock file is taken to carry them only
-    when its header declares phase biases (``SYS / PHASE BIAS``-like
-    records or comments naming WSB / wide-lane); none of the GRG files here
-    does.
+def read_wl_biases(path):
+    """Satellite wide-lane biases [cycles] from the header of a CNES (GRG) RINEX clock file.
+
+    The GRG integer-recovery clocks ([Laurichesse 2009]) carry the wide-lane
+    satellite biases they were computed with as header ``COMMENT`` records::
+
+        WL G01  2020  6 25 12  0  0.000000  1   -0.110300E+01  0102 COMMENT
+
+    (satellite, epoch, count, value, flags). With them the Melbourne-
+    Wuebbena combination ``MW + wsb`` of every satellite has the same
+    fractional part (the receiver's): on ESBC00DNK 2020-06-25 the arc means
+    scatter by 0.05 cycles around it (``tools/bench_ppp_ar.py``).
 
     Returns
     -------
-    str or None
-        A one-line reason when the biases are missing.
+    dict of str -> float
+        Empty when the file has none.
     """
-    lines = read_text(clk_path)
-    end = next((i for i, line in enumerate(lines) if line[60:].strip() == "END OF HEADER"), len(lines))
-    head = [line.upper() for line in lines[:end]]
-    if any("WSB" in h or "WIDE" in h or "PHASE BIAS" in h or "OSB" in h for h in head):
-        return None
-    dcb = [h[:60].split() for h in head if h[60:].strip() == "SYS / DCBS APPLIED"]
-    told = f" (it declares only code biases: {' '.join(dcb[0][1:3])})" if dcb else ""
-    return (f"{clk_path}: no satellite wide-lane biases{told}; wide-lane/narrow-lane fixing with these "
-            "integer clocks also needs the analysis centre's wide-lane bias file (WSB or OSB) of the same day")
+    lines = read_text(path)
+    out = {}
+    for i, line in enumerate(lines):
+        label = line[60:].strip()
+        if label == "END OF HEADER":
+            break
+        if label == "COMMENT" and line.startswith("WL "):
+            f = line[:60].split()
+            try:
+                out[f[1]] = float(f[9])
+            except (IndexError, ValueError):
+                raise InputError(f"{path}: line {i + 1}: unreadable wide-lane bias comment") from None
+    return out
