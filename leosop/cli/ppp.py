@@ -4,8 +4,12 @@ Dual-frequency ionosphere-free code and phase of GPS and Galileo with precise
 orbits (SP3) and clocks (RINEX clock), float ambiguities, estimated zenith
 wet delay (leosop.gnss.ppp). Without ``--static`` the position is re-estimated
 every epoch (kinematic); with ``--static`` it is one constant, and the JSON
-``summary`` gives the final position. ``--ar`` and ``--imu`` are reserved for
-ambiguity resolution and PPP/INS coupling, not built yet.
+``summary`` gives the final position. ``--ar`` (wide-lane then narrow-lane
+fixing) and ``--imu`` (tight PPP/INS) are built (leosop.gnss.lambda_,
+leosop.gnss.ppp_ins) and run on the simulated vehicle test (``leosop reproduce
+ppp-ins``); on real files they stop with what is missing: the satellite
+antenna offsets (ANTEX) the integer clocks were made with, and an IMU log
+recorded with the observations.
 """
 
 import sys
@@ -35,16 +39,20 @@ def register(subparsers):
     p.add_argument("--static", action="store_true", help="receiver at rest: one position for the whole file")
     p.add_argument("--systems", default="GE", help="GNSS letters to use (default %(default)s)")
     p.add_argument("--mask-deg", type=float, default=10.0, metavar="D", help="elevation mask (default %(default)g)")
-    p.add_argument("--ar", action="store_true", help="ambiguity resolution (not available yet)")
-    p.add_argument("--imu", metavar="FILE", help="IMU log for PPP/INS coupling (not available yet)")
+    p.add_argument("--ar", action="store_true", help="ambiguity resolution (needs ANTEX satellite offsets: see "
+                   "'leosop reproduce ppp-ins' for the simulated test)")
+    p.add_argument("--imu", metavar="FILE", help="IMU log for tight PPP/INS (see 'leosop reproduce ppp-ins')")
     return p
 
 
 def run(args):
     if args.ar:
-        raise InputError("--ar: ambiguity resolution is not implemented yet (float PPP only)")
+        raise InputError(f"--ar: {args.clk}: narrow-lane fixing with these integer clocks needs the satellite antenna "
+                         "offsets they were computed with (its SYS / PCVS APPLIED: an ANTEX file), and none is given "
+                         "(the wide-lane biases are in its header; tools/bench_ppp_ar.py)")
     if args.imu:
-        raise InputError("--imu: PPP/INS coupling is not implemented yet")
+        raise InputError(f"--imu {args.imu}: no IMU log recorded with these observations can be read yet; the tight "
+                         "PPP/INS filter runs on the simulated vehicle test: leosop reproduce ppp-ins")
     if not set(args.systems) <= {"G", "E"} or not args.systems:
         raise InputError(f"--systems {args.systems!r}: expected letters among G, E")
     if not 0.0 <= args.mask_deg < 90.0:
