@@ -58,14 +58,15 @@ def run(args):
     if not 0.0 <= args.mask_deg < 90.0:
         raise InputError(f"--mask-deg {args.mask_deg!r}: expected a value in [0, 90)")
     t0 = time.perf_counter()
+    # The small files first: a bad product fails before the observation file is read.
+    nav_day = check_nav(args.nav)
+    orbits = read_sp3(args.sp3, systems=args.systems)
+    clocks = read_clk(args.clk, systems=args.systems)
     obs = read_obs(args.obs, systems=args.systems,
                    codes={"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]})
-    nav_day = check_nav(args.nav)
     day = obs.time_gps[0].astype("datetime64[D]")
     if nav_day is not None and abs((nav_day - day).astype(int)) > 1:
         raise InputError(f"{args.nav}: navigation records start {nav_day}, the observations {day}")
-    orbits = read_sp3(args.sp3, systems=args.systems)
-    clocks = read_clk(args.clk, systems=args.systems)
     t_read = time.perf_counter() - t0
     print(f"leosop ppp: read {len(obs.time_gps)} epochs in {t_read:.1f} s", file=sys.stderr)
     res = run_ppp(obs, orbits, clocks, PppOptions(static=args.static, systems=args.systems,
