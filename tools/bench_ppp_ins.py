@@ -48,9 +48,10 @@ def main():
     mean = nees.mean(axis=0)
     lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * a.seeds) / a.seeds
     print(f"{a.seeds} seeds, {a.duration:g} s, grade {a.grade}, {time.perf_counter() - t0:.0f} s")
+    inside = 100 * np.mean((mean > lo) & (mean < hi))
     print(f"float NEES (3 dof) averaged over seeds, epochs from 300 s: mean {mean.mean():.2f}, median "
-          f"{np.median(mean):.2f}; inside the 95% band [{lo:.2f}, {hi:.2f}] at {100 * np.mean((mean > lo) & (mean < hi)):.0f}%"
-          f" of epochs, above it at {100 * np.mean(mean > hi):.0f}%")
+          f"{np.median(mean):.2f}; inside the 95% band [{lo:.2f}, {hi:.2f}] at {inside:.0f}% of epochs, "
+          f"above it at {100 * np.mean(mean > hi):.0f}%")
     for k in rows[0]:
         v = [r[k] for r in rows if r[k] is not None]
         print(f"{k}: median {np.median(v):.3f}, max {np.max(v):.3f} ({len(v)}/{len(rows)} runs)" if v else f"{k}: -")

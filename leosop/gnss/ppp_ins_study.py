@@ -3,22 +3,24 @@
 The paper's car test (section 4): GPS only, a single dual-frequency receiver
 and an IMU, about 9 min of static alignment then driving; statistics of the
 last 30 min: 3-D RMS 0.1514 m float, 0.0392 m fixed, first fix after about
-10 min. Its IMU is not stated; ours is a tactical-grade unit of the class of
-the paper's reference [Petovello 2004] (gyro 1 deg/h, 0.07 deg/sqrt(h);
-accelerometer 300 ug, 50 ug/sqrt(Hz)), and the alignment is replaced by
-initial errors drawn from the filter's prior (0.02 deg level, 0.3 deg
-heading, 0.05 m/s, 1 m). GNSS: the real GRG orbits and clocks of 2020-06-25
-from 06:00 GPST around Esbjerg (:mod:`leosop.gnss.simulate`), 1 Hz, 10 deg
-mask; vehicle: 15 m/s with a 90 deg turn every 4.5 min; a 60 s GNSS outage
-starts 40 min into the run.
+10 min. Its IMU is not stated; ours is a fibre-optic unit (:data:`GRADES`
+"fog": gyro 0.1 deg/h, 0.01 deg/sqrt(h); accelerometer 100 ug, 20 ug/sqrt(Hz);
+true biases drawn per run from the filter's prior), and the alignment is
+replaced by initial errors drawn from the filter's prior (0.02 deg level,
+0.3 deg heading, 0.05 m/s, 1 m). GNSS: the real GRG orbits and clocks of
+2020-06-25 from 06:00 GPST around Esbjerg (:mod:`leosop.gnss.simulate`),
+1 Hz, 10 deg mask; vehicle: 15 m/s with a 90 deg turn every 4.5 min; a 60 s
+GNSS outage starts 40 min into the run.
 """
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
 from ..constants import G0_MPS2
-from ..fusion.common import FilterSettings
+from ..errors import InputError
+from ..fusion.common import FilterSettings, pos_jacobian
 from ..ins import strapdown
 from ..ins.imu import ImuErrors, corrupt
 from ..ins.trajectory import Segment, from_segments
@@ -57,14 +59,13 @@ ESBJERG_DEG = (55.4936, 8.4568, 60.0)
 OUTAGE_AT_S = 2400.0
 
 
-def _data_dir():
-    from pathlib import Path
-
-    return Path(__file__).resolve().parents[3] / "shared" / "data" / "rinex" / "esbc_2020-177"
+DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rinex" / "esbc_2020-177"
 
 
 def _products():
-    d = _data_dir()
+    d = DATA_DIR
+    if not d.is_dir():
+        raise InputError(f"{d}: the ESBC 2020-177 products (shared data folder) are needed for this simulation")
     day = np.datetime64("2020-06-25", "ns")
     return (read_sp3(d / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz", systems="G", ref_gps=day),
             read_clk(d / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz", systems="G", ref_gps=day))
@@ -106,8 +107,6 @@ def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None,
     att = rng.normal(size=3) * np.array(settings.att_sigma_rad)
     dv = rng.normal(size=3) * np.array(settings.vel_sigma_mps)
     dpos_enu = rng.normal(size=3) * np.array(settings.pos_sigma_m)
-    from ..fusion.common import pos_jacobian
-
     dpos = np.linalg.solve(pos_jacobian(traj.lat_rad[0], traj.alt_m[0]), dpos_enu)
     true0 = strapdown.NavState.from_dcm(traj.lat_rad[0], traj.lon_rad[0], traj.alt_m[0], traj.vel_enu_mps[0],
                                         traj.C_n_b[0])
@@ -147,7 +146,7 @@ def ppp_ins_table(*, seed=0, full=False):
             for k in runs[0]}
     return {"paper": PAPER, "ours": ours, "runs": runs,
             "setting": "simulated car, GPS L1/L2 on GRG orbits/clocks 2020-06-25 06:00 GPST, 1 Hz, 60 min, "
-                       "tactical IMU, 60 s outage at 40 min; statistics over the last 30 min",
+                       "fog-grade IMU, 60 s outage at 40 min; statistics over the last 30 min",
             **{k: ours[k] for k in ("float_rms_3d_m", "fixed_rms_3d_m", "first_fix_s")}}
 
 
