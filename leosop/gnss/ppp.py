@@ -432,4 +432,4 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         out_clk[i] = x[3:5]
         n_used[i] = len(js_i)
     return PppResult(time_gps=obs.time_gps, pos_ecef_m=out_pos, sigma_enu_m=out_sig, zwd_m=out_zwd, clock_m=out_clk,
-                     n_used=n_used,                     sv=sv, n_slips=n_slips, n_outliers=n_outl)
+                     n_used=n_used, sv=sv, n_slips=n_slips, n_outliers=n_outl)
