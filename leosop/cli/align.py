@@ -102,8 +102,8 @@ def run(args):
     doc = {**_angles_deg(pitch, roll, yaw), "method": method, "method_requested": args.method,
            "lat_deg": float(lat_deg), "duration_s": float(n * dt), "motion_std_mps2": motion_std_mps2(dvel, dt)}
     if args.window_s is not None:
-        if not (np.isfinite(args.window_s) and args.window_s >= 1.0):
-            raise InputError(f"--window-s {args.window_s:g}: must be at least 1 s")
+        if not 1.0 <= args.window_s <= n * dt:
+            raise InputError(f"--window-s {args.window_s:g}: must be between 1 s and the {n * dt:.1f} s aligned")
         m = int(round(args.window_s / dt))
         doc["window_method"] = window_method = resolve_method(args.method, m * dt)
         windows = []
