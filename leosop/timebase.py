@@ -19,6 +19,10 @@ _UNIX_EPOCH_JD = 2_440_587.5
 _NS_PER_DAY = 86_400 * 1_000_000_000
 
 
+#: First and last instants a datetime64[ns] holds (whole days inside its range).
+_NS_SPAN = (np.datetime64("1678-01-01"), np.datetime64("2261-12-31"))
+
+
 def parse_utc(value, *, name="time"):
     """UTC instant(s) from ISO 8601 text or datetime64.
 
@@ -48,9 +52,13 @@ def parse_utc(value, *, name="time"):
         if re.search(r"T.*[+-]\d\d:?\d\d$", s):
             raise InputError(f"{name}: {str(text)!r} has a UTC offset; give the time in UTC (ending in Z)")
         try:
-            flat.append(np.datetime64(s, "ns"))
+            native = np.datetime64(s)  # its own unit: years beyond datetime64[ns] do not wrap around here
         except ValueError:
             raise InputError(f"{name}: {str(text)!r} is not an ISO 8601 UTC time (e.g. 2024-01-02T03:04:05Z)") from None
+        if not np.isnat(native) and not _NS_SPAN[0] <= native <= _NS_SPAN[1]:
+            raise InputError(f"{name}: {str(text)!r} is outside the years 1678..2261 that the toolkit's "
+                             "nanosecond times hold")
+        flat.append(native.astype("datetime64[ns]"))
     out = np.array(flat, dtype="datetime64[ns]").reshape(arr.shape)
     return out[()]
 

@@ -281,3 +281,27 @@ def test_sigterm_is_cleaned_up_like_sigint(tmp_path):
 def test_no_command_is_one_line(capsys):
     status, _, err = _run(capsys)
     assert status == 2 and "give a command: visibility, tle" in _one_line(err)
+
+
+REC = "signals/starlink_xian_snapshots.sigmf-meta"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["visibility", "--start", "9999-01-01T00:00:00Z"], "outside the years 1678..2261"),
+    (["visibility", "--duration-s", "1e300"], "1e+300 epochs is too many"),
+    (["generate", "-o", "r.sigmf-meta", "--sample-rate-hz", "1e300"], "--sample-rate-hz 1e+300: at most 1e+10"),
+    (["generate", "-o", "r.sigmf-meta", "--duration-s", "1e300"], "2.5e+306 samples; at most 1e+11"),
+    (["generate", "-o", "r.sigmf-meta", "--cn0-dbhz", "1e300"], "--cn0-dbhz 1e+300: must be in [-20, 100] dB-Hz"),
+    (["generate", "-o", "r.sigmf-meta", "--rx-offset-hz", "1e300"], "must be within +-1.25e+06 Hz"),
+    (["generate", "-o", "r.sigmf-meta", "--orbit-error-along-m", "1e300"], "in [0, 100000] m"),
+    (["doppler", REC, "--max-doppler-hz", "1e300"], "--max-doppler-hz 1e+300: must be in (0, 1e+07] Hz"),
+    (["doppler", REC, "--max-rate-hz-per-s", "1e300"], "--max-rate-hz-per-s 1e+300: must be in [0, 1e+06]"),
+    (["doppler", REC, "--resolution-hz", "1e-300"], "--resolution-hz 1e-300: must be in [1e-09, 1000] Hz"),
+    (["doppler", REC, "--block-s", "1e300"], "--block-s 1e+300 is longer than the recording (600000 samples"),
+])
+def test_absurd_option_values_are_refused(tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(fileio.Path(__file__).resolve().parents[1])
+    argv = [str(tmp_path / a) if a.endswith(".sigmf-meta") and a != REC else a for a in argv]
+    status, _, err = _run(capsys, *argv)
+    assert status == 2 and message in _one_line(err)
+    assert list(tmp_path.iterdir()) == []

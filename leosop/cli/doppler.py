@@ -31,6 +31,10 @@ from .options import positive
 
 _FIG_COLS = 1000  # time columns kept for the spectrogram figure
 _FIG_ROWS = 1024  # frequency rows kept
+_RESOLUTION_RANGE_HZ = (1e-9, 1e3)
+# Ka-band LEO Doppler stays below 1 MHz and its rate below 1e4 Hz/s: larger limits are typos.
+_MAX_DOPPLER_LIMIT_HZ = 1e7
+_MAX_RATE_LIMIT_HZ_PER_S = 1e6
 
 
 def register(subparsers):
@@ -85,10 +89,17 @@ def run(args):
     rec = _open(args)
     fs = rec.sample_rate_hz
     block_s = positive(args.block_s, "--block-s")
-    positive(args.resolution_hz, "--resolution-hz")
-    positive(args.max_doppler_hz, "--max-doppler-hz")
-    if not (np.isfinite(args.max_rate_hz_per_s) and args.max_rate_hz_per_s >= 0):
-        raise InputError(f"--max-rate-hz-per-s {args.max_rate_hz_per_s:g}: must be >= 0")
+    if not _RESOLUTION_RANGE_HZ[0] <= args.resolution_hz <= _RESOLUTION_RANGE_HZ[1]:
+        raise InputError(f"--resolution-hz {args.resolution_hz:g}: must be in [{_RESOLUTION_RANGE_HZ[0]:g}, "
+                         f"{_RESOLUTION_RANGE_HZ[1]:g}] Hz")
+    if not 0 < args.max_doppler_hz <= _MAX_DOPPLER_LIMIT_HZ:
+        raise InputError(f"--max-doppler-hz {args.max_doppler_hz:g}: must be in (0, {_MAX_DOPPLER_LIMIT_HZ:g}] Hz")
+    if not 0 <= args.max_rate_hz_per_s <= _MAX_RATE_LIMIT_HZ_PER_S:
+        raise InputError(f"--max-rate-hz-per-s {args.max_rate_hz_per_s:g}: must be in [0, "
+                         f"{_MAX_RATE_LIMIT_HZ_PER_S:g}]")
+    if block_s > rec.duration_s:
+        raise InputError(f"--block-s {block_s:g} is longer than the recording ({rec.n_samples} samples, "
+                         f"{rec.duration_s:.6g} s)")
     block_len = int(round(block_s * fs))
     if block_len < 64:
         raise InputError(f"--block-s {block_s:g}: {block_len} samples at {fs:g} Hz; need at least 64")

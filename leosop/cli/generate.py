@@ -41,6 +41,11 @@ from . import add_command
 from .options import mask_deg, parse_site, parse_time, positive, warn_stale
 
 DEFAULT_SITE = "34.342,108.940,400"
+#: Bounds of the numeric options: beyond them a value is a typo, not an experiment.
+_MAX_SAMPLE_RATE_HZ = 1e10  # above any SDR
+_MAX_SAMPLES = 10**11  # 800 GB of cf32
+_CN0_RANGE_DBHZ = (-20.0, 100.0)
+_MAX_ORBIT_ERROR_M = 1e5  # 100 km: beyond it the truth is not the element set's satellite
 _WAVEFORM_TEXT = {"tones": "pilot combs", "ofdm": "OFDM downlink frames with pilot combs"}
 _CHUNK = 1 << 18
 
@@ -123,8 +128,9 @@ def _captures(args, n, fs):
 def _cn0(args, const, t_nodes, range_m, elev_rad):
     """C/N0 per satellite at every node, (n_sats, n_nodes)."""
     values = np.asarray(args.cn0_dbhz, dtype=float)
-    if not np.all(np.isfinite(values)):
-        raise InputError(f"--cn0-dbhz {args.cn0_dbhz}: must be finite numbers")
+    if not np.all((values >= _CN0_RANGE_DBHZ[0]) & (values <= _CN0_RANGE_DBHZ[1])):
+        raise InputError(f"--cn0-dbhz {' '.join(f'{v:g}' for v in values)}: must be in "
+                         f"[{_CN0_RANGE_DBHZ[0]:g}, {_CN0_RANGE_DBHZ[1]:g}] dB-Hz")
     if values.size not in (1, len(const)) or (values.size > 1 and args.cn0_model != "constant"):
         raise InputError(f"--cn0-dbhz: {values.size} values; give one, or one per satellite "
                          f"({len(const)}) with --cn0-model constant")
@@ -162,13 +168,23 @@ def run(args):
     fs = positive(args.sample_rate_hz, "--sample-rate-hz")
     step = positive(args.truth_step_s, "--truth-step-s")
     mask = mask_deg(args.mask_deg)
-    if not (np.isfinite(args.sat_offset_max_hz) and args.sat_offset_max_hz >= 0):
-        raise InputError(f"--sat-offset-max-hz {args.sat_offset_max_hz}: must be >= 0")
+    if fs > _MAX_SAMPLE_RATE_HZ:
+        raise InputError(f"--sample-rate-hz {fs:g}: at most {_MAX_SAMPLE_RATE_HZ:g}")
+    if duration * fs > _MAX_SAMPLES:
+        raise InputError(f"--duration-s {duration:g} at {fs:g} Hz is {duration * fs:.3g} samples; at most "
+                         f"{_MAX_SAMPLES:.0e}")
+    if not 0 <= args.sat_offset_max_hz <= fs / 2:
+        raise InputError(f"--sat-offset-max-hz {args.sat_offset_max_hz:g}: must be in [0, {fs / 2:g}] "
+                         "(half the sample rate)")
+    if abs(args.rx_offset_hz) > fs / 2:
+        raise InputError(f"--rx-offset-hz {args.rx_offset_hz:g}: must be within +-{fs / 2:g} Hz (half the sample "
+                         "rate)")
     sigma_orbit_m = {}
     for axis in ("along", "radial", "cross"):
         value = getattr(args, f"orbit_error_{axis}_m")
-        if not (np.isfinite(value) and value >= 0):
-            raise InputError(f"--orbit-error-{axis}-m {value}: must be a standard deviation >= 0 m")
+        if not 0 <= value <= _MAX_ORBIT_ERROR_M:
+            raise InputError(f"--orbit-error-{axis}-m {value:g}: must be a standard deviation in "
+                             f"[0, {_MAX_ORBIT_ERROR_M:g}] m")
         sigma_orbit_m[f"{axis}_sigma_m"] = value
     out = Path(args.output)
     if out.suffix != ".sigmf-meta":

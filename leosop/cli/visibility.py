@@ -66,9 +66,9 @@ def run(args):
     mask = mask_deg(args.mask_deg)
     if args.carrier_hz is not None:
         positive(args.carrier_hz, "--carrier-hz")
+    if duration / step > 5_000_000:
+        raise InputError(f"--duration-s/--step-s: {duration / step + 1:.3g} epochs is too many (at most 5,000,000)")
     n_epochs = int(np.floor(duration / step + 1e-9)) + 1
-    if n_epochs > 5_000_000:
-        raise InputError(f"--duration-s/--step-s: {n_epochs} epochs is too many (at most 5,000,000)")
 
     families = _families(args.constellation)
     if len(families) > 1 and args.carrier_hz is not None:
