@@ -180,13 +180,10 @@ def open_sigmf(meta_path, *, verify=True):
         with warnings.catch_warnings():  # sigmf warns about odd sizes; we raise below
             warnings.simplefilter("ignore")
             meta = sigmffile.fromfile(str(meta_path), skip_checksum=True)
-    except (SigMFError, json.JSONDecodeError, KeyError, ValueError, TypeError, AttributeError) as exc:
+    except (SigMFError, json.JSONDecodeError, KeyError, ValueError, TypeError, AttributeError, IndexError) as exc:
         raise InputError(f"{meta_path}: not valid SigMF metadata ({exc})".replace("\n", " ")) from None
     info = meta.get_global_info()
-    datatype = info.get("core:datatype")
-    if datatype not in DATATYPES:
-        raise InputError(f"{meta_path}: core:datatype {datatype!r} is not supported; expected one of "
-                         f"{', '.join(DATATYPES)}")
+    datatype = info["core:datatype"]
     if info.get("core:num_channels", 1) != 1:
         raise InputError(f"{meta_path}: core:num_channels must be 1")
     fs = _check_rate(info.get("core:sample_rate"), f"{meta_path}: core:sample_rate")
@@ -258,6 +255,10 @@ def _check_structure(meta_path):
         if not isinstance(items, list) or not all(isinstance(c, dict) for c in items):
             raise InputError(f"{meta_path}: '{key}' must be a list of objects")
     _check_types(doc["global"], _GLOBAL_TYPES, f"{meta_path}: global")
+    datatype = doc["global"].get("core:datatype")
+    if datatype not in DATATYPES:  # before the sigmf package, which fails on odd names
+        raise InputError(f"{meta_path}: core:datatype {datatype!r} is not supported; expected one of "
+                         f"{', '.join(DATATYPES)}")
     n_tones = doc["global"].get("leosop:n_tones", 1)
     spacing = doc["global"].get("leosop:tone_spacing_hz", 1.0)
     if n_tones % 2 != 1:
