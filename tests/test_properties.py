@@ -22,7 +22,8 @@ from leosop.rotations import (dcm_to_euler, dcm_to_quat, euler_to_dcm, quat_mult
 from leosop.signal.iq import open_sigmf, write_sigmf
 from leosop.timebase import format_utc, parse_utc
 
-FAST = settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FAST = settings(max_examples=40, deadline=None, database=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture])
 ONE_MM = 1e-3  # [m] round trips of ECEF positions: double precision at 1e7 m is ~2e-9 m
 F_KU_HZ = 11.325e9  # Starlink downlink carrier
 
