@@ -11,10 +11,12 @@ so a new figure shows up in the gallery the next time this runs.
 
 The PNG files are not committed (``docs/gallery/.gitignore``): they are
 products of the plotting code and would go stale with every change of it;
-this script is their source and takes a few minutes on a laptop.
+this script is their source and takes a few minutes.
 """
 
 import argparse
+import json
+import re
 import shlex
 import shutil
 import subprocess
@@ -25,6 +27,16 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDING = str(files("leosop") / "data" / "starlink_xian_snapshots.sigmf-meta")
+#: A Monte Carlo study small enough for the gallery (the bundled table5/table6 specs
+#: fly 160 full flights); the script writes it as ``small.json`` and shows it on the page.
+SMALL_SPEC = {
+    "name": "small",
+    "description": "Starlink/INS error vs EKF correction period, both couplings, 120 s of xian-baoji, 3 seeds",
+    "scenario": {"name": "xian-baoji-120s", "duration_s": 120},
+    "fixed": {"level": "measurement"},
+    "parameters": {"correction_period_s": [1, 10, 30], "coupling": ["loose", "tight"]},
+    "n_seeds": 3,
+}
 
 #: name -> (arguments after ``leosop``, what the run shows, {figure file: caption}).
 RUNS = {
@@ -70,6 +82,15 @@ RUNS = {
             "gdop_maps.png": "Doppler GDOP at the same instants.",
         },
     ),
+    "montecarlo": (
+        ["study", "montecarlo", "small.json", "--scheduler", "serial"],
+        "A Monte Carlo study of the fusion flight (`small.json` below: a grid of parameters x seeds).",
+        {
+            "error_vs_correction_period_s.png": "Mean fused error over the seeds against the correction period, "
+                                                "one line per coupling, 10-90 % band.",
+            "error_vs_coupling.png": "The same against the coupling, one line per correction period.",
+        },
+    ),
     "align-fig2": (
         ["reproduce", "align-fig2", "--scheduler", "serial"],
         "[Qu 2024]'s Fig. 1-2: coarse-alignment errors against pitch, Monte Carlo.",
@@ -82,12 +103,14 @@ RUNS = {
 
 
 def _run(name, argv, out):
-    """Run one command; its printed summary (runtimes dropped: they would change the page every run)."""
+    """Run one command in ``out``'s parent; its printed summary without runtimes (they would change the page
+    every run)."""
     cmd = [sys.executable, "-m", "leosop", *argv, "--out", str(out)]
     proc = subprocess.run(cmd, cwd=out.parent, capture_output=True, text=True)
     if proc.returncode != 0:
         raise SystemExit(f"make_gallery: {name}: exit {proc.returncode}: {proc.stderr.strip()}")
-    return "\n".join(line for line in proc.stdout.strip().splitlines() if "runtime" not in line)
+    printed = proc.stdout.strip().replace(str(out), f"out/{name}")
+    return "\n".join(line for line in printed.splitlines() if not re.search(r"runtime|\d s on this process", line))
 
 
 def _shown(argv):
@@ -108,13 +131,17 @@ def main(argv=None):
              "defaults, its printed summary and the figures it wrote. The PNG files are not in the repository; "
              "run the script to draw them into `docs/gallery/`.", ""]
     with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "small.json").write_text(json.dumps(SMALL_SPEC, indent=2) + "\n")
         for name in args.only or RUNS:
             run_argv, what, captions = RUNS[name]
             out = Path(tmp) / name
             print(f"make_gallery: {_shown(run_argv)}", file=sys.stderr)
             printed = _run(name, run_argv, out)
-            lines += [f"## {name}", "", what, "", "```sh", f"{_shown(run_argv)} --out out/{name}", "```", "",
-                      "Printed:", "", "```text", printed, "```", ""]
+            lines += [f"## {name}", "", what, ""]
+            if "small.json" in run_argv:
+                lines += ["```json", json.dumps(SMALL_SPEC, indent=2), "```", ""]
+            lines += ["```sh", f"{_shown(run_argv)} --out out/{name}", "```", "", "Printed:", "", "```text", printed,
+                      "```", ""]
             written = {p.name: p for p in out.glob("*.png")}
             for png in [written[n] for n in captions if n in written] + sorted(
                     p for n, p in written.items() if n not in captions):
