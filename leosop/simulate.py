@@ -341,7 +341,8 @@ def _family_models(leo):
     return {
         "carrier_hz": np.array([CARRIERS[f].default_hz for f in fams]),
         "clock_scale": scale,
-        "rx_offset_hz": np.array([leo.rx_freq_offsets_hz.get(f, leo.rx_freq_offset_hz * r) for f, r in zip(fams, scale)]),
+        "rx_offset_hz": np.array([leo.rx_freq_offsets_hz.get(f, leo.rx_freq_offset_hz * r)
+                                  for f, r in zip(fams, scale)]),
         "sigma_hz": tone_sigma_hz(cn0, [FAMILY_MODELS[f].integration_s for f in fams]),
         "starlink": fams.index("starlink") if "starlink" in fams else -1,
     }
@@ -460,7 +461,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     doppler_meas = np.full(doppler_geom.shape, np.nan)
     comb = (fam == models["starlink"]) & (level == "signal")
     if comb.any():
-        # Starlink at signal level: prediction from the INS alone and the known orbits (range-rate part of the Jacobian).
+        # Starlink at signal level: prediction from the INS alone and the known
+        # orbits (range-rate part of the Jacobian).
         predicted = np.einsum("mi,mi->m", H_known[comb, 3:6], ins_vel_ecef[ep[comb]] - vis.vel_sv_ecef_mps[comb])
         rate = _doppler_rate_hz_per_s(vis.pos_sv_ecef_m[comb], vis.vel_sv_ecef_mps[comb], pos_rx[ep[comb]],
                                       vel_rx[ep[comb]], carrier[comb])
@@ -472,11 +474,12 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
 
     # 4. Snapshot fixes from what the receiver knows: orbits with their errors; 6 + k states for k families seen.
     offset_max = offset_max_sat[sat]
-    sigma_hz = np.sqrt(sigma_est**2 + offset_max**2 / 12.0 + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
+    sigma_hz = np.sqrt(sigma_est**2 + offset_max**2 / 12.0
+                       + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
     x0 = np.concatenate([ins_pos, ins_vel_ecef, np.zeros((n_ep, 1))], axis=-1)
+    clock_group = None if groups is None else np.nan_to_num(vis.padded(fam.astype(float))).astype(int)
     fixes = solve_snapshots(vis.padded(doppler_meas), vis.padded(sigma_hz), vis.padded(pos_sv_known),
-                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(carrier), x0=x0,
-                            clock_group=None if groups is None else np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
+                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(carrier), x0=x0, clock_group=clock_group)
     good = fixes.status == FixStatus.OK
     fix_pos = np.where(good[:, None], fixes.pos_ecef_m, np.nan)
     fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
@@ -490,9 +493,9 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, cov_white), settings,
                           fix_errors=fix_errors, progress=progress)
     else:
-        priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2, sat_offset_sigma_hz=offset_max_sat / np.sqrt(12),
-                                     orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model,
-                                     n_clocks=n_families)
+        priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,
+                                     sat_offset_sigma_hz=offset_max_sat / np.sqrt(12), orbit_sigma_m=orbit_error_m,
+                                     orbit_model=orbit_error_model, n_clocks=n_families)
         meas = tight.DopplerMeasurements(ep, sat, doppler_meas, sigma_est, pos_sv_known, vis.vel_sv_ecef_mps,
                                          carrier_hz=carrier, clock_index=fam)
         fused = tight.run(state0, dtheta, dvel, truth.dt_s, meas, priors, settings, n_ep, progress=progress)
@@ -504,7 +507,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         truth_lon_rad=truth1.lon_rad, ins_pos_ecef_m=ins_pos, ins_vel_enu_mps=ins.vel_enu_mps,
         fix_pos_ecef_m=fix_pos, fix_vel_enu_mps=fix_vel_enu, fix_cov=fix_cov, fused=fused, n_visible=n_visible,
         gdop=gdop, tle_age_days=tle_age_days, runtime_s=time.perf_counter() - tic,
-        n_visible_by_family=vis.n_visible_by_group(family_sat) if len(family_sat) else np.zeros((n_ep, n_families), int))
+        n_visible_by_family=vis.n_visible_by_group(family_sat))
 
 
 def metrics(result):

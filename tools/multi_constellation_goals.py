@@ -88,8 +88,9 @@ def main():
             for c in COUPLINGS:
                 w, o = runs(name, "all", c), runs(name, "all", c, outage=False)
                 ratio = _mean(w, "window_pos") / _mean(o, "window_pos")
-                print(f"  outage window, {c:5s}: {_mean(w, 'window_pos'):7.2f} m (end {_mean(w, 'window_end_pos'):.2f} m)"
-                      f"  open sky {_mean(o, 'window_pos'):.2f} m  ratio {ratio:.2f} (goal tight <= 5)")
+                print(f"  outage window, {c:5s}: {_mean(w, 'window_pos'):7.2f} m (end "
+                      f"{_mean(w, 'window_end_pos'):.2f} m)  open sky {_mean(o, 'window_pos'):.2f} m  "
+                      f"ratio {ratio:.2f} (goal tight <= 5)")
 
 
 if __name__ == "__main__":
