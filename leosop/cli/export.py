@@ -48,8 +48,8 @@ def register(subparsers):
                     help="GeoJSON/KML of trajectories, fixes and passes; NMEA GGA/RMC of a fused solution",
                     description="Convert a solution.csv (simulate), fixes.csv (position, replay) or passes.csv "
                                 "(visibility) into GeoJSON and KML for map viewers, and a solution into NMEA "
-                                "GGA/RMC sentences; the kind is told by the CSV header. Writes STEM.geojson, STEM.kml (and "
-                                "STEM.nmea) into --out DIR, default the CSV's folder, all or none.")
+                                "GGA/RMC sentences; the kind is told by the CSV header. Writes STEM.geojson, "
+                                "STEM.kml (and STEM.nmea) into --out DIR, default the CSV's folder, all or none.")
     p.add_argument("csv", metavar="FILE.csv", help="solution.csv, fixes.csv or passes.csv (kind told by the header)")
     p.add_argument("--to", nargs="+", choices=FORMATS, metavar="FORMAT",
                    help="geojson, kml, nmea (default: geojson and kml, plus nmea for a solution)")

@@ -444,7 +444,8 @@ def align_increments(dtheta_b_rad, dvel_b_mps, dt_s, lat_rad, *, method="2", g_m
     dtheta = as_vec3(dtheta_b_rad, "dtheta_b_rad")
     dvel = as_vec3(dvel_b_mps, "dvel_b_mps")
     if dtheta.ndim != 2 or dtheta.shape != dvel.shape or dtheta.shape[0] < 1:
-        raise InputError(f"IMU increments must be two (n, 3) arrays of equal length, got {dtheta.shape} and {dvel.shape}")
+        raise InputError(f"IMU increments must be two (n, 3) arrays of equal length, got {dtheta.shape} and "
+                         f"{dvel.shape}")
     if not (dt_s > 0):
         raise InputError(f"sampling interval {dt_s} s must be > 0")
     duration_s = dtheta.shape[0] * dt_s
