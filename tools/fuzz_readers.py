@@ -3,10 +3,10 @@
 Each target writes the fuzzer's bytes to a file and calls one reader. The
 contract (DESIGN 4.1): a reader either returns or raises
 :class:`~leosop.errors.InputError` with a message (the CLI prints it as one
-line and exits 2). Anything else
-(another exception, a multi-line message) is a finding: the input is saved
-under ``tests/fuzz_corpus/<target>/`` (one per distinct exception type and
-place) and fuzzing goes on; ``tests/test_fuzz_corpus.py`` replays them.
+line and exits 2). Any other exception is a finding: the input is saved under
+``tests/fuzz_corpus/<target>/`` (one per distinct exception type and place
+not already in the corpus) and fuzzing goes on; ``tests/test_fuzz_corpus.py``
+replays them.
 
 Usage::
 
@@ -19,7 +19,9 @@ runs"); each new finding is printed as a ``FINDING`` line with its traceback.
 """
 
 import hashlib
+import importlib
 import os
+import shutil
 import sys
 import tempfile
 import traceback
@@ -223,20 +225,23 @@ def main():
     target, fuzzer_args = sys.argv[1], [sys.argv[0], *sys.argv[2:]]
     import atheris
 
-    import importlib
-
     with atheris.instrument_imports(include=["leosop", "sigmf"]):
         for module in ("leosop.gnss.products", "leosop.gnss.rinex", "leosop.ins.imu_io", "leosop.orbits",
                        "leosop.positioning.measurements", "leosop.scenarios", "leosop.signal.iq", "sigmf.sigmffile"):
             importlib.import_module(module)
     out = CORPUS / target
-    seen = set()
-    tmp = tempfile.mkdtemp(prefix=f"fuzz_{target}_", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
-    seed_dir = Path(tempfile.mkdtemp(prefix="seeds_", dir=tmp))
+    # One scratch directory per target, emptied at start (libFuzzer exits without Python's clean-up).
+    tmp = Path("/dev/shm" if os.path.isdir("/dev/shm") else tempfile.gettempdir()) / f"leosop_fuzz_{target}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    seed_dir = tmp / "seeds"
+    seed_dir.mkdir(parents=True)
     for k, seed in enumerate(s for s in TARGETS[target][1]() if s):
         (seed_dir / f"seed{k}").write_bytes(seed)
-    work = Path(tmp) / "work"
+    work = tmp / "work"
     work.mkdir()
+    # Findings already in the corpus are not saved again.
+    seen = {_signature(tb) for tb in (check_one(target, p.read_bytes(), work) for p in sorted(out.glob("crash-*")))
+            if tb is not None}
 
     def one_input(data):
         tb = check_one(target, data, work)
@@ -248,8 +253,8 @@ def main():
                 (out / f"crash-{hashlib.sha1(data).hexdigest()[:16]}").write_bytes(data)
                 print(f"FINDING {target}: {sig}\n{tb}", file=sys.stderr, flush=True)
 
-    atheris.Setup([*fuzzer_args, str(Path(tmp) / "corpus"), str(seed_dir)], one_input)
-    (Path(tmp) / "corpus").mkdir(exist_ok=True)
+    (tmp / "corpus").mkdir()
+    atheris.Setup([*fuzzer_args, str(tmp / "corpus"), str(seed_dir)], one_input)
     atheris.Fuzz()
 
 
