@@ -221,3 +221,25 @@ def test_imu_sf_csv_round_trip(tmp_path, seed, n, rate_hz):
     assert np.allclose(log.dt_s, np.diff(t), rtol=1e-12, atol=1e-9)
     assert np.allclose(log.gyro_rad_per_s, gyro[1:], rtol=1e-6, atol=1e-9)
     assert np.allclose(log.accel_mps2 / 9.80665, acc_g[1:], rtol=1e-6, atol=1e-9)
+
+
+@FAST
+@given(st.floats(-90, 90), st.floats(-180, 360), st.floats(-1.2e4, 1e8))
+def test_site_option_round_trip(lat, lon, alt):
+    from leosop.cli.options import parse_site
+
+    assert parse_site(f"{lat!r},{lon!r},{alt!r}") == (lat, lon, alt)
+
+
+@FAST
+@given(st.floats(allow_nan=True, allow_infinity=True))
+def test_float_options_take_every_finite_number_and_nothing_else(value):
+    import argparse
+
+    from leosop.cli.options import finite_float
+
+    if np.isfinite(value):
+        assert finite_float(repr(value)) == value
+    else:
+        with pytest.raises(argparse.ArgumentTypeError, match="is not a finite number"):
+            finite_float(repr(value))
