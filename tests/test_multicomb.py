@@ -54,14 +54,14 @@ def test_frequency_domain_decimation_is_integrate_and_dump():
     # rounding of the input. A channel eps off the bin grid is rotated at the
     # segment centres: first-order error 2 pi eps (L / fs) times the tone's
     # offset times L / fs, here <= 2 pi 10 Hz 0.25 ms * 1 kHz 0.25 ms = 4e-3.
-    from leosop.signal.multicomb import _Grid
+    from leosop.signal.multicomb import _ALIAS_BANDS, _Grid
 
     n, fs = 125_000, 2.5e6
     df = fs / n
     rng = np.random.default_rng(3)
     t = np.arange(n) / fs
     n_seg = _Grid(np.zeros(n, dtype=np.complex64), fs, 500.0).n_seg
-    for f_c, reach, tol in ((200 * df, 4 * n_seg, 1e-5), (-55_551.2, 50, 4e-3)):
+    for f_c, reach, tol in ((200 * df, _ALIAS_BANDS * n_seg, 1e-5), (-55_551.2, 50, 4e-3)):
         x = np.zeros(n, dtype=complex)
         for k in rng.integers(-reach, reach, 5):
             x += rng.normal() * np.exp(2j * np.pi * ((np.round(f_c / df) + k) * df * t + rng.uniform()))
@@ -104,12 +104,15 @@ def test_tracking_recovers_the_full_search():
     pred_rate = full.doppler_rate_hz_per_s + rng.uniform(-20.0, 20.0, full.n_found)
     track = find_combs(x, FS, predicted_hz=pred, predicted_rate_hz_per_s=pred_rate, search=False)
     assert list(track.predicted_index) == list(range(full.n_found))
-    # Both end at the joint ML after the refinement passes: far below sigma.
-    assert np.all(np.abs(track.doppler_hz - full.doppler_hz) < 0.05 * full.sigma_hz)
+    # Both approach the joint ML, from different decimations: tracking keeps a
+    # band just wide enough for the predicted chirp (~100 segments, the search
+    # ~500), so the two see different shares of the noise. Largest difference
+    # over 7 combs in 9 such blocks: 0.16 sigma.
+    assert np.all(np.abs(track.doppler_hz - full.doppler_hz) < 0.3 * full.sigma_hz)
     # A prediction where no comb is, is dropped; the search then finds nothing new.
     empty = find_combs(x, FS, predicted_hz=np.r_[pred, 280e3], predicted_rate_hz_per_s=np.r_[pred_rate, 0.0])
     assert empty.n_found == full.n_found
-    assert np.all(np.abs(empty.doppler_hz - full.doppler_hz) < 0.05 * full.sigma_hz)
+    assert np.all(np.abs(empty.doppler_hz - full.doppler_hz) < 0.3 * full.sigma_hz)
 
 
 def test_batched_tracking_equals_one_at_a_time():

@@ -20,6 +20,7 @@ Doppler also come from the PSS of the first capture
 """
 
 import sys
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -211,6 +212,9 @@ class ReplayResult:
     pss : (PssAcquisition, datetime64) or None
         Full-channel OFDM recordings: the PSS acquisition on the first
         capture and that capture's start time.
+    cpu_s : dict
+        Processor time of each stage [s]: ``blocks`` (reading, comb search
+        and tracking), ``identify``, ``fix``.
     """
 
     tracks: list
@@ -222,6 +226,7 @@ class ReplayResult:
     spectrum_f_hz: np.ndarray
     spectrum: np.ndarray
     pss: object = None
+    cpu_s: dict = None
 
 
 def track_measurements(tracks, carrier_hz):
@@ -293,6 +298,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         max_gap_s = 5.0 * max(spacing, block_s)
     tracker = Tracker(max_gap_s=max_gap_s, max_gap_tentative_s=max(2.5, 2.5 * max_gap_s / 5.0))
     every = max(1, int(np.ceil(len(blocks) / SPECTRUM_COLUMNS)))
+    t0 = time.process_time()
     spec_t, spec = [], []
     block_len = {}
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
@@ -301,11 +307,14 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
         contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
         pred = tracker.predictions(b.t_s) if contiguous else None
-        if pred is not None and k % SEARCH_EVERY:
-            found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                               search=False, gate_hz=TRACK_GATE_HZ, n_refine=TRACK_REFINE)
-        else:
+        if pred is None:
             found = find_combs(iq, fs, comb=comb)
+        else:
+            # Every SEARCH_EVERY-th block also searches the spectrum for new
+            # combs, with the tracked ones fitted first and removed.
+            search = k % SEARCH_EVERY == 0
+            found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
+                               search=search, gate_hz=TRACK_GATE_HZ, n_refine=2 if search else TRACK_REFINE)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
         shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz
@@ -315,12 +324,14 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         if k % every == 0:
             spec_t.append(b.t_s)
             spec.append(_spectrum(iq))
+    cpu_s = {"blocks": time.process_time() - t0}
     tracks = [remove_outliers(tr) for tr in join_fragments(tracker.finish(), max(JOIN_GAP_S, 2.0 * max_gap_s))]
     for tr in tracks:
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,
                             carrier_hz=comb.carrier_hz) if tracks else None
     meas = track_measurements(tracks, comb.carrier_hz)
+    cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
     position = None
     if meas is not None:
         start = getattr(ident, "pos_ecef_m", None)
@@ -332,6 +343,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
                                               init_pos_ecef_m=start, clock="common")
         else:
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
+    cpu_s["fix"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
-                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec))
+                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s)

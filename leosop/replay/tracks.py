@@ -96,6 +96,7 @@ class Tracker:
         self.max_gap_tentative_s = float(max_gap_tentative_s)
         self._active = []  # lists of rows (t_s, time_utc, f, rate, cn0, sigma)
         self._done = []
+        self._memo = (None, {})  # the last predictions: (t_s, {id(rows): prediction})
 
     def _predict(self, rows, t_s):
         """Predicted Doppler at ``t_s`` and the gate around it.
@@ -137,7 +138,8 @@ class Tracker:
         live = [rows for rows in self._active if rows[-1][0] == t_last]
         if any(len(rows) < 2 for rows in live):
             return None
-        f, r, _ = np.array([self._predict(rows, t_s) for rows in live]).T
+        self._memo = (t_s, {id(rows): self._predict(rows, t_s) for rows in self._active})
+        f, r, _ = np.array([self._memo[1][id(rows)] for rows in live]).T
         return f, r
 
     def update(self, t_s, time_utc, det, block_s=None):
@@ -159,7 +161,8 @@ class Tracker:
         self._active = keep
         claimed = np.zeros(len(det), bool)
         if self._active and len(det):
-            pred, _, gate = np.array([self._predict(rows, t_s) for rows in self._active]).T
+            memo = self._memo[1] if self._memo[0] == t_s else {}
+            pred, _, gate = np.array([memo.get(id(rows)) or self._predict(rows, t_s) for rows in self._active]).T
             cost = np.abs(det.doppler_hz[None, :] - pred[:, None]) / gate[:, None]
             big = 1e6
             i, j = linear_sum_assignment(np.where(cost <= 1.0, cost, big))

@@ -9,9 +9,9 @@ multi-satellite Starlink receivers of Humphreys 2023 and Kozhaya 2023]:
 1. One FFT of the block. The comb detector (:func:`~.doppler.coarse_fft`,
    false-alarm probability ``pfa`` per search) runs on the spectrum with every
    comb found so far subtracted.
-2. A detected comb is decimated from the raw samples exactly as ``fast`` does
-   (integrate-and-dump into B segments per tone, mixed at the coarse
-   frequency), the contributions of the combs already found are removed from
+2. A detected comb is decimated as ``fast`` does (integrate-and-dump into B
+   segments per tone, mixed at the coarse frequency), here from the block's
+   FFT (:class:`_Grid`), the contributions of the combs already found are removed from
    its (B, tones) matrix, and rate search, frequency search and Newton on the
    joint ML cost follow (``fast``'s own helpers). The coherent tone powers
    at two more tone positions either side then fix the comb position (always:
@@ -43,8 +43,9 @@ Contributions of one comb to another's decimated tones are closed forms: a
 tone at local frequency nu in segment m, seen by a channel mixed at f_c,
 gives its value at the segment centre times the Dirichlet kernel
 ``sin(pi (nu - f_c) L / fs) / sin(pi (nu - f_c) / fs)`` and the channel's
-mixing phase. Only tones within ``4 fs_dec`` of a channel are counted (the
-integrate-and-dump sinc puts what aliases into the band near its nulls).
+mixing phase. Only tones within ``_LEAK_BANDS`` decimated bands of a channel
+are counted, the reach of the frequency-domain decimation (:class:`_Grid`):
+farther tones reach the channel only through their own spectral sidelobes.
 
 Ambiguities
 -----------
@@ -60,15 +61,13 @@ Not handled: ``delta`` of ~2-3/T with similar rates gives biased estimates
 (~6 sigma seen) or a third, spurious comb; ``m = +-1`` with ``delta`` below
 ~1/T gives spurious combs (the pair looks like one ten-tone comb).
 
-Cost (tools/bench_multicomb.py, CPU time, one core, 7 combs, 0.1 s at 2.5 MS/s):
-see the commit log for the latest numbers; tracking ~12 ms per block (~8x real
-time), of which the cross-comb leakage ~3.5 ms (two passes; a Dirichlet kernel
-per pair of a tone and a channel within 4 decimated bands, ~460 pairs, at
-every segment), the decimation product ~2.6 ms, Newton ~1.8 ms, and the
-amplitude fits and per-comb bookkeeping the rest. Transcendentals are single
-precision (1e-7 rad). 20x needs the block's FFT to feed the channels (bins
-around each tone, a short inverse FFT) and a tapered band that limits the
-leakage reach; not done.
+Cost (tools/bench_multicomb.py; CPU time, one core, 7 combs, 0.1 s at 2.5 MS/s;
+numbers in the commit log): one FFT of the block feeds every channel; in
+tracking mode the decimated band covers only the gate and the predicted chirp
+(B ~200 segments instead of ~500, and the leakage cost goes with B^2), the
+cross-comb leakage is a Dirichlet kernel per pair of a tone and a channel
+within reach at every segment, and Newton, amplitude fits and bookkeeping the
+rest. Transcendentals are single precision (1e-7 rad).
 
 Output order is detection order (strongest first in the full search;
 predicted combs first, in the order given, in tracking mode).
@@ -91,8 +90,14 @@ __all__ = ["Combs", "find_combs"]
 
 #: Tone positions decimated beyond each end of a comb for the coherent position check.
 _EXTRA = 2
+#: Aliases either side of a channel kept by the frequency-domain decimation (whole decimated bands;
+#: half a band more is kept, so the reach is ``_LEAK_BANDS``): what is decimated is what is modelled.
+#: Two bands: RMSE/CRLB as with four (0.96 on 7-comb blocks), half the work.
+_ALIAS_BANDS = 2
 #: Channels count another comb's tone within this many decimated bandwidths.
-_LEAK_BANDS = 4.0
+_LEAK_BANDS = _ALIAS_BANDS + 0.5
+#: Decimated rate over the band a tracked tone can cover (the search uses 8).
+_TRACK_OVERSAMPLE = 4.0
 
 
 @dataclass(frozen=True)
@@ -123,11 +128,6 @@ class Combs:
     @property
     def n_found(self):
         return self.doppler_hz.size
-
-
-#: Aliases either side of a channel kept by the frequency-domain decimation (whole decimated bands):
-#: the same reach as the leakage model, so what is decimated is what is modelled.
-_ALIAS_BANDS = 4
 
 
 @lru_cache(maxsize=16)
@@ -164,10 +164,10 @@ class _Grid:
     mixer (~10x less work with 7 combs).
     """
 
-    def __init__(self, iq, fs, bw_hz):
+    def __init__(self, iq, fs, bw_hz, oversample=8.0):
         n = iq.shape[-1]
         self.n, self.fs = n, fs
-        self.n_seg, self.seg = _decimation(n, int(np.ceil(8.0 * bw_hz * n / fs)))
+        self.n_seg, self.seg = _decimation(n, int(np.ceil(oversample * bw_hz * n / fs)))
         self.t_l, self.t_m, self.tau, self.tpow = _segments(n, fs, self.n_seg, self.seg)
         self.counts = np.minimum(self.seg, n - np.arange(self.n_seg) * self.seg)
         self.t_abs = self.tau + 0.5 * (n - 1) / fs  # segment centres from the first sample
@@ -549,6 +549,29 @@ def _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s):
     np.subtract.at(spectrum, b % n, (weight * dft[np.arange(comb.n_tones)[:, None], b % n_seg_s]).astype(spectrum.dtype))
 
 
+def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa):
+    """True when the block's spectrum, the combs ``found`` (Combs) removed, holds another comb.
+
+    A detection within the coarse error (modulo the spacing) of a found comb
+    is taken as its residue (the subtraction leaves a little of a strong,
+    fast-chirping comb), not as another comb: a new comb hidden there is
+    found by a later search, when the two have drifted apart.
+    """
+    n = iq.shape[-1]
+    spectrum = fft(iq)
+    if not np.isfinite(spectrum[0]):
+        raise InputError("IQ samples contain NaN or inf")
+    n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * n / fs)))
+    for d, r, a in zip(found.doppler_hz, found.doppler_rate_hz_per_s, found.amplitudes):
+        _subtract_spectrum(spectrum, comb, _Comb(d, None, doppler_hz=d, rate=r, amp=a), n, fs, n_seg_s)
+    coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa)
+    if not coarse.detected:
+        return False
+    dd = coarse.doppler_hz - found.doppler_hz
+    dd -= comb.tone_spacing_hz * np.round(dd / comb.tone_spacing_hz)
+    return not np.any(np.abs(dd) <= 0.5 * smear + 2.0 * fs / n)
+
+
 #: Residues of found combs removed in one search before it gives up.
 _MAX_RESIDUES = 3
 
@@ -630,12 +653,23 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     smear = max_rate_hz_per_s * dur
     error_hz = 0.5 * smear + 2.0 * df
     gate = error_hz if gate_hz is None else float(gate_hz)
+    if search and pred_rate is not None and pred.size and batch:
+        # The tracked combs first, in their narrow bands; the full search (wide
+        # bands, every comb refitted) only when the spectrum without them holds
+        # another comb, which is rare: a search block then costs little more
+        # than a tracking one.
+        kw = dict(comb=comb, max_combs=max_combs, pfa=pfa, max_doppler_hz=max_doppler_hz,
+                  max_rate_hz_per_s=max_rate_hz_per_s, gate_hz=gate_hz, n_refine=n_refine)
+        tracked = find_combs(iq, fs, predicted_hz=pred, predicted_rate_hz_per_s=pred_rate, search=False, **kw)
+        if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa):
+            return tracked
     tracking = pred_rate is not None and pred.size > 0 and not search
     if tracking:
         # Every comb is near its prediction, chirping at its predicted rate: the
         # channels need only pass the gate and that chirp, and the comb position
         # (checked when the comb was found) needs no check.
-        grid = _Grid(iq, fs, gate + 0.5 * float(np.max(np.abs(pred_rate[:max_combs]))) * dur + 2.0 * df)
+        grid = _Grid(iq, fs, gate + 0.5 * float(np.max(np.abs(pred_rate[:max_combs]))) * dur + 2.0 * df,
+                     oversample=_TRACK_OVERSAMPLE)
     else:
         grid = _Grid(iq, fs, max(error_hz, gate) + 0.5 * max_rate_hz_per_s * dur)
     half = comb.n_tones // 2
