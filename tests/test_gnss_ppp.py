@@ -184,3 +184,6 @@ def test_cli_json_contract(tmp_path, capsys, monkeypatch):
     # One hour of float PPP: decimetres (0.3 m is three times the 4 h bound above).
     assert np.linalg.norm(np.array([pos["x_m"], pos["y_m"], pos["z_m"]]) - REF_ITRF_ECEF_M) < 0.3
     assert (tmp_path / "out" / "ppp.json").exists() and (tmp_path / "out" / "ppp.csv").exists()
+    # The header-frame comparison: the metre-level plate motion is gone, decimetres of 1 h float PPP remain.
+    assert np.linalg.norm(doc["summary"]["minus_header_approx_m"]) > 0.5
+    assert np.linalg.norm(doc["summary"]["minus_header_if_etrf2000_m"]) < 0.3

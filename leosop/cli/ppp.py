@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import ecef_to_geodetic
+from ..gnss.etrf import decimal_year, itrf2014_to_etrf2000
 from ..gnss.ppp import PppOptions, gps_to_utc, run_ppp
 from ..gnss.products import read_clk, read_sp3
 from ..gnss.rinex import check_nav, read_obs
@@ -90,7 +91,11 @@ def run(args):
                                                       "sigma_enu_m")}
         hdr = obs.approx_pos_ecef_m
         if np.any(hdr):
-            summary["minus_header_approx_m"] = (np.array([last["x_m"], last["y_m"], last["z_m"]]) - hdr).tolist()
+            pos = np.array([last["x_m"], last["y_m"], last["z_m"]])
+            summary["minus_header_approx_m"] = (pos - hdr).tolist()
+            # European agencies write the ETRS89 (ETRF2000) coordinate there; ours is ITRF2014 (the products').
+            summary["minus_header_if_etrf2000_m"] = (
+                itrf2014_to_etrf2000(pos, decimal_year(obs.time_gps[len(obs.time_gps) // 2])) - hdr).tolist()
     doc = {"solutions": sols, "summary": summary}
     if args.out:
         with atomic_outputs(args.out) as stage:
@@ -113,4 +118,7 @@ def summary(doc):
         if "minus_header_approx_m" in s:
             d = np.array(s["minus_header_approx_m"])
             lines.append(f"minus header APPROX POSITION: {np.round(d, 4).tolist()} m (|d| {np.linalg.norm(d):.3f} m)")
+            e = np.array(s["minus_header_if_etrf2000_m"])
+            lines.append(f"  same in ETRF2000, if the header is an ETRS89 coordinate: {np.round(e, 4).tolist()} m "
+                         f"(|d| {np.linalg.norm(e):.3f} m)")
     return "\n".join(lines)
