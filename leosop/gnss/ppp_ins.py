@@ -230,8 +230,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         if js.size < 2:
             amb.drop(P, x, np.flatnonzero(amb.on))
             amb.ref = -1
-            mw_n[:] = 0
-            mw_sum[:] = 0.0
+            mw_sum[:], mw_sq[:], mw_n[:] = 0.0, 0.0, 0
             _record(out, k, ins, P, r_ins, C, J)
             continue
         clk_m, drift_mps = satellite_clock(orbits, clocks, gnss.orb_idx[js], gnss.clk_idx[js],
@@ -265,45 +264,16 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         stale = others[nw[others] | ~amb.on[jo]]
         amb.reset(P, x, js[stale], (lc - pc)[stale] - (lc - pc)[iref], o.amb_sigma_m)
         # SD measurements: code, phase, range rate; rows per kind for the satellites in ``others``.
-        sin_el = np.sin(elev)
-        e_sd = los[others] - los[iref]
-        mw_sd = m_wet[others] - m_wet[iref]
+        geo = _Geometry(rho, rate, los, m_wet, np.sin(elev), iref, others, jo)
         use = [np.ones(others.size, bool) for _ in range(3)]
         for _ in range(6):
-            rows_H, rows_y, blocks = [], [], []
-            for kind, (obs, pred, sig) in enumerate((
-                    (pc, rho + m_wet * x[_ZWD], o.sigma_code_m),
-                    (lc, rho + m_wet * x[_ZWD], o.sigma_phase_m),
-                    (rr, rate, o.sigma_rate_mps))):
-                u = use[kind]
-                H = np.zeros((u.sum(), n_x))
-                y = (obs[others] - obs[iref]) - (pred[others] - pred[iref])
-                if kind < 2:
-                    H[:, DPOS] = e_sd[u] @ C @ J
-                    H[:, _ZWD] = mw_sd[u]
-                else:
-                    H[:, DV] = e_sd[u] @ C
-                if kind == 1:
-                    H[np.arange(u.sum()), _A0 + jo[u]] = 1.0
-                    y = y - x[_A0 + jo]
-                var = (sig / sin_el) ** 2
-                rows_H.append(H)
-                rows_y.append(y[u])
-                blocks.append(_sd_cov(var[others][u], var[iref]))
-            H = np.vstack(rows_H)
-            y = np.concatenate(rows_y)
-            R = np.zeros((y.size, y.size))
-            off = 0
-            for b in blocks:
-                R[off:off + len(b), off:off + len(b)] = b
-                off += len(b)
+            H, y, R, sizes = _sd_measurements(geo, (pc, lc, rr), x, C, J, use, o)
             S = H @ P @ H.T + R
             w = np.abs(y) / np.sqrt(np.diag(S))
             worst = int(np.argmax(w)) if w.size else 0
             if not w.size or w[worst] <= o.k_outlier:
                 break
             out.n_outliers += 1
-            sizes = np.cumsum([0] + [u.sum() for u in use])
             kind = int(np.searchsorted(sizes, worst, side="right") - 1)
             idx = np.flatnonzero(use[kind])[worst - sizes[kind]]
             use[kind][idx] = False
@@ -323,6 +293,73 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         if o.ar:
             _fix(out, k, ins, P, x, jo, amb.ref, (mw_sum, mw_sq, mw_n), gnss.wsb_cyc, o)
     return out
+
+
+@dataclass
+class _Geometry:
+    """One epoch's predicted ranges, rates, lines of sight, wet mappings, sin(elev); reference and others."""
+
+    rho: np.ndarray
+    rate: np.ndarray
+    los: np.ndarray
+    m_wet: np.ndarray
+    sin_el: np.ndarray
+    iref: int
+    others: np.ndarray
+    jo: np.ndarray
+
+
+def _sd_measurements(g, observed, x, C, J, use, o):
+    """SD innovations, design matrix and covariance of one epoch.
+
+    Parameters
+    ----------
+    g : _Geometry
+    observed : tuple of ndarray, each shape (m,)
+        Corrected IF code, IF phase [m] and range rate [m/s] of the epoch's satellites.
+    x : ndarray, shape (n_x,)
+        Non-INS states (ZWD, SD ambiguities).
+    C, J : ndarray, shape (3, 3)
+        ``C_e_n`` and the position Jacobian at the INS.
+    use : list of 3 ndarray of bool, shape (m - 1,)
+        Rows kept per kind (code, phase, rate).
+
+    Returns
+    -------
+    H : ndarray, shape (r, n_x)
+    y : ndarray, shape (r,)
+    R : ndarray, shape (r, r)
+        Block diagonal: each kind ``diag(var_j) + var_ref``.
+    sizes : ndarray of int, shape (4,)
+        Row offsets of the three kinds.
+    """
+    n_x = x.size
+    e_sd = g.los[g.others] - g.los[g.iref]
+    mw_sd = g.m_wet[g.others] - g.m_wet[g.iref]
+    rng = g.rho + g.m_wet * x[_ZWD]
+    rows_H, rows_y, blocks = [], [], []
+    for kind, (obs, pred, sig) in enumerate(zip(observed, (rng, rng, g.rate),
+                                                (o.sigma_code_m, o.sigma_phase_m, o.sigma_rate_mps))):
+        u = use[kind]
+        H = np.zeros((u.sum(), n_x))
+        y = (obs[g.others] - obs[g.iref]) - (pred[g.others] - pred[g.iref])
+        if kind < 2:
+            H[:, DPOS] = e_sd[u] @ C @ J
+            H[:, _ZWD] = mw_sd[u]
+        else:
+            H[:, DV] = e_sd[u] @ C
+        if kind == 1:
+            H[np.arange(u.sum()), _A0 + g.jo[u]] = 1.0
+            y = y - x[_A0 + g.jo]
+        var = (sig / g.sin_el) ** 2
+        rows_H.append(H)
+        rows_y.append(y[u])
+        blocks.append(_sd_cov(var[g.others][u], var[g.iref]))
+    R = np.zeros((sum(len(b) for b in blocks),) * 2)
+    sizes = np.cumsum([0] + [len(b) for b in blocks])
+    for b, off in zip(blocks, sizes):
+        R[off:off + len(b), off:off + len(b)] = b
+    return np.vstack(rows_H), np.concatenate(rows_y), R, sizes
 
 
 def _record(out, k, ins, P, r_ins, C, J):
