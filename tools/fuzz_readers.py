@@ -15,7 +15,9 @@ Usage::
 
 The seed corpus is made at start from the shared real data (heads of the
 files) and small examples written here. libFuzzer reports the inputs run ("Done N
-runs"); each new finding is printed as a ``FINDING`` line with its traceback.
+runs"); each new finding is printed as a ``FINDING`` line with its traceback,
+and every 10,000 inputs a ``TALLY`` line counts the inputs run, those that
+failed the contract (known findings included) and the distinct findings.
 """
 
 import hashlib
@@ -32,6 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 CORPUS = REPO / "tests" / "fuzz_corpus"
 DATA = Path(os.environ.get("LEOSOP_SHARED_DATA", REPO.parent / "shared" / "data"))
 _SEED_BYTES = 3000  # heads of real files; libFuzzer's default -max_len is 4096
+_TALLY_EVERY = 10_000  # inputs between two TALLY lines (inputs run, failing, distinct findings)
 
 _SIGMF_META = b"""{"global": {"core:datatype": "cf32_le", "core:sample_rate": 1000.0, "core:version": "1.2.0",
  "leosop:n_tones": 9, "leosop:tone_spacing_hz": 43945.3125},
@@ -243,8 +246,15 @@ def main():
     seen = {_signature(tb) for tb in (check_one(target, p.read_bytes(), work) for p in sorted(out.glob("crash-*")))
             if tb is not None}
 
+    tally = {"inputs": 0, "failures": 0}
+
     def one_input(data):
         tb = check_one(target, data, work)
+        tally["inputs"] += 1
+        tally["failures"] += tb is not None
+        if tally["inputs"] % _TALLY_EVERY == 0:
+            print(f"TALLY {target}: {tally['inputs']} inputs, {tally['failures']} failing "
+                  f"({len(seen)} distinct)", file=sys.stderr, flush=True)
         if tb is not None:
             sig = _signature(tb)
             if sig not in seen:
