@@ -27,7 +27,8 @@ OPEN = {
     "sp3/crash-ceda122fb1a18983": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
     "scenario/crash-235ef9dd2faf8ce7": "scenarios.py load_scenario: a non-UTF-8 file raises UnicodeDecodeError "
                                        "(the CLI turns it into exit 2, but without the file name)",
-    "scenario/crash-6233d3425cb24395": "scenarios.py load_scenario: a non-UTF-8 file raises UnicodeDecodeError",
+    "rinex_obs/crash-0b2d4393c29d6753": "gnss/rinex.py read_obs: a non-numeric count in SYS / # / OBS TYPES raises "
+                                        "ValueError",
 }
 
 
