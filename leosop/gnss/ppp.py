@@ -20,16 +20,18 @@ wet delay (random walk), phase wind-up, solid Earth tide, antenna reference
 point height from the RINEX header. Not modelled (no ANTEX file with the
 data): satellite and receiver antenna phase-centre offsets and variations,
 ocean loading, eclipse yaw manoeuvres; their effect is in the measured
-errors reported by ``tools/bench_ppp.py`` (24 h static 1.0 cm, kinematic
-10.2 cm RMS after 1 h on ESBC00DNK against its published coordinate;
-Galileo alone 6.2 cm, GPS alone 14.7 cm).
+errors reported by ``tools/bench_ppp.py`` (24 h static 1.3 cm, kinematic
+9.7 cm RMS after 1 h on ESBC00DNK against its published coordinate).
 
-Weights: ``sigma = sigma_0 / sin(elev)``, code:phase standard deviations
-100:1 as in [Liu 2016], at the ionosphere-free level: 0.3 m and 3 mm on
-each frequency become 0.9 m and 9 mm (the IF combination multiplies white
-noise by ``sqrt(g1^2 + g2^2) = 2.98`` for L1/L2). Cycle slips: Melbourne-Wuebbena
-jump against its running arc mean and geometry-free phase jump between
-epochs, plus the receiver's loss-of-lock flag. Outliers: normalised
+Weights: ``sigma^2 = sigma_0^2 (1 + 1 / sin^2(elev)) / 2`` (an elevation-
+independent floor plus the elevation-dependent part, equal at 90 deg; the
+pure ``sigma_0 / sin(elev)`` gives 10.2 cm instead of 9.7 cm kinematic RMS on
+ESBC00DNK), code:phase standard deviations 100:1 as in [Liu 2016], at the
+ionosphere-free level: 0.3 m and 3 mm on each frequency become 0.9 m and
+9 mm (the IF combination multiplies white noise by ``sqrt(g1^2 + g2^2) =
+2.98`` for L1/L2). Cycle slips: Melbourne-Wuebbena jump against its
+running arc mean and geometry-free phase jump between epochs, plus the
+receiver's loss-of-lock flag. Outliers: normalised
 innovations above ``k_outlier`` are removed one at a time (a phase outlier
 resets that satellite's ambiguity, a code outlier drops the code).
 
@@ -401,10 +403,10 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
                 if is_phase:
                     H[sl.start + np.arange(len(rows)), 6 + jj] = 1.0
                     z[sl] = Lc[i, jj] - pred - x[6 + jj]
-                    r_var[sl] = (opt.sigma_phase_m / sin_el[rows]) ** 2
+                    r_var[sl] = opt.sigma_phase_m**2 * 0.5 * (1.0 + 1.0 / sin_el[rows] ** 2)
                 else:
                     z[sl] = Pc[i, jj] - pred
-                    r_var[sl] = (opt.sigma_code_m / sin_el[rows]) ** 2
+                    r_var[sl] = opt.sigma_code_m**2 * 0.5 * (1.0 + 1.0 / sin_el[rows] ** 2)
             PHt = P @ H.T
             S = H @ PHt + np.diag(r_var)
             w = np.abs(z) / np.sqrt(np.diag(S))
