@@ -183,7 +183,7 @@ def test_cli_json_contract(tmp_path, capsys, monkeypatch):
     pos = doc["summary"]["position"]
     # One hour of float PPP: decimetres (0.3 m is three times the 4 h bound above).
     assert np.linalg.norm(np.array([pos["x_m"], pos["y_m"], pos["z_m"]]) - REF_ITRF_ECEF_M) < 0.3
-    assert (tmp_path / "out" / "ppp.json").exists() and (tmp_path / "out" / "ppp.csv").exists()
+    assert all((tmp_path / "out" / f).exists() for f in ("ppp.json", "ppp.csv", "ppp.png"))
     # The header-frame comparison: the metre-level plate motion is gone, decimetres of 1 h float PPP remain.
     assert np.linalg.norm(doc["summary"]["minus_header_approx_m"]) > 0.5
     assert np.linalg.norm(doc["summary"]["minus_header_if_etrf2000_m"]) < 0.3

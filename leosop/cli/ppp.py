@@ -19,7 +19,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
-from ..frames import ecef_to_geodetic
+from ..frames import C_e_n, ecef_to_geodetic
+from ..gnss.figures import ppp_figure
 from ..gnss.etrf import decimal_year, itrf2014_to_etrf2000
 from ..gnss.ppp import PppOptions, gps_to_utc, run_ppp
 from ..gnss.products import read_clk, read_sp3
@@ -100,6 +101,13 @@ def run(args):
     if args.out:
         with atomic_outputs(args.out) as stage:
             write_json(stage / "ppp.json", doc)
+            ok = np.isfinite(res.pos_ecef_m).all(axis=1)
+            ref_pos = res.pos_ecef_m[ok][-1]
+            lat0, lon0, _ = ecef_to_geodetic(ref_pos)
+            t_h = (res.time_gps[ok] - res.time_gps[0]).astype("timedelta64[ms]").astype(float) / 3.6e6
+            ppp_figure(t_h, (res.pos_ecef_m[ok] - ref_pos) @ C_e_n(lat0, lon0), res.sigma_enu_m[ok], res.n_used[ok],
+                       stage / "ppp.png", title=f"{obs.marker} {summary['mode']} float PPP, offsets from the "
+                                                "final position")
             write_csv(stage / "ppp.csv", ["time_utc", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m",
                                          "sigma_e_m", "sigma_n_m", "sigma_u_m", "zwd_m", "n_sats"],
                       [[s["time_utc"], s["x_m"], s["y_m"], s["z_m"], s["lat_deg"], s["lon_deg"], s["alt_m"],
