@@ -305,3 +305,9 @@ def test_absurd_option_values_are_refused(tmp_path, capsys, monkeypatch, argv, m
     status, _, err = _run(capsys, *argv)
     assert status == 2 and message in _one_line(err)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_with_satellites_below_the_horizon(tmp_path, capsys):
+    status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "r.sigmf-meta"), *SMALL,
+                          "--start", "2025-01-01T00:00:00Z")
+    assert status == 2 and "--sat 70002: no satellite is above the horizon" in _one_line(err)

@@ -209,7 +209,11 @@ def run(args):
     speed = inertial_speed_mps(const, start)
     orbit_error = OrbitError.draw(rng, speed, **sigma_orbit_m)
     t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=orbit_error)
-    channel = SiteChannel(t_nodes, range_m, fs, _cn0(args, const, t_nodes, range_m, elev), clock, comb=comb,
+    cn0_nodes = _cn0(args, const, t_nodes, range_m, elev)
+    if np.isfinite(range_m).all() and not np.isfinite(cn0_nodes).any():  # (SGP4 failures: SiteChannel)
+        raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
+                         f"during the recording from {format_utc(start)}")
+    channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb,
                           phase_rad=phase, waveform=args.waveform)
 
     blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
