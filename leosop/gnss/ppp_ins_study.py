@@ -26,6 +26,7 @@ from ..ins import strapdown
 from ..ins.imu import ImuErrors, corrupt
 from ..ins.trajectory import Segment, from_segments
 from . import ppp_ins
+from .figures import ppp_ins_figure
 from .products import read_clk, read_sp3
 from .simulate import SimSettings, simulate
 
@@ -138,17 +139,34 @@ def statistics(truth, res, *, last_s=1800.0, outage_at_s=OUTAGE_AT_S, outage_s=6
     return doc
 
 
-def ppp_ins_table(*, seed=0, full=False):
-    """``leosop reproduce ppp-ins``: one 60-min run (``full``: three seeds, their mean) beside the paper."""
+def ppp_ins_table(*, seed=0, full=False, out_dir=None):
+    """``leosop reproduce ppp-ins``: one 60-min run (``full``: three seeds, their mean) beside the paper.
+
+    With ``out_dir``, ``ppp_ins.png``: errors, sigma and fixed ambiguities of the first run.
+    """
     products = _products()
     seeds = [seed] if not full else [seed, seed + 1, seed + 2]
-    runs = [statistics(*scenario(s, products=products)) for s in seeds]
+    runs = []
+    for i, s in enumerate(seeds):
+        truth, res = scenario(s, products=products)
+        runs.append(statistics(truth, res))
+        if i == 0 and out_dir is not None:
+            _figure(truth, res, Path(out_dir) / "ppp_ins.png", s)
     ours = {k: (float(np.mean([r[k] for r in runs])) if all(r[k] is not None for r in runs) else None)
             for k in runs[0]}
     return {"paper": PAPER, "ours": ours, "runs": runs,
             "setting": "simulated car, GPS L1/L2 on GRG orbits/clocks 2020-06-25 06:00 GPST, 1 Hz, 60 min, "
                        "fog-grade IMU, 60 s outage at 20 min; statistics over the last 30 min",
             **{k: ours[k] for k in ("float_rms_3d_m", "fixed_rms_3d_m", "first_fix_s")}}
+
+
+def _figure(truth, res, path, seed):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    t = res.t_s - res.t_s[0]
+    ppp_ins_figure(t, np.linalg.norm(res.pos_float_ecef_m - truth, axis=1),
+                   np.linalg.norm(res.pos_fixed_ecef_m - truth, axis=1),
+                   np.sqrt(np.trace(res.cov_pos_enu_m2, axis1=1, axis2=2)), res.n_fixed, res.n_sats, path,
+                   title=f"tight PPP/INS, simulated car (seed {seed}), 60 s outage at {OUTAGE_AT_S / 60:g} min")
 
 
 def format_table(doc):
