@@ -147,3 +147,9 @@ def test_imu_sf_csv_time_beyond_gps_era(tmp_path):
     rows = [f"{1.6e15 + 0.01 * k:.2f},0,0,1,0,0,0,0,0,0,0" for k in range(20)]
     path.write_text("\n".join(rows) + "\n")
     _one_line_error(lambda: read_rtklib_sf_csv(path), "imu_sf.csv", "is not GPST seconds since 1970")
+
+
+def test_omm_csv_with_a_byte_order_mark(tmp_path):
+    path = tmp_path / "set.csv"
+    path.write_text("\ufeff" + ",".join(_OMM) + "\n" + ",".join(str(v) for v in _OMM.values()) + "\n")
+    assert list(read_omm(path).sat_ids) == ["44713"]

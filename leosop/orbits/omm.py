@@ -37,7 +37,7 @@ def read_omm(path):
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such OMM file")
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = path.read_text(encoding="utf-8-sig", errors="replace")  # a BOM (spreadsheet exports) is not a field
     if not text.strip():
         raise InputError(f"{path}: empty file, expected OMM element sets")
     if path.suffix.lower() == ".json" or text.lstrip().startswith(("[", "{")):
