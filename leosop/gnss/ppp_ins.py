@@ -27,9 +27,14 @@ fix-and-hold): the SD wide-lane from the arc means of the Melbourne-
 Wuebbena combinations less the satellites' wide-lane biases, rounded when
 within ``wl_tol_cyc`` of an integer; then the narrow-lane
 ``N1 = (B_IF - beta N_WL) / lambda_NL`` (``beta = c f2 / (f1^2 - f2^2)``)
-by LAMBDA with the ratio test and partial fixing
-(:mod:`leosop.gnss.lambda_`); the fixed ambiguities condition the state
-(a noise-free pseudo-observation on a copy) for the fixed solution.
+by LAMBDA with the ratio test (``ratio_min``), a bootstrapped success rate
+of at least ``success_min`` and partial fixing (:mod:`leosop.gnss.lambda_`);
+the fixed ambiguities condition the state (a noise-free pseudo-observation
+on a copy) for the fixed solution.
+
+Measured (``leosop reproduce ppp-ins``, ``tools/bench_ppp_ins.py``): on the
+simulated car, 20 seeds of 15 min, the float-position NEES averaged over
+the seeds is 2.57 (3 expected; inside its 95 % band at 95 % of epochs).
 """
 
 from dataclasses import dataclass
