@@ -76,8 +76,10 @@ _RATE_MAX_HZ_PER_S = 5e3
 _ID_CANDIDATES = 24
 #: Chi-square (3 features) above which a cell's linearised fit does not count a track.
 _TRACK_CHI2_GATE = 25.0
-#: Cells voted at once (memory bound).
+#: Cells voted at once, and at most this many (cell, track, satellite) triples (memory bound:
+#: ~1 kB of intermediate arrays per triple that passes the first screen).
 _CHUNK_CELLS = 400
+_MAX_PAIRS = 300_000
 
 
 @dataclass
@@ -309,15 +311,21 @@ class _Search:
         assign = np.full((n_cells, n_tr), -1)
         clock = np.zeros(n_cells)
         moved = cells.copy()
-        for a in range(0, n_cells, _CHUNK_CELLS):
-            sl = slice(a, min(a + _CHUNK_CELLS, n_cells))
-            count[sl], cost[sl], assign[sl], clock[sl], moved[sl] = self._vote_chunk(cells[sl], radius_m)
+        a = 0
+        while a < n_cells:
+            size = min(_CHUNK_CELLS, n_cells - a)
+            pairs = self._pairs(cells[a:a + size], radius_m)
+            while len(pairs) > _MAX_PAIRS and size > 1:
+                size = max(1, size * _MAX_PAIRS // len(pairs))
+                pairs = self._pairs(cells[a:a + size], radius_m)
+            sl = slice(a, a + size)
+            count[sl], cost[sl], assign[sl], clock[sl], moved[sl] = self._vote_chunk(cells[sl], radius_m, pairs)
+            a += size
         return count, cost, assign, clock, moved
 
-    def _vote_chunk(self, cells, radius_m):
+    def _vote_chunk(self, cells, radius_m, pairs):
         o = self.o
         n_cells, n_tr = len(cells), len(self.tracks)
-        pairs = self._pairs(cells, radius_m)
         c, k, s = pairs.T
         t_ref = np.array([tr.t_ref_s for tr in self.tracks])[k]  # (m, 3)
         f_ref = np.array([tr.f_ref_hz for tr in self.tracks])[k]

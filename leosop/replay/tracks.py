@@ -124,6 +124,31 @@ class Tracker:
         rate = c[1] + (2.0 * c[2] * dt if deg == 2 else 0.0)
         return float(np.polyval(c[::-1], dt)), float(rate), gate
 
+    def _predict_all(self, tracks, t_s):
+        """:meth:`_predict` of every track in ``tracks`` (lists of rows), as a list: the tracks
+        with a full history fitted together (one batched 3 x 3 solve), the others one by one."""
+        out = [None] * len(tracks)
+        full = [i for i, rows in enumerate(tracks) if len(rows) >= _FIT_POINTS]
+        if full:
+            recent = np.array([[(r[0], r[2], r[5]) for r in tracks[i][-_FIT_POINTS:]] for i in full])  # (n, P, 3)
+            t_last = recent[:, -1, 0]
+            tau = recent[:, :, 0] - t_last[:, None]
+            sigma = recent[:, :, 2]
+            w2 = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0) ** 2
+            a = tau[..., None] ** np.arange(3)  # (n, P, 3)
+            aw = a * w2[..., None]
+            c = np.linalg.solve(np.einsum("npi,npj->nij", aw, a), np.einsum("npi,np->ni", aw, recent[:, :, 1])[..., None])[..., 0]
+            dt = t_s - t_last
+            f = c[:, 0] + c[:, 1] * dt + c[:, 2] * dt**2
+            rate = c[:, 1] + 2.0 * c[:, 2] * dt
+            gate = GATE_HZ + GATE_HZ_PER_S * dt + GATE_HZ_PER_S2 * dt**2
+            for j, i in enumerate(full):
+                out[i] = (float(f[j]), float(rate[j]), float(gate[j]))
+        for i, rows in enumerate(tracks):
+            if out[i] is None:
+                out[i] = self._predict(rows, t_s)
+        return out
+
     def predictions(self, t_s):
         """Doppler and rate at ``t_s`` of every track fed in the last block, (n,) each; None after a birth.
 
@@ -138,7 +163,7 @@ class Tracker:
         live = [rows for rows in self._active if rows[-1][0] == t_last]
         if any(len(rows) < 2 for rows in live):
             return None
-        self._memo = (t_s, {id(rows): self._predict(rows, t_s) for rows in self._active})
+        self._memo = (t_s, dict(zip(map(id, self._active), self._predict_all(self._active, t_s))))
         f, r, _ = np.array([self._memo[1][id(rows)] for rows in live]).T
         return f, r
 
@@ -161,8 +186,10 @@ class Tracker:
         self._active = keep
         claimed = np.zeros(len(det), bool)
         if self._active and len(det):
-            memo = self._memo[1] if self._memo[0] == t_s else {}
-            pred, _, gate = np.array([memo.get(id(rows)) or self._predict(rows, t_s) for rows in self._active]).T
+            if self._memo[0] == t_s and all(id(rows) in self._memo[1] for rows in self._active):
+                pred, _, gate = np.array([self._memo[1][id(rows)] for rows in self._active]).T
+            else:
+                pred, _, gate = np.array(self._predict_all(self._active, t_s)).T
             cost = np.abs(det.doppler_hz[None, :] - pred[:, None]) / gate[:, None]
             big = 1e6
             i, j = linear_sum_assignment(np.where(cost <= 1.0, cost, big))
