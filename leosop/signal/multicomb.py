@@ -201,9 +201,11 @@ class _Grid:
             wrapped = np.concatenate([x[self.k[0]:], x, x[:self.k[-1]]])
             self._windows = np.lib.stride_tricks.sliding_window_view(wrapped, self.k.size)
         z = self._windows[b % self.n_fft] * self.weights
-        z = z.reshape(f_c.size, -1, self.n_seg).sum(axis=1)
-        y = np.fft.ifft(np.roll(z, int(self.k[0]), axis=1), axis=1).T
-        return y * _cis(-np.multiply.outer(self.t_abs, f_c - b * df))
+        z = z.reshape(f_c.size, -1, self.n_seg).sum(axis=1)  # column c: spectral index k[0] + c (mod n_seg)
+        y = np.fft.ifft(z, axis=1).T
+        # The first column's index k[0] as a phase ramp, and the rotation by the off-bin part.
+        return y * _cis((self.k[0] / self.n_seg) * np.arange(self.n_seg)[:, None]
+                        - np.multiply.outer(self.t_abs, f_c - b * df))
 
 
 def _channels_hz(comb, d_c, wide):
