@@ -66,6 +66,23 @@ def _head(*parts):
     return path.read_bytes()[:_SEED_BYTES] if path.is_file() else None
 
 
+def _header_and_records(parts, prefix, n_records=12):
+    """Header (to END OF HEADER) and the first records starting with ``prefix`` of a RINEX-style file.
+
+    Gzip and Hatanaka compression are undone; None when the data are not here.
+    """
+    path = DATA.joinpath(*parts)
+    if not path.is_file():
+        return None
+    from leosop.gnss.rinex import read_text
+
+    lines = read_text(path)
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    body = lines[end:]
+    first = next(i for i, line in enumerate(body) if line.startswith(prefix))
+    return "\n".join(lines[:end] + body[first:first + n_records]).encode() + b"\n"
+
+
 def _write(tmp, name, data):
     path = Path(tmp) / name
     path.write_bytes(data)
@@ -186,9 +203,10 @@ TARGETS = {
     "rtklib_csv": (_rtklib_raw, lambda: [
         (_head("gnss-ins", "rtklibexplorer_walk_0827", "imu_1730.csv") or b"") + b"\0"
         + (_head("gnss-ins", "rtklibexplorer_walk_0827", "imu_1730.csv.tag") or b"")]),
-    "rinex_obs": (_rinex_obs, lambda: [_head("rinex", "gsi_2005-092", "07590920.05o")]),
+    "rinex_obs": (_rinex_obs, lambda: [
+        _header_and_records(("rinex", "esbc_2020-177", "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"), ">", 60)]),
     "sp3": (_sp3, lambda: [_head("rinex", "igs_2010-182", "igs15904.sp3")]),
-    "clk": (_clk, lambda: [_head("rinex", "igs_2010-182", "igs15904.clk")]),
+    "clk": (_clk, lambda: [_header_and_records(("rinex", "igs_2010-182", "igs15904.clk"), "AS ", 20)]),
 }
 
 
