@@ -66,10 +66,11 @@ def _head(*parts):
     return path.read_bytes()[:_SEED_BYTES] if path.is_file() else None
 
 
-def _header_and_records(parts, prefix, n_records=12):
-    """Header (to END OF HEADER) and the first records starting with ``prefix`` of a RINEX-style file.
+def _first_records(parts, prefix, n_records):
+    """A RINEX-style file up to its ``n_records``-th record (a record starts with a ``prefix`` line).
 
-    Gzip and Hatanaka compression are undone; None when the data are not here.
+    The header is kept whole, gzip and Hatanaka compression are undone; None
+    when the data are not here.
     """
     path = DATA.joinpath(*parts)
     if not path.is_file():
@@ -77,10 +78,8 @@ def _header_and_records(parts, prefix, n_records=12):
     from leosop.gnss.rinex import read_text
 
     lines = read_text(path)
-    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
-    body = lines[end:]
-    first = next(i for i, line in enumerate(body) if line.startswith(prefix))
-    return "\n".join(lines[:end] + body[first:first + n_records]).encode() + b"\n"
+    starts = [i for i, line in enumerate(lines) if line.startswith(prefix)]
+    return "\n".join(lines[:starts[n_records]]).encode() + b"\n"
 
 
 def _write(tmp, name, data):
@@ -204,9 +203,9 @@ TARGETS = {
         (_head("gnss-ins", "rtklibexplorer_walk_0827", "imu_1730.csv") or b"") + b"\0"
         + (_head("gnss-ins", "rtklibexplorer_walk_0827", "imu_1730.csv.tag") or b"")]),
     "rinex_obs": (_rinex_obs, lambda: [
-        _header_and_records(("rinex", "esbc_2020-177", "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"), ">", 60)]),
-    "sp3": (_sp3, lambda: [_head("rinex", "igs_2010-182", "igs15904.sp3")]),
-    "clk": (_clk, lambda: [_header_and_records(("rinex", "igs_2010-182", "igs15904.clk"), "AS ", 20)]),
+        _first_records(("rinex", "esbc_2020-177", "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"), ">", 2)]),
+    "sp3": (_sp3, lambda: [_first_records(("rinex", "igs_2010-182", "igs15904.sp3"), "*", 3)]),
+    "clk": (_clk, lambda: [_first_records(("rinex", "igs_2010-182", "igs15904.clk"), "AS ", 70)]),
 }
 
 
