@@ -21,6 +21,7 @@ _spec.loader.exec_module(fuzz_readers)
 #: Findings still open, by file name: where the fix belongs.
 OPEN = {
     "clk/crash-0d170070d4c09eb6": "gnss/rinex.py read_text: zlib.error of a corrupt gzip stream is not caught",
+    "clk/crash-7ada3ff7fcd5e09f": "gnss/products.py _epoch (via read_clk): month 0 raises ValueError",
     "sp3/crash-1a3ffacf5c3f86dc": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
     "sp3/crash-a9db9653b9f753dc": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
     "sp3/crash-b0034b39f4582629": "gnss/products.py _epoch: month 0 raises ValueError",
