@@ -265,7 +265,7 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
     ----------
     carrier_hz : ndarray, (m,)
     family : ndarray of int, (m,)
-        Clock group of each pair.
+        Clock group of each pair (the ``clock_group`` of the fixes).
     offset_max_sat_hz : ndarray, (n_sats,)
         Each satellite's offset bound (offsets uniform in [0, max]).
 
@@ -277,8 +277,10 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
     """
     H = doppler_jacobian(vis.padded(pos_sv_known), vis.padded(vis.vel_sv_ecef_mps), fixes.pos_ecef_m,
                          fixes.vel_ecef_mps, vis.padded(carrier_hz))
-    n_clk = fixes.cov.shape[-1] - 6
-    onehot = np.nan_to_num(vis.padded(family.astype(float)), nan=-1.0)[..., None] == np.arange(n_clk)
+    # The fix's clock columns follow the groups present in the sky, sorted (fixes.clock_labels).
+    labels = np.asarray(fixes.clock_labels if fixes.clock_labels else [0])
+    clock = np.searchsorted(labels, family) if fixes.clock_labels else np.zeros(family.shape, int)
+    onehot = np.nan_to_num(vis.padded(clock.astype(float)), nan=-1.0)[..., None] == np.arange(labels.size)
     H = np.concatenate([H[..., :6], onehot], -1)
     used = fixes.used & good[:, None]
     w = np.where(used, 1.0 / np.nan_to_num(vis.padded(sigma_hz), nan=1.0) ** 2, 0.0)
