@@ -1,7 +1,8 @@
 """Inputs that once broke a reader (found by ``tools/fuzz_readers.py``), replayed.
 
-Each file in ``tests/fuzz_corpus/<target>/`` must now be read or refused with
-an InputError. Findings in readers this change does not own are listed in
+Each ``crash-*`` file in ``tests/fuzz_corpus/<target>/`` must now be read or
+refused with an InputError. ``oom-*`` files made a reader allocate gigabytes;
+they are kept for the reader's owner but not replayed here. Findings in readers this change does not own are listed in
 ``OPEN`` with the owner's fix; they are strict xfails, so fixing the reader
 turns them into failures here until they leave the list.
 """
@@ -28,6 +29,7 @@ OPEN = {
     "sp3/crash-ceda122fb1a18983": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
     "scenario/crash-235ef9dd2faf8ce7": "scenarios.py load_scenario: a non-UTF-8 file raises UnicodeDecodeError "
                                        "(the CLI turns it into exit 2, but without the file name)",
+    "rinex_obs/crash-8b59836f9d30598e": "gnss/rinex.py read_obs: an impossible epoch date (day 0) raises ValueError",
     "rinex_obs/crash-0b2d4393c29d6753": "gnss/rinex.py read_obs: a non-numeric count in SYS / # / OBS TYPES raises "
                                         "ValueError",
 }

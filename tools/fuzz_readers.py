@@ -23,6 +23,7 @@ failed the contract (known findings included) and the distinct findings.
 import hashlib
 import importlib
 import os
+import resource
 import shutil
 import sys
 import tempfile
@@ -35,6 +36,9 @@ CORPUS = REPO / "tests" / "fuzz_corpus"
 DATA = Path(os.environ.get("LEOSOP_SHARED_DATA", REPO.parent / "shared" / "data"))
 _SEED_BYTES = 3000  # heads of real files; libFuzzer's default -max_len is 4096
 _TALLY_EVERY = 10_000  # inputs between two TALLY lines (inputs run, failing, distinct findings)
+# Address-space cap: an input that makes a reader allocate more fails with MemoryError (a finding, saved as
+# oom-*, not replayed by the tests) instead of ending the run at libFuzzer's RSS limit.
+_MEMORY_LIMIT_BYTES = 3 << 30
 
 _SIGMF_META = b"""{"global": {"core:datatype": "cf32_le", "core:sample_rate": 1000.0, "core:version": "1.2.0",
  "leosop:n_tones": 9, "leosop:tone_spacing_hz": 43945.3125},
@@ -277,10 +281,12 @@ def main():
             if sig not in seen:
                 seen.add(sig)
                 out.mkdir(parents=True, exist_ok=True)
-                (out / f"crash-{hashlib.sha1(data).hexdigest()[:16]}").write_bytes(data)
+                kind = "oom" if sig.endswith("MemoryError") else "crash"
+                (out / f"{kind}-{hashlib.sha1(data).hexdigest()[:16]}").write_bytes(data)
                 print(f"FINDING {target}: {sig}\n{tb}", file=sys.stderr, flush=True)
 
     (tmp / "corpus").mkdir()
+    resource.setrlimit(resource.RLIMIT_AS, (_MEMORY_LIMIT_BYTES, resource.getrlimit(resource.RLIMIT_AS)[1]))
     atheris.Setup([*fuzzer_args, str(tmp / "corpus"), str(seed_dir)], one_input)
     atheris.Fuzz()
 
