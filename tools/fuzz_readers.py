@@ -264,7 +264,7 @@ def main():
     work = tmp / "work"
     work.mkdir()
     # Findings already in the corpus are not saved again.
-    seen = {_signature(tb) for tb in (check_one(target, p.read_bytes(), work) for p in sorted(out.glob("crash-*")))
+    seen = {_signature(tb) for tb in (check_one(target, p.read_bytes(), work) for p in sorted(out.glob("*-*")))
             if tb is not None}
 
     tally = {"inputs": 0, "failures": 0}
