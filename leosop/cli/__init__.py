@@ -40,7 +40,8 @@ from ..fileio import check_output_dir, check_output_file  # noqa: E402
 from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "replay", "study", "ppp", "export")
+COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "replay",
+            "study", "ppp", "export")
 
 
 class _Parser(argparse.ArgumentParser):
