@@ -46,13 +46,13 @@ def main():
     print(f"DopTrack Delfi-C3, {len(passes)} passes, time offsets {'off' if args.off else 'on'}; horizontal error")
     print(f"{'set':>9s} {'fixes':>5s} {'failed':>6s} {'med_err_m':>10s} {'med_sig_m':>10s} {'med_e/s':>8s} "
           f"{'max_e/s':>8s} {'e/s<3':>7s}")
-    _row("all", [fix_passes(passes, **kw)], p0)
     days = np.array([str(p.meas.time_utc[0])[:10] for p in passes])
     by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
     r = _row("per day", [fix_passes(s, **kw) for s in progress(by_day, desc="days")], p0)
     print(f"{'':>9s} per-day err/sigma: {' '.join(f'{x:.1f}' for x in r)}")
     if not args.no_single:
         _row("one pass", [fix_passes([p], **kw) for p in progress(passes, desc="passes")], p0)
+    _row("all", [fix_passes(passes, **kw)], p0)
 
 
 if __name__ == "__main__":
