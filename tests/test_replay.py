@@ -73,6 +73,34 @@ def test_measurements_csv_reproduces_the_fix_with_leosop_position(snapshot_recor
     assert abs(a["x_m"] - b["x_m"]) < 0.01 and abs(a["y_m"] - b["y_m"]) < 0.01 and abs(a["z_m"] - b["z_m"]) < 0.01
 
 
+def test_snapshot_fixes_carry_the_satellite_offsets_in_their_sigmas(snapshot_recording, capsys):
+    # Without --static: one fix per 20 ms snapshot (position, velocity and
+    # clock from ~9 Dopplers). The recording's satellites have their own
+    # frequency offsets (up to 5 Hz), which one snapshot cannot estimate: the
+    # fix adds SAT_OFFSET_SIGMA_HZ to each measurement's sigma. One draw of
+    # offsets biases all fixes alike, so |error| / sigma is judged loosely:
+    # median per axis below 2.5 (measured 1.3-1.7; 4-5.5 without the offset
+    # term, 0.2 on a recording without offsets), horizontal error below 60 m
+    # (measured ~35 m; the static fix, which estimates the offsets, ~5 m).
+    from leosop.frames import C_e_n
+
+    path, _ = snapshot_recording
+    code, doc, err = _replay(capsys, str(path), "--init", "34.98,109.71,0")
+    assert code == 0, err
+    assert doc["mode"] != "static" and len(doc["solutions"]) >= 50
+    site = geodetic_to_ecef(np.radians(SITE[0]), np.radians(SITE[1]), SITE[2])
+    c_enu_ecef = C_e_n(np.radians(SITE[0]), np.radians(SITE[1])).T  # ECEF to the site's ENU
+    enu, sig = [], []
+    for sol in doc["solutions"]:
+        if sol["status"] == "ok":
+            enu.append(c_enu_ecef @ (np.array([sol["x_m"], sol["y_m"], sol["z_m"]]) - site))
+            sig.append(sol["sigma_enu_m"])
+    enu, sig = np.array(enu), np.array(sig)
+    assert len(enu) >= 40
+    assert np.all(np.median(np.abs(enu) / sig, axis=0) < 2.5)
+    assert np.median(np.hypot(enu[:, 0], enu[:, 1])) < 60.0
+
+
 def test_noise_only_recording_gives_empty_tracks_and_exit_0(tmp_path, capsys):
     path = tmp_path / "noise.sigmf-meta"
     _generate(path, "--duration-s", "3", "--snapshot-s", "0.02", "--period-s", "1", "--cn0-dbhz", "-20")

@@ -229,12 +229,22 @@ class ReplayResult:
     cpu_s: dict = None
 
 
-def track_measurements(tracks, carrier_hz):
+#: Sigma of a satellite's own frequency offset about the constellation's
+#: mean [Hz], added to every measurement of a snapshot fix, which cannot
+#: estimate it (the static fix estimates one per satellite). Offsets of a
+#: few hertz: drawn uniform over 5 Hz, as ``leosop generate`` does, their
+#: rms about the mean is 5 / sqrt(12) = 1.44 Hz. Without it a snapshot fix
+#: from such a recording errs ~5x its sigma (0.7x with no offsets).
+SAT_OFFSET_SIGMA_HZ = 1.5
+
+
+def track_measurements(tracks, carrier_hz, model_sigma_hz=0.0):
     """The identified tracks as measurement rows (DESIGN 4.3), time-ordered.
 
     ``pass_id`` is the satellite: each satellite's rows share its clock and
     orbit-error states in a static fix (``leosop position --static`` on the
-    written table solves the same fix).
+    written table solves the same fix). ``model_sigma_hz`` is added in
+    quadrature to every row's sigma.
 
     Returns
     -------
@@ -252,7 +262,7 @@ def track_measurements(tracks, carrier_hz):
     sat_id = np.concatenate([np.full(len(tr), tr.sat_id, dtype=object) for tr in ids])[order].astype(str)
     n = len(t_s)
     return Measurements(t_s=t_s, time_utc=time_utc, sat_id=sat_id, doppler_hz=col("doppler_hz"),
-                        sigma_hz=col("sigma_hz"), carrier_hz=np.full(n, float(carrier_hz)),
+                        sigma_hz=np.hypot(col("sigma_hz"), model_sigma_hz), carrier_hz=np.full(n, float(carrier_hz)),
                         line=np.arange(2, n + 2), source="replay", pass_id=sat_id.copy())
 
 
@@ -330,7 +340,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,
                             carrier_hz=comb.carrier_hz) if tracks else None
-    meas = track_measurements(tracks, comb.carrier_hz)
+    meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
     position = None
     if meas is not None:
