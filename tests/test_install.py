@@ -9,6 +9,7 @@ the test needs no network.
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import venv
@@ -29,8 +30,13 @@ def _run(cmd, cwd, **kw):
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     base = tmp_path_factory.mktemp("wheel")
+    # Built from a copy without build/ and egg-info: their leftovers from an
+    # earlier build would put files in the wheel that a clean clone lacks.
+    src = base / "src"
+    shutil.copytree(ROOT, src, symlinks=True,
+                    ignore=shutil.ignore_patterns("build", "*.egg-info", ".git", "__pycache__", ".pytest_cache"))
     built = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                  "-w", str(base / "dist"), str(ROOT)], cwd=base)
+                  "-w", str(base / "dist"), str(src)], cwd=base)
     assert built.returncode == 0, built.stderr
     (wheel,) = (base / "dist").glob("leosop-*.whl")
     venv.create(base / "env", system_site_packages=True, with_pip=True)
@@ -62,3 +68,22 @@ def test_installed_simulate_runs_from_another_directory(installed):
     # The default flight at measurement level fuses to a few metres (README); 10 m is
     # the scenario goal, so a broken install or data set cannot pass.
     assert doc["fused"]["pos_err_mean_m"] < 10.0 and doc["fused"]["availability"] == 1.0
+
+
+def test_wheel_carries_every_bundled_data_file(installed):
+    # Every file under leosop/data/ that the code reads (scenarios, study
+    # specs, element sets, the example recording) is in the installed package;
+    # a new data folder missing from pyproject's package-data fails here.
+    python, cwd = installed
+    cwd.mkdir(exist_ok=True)
+    probe = "import leosop, pathlib; print(pathlib.Path(leosop.__file__).parent / 'data')"
+    out = _run([str(python), "-c", probe], cwd=cwd)
+    assert out.returncode == 0, out.stderr
+    installed_dir = Path(out.stdout.strip())
+    source_dir = ROOT / "leosop" / "data"
+
+    def listing(d):
+        return {p.relative_to(d).as_posix() for p in d.rglob("*")
+                if p.is_file() and p.name != "README.md" and "__pycache__" not in p.parts}
+
+    assert listing(source_dir) - listing(installed_dir) == set()
