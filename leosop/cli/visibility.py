@@ -108,7 +108,8 @@ def run(args):
         doc["families"] = families
         doc["n_visible_by_family"] = {f: counts[:, j].tolist() for j, f in enumerate(families)}
     if args.out:
-        _write_outputs(Path(args.out), doc, vis, gdop, times, mask, const.source)
+        title = f"{Path(const.source).name} at {lat:.3f}, {lon:.3f} deg, {alt:g} m"
+        _write_outputs(Path(args.out), doc, vis, gdop, times, mask, title)
     return doc
 
 
@@ -127,16 +128,16 @@ def _families(names):
     return out
 
 
-def _write_outputs(out, doc, vis, gdop, times, mask, source):
-    t_s = seconds_since(times, times[0])
+def _write_outputs(out, doc, vis, gdop, times, mask, title):
     with atomic_outputs(out) as stage:
-        _write_files(stage, doc, vis, gdop, t_s, mask, source)
+        _write_files(stage, doc, vis, gdop, times, mask, title)
 
 
-def _write_files(out, doc, vis, gdop, t_s, mask, source):
+def _write_files(out, doc, vis, gdop, times, mask, title):
     from ..orbits.plots import plot_skyplot, plot_visibility
 
     write_json(out / "visibility.json", doc)
+    t_s = seconds_since(times, times[0])
     dops = vis.range_dops()
     blank = lambda x: "" if not np.isfinite(x) else f"{x:.4f}"  # noqa: E731
     by_family = doc.get("n_visible_by_family", {})
@@ -151,9 +152,9 @@ def _write_files(out, doc, vis, gdop, t_s, mask, source):
     write_csv(out / "passes.csv", ["sat_id", "rise_utc", "culmination_utc", "set_utc", "max_elev_deg", "truncated"],
               ([p.sat_id, format_utc(p.rise_utc), format_utc(p.culmination_utc), format_utc(p.set_utc),
                 f"{p.max_elev_deg:.3f}", int(p.truncated)] for p in vis.passes()))
-    title = f"{Path(source).name}, from {doc['epochs_utc'][0]}"
-    plot_visibility(out / "visibility.png", t_s, vis.n_visible, gdop, dops["gdop"], mask_deg=mask, title=title)
-    plot_skyplot(out / "skyplot.png", vis.az_rad, vis.elev_rad, vis.sat_index, mask_deg=mask, title=title)
+    plot_visibility(out / "visibility.png", times, vis.n_visible, gdop, dops["gdop"], mask_deg=mask, title=title)
+    plot_skyplot(out / "skyplot.png", vis.az_rad, vis.elev_rad, t_s[vis.epoch_index], vis.sat_ids[vis.sat_index],
+                 times[0], mask_deg=mask, title=title)
 
 
 def summary(doc):

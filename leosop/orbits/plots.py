@@ -1,66 +1,130 @@
-"""Figures of visibility studies: visible count and GDOP over time, sky plot."""
+"""Figures of visibility studies: visible count and GDOP over UTC time, sky plot of a window."""
 
 import numpy as np
 
 from ..figure import pyplot, save_png
+from ..timebase import format_utc
 
 __all__ = ["plot_visibility", "plot_skyplot"]
 
+#: Sky-plot window: tracks over the first ten minutes read as passes; a day of them is a solid disc.
+SKYPLOT_WINDOW_S = 600.0
+#: Satellites labelled at most (the highest first).
+MAX_LABELS = 25
 
-def plot_visibility(path, t_s, n_visible, gdop, gdop_range, *, mask_deg, title=""):
-    """Visible satellites, Doppler GDOP and range GDOP against time, saved to ``path`` (PNG).
+
+def _utc_axis(ax):
+    """Concise UTC date ticks on the x axis."""
+    import matplotlib.dates as mdates
+
+    locator = mdates.AutoDateLocator()
+    ax.xaxis.set_major_locator(locator)
+    ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    ax.set_xlabel("time [UTC]")
+
+
+def plot_visibility(path, times_utc, n_visible, gdop, gdop_range, *, mask_deg, title=""):
+    """Visible satellites, Doppler GDOP and range GDOP against UTC time, saved to ``path`` (PNG).
 
     Parameters
     ----------
     path : str or Path
-    t_s : ndarray, (n_epochs,)
-        Seconds from the start.
+    times_utc : ndarray of datetime64, (n_epochs,)
     n_visible : ndarray of int, (n_epochs,)
     gdop : ndarray, (n_epochs,)
         Doppler GDOP ([Shen 2024] eq. 10); NaN below 7 satellites.
     gdop_range : ndarray, (n_epochs,)
         Classic pseudorange GDOP, for comparison; NaN below 4 satellites.
+    mask_deg : float
+    title : str
+        What was run (element sets, site); drawn above the figure.
     """
     plt = pyplot()
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
-    ax1.step(t_s, n_visible, where="mid", color="C0")
+    t = np.asarray(times_utc).astype("datetime64[ms]").astype(object)
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5), constrained_layout=True)
+    ax1.step(t, n_visible, where="mid", color="C0")
     ax1.axhline(7, color="0.5", ls="--", lw=0.8, label="7 needed for a Doppler fix")
-    ax1.set_ylabel(f"visible (mask {mask_deg:g} deg)")
+    ax1.set_ylabel(f"visible satellites\n(mask {mask_deg:g} deg)")
     ax1.legend(loc="upper right", fontsize=8)
-    ax1.set_title(title)
-    ax2.semilogy(t_s, gdop, color="C1", label="Doppler, 7 states ([Shen 2024] eq. 10)")
-    ax2.semilogy(t_s, gdop_range, color="C2", lw=0.8, label="pseudorange, 4 states")
+    fig.suptitle(title, fontsize="medium")
+    ax2.semilogy(t, gdop, color="C1", label="Doppler, 7 states ([Shen 2024] eq. 10) [m per Hz]")
+    ax2.semilogy(t, gdop_range, color="C2", lw=0.8, label="pseudorange, 4 states [unitless]")
     ax2.set_ylabel("GDOP")
     ax2.legend(loc="upper right", fontsize=8)
-    ax2.set_xlabel("time since start [s]")
+    _utc_axis(ax2)
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
-    fig.tight_layout()
     save_png(fig, path, dpi=110)
 
 
-def plot_skyplot(path, az_rad, elev_rad, track_id, *, mask_deg, title=""):
-    """Sky plot of satellite tracks (north up, azimuth clockwise), saved to ``path``.
+def plot_skyplot(path, az_rad, elev_rad, t_s, sat_label, start_utc, *, mask_deg, window_s=SKYPLOT_WINDOW_S,
+                 title=""):
+    """Sky plot at the first epoch with the tracks of the following ``window_s``, saved to ``path`` (PNG).
+
+    North up, azimuth clockwise, compass points marked, the sky below the mask
+    shaded. Satellites above the mask at the first epoch are dots labelled
+    with their id (the :data:`MAX_LABELS` highest), each with its track over
+    the window as a line starting at the dot.
 
     Parameters
     ----------
+    path : str or Path
     az_rad, elev_rad : ndarray, (m,)
-    track_id : ndarray, (m,)
-        Points with the same id are drawn as one track.
+        Visible points (any order).
+    t_s : ndarray, (m,)
+        Seconds of each point since ``start_utc`` (the first epoch is 0).
+    sat_label : ndarray of str, (m,)
+        Satellite id of each point; points with the same id form one track.
+    start_utc : numpy.datetime64
+        The first epoch (the instant shown).
+    mask_deg : float
+    window_s : float
+        Length of the tracks drawn [s].
+    title : str
+        What was run; the instant and window are added below it.
     """
     plt = pyplot()
-    fig = plt.figure(figsize=(6, 6))
+    fig = plt.figure(figsize=(6.4, 7))
     ax = fig.add_subplot(projection="polar")
     ax.set_theta_zero_location("N")
     ax.set_theta_direction(-1)
-    zen = 90.0 - np.degrees(elev_rad)
-    order = np.lexsort((np.arange(len(track_id)), track_id))
-    ids, start = np.unique(np.asarray(track_id)[order], return_index=True)
-    for a, b in zip(start, np.r_[start[1:], len(order)]):
-        sel = order[a:b]
-        ax.plot(az_rad[sel], zen[sel], lw=0.8)
+    ax.fill_between(np.linspace(0, 2 * np.pi, 181), 90 - mask_deg, 90, color="0.85", zorder=0,
+                    label=f"below the {mask_deg:g} deg mask")
+    t_s = np.asarray(t_s, float)
+    sat_label = np.asarray(sat_label)
+    now = t_s == 0.0
+    # Only the satellites up at the instant, each with the next window_s of its pass: later risers would
+    # turn a day (or a dense shell) into a solid disc.
+    sel = np.isin(sat_label, sat_label[now]) & (t_s <= window_s)
+    az, zen, t_w, labels = az_rad[sel], 90.0 - np.degrees(elev_rad[sel]), t_s[sel], sat_label[sel]
+    order = np.lexsort((t_w, labels))
+    ids, start = np.unique(labels[order], return_index=True)
+    first = order[start]
+    # Label the highest MAX_LABELS satellites; a crowd of labels reads as none.
+    labelled = set(np.argsort(zen[first])[:MAX_LABELS].tolist())
+    placed = []  # labelled points so far, on the plane of the plot [deg]
+    for k, (a, b) in enumerate(zip(start, np.r_[start[1:], len(order)])):
+        track, i0 = order[a:b], first[k]
+        color = f"C{k % 10}"
+        ax.plot(az[track], zen[track], lw=0.9, color=color)
+        ax.plot(az[i0], zen[i0], "o", color=color, ms=4)
+        if k in labelled:
+            xy = zen[i0] * np.array([np.sin(az[i0]), np.cos(az[i0])])
+            # Stack the labels of satellites close together (a shell's neighbours) instead of overprinting.
+            n_near = sum(np.hypot(*(xy - p)) < 8.0 for p in placed)
+            placed.append(xy)
+            ax.annotate(ids[k], (az[i0], zen[i0]), xytext=(5, 3 + 9 * n_near), textcoords="offset points",
+                        fontsize=7, color=color)
     ax.set_rlim(0, 90)
     ax.set_rticks([0, 30, 60, 90 - mask_deg])
-    ax.set_yticklabels(["90", "60", "30", f"{mask_deg:g}"])
-    ax.set_title(title or f"{len(ids)} satellites above {mask_deg:g} deg")
-    save_png(fig, path, dpi=110)
+    ax.set_yticklabels(["90", "60", "30", f"{mask_deg:g}"], fontsize=7)
+    ax.set_rlabel_position(112.5)
+    ax.set_xticks(np.radians(np.arange(0, 360, 45)))
+    ax.set_xticklabels(["N", "NE", "E", "SE", "S", "SW", "W", "NW"])
+    ax.legend(loc="lower right", bbox_to_anchor=(1.1, -0.12), fontsize=8)
+    span_min = min(window_s, t_s.max(initial=0.0)) / 60
+    stamp = format_utc(start_utc)[:19] + "Z"
+    shown = f", the {MAX_LABELS} highest labelled" if len(ids) > MAX_LABELS else ""
+    ax.set_title(f"{title}\nsky at {stamp}: {len(ids)} satellites above {mask_deg:g} deg (dots{shown}),\n"
+                 f"their tracks over the next {span_min:.0f} min", fontsize=9, pad=18)
+    save_png(fig, path, dpi=110, bbox_inches="tight")
