@@ -53,7 +53,7 @@ from .fusion import common, kalman, loose, tight
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
-from .positioning.dop import doppler_jacobian
+from .geometry.doppler import doppler_jacobian
 from .positioning.doppler_ls import FixStatus, solve_snapshots
 from .signal.doppler import doppler_sigma_hz, estimate_block
 from .signal.pilot import PilotComb, add_noise, comb_baseband

@@ -3,7 +3,8 @@
 import numpy as np
 
 from leosop.constants import C_MPS
-from leosop.positioning.dop import cofactor, doppler_jacobian, gdop, range_dops
+from leosop.geometry.dop import cofactor, gdop, range_dops
+from leosop.geometry.doppler import doppler_jacobian
 
 F0 = 11.325e9
 

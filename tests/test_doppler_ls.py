@@ -7,8 +7,8 @@ from leosop.constants import C_MPS
 from leosop.frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.doppler_ls import FixStatus, doppler_rate, solve_snapshots, solve_static, solve_static_passes
-from leosop.positioning.dop import doppler_jacobian
+from leosop.positioning.doppler_ls import FixStatus, solve_snapshots, solve_static, solve_static_passes
+from leosop.geometry.doppler import doppler_jacobian, doppler_rate
 
 F0_HZ = 11.325e9
 #: Noise-free recovery: the solver stops when a step is below 0.1 mm and

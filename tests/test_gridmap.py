@@ -12,7 +12,8 @@ from leosop.orbits.gridmap import (
     footprint_pairs, gdop_map, make_grid, satellite_carriers_hz,
 )
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.dop import doppler_jacobian, gdop
+from leosop.geometry.dop import gdop
+from leosop.geometry.doppler import doppler_jacobian
 
 # Cholesky of the normal matrix against the eigen-decomposition of dop.cofactor:
 # both exact to rounding, conditioned geometries amplify it to ~1e-7.

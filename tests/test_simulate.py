@@ -7,7 +7,7 @@ from leosop.constants import C_MPS
 from leosop.ins import trajectory
 from leosop.orbits import CARRIERS
 from leosop.orbits.visibility import compute_visibility
-from leosop.positioning.dop import doppler_jacobian
+from leosop.geometry.doppler import doppler_jacobian
 from leosop.positioning.doppler_ls import FixStatus, solve_snapshots
 from leosop.scenarios import XIAN_BAOJI
 

@@ -9,7 +9,7 @@ from conftest import data_path
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation, read_tle
 from leosop.orbits.visibility import compute_visibility
-from leosop.positioning.dop import doppler_jacobian
+from leosop.geometry.doppler import doppler_jacobian
 
 DELFT = (np.radians(51.9989), np.radians(4.3733585), 95.0)
 

@@ -35,7 +35,7 @@ from scipy import stats
 
 from .. import frames
 from ..ins.error_model import DPOS, DV
-from ..positioning.dop import doppler_jacobian
+from ..geometry.doppler import doppler_jacobian
 from . import kalman
 from .common import N_INS, FeedbackIns, SatelliteStates, Track, initial_covariance, pos_jacobian
 

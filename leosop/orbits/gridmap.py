@@ -13,7 +13,7 @@ the exact elevation test of :func:`_visible` -- the same test as the brute
 force :func:`brute_force_epoch`, so the counts are identical.
 
 The Doppler GDOP per cell (Shen 2024 eq. 10; 7 states, static receiver, see
-:mod:`leosop.positioning.dop`) needs ``H^T W H`` per cell: the outer products
+:mod:`leosop.geometry.dop`) needs ``H^T W H`` per cell: the outer products
 of the visible satellites' Jacobian rows are scatter-added to their cells
 (``numpy.bincount``), then inverted in one batch. NaN where fewer than 7
 satellites are visible or the geometry is singular.
@@ -34,7 +34,8 @@ import numpy as np
 from ..constants import WGS84_B_M
 from ..errors import ExternalError, InputError
 from ..frames import geodetic_to_ecef
-from ..positioning.dop import N_DOPPLER_STATES, doppler_jacobian, gdop as gdop_of_h
+from ..geometry.dop import gdop as gdop_of_h
+from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian
 from .constellation import CARRIERS
 from .propagate import state_ecef
 
@@ -223,7 +224,7 @@ def _normal_gdop(normal):
 
     Cholesky factor of the equilibrated matrix (unit diagonal), unrolled over
     the batch: ``trace(A^-1) = sum (D L^-T)^2``. A pivot below 1e-12 marks the
-    geometry singular, the threshold of :func:`leosop.positioning.dop.cofactor`
+    geometry singular, the threshold of :func:`leosop.geometry.dop.cofactor`
     (its eigenvalue ratio 1e-12 bounds every pivot from below).
     """
     n = normal.shape[-1]
@@ -252,7 +253,7 @@ def _normal_gdop(normal):
 def _jacobian_static(los_ecef_m, rng_m, vel_sv_ecef_mps, carrier_hz):
     """Doppler Jacobian rows of a static receiver as columns (7, m), Fortran-friendly.
 
-    Same rows as :func:`leosop.positioning.dop.doppler_jacobian` with zero
+    Same rows as :func:`leosop.geometry.doppler.doppler_jacobian` with zero
     receiver velocity, from the satellite-minus-receiver vector ``los``.
     """
     u = -los_ecef_m / rng_m[:, None]
@@ -314,7 +315,7 @@ def brute_force_epoch(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg
 
     Same arguments as :func:`epoch_maps`; ``cells`` (flat indices) restricts
     the evaluation. Returns ``n_visible, gdop`` of shape (n_cells_evaluated,).
-    GDOP through :func:`leosop.positioning.dop.gdop` on the zero-weighted rows.
+    GDOP through :func:`leosop.geometry.dop.gdop` on the zero-weighted rows.
     """
     cells = np.arange(grid.n_cells) if cells is None else np.asarray(cells)
     sin_mask = math.sin(math.radians(mask_deg))

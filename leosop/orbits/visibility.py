@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import C_e_n, ecef_to_geodetic, teme_to_ecef
-from ..positioning.dop import cofactor, doppler_jacobian, range_dops
+from ..geometry.dop import cofactor, range_dops
+from ..geometry.doppler import doppler_jacobian
 from ..progress import progress
 from ..timebase import jd_ut1, jd_utc
 

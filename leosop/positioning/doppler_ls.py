@@ -39,12 +39,12 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm as norm_dist
 
-from ..constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
-from .dop import N_DOPPLER_STATES, cofactor, doppler_jacobian
+from ..geometry.dop import cofactor
+from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian, doppler_rate
 
 __all__ = ["FixStatus", "SnapshotFixes", "StaticFix", "PassesFix", "solve_snapshots", "solve_static",
-           "solve_static_passes", "doppler_rate", "subpoint_centroid_ecef_m", "N_STATIC_STATES",
+           "solve_static_passes", "subpoint_centroid_ecef_m", "N_STATIC_STATES",
            "TIME_OFFSET_SIGMA_S", "SAT_OFFSET_SIGMA_HZ"]
 
 #: States of a static batch fix with a linear clock: position, frequency offset, frequency drift.
@@ -833,41 +833,6 @@ def _inverse_or_nan(N, rcond=1e-12):
     if not (diag > 0).all() or lam[0] <= rcond * abs(lam[-1]):
         return np.full(N.shape, np.nan)
     return (V / lam) @ V.T * d[:, None] * d[None, :]
-
-
-def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz):
-    """Rate of the Doppler seen by a receiver at rest in ECEF, and its gradient w.r.t. the receiver position.
-
-    The satellite's acceleration is two-body gravity plus the frame's
-    centrifugal and Coriolis terms (J2 changes it by ~0.1 %). The rate is
-    ``d(doppler)/d(dt)`` for a time offset ``dt`` of the satellite states.
-
-    Parameters
-    ----------
-    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
-    pos_rx_ecef_m : array_like, (..., 3)
-    carrier_hz : float or array_like, (m,)
-
-    Returns
-    -------
-    rate_hz_per_s : ndarray, (..., m)
-    grad_hz_per_s_m : ndarray, (..., m, 3)
-    """
-    r_s = np.asarray(pos_sv_ecef_m, dtype=float)
-    v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
-    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
-    a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
-           - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
-    dr = r_s - np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :]
-    rho = np.linalg.norm(dr, axis=-1, keepdims=True)
-    u = dr / rho
-    rho_dot = np.sum(u * v_s, axis=-1, keepdims=True)
-    u_a = np.sum(u * a_s, axis=-1, keepdims=True)
-    v2 = np.sum(v_s * v_s, axis=-1, keepdims=True)
-    k = -np.asarray(carrier_hz, dtype=float)[..., None] / C_MPS
-    rate = k * ((v2 - rho_dot**2) / rho + u_a)
-    grad = k * (2.0 * rho_dot * (v_s - u * rho_dot) / rho**2 + (v2 - rho_dot**2) * u / rho**2 - (a_s - u * u_a) / rho)
-    return rate[..., 0], grad
 
 
 def _grid_starts(centre_ecef_m, offset_m):

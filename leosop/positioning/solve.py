@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import InputError
 from .doppler_ls import (SAT_OFFSET_SIGMA_HZ, TIME_OFFSET_SIGMA_S, solve_snapshots, solve_static,
                          solve_static_passes, subpoint_centroid_ecef_m)
-from .dop import N_DOPPLER_STATES
+from ..geometry.doppler import N_DOPPLER_STATES
 from .measurements import clock_groups, sv_states_from_tle
 
 __all__ = ["PositionResult", "position_snapshots", "position_static", "position_static_passes", "satellite_states"]

@@ -1,49 +1,12 @@
-"""Dilution of precision: Doppler positioning ([Shen 2024] eq. 8-10) and range-based.
+"""Dilution of precision: Doppler positioning ([Shen 2024] eq. 10) and range-based.
 
-Doppler model (the toolkit's sign, see :mod:`leosop`)::
-
-    doppler_hz = -(f0 / c) * (v_s - v_r) . (r_s - r_r) / |r_s - r_r| + T_u
-
-State ``[x, y, z, vx, vy, vz, T_u]`` (ECEF m, m/s, Hz). Its Jacobian is seed
-004's eq. 8-9 with the position and velocity columns negated (the paper writes
-the carrier with the opposite sign of the range-rate term); GDOP
-``sqrt(trace((H^T H)^-1))`` (eq. 10) is the same for both signs.
+GDOP ``sqrt(trace((H^T H)^-1))`` of the Doppler rows of :mod:`leosop.geometry.doppler`
+(eq. 10) is the same for either sign convention of the Doppler.
 """
 
 import numpy as np
 
-from ..constants import C_MPS
-
-__all__ = ["doppler_jacobian", "gdop", "cofactor", "range_dops", "N_DOPPLER_STATES"]
-
-#: States of a Doppler snapshot fix: position, velocity, frequency offset.
-N_DOPPLER_STATES = 7
-
-
-def doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_mps, carrier_hz):
-    """Rows of H: derivative of each satellite's Doppler w.r.t. the receiver state.
-
-    Parameters
-    ----------
-    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (..., n_sv, 3)
-    pos_rx_ecef_m, vel_rx_ecef_mps : array_like, (..., 3)
-    carrier_hz : float or array_like, broadcastable to (..., n_sv)
-
-    Returns
-    -------
-    H : ndarray, (..., n_sv, 7)
-        Columns d/dr_rx [Hz/m], d/dv_rx [Hz/(m/s)], d/dT_u [1].
-    """
-    r_s = np.asarray(pos_sv_ecef_m, dtype=float)
-    v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
-    dr = np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :] - r_s
-    dv = np.asarray(vel_rx_ecef_mps, dtype=float)[..., None, :] - v_s
-    rho = np.linalg.norm(dr, axis=-1, keepdims=True)
-    u = dr / rho
-    k = -np.asarray(carrier_hz, dtype=float)[..., None] / C_MPS
-    d_pos = k * (dv - u * np.sum(u * dv, axis=-1, keepdims=True)) / rho
-    d_vel = k * u
-    return np.concatenate([d_pos, d_vel, np.ones(d_pos.shape[:-1] + (1,))], axis=-1)
+__all__ = ["gdop", "cofactor", "range_dops"]
 
 
 def cofactor(H, weights=None, *, rcond=1e-12):

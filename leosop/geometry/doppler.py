@@ -1,0 +1,86 @@
+"""The Doppler measurement model: its Jacobian rows and its rate ([Shen 2024] eq. 4-9).
+
+Model (the toolkit's sign, see :mod:`leosop`)::
+
+    doppler_hz = -(f0 / c) * (v_s - v_r) . (r_s - r_r) / |r_s - r_r| + T_u
+
+State ``[x, y, z, vx, vy, vz, T_u]`` (ECEF m, m/s, Hz). Its Jacobian is
+[Shen 2024] eq. 8-9 with the position and velocity columns negated (the paper
+writes the carrier with the opposite sign of the range-rate term).
+"""
+
+import numpy as np
+
+from ..constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
+
+__all__ = ["N_DOPPLER_STATES", "doppler_jacobian", "doppler_rate"]
+
+#: States of a Doppler snapshot fix: position (3), velocity (3), one receiver frequency offset; so a
+#: snapshot needs at least 7 satellites ([Shen 2024] eq. 4-7).
+N_DOPPLER_STATES = 7
+
+
+def doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_mps, carrier_hz):
+    """Rows of H: derivative of each satellite's Doppler w.r.t. the receiver state.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (..., n_sv, 3)
+    pos_rx_ecef_m, vel_rx_ecef_mps : array_like, (..., 3)
+    carrier_hz : float or array_like, broadcastable to (..., n_sv)
+
+    Returns
+    -------
+    H : ndarray, (..., n_sv, 7)
+        Columns d/dr_rx [Hz/m], d/dv_rx [Hz/(m/s)], d/dT_u [1].
+    """
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
+    dr = np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :] - r_s
+    dv = np.asarray(vel_rx_ecef_mps, dtype=float)[..., None, :] - v_s
+    rho = np.linalg.norm(dr, axis=-1, keepdims=True)
+    u = dr / rho
+    k = -np.asarray(carrier_hz, dtype=float)[..., None] / C_MPS
+    d_pos = k * (dv - u * np.sum(u * dv, axis=-1, keepdims=True)) / rho
+    d_vel = k * u
+    return np.concatenate([d_pos, d_vel, np.ones(d_pos.shape[:-1] + (1,))], axis=-1)
+
+
+def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=None):
+    """Rate of the Doppler, and its gradient w.r.t. the receiver position.
+
+    The satellite's ECEF acceleration is two-body gravity plus the frame's
+    centrifugal and Coriolis terms (J2 changes it by ~0.1 %); the receiver's
+    acceleration is neglected. At rest the rate is ``d(doppler)/d(dt)`` for
+    a time offset ``dt`` of the satellite states.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
+    pos_rx_ecef_m : array_like, (..., 3)
+    carrier_hz : float or array_like, (m,)
+    vel_rx_ecef_mps : array_like, (..., 3) or (m, 3), optional
+        Receiver velocity; default at rest in ECEF.
+
+    Returns
+    -------
+    rate_hz_per_s : ndarray, (..., m)
+    grad_hz_per_s_m : ndarray, (..., m, 3)
+    """
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
+    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
+    a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
+           - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
+    if vel_rx_ecef_mps is not None:
+        v_s = v_s - np.asarray(vel_rx_ecef_mps, dtype=float)
+    dr = r_s - np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :]
+    rho = np.linalg.norm(dr, axis=-1, keepdims=True)
+    u = dr / rho
+    rho_dot = np.sum(u * v_s, axis=-1, keepdims=True)
+    u_a = np.sum(u * a_s, axis=-1, keepdims=True)
+    v2 = np.sum(v_s * v_s, axis=-1, keepdims=True)
+    k = -np.asarray(carrier_hz, dtype=float)[..., None] / C_MPS
+    rate = k * ((v2 - rho_dot**2) / rho + u_a)
+    grad = k * (2.0 * rho_dot * (v_s - u * rho_dot) / rho**2 + (v2 - rho_dot**2) * u / rho**2 - (a_s - u * u_a) / rho)
+    return rate[..., 0], grad
