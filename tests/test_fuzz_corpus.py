@@ -21,20 +21,8 @@ _spec.loader.exec_module(fuzz_readers)
 
 #: Findings still open, by file name: where the fix belongs.
 OPEN = {
-    "clk/crash-0d170070d4c09eb6": "gnss/rinex.py read_text: zlib.error of a corrupt gzip stream is not caught",
-    "clk/crash-6e9dd118c7add9a4": "gnss/products.py read_clk: records that leave no epoch raise IndexError",
-    "clk/crash-170c749c253beeba": "gnss/products.py _epoch (via read_clk): huge epoch fields raise OverflowError",
-    "clk/crash-b469fdd35903d664": "gnss/products.py _epoch (via read_clk): huge epoch fields raise OverflowError",
-    "clk/crash-7ada3ff7fcd5e09f": "gnss/products.py _epoch (via read_clk): month 0 raises ValueError",
-    "sp3/crash-1a3ffacf5c3f86dc": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
-    "sp3/crash-a9db9653b9f753dc": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
-    "sp3/crash-b0034b39f4582629": "gnss/products.py _epoch: month 0 raises ValueError",
-    "sp3/crash-ceda122fb1a18983": "gnss/products.py _epoch: impossible epoch fields raise ValueError/OverflowError",
     "scenario/crash-235ef9dd2faf8ce7": "scenarios.py load_scenario: a non-UTF-8 file raises UnicodeDecodeError "
                                        "(the CLI turns it into exit 2, but without the file name)",
-    "rinex_obs/crash-8b59836f9d30598e": "gnss/rinex.py read_obs: an impossible epoch date (day 0) raises ValueError",
-    "rinex_obs/crash-0b2d4393c29d6753": "gnss/rinex.py read_obs: a non-numeric count in SYS / # / OBS TYPES raises "
-                                        "ValueError",
 }
 
 

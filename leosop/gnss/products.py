@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .rinex import read_text
+from .rinex import epochs_gps, read_text
 
 __all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps", "read_wl_biases"]
 
@@ -25,7 +25,7 @@ N_LAGRANGE = 11
 
 def seconds_gps(times_gps, ref_gps):
     """``datetime64`` GPS instants -> float seconds since ``ref_gps``."""
-    return (np.asarray(times_gps, "datetime64[ns]") - np.datetime64(ref_gps, "ns")).astype(np.int64) * 1e-9
+    return (np.asarray(times_gps, "datetime64[ns]") - np.datetime64(ref_gps, "ns")).astype(np.int64) / 1e9
 
 
 @dataclass
@@ -126,25 +126,54 @@ class Clocks:
         return out
 
 
-def _epoch(line, a, path, lineno):
+def _epoch_fields(line, a, path, lineno):
+    """Year, month, day, hour, minute, seconds of an epoch written from column ``a`` on."""
+    f = line[a:].split()[:6]
     try:
-        f = line[a:].split()
-        y, mo, d, h, mi = (int(v) for v in f[:5])
-        s = float(f[5])
-    except (ValueError, IndexError):
-        raise InputError(f"{path}: line {lineno}: unreadable epoch") from None
-    return (np.datetime64(f"{y:04d}-{mo:02d}-{d:02d}", "ns") + np.timedelta64(h * 3600 + mi * 60, "s")
-            + np.timedelta64(int(round(s * 1e9)), "ns"))
+        if len(f) == 6:
+            return tuple(float(v) for v in f)
+    except ValueError:
+        pass
+    raise InputError(f"{path}: line {lineno}: unreadable epoch")
 
 
-def _grid(times, path, what):
-    t = np.asarray(times)
-    if len(t) < 2:
+#: Shortest record interval accepted [s] (RINEX clock products are 1 s to 5 min).
+MIN_STEP_S = 1.0
+#: Longest product span accepted [s]: a week of records and a day either side.
+MAX_SPAN_S = 9 * 86400.0
+
+
+def _grid(times, line_numbers, path, what):
+    """Sorted epochs and their smallest spacing; every epoch on that grid, the grid a bounded size.
+
+    Returns
+    -------
+    t : ndarray of datetime64[ns], shape (n,)
+    step : timedelta64[ns]
+    index : ndarray of int, shape (n,)
+        Row of each sorted epoch in the regular grid ``t[0] + k * step``.
+    order : ndarray of int, shape (n,)
+        Sorting permutation of ``times``.
+    """
+    times = np.asarray(times)
+    if len(times) < 2:
         raise InputError(f"{path}: fewer than two {what} epochs")
-    step = np.diff(t)
-    if np.any(step <= np.timedelta64(0)):
-        raise InputError(f"{path}: {what} epochs not increasing")
-    return t, np.median(step)
+    order = np.argsort(times, kind="stable")
+    t, lines = times[order], np.asarray(line_numbers)[order]
+    dt = np.diff(t).astype(np.int64) * 1e-9
+    if np.any(dt <= 0):
+        raise InputError(f"{path}: line {lines[1:][dt <= 0][0]}: {what} epoch repeated")
+    step = float(dt.min())
+    span = (t[-1] - t[0]).astype(np.int64) * 1e-9
+    if step < MIN_STEP_S or span > MAX_SPAN_S:
+        raise InputError(f"{path}: {what} epochs {step:g} s apart over {span:g} s "
+                         f"(expected at least {MIN_STEP_S:g} s apart over at most {MAX_SPAN_S:g} s)")
+    u = (t - t[0]).astype(np.int64) * 1e-9 / step
+    index = np.round(u).astype(int)
+    off = np.abs(u - index) > 1e-3
+    if np.any(off):
+        raise InputError(f"{path}: line {lines[off][0]}: {what} epoch off the {step:g} s record grid")
+    return t, np.timedelta64(int(round(step * 1e9)), "ns"), index, order
 
 
 def read_sp3(path, *, systems="GE", ref_gps=None):
@@ -167,10 +196,11 @@ def read_sp3(path, *, systems="GE", ref_gps=None):
         raise InputError(f"{path}: line 1: not an SP3-c/d orbit file")
     if lines[0][2:3] not in ("P", "V"):
         raise InputError(f"{path}: line 1: unknown SP3 position/velocity flag {lines[0][2:3]!r}")
-    epochs, recs = [], []
+    epochs, epoch_lines, recs = [], [], []
     for i, line in enumerate(lines):
         if line[:1] == "*":
-            epochs.append(_epoch(line, 1, path, i + 1))
+            epochs.append(_epoch_fields(line, 1, path, i + 1))
+            epoch_lines.append(i + 1)
         elif line[:1] == "P" and epochs:
             s = line[1:2]
             if s not in systems:
@@ -184,7 +214,10 @@ def read_sp3(path, *, systems="GE", ref_gps=None):
             break
     if not recs:
         raise InputError(f"{path}: no position records for systems {systems!r}")
-    t, step = _grid(epochs, path, "SP3")
+    t, step, _, order = _grid(epochs_gps(epochs, epoch_lines, path), epoch_lines, path, "SP3")
+    if np.any(order != np.arange(len(order))):
+        raise InputError(f"{path}: line {epoch_lines[np.flatnonzero(order != np.arange(len(order)))[0]]}: "
+                         "SP3 epochs not in time order")
     if np.any(np.diff(t) != step):
         raise InputError(f"{path}: SP3 epochs are not evenly spaced")
     sv = sorted({r[1] for r in recs})
@@ -218,7 +251,7 @@ def read_clk(path, *, systems="GE", ref_gps=None):
             continue
         f = line[3:].split()
         try:
-            key = tuple(int(v) for v in f[1:6]) + (float(f[6]),)
+            key = tuple(float(v) for v in f[1:7])
             val = float(f[8])
         except (ValueError, IndexError):
             raise InputError(f"{path}: line {i + 1}: unreadable AS clock record") from None
@@ -227,13 +260,12 @@ def read_clk(path, *, systems="GE", ref_gps=None):
         vals.append(val)
     if not vals:
         raise InputError(f"{path}: no satellite clock records for systems {systems!r}")
-    times = [_epoch(" ".join(f"{v}" for v in k), 0, path, ln) for k, (_, ln) in keys.items()]
-    order = np.argsort(np.array(times))
-    t, step = _grid(np.array(times)[order], path, "clock")
+    fields = np.array(list(keys), float)
+    key_lines = [ln for _, ln in keys.values()]
+    t, step, idx, order = _grid(epochs_gps(fields, key_lines, path), key_lines, path, "clock")
     rank = np.empty(len(order), int)
     rank[order] = np.arange(len(order))
     # Records on a regular grid (gaps become NaN rows).
-    idx = np.round((t - t[0]) / step).astype(int)
     grid = t[0] + np.arange(idx[-1] + 1) * step
     sv = sorted({s for _, s in svs})
     col = {s: k for k, s in enumerate(sv)}

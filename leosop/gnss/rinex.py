@@ -13,6 +13,7 @@ mixed files, RINEX 3.05 section 6.7), as ``datetime64[ns]`` named ``time_gps``.
 """
 
 import gzip
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["ObsData", "read_obs", "read_text", "check_nav"]
+__all__ = ["ObsData", "read_obs", "read_text", "check_nav", "epochs_gps"]
 
 
 @dataclass
@@ -75,7 +76,7 @@ def read_text(path):
     if raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
+        except (OSError, EOFError, zlib.error) as exc:
             raise InputError(f"{path}: truncated or corrupt gzip data ({exc})") from None
     if raw[:80].find(b"COMPACT RINEX FORMAT") >= 0 or raw[60:80].startswith(b"CRINEX VERS"):
         import hatanaka
@@ -88,6 +89,50 @@ def read_text(path):
         return raw.decode("ascii", errors="replace").splitlines()
     except Exception as exc:  # pragma: no cover - decode with replace does not fail
         raise InputError(f"{path}: not text ({exc})") from None
+
+
+#: Calendar years accepted in epochs: the GNSS era (also keeps ``datetime64[ns]`` far from overflow).
+EPOCH_YEARS = (1980, 2099)
+
+
+def epochs_gps(fields, line_numbers, path):
+    """Calendar epoch fields -> ``datetime64[ns]``, refusing impossible dates.
+
+    Parameters
+    ----------
+    fields : array_like, shape (n, 6)
+        Year, month, day, hour, minute (whole numbers) and seconds.
+    line_numbers : array_like of int, shape (n,)
+        Line of each epoch in ``path``, for the error message.
+    path : str
+
+    Returns
+    -------
+    ndarray of datetime64[ns], shape (n,)
+
+    Raises
+    ------
+    InputError
+        At the first epoch outside years 1980-2099, month 1-12, the month's
+        days, hour 0-23, minute 0-59 or seconds [0, 61) (leap second).
+    """
+    f = np.asarray(fields, float).reshape(-1, 6)
+    y, mo, d, h, mi, s = f.T
+    whole = np.all(np.isfinite(f[:, :5]) & (f[:, :5] == np.round(f[:, :5])), axis=1)
+    ok = (whole & (y >= EPOCH_YEARS[0]) & (y <= EPOCH_YEARS[1]) & (mo >= 1) & (mo <= 12) & (d >= 1)
+          & (h >= 0) & (h <= 23) & (mi >= 0) & (mi <= 59) & (s >= 0) & (s < 61))
+    month = np.where(ok, (y - 1970) * 12 + mo - 1, 0).astype(np.int64).astype("datetime64[M]")
+    day = month.astype("datetime64[D]") + np.where(ok, d - 1, 0).astype(np.int64)
+    ok &= day.astype("datetime64[M]") == month
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        k = bad[0]
+        shown = " ".join(f"{v:g}" for v in f[k])
+        raise InputError(f"{path}: line {int(np.asarray(line_numbers)[k])}: impossible epoch {shown} "
+                         f"(expected year {EPOCH_YEARS[0]}-{EPOCH_YEARS[1]}, a valid date, hour 0-23, minute 0-59, "
+                         "seconds 0-60)")
+    return (day.astype("datetime64[ns]") + ((h * 3600 + mi * 60) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+            + np.round(s * 1e9).astype(np.int64).astype("timedelta64[ns]"))
 
 
 def _header(lines, path):
@@ -155,7 +200,12 @@ def read_obs(path, *, systems="GE", codes=None):
     for label, text, lineno in head:
         if label == "SYS / # / OBS TYPES":
             if text[0] != " ":
-                sys_letter, n = text[0], int(text[3:6])
+                try:
+                    n = int(text[3:6])
+                except ValueError:
+                    raise InputError(f"{path}: line {lineno}: SYS / # / OBS TYPES: expected the number of "
+                                     f"observation types in columns 4-6, got {text[3:6]!r}") from None
+                sys_letter = text[0]
                 obs_types[sys_letter] = text[7:].split()
                 pending = (sys_letter, n)
             elif pending:
@@ -185,7 +235,7 @@ def read_obs(path, *, systems="GE", codes=None):
         raise InputError(f"{path}: no observation types for systems {systems!r}")
 
     # Pass 1: epoch records and the data lines of the kept systems.
-    epochs, rows = [], {s: [] for s in keep}
+    epochs, epoch_lines, rows = [], [], {s: [] for s in keep}
     i, n = n_head, len(lines)
     while i < n:
         line = lines[i]
@@ -202,6 +252,8 @@ def read_obs(path, *, systems="GE", codes=None):
                   float(line[18:29]))
         except ValueError:
             raise InputError(f"{path}: line {i + 1}: unreadable epoch record") from None
+        if nsat < 0:
+            raise InputError(f"{path}: line {i + 1}: negative satellite count {nsat} in the epoch record")
         if flag > 1:  # events: header lines follow, no observations
             i += 1 + nsat
             continue
@@ -210,6 +262,7 @@ def read_obs(path, *, systems="GE", codes=None):
                              f"the file ends after {n - 1 - i} (truncated file?)")
         k = len(epochs)
         epochs.append(ep)
+        epoch_lines.append(i + 1)
         for j in range(i + 1, i + 1 + nsat):
             data = lines[j]
             if data[:1] == ">":
@@ -221,12 +274,7 @@ def read_obs(path, *, systems="GE", codes=None):
         i += 1 + nsat
     if not epochs:
         raise InputError(f"{path}: line {n_head + 1}: no observation epochs")
-    ep = np.array(epochs)
-    sec = ep[:, 5]
-    days = (np.array([np.datetime64(f"{int(y):04d}-{int(m):02d}-{int(d):02d}") for y, m, d in ep[:, :3]])
-            .astype("datetime64[ns]"))
-    time_gps = (days + ((ep[:, 3] * 3600 + ep[:, 4] * 60) * 1e9).astype("timedelta64[ns]")
-                + np.round(sec * 1e9).astype("timedelta64[ns]"))
+    time_gps = epochs_gps(epochs, epoch_lines, path)
     sv = sorted({r[1][:3].replace(" ", "0") for s in rows for r in rows[s]})
     col = {name: c for c, name in enumerate(sv)}
     n_ep, n_sv = len(epochs), len(sv)
