@@ -105,3 +105,14 @@ def test_worker_killed_mid_study_same_results(serial, tmp_path):
     run = outcome["run"]
     assert run.n_resumed == 0 and run.n_workers == 2
     np.testing.assert_array_equal(run.rows[:, COLS], rows[:, COLS])
+
+
+def test_constellation_mix_reaches_the_runs(serial, tmp_path):
+    spec, rows = serial
+    mixes = [["starlink"], ["starlink", "oneweb", "iridium", "orbcomm"]]
+    mix = _spec(parameters={"constellations": mixes, "correction_period_s": [1, 5], "coupling": ["loose", "tight"]})
+    got = run_study(mix, tmp_path, scheduler="serial").rows.reshape(mix.shape + (len(METRICS),))
+    # Starlink alone is the default sky: the same numbers as the study without the parameter.
+    np.testing.assert_array_equal(got[0][..., COLS], rows.reshape(spec.shape + (len(METRICS),))[..., COLS])
+    seen = list(METRICS).index("n_visible_min")
+    assert (got[1][..., seen] > got[0][..., seen]).all()  # the other families' satellites are in the sky

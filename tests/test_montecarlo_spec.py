@@ -5,8 +5,10 @@ import json
 import numpy as np
 import pytest
 
+from leosop.chunkstore import PACKAGE_DIR, code_digest
 from leosop.errors import InputError
-from leosop.montecarlo import IMU_GRADES, bundled_specs, load_spec, run_seeds, spec_from_dict
+from leosop.montecarlo import IMU_GRADES, METRICS, bundled_specs, load_spec, run_seeds, spec_from_dict, to_dataset
+from leosop.montecarlo import spec as spec_module
 from leosop.montecarlo.parameters import apply
 from leosop.scenarios import XIAN_BAOJI
 from leosop.simulate_study import PAPER_TABLE5, PAPER_TABLE6
@@ -38,6 +40,16 @@ def _with(**changes):
     ({"parameters": {"coupling": ["loose"]}}, "s.json: missing key 'n_seeds'"),
     (_with(scenario={"speed": 100}), "s.json: scenario: unknown key 'speed'"),
     (_with(tle="missing.tle"), "s.json: tle: 'missing.tle' is not a file"),
+    (_with(parameters={"constellations": [["starlink"], ["starlink", "galileo"]]}),
+     "parameters.constellations[1]: scenario.leo.constellations: unknown constellation 'galileo'; "
+     "expected one of starlink, oneweb, iridium, orbcomm"),
+    (_with(parameters={"constellations": [[]]}), "parameters.constellations[0]: scenario.leo.constellations: "
+                                                 "expected a non-empty list of constellation names"),
+    (_with(parameters={"constellations": ["starlink"]}), "parameters.constellations[0]: scenario.leo.constellations: "
+                                                         "expected a non-empty list"),
+    (_with(parameters={"constellations": [["oneweb"], ["oneweb"]]}), "parameters.constellations: values repeat"),
+    (_with(fixed={"constellations": ["iridium", "iridium"]}), "fixed.constellations: scenario.leo.constellations: "
+                                                              "a constellation is listed twice"),
 ])
 def test_bad_specs_one_line_naming_the_field(doc, message, tmp_path):
     with pytest.raises(InputError) as err:
@@ -63,6 +75,17 @@ def test_grid_cells_and_scenarios():
     assert options == {"level": "measurement"}
     assert scenario.leo.cn0_dbhz == 35.0 and scenario.imu.gyro_bias_deg_per_h == IMU_GRADES["mems"]["gyro_bias_deg_per_h"]
     assert scenario.imu.rate_hz == XIAN_BAOJI.imu.rate_hz and scenario.waypoints == XIAN_BAOJI.waypoints
+
+
+def test_constellation_mix_is_a_parameter():
+    mixes = [["starlink"], ["starlink", "oneweb", "iridium", "orbcomm"]]
+    spec = spec_from_dict(_with(parameters={"constellations": mixes, "coupling": ["loose", "tight"]}))
+    assert spec.axes["constellations"] == (("starlink",), ("starlink", "oneweb", "iridium", "orbcomm"))
+    scenario, options = apply(XIAN_BAOJI, spec.cells()[3], "test")
+    assert scenario.leo.constellations == ("starlink", "oneweb", "iridium", "orbcomm") and options["coupling"] == "tight"
+    ds = to_dataset(spec, np.zeros((spec.n_runs, len(METRICS))))
+    assert list(ds["constellations"].values) == ["starlink", "starlink+oneweb+iridium+orbcomm"]
+    assert json.loads(ds.attrs["spec"])["parameters"]["constellations"] == mixes
 
 
 def test_navigation_grade_is_the_papers_table1():
@@ -93,3 +116,29 @@ def test_digest_follows_what_the_results_depend_on():
     assert a.digest() == spec_from_dict(GOOD).digest()
     assert a.digest() != spec_from_dict(_with(n_seeds=3)).digest()
     assert a.digest() != spec_from_dict(_with(scenario={"mask_deg": 30})).digest()
+
+
+def test_digest_follows_the_source_code(monkeypatch):
+    before = spec_from_dict(GOOD).digest()
+    monkeypatch.setattr(spec_module, "code_digest", lambda: "0" * 64)  # as if a module had changed
+    assert spec_from_dict(GOOD).digest() != before
+
+
+def test_code_digest_sees_every_source_change(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "sub" / "b.py").write_text("y = 2\n")
+    (tmp_path / "notes.txt").write_text("not code")
+    digests = [code_digest(tmp_path)]
+    code_digest.cache_clear()
+    (tmp_path / "notes.txt").write_text("still not code")
+    assert code_digest(tmp_path) == digests[0]  # only Python source counts
+    for change in (lambda: (tmp_path / "sub" / "b.py").write_text("y = 3\n"),
+                   lambda: (tmp_path / "c.py").write_text(""),
+                   lambda: (tmp_path / "c.py").rename(tmp_path / "sub" / "c.py")):
+        change()
+        code_digest.cache_clear()
+        digests.append(code_digest(tmp_path))
+    assert len(set(digests)) == 4
+    code_digest.cache_clear()
+    assert code_digest() == code_digest(PACKAGE_DIR) and len(code_digest()) == 64

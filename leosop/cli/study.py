@@ -17,8 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
-from ..chunkstore import ChunkStore
+from ..chunkstore import ChunkStore, code_digest
 from ..errors import InputError
 from ..montecarlo import bundled_specs
 from ..orbits import CARRIERS
@@ -138,9 +137,9 @@ def _out_dir(path):
 
 
 def _gdop_digest(args, grid_deg, mask_deg):
-    """Hash of what a map's epochs depend on besides their times: satellites, grid, mask, leosop version."""
+    """Hash of what a map's epochs depend on besides their times: satellites, grid, mask, leosop version and code."""
     key = {"tle": str(Path(args.tle).resolve()) if args.tle else None, "families": sorted(args.constellation or ()),
-           "skip_bad": args.skip_bad, "grid_deg": grid_deg, "mask_deg": mask_deg, "version": __version__}
+           "skip_bad": args.skip_bad, "grid_deg": grid_deg, "mask_deg": mask_deg, "code": code_digest()}
     if args.tle:
         stat = Path(args.tle).stat()
         key["tle_file"] = [stat.st_size, stat.st_mtime_ns]

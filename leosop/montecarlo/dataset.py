@@ -2,7 +2,8 @@
 
 Every metric of :data:`leosop.montecarlo.runs.METRICS` is a variable over
 ``(axis_1, ..., axis_k, seed)`` with CF-style ``units`` and ``long_name``;
-each parameter axis is a coordinate (numbers with units, or names), ``seed``
+each parameter axis is a coordinate (numbers with units, names, or lists of
+names joined by ``+``: :func:`leosop.montecarlo.parameters.label`), ``seed``
 counts 0..n-1 and ``run_seed(seed)`` is the integer each run was given. The
 normalised spec and the fixed parameters are global attributes, so a file
 says how to reproduce itself.
@@ -14,7 +15,7 @@ import numpy as np
 
 from .. import __version__
 from ..fileio import atomic_path
-from .parameters import PARAMETERS
+from .parameters import PARAMETERS, label
 from .runs import METRICS
 from .spec import run_seeds
 
@@ -47,7 +48,8 @@ def to_dataset(spec, rows):
     for name, values in spec.axes.items():
         p = PARAMETERS[name]
         attrs = {"long_name": p.long_name} | ({"units": p.units} if p.units else {})
-        coords[name] = (name, np.array(values, dtype=float if p.choices is None else str), attrs)
+        coords[name] = (name, np.array(values, dtype=float) if p.choices is None
+                        else np.array([label(v) for v in values], dtype=str), attrs)
     return xr.Dataset(variables, coords=coords, attrs={
         "Conventions": "CF-1.8",
         "title": f"leosop Monte Carlo study {spec.name}",

@@ -5,9 +5,12 @@ A parameter is either an option of :func:`leosop.simulate.run_scenario`
 ``coupling``, ``level``), a field of the scenario (``mask_deg``,
 ``cn0_dbhz``, the IMU figures, ... named as in the scenario file without
 their section, DESIGN.md 4.1) or ``imu_grade``, a named set of the four IMU
-error figures (:data:`IMU_GRADES`). Scenario fields are checked by
-:func:`leosop.scenarios.scenario_from_dict`, so a study accepts exactly the
-values a scenario file accepts.
+error figures (:data:`IMU_GRADES`). ``constellations`` is the LEO family mix
+(``leo.constellations``): each value a list of family names, e.g.
+``[["starlink"], ["starlink", "oneweb", "iridium", "orbcomm"]]``, labelled
+``starlink+oneweb+...`` in results (:func:`label`). Scenario fields are
+checked by :func:`leosop.scenarios.scenario_from_dict`, so a study accepts
+exactly the values a scenario file accepts.
 """
 
 from dataclasses import dataclass
@@ -16,10 +19,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..fusion.common import ORBIT_MODELS
+from ..orbits import CARRIERS
 from ..scenarios import scenario_from_dict
 from ..simulate import COUPLINGS, LEVELS
 
-__all__ = ["Parameter", "PARAMETERS", "IMU_GRADES", "check_value", "apply"]
+__all__ = ["Parameter", "PARAMETERS", "IMU_GRADES", "check_value", "apply", "label"]
 
 #: IMU error figures by grade (bias and random walk of gyro and accelerometer).
 #: ``navigation``: [Shen 2024] Table 1 (the xian-baoji IMU). ``tactical``: the
@@ -53,6 +57,9 @@ class Parameter:
     long_name : str
     choices : tuple of str, optional
         The allowed names of a categorical parameter; None for numbers.
+    multiple : bool
+        Each value is a list of distinct ``choices`` (a tuple once checked),
+        not one of them.
     """
 
     name: str
@@ -60,6 +67,7 @@ class Parameter:
     units: str
     long_name: str
     choices: tuple | None = None
+    multiple: bool = False
 
 
 def _params():
@@ -76,6 +84,8 @@ def _params():
         Parameter("sat_doppler_offset_max_hz", "leo", "Hz", "largest clock-induced Doppler offset of a satellite"),
         Parameter("rx_freq_offset_hz", "leo", "Hz", "receiver frequency offset"),
         Parameter("fix_rate_hz", "leo", "Hz", "LEO fix and fusion rate"),
+        Parameter("constellations", "leo", "", "LEO constellation families received", tuple(CARRIERS),
+                  multiple=True),
         Parameter("gyro_bias_deg_per_h", "imu", "degree h-1", "gyro constant bias"),
         Parameter("gyro_arw_deg_per_rt_h", "imu", "degree h-1/2", "gyro angle random walk"),
         Parameter("accel_bias_g", "imu", "g", "accelerometer constant bias"),
@@ -92,12 +102,16 @@ PARAMETERS = _params()
 
 
 def check_value(name, value, where):
-    """``value`` as the run will use it (float or str); InputError naming ``where`` if invalid.
+    """``value`` as the run will use it (float, str or tuple of str); InputError naming ``where`` if invalid.
 
-    Run options are checked here; scenario fields by :func:`apply` (which
-    builds the scenario).
+    Run options and lists of names are checked here (lists as the scenario
+    file checks them); other scenario fields by :func:`apply` (which builds
+    the scenario).
     """
     param = PARAMETERS[name]
+    if param.multiple:
+        scenario = scenario_from_dict({param.target: {name: value}}, source=f"{where}: scenario")
+        return getattr(getattr(scenario, param.target), name)
     if param.choices is not None:
         if value not in param.choices:
             raise InputError(f"{where}: expected one of {', '.join(param.choices)}, got {value!r}")
@@ -110,6 +124,13 @@ def check_value(name, value, where):
     if name == "orbit_error_m" and value < 0:
         raise InputError(f"{where}: {value:g} must be >= 0 m")
     return value
+
+
+def label(value):
+    """A checked value as text for coordinates and tables: names of a list joined by ``+``, numbers as ``%g``."""
+    if isinstance(value, tuple):
+        return "+".join(value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def apply(base, values, where):

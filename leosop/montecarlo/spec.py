@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from ..chunkstore import code_digest
 from ..errors import InputError
 from ..scenarios import load_scenario, scenario_from_dict, to_dict
-from .parameters import PARAMETERS, apply, check_value
+from .parameters import PARAMETERS, apply, check_value, label
 
 __all__ = ["StudySpec", "load_spec", "spec_from_dict", "bundled_specs", "run_seeds"]
 
@@ -98,9 +98,9 @@ class StudySpec:
         }, sort_keys=True)
 
     def digest(self):
-        """Hash of everything the results depend on (spec, element-set file, leosop version)."""
+        """Hash of everything the results depend on: spec, element-set file, leosop version and source code."""
         h = hashlib.sha256(self.to_json().encode())
-        h.update(__version__.encode())
+        h.update(code_digest().encode())
         if self.tle is not None:
             stat = Path(self.tle).stat()
             h.update(f"{stat.st_size}:{stat.st_mtime_ns}".encode())
@@ -224,4 +224,4 @@ def spec_from_dict(doc, *, source="<dict>", base_dir=Path(".")):
 
 
 def _label(cell, axes):
-    return ", ".join(f"{k}={cell[k]}" for k in axes)
+    return ", ".join(f"{k}={label(cell[k])}" for k in axes)
