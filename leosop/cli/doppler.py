@@ -77,6 +77,23 @@ def _truth(rec, block_len):
     return out
 
 
+def _block_utc(captures, centre_sample, fs):
+    """UTC of a block centre (sample index, may be fractional) from the capture that holds it; None if unknown."""
+    cap = next((c for c in reversed(captures) if c.sample_start <= centre_sample), captures[0])
+    if cap.start_utc is None:
+        return None
+    return format_utc(cap.start_utc + np.timedelta64(int(round((centre_sample - cap.sample_start) / fs * 1e9)), "ns"))
+
+
+def _warn_straddling(captures, block_len, fs):
+    """One stderr line when blocks join samples of different captures (snapshots with gaps between them)."""
+    shortest = min(c.n_samples for c in captures)
+    if len(captures) > 1 and block_len > shortest:
+        print(f"leosop doppler: warning: blocks of {block_len / fs:g} s join {len(captures)} captures of "
+              f"{shortest / fs:g} s or less across their time gaps; use --block-s {shortest / fs:g} or less",
+              file=sys.stderr)
+
+
 def _reduce(power, rows, cols):
     """Sum a spectrogram down to at most rows x cols cells."""
     r = max(1, power.shape[0] // rows)
@@ -109,6 +126,7 @@ def run(args):
     comb = PilotComb(carrier_hz=PilotComb.carrier_hz if rec.center_hz is None else rec.center_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     truth = _truth(rec, block_len)
+    _warn_straddling(rec.captures, block_len, fs)
     n_blocks = rec.n_samples // block_len
     nperseg = min(4096, block_len // 4)
     want_fig = args.out is not None
@@ -135,8 +153,7 @@ def run(args):
                              max_rate_hz_per_s=args.max_rate_hz_per_s)
         entry = {
             "t_s": t_c,
-            "time_utc": format_utc(rec.start_utc + np.timedelta64(int(round(t_c * 1e9)), "ns"))
-            if rec.start_utc is not None else None,
+            "time_utc": _block_utc(rec.captures, start + 0.5 * (block_len - 1), fs),
             "doppler_hz": est["doppler_hz"],
             "doppler_rate_hz_per_s": est["doppler_rate_hz_per_s"],
             "cn0_dbhz": est["cn0_dbhz"],
@@ -160,7 +177,10 @@ def run(args):
     if args.out:
         f_lim = min(0.5 * fs, args.max_doppler_hz + comb.offsets_hz.max() * 1.2)
         with atomic_outputs(args.out) as stage:
-            _write_outputs(stage, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim)
+            origin = "" if rec.start_utc is None else f" ({format_utc(rec.start_utc)[:19]}Z)"
+            joined = ", captures joined" if len(rec.captures) > 1 else ""
+            x_label = f"time from the first sample{origin}{joined} [s]"
+            _write_outputs(stage, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim, x_label)
     return doc
 
 
@@ -184,7 +204,7 @@ def _correct_rate_change(estimates, block_len, fs):
             e["doppler_hz"] = d[i] - float(cubic_bias_hz((r[j1] - r[j0]) / (t[j1] - t[j0]), block_len, fs))
 
 
-def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim_hz):
+def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim_hz, x_label):
     from ..signal.plots import plot_spectrogram
 
     keys = ["t_s", "time_utc", "doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz", "status"]
@@ -198,7 +218,8 @@ def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f
     plot_spectrogram(out / "spectrogram.png", np.array(fig_t), f_hz, power,
                      track_t_s=np.array([e["t_s"] for e in ok]), track_hz=np.array([e["doppler_hz"] for e in ok]),
                      coarse_t_s=np.array(coarse_t), coarse_hz=np.array(coarse_f), f_lim_hz=f_lim_hz,
-                     title=f"{Path(doc['recording']).name}: pilot comb, method {doc['method']}")
+                     title=f"{Path(doc['recording']).name}: pilot comb, method {doc['method']}, "
+                           f"{doc['block_s']:g} s blocks", x_label=x_label)
 
 
 def summary(doc):

@@ -81,11 +81,11 @@ def run(args):
     if not res.tracks:
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
     if args.out:
-        _write_outputs(Path(args.out), doc, res, path.name)
+        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc)
     return doc
 
 
-def _write_outputs(out, doc, res, name):
+def _write_outputs(out, doc, res, name, start_utc):
     from ..signal.plots import plot_spectrogram
     from .position import fixes_csv_rows
 
@@ -102,7 +102,9 @@ def _write_outputs(out, doc, res, name):
             labelled = [(tr.t_s, tr.doppler_hz, tr.sat_id or "unidentified") for tr in res.tracks]
             plot_spectrogram(stage / "spectrogram.png", res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,
                              labelled_tracks=labelled,
-                             title=f"{name}: {doc['n_identified']} of {len(res.tracks)} tracks identified")
+                             x_label=f"time since the first sample, {format_utc(start_utc)[:19]}Z [s]",
+                             title=f"{name}: {doc['n_identified']} of {len(res.tracks)} tracks identified, "
+                                   f"{doc['mode']} fix")
 
 
 def summary(doc):
