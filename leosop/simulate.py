@@ -54,7 +54,8 @@ from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
 from .geometry.doppler import doppler_jacobian
-from .positioning.doppler_ls import FixStatus, solve_snapshots
+from .positioning.robust_ls import FixStatus
+from .positioning.snapshot import solve_snapshots
 from .signal.doppler import doppler_sigma_hz, estimate_block
 from .signal.pilot import PilotComb, add_noise, comb_baseband
 from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz

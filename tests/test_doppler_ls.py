@@ -7,7 +7,10 @@ from leosop.constants import C_MPS
 from leosop.frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.doppler_ls import FixStatus, solve_snapshots, solve_static, solve_static_passes
+from leosop.positioning.robust_ls import FixStatus
+from leosop.positioning.snapshot import solve_snapshots
+from leosop.positioning.static import solve_static
+from leosop.positioning.static_passes import solve_static_passes
 from leosop.geometry.doppler import doppler_jacobian, doppler_rate
 
 F0_HZ = 11.325e9

@@ -9,7 +9,10 @@ import pytest
 from leosop.cli import main
 from leosop.constants import C_MPS
 from leosop.frames import C_e_n, geodetic_to_ecef
-from leosop.positioning.doppler_ls import FixStatus, solve_snapshots, solve_static, solve_static_passes
+from leosop.positioning.robust_ls import FixStatus
+from leosop.positioning.snapshot import solve_snapshots
+from leosop.positioning.static import solve_static
+from leosop.positioning.static_passes import solve_static_passes
 
 #: Noise-free recovery: the solver stops on steps below 0.1 mm; 1 mm leaves room for the last step.
 ONE_MM = 1e-3

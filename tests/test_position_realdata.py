@@ -12,7 +12,7 @@ from conftest import data_path
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
-from leosop.positioning.doppler_ls import FixStatus
+from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.measurements import Measurements
 from leosop.positioning.solve import position_snapshots, position_static, position_static_passes, satellite_states
 from leosop.timebase import seconds_since

@@ -16,7 +16,7 @@ from leosop.frames import C_e_n, ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geo
 from leosop.ins.imu_io import read_rtklib_sf_csv
 from leosop.orbits.tle import parse_tle_lines, tle_checksum
 from leosop.geometry.doppler import doppler_jacobian, doppler_rate
-from leosop.positioning.doppler_ls import solve_snapshots
+from leosop.positioning.snapshot import solve_snapshots
 from leosop.rotations import (dcm_to_euler, dcm_to_quat, euler_to_dcm, quat_multiply, quat_normalize, quat_to_dcm,
                               rotvec_to_dcm)
 from leosop.signal.iq import open_sigmf, write_sigmf

@@ -8,7 +8,8 @@ from leosop.ins import trajectory
 from leosop.orbits import CARRIERS
 from leosop.orbits.visibility import compute_visibility
 from leosop.geometry.doppler import doppler_jacobian
-from leosop.positioning.doppler_ls import FixStatus, solve_snapshots
+from leosop.positioning.robust_ls import FixStatus
+from leosop.positioning.snapshot import solve_snapshots
 from leosop.scenarios import XIAN_BAOJI
 
 

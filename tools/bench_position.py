@@ -16,7 +16,7 @@ import numpy as np
 from leosop.constants import C_MPS
 from leosop.frames import geodetic_to_ecef
 from leosop.geometry.doppler import doppler_jacobian
-from leosop.positioning.doppler_ls import solve_snapshots
+from leosop.positioning.snapshot import solve_snapshots
 
 F0_HZ = 11.325e9
 

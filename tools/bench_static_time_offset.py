@@ -35,7 +35,7 @@ from leosop.constants import C_MPS, STARLINK_PILOT_HZ
 from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.doppler_ls import solve_static_passes
+from leosop.positioning.static_passes import solve_static_passes
 from leosop.signal.doppler import doppler_sigma_hz
 
 TLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"

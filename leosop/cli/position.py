@@ -29,11 +29,12 @@ from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from ..orbits import load_constellation
-from ..positioning.doppler_ls import FixStatus
+from ..positioning.robust_ls import FixStatus
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
 from ..positioning.solve import position_snapshots, position_static, position_static_passes
 from ..timebase import format_utc
 from . import add_command
+from .options import parse_site
 
 _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 
@@ -61,16 +62,6 @@ def register(subparsers):
     p.add_argument("--alpha", type=float, default=1e-3, metavar="P",
                    help="significance of the chi-square outlier test, 0 to disable (default %(default)g)")
     return p
-
-
-def _site(text):
-    try:
-        lat, lon, alt = (float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError(f"--init {text!r}: expected LAT_DEG,LON_DEG,ALT_M") from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 360):
-        raise InputError(f"--init {text!r}: latitude must be in [-90, 90] and longitude in [-180, 360] deg")
-    return geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
 
 
 def _check(args):
@@ -110,7 +101,8 @@ def solutions_doc(res, meas):
     residuals : list of tuple
         ``(line, t_s, sat_id, residual_hz, used)`` per measurement.
     """
-    from ..positioning.doppler_ls import PassesFix, StaticFix
+    from ..positioning.static import StaticFix
+    from ..positioning.static_passes import PassesFix
 
     f = res.fixes
     utc = (lambda k: None) if res.time_utc is None else (lambda k: res.time_utc[k])  # noqa: E731
@@ -190,7 +182,10 @@ def run(args):
     if meas.pos_sv_ecef_m is None and constellation is None:
         constellation = load_constellation(None)
         meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
-    init = _site(args.init) if args.init else None
+    init = None
+    if args.init:
+        lat, lon, alt = parse_site(args.init, "--init")
+        init = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     alpha = args.alpha or None
     if args.static and meas.pass_id is not None:
         res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,
@@ -203,6 +198,9 @@ def run(args):
         res = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=init, sigma_hz=args.sigma_hz,
                                  alpha=alpha)
     solutions, passes, residuals = solutions_doc(res, meas)
+    if solutions and not any(np.isfinite([s["x_m"], s["y_m"], s["z_m"]]).all() for s in solutions):
+        raise InputError(f"{args.meas}: no finite fix from {len(solutions)} solve(s); check the doppler_hz "
+                         "values (Hz, sign of DESIGN 4.3), the satellite states and --init")
     for line, reason in res.rejected:
         print(f"leosop position: warning: {meas.source}:{line}: {reason}", file=sys.stderr)
     doc = {
@@ -225,7 +223,7 @@ def run(args):
 
 
 def _fmt(value, spec):
-    return "nan" if value is None else format(value, spec)
+    return "n/a" if value is None else format(value, spec)
 
 
 def summary(doc):

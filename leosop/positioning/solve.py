@@ -9,8 +9,8 @@ What ``leosop position`` does, as functions:
 3. rows without ``sigma_hz`` get the caller's sigma, or one estimated from
    the data: a first solve with unit weights, then the robust (MAD) scale of
    its residuals, corrected for the states the fit absorbs;
-4. :func:`~leosop.positioning.doppler_ls.solve_snapshots` or
-   :func:`~leosop.positioning.doppler_ls.solve_static`, with one receiver
+4. :func:`~leosop.positioning.snapshot.solve_snapshots` or
+   :func:`~leosop.positioning.static.solve_static`, with one receiver
    clock per constellation (:func:`~leosop.positioning.measurements.clock_groups`:
    the satellite's family, else its carrier): a snapshot epoch needs
    ``6 + k`` satellites for the k constellations it sees.
@@ -24,10 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .doppler_ls import (SAT_OFFSET_SIGMA_HZ, TIME_OFFSET_SIGMA_S, solve_snapshots, solve_static,
-                         solve_static_passes, subpoint_centroid_ecef_m)
 from ..geometry.doppler import N_DOPPLER_STATES
 from .measurements import clock_groups, sv_states_from_tle
+from .snapshot import solve_snapshots
+from .starts import subpoint_centroid_ecef_m
+from .static import solve_static
+from .static_passes import SAT_OFFSET_SIGMA_HZ, TIME_OFFSET_SIGMA_S, solve_static_passes
 
 __all__ = ["PositionResult", "position_snapshots", "position_static", "position_static_passes", "satellite_states"]
 
@@ -236,7 +238,7 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
     constellation : Constellation, optional
     init_pos_ecef_m : array_like, (3,), optional
         Start position; default three starts on the ground around the
-        satellites (see :func:`~leosop.positioning.doppler_ls.solve_static`).
+        satellites (see :func:`~leosop.positioning.static.solve_static`).
     alt_m : float, optional
         Known height above the ellipsoid, with standard deviation ``alt_sigma_m``.
     sigma_hz : float, optional
@@ -247,7 +249,7 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
         chosen by information criterion);
     side_clock_degree : int
         The degree that chooses between the starts' (mirror) solutions; see
-        :func:`~leosop.positioning.doppler_ls.solve_static`. The defaults
+        :func:`~leosop.positioning.static.solve_static`. The defaults
         (up to cubic, side chosen with a linear drift) gave the best
         single-pass fixes on the DopTrack passes
         (tools/real_doppler_position.py).
@@ -320,7 +322,7 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
         Clock model: ``"per_pass"`` (a frequency polynomial per pass, degree
         3 by default) or ``"common"`` (one receiver polynomial, degree 1 by
         default, plus each satellite's constant offset with a prior); see
-        :func:`~leosop.positioning.doppler_ls.solve_static_passes`.
+        :func:`~leosop.positioning.static_passes.solve_static_passes`.
     time_bias, time_bias_sigma_s
         Estimate a time offset of each pass's satellite states (its element
         set's along-track error) with a zero-mean prior (None: no prior).
@@ -328,7 +330,7 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
     Returns
     -------
     PositionResult
-        ``fixes`` is a :class:`~leosop.positioning.doppler_ls.PassesFix`.
+        ``fixes`` is a :class:`~leosop.positioning.static_passes.PassesFix`.
     """
     pass_id = np.asarray(pass_id)
     pos, vel, reason, source = satellite_states(meas, constellation)

@@ -1,0 +1,194 @@
+"""Robust damped least squares, batched over independent problems: the core of the Doppler solvers.
+
+One Levenberg-Marquardt iteration (Gauss-Newton, [Shen 2024] eq. 11-12, with
+Marquardt damping on the Jacobi-scaled normal equations, so that a start
+1,000 km away converges) runs over many problems at once, with an iteration
+cap and per-state step thresholds. Measurements are weighted by
+``1 / sigma**2``; the cofactor ``(J^T W J)^-1`` at the solution is the
+covariance.
+
+Outliers: when the weighted residual sum fails the chi-square test at
+significance ``alpha``, the measurement with the largest standardised
+residual (Baarda's w-test statistic) is excluded and the problem re-solved,
+one measurement at a time, while at least two redundant measurements remain.
+Failures come back as data in ``status`` (:class:`FixStatus`).
+"""
+
+from enum import IntEnum
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm as norm_dist
+
+from ..geometry.dop import cofactor
+
+__all__ = ["FixStatus", "solve_robust", "XTOL_POS_M"]
+
+#: Step threshold of convergence of a position [m]: 0.1 mm.
+XTOL_POS_M = 1e-4
+
+class FixStatus(IntEnum):
+    """Outcome of one fix."""
+
+    OK = 0
+    #: The iteration cap was reached before the step fell below the thresholds.
+    NOT_CONVERGED = 1
+    #: The geometry cannot determine the state: ``H^T W H`` is rank deficient.
+    SINGULAR = 2
+    #: Fewer measurements than states.
+    TOO_FEW = 3
+    #: Residuals fail the chi-square test and no single outlier can be isolated.
+    INCONSISTENT = 4
+
+def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
+    """Damped Gauss-Newton over independent problems.
+
+    ``model(x, idx, w)`` gives predictions (k, m) and Jacobians (k, m, n) of
+    the problems ``idx`` at states ``x`` (k, n) with row weights ``w`` (k, m)
+    (a model that eliminates linear states needs them); ``y``, ``w`` (P, m)
+    are the measurements and weights (0 drops a row). A problem has
+    converged when its step is below ``xtol`` (n,) in every state, or, with
+    ``step_sigma_tol``, when an accepted step's length in units of the
+    posterior sigma, ``sqrt(dx^T J^T W J dx)``, is below it (a weakly
+    determined direction then needs no sub-millimetre steps). Returns ``x,
+    iterations, converged``.
+    """
+    n_prob, n = x0.shape
+    x = x0.copy()
+    pred, J = model(x, np.arange(n_prob), w)
+    r = np.where(w > 0, y - pred, 0.0)
+    cost = np.einsum("pm,pm->p", w, r * r)
+    lam = np.full(n_prob, 1e-3)
+    iterations = np.zeros(n_prob, dtype=int)
+    converged = np.zeros(n_prob, dtype=bool)
+    active = np.flatnonzero(np.isfinite(cost))
+    eye = np.eye(n)
+    for _ in range(max_iter):
+        if active.size == 0:
+            break
+        Ja, wa, ra = J[active], w[active], r[active]
+        N = np.einsum("pmi,pm,pmj->pij", Ja, wa, Ja)
+        g = np.einsum("pmi,pm->pi", Ja, wa * ra)
+        d = np.sqrt(np.diagonal(N, axis1=-2, axis2=-1))
+        d = np.where(d > 0, d, 1.0)
+        Ns = N / (d[:, :, None] * d[:, None, :]) + lam[active, None, None] * eye
+        dx = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
+        xt = x[active] + dx
+        pt, Jt = model(xt, active, wa)
+        rt = np.where(wa > 0, y[active] - pt, 0.0)
+        ct = np.einsum("pm,pm->p", wa, rt * rt)
+        accept = np.isfinite(ct) & (ct <= cost[active])
+        acc = active[accept]
+        x[acc], J[acc], r[acc], cost[acc] = xt[accept], Jt[accept], rt[accept], ct[accept]
+        lam[active] = np.where(accept, np.maximum(lam[active] / 10, 1e-12), np.minimum(lam[active] * 10, 1e12))
+        iterations[active] += 1
+        done = np.all(np.abs(dx) <= xtol, axis=-1)
+        if step_sigma_tol is not None:
+            done |= accept & (np.einsum("pi,pij,pj->p", dx, N, dx) <= step_sigma_tol**2)
+        converged[active[done]] = True
+        active = active[~done]
+    return x, iterations, converged
+
+def _group_argmax(values, groups):
+    """Index of the largest of ``values`` (k, m) within each group of ``groups`` (m,), -1 for an empty group.
+
+    Rows of group -1 belong to none. Returns (k, n_groups).
+    """
+    n_groups = int(groups.max()) + 1 if groups.size else 0
+    out = np.full((values.shape[0], n_groups), -1)
+    for g in range(n_groups):
+        rows = np.flatnonzero(groups == g)
+        if rows.size:
+            best = rows[np.argmax(values[:, rows], axis=-1)]
+            out[:, g] = np.where(np.isfinite(values[np.arange(len(values)), best]), best, -1)
+    return out
+
+def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, fixed=None, x_alt=None,
+                  groups=None, step_sigma_tol=None):
+    """LM, then chi-square test and w-test exclusions one at a time.
+
+    Returns ``x, residuals, J, Q (weighted cofactor), used, iterations, chi2,
+    status``; rows in ``fixed`` (bool, (m,)) are never excluded. Problems
+    that do not converge or fail the test from ``x0`` are retried once from
+    ``x_alt`` (P, n) and keep the better solution. With ``groups`` (int,
+    (m,), e.g. the pass of each row) each round excludes the largest
+    standardised residual of every group whose largest one exceeds the
+    two-sided normal critical value at ``alpha`` (one row per pass at a time
+    instead of one in all), and stops when none does. ``step_sigma_tol``: see
+    :func:`_levenberg_marquardt`.
+    """
+    n_prob = x0.shape[0]
+    used = used.copy()
+    fixed = np.zeros(y.shape[-1], dtype=bool) if fixed is None else fixed
+    w_all = 1.0 / sigma**2
+    n_rows = used.sum(-1)
+    status = np.where(n_rows < n_states, FixStatus.TOO_FEW, FixStatus.OK).astype(int)
+    todo = np.flatnonzero(status == FixStatus.OK)
+    x = x0.copy()
+    iterations = np.zeros(n_prob, dtype=int)
+    converged = np.zeros(n_prob, dtype=bool)
+    first = True
+    while todo.size:
+        sub = lambda xs, i, w_, todo=todo: model(xs, todo[i], w_)  # noqa: E731
+        w = np.where(used[todo], w_all[todo], 0.0)
+        xs, it, conv = _levenberg_marquardt(sub, x[todo], y[todo], w, xtol, max_iter, step_sigma_tol)
+        iterations[todo] += it
+        pred, J = model(xs, todo, w)
+        r = np.where(used[todo], y[todo] - pred, 0.0)
+        chi2 = np.einsum("pm,pm->p", w, r * r)
+        dof = used[todo].sum(-1) - n_states
+        if first and x_alt is not None:
+            # A start far away can end in a local minimum: retry those that fail the test from x_alt.
+            with np.errstate(invalid="ignore"):
+                retry = ~conv | (chi2 > chi2_dist.isf(alpha or 1e-3, np.maximum(dof, 1)))
+            if retry.any():
+                k = np.flatnonzero(retry)
+                sub2 = lambda xs, i, w_, p=todo[k]: model(xs, p[i], w_)  # noqa: E731
+                xs2, it2, conv2 = _levenberg_marquardt(sub2, x_alt[todo[k]], y[todo[k]], w[k], xtol,
+                                                                 max_iter, step_sigma_tol)
+                iterations[todo[k]] += it2
+                pred2, J2 = model(xs2, todo[k], w[k])
+                r2 = np.where(used[todo[k]], y[todo[k]] - pred2, 0.0)
+                chi2_2 = np.einsum("pm,pm->p", w[k], r2 * r2)
+                better = conv2 & (~conv[k] | (chi2_2 < chi2[k]))
+                kb = k[better]
+                xs[kb], conv[kb], pred[kb], J[kb], r[kb], chi2[kb] = (
+                    xs2[better], True, pred2[better], J2[better], r2[better], chi2_2[better])
+        first = False
+        x[todo], converged[todo] = xs, conv
+        if alpha is None:
+            break
+        Q = cofactor(J, w)
+        ok = conv & np.isfinite(Q[:, 0, 0])
+        with np.errstate(invalid="ignore"):
+            fail = ok & (dof >= 1) & (chi2 > chi2_dist.isf(alpha, np.maximum(dof, 1)))
+        can = fail & (dof >= 2)
+        if not can.any():
+            break
+        p, Jp, Qp = todo[can], J[can], Q[can]
+        var_r = sigma[p] ** 2 - np.einsum("pmi,pij,pmj->pm", Jp, Qp, Jp)
+        wstat = np.abs(r[can]) / np.sqrt(np.maximum(var_r, 1e-12 * sigma[p] ** 2))
+        wstat = np.where(used[p] & ~fixed, wstat, -np.inf)
+        if groups is None:
+            used[p, np.argmax(wstat, axis=-1)] = False
+        else:
+            worst = _group_argmax(wstat, groups)
+            take = np.take_along_axis(wstat, np.maximum(worst, 0), -1) > norm_dist.isf(alpha / 2)
+            pi, gi = np.nonzero(take & (worst >= 0))
+            used[p[pi], worst[pi, gi]] = False
+            p = p[take.any(-1)]
+        todo = p
+    w = np.where(used, w_all, 0.0)
+    pred, J = model(x, np.arange(n_prob), w)
+    residuals = np.where(used, y - pred, np.nan)
+    chi2 = np.einsum("pm,pm->p", w, np.nan_to_num(residuals) ** 2)
+    Q = cofactor(J, w)
+    run = status == FixStatus.OK
+    status[run & ~converged] = FixStatus.NOT_CONVERGED
+    status[run & converged & ~np.isfinite(Q[:, 0, 0])] = FixStatus.SINGULAR
+    if alpha is not None:
+        dof = used.sum(-1) - n_states
+        with np.errstate(invalid="ignore"):
+            bad = (dof >= 1) & (chi2 > chi2_dist.isf(alpha, np.maximum(dof, 1)))
+        status[(status == FixStatus.OK) & bad] = FixStatus.INCONSISTENT
+    return x, residuals, J, Q, used, iterations, chi2, status

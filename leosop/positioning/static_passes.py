@@ -1,0 +1,442 @@
+"""Static batch Doppler fix from several passes, each with its own clock terms and time offset.
+
+A receiver at rest in ECEF; each pass (one satellite's track) has frequency
+terms (its own polynomial, or a satellite offset on a shared receiver clock)
+and optionally a time offset of its satellite states. The linear terms are
+eliminated exactly (variable projection) inside
+:func:`~leosop.positioning.robust_ls.solve_robust`'s iteration.
+"""
+
+from dataclasses import dataclass
+from math import comb
+
+import numpy as np
+
+from ..frames import C_e_n, ecef_to_geodetic
+from ..geometry.dop import cofactor
+from ..geometry.doppler import doppler_jacobian, doppler_rate
+from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
+from .starts import grid_starts, subpoint_centroid_ecef_m
+
+__all__ = ["PassesFix", "solve_static_passes", "TIME_OFFSET_SIGMA_S", "SAT_OFFSET_SIGMA_HZ"]
+
+#: Default prior standard deviation of a pass's time offset of its satellite states [s]: an element
+#: set's along-track error of a few hundred metres to a few km at ~7.5 km/s.
+TIME_OFFSET_SIGMA_S = 0.5
+#: Default prior standard deviation of a satellite's own frequency offset, clock "common" [Hz]
+#: (Starlink: 0-5 Hz, [Shen 2024] Table 1).
+SAT_OFFSET_SIGMA_HZ = 5.0
+#: Fixes also stop when a step is below this fraction of the posterior sigma along it.
+_STEP_SIGMA_TOL = 1e-3
+
+@dataclass(frozen=True)
+class PassesFix:
+    """Batch fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
+
+    Attributes
+    ----------
+    pos_ecef_m : ndarray, (3,)
+    pass_ids : ndarray, (n_pass,)
+        The passes solved (those with enough usable rows), in the order of
+        the clock rows.
+    t_ref_s : ndarray, (n_pass,)
+        Mid-time of each pass, the origin of its polynomial.
+    clock_poly_hz : ndarray, (n_pass, d + 1)
+        Each pass's frequency offset polynomial in ``t - t_ref`` [Hz/s^k],
+        lowest first (clock ``"common"``: the receiver's polynomial moved to
+        the pass's ``t_ref`` plus the satellite's constant offset).
+    cov : ndarray, (n_states, n_states)
+        Posterior covariance of ``[pos, clock_poly_hz.ravel(), time_bias_s]``
+        (clock ``"per_pass"``) or ``[pos, rx_clock_poly_hz, sat_offset_hz,
+        time_bias_s]`` (clock ``"common"``); no ``time_bias_s`` states
+        without time biases. Priors are included.
+    gdop : float
+        ``sqrt(trace((H^T W H)^-1))`` of the position with the clocks
+        eliminated, weights relative to the median Doppler weight.
+    residuals_hz : ndarray, (m,)
+    used : ndarray of bool, (m,)
+    n_used, iterations : int
+    chi2 : float
+        Weighted residual sum of the Doppler rows and the priors' pseudo-rows.
+    status : FixStatus
+    ambiguous : bool
+        Another start reached a solution beyond ``ambiguity_m`` that fits as
+        well (e.g. passes all on one side of the station).
+    mirror_pos_ecef_m : ndarray, (3,)
+        The best such solution, NaN when none; ``mirror_chi2`` its chi-square
+        on the rows the fix used.
+    mirror_chi2 : float
+    time_bias_s : ndarray, (n_pass,), or None
+        Each pass's time offset of the satellite states (first order: an
+        along-track error of its element set) when modelled.
+    clock : str
+        ``"per_pass"`` or ``"common"``.
+    rx_clock_poly_hz : ndarray, (d + 1,), or None
+        Clock ``"common"``: the receiver's frequency offset polynomial in
+        ``t - rx_t_ref_s`` [Hz/s^k].
+    rx_t_ref_s : float
+    sat_offset_hz : ndarray, (n_pass,), or None
+        Clock ``"common"``: each satellite's constant frequency offset [Hz].
+    rx_clock_polys_hz : ndarray, (k, d + 1), or None
+        Clock ``"common"``: each receiver clock's polynomial (k clock
+        groups, row 0 is ``rx_clock_poly_hz``); the covariance's receiver
+        block is ``[clock 0 terms, clock 1 terms, ...]``.
+    clock_labels : tuple, (k,)
+        The ``clock_group`` value of each receiver clock; ``()`` without.
+    pass_clock : ndarray of int, (n_pass,), or None
+        Index of each pass's receiver clock.
+    """
+
+    pos_ecef_m: np.ndarray
+    pass_ids: np.ndarray
+    t_ref_s: np.ndarray
+    clock_poly_hz: np.ndarray
+    cov: np.ndarray
+    gdop: float
+    residuals_hz: np.ndarray
+    used: np.ndarray
+    n_used: int
+    iterations: int
+    chi2: float
+    status: FixStatus
+    ambiguous: bool
+    mirror_pos_ecef_m: np.ndarray
+    mirror_chi2: float
+    time_bias_s: np.ndarray = None
+    clock: str = "per_pass"
+    rx_clock_poly_hz: np.ndarray = None
+    rx_t_ref_s: float = np.nan
+    sat_offset_hz: np.ndarray = None
+    rx_clock_polys_hz: np.ndarray = None
+    clock_labels: tuple = ()
+    pass_clock: np.ndarray = None
+
+    @property
+    def clock_offset_hz(self):
+        """Each pass's frequency offset at its ``t_ref_s``, ndarray (n_pass,)."""
+        return self.clock_poly_hz[:, 0]
+
+    @property
+    def clock_drift_hz_per_s(self):
+        """Each pass's frequency drift at its ``t_ref_s``, ndarray (n_pass,)."""
+        return self.clock_poly_hz[:, 1] if self.clock_poly_hz.shape[1] > 1 else np.zeros(len(self.pass_ids))
+
+    @property
+    def residual_rms_hz(self):
+        """RMS of the used residuals [Hz]."""
+        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
+
+def _inverse_or_nan(N, rcond=1e-12):
+    """Inverse of a symmetric positive semi-definite matrix, judged on its unit-diagonal scaling; NaN if singular."""
+    diag = np.diagonal(N)
+    d = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+    lam, V = np.linalg.eigh(N * d[:, None] * d[None, :])
+    if not (diag > 0).all() or lam[0] <= rcond * abs(lam[-1]):
+        return np.full(N.shape, np.nan)
+    return (V / lam) @ V.T * d[:, None] * d[None, :]
+
+def _shift_poly(coef, shift):
+    """Coefficients (..., d + 1) of ``p(s + shift)`` for ``p(s) = sum coef_k s^k``, lowest first."""
+    d = coef.shape[-1] - 1
+    k = np.arange(d + 1)
+    binom = np.array([[comb(j, i) if j >= i else 0 for j in k] for i in k], dtype=float)
+    powers = np.asarray(shift, dtype=float)[..., None, None] ** np.maximum(k[None, :] - k[:, None], 0)
+    return np.einsum("...j,ij,...ij->...i", coef, binom, powers)
+
+def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
+                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3,
+                        clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
+                        time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
+                        ambiguity_m=10e3, clock_group=None):
+    """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
+
+    The position is shared. Each pass ``p`` (one satellite's track) has
+    frequency terms and optionally a time offset ``dt_p`` of its satellite
+    states (to first order the along-track error of its element set, or a
+    time-tag offset), entering each row through the Doppler rate
+    (:func:`~leosop.geometry.doppler.doppler_rate`), with a zero-mean prior
+    ``time_bias_sigma_s``.
+    Clock models:
+
+    ``"per_pass"``
+        each pass its own frequency polynomial of degree ``clock_degree``
+        (default 3) in ``t - t_ref[p]`` (the pass's mid-time): one receiver
+        seeing one transmitter at a time (DopTrack), or an unknown drift per
+        transmitter.
+    ``"common"``
+        one receiver clock, a polynomial of degree ``clock_degree`` (default
+        1: offset and drift) in ``t - rx_t_ref_s`` shared by all passes, plus
+        each satellite's constant frequency offset with a zero-mean prior
+        ``sat_offset_sigma_hz`` (Starlink satellites' own offsets are 0-5 Hz,
+        [Shen 2024] Table 1): a multi-satellite receiver, which keeps the
+        geometry a free polynomial per pass would absorb.
+
+    All these terms enter linearly and are eliminated exactly (variable
+    projection): each LM step solves the weighted linear fit of them to the
+    residuals (block-diagonal per pass, the shared clock by its Schur
+    complement) and iterates on the position alone with the projected
+    Jacobian ``(I - A K) D``, ``D`` the position derivative at fixed linear
+    terms (the exact gradient even though the rate column depends on the
+    position). The iteration stops when a step is below 0.1 mm or 1e-3 of
+    the posterior sigma along it. Priors enter as pseudo-rows (never
+    excluded), so chi-square and degrees of freedom count them. The
+    covariance is that of the full state. Passes on opposite sides of the
+    station resolve the mirror ambiguity of a single pass. Outliers are
+    excluded one row per pass at a time (see
+    :func:`~leosop.positioning.robust_ls.solve_robust`).
+
+    Parameters
+    ----------
+    doppler_hz, sigma_hz, carrier_hz, t_s : array_like, (m,)
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
+    pass_id : array_like, (m,)
+        Label of each row's pass (any sortable type). Passes with fewer than
+        one more usable row than per-pass terms are left out.
+    pos0_ecef_m : array_like, (3,) or (k, 3), optional
+        Start(s); the lowest chi-square wins. Default the ground point below
+        the satellites' mean direction and a 5 x 5 grid of
+        ``start_offset_m`` half-width around it.
+    alt_m : float, optional
+        Known height above the ellipsoid, standard deviation ``alt_sigma_m``.
+    mask : array_like of bool, (m,), optional
+    max_iter : int
+    alpha : float or None
+        Significance of the chi-square outlier test; None disables it.
+    clock : {"per_pass", "common"}
+    clock_degree : int, optional
+    sat_offset_sigma_hz : float
+        Clock ``"common"``: prior standard deviation of each satellite's offset [Hz].
+    time_bias : bool
+        Estimate each pass's time offset ``dt_p`` [s].
+    time_bias_sigma_s : float or None
+        Zero-mean prior standard deviation of each ``dt_p``; None: no prior.
+    start_offset_m, ambiguity_m : float
+    clock_group : array_like of int, (m,), optional
+        Clock ``"common"``: receiver clock of each row (e.g. its
+        constellation); each distinct value among the unmasked rows gets its
+        own receiver polynomial (a pass takes the clock of its first row).
+        Ignored by ``"per_pass"`` (every pass has its own terms already).
+
+    Returns
+    -------
+    PassesFix
+    """
+    if clock not in ("per_pass", "common"):
+        raise ValueError(f"clock {clock!r}: expected 'per_pass' or 'common'")
+    common = clock == "common"
+    deg = (1 if common else 3) if clock_degree is None else int(clock_degree)
+    if deg < 0:
+        raise ValueError("clock degree must be non-negative")
+    if common and not sat_offset_sigma_hz > 0:
+        raise ValueError("sat_offset_sigma_hz must be positive")
+    tb = int(bool(time_bias))
+    n_glob = deg + 1 if common else 0
+    n_loc = (1 if common else deg + 1) + tb
+    # Prior weights of the per-pass terms: [satellite offset | polynomial..., time offset].
+    prior = np.zeros(n_loc)
+    if common:
+        prior[0] = 1.0 / float(sat_offset_sigma_hz) ** 2
+    if tb and time_bias_sigma_s is not None:
+        prior[-1] = 1.0 / float(time_bias_sigma_s) ** 2
+    prior_cols = np.flatnonzero(prior > 0)
+    y = np.asarray(doppler_hz, dtype=float).ravel()
+    n = y.size
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n, 3)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(n, 3)
+    sigma = np.broadcast_to(np.asarray(sigma_hz, dtype=float), y.shape)
+    f0 = np.broadcast_to(np.asarray(carrier_hz, dtype=float), y.shape)
+    t = np.asarray(t_s, dtype=float).ravel()
+    labels, gi = np.unique(np.asarray(pass_id).ravel(), return_inverse=True)
+    m = np.ones(n, bool) if mask is None else np.asarray(mask, bool).ravel()
+    m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
+    m &= np.isfinite(t)
+    keep = np.bincount(gi[m], minlength=len(labels)) >= n_loc + 1 - len(prior_cols)
+    m &= keep[gi]
+    labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
+    gi[~m] = np.maximum(gi[~m], 0)
+    # Receiver clocks (clock "common"): one polynomial per distinct group among the rows kept.
+    grp = np.zeros(n, int) if clock_group is None or not common else np.broadcast_to(np.asarray(clock_group), (n,))
+    clock_labels, g_idx = np.unique(grp[m], return_inverse=True)
+    n_clk = max(len(clock_labels), 1)
+    clk = np.zeros(n, int)
+    clk[m] = g_idx.ravel()
+    n_glob *= n_clk
+    n_pass = len(labels)
+    # Rows in pass order internally (contiguous segments for the per-pass sums).
+    order = np.argsort(gi, kind="stable")
+    y, sigma, f0, t, m, gi, r_s, v_s, clk = (a[order] for a in (y, sigma, f0, t, m, gi, r_s, v_s, clk))
+    pass_clk = np.zeros(len(labels), int)
+    pass_clk[gi[m]] = clk[m]
+    y, sigma, f0, t = (np.where(m, a, fill) for a, fill in ((y, 0.0), (sigma, 1.0), (f0, 1.0), (t, 0.0)))
+    r_s = np.where(m[:, None], r_s, [2e7, 0.0, 0.0])
+    v_s = np.where(m[:, None], v_s, 0.0)
+    seg = np.searchsorted(gi, np.arange(n_pass))
+    t_lo = np.array([t[gi == p][m[gi == p]].min() for p in range(n_pass)]) if n_pass else np.zeros(0)
+    t_hi = np.array([t[gi == p][m[gi == p]].max() for p in range(n_pass)]) if n_pass else np.zeros(0)
+    t_ref = 0.5 * (t_lo + t_hi)
+    half_span_s = np.maximum(0.5 * (t_hi - t_lo), 1.0)
+    t_rx = 0.5 * (t_lo.min() + t_hi.max()) if n_pass else 0.0
+    half_rx_s = max(0.5 * (t_hi.max() - t_lo.min()), 1.0) if n_pass else 1.0
+    # Polynomial bases in scaled time (|u| <= 1) for conditioning: the shared clock's and the per-pass ones.
+    B_glob = ((t - t_rx) / half_rx_s)[:, None] ** np.arange(n_glob // n_clk)
+    if n_clk > 1:
+        B_glob = ((clk[:, None] == np.arange(n_clk))[:, :, None] * B_glob[:, None, :]).reshape(n, n_glob)
+    basis = np.ones((n, 1)) if common else ((t - t_ref[gi]) / half_span_s[gi])[:, None] ** np.arange(deg + 1)
+    # Priors: per prior'd per-pass term a pseudo-row per pass (measured 0), after the Doppler rows.
+    n_extra = n_pass * len(prior_cols)
+    sig_prior = np.repeat(1.0 / np.sqrt(prior[prior_cols]), n_pass)
+    y, sigma, m = np.append(y, np.zeros(n_extra)), np.append(sigma, sig_prior), np.append(m, np.ones(n_extra, bool))
+    has_alt = alt_m is not None
+    if has_alt:
+        y, sigma, m = np.append(y, alt_m), np.append(sigma, alt_sigma_m), np.append(m, True)
+    fixed = np.zeros(y.size, bool)
+    fixed[n:] = True
+    groups = np.concatenate([gi, [-1] * (n_extra + has_alt)])
+
+    def normal(x, w):
+        """Geometry (h, D, rate grad), the per-pass basis A and the linear normal matrix's blocks and solver."""
+        H = doppler_jacobian(r_s, v_s, x, np.zeros((len(x), 3)), f0)
+        h, D = np.einsum("pmi,mi->pm", H[..., 3:6], -v_s), H[..., :3]
+        A = np.broadcast_to(basis, (len(x),) + basis.shape)
+        grad = None
+        if tb:
+            rate, grad = doppler_rate(r_s, v_s, x, f0)
+            A = np.concatenate([A, rate[..., None]], -1)
+        wd = w[:, :n]
+        wA = wd[..., None] * A
+        G_ss = np.add.reduceat(wA[..., :, None] * A[..., None, :], seg, axis=1) + np.diag(prior)
+        Gi_ss = np.linalg.pinv(G_ss, hermitian=True)
+        G_gg = np.einsum("mi,pm,mj->pij", B_glob, wd, B_glob)
+        G_sg = np.add.reduceat(wA[..., :, None] * B_glob[None, :, None, :], seg, axis=1)  # (k, P, l, g)
+        S = G_gg - np.einsum("pqli,pqlj->pij", G_sg, Gi_ss @ G_sg)
+        Si = np.linalg.pinv(S, hermitian=True) if n_glob else S
+
+        def lin(rhs):
+            """Linear terms (global (k, g, q), per pass (k, P, l, q)) fitting rows ``rhs`` (k, n, q)."""
+            b_s = np.add.reduceat(wA[..., :, None] * rhs[..., None, :], seg, axis=1)
+            z_s = Gi_ss @ b_s
+            b_g = np.einsum("mi,pm,pmq->piq", B_glob, wd, rhs)
+            c_g = Si @ (b_g - np.einsum("pqli,pqlk->pik", G_sg, z_s))
+            return c_g, z_s - Gi_ss @ (G_sg @ c_g[:, None])
+
+        def fitted(c_g, c_s):
+            """Rows (k, n, q) of the linear terms."""
+            return np.einsum("mi,piq->pmq", B_glob, c_g) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
+
+        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss)
+
+    def pieces(x, w):
+        """Prediction, projected position Jacobian and the linear terms (global, per pass) at ``x``."""
+        h, D, grad, A, lin, fitted, blocks = normal(x, w)
+        c_g, c_s = lin((y[:n] - h)[..., None])
+        if tb:
+            D = D + c_s[:, gi, -1, 0, None] * grad
+        K_g, K_s = lin(D)
+        pred = h + fitted(c_g, c_s)[..., 0]
+        J = D - fitted(K_g, K_s)
+        return pred, J, D, A, c_g[..., 0], c_s[..., 0], K_s, blocks
+
+    def model(x, idx, w):
+        pred, J, _, _, _, c_s, K_s, _ = pieces(x, w)
+        pred = np.concatenate([pred] + [c_s[:, :, j] for j in prior_cols], -1)
+        J = np.concatenate([J] + [-K_s[:, :, j] for j in prior_cols], axis=1)
+        if has_alt:
+            lat, lon, alt = ecef_to_geodetic(x)
+            pred = np.concatenate([pred, alt[:, None]], -1)
+            J = np.concatenate([J, C_e_n(lat, lon)[..., 2][:, None, :]], axis=1)
+        return pred, J
+
+    n_states = 3 + n_glob + n_pass * n_loc
+    xtol = np.full(3, XTOL_POS_M)
+
+    def solve(x0, used, alpha_):
+        k = len(x0)
+        ys, ss, ms = (np.broadcast_to(a, (k, y.size)) for a in (y, sigma, used))
+        return solve_robust(model, x0, ys, ss, ms, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha_,
+                             fixed=fixed, groups=groups, step_sigma_tol=_STEP_SIGMA_TOL)
+
+    if pos0_ecef_m is not None:
+        starts = np.asarray(pos0_ecef_m, dtype=float).reshape(-1, 3)
+    elif m[:n].any():
+        starts = grid_starts(subpoint_centroid_ecef_m(r_s[m[:n]]), start_offset_m)
+    else:
+        starts = np.zeros((1, 3))
+    x, res, J, Q, used, iterations, chi2, status = solve(starts, m, None)
+    solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
+    cost = np.where(solved, chi2, np.inf)
+    best = int(np.argmin(cost))
+    dof = max(int(used[best].sum()) - n_states, 1)
+    fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
+    apart = solved & (np.linalg.norm(x - x[best], axis=-1) > ambiguity_m)
+    ambiguous = bool((fits & apart).any())
+    other = int(np.argmin(np.where(apart, cost, np.inf))) if apart.any() else None
+    x_mirror = x[other:other + 1].copy() if other is not None else None
+    iterations = iterations[best:best + 1]
+    x, res, J, Q, used, chi2, status = x[best:best + 1], res[best:best + 1], J[best:best + 1], Q[best:best + 1], \
+        used[best:best + 1], chi2[best:best + 1], status[best:best + 1]
+    if alpha is not None and solved[best]:
+        x, res, J, Q, used, it, chi2, status = solve(x, used, alpha)
+        iterations = iterations + it
+    ok = status[0] in (FixStatus.OK, FixStatus.INCONSISTENT)
+    mirror_pos, mirror_chi2 = np.full(3, np.nan), np.nan
+    if x_mirror is not None and ok:
+        xm, _, _, _, _, _, chi2_m, status_m = solve(x_mirror, used, None)
+        if status_m[0] in (FixStatus.OK, FixStatus.INCONSISTENT):
+            mirror_pos, mirror_chi2 = xm[0], float(chi2_m[0])
+    # Full normal matrix of [pos, global terms, per-pass terms (pass-major)] at the solution, inverted.
+    w = np.where(used, 1.0 / sigma**2, 0.0)
+    _, _, D, A, c_g, c_s, _, (G_gg, G_sg, G_ss) = pieces(x, w)
+    wd, D, A = w[0, :n], D[0], A[0]
+    N = np.zeros((n_states, n_states))
+    N[:3, :3] = np.einsum("mi,m,mj->ij", D, wd, D)
+    if has_alt:
+        lat, lon, _ = ecef_to_geodetic(x[0])
+        up = C_e_n(lat, lon)[:, 2]
+        N[:3, :3] += np.outer(up, up) * w[0, -1]
+    g = slice(3, 3 + n_glob)
+    N[g, :3] = np.einsum("mi,m,mj->ij", B_glob, wd, D)
+    N[g, g] = G_gg[0]
+    N[3 + n_glob:, :3] = np.add.reduceat((wd[:, None] * A)[:, :, None] * D[:, None, :], seg, axis=0).reshape(-1, 3)
+    N[3 + n_glob:, g] = G_sg[0].reshape(n_pass * n_loc, n_glob)
+    for p in range(n_pass):
+        sl = slice(3 + n_glob + p * n_loc, 3 + n_glob + (p + 1) * n_loc)
+        N[sl, sl] = G_ss[0, p]
+    N = np.tril(N) + np.tril(N, -1).T
+    scale_glob = np.tile(1.0 / half_rx_s ** np.arange(n_glob // n_clk), n_clk)
+    scale_loc = np.ones((n_pass, n_loc)) if common else \
+        np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
+    scale = np.concatenate([np.ones(3), scale_glob, scale_loc.ravel()])
+    cov = _inverse_or_nan(N) * scale[:, None] * scale[None, :] if ok else np.full((n_states, n_states), np.nan)
+    # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
+    loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
+    n_poly_loc = n_loc - tb
+    perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_poly_loc].ravel(), loc[:, n_poly_loc:].ravel()])
+    cov = cov[np.ix_(perm, perm)]
+    w_rel = np.where(used[0], np.median(sigma[:n][m[:n]]) ** 2 / sigma**2, 0.0) if m[:n].any() \
+        else used[0].astype(float)
+    gdop = float(np.sqrt(np.trace(cofactor(J[0], w_rel))))
+    back = np.empty(n, dtype=int)
+    back[order] = np.arange(n)
+    nan_unless = (lambda a: a if ok else np.full_like(a, np.nan))  # noqa: E731
+    c_loc = c_s[0] * scale_loc
+    rx_polys = (c_g[0] * scale_glob).reshape(n_clk, -1)
+    rx_poly = rx_polys[0]
+    if common:
+        # Each pass's effective polynomial: its receiver clock's about the pass's mid-time, plus its satellite's offset.
+        poly = _shift_poly(rx_polys[pass_clk] if n_clk > 1 else np.broadcast_to(rx_poly, (n_pass, deg + 1)),
+                           t_ref - t_rx)
+        poly[:, 0] += c_loc[:, 0]
+    else:
+        poly = c_loc[:, :deg + 1]
+    return PassesFix(
+        pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref, clock_poly_hz=nan_unless(poly),
+        cov=cov, gdop=gdop, residuals_hz=res[0, :n][back], used=used[0, :n][back], n_used=int(used[0, :n].sum()),
+        iterations=int(iterations[0]), chi2=float(chi2[0]), status=FixStatus(int(status[0])),
+        ambiguous=ambiguous, mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
+        time_bias_s=nan_unless(c_loc[:, -1].copy()) if tb else None, clock=clock,
+        rx_clock_poly_hz=nan_unless(rx_poly) if common else None, rx_t_ref_s=float(t_rx) if common else np.nan,
+        sat_offset_hz=nan_unless(c_loc[:, 0].copy()) if common else None,
+        rx_clock_polys_hz=nan_unless(rx_polys.copy()) if common else None,
+        clock_labels=tuple(clock_labels.tolist()) if common and clock_group is not None else (),
+        pass_clock=pass_clk.copy() if common else None,
+    )
