@@ -1,4 +1,6 @@
-"""Figures of a simulation, after [Shen 2024]'s Fig. 4 (trajectory), 8 (errors), 9 (visible satellites), 10 (GDOP).
+"""Figures of a simulation: ``trajectory.png``, ``errors_3d.png``, ``visible.png`` and ``gdop.png``.
+
+They follow [Shen 2024]'s Fig. 4 (trajectory), 8 (errors), 9 (visible satellites) and 10 (GDOP).
 
 Every title names the run (scenario, coupling, level, seed) and every time
 axis its UTC origin. Besides the paper's four, ``errors_enu.png`` splits the
@@ -132,9 +134,9 @@ def write_figures(result, out_dir):
     """All five figures into ``out_dir``; returns their paths."""
     out = Path(out_dir)
     paths = []
-    for name, func in (("fig4_trajectory.png", trajectory_figure), ("fig8_errors.png", errors_figure),
-                       ("errors_enu.png", errors_enu_figure), ("fig9_visible.png", visible_figure),
-                       ("fig10_gdop.png", gdop_figure)):
+    for name, func in (("trajectory.png", trajectory_figure), ("errors_3d.png", errors_figure),
+                       ("errors_enu.png", errors_enu_figure), ("visible.png", visible_figure),
+                       ("gdop.png", gdop_figure)):
         func(result, out / name)
         paths.append(out / name)
     return paths

@@ -346,9 +346,12 @@ def load_scenario(name_or_path):
             raise InputError(f"--scenario: {key!r} is neither a built-in scenario ({', '.join(bundled_names())}) "
                              "nor a JSON file")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(f"--scenario: cannot read {path}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); "
+                         "a scenario file is JSON") from None
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

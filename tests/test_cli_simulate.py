@@ -52,7 +52,7 @@ def test_json_contract_files_and_figures(tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     assert len(rows) == 61 and float(rows[-1]["t_s"]) == 60.0
     assert {"truth_lat_deg", "ins_lat_deg", "fix_lat_deg", "fused_lat_deg", "sigma_e_m", "sigma_vu_mps"} <= set(rows[0])
-    for fig in ("fig4_trajectory.png", "fig8_errors.png", "fig9_visible.png", "fig10_gdop.png"):
+    for fig in ("trajectory.png", "errors_3d.png", "visible.png", "gdop.png"):
         assert (out_dir / fig).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

@@ -44,12 +44,12 @@ RUNS = {
         ["simulate"],
         "The main job: [Shen 2024]'s Xi'an -> Baoji flight at signal level, loose coupling, seed 0.",
         {
-            "fig4_trajectory.png": "Truth, INS-only and Starlink/INS tracks (longitude/latitude) and heights.",
-            "fig8_errors.png": "3D position and velocity errors of the INS alone, the LEO snapshot fixes and the "
+            "trajectory.png": "Truth, INS-only and Starlink/INS tracks (longitude/latitude) and heights.",
+            "errors_3d.png": "3D position and velocity errors of the INS alone, the LEO snapshot fixes and the "
                                "fused solution.",
             "errors_enu.png": "Fused position error east, north and up inside the filter's +-3 sigma.",
-            "fig9_visible.png": "Visible satellites along the flight; 7 are needed for a snapshot fix.",
-            "fig10_gdop.png": "Doppler GDOP along the flight (position [m], velocity [m/s] and clock [Hz] "
+            "visible.png": "Visible satellites along the flight; 7 are needed for a snapshot fix.",
+            "gdop.png": "Doppler GDOP along the flight (position [m], velocity [m/s] and clock [Hz] "
                               "standard deviations per 1 Hz of Doppler noise, root-sum-squared; see "
                               "[visibility](visibility.md#what-the-doppler-gdop-means)).",
         },

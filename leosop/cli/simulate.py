@@ -2,9 +2,8 @@
 
 import sys
 import warnings
-from pathlib import Path
 
-from ..fileio import write_csv, write_json
+from ..fileio import atomic_outputs, write_csv, write_json
 from ..scenarios import load_scenario
 from ..simulate import COUPLINGS, LEVELS, metrics, run_scenario, solution_table
 from . import add_command
@@ -44,15 +43,15 @@ def run(args):
     if args.out:
         from ..plots import write_figures
 
-        out = Path(args.out)
-        header, rows = solution_table(result)
-        write_csv(out / "solution.csv", header, rows)
-        write_json(out / "metrics.json", doc)
-        write_figures(result, out)
-        if len(scenario.leo.constellations) > 1:
-            from ..plots_families import visible_by_family_figure
+        with atomic_outputs(args.out) as stage:  # all files or none
+            header, rows = solution_table(result)
+            write_csv(stage / "solution.csv", header, rows)
+            write_json(stage / "metrics.json", doc)
+            write_figures(result, stage)
+            if len(scenario.leo.constellations) > 1:
+                from ..plots_families import visible_by_family_figure
 
-            visible_by_family_figure(result, out / "fig9_visible_by_family.png")
+                visible_by_family_figure(result, stage / "visible_by_family.png")
     return doc
 
 
