@@ -30,7 +30,12 @@ within ``wl_tol_cyc`` of an integer; then the narrow-lane
 by LAMBDA with the ratio test (``ratio_min``), a bootstrapped success rate
 of at least ``success_min`` and partial fixing (:mod:`leosop.gnss.lambda_`);
 the fixed ambiguities condition the state (a noise-free pseudo-observation
-on a copy) for the fixed solution.
+on a copy) for the fixed solution. When the GNSS is lost after a fixed
+epoch (``bridge_fixed``), the INS bridges the gap from that fixed solution
+and its conditioned covariance rather than from the float one: every
+ambiguity is dropped in the gap, so nothing is held beyond it, and the
+outage starts from centimetres instead of the float solution's
+decimetre (``tools/bench_ppp_ins_outage.py``).
 
 Measured (``leosop reproduce ppp-ins``, ``tools/bench_ppp_ins.py``): on the
 simulated car, 20 seeds of 15 min, the float-position NEES averaged over
@@ -80,6 +85,7 @@ class PppInsOptions:
     wl_tol_cyc: float = 0.25
     wl_se_max_cyc: float = 0.1
     wl_min_epochs: int = 5
+    bridge_fixed: bool = True
 
 
 @dataclass
@@ -217,8 +223,16 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
                        cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan), n_sats=np.zeros(n_ep, int),
                        n_fixed=np.zeros(n_ep, int), n_wl=np.zeros(n_ep, int), ratio=np.full(n_ep, np.nan),
                        gnss=np.zeros(n_ep, bool), n_slips=0, n_outliers=0, n_ref_changes=0)
+    held = None  # the previous epoch's fixed solution: (state increment, conditioned covariance)
     for k in range(n_ep):
         if k > 0:
+            if o.bridge_fixed and held is not None and np.count_nonzero(have[k]) < 2:
+                # GNSS lost: the INS bridges the gap from the fixed solution, not the float one (every
+                # ambiguity is dropped in the gap, so conditioning on the fixed ones loses nothing).
+                ins.feedback(held[0])
+                x[N_INS:] += held[0][N_INS:]
+                P = held[1]
+            held = None
             P = ins.predict(k, P)
             P[_ZWD, _ZWD] += o.zwd_rw_m_per_rt_s**2 * settings.step_s
         s = ins.state
@@ -296,7 +310,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         out.gnss[k] = True
         out.n_sats[k] = js.size
         if o.ar:
-            _fix(out, k, ins, P, x, jo, amb.ref, (mw_sum, mw_sq, mw_n), gnss.wsb_cyc, o)
+            held = _fix(out, k, ins, P, x, jo, amb.ref, (mw_sum, mw_sq, mw_n), gnss.wsb_cyc, o)
     return out
 
 
@@ -375,6 +389,10 @@ def _record(out, k, ins, P, r_ins, C, J):
 def _fix(out, k, ins, P, x, jo, ref, mw, wsb, o):
     """Wide-lane rounding, narrow-lane LAMBDA; the fixed position into ``out`` when a subset passes.
 
+    Returns the fixed solution as the state increment ``dx`` (shape (n_x,))
+    and the covariance conditioned on the fixed ambiguities (shape (n_x, n_x)),
+    or None when nothing is fixed.
+
     ``mw`` holds the running sums, sums of squares and counts of each
     satellite's Melbourne-Wuebbena arc; a SD wide-lane is rounded when both
     arcs have ``wl_min_epochs``, the standard error of the SD mean is below
@@ -384,7 +402,7 @@ def _fix(out, k, ins, P, x, jo, ref, mw, wsb, o):
     ok = (mw_n[jo] >= o.wl_min_epochs) & (mw_n[ref] >= o.wl_min_epochs)
     jo = jo[ok]
     if jo.size < o.min_fixed:
-        return
+        return None
     mean = mw_sum / np.maximum(mw_n, 1)
     var_mean = np.maximum(mw_sq / np.maximum(mw_n, 1) - mean**2, 0.0) / np.maximum(mw_n - 1, 1)
     wl = mean[jo] - mean[ref] - (wsb[jo] - wsb[ref])
@@ -393,17 +411,20 @@ def _fix(out, k, ins, P, x, jo, ref, mw, wsb, o):
     jo, n_wl = jo[good], n_wl[good]
     out.n_wl[k] = jo.size
     if jo.size < o.min_fixed:
-        return
+        return None
     a = _A0 + jo
     a_hat = (x[a] - BETA_M * n_wl) / LAM_NL_M
     Q = P[np.ix_(a, a)] / LAM_NL_M**2
     fixed, n1, ratio = partial_fix(a_hat, Q, ratio_min=o.ratio_min, min_fixed=o.min_fixed, success_min=o.success_min)
     out.ratio[k] = ratio
     if not fixed.any():
-        return
+        return None
     af = a[fixed]
     b_fix = LAM_NL_M * n1[fixed] + BETA_M * n_wl[fixed]
-    dx = P[:, af] @ np.linalg.solve(P[np.ix_(af, af)], b_fix - x[af])
+    gain = np.linalg.solve(P[np.ix_(af, af)], P[af, :]).T  # (n_x, n_fixed)
+    dx = gain @ (b_fix - x[af])
     s = ins.state.corrected(dpos=dx[DPOS])
     out.pos_fixed_ecef_m[k] = geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
     out.n_fixed[k] = fixed.sum()
+    P_fixed = P - gain @ P[af, :]
+    return dx, 0.5 * (P_fixed + P_fixed.T)

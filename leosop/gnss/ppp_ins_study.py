@@ -81,14 +81,13 @@ def _trajectory(duration_s):
 
 
 def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None, ar=True, sim=SimSettings(),
-             grade="fog"):
-    """Simulate one run and filter it.
+             grade="fog", options=ppp_ins.PppInsOptions()):
+    """Simulate one run and filter it (``options`` with ``ar`` replaced).
 
     Returns
     -------
     truth_ecef_m : ndarray, shape (n, 3)
     result : leosop.gnss.ppp_ins.PppInsResult
-    init_err : ndarray, shape (3,)
     """
     rng = np.random.default_rng(seed)
     settings = filter_settings(grade)
@@ -114,7 +113,7 @@ def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None,
                                         traj.C_n_b[0])
     state0 = true0.corrected(-att, -dv, -dpos)
     res = ppp_ins.run(gnss, orbits, clocks, state0, dth, dvl, traj.dt_s, settings,
-                      ppp_ins.PppInsOptions(ar=ar))
+                      dataclasses.replace(options, ar=ar))
     return gnss.pos_ecef_m[:n], res
 
 
