@@ -311,3 +311,60 @@ def test_generate_with_satellites_below_the_horizon(tmp_path, capsys):
     status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "r.sigmf-meta"), *SMALL,
                           "--start", "2025-01-01T00:00:00Z")
     assert status == 2 and "--sat 70002: no satellite is above the horizon" in _one_line(err)
+
+
+def _absurd_doppler_csv(path):
+    """Eight satellites of one epoch around the Earth, states given, every Doppler 1e300 Hz."""
+    az = 2 * np.pi * np.arange(8) / 8
+    pos = np.stack([7.0e6 * np.cos(az), 7.0e6 * np.sin(az), 1.0e6 * (np.arange(8) - 4)], axis=1)
+    vel = np.stack([-7.5e3 * np.sin(az), 7.5e3 * np.cos(az), np.zeros(8)], axis=1)
+    rows = [f"0,{70000 + k},1e300," + ",".join(f"{v:.3f}" for v in (*pos[k], *vel[k])) for k in range(8)]
+    path.write_text("t_s,sat_id,doppler_hz,x_sv_m,y_sv_m,z_sv_m,vx_sv_mps,vy_sv_mps,vz_sv_mps\n" + "\n".join(rows))
+    return str(path)
+
+
+@pytest.mark.parametrize("mode", [[], ["--static"]])
+def test_position_refuses_to_report_nan_fixes(tmp_path, capsys, mode):
+    # Before: "1 fix(es)" of NaN coordinates, exit 0.
+    meas = _absurd_doppler_csv(tmp_path / "absurd.csv")
+    status, out, err = _run(capsys, "position", meas, *mode, "--out", str(tmp_path / "out"))
+    assert status == 2 and out == ""
+    assert "absurd.csv: no finite fix from 1 solve(s); check the doppler_hz values" in _one_line(err)
+    assert not (tmp_path / "out").exists() and _leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("init, message", [
+    ("34,108,1e12", "--init: altitude 1e+12 m is outside [-12000, 1e8]"),
+    ("34,108", "--init '34,108': expected LAT_DEG,LON_DEG,ALT_M (three numbers)"),
+    ("95,108,0", "--init: latitude 95 deg is outside [-90, 90]"),
+])
+def test_position_init_is_checked_as_a_site(tmp_path, capsys, init, message):
+    meas = _absurd_doppler_csv(tmp_path / "m.csv")
+    status, _, err = _run(capsys, "position", meas, "--init", init, "--out", str(tmp_path / "out"))
+    assert status == 2 and message in _one_line(err)
+    assert not (tmp_path / "out").exists()
+
+
+def test_scenario_file_not_utf8_is_bad_input(tmp_path, capsys):
+    path = tmp_path / "latin1.json"
+    path.write_bytes('{"name": "caf\u00e9"}'.encode("latin-1"))
+    status, _, err = _run(capsys, "simulate", "--scenario", str(path), "--out", str(tmp_path / "out"))
+    assert status == 2
+    assert f"{path}: not UTF-8 text (byte 0xe9 at offset 13)" in _one_line(err)
+    assert not (tmp_path / "out").exists()
+
+
+def test_simulate_out_is_all_or_nothing(tmp_path, capsys, monkeypatch):
+    from leosop import plots
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no fonts")
+
+    # The last figure fails after the CSV, the JSON and three figures are made: none of them may stay.
+    monkeypatch.setattr(plots, "gdop_figure", broken)
+    scenario = tmp_path / "short.json"
+    scenario.write_text(json.dumps({"name": "short", "duration_s": 5.0}))
+    status, _, err = _run(capsys, "simulate", "--scenario", str(scenario), "--level", "measurement",
+                          "--out", str(tmp_path / "out"))
+    assert status == 1 and "no fonts" in err
+    assert not (tmp_path / "out").exists() and _leftovers(tmp_path) == []
