@@ -47,13 +47,13 @@ from pathlib import Path
 import numpy as np
 
 from . import earth, frames
-from .constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
+from .constants import C_MPS
 from .errors import InputError
 from .fusion import common, kalman, loose, tight
+from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
-from .geometry.doppler import doppler_jacobian
 from .positioning.robust_ls import FixStatus
 from .positioning.snapshot import solve_snapshots
 from .signal.doppler import doppler_sigma_hz, estimate_block
@@ -202,24 +202,6 @@ def _initial_state(truth, init):
     de, dn, du = init.pos_m
     return strapdown.NavState.from_dcm(lat + dn / (R_M + alt), truth.lon_rad[0] + de / ((R_N + alt) * np.cos(lat)),
                                        alt + du, truth.vel_enu_mps[0] + np.asarray(init.vel_mps), truth.C_n_b[0])
-
-
-def _doppler_rate_hz_per_s(pos_sv, vel_sv, pos_rx, vel_rx, carrier_hz):
-    """Central-tone Doppler rate of each pair from the relative acceleration, (m,).
-
-    The satellite's ECEF acceleration is point-mass gravity plus the Coriolis
-    and centrifugal terms; the aircraft flies straight (its acceleration is
-    neglected). Only the shape of the generated chirp depends on it.
-    """
-    w = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
-    r = np.linalg.norm(pos_sv, axis=-1, keepdims=True)
-    acc_sv = -GM_M3_PER_S2 * pos_sv / r**3 - 2.0 * np.cross(w, vel_sv) - np.cross(w, np.cross(w, pos_sv))
-    los = pos_sv - pos_rx
-    rho = np.linalg.norm(los, axis=-1)
-    dv = vel_sv - vel_rx
-    rr = np.sum(los * dv, axis=-1) / rho
-    rr_dot = (np.sum(dv * dv, axis=-1) - rr**2) / rho + np.sum(acc_sv * los, axis=-1) / rho
-    return -rr_dot * carrier_hz / C_MPS
 
 
 def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_dbhz, rng, progress):
@@ -467,8 +449,9 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         # Starlink at signal level: prediction from the INS alone and the known
         # orbits (range-rate part of the Jacobian).
         predicted = np.einsum("mi,mi->m", H_known[comb, 3:6], ins_vel_ecef[ep[comb]] - vis.vel_sv_ecef_mps[comb])
-        rate = _doppler_rate_hz_per_s(vis.pos_sv_ecef_m[comb], vis.vel_sv_ecef_mps[comb], pos_rx[ep[comb]],
-                                      vel_rx[ep[comb]], carrier[comb])
+        # Only the shape of the generated chirp depends on the rate (the aircraft's acceleration neglected).
+        rate = doppler_rate(vis.pos_sv_ecef_m[comb, None], vis.vel_sv_ecef_mps[comb, None], pos_rx[ep[comb]],
+                            carrier[comb, None], vel_rx[ep[comb], None])[0][:, 0]
         doppler_meas[comb], sigma_est[comb] = _signal_level(doppler_geom[comb], rate, clock_hz[comb], predicted,
                                                             scenario.leo.cn0_dbhz, rng_meas, progress)
     modelled = ~comb
