@@ -10,7 +10,8 @@ from leosop.errors import InputError
 from leosop.montecarlo import IMU_GRADES, METRICS, bundled_specs, load_spec, run_seeds, spec_from_dict, to_dataset
 from leosop.montecarlo import spec as spec_module
 from leosop.montecarlo.parameters import apply
-from leosop.scenarios import XIAN_BAOJI
+from leosop.orbits import CARRIERS
+from leosop.scenarios import XIAN_BAOJI, load_scenario
 from leosop.simulate_study import PAPER_TABLE5, PAPER_TABLE6
 
 GOOD = {"fixed": {"level": "measurement"}, "parameters": {"correction_period_s": [1, 30]}, "n_seeds": 2}
@@ -62,7 +63,7 @@ def test_spec_file_errors(tmp_path):
     bad.write_text("{\"n_seeds\": 2,")
     with pytest.raises(InputError, match=r"bad.json: not valid JSON"):
         load_spec(bad)
-    with pytest.raises(InputError, match=r"nope.json: no such spec file \(bundled specs: cn0_imu, table5, table6\)"):
+    with pytest.raises(InputError, match=r"nope.json: no such spec file \(bundled specs: cn0_imu, families, table5, table6\)"):
         load_spec(tmp_path / "nope.json")
 
 
@@ -95,13 +96,15 @@ def test_navigation_grade_is_the_papers_table1():
 
 def test_bundled_specs_are_the_papers_grids():
     specs = {name: load_spec(name) for name in bundled_specs()}
-    t5, t6, cn0 = specs["table5"], specs["table6"], specs["cn0_imu"]
+    t5, t6, cn0, fam = specs["table5"], specs["table6"], specs["cn0_imu"], specs["families"]
     assert list(t5.axes["correction_period_s"]) == sorted(PAPER_TABLE5) and t5.axes["coupling"] == ("loose", "tight")
     assert t5.fixed == {"level": "measurement", "orbit_error_m": 1.0}
     assert list(t6.axes["orbit_error_m"]) == sorted(PAPER_TABLE6) and t6.fixed["correction_period_s"] == 1.0
     assert set(t6.axes["orbit_error_model"]) == {"independent", "common"}
     assert cn0.axes["imu_grade"] == tuple(IMU_GRADES) and len(cn0.axes["cn0_dbhz"]) == 5
-    assert {s.n_seeds for s in specs.values()} == {20} and all(s.scenario == XIAN_BAOJI for s in specs.values())
+    assert fam.axes["constellations"] == (("starlink",), tuple(CARRIERS)) and fam.axes["coupling"] == ("loose", "tight")
+    assert fam.scenario == load_scenario("xian-baoji-multi")  # each family its own receiver clock
+    assert {s.n_seeds for s in specs.values()} == {20} and all(s.scenario == XIAN_BAOJI for s in (t5, t6, cn0))
 
 
 def test_run_seeds_from_one_seed_sequence():
