@@ -43,41 +43,54 @@ def plot_fix_fraction(path, lat_deg, lon_deg, fix_fraction, *, title=""):
     fix_fraction : ndarray, (n_lat, n_lon)
     """
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(9, 5))
+    fig, ax = plt.subplots(figsize=(9, 4.6), constrained_layout=True)
     mesh = ax.pcolormesh(lon_deg, lat_deg, fix_fraction, shading="nearest", cmap="viridis", vmin=0, vmax=1)
     _world_axes(ax)
-    fig.colorbar(mesh, ax=ax, shrink=0.7, label="fraction of time with >= 7 satellites")
+    fig.colorbar(mesh, ax=ax, shrink=0.8, label="fraction of epochs with >= 7 satellites")
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("longitude [deg]")
     ax.set_ylabel("latitude [deg]")
-    save_png(fig, path)
+    save_png(fig, path, bbox_inches="tight")
 
 
 def plot_small_multiples(path, lat_deg, lon_deg, values, labels, *, cbar_label, vmin=None, vmax=None,
-                         cmap="viridis", title=""):
+                         cmap="viridis", log_colors=False, title=""):
     """One world map per selected epoch, shared colour scale.
 
     Parameters
     ----------
     values : ndarray, (n_panels, n_lat, n_lon)
     labels : list of str, (n_panels,)
+    log_colors : bool
+        Logarithmic colour scale (for quantities spanning decades, like GDOP); ``vmin`` must then be > 0.
     """
     plt = pyplot()
     n = len(values)
     cols = min(n, 3)
     rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows + 0.6), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.0 * cols + 1.0, 2.3 * rows + 0.7), squeeze=False,
+                             sharex=True, sharey=True, constrained_layout=True)
     finite = values[np.isfinite(values)]
     vmin = vmin if vmin is not None else (float(finite.min()) if finite.size else 0.0)
     vmax = vmax if vmax is not None else (float(finite.max()) if finite.size else 1.0)
+    if log_colors:
+        from matplotlib.colors import LogNorm
+
+        scale = {"norm": LogNorm(vmin=vmin, vmax=vmax)}
+    else:
+        scale = {"vmin": vmin, "vmax": vmax}
     mesh = None
     for ax, v, label in zip(axes.ravel(), values, labels):
-        mesh = ax.pcolormesh(lon_deg, lat_deg, v, shading="nearest", cmap=cmap, vmin=vmin, vmax=vmax)
+        mesh = ax.pcolormesh(lon_deg, lat_deg, v, shading="nearest", cmap=cmap, **scale)
         _world_axes(ax)
         ax.set_title(label, fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("longitude [deg]", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("latitude [deg]", fontsize=8)
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     if mesh is not None:
         fig.colorbar(mesh, ax=axes.ravel().tolist(), shrink=0.8, label=cbar_label)
     fig.suptitle(title, fontsize=9)
-    save_png(fig, path)
+    save_png(fig, path, bbox_inches="tight")
