@@ -118,7 +118,7 @@ def test_reproduce_align_fig2_serial_writes_figures(tmp_path, capsys):
     i = doc["pitch_deg"].index(80.0)
     # Paper: about 11 and 2.2 deg at 80 deg pitch (bounds as in test_alignment).
     assert 7.7 < doc["max_yaw_err_deg"]["alg1"][i] < 15.4 and 1.5 < doc["max_yaw_err_deg"]["alg2"][i] < 3.1
-    for name in ("align_fig2.json", "align_fig2.csv", "align_fig1_pitch_roll.png", "align_fig2_yaw.png"):
+    for name in ("align_fig2.json", "align_fig2.csv", "align_pitch_roll_error.png", "align_yaw_error.png"):
         assert (tmp_path / name).stat().st_size > 0
 
 

@@ -63,8 +63,9 @@ RUNS = {
         },
     ),
     "doppler": (
-        ["doppler", RECORDING],
-        "Doppler of the strongest pilot comb in each block of the bundled snapshot recording.",
+        ["doppler", RECORDING, "--block-s", "0.02"],
+        "Doppler of the strongest pilot comb in each 20 ms snapshot capture of the bundled recording (one block "
+        "per capture: longer blocks would join captures across their 2 s gaps).",
         {"spectrogram.png": "Spectrogram of the recording with the estimated Doppler track."},
     ),
     "replay": (
@@ -95,8 +96,9 @@ RUNS = {
         ["reproduce", "align-fig2", "--scheduler", "serial"],
         "[Qu 2024]'s Fig. 1-2: coarse-alignment errors against pitch, Monte Carlo.",
         {
-            "align_fig1_pitch_roll.png": "Pitch and roll errors of algorithms 1, 2 and the Wahba solution.",
-            "align_fig2_yaw.png": "Largest yaw error against pitch.",
+            "align_pitch_roll_error.png": "Largest pitch and roll errors of algorithms 1, 2 and the Wahba solution "
+                                          "against pitch.",
+            "align_yaw_error.png": "Largest yaw error against pitch, the paper's values at 80 deg marked.",
         },
     ),
 }

@@ -155,24 +155,44 @@ def _grid(full):
     return np.array(pitch, dtype=float), np.arange(-180.0, 180.0, 15.0), np.arange(0.0, 360.0, 15.0)
 
 
+#: Line style per method: alg1 and alg2 give the same pitch and roll, so alg1 is drawn thick underneath.
+_STYLE = {"alg1": dict(color="C0", lw=3.0, alpha=0.5, marker="o", ms=7), "alg2": dict(color="C1", lw=1.2, marker="s"),
+          "wahba": dict(color="C2", lw=1.2, ls="--", marker="^")}
+
+
+def _settings_text(settings):
+    return (f"{settings['n_shots']} shots per attitude, accel {settings['accel_sigma_mg']:g} mg, gyro "
+            f"{settings['gyro_sigma_deg_per_h']:g} deg/h (1 sigma), lat {settings['lat_deg']:g} deg, "
+            f"seed {settings['seed']}")
+
+
 def _plot_fig2(path_pr, path_yaw, doc):
+    """Pitch and roll errors (two panels) and yaw error against pitch, the paper's values marked."""
     plt = pyplot()
     p = doc["pitch_deg"]
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for label in doc["max_pitch_err_deg"]:
-        ax.semilogy(p, doc["max_pitch_err_deg"][label], "o-", label=f"pitch, {label}")
-        ax.semilogy(p, doc["max_roll_err_deg"][label], "s--", label=f"roll, {label}")
-    ax.set(xlabel="pitch [deg]", ylabel="max error [deg]", title="[Qu 2024] Fig. 1: pitch and roll alignment error")
+    paper = doc["paper"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), sharey=True, constrained_layout=True)
+    for ax, angle, limit in zip(axes, ("pitch", "roll"), (paper["pitch_err_below_0p6_deg_up_to_pitch_deg"],
+                                                          paper["roll_err_below_0p6_deg_up_to_pitch_deg"])):
+        for label, y in doc[f"max_{angle}_err_deg"].items():
+            ax.semilogy(p, y, label=label, **_STYLE.get(label, {}))
+        ax.plot([limit], [0.6], "k*", ms=11, label=f"[Qu 2024]: < 0.6 deg up to {limit:g} deg")
+        ax.set(xlabel="pitch [deg]", title=f"{angle} error")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("largest error over the attitudes [deg]")
+    fig.suptitle(f"[Qu 2024] Fig. 1, coarse alignment: {_settings_text(doc['settings'])}", fontsize=9)
+    save_png(fig, path_pr)
+    fig, ax = plt.subplots(figsize=(7, 4.4), constrained_layout=True)
+    for label, y in doc["max_yaw_err_deg"].items():
+        ax.semilogy(p, y, label=label, **_STYLE.get(label, {}))
+    for label, y in paper["max_yaw_err_at_80_deg"].items():
+        ax.plot([80], [y], "*", color=_STYLE[label]["color"], mec="k", ms=13,
+                label=f"[Qu 2024] {label} at 80 deg: {y:g} deg")
+    ax.set(xlabel="pitch [deg]", ylabel="largest yaw error over the attitudes [deg]")
+    ax.set_title(f"[Qu 2024] Fig. 2, coarse alignment: yaw error\n{_settings_text(doc['settings'])}", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    save_png(fig, path_pr)
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for label, y in doc["max_yaw_err_deg"].items():
-        ax.semilogy(p, y, "o-", label=label)
-    ax.plot([80, 80], [2.2, 11.0], "k*", ms=10, label="paper at 80 deg")
-    ax.set(xlabel="pitch [deg]", ylabel="max yaw error [deg]", title="[Qu 2024] Fig. 2: yaw alignment error")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
     save_png(fig, path_yaw)
 
 
@@ -202,7 +222,7 @@ def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):
         rows = [[p] + [doc[f"max_{a}_err_deg"][m][i] for a in ("pitch", "roll", "yaw") for m in labels]
                 for i, p in enumerate(doc["pitch_deg"])]
         write_csv(out / "align_fig2.csv", header, rows)
-        _plot_fig2(out / "align_fig1_pitch_roll.png", out / "align_fig2_yaw.png", doc)
+        _plot_fig2(out / "align_pitch_roll_error.png", out / "align_yaw_error.png", doc)
     return doc
 
 
