@@ -170,7 +170,9 @@ def _run_montecarlo(args):
     ds = to_dataset(spec, result.rows)
     with atomic_outputs(out) as stage:
         write_netcdf(ds, stage / "montecarlo.nc")
-        figures = plot_study(ds, stage, spec.name)
+        fixed = "".join(f", {k} {v}" for k, v in spec.fixed.items())
+        figures = plot_study(ds, stage, f"{spec.name}: {spec.scenario.name}{fixed}, seeds {spec.seed}.."
+                                        f"{spec.seed + spec.n_seeds - 1}")
     ChunkStore(work_dir).remove()
     return {
         "study": "montecarlo",

@@ -2,8 +2,9 @@
 
 One PNG per parameter axis with more than one value, ``error_vs_<name>.png``:
 position (top) and velocity (bottom) error, the mean over seeds as a line and
-the 10-90 percentile band over seeds shaded, one line per combination of the
-other axes (up to :data:`MAX_LINES`; beyond that the other axes are pooled).
+the 10-90 percentile band over seeds shaded (for a categorical axis such as
+``coupling``: points with 10-90 percentile bars), one line per combination of
+the other axes (up to :data:`MAX_LINES`; beyond that the other axes are pooled).
 """
 
 import itertools
@@ -16,7 +17,8 @@ from ..figure import pyplot, save_png
 __all__ = ["plot_study", "MAX_LINES"]
 
 MAX_LINES = 8
-_PANELS = (("fused_pos_err_mean_m", "position error [m]"), ("fused_vel_err_mean_mps", "velocity error [m/s]"))
+_PANELS = (("fused_pos_err_mean_m", "fused position error [m]\n(3D, mean over the flight)"),
+           ("fused_vel_err_mean_mps", "fused velocity error [m/s]\n(3D, mean over the flight)"))
 
 
 def _x(ds, axis):
@@ -48,16 +50,21 @@ def plot_study(ds, out_dir, title):
     paths = []
     for axis in [d for d in ds["fused_pos_err_mean_m"].dims if d != "seed" and ds.sizes[d] > 1]:
         x, numeric, labels = _x(ds, axis)
-        fig, axes = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
+        fig, axes = plt.subplots(2, 1, figsize=(7, 7), sharex=True, constrained_layout=True)
         for ax, (metric, ylabel) in zip(axes, _PANELS):
-            for label, where, pooled in _lines(ds, axis):
+            lines = _lines(ds, axis)
+            for k, (label, where, pooled) in enumerate(lines):
                 v = _select(ds, metric, axis, where, pooled)
                 with warnings.catch_warnings():  # cells without a fused output plot as gaps
                     warnings.simplefilter("ignore", RuntimeWarning)
                     mean = np.nanmean(v, axis=1)
                     lo, hi = np.nanpercentile(v, [10, 90], axis=1)
-                line, = ax.plot(x, mean, "o-", label=label)
-                ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
+                if numeric:
+                    line, = ax.plot(x, mean, "o-", label=label)
+                    ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
+                else:  # categories: no line between them; the band as an error bar, lines side by side
+                    dx = 0.08 * (k - (len(lines) - 1) / 2)
+                    ax.errorbar(x + dx, mean, yerr=[mean - lo, hi - mean], fmt="o", capsize=4, label=label)
             finite = ds[metric].values[np.isfinite(ds[metric].values)]
             if finite.size and finite.min() > 0 and finite.max() / finite.min() > 30:
                 ax.set_yscale("log")
@@ -65,11 +72,14 @@ def plot_study(ds, out_dir, title):
             ax.grid(True, alpha=0.3)
         if not numeric:
             axes[-1].set_xticks(x, labels)
+            axes[-1].set_xlim(-0.5, len(x) - 0.5)
         units = ds[axis].attrs.get("units")
         axes[-1].set_xlabel(axis + (f" [{units}]" if units else ""))
         if axes[0].get_legend_handles_labels()[1]:
             axes[0].legend(fontsize=7)
-        axes[0].set_title(f"{title}: mean over {ds.sizes['seed']} seeds, 10-90 % band", fontsize=9)
+        spread = "band" if numeric else "bar"
+        axes[0].set_title(f"{title}\npoint: mean over the {ds.sizes['seed']} seeds; {spread}: their 10-90 % range",
+                          fontsize=9)
         path = out_dir / f"error_vs_{axis}.png"
         save_png(fig, path)
         paths.append(path)
