@@ -64,7 +64,7 @@ def errors_figure(result, path):
         ax.semilogy(result.t_s, err["fused"][i], "C0-", label="Starlink/INS")
         ax.set_ylabel(unit)
         ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend()
+    axes[0].legend(ncol=3, loc="upper left", fontsize="small", framealpha=0.9, markerscale=4)
     axes[0].set_title(f"{_run_label(result)}: 3D errors, correction every {result.correction_period_s:g} s")
     axes[1].set_xlabel(_time_label(result))
     _save(fig, path)
