@@ -1,5 +1,6 @@
 """`leosop visibility` and `leosop tle`: the JSON contract, bad input, and fetching."""
 
+import csv
 import http.server
 import json
 import subprocess
@@ -30,6 +31,13 @@ def test_json_contract_and_outputs(tmp_path, capsys):
     for name in ("visibility.json", "visibility.csv", "passes.csv", "visibility.png", "skyplot.png"):
         assert (tmp_path / name).stat().st_size > 0
     assert json.loads((tmp_path / "visibility.json").read_text()) == doc
+    # The CSV's Doppler GDOP column carries its unit in the header and the JSON's values (4 decimals written).
+    with open(tmp_path / "visibility.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["time_utc"] for r in rows] == doc["epochs_utc"]
+    for r, g in zip(rows, doc["gdop"]):
+        assert (r["gdop_doppler_m_per_hz"] == "") if g is None else float(r["gdop_doppler_m_per_hz"]) == \
+            pytest.approx(g, abs=5e-5)
 
 
 @pytest.mark.parametrize("args, message", [

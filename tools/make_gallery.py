@@ -59,7 +59,7 @@ RUNS = {
         "One hour at Xi'an over the bundled Walker constellation, 40 deg mask.",
         {
             "visibility.png": "Visible satellites, Doppler GDOP and the classic range DOPs over the hour.",
-            "skyplot.png": "Tracks of the visible satellites in azimuth and elevation.",
+            "skyplot.png": "The sky at the first epoch: satellites above the mask labelled, their next 10 min of track.",
         },
     ),
     "doppler": (

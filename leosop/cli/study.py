@@ -20,6 +20,7 @@ import numpy as np
 from ..chunkstore import ChunkStore, code_digest
 from ..errors import InputError
 from ..montecarlo import bundled_specs
+from ..montecarlo.parameters import PARAMETERS
 from ..orbits import CARRIERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
 from ..timebase import format_utc
@@ -52,8 +53,16 @@ def register(subparsers):
     g.set_defaults(_module=sys.modules[__name__])
     m = sub.add_parser("montecarlo", help="sweep scenario parameters x seeds of the simulate flight, to NetCDF and "
                                           "error-vs-parameter figures",
-                       description="SPEC: a JSON spec file or a bundled spec name "
-                                   f"({', '.join(sorted(bundled_specs()))}); see leosop.montecarlo.spec.")
+                       description="SPEC: a bundled spec name "
+                                   f"({', '.join(sorted(bundled_specs()))}) or a JSON file: an object with "
+                                   "'scenario' (built-in name, scenario file or object), 'parameters' (name -> "
+                                   "list of values, one grid axis each, e.g. {\"correction_period_s\": [1, 10], "
+                                   "\"coupling\": [\"loose\", \"tight\"]}), 'n_seeds' (runs per grid cell) "
+                                   "and optional 'name', 'description', 'tle', 'fixed' (parameters held at one "
+                                   "value, e.g. {\"level\": \"measurement\"}), 'seed' (default 0) and "
+                                   f"'runs_per_chunk' (default 10). Parameters: {', '.join(PARAMETERS)}. Writes "
+                                   "montecarlo.nc (the simulate metrics of every run: grid cell x seed) and "
+                                   "error_vs_<parameter>.png.")
     m.add_argument("spec", metavar="SPEC", help="JSON spec file or bundled spec name")
     m.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     m.add_argument("--out", metavar="DIR", required=True,
