@@ -18,19 +18,19 @@ from .frames import ecef_to_enu, ecef_to_geodetic
 from .timebase import format_utc
 
 __all__ = ["write_figures", "trajectory_figure", "errors_figure", "errors_enu_figure", "visible_figure",
-           "gdop_figure"]
+           "gdop_figure", "run_label", "time_label"]
 
 
 def _save(fig, path):
     save_png(fig, path, bbox_inches="tight")
 
 
-def _run_label(result):
+def run_label(result):
     """``scenario (loose coupling, signal level, seed 0)``: what was run, for titles."""
     return f"{result.scenario.name} ({result.coupling} coupling, {result.level} level, seed {result.seed})"
 
 
-def _time_label(result):
+def time_label(result):
     """Time-axis label with the UTC origin (seconds up to a flight's length read better than clock times)."""
     return f"time since {format_utc(result.times_utc[0])[:19]}Z [s]"
 
@@ -46,9 +46,9 @@ def trajectory_figure(result, path):
         ax_h.plot(result.t_s, alt, style, label=label)
     ax.set_xlabel("longitude [deg]")
     ax.set_ylabel("latitude [deg]")
-    ax.set_title(f"{_run_label(result)}: trajectory")
+    ax.set_title(f"{run_label(result)}: trajectory")
     ax.legend()
-    ax_h.set_xlabel(_time_label(result))
+    ax_h.set_xlabel(time_label(result))
     ax_h.set_ylabel("height [m]")
     _save(fig, path)
 
@@ -65,8 +65,8 @@ def errors_figure(result, path):
         ax.set_ylabel(unit)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(ncol=3, loc="upper left", fontsize="small", framealpha=0.9, markerscale=4)
-    axes[0].set_title(f"{_run_label(result)}: 3D errors, correction every {result.correction_period_s:g} s")
-    axes[1].set_xlabel(_time_label(result))
+    axes[0].set_title(f"{run_label(result)}: 3D errors, correction every {result.correction_period_s:g} s")
+    axes[1].set_xlabel(time_label(result))
     _save(fig, path)
 
 
@@ -93,8 +93,8 @@ def errors_enu_figure(result, path):
         if col.size and np.percentile(col, 99) > 0:
             ax.set_ylim(-1.2 * np.percentile(col, 99), 1.2 * np.percentile(col, 99))
     axes[0].legend(loc="lower right", fontsize="small")
-    axes[0].set_title(f"{_run_label(result)}: fused position error")
-    axes[-1].set_xlabel(_time_label(result))
+    axes[0].set_title(f"{run_label(result)}: fused position error")
+    axes[-1].set_xlabel(time_label(result))
     _save(fig, path)
 
 
@@ -104,9 +104,9 @@ def visible_figure(result, path):
     fig, ax = plt.subplots(figsize=(9, 3.2))
     ax.step(result.t_s, result.n_visible, where="mid")
     ax.axhline(7, color="C3", ls=":", label="7 needed for a snapshot fix")
-    ax.set_xlabel(_time_label(result))
+    ax.set_xlabel(time_label(result))
     ax.set_ylabel(f"visible satellites (mask {result.scenario.mask_deg:g} deg)")
-    ax.set_title(f"{_run_label(result)}: visible satellites")
+    ax.set_title(f"{run_label(result)}: visible satellites")
     ax.legend()
     _save(fig, path)
 
@@ -121,11 +121,11 @@ def gdop_figure(result, path):
         ax.fill_between(result.t_s, 0, 1, where=gap, transform=ax.get_xaxis_transform(), color="0.85",
                         step="mid", label="< 7 satellites: no fix")
         ax.legend(loc="upper left", fontsize="small")
-    ax.set_xlabel(_time_label(result))
+    ax.set_xlabel(time_label(result))
     # [Shen 2024] eq. 10: root of the trace over position [m^2], velocity [(m/s)^2] and
     # clock [Hz^2] per 1 Hz of Doppler noise; the position part dominates (docs/visibility.md).
     ax.set_ylabel("Doppler GDOP\n[~m of position per Hz]")
-    ax.set_title(f"{_run_label(result)}: Doppler GDOP ([Shen 2024] eq. 10)")
+    ax.set_title(f"{run_label(result)}: Doppler GDOP ([Shen 2024] eq. 10)")
     ax.grid(True, which="both", alpha=0.3)
     _save(fig, path)
 

@@ -7,6 +7,7 @@ written by ``leosop simulate --out`` when the scenario mixes families.
 import numpy as np
 
 from .figure import pyplot, save_png
+from .plots import run_label, time_label
 
 __all__ = ["visible_by_family_figure"]
 
@@ -21,8 +22,8 @@ def visible_by_family_figure(result, path):
     need = 6 + (counts > 0).sum(axis=1)
     ax.step(result.t_s, np.where(counts.sum(axis=1) > 0, need, np.nan), "k:", where="mid",
             label="6 + k needed for a snapshot fix")
-    ax.set_xlabel("time [s]")
+    ax.set_xlabel(time_label(result))
     ax.set_ylabel("tracked satellites")
-    ax.set_title(f"{result.scenario.name}: satellites above the {result.scenario.mask_deg:g} deg mask per family")
-    ax.legend(loc="upper right", fontsize="small")
+    ax.set_title(f"{run_label(result)}: satellites above the {result.scenario.mask_deg:g} deg mask per family")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")  # beside: the stack fills the axes
     save_png(fig, path, bbox_inches="tight")
