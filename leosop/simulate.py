@@ -56,7 +56,8 @@ from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
 from .positioning.robust_ls import FixStatus
 from .positioning.snapshot import solve_snapshots
-from .signal.doppler import doppler_sigma_hz, estimate_block
+from .signal.doppler import estimate_block
+from .signal.error_model import doppler_sigma_hz
 from .signal.pilot import PilotComb, add_noise, comb_baseband
 from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz
 from .timebase import format_utc, seconds_since

@@ -5,7 +5,7 @@ Starlink's Doppler is simulated at signal level (the pilot comb through the
 at measurement level from a documented sigma model: the Cramér-Rao bound of
 the frequency of one tone of carrier-to-noise density C/N0 observed for
 ``integration_s`` seconds (Rife and Boorstyn's bound in its continuous-time
-limit, which the estimators of :mod:`leosop.signal.doppler` reach above
+limit, which the estimators of :mod:`leosop.signal.fine` reach above
 threshold)::
 
     sigma_hz = sqrt(6 / ((2 pi)^2 * C/N0 * T^3)),   C/N0 in Hz (linear)

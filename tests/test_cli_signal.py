@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
-from leosop.signal.doppler import doppler_sigma_hz
+from leosop.signal.error_model import doppler_sigma_hz
 from leosop.signal.iq import write_sigmf
 
 SAT = "71585"  # above 40 deg from Xi'an at the default start (2025-01-01T19:40Z)

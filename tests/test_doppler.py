@@ -6,8 +6,9 @@ import pytest
 from leosop.errors import InputError
 from leosop.signal.channel import doppler_blocks
 from leosop.signal.crlb import crlb_frequency_hz2
-from leosop.signal.doppler import (_interleaved, _phasors, cubic_bias_hz, doppler_sigma_hz, estimate_block,
-                                   estimate_blocks, fine_fmlef, fine_ml, periodogram_grid)
+from leosop.signal.doppler import estimate_block, estimate_blocks
+from leosop.signal.error_model import doppler_sigma_hz
+from leosop.signal.fine import _interleaved, _phasors, cubic_bias_hz, fine_fmlef, fine_ml, periodogram_grid
 from leosop.signal.pilot import PilotComb
 
 FS = 1e6          # Hz: holds the comb (+-176 kHz) and +-300 kHz of Doppler

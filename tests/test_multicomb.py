@@ -5,7 +5,8 @@ import pytest
 
 from leosop.errors import InputError
 from leosop.signal.channel import doppler_blocks
-from leosop.signal.doppler import doppler_sigma_hz, estimate_block
+from leosop.signal.doppler import estimate_block
+from leosop.signal.error_model import doppler_sigma_hz
 from leosop.signal.multicomb import find_combs
 from leosop.signal.pilot import PilotComb, add_noise
 

@@ -10,7 +10,8 @@ import pytest
 
 from leosop.errors import InputError
 from leosop.signal import ofdm
-from leosop.signal.doppler import doppler_sigma_hz, estimate_block
+from leosop.signal.doppler import estimate_block
+from leosop.signal.error_model import doppler_sigma_hz
 from leosop.signal.pilot import PilotComb, add_noise
 
 CH_HZ = 11.325e9

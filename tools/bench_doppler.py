@@ -31,7 +31,10 @@ from leosop.fileio import write_json  # noqa: E402
 from leosop.frames import geodetic_to_ecef  # noqa: E402
 from leosop.orbits import load_constellation  # noqa: E402
 from leosop.signal.channel import SiteChannel, doppler_blocks, site_geometry  # noqa: E402
-from leosop.signal.doppler import coarse_fft, doppler_sigma_hz, estimate_block, fine_fmlef  # noqa: E402
+from leosop.signal.coarse import coarse_fft  # noqa: E402
+from leosop.signal.doppler import estimate_block  # noqa: E402
+from leosop.signal.error_model import doppler_sigma_hz  # noqa: E402
+from leosop.signal.fine import fine_fmlef  # noqa: E402
 from leosop.signal.fft import fft  # noqa: E402
 from leosop.signal.pilot import PilotComb  # noqa: E402
 

@@ -24,7 +24,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from leosop.signal.channel import doppler_blocks  # noqa: E402
-from leosop.signal.doppler import doppler_sigma_hz, estimate_block  # noqa: E402
+from leosop.signal.doppler import estimate_block  # noqa: E402
+from leosop.signal.error_model import doppler_sigma_hz  # noqa: E402
 from leosop.signal.multicomb import find_combs  # noqa: E402
 from leosop.signal.pilot import PilotComb, add_noise  # noqa: E402
 

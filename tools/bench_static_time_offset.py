@@ -5,7 +5,7 @@
 Seven real Starlink satellites (SGP4 from the 2026-04-08 snapshot) above
 25 deg over a site for 150 s, one pilot Doppler per satellite per second,
 sigma the comb's CRLB for a 20 ms block at 2.5 MS/s and 45 dB-Hz
-(:func:`leosop.signal.doppler.doppler_sigma_hz`). Truth per seed: each
+(:func:`leosop.signal.error_model.doppler_sigma_hz`). Truth per seed: each
 satellite's orbit is its element set shifted in time by ``dt_s ~ N(0,
 (300 m / v)^2)`` (an along-track error of ~300 m), each satellite has its own
 frequency offset ``~ U(-5, 5) Hz`` ([Shen 2024] Table 1), the receiver a
@@ -36,7 +36,7 @@ from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.orbits.propagate import state_ecef
 from leosop.positioning.static_passes import solve_static_passes
-from leosop.signal.doppler import doppler_sigma_hz
+from leosop.signal.error_model import doppler_sigma_hz
 
 TLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
 LAT_DEG, LON_DEG, ALT_M = 42.7, 23.3, 550.0

@@ -22,7 +22,9 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..progress import progress
-from ..signal.doppler import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, METHODS, coarse_stft, cubic_bias_hz, estimate_block
+from ..signal.coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, coarse_stft
+from ..signal.doppler import METHODS, estimate_block
+from ..signal.fine import cubic_bias_hz
 from ..signal.iq import open_raw, open_sigmf
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..positioning.measurements import MAX_TLE_AGE_DAYS, Measurements
-from ..signal.doppler import cubic_bias_hz
+from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks

@@ -2,7 +2,7 @@
 
 A Starlink recording carries the combs of several satellites interleaved in
 one band. :func:`find_combs` finds them one at a time, strongest first, with
-the single-comb ``fast`` machinery of :mod:`leosop.signal.doppler`, cancelling
+the single-comb ``fast`` machinery of :mod:`leosop.signal.fine`, cancelling
 each comb once found [successive interference cancellation, as in the
 multi-satellite Starlink receivers of Humphreys 2023 and Kozhaya 2023]:
 
@@ -80,9 +80,9 @@ import numpy as np
 
 from ..errors import InputError
 from .crlb import crlb_frequency_hz2
-from .doppler import (MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, _abs2, _decimation,
-                      _dechirped_peak, _newton, _phasors, _rate_dpt, _rate_grid, _segments,
-                      _threshold, _trimmed_sum, _wrap, coarse_fft)
+from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, _abs2, _threshold, coarse_fft
+from .fine import (_decimation, _dechirped_peak, _newton, _phasors, _rate_dpt, _rate_grid, _segments, _trimmed_sum,
+                   _wrap)
 from .fft import fft
 from .pilot import PilotComb
 

@@ -22,7 +22,9 @@ import time
 import numpy as np
 
 from .channel import doppler_blocks
-from .doppler import coarse_fft, estimate_block, fine_fmlef, fine_ml, periodogram_grid
+from .coarse import coarse_fft
+from .doppler import estimate_block
+from .fine import fine_fmlef, fine_ml, periodogram_grid
 from .fft import fft
 from .pilot import PilotComb
 
