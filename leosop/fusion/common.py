@@ -18,8 +18,8 @@ from .. import earth, frames
 from ..ins import error_model, strapdown
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 
-__all__ = ["FilterSettings", "FusionResult", "FeedbackIns", "SatelliteStates", "Track", "pos_jacobian",
-           "initial_covariance", "ORBIT_MODELS", "DROP_AFTER_S", "N_INS"]
+__all__ = ["FilterSettings", "FusionResult", "FeedbackIns", "SatelliteStates", "Track", "Corrections", "epochs",
+           "pos_jacobian", "initial_covariance", "ORBIT_MODELS", "DROP_AFTER_S", "N_INS", "GATE_PROBABILITY"]
 
 #: How the satellites' orbit errors are related: each its own, or one shift of all.
 ORBIT_MODELS = ("independent", "common")
@@ -27,6 +27,12 @@ ORBIT_MODELS = ("independent", "common")
 DROP_AFTER_S = 30.0
 #: Number of INS error states; they come first in every filter state.
 N_INS = 15
+#: Innovations beyond this chi-square quantile (degrees of freedom: the measurement's size) are rejected:
+#: a consistent filter loses one good measurement in a million (a single Doppler: 4.9 sigma), while a
+#: wrong Doppler peak is tens of Hz off and its fix hundreds of metres.
+GATE_PROBABILITY = 1.0 - 1e-6
+#: Slack on comparisons of epoch times [s]: ``k * step_s`` and ``per_step * dt_s`` round far below it.
+_TIME_SLACK_S = 1e-9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,6 +128,28 @@ def pos_jacobian(lat_rad, alt_m):
     return J
 
 
+def epochs(n, step_s, progress=None):
+    """Filter epochs ``k < n`` and their times ``k * step_s`` [s]; ``progress`` wraps the iterator."""
+    ks = range(n) if progress is None else progress(range(n))
+    return ((k, k * step_s) for k in ks)
+
+
+class Corrections:
+    """When a filter corrects the INS: at P, 2P, ... (``period_s``), or at the first epoch with data after."""
+
+    def __init__(self, period_s):
+        self.period_s = period_s
+        self.last_s = 0.0
+
+    def due(self, t_s):
+        """Whether a correction is due at time ``t_s`` [s]."""
+        return t_s - self.last_s >= self.period_s - _TIME_SLACK_S
+
+    def done(self, t_s):
+        """Record a correction at ``t_s`` [s]."""
+        self.last_s = t_s
+
+
 def initial_covariance(settings, lat_rad, alt_m):
     """Initial 15 x 15 covariance of the INS errors (position in rad, rad, m)."""
     J_inv = np.linalg.inv(pos_jacobian(lat_rad, alt_m))
@@ -160,7 +188,7 @@ class FeedbackIns:
 
     def __init__(self, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings):
         self.per_step = int(round(settings.step_s / dt_s))
-        if self.per_step < 2 or self.per_step % 2 or abs(self.per_step * dt_s - settings.step_s) > 1e-9:
+        if self.per_step < 2 or self.per_step % 2 or abs(self.per_step * dt_s - settings.step_s) > _TIME_SLACK_S:
             raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
         self.dtheta_b_rad, self.dvel_b_mps, self.dt_s, self.step_s = dtheta_b_rad, dvel_b_mps, dt_s, settings.step_s
         self.n_epochs = dtheta_b_rad.shape[0] // self.per_step + 1

@@ -48,14 +48,10 @@ from scipy import stats
 from .. import frames
 from ..ins.error_model import DPOS, DV
 from . import kalman
-from .common import N_INS, FeedbackIns, SatelliteStates, Track, initial_covariance, pos_jacobian
+from .common import (GATE_PROBABILITY, N_INS, Corrections, FeedbackIns, SatelliteStates, Track, epochs,
+                     initial_covariance, pos_jacobian)
 
 __all__ = ["FixErrorModel", "measurement", "run"]
-
-#: Innovations whose NIS exceeds this chi-square(6) quantile are rejected
-#: (a wrong Doppler peak can give a fix hundreds of metres off); at 1 - 1e-6
-#: a consistent filter loses one good fix in a million.
-GATE_PROBABILITY = 1.0 - 1e-6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -187,10 +183,8 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
                                fix_errors.orbit_sigma_m)
         x_hat, P = sats.initial(x_hat, P)
         bounds = np.searchsorted(fix_errors.epoch_index, np.arange(n + 1))
-    last_update_s = 0.0  # corrections at P, 2P, ... (or the first fix after)
-    epochs = range(n) if progress is None else progress(range(n))
-    for k in epochs:
-        t_s = k * settings.step_s
+    corrections = Corrections(settings.correction_period_s)
+    for k, t_s in epochs(n, settings.step_s, progress):
         if k > 0:
             P = ins.predict(k, P)
         have_fix = k > 0 and np.all(np.isfinite(pos_fix[k]))
@@ -199,8 +193,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
             # satellite keeps its states while it stays in view.
             rows = range(bounds[k], bounds[k + 1])
             x_hat, P = sats.see(x_hat, P, fix_errors.sat_index[rows], t_s)
-        due = t_s - last_update_s >= settings.correction_period_s - 1e-9
-        if have_fix and due:
+        if have_fix and corrections.due(t_s):
             z, H, R = measurement(ins.state, pos_fix[k], vel_fix[k], cov_fix[k])
             if fix_errors is not None:
                 H = np.hstack([H, _satellite_rows(ins.state, sats, fix_errors, rows, P.shape[0])[:, N_INS:]])
@@ -211,7 +204,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
                 ins.feedback(x - x_hat)
                 x_hat = np.concatenate([np.zeros(N_INS), x[N_INS:]])
                 track.updated[k] = True
-                last_update_s = t_s
+                corrections.done(t_s)
                 innovation[k], innovation_cov[k], track.nis[k], track.nis_dof[k] = y, S, nis, 6
             else:
                 track.rejected[k] = True

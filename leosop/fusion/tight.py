@@ -37,13 +37,11 @@ from .. import frames
 from ..ins.error_model import DPOS, DV
 from ..geometry.doppler import doppler_jacobian
 from . import kalman
-from .common import N_INS, FeedbackIns, SatelliteStates, Track, initial_covariance, pos_jacobian
+from .common import (GATE_PROBABILITY, N_INS, Corrections, FeedbackIns, SatelliteStates, Track, epochs,
+                     initial_covariance, pos_jacobian)
 
 __all__ = ["DopplerPriors", "DopplerMeasurements", "run"]
 
-#: Single Doppler innovations beyond this chi-square(1) quantile are not used
-#: (a wrong comb hypothesis is off by tens of Hz); 1 - 1e-6 is 4.9 sigma.
-GATE_PROBABILITY = 1.0 - 1e-6
 _T = N_INS  # index of the first receiver offset (constellation 0)
 
 
@@ -167,18 +165,15 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
     sats = SatelliteStates(clocks.stop, priors.orbit_model, priors.sat_offset_mean_hz, priors.sat_offset_sigma_hz,
                            priors.orbit_sigma_m)
     x_hat, P = sats.initial(x_hat, P)
-    last_update_s = 0.0  # corrections at P, 2P, ... (or the first fix after)
-    epochs = range(n) if progress is None else progress(range(n))
-    for k in epochs:
-        t_s = k * settings.step_s
+    corrections = Corrections(settings.correction_period_s)
+    for k, t_s in epochs(n, settings.step_s, progress):
         if k > 0:
             P = ins.predict(k, P)
             P[clocks, clocks] += np.eye(priors.n_clocks) * priors.rx_offset_psd_hz2_per_s * settings.step_s
         rows = np.arange(bounds[k], bounds[k + 1])
         rows = rows[np.isfinite(measurements.doppler_hz[rows]) & (measurements.sigma_hz[rows] > 0)]
         x_hat, P = sats.see(x_hat, P, measurements.sat_index[rows], t_s)
-        due = t_s - last_update_s >= settings.correction_period_s - 1e-9
-        if k > 0 and due and rows.size:
+        if k > 0 and corrections.due(t_s) and rows.size:
             columns = [sats.columns(j) for j in measurements.sat_index[rows]]
             y, H = _rows(ins.state, x_hat, columns, measurements, rows)
             R = np.diag(measurements.sigma_hz[rows] ** 2)
@@ -190,7 +185,7 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, measurements, priors, settings, 
                 ins.feedback(x)
                 x_hat[N_INS:] += x[N_INS:]
                 track.updated[k] = True
-                last_update_s = t_s
+                corrections.done(t_s)
                 track.nis[k] = kalman.nis(y_used, S)
                 track.nis_dof[k] = int(ok.sum())
                 for j, v in zip(measurements.sat_index[rows][ok], y_used / np.sqrt(np.diag(S))):
