@@ -11,6 +11,11 @@ __all__ = ["plot_visibility", "plot_skyplot"]
 SKYPLOT_WINDOW_S = 600.0
 #: Satellites labelled at most (the highest first).
 MAX_LABELS = 25
+#: Label geometry on the plot plane, in degrees of zenith distance: the polar axes of the 6.4 in figure
+#: span 180 deg in about 345 pt, so a 7 pt label of 5 digits is ~11 x 4.7 deg, drawn 5 pt right, 3 pt up.
+_PT_PER_DEG = 1.9
+_LABEL_BOX_DEG = np.array([11.0, 4.7])
+_LABEL_OFFSET_DEG = np.array([5.0, 3.0]) / _PT_PER_DEG
 
 
 def _utc_axis(ax):
@@ -102,18 +107,21 @@ def plot_skyplot(path, az_rad, elev_rad, t_s, sat_label, start_utc, *, mask_deg,
     first = order[start]
     # Label the highest MAX_LABELS satellites; a crowd of labels reads as none.
     labelled = set(np.argsort(zen[first])[:MAX_LABELS].tolist())
-    placed = []  # labelled points so far, on the plane of the plot [deg]
+    placed = []  # lower-left corners of the labels so far, on the plane of the plot [deg]
     for k, (a, b) in enumerate(zip(start, np.r_[start[1:], len(order)])):
         track, i0 = order[a:b], first[k]
         color = f"C{k % 10}"
         ax.plot(az[track], zen[track], lw=0.9, color=color)
         ax.plot(az[i0], zen[i0], "o", color=color, ms=4)
         if k in labelled:
-            xy = zen[i0] * np.array([np.sin(az[i0]), np.cos(az[i0])])
-            # Stack the labels of satellites close together (a shell's neighbours) instead of overprinting.
-            n_near = sum(np.hypot(*(xy - p)) < 8.0 for p in placed)
-            placed.append(xy)
-            ax.annotate(ids[k], (az[i0], zen[i0]), xytext=(5, 3 + 9 * n_near), textcoords="offset points",
+            # Lift a label until its box clears every label placed before (neighbours in a shell).
+            corner = zen[i0] * np.array([np.sin(az[i0]), np.cos(az[i0])]) + _LABEL_OFFSET_DEG
+            while any(abs(corner[0] - c[0]) < _LABEL_BOX_DEG[0] and abs(corner[1] - c[1]) < _LABEL_BOX_DEG[1]
+                      for c in placed):
+                corner[1] += _LABEL_BOX_DEG[1]
+            placed.append(corner)
+            lift_pt = (corner[1] - zen[i0] * np.cos(az[i0]) - _LABEL_OFFSET_DEG[1]) * _PT_PER_DEG
+            ax.annotate(ids[k], (az[i0], zen[i0]), xytext=(5, 3 + lift_pt), textcoords="offset points",
                         fontsize=7, color=color)
     ax.set_rlim(0, 90)
     ax.set_rticks([0, 30, 60, 90 - mask_deg])
