@@ -136,3 +136,14 @@ def test_static_with_pass_id_column_solves_passes_jointly(capsys, tmp_path):
     np.testing.assert_allclose([p["clock_poly_hz"][0] for p in doc["passes"]], [-300.0, 200.0], atol=1.5)
     err = np.linalg.norm(geodetic_to_ecef(np.radians(s["lat_deg"]), np.radians(s["lon_deg"]), s["alt_m"]) - rx)
     assert err < 5 * np.linalg.norm(s["sigma_enu_m"])
+
+
+def test_static_summary_counts_measurements_and_satellites(capsys, table):
+    # A static fix uses every row: the human summary says how many rows of how many satellites
+    # (it used to print "80/27 sats", rows over satellites).
+    path, _ = table
+    assert main(["position", str(path), "--static", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["solutions"][0]
+    assert main(["position", str(path), "--static"]) == 0
+    out = capsys.readouterr().out
+    assert f"{s['n_used']} measurements of {s['n_sats']} sats" in out and s["n_used"] > s["n_sats"]

@@ -233,9 +233,12 @@ def summary(doc):
             ("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f"), ("vx_mps", ".3f"), ("vy_mps", ".3f"),
             ("vz_mps", ".3f"), ("clock_offset_hz", ".3f"), ("gdop", ".3g"), ("residual_rms_hz", ".3g"))}
         when = s["time_utc"] or f"t={s['t_s']:.3f} s"
-        lines.append(f"{when}  {f['lat_deg']} {f['lon_deg']} {f['alt_m']} m  v=({f['vx_mps']}, {f['vy_mps']}, {f['vz_mps']}) m/s  "
-                     f"clock {f['clock_offset_hz']} Hz  gdop {f['gdop']}  {s['n_used']}/{s['n_sats']} sats  "
-                     f"rms {f['residual_rms_hz']} Hz  {s['status']}")
+        # A static fix uses rows (measurements) of n_sats satellites; a snapshot fix one row per satellite.
+        used = (f"{s['n_used']} measurements of {s['n_sats']} sats" if doc.get("mode") == "static" else
+                f"{s['n_used']}/{s['n_sats']} sats")
+        lines.append(f"{when}  {f['lat_deg']} {f['lon_deg']} {f['alt_m']} m  "
+                     f"v=({f['vx_mps']}, {f['vy_mps']}, {f['vz_mps']}) m/s  clock {f['clock_offset_hz']} Hz  "
+                     f"gdop {f['gdop']}  {used}  rms {f['residual_rms_hz']} Hz  {s['status']}")
     lines.append(f"{len(doc['solutions'])} fix(es), {len(doc['unsolved'])} epoch(s) unsolved, "
                  f"{len(doc['rejected'])} row(s) rejected")
     return "\n".join(lines)
