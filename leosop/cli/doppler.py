@@ -224,13 +224,17 @@ def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f
                            f"{doc['block_s']:g} s blocks", x_label=x_label)
 
 
+def _num(value, spec, unit):
+    """``value`` formatted with its unit, or "n/a" for a value the estimator could not give (null in the JSON)."""
+    return "n/a" if value is None else f"{format(value, spec)} {unit}"
+
+
 def summary(doc):
     lines = [f"{doc['n_detected']}/{doc['n_blocks']} blocks with a pilot ({doc['method']}, {doc['block_s']:g} s blocks)"]
     for e in doc["estimates"][:20]:
         if e["status"] == "ok":
             lines.append(f"  t={e['t_s']:.4f} s  Doppler {e['doppler_hz']:+.4f} Hz  rate "
-                         f"{e['doppler_rate_hz_per_s'] if e['doppler_rate_hz_per_s'] is not None else float('nan'):+.2f} Hz/s  "
-                         f"C/N0 {e['cn0_dbhz'] if e['cn0_dbhz'] is not None else float('nan'):.1f} dB-Hz")
+                         f"{_num(e['doppler_rate_hz_per_s'], '+.2f', 'Hz/s')}  C/N0 {_num(e['cn0_dbhz'], '.1f', 'dB-Hz')}")
         else:
             lines.append(f"  t={e['t_s']:.4f} s  no pilot detected")
     if len(doc["estimates"]) > 20:
