@@ -37,7 +37,8 @@ def test_json_contract_files_and_figures(tmp_path, capsys):
                           "--out", str(out_dir))
     assert status == 0
     doc = json.loads(out)
-    assert set(doc) == set(CONTRACT)
+    assert set(doc) == set(CONTRACT) | {"run"}  # "run": an extension naming what was run
+    assert doc["run"] == {"coupling": "loose", "level": "measurement", "seed": 0, "correction_period_s": 1.0}
     for key, sub in CONTRACT.items():
         if sub is not None:
             assert set(doc[key]) == sub
@@ -76,6 +77,7 @@ def test_human_summary_prints_metrics_and_runtime(tmp_path, capsys):
     status, out, _ = _run(capsys, "--scenario", _scenario(tmp_path, duration_s=10.0), "--level", "measurement")
     assert status == 0
     assert "Starlink/INS" in out and "INS only" in out and "runtime" in out
+    assert out.startswith("scenario short (loose coupling, measurement level, seed 0, correction every 1 s): 10 s")
 
 
 @pytest.mark.parametrize(

@@ -40,6 +40,9 @@ def run(args):
     for w in caught:
         print(f"leosop simulate: warning: {w.message}", file=sys.stderr)
     doc = metrics(result)
+    # Beyond the contract's keys: what was run, so a metrics.json names its coupling, level and seed.
+    doc["run"] = {"coupling": args.coupling, "level": args.level, "seed": args.seed,
+                  "correction_period_s": args.correction_period_s}
     if args.out:
         from ..plots import write_figures
 
@@ -60,10 +63,12 @@ def _num(value, fmt):
 
 
 def summary(doc):
-    f, i, x = doc["fused"], doc["ins_only"], doc["leo_fix"]
+    f, i, x, run = doc["fused"], doc["ins_only"], doc["leo_fix"], doc["run"]
     return "\n".join([
-        f"scenario {doc['scenario']}: {doc['duration_s']:g} s, {doc['visible']['min']}-{doc['visible']['max']} "
-        f"satellites visible, max GDOP {_num(doc['gdop']['max'], '.1f')}",
+        f"scenario {doc['scenario']} ({run['coupling']} coupling, {run['level']} level, seed {run['seed']}, "
+        f"correction every {run['correction_period_s']:g} s): {doc['duration_s']:g} s, "
+        f"{doc['visible']['min']}-{doc['visible']['max']} satellites visible, max Doppler GDOP "
+        f"{_num(doc['gdop']['max'], '.1f')} m/Hz",
         f"  INS only      position {_num(i['pos_err_mean_m'], '10.2f')} m   velocity "
         f"{_num(i['vel_err_mean_mps'], '.3f')} m/s (mean 3D error)",
         f"  LEO fixes     position {_num(x['pos_err_mean_m'], '10.2f')} m   velocity "
