@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from leosop.constants import C_MPS
+from leosop.constants import C_MPS, STARLINK_PILOT_HZ
 from leosop.geometry.dop import cofactor, gdop, range_dops
 from leosop.geometry.doppler import doppler_jacobian
 
-F0 = 11.325e9
+F0 = STARLINK_PILOT_HZ
 
 
 def _doppler(x, r_s, v_s):

@@ -2,13 +2,13 @@
 
 import numpy as np
 
-from leosop.constants import C_MPS
+from leosop.constants import C_MPS, STARLINK_PILOT_HZ
 from leosop.frames import geodetic_to_ecef, range_rate
 from leosop.geometry.doppler import doppler_rate
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
 
-F_KU_HZ = 11.325e9  # Starlink downlink carrier
+F_KU_HZ = STARLINK_PILOT_HZ
 
 
 def test_moving_receiver_doppler_rate_matches_differences_of_propagated_states():

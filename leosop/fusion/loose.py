@@ -8,27 +8,19 @@ position rows of ``H`` carry the radii that turn ``dlat, dlon`` into metres).
 
 Time-correlated fix errors. A snapshot fix is ``x_true + G_k e_k`` to first
 order, ``G_k`` the least-squares gain of epoch k and ``e_k`` the Doppler
-errors of its satellites: constant clock-induced offsets ([Shen 2024] Table 1,
-uniform 0-5 Hz), constant orbit errors and white estimator noise. Measured on
-10 seeds of the xian-baoji flight (measurement level, 7,468 fixes): the fix
-error has NEES/6 = 1.02 against the fix covariance, but its lag-1 correlation
-is 0.58 (0.20 at 10 s, ~0 at 30 s), with jumps when the satellite set
-changes (every 8 s on average; median 18 m, 90th percentile 95 m, against
-12 m between epochs with the same set); its systematic part ``G_k (o + h.dr)``
-(median 18 m, 0.38 m/s) exceeds the white part (9 m, 0.19 m/s). The
-decomposition is exact: what is left has NEES/6 = 1.00 against
-``G_k diag(sigma_noise^2) G_k^T`` (except 5 fixes km off at GDOP > 500). The
-error is not stationary, so no decaying random error fits it. Treating
-it as white gave NEES/6 = 28; a Schmidt (consider) treatment of the offsets
-and orbit errors gives NEES/6 = 0.98 but 5.3 m and 0.057 m/s (5 seeds);
-estimating them as states gives NEES/6 = 1.0 with 2.2 m and 0.026 m/s (20 seeds:
-2.17 m, 0.026 m/s, NEES/6 0.98, NIS/dof 1.004, lag-1 correlation -0.002), so
-that is what this filter does when given a :class:`FixErrorModel`: each
-satellite in a fix adds a constant offset state (and three orbit-error
-states, or three shared by all satellites for a common orbit shift), which
-enter the measurement through the fix's gain; they are marginalised
-``DROP_AFTER_S`` (:mod:`.common`) after the last fix that included them. The filter stays
-loose: one 6-value fix difference per update, no Doppler.
+errors of its satellites: constant clock-induced offsets ([Shen 2024] Table 1),
+constant orbit errors and white estimator noise. Its systematic part persists
+from fix to fix and jumps when the satellite set changes: not white, and not
+stationary, so no decaying random error fits it. Treated as white it makes the
+filter badly overconfident; a Schmidt (consider) treatment is consistent but
+more than doubles the errors. So, given a :class:`FixErrorModel`, the filter
+estimates them: each satellite in a fix adds a constant offset state (and
+three orbit-error states, or three shared by all satellites for a common
+orbit shift), which enter the measurement through the fix's gain; they are
+marginalised ``DROP_AFTER_S`` (:mod:`.common`) after the last fix that
+included them. The filter stays loose: one 6-value fix difference per
+update, no Doppler. The measurements behind this choice:
+docs/notes/loose-fix-errors.md.
 
 After every update the estimated INS errors are fed back: the INS state is
 corrected (:meth:`NavState.corrected`), the bias estimates are accumulated
@@ -36,8 +28,8 @@ and removed from later IMU increments, and the INS error state returns to
 zero (the satellite error estimates are kept). The INS runs at the IMU
 rate; the filter predicts every ``step_s`` (1 s) and updates every
 ``correction_period_s`` when a fix exists. When no fix exists (fewer than the
-fix's 6 + k states for k constellations in view) the INS carries the solution and the filter resumes at the next
-fix, so every epoch has an output.
+fix's 6 + k states for k constellations in view) the INS carries the solution
+and the filter resumes at the next fix, so every epoch has an output.
 """
 
 import dataclasses

@@ -26,6 +26,18 @@ __all__ = ["FixStatus", "solve_robust", "XTOL_POS_M"]
 
 #: Step threshold of convergence of a position [m]: 0.1 mm.
 XTOL_POS_M = 1e-4
+#: Marquardt damping added to the unit diagonal of the Jacobi-scaled normal equations: its start
+#: (nearly Gauss-Newton), the factor it shrinks by after an accepted step and grows by after a
+#: rejected one, and its bounds (1e12 makes the step a tiny gradient step).
+_DAMPING_START = 1e-3
+_DAMPING_FACTOR = 10
+_DAMPING_MIN, _DAMPING_MAX = 1e-12, 1e12
+#: Significance of the chi-square test that retries a problem from its alternative start, when the
+#: caller disabled the outlier tests.
+_RETRY_ALPHA = 1e-3
+#: Floor of a residual's variance relative to its measurement's (a row that alone determines a
+#: state has a residual variance of zero up to round-off).
+_RESIDUAL_VAR_FLOOR = 1e-12
 
 class FixStatus(IntEnum):
     """Outcome of one fix."""
@@ -58,7 +70,7 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
     pred, J = model(x, np.arange(n_prob), w)
     r = np.where(w > 0, y - pred, 0.0)
     cost = np.einsum("pm,pm->p", w, r * r)
-    lam = np.full(n_prob, 1e-3)
+    lam = np.full(n_prob, _DAMPING_START)
     iterations = np.zeros(n_prob, dtype=int)
     converged = np.zeros(n_prob, dtype=bool)
     active = np.flatnonzero(np.isfinite(cost))
@@ -80,7 +92,8 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
         accept = np.isfinite(ct) & (ct <= cost[active])
         acc = active[accept]
         x[acc], J[acc], r[acc], cost[acc] = xt[accept], Jt[accept], rt[accept], ct[accept]
-        lam[active] = np.where(accept, np.maximum(lam[active] / 10, 1e-12), np.minimum(lam[active] * 10, 1e12))
+        lam[active] = np.where(accept, np.maximum(lam[active] / _DAMPING_FACTOR, _DAMPING_MIN),
+                               np.minimum(lam[active] * _DAMPING_FACTOR, _DAMPING_MAX))
         iterations[active] += 1
         done = np.all(np.abs(dx) <= xtol, axis=-1)
         if step_sigma_tol is not None:
@@ -140,7 +153,7 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
         if first and x_alt is not None:
             # A start far away can end in a local minimum: retry those that fail the test from x_alt.
             with np.errstate(invalid="ignore"):
-                retry = ~conv | (chi2 > chi2_dist.isf(alpha or 1e-3, np.maximum(dof, 1)))
+                retry = ~conv | (chi2 > chi2_dist.isf(alpha or _RETRY_ALPHA, np.maximum(dof, 1)))
             if retry.any():
                 k = np.flatnonzero(retry)
                 sub2 = lambda xs, i, w_, p=todo[k]: model(xs, p[i], w_)  # noqa: E731
@@ -167,7 +180,7 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
             break
         p, Jp, Qp = todo[can], J[can], Q[can]
         var_r = sigma[p] ** 2 - np.einsum("pmi,pij,pmj->pm", Jp, Qp, Jp)
-        wstat = np.abs(r[can]) / np.sqrt(np.maximum(var_r, 1e-12 * sigma[p] ** 2))
+        wstat = np.abs(r[can]) / np.sqrt(np.maximum(var_r, _RESIDUAL_VAR_FLOOR * sigma[p] ** 2))
         wstat = np.where(used[p] & ~fixed, wstat, -np.inf)
         if groups is None:
             used[p, np.argmax(wstat, axis=-1)] = False
