@@ -1,0 +1,168 @@
+"""Float PPP of ESBC00DNK (2020-06-25) by leosop and by cssrlib, side by side: same files, same products.
+
+Both get the day's observation file, the GRG (CNES) SP3 orbits and 30 s clocks, and the broadcast
+navigation file; the reference is the station's published coordinate mapped to ITRF2014
+(``leosop.gnss.etrf``, as ``tools/bench_ppp.py``). Printed per solver: read time, run time, and for
+``--mode static`` the final 3-D error and the time from which it stays below 5 cm, for ``kinematic`` the
+3-D RMS after ``--converge-min``.
+
+What cssrlib (1.2.1, ``cssrlib.pppssr.pppos`` with ``ephopt = 4``, precise products) needs that the
+shared data do not have, and what is given instead:
+
+- an ANTEX file (satellite antenna offsets; without one it skips every satellite): its satellite
+  antenna correction is set to zero, which is what leosop does too (no ANTEX, no offsets modelled);
+  no receiver antenna model in either;
+- a Bias-SINEX file of observable-specific biases (without one its biases are NaN): zero biases are
+  given; the GRG clocks refer to the signals both use (GPS C1W/C2W and L1C/L2W, Galileo C1C/C5Q and
+  L1C/L5Q), so zero is the consistent value for float PPP;
+- plain-text files: the Hatanaka/gzip inputs are expanded to a temporary folder first (counted in its
+  read time; leosop reads them as they are).
+
+cssrlib estimates uncombined signals with slant ionosphere states; leosop the ionosphere-free
+combination. Elevation mask 10 deg in both. cssrlib is an optional tool dependency, not a runtime
+one: ``python -m pip install --target /tmp/cssr_site --no-deps cssrlib==1.2.1`` (its own imports need
+numpy, scipy and bitstruct, which are here) and ``--cssrlib-path /tmp/cssr_site``.
+
+Run: ``OPENBLAS_NUM_THREADS=1 python tools/compare_cssrlib_ppp.py [--hours 24] [--mode static|kinematic]
+[--cssrlib-path DIR]``
+"""
+
+import argparse
+import dataclasses
+import gzip
+import os
+import sys
+import tempfile
+import time
+from copy import deepcopy
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from leosop.frames import C_e_n, ecef_to_geodetic  # noqa: E402
+from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014  # noqa: E402
+from leosop.gnss.ppp import PppOptions, run_ppp  # noqa: E402
+from leosop.gnss.products import read_clk, read_sp3  # noqa: E402
+from leosop.gnss.rinex import read_obs, read_text  # noqa: E402
+
+DAY = Path(__file__).resolve().parents[2] / "shared" / "data" / "rinex" / "esbc_2020-177"
+OBS = DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
+NAV = DAY / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+SP3 = DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
+CLK = DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
+CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
+CSSR_SIGNALS = ("GC1W", "GC2W", "GL1C", "GL2W", "GS1C", "GS2W", "EC1C", "EC5Q", "EL1C", "EL5Q", "ES1C", "ES5Q")
+MASK_DEG = 10.0
+EPOCH_S = 30.0
+
+
+def ours(n_epochs, static):
+    """leosop float PPP: (read s, run s, positions (n, 3), header position (3,))."""
+    t0 = time.perf_counter()
+    obs = read_obs(OBS, codes=CODES)
+    orb, clk = read_sp3(SP3), read_clk(CLK)
+    t1 = time.perf_counter()
+    obs = dataclasses.replace(obs, time_gps=obs.time_gps[:n_epochs],
+                              obs={k: v[:n_epochs] for k, v in obs.obs.items()},
+                              lli={k: v[:n_epochs] for k, v in obs.lli.items()})
+    res = run_ppp(obs, orb, clk, PppOptions(static=static, systems="GE", mask_deg=MASK_DEG))
+    return t1 - t0, time.perf_counter() - t1, res.pos_ecef_m, obs.approx_pos_ecef_m
+
+
+class _ZeroBiases:
+    """Bias-SINEX stand-in: zero observable-specific biases (see the module notes)."""
+
+    def getosb(self, sat, t, sig):
+        return 0.0
+
+
+def theirs(n_epochs, static, tmp):
+    """cssrlib float PPP on plain-text copies of the same files: (read s, run s, positions (n, 3))."""
+    import cssrlib.pppssr as pppssr
+    from cssrlib.gnss import Nav, rSigRnx
+    from cssrlib.peph import peph
+    from cssrlib.rinex import rnxdec
+
+    t0 = time.perf_counter()
+    files = {}
+    for name, src in (("obs.rnx", OBS), ("nav.rnx", NAV), ("orb.sp3", SP3), ("clk.clk", CLK)):
+        files[name] = Path(tmp) / name
+        if name == "obs.rnx":  # Hatanaka
+            files[name].write_text("\n".join(read_text(src)) + "\n")
+        else:
+            files[name].write_bytes(gzip.decompress(src.read_bytes()))
+    rnx = rnxdec()
+    rnx.setSignals([rSigRnx(s) for s in CSSR_SIGNALS])
+    nav = Nav()
+    nav.pmode = 0 if static else 1
+    orb = peph()
+    nav = rnx.decode_nav(str(files["nav.rnx"]), nav)
+    nav = orb.parse_sp3(str(files["orb.sp3"]), nav)
+    nav = rnx.decode_clk(str(files["clk.clk"]), nav)
+    if rnx.decode_obsh(str(files["obs.rnx"])) < 0:
+        raise SystemExit("cssrlib could not read the observation header")
+    t1 = time.perf_counter()
+    # No ANTEX: zero satellite antenna correction (as leosop), none for the receiver.
+    pppssr.antModelTx = lambda nav_, e, sigs, *args, **kw: np.zeros(len(sigs))
+    ppp = pppssr.pppos(nav, rnx.pos, None)
+    nav.ephopt, nav.armode = 4, 0
+    nav.elmin = np.radians(MASK_DEG)
+    nav.cnr_min = nav.cnr_min_gpy = 0.0
+    nav.sat_ant, nav.rcv_ant = [], None
+    pos = np.full((n_epochs, 3), np.nan)
+    obs = rnx.decode_obs()
+    nav.t = deepcopy(obs.t)
+    bsx = _ZeroBiases()
+    for k in range(n_epochs):
+        ppp.process(obs, orb=orb, bsx=bsx)
+        pos[k] = nav.x[0:3]
+        obs = rnx.decode_obs()
+        if obs.t.time == 0:
+            break
+    rnx.fobs.close()
+    return t1 - t0, time.perf_counter() - t1, pos
+
+
+def report(name, t_read, t_run, pos, ref, static, converge_min):
+    lat, lon, _ = ecef_to_geodetic(ref)
+    C = C_e_n(lat, lon)
+    err = pos - ref
+    ok = np.isfinite(err).all(axis=1)
+    t_h = np.arange(len(pos)) * EPOCH_S / 3600.0
+    norm = np.linalg.norm(err, axis=1)
+    if static:
+        e = err[ok][-1]
+        bad = np.flatnonzero(~ok | (norm >= 0.05))
+        stay = t_h[bad[-1] + 1] if bad.size and bad[-1] + 1 < len(pos) else (0.0 if not bad.size else None)
+        acc = (f"final 3-D error {100 * np.linalg.norm(e):.1f} cm, ENU {np.round(100 * C.T @ e, 1).tolist()} cm, "
+               + (f"below 5 cm from {stay:.2f} h" if stay is not None else "not below 5 cm at the end"))
+    else:
+        sel = ok & (t_h >= converge_min / 60.0)
+        acc = f"3-D RMS after {converge_min:g} min {100 * np.sqrt(np.mean(norm[sel] ** 2)):.1f} cm"
+    print(f"{name:8s} {'static' if static else 'kinematic'}: {acc}; read {t_read:.1f} s, run {t_run:.1f} s "
+          f"({1e3 * t_run / len(pos):.1f} ms/epoch), epochs without a solution {np.sum(~ok)}", flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--mode", choices=("static", "kinematic"), default="static")
+    ap.add_argument("--converge-min", type=float, default=60.0)
+    ap.add_argument("--cssrlib-path", help="folder cssrlib was installed into (pip install --target)")
+    a = ap.parse_args()
+    if a.cssrlib_path:
+        sys.path.insert(0, a.cssrlib_path)
+    n = int(round(a.hours * 3600 / EPOCH_S))
+    static = a.mode == "static"
+    t_read, t_run, pos, header_ecef_m = ours(n, static)
+    # The header position is the station's ETRF2000 coordinate; the products' frame is ITRF2014.
+    ref = etrf2000_to_itrf2014(header_ecef_m, decimal_year(np.datetime64("2020-06-25T12:00")))
+    report("leosop", t_read, t_run, pos, ref, static, a.converge_min)
+    with tempfile.TemporaryDirectory() as tmp:
+        report("cssrlib", *theirs(n, static, tmp), ref, static, a.converge_min)
+
+
+if __name__ == "__main__":
+    main()
