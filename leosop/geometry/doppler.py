@@ -13,7 +13,7 @@ import numpy as np
 
 from ..constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 
-__all__ = ["N_DOPPLER_STATES", "doppler_jacobian", "doppler_rate"]
+__all__ = ["N_DOPPLER_STATES", "doppler_jacobian", "clock_group_rows", "doppler_rate"]
 
 #: States of a Doppler snapshot fix: position (3), velocity (3), one receiver frequency offset; so a
 #: snapshot needs at least 7 satellites ([Shen 2024] eq. 4-7).
@@ -44,6 +44,30 @@ def doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_
     d_pos = k * (dv - u * np.sum(u * dv, axis=-1, keepdims=True)) / rho
     d_vel = k * u
     return np.concatenate([d_pos, d_vel, np.ones(d_pos.shape[:-1] + (1,))], axis=-1)
+
+
+def clock_group_rows(H, clock_onehot):
+    """Doppler rows of a state with one receiver frequency offset per clock group (e.g. constellation).
+
+    Parameters
+    ----------
+    H : ndarray, (..., n_sv, 7)
+        Rows of :func:`doppler_jacobian`.
+    clock_onehot : array_like, (..., n_sv, k)
+        1 where a row belongs to clock group g (padding rows: all 0).
+
+    Returns
+    -------
+    ndarray, (..., n_sv + k, 6 + k)
+        Columns position, velocity, ``T_u[0..k-1]``. The last k rows are
+        pseudo-measurements of each clock state alone: weighted 1 for a clock
+        no satellite of the epoch sees, 0 otherwise, they keep the state
+        determined without counting as a measurement of the others.
+    """
+    onehot = np.asarray(clock_onehot, dtype=float)
+    k = onehot.shape[-1]
+    pseudo = np.broadcast_to(np.eye(6 + k)[6:], H.shape[:-2] + (k, 6 + k))
+    return np.concatenate([np.concatenate([H[..., :6], onehot], -1), pseudo], -2)
 
 
 def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=None):

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..frames import C_e_n, ecef_to_geodetic, teme_to_ecef
 from ..geometry.dop import cofactor, range_dops
-from ..geometry.doppler import doppler_jacobian
+from ..geometry.doppler import clock_group_rows, doppler_jacobian
 from ..progress import progress
 from ..timebase import jd_ut1, jd_utc
 
@@ -134,11 +134,8 @@ class Visibility:
         g = self.padded(code.ravel()[self.sat_index].astype(float))
         onehot = (g[..., None] == np.arange(len(labels))) & (w[..., None] > 0)
         present = onehot.any(-2)
-        n_states = 6 + len(labels)
         # An absent clock is held by a pseudo-row of its own, so that it neither counts nor breaks the rank.
-        pseudo = np.broadcast_to(np.eye(n_states)[6:], present.shape + (n_states,))
-        Hk = np.concatenate([np.concatenate([H[..., :6], onehot.astype(float)], -1), pseudo], -2)
-        Q = cofactor(Hk, weights=np.concatenate([w, (~present).astype(float)], -1))
+        Q = cofactor(clock_group_rows(H, onehot), weights=np.concatenate([w, (~present).astype(float)], -1))
         keep = np.concatenate([np.ones(present.shape[:-1] + (6,), bool), present], -1)
         return np.where(keep[..., :, None] & keep[..., None, :], Q, np.nan)
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.dop import cofactor
-from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian
+from ..geometry.doppler import N_DOPPLER_STATES, clock_group_rows, doppler_jacobian
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
 from .starts import R_GROUND_M, subpoint_centroid_ecef_m
 
@@ -157,7 +157,6 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
         sigma = np.concatenate([sigma, np.ones((n_ep, n_clk))], -1)
         m = np.concatenate([m, ~present], -1)
         fixed = np.arange(n_sv + n_clk) >= n_sv
-        pseudo = np.eye(n_states)[6:]
         clk_cols = onehot.astype(float)
 
     def model(x, idx, w):
@@ -166,9 +165,7 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
         if n_clk == 1:
             return pred + x[:, 6:7], H
         pred = np.concatenate([pred + np.einsum("pmk,pk->pm", clk_cols[idx], x[:, 6:]), x[:, 6:]], -1)
-        J = np.concatenate([np.concatenate([H[..., :6], clk_cols[idx]], -1),
-                            np.broadcast_to(pseudo, (len(x),) + pseudo.shape)], 1)
-        return pred, J
+        return pred, clock_group_rows(H, clk_cols[idx])
 
     x, res, H, Q, used, iterations, chi2, status = solve_robust(
         model, x0, y, sigma, m, n_states, xtol=_xtol_snapshot(n_clk), max_iter=max_iter, alpha=alpha,
