@@ -368,3 +368,11 @@ def test_simulate_out_is_all_or_nothing(tmp_path, capsys, monkeypatch):
                           "--out", str(tmp_path / "out"))
     assert status == 1 and "no fonts" in err
     assert not (tmp_path / "out").exists() and _leftovers(tmp_path) == []
+
+
+def test_export_of_a_file_not_utf8_names_it(tmp_path, capsys):
+    path = tmp_path / "latin1.csv"
+    path.write_bytes("sat_id,rise_utc\ncaf\u00e9,x\n".encode("latin-1"))
+    status, _, err = _run(capsys, "export", str(path), "--out", str(tmp_path / "out"))
+    assert status == 2 and f"{path}: not UTF-8 text (a byte 0xe9)" in _one_line(err)
+    assert not (tmp_path / "out").exists()

@@ -60,8 +60,13 @@ def register(subparsers):
 def _read(path):
     """Header and rows of a CSV, with the kind it is."""
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh:
-        rows = list(csv.reader(fh))
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except UnicodeDecodeError as exc:
+        # No offset: the reader decodes in chunks, so exc.start is not the file's.
+        raise InputError(f"{path}: not UTF-8 text (a byte 0x{exc.object[exc.start]:02x}); expected a CSV written "
+                         "by leosop") from None
     if not rows:
         raise InputError(f"{path}: empty file, expected a CSV header")
     header = [h.strip() for h in rows[0]]
