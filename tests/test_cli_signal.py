@@ -45,9 +45,11 @@ def test_generate_and_recover(recording, capsys, tmp_path):
 
 
 def test_paper_method_on_recording(recording, capsys):
-    status, out, _ = _run(capsys, ["doppler", str(recording), "--json", "--method", "fmlef",
-                                   "--resolution-hz", "0.01"])
+    status, out, err = _run(capsys, ["doppler", str(recording), "--json", "--method", "fmlef",
+                                     "--resolution-hz", "0.01"])
     assert status == 0
+    # The user is told, in one line, why the paper's method errs here.
+    assert err.count("\n") == 1 and "--method fmlef assumes a constant tone within a block" in err
     doc = json.loads(out)
     assert all(e["doppler_rate_hz_per_s"] is None for e in doc["estimates"])
     # Under a LEO rate (~2.6 kHz/s over 0.1 s) the constant-tone model smears: the

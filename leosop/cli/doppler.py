@@ -129,6 +129,13 @@ def run(args):
                      tone_spacing_hz=rec.tone_spacing_hz)
     truth = _truth(rec, block_len)
     _warn_straddling(rec.captures, block_len, fs)
+    if args.method != "fast":
+        sweep_hz = args.max_rate_hz_per_s * block_len / fs
+        slow = "; ml is also slow (a fine grid search per block)" if args.method == "ml" else ""
+        print(f"leosop doppler: warning: --method {args.method} assumes a constant tone within a block; at LEO "
+              f"Doppler rates up to {args.max_rate_hz_per_s:g} Hz/s a {block_len / fs:g} s block sweeps up to "
+              f"{sweep_hz:.0f} Hz and the estimate can be off by half that (fast follows the rate){slow}",
+              file=sys.stderr)
     n_blocks = rec.n_samples // block_len
     nperseg = min(4096, block_len // 4)
     want_fig = args.out is not None
