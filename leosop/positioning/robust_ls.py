@@ -22,10 +22,13 @@ from scipy.stats import norm as norm_dist
 
 from ..geometry.dop import cofactor
 
-__all__ = ["FixStatus", "solve_robust", "XTOL_POS_M"]
+__all__ = ["FixStatus", "solve_robust", "XTOL_POS_M", "EQUAL_FIT_SIGMAS"]
 
 #: Step threshold of convergence of a position [m]: 0.1 mm.
 XTOL_POS_M = 1e-4
+#: Solutions from different starts fit the data equally well when their chi-squares differ by less
+#: than this many standard deviations of a chi-square, ``sqrt(2 dof)`` (e.g. a pass's mirror image).
+EQUAL_FIT_SIGMAS = 3.0
 #: Marquardt damping added to the unit diagonal of the Jacobi-scaled normal equations: its start
 #: (nearly Gauss-Newton), the factor it shrinks by after an accepted step and grows by after a
 #: rejected one, and its bounds (1e12 makes the step a tiny gradient step).

@@ -16,7 +16,7 @@ import numpy as np
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
 from ..geometry.doppler import doppler_jacobian
-from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
+from .robust_ls import EQUAL_FIT_SIGMAS, XTOL_POS_M, FixStatus, solve_robust
 from .starts import track_starts
 
 __all__ = ["StaticFix", "solve_static"]
@@ -229,10 +229,9 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
     cost = np.where(solved, chi2, np.inf)
     best = int(np.argmin(cost))
-    # Solutions whose chi-square is within 3 standard deviations of the best one fit the data
-    # equally well (a single pass's mirror image): the start given decides between them.
+    # Solutions that fit as well as the best one (a single pass's mirror image): the start given decides.
     dof = max(int(used[best].sum()) - 3 - n_clk * (1 + deg_side), 1)
-    fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
+    fits = solved & (cost <= cost[best] + EQUAL_FIT_SIGMAS * np.sqrt(2.0 * dof))
     if pos0_ecef_m is not None and fits.sum() > 1:
         best = int(np.argmin(np.where(fits, np.linalg.norm(x[:, :3] - starts[0], axis=-1), np.inf)))
     apart = solved & (np.linalg.norm(x[:, :3] - x[best, :3], axis=-1) > ambiguity_m)
