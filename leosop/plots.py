@@ -57,14 +57,18 @@ def errors_figure(result, path):
     """Fig. 8: 3D position and velocity errors of INS only, LEO fixes and the fusion."""
     plt = pyplot()
     err = result.errors()
+    var = np.diagonal(result.fused.pos_vel_cov_enu(), axis1=-2, axis2=-1)  # [dv_enu, dpos_enu]
+    # 3 x the root of the trace: the filter's own 3D bound (the RSS of the three axes' sigmas).
+    bound_3d = 3 * np.sqrt(np.stack([var[:, 3:6].sum(axis=1), var[:, 0:3].sum(axis=1)]))
     fig, axes = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
     for i, (ax, unit) in enumerate(zip(axes, ("position error [m]", "velocity error [m/s]"))):
         ax.semilogy(result.t_s, err["leo_fix"][i], ".", color="0.7", ms=2, label="LEO fix")
         ax.semilogy(result.t_s, err["ins_only"][i], "C1-", label="INS only")
         ax.semilogy(result.t_s, err["fused"][i], "C0-", label="Starlink/INS")
+        ax.semilogy(result.t_s, bound_3d[i], "C0--", lw=0.8, label="Starlink/INS filter 3 sigma (3D)")
         ax.set_ylabel(unit)
         ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(ncol=3, loc="upper left", fontsize="small", framealpha=0.9, markerscale=4)
+    axes[0].legend(ncol=4, loc="upper left", fontsize="small", framealpha=0.9, markerscale=4)
     axes[0].set_title(f"{run_label(result)}: 3D errors, correction every {result.correction_period_s:g} s")
     axes[1].set_xlabel(time_label(result))
     _save(fig, path)

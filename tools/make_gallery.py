@@ -46,7 +46,7 @@ RUNS = {
         {
             "trajectory.png": "Truth, INS-only and Starlink/INS tracks (longitude/latitude) and heights.",
             "errors_3d.png": "3D position and velocity errors of the INS alone, the LEO snapshot fixes and the "
-                               "fused solution.",
+                             "fused solution, with the filter's 3D 3 sigma (3 x root of the covariance trace).",
             "errors_enu.png": "Fused position error east, north and up inside the filter's +-3 sigma.",
             "visible.png": "Visible satellites along the flight; 7 are needed for a snapshot fix.",
             "gdop.png": "Doppler GDOP along the flight (position [m], velocity [m/s] and clock [Hz] "
