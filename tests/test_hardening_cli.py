@@ -376,3 +376,12 @@ def test_export_of_a_file_not_utf8_names_it(tmp_path, capsys):
     status, _, err = _run(capsys, "export", str(path), "--out", str(tmp_path / "out"))
     assert status == 2 and f"{path}: not UTF-8 text (a byte 0xe9)" in _one_line(err)
     assert not (tmp_path / "out").exists()
+
+
+def test_gdop_map_without_any_fix_reports_n_a(tmp_path, capsys):
+    # An 89 deg mask: no cell ever sees 7 satellites. The summary crashed on the null median (exit 1).
+    status, out, err = _run(capsys, "study", "gdop-map", "--duration-s", "600", "--step-s", "600", "--grid-deg", "90",
+                            "--mask-deg", "89", "--scheduler", "serial", "--out", str(tmp_path / "map"))
+    assert status == 0, err
+    assert "cell-epochs with a Doppler fix (>= 7): 0.0%; median Doppler GDOP n/a" in out
+    assert (tmp_path / "map" / "gdop_maps.png").is_file()

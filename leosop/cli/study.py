@@ -230,5 +230,6 @@ def summary(doc):
         f"{doc['netcdf']}: {doc['n_epochs']} epochs {doc['start_utc']} .. {doc['end_utc']}, "
         f"{doc['grid_deg']:g} deg grid, {doc['n_satellites']} satellites, mask {doc['mask_deg']:g} deg",
         f"visible satellites: mean {doc['n_visible_mean']:.1f}, max {doc['n_visible_max']}",
-        f"cell-epochs with a Doppler fix (>= 7): {doc['fix_fraction']:.1%}; median GDOP {doc['gdop_median']:.1f}",
+        f"cell-epochs with a Doppler fix (>= 7): {doc['fix_fraction']:.1%}; median Doppler GDOP "
+        + ("n/a" if doc["gdop_median"] is None else f"{doc['gdop_median']:.1f} m/Hz"),
     ])
