@@ -111,8 +111,9 @@ def summary(doc):
     lines = [f"{len(doc['tracks'])} track(s) in {doc['n_blocks']} block(s), {doc['n_identified']} identified"]
     for t in doc["tracks"]:
         rms = "n/a" if t["match_rms_hz"] is None else f"{t['match_rms_hz']:.2f} Hz"
+        cn0 = "n/a" if t["cn0_dbhz"] is None else f"{t['cn0_dbhz']:.1f} dB-Hz"
         lines.append(f"  {t['sat_id'] or 'unidentified':>12}  {t['n_blocks']:4d} blocks  {t['start_utc']} .. "
-                     f"{t['end_utc']}  C/N0 {t['cn0_dbhz']:.1f} dB-Hz  match rms {rms}")
+                     f"{t['end_utc']}  C/N0 {cn0}  match rms {rms}")
     for s in doc["solutions"][:10]:
         sig = s.get("sigma_enu_m") or [None] * 3
         sig_txt = "n/a" if None in sig else "/".join(f"{v:.1f}" for v in sig)
