@@ -29,7 +29,7 @@ import numpy as np
 from ..constants import STARLINK_N_TONES, STARLINK_PILOT_HZ, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
 from ..fileio import atomic_files
-from ..frames import azimuth_elevation_range, geodetic_to_ecef
+from ..frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..progress import progress
 from ..scenarios import XIAN_BAOJI
@@ -38,7 +38,7 @@ from ..signal.iq import write_sigmf_files
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
 from . import add_command
-from .options import mask_deg, parse_site, parse_time, positive, warn_stale
+from .options import mask_deg, parse_site, parse_time, parse_velocity, positive, warn_stale
 
 DEFAULT_SITE = "34.342,108.940,400"
 #: Bounds of the numeric options: beyond them a value is a typo, not an experiment.
@@ -56,7 +56,10 @@ def register(subparsers):
     p.add_argument("-o", "--output", required=True, metavar="FILE.sigmf-meta", help="output recording")
     p.add_argument("--tle", metavar="FILE", help="TLE or OMM file (default: bundled Walker set)")
     p.add_argument("--site", default=DEFAULT_SITE, metavar="LAT_DEG,LON_DEG,ALT_M",
-                   help=f"static receiver (default {DEFAULT_SITE}, Xi'an)")
+                   help=f"receiver at the start (default {DEFAULT_SITE}, Xi'an)")
+    p.add_argument("--velocity-enu-mps", default="0,0,0", metavar="VE,VN,VU",
+                   help="constant receiver velocity in the start site's east/north/up frame: a straight line "
+                        "(default 0,0,0: static)")
     p.add_argument("--start", metavar="ISO",
                    help=f"UTC of the first sample (default {format_utc(XIAN_BAOJI.start_utc)}, the xian-baoji start)")
     p.add_argument("--duration-s", type=float, default=1.0, help="length in seconds (default 1)")
@@ -163,6 +166,7 @@ def _chunks(channel, signal_starts, lengths, rng):
 
 def run(args):
     lat, lon, alt = parse_site(args.site)
+    vel_enu = parse_velocity(args.velocity_enu_mps)
     start = parse_time(args.start) if args.start else XIAN_BAOJI.start_utc
     duration = positive(args.duration_s, "--duration-s")
     fs = positive(args.sample_rate_hz, "--sample-rate-hz")
@@ -208,7 +212,9 @@ def run(args):
     phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
     speed = inertial_speed_mps(const, start)
     orbit_error = OrbitError.draw(rng, speed, **sigma_orbit_m)
-    t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=orbit_error)
+    vel_rx = C_e_n(np.radians(lat), np.radians(lon)) @ vel_enu
+    t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=orbit_error,
+                                           vel_rx_ecef_mps=vel_rx)
     cn0_nodes = _cn0(args, const, t_nodes, range_m, elev)
     if np.isfinite(range_m).all() and not np.isfinite(cn0_nodes).any():  # (SGP4 failures: SiteChannel)
         raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
@@ -246,7 +252,8 @@ def run(args):
              "core:description": f"leosop generate: Starlink {_WAVEFORM_TEXT[args.waveform]} of {len(const)} "
                                  f"satellite(s) "
                                  f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
-             "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]}}
+             "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
+             "leosop:vel_enu_mps": [float(v) for v in vel_enu]}
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
@@ -260,6 +267,7 @@ def run(args):
         "period_s": args.period_s,
         "cn0_model": args.cn0_model,
         "waveform": args.waveform,
+        "vel_enu_mps": [float(v) for v in vel_enu],
         "satellites": satellites,
     }
     # All outputs or none: the data file, then its metadata, then generate.json.

@@ -13,7 +13,7 @@ from ..timebase import format_utc, parse_utc, seconds_since
 #: SGP4 errors grow by kilometres per day from the epoch.
 STALE_DAYS = 14.0
 
-__all__ = ["STALE_DAYS", "finite_float", "parse_site", "parse_time", "positive", "mask_deg", "warn_stale"]
+__all__ = ["STALE_DAYS", "finite_float", "parse_site", "parse_velocity", "parse_time", "positive", "mask_deg", "warn_stale"]
 
 
 def finite_float(text):
@@ -47,6 +47,19 @@ def parse_site(text, option="--site"):
     if not -1.2e4 <= alt <= 1e8:
         raise InputError(f"{option}: altitude {alt:g} m is outside [-12000, 1e8]")
     return lat, lon, alt
+
+
+def parse_velocity(text, option="--velocity-enu-mps", max_mps=1000.0):
+    """``VE,VN,VU`` [m/s] -> ndarray (3,), finite and at most ``max_mps`` in speed."""
+    try:
+        vel = np.array([float(p) for p in str(text).split(",")])
+    except ValueError:
+        raise InputError(f"{option} {text!r}: expected VE,VN,VU in m/s (three numbers)") from None
+    if vel.shape != (3,) or not np.all(np.isfinite(vel)):
+        raise InputError(f"{option} {text!r}: expected VE,VN,VU in m/s (three finite numbers)")
+    if np.linalg.norm(vel) > max_mps:
+        raise InputError(f"{option} {text!r}: speed {np.linalg.norm(vel):g} m/s exceeds {max_mps:g} m/s")
+    return vel
 
 
 def parse_time(text, option="--start"):

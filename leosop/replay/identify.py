@@ -72,6 +72,8 @@ _MAX_SAMPLES = 120
 _LIGHT_TIME_MAX_S = 0.012
 #: Largest Doppler rate of a LEO satellite at Ku band, a bound for the screen [Hz/s].
 _RATE_MAX_HZ_PER_S = 5e3
+#: Largest angular rate of a line of sight to a LEO satellite [rad/s] (7.6 km/s at 550 km overhead).
+_SAT_RATE_MAX_RAD_PER_S = 0.014
 #: Candidates per track fitted in the identification (nearest in Doppler at the track's middle).
 _ID_CANDIDATES = 24
 #: Chi-square (3 features) above which a cell's linearised fit does not count a track.
@@ -167,14 +169,18 @@ class _Ephemeris:
         return pos, vel * (1 - tau_dot)[..., None] + (OMEGA_E_RAD_PER_S * tau_dot)[..., None] * turn
 
 
-def _doppler(pos_sv, vel_sv, pos_rx, hz_per_mps):
-    """Doppler (...) of a static receiver and its gradient (..., 3) in the receiver position [Hz/m]."""
-    los = pos_sv - pos_rx
-    rng = np.linalg.norm(los, axis=-1)
-    u = los / rng[..., None]
+def _doppler(pos_sv, vel_sv, pos_rx, hz_per_mps, los=False):
+    """Doppler (...) and its gradient (..., 3) in the receiver position [Hz/m].
+
+    ``vel_sv`` is relative to the receiver (satellite minus receiver
+    velocity). With ``los`` the unit line of sight (..., 3) is returned too.
+    """
+    los_m = pos_sv - pos_rx
+    rng = np.linalg.norm(los_m, axis=-1)
+    u = los_m / rng[..., None]
     rr = np.sum(u * vel_sv, axis=-1)
     grad = hz_per_mps * (vel_sv - rr[..., None] * u) / rng[..., None]
-    return -hz_per_mps * rr, grad
+    return (-hz_per_mps * rr, grad, u) if los else (-hz_per_mps * rr, grad)
 
 
 @dataclass
@@ -257,6 +263,7 @@ class _Search:
 
     def __init__(self, tracks, eph, hz_per_mps, opts, region=None):
         self.tracks, self.eph, self.k, self.o = tracks, eph, hz_per_mps, opts
+        self.moving = opts["rx_speed_sigma_mps"] > 0
         self.t_c = float(np.mean([tr.t_mid_s for tr in tracks]))
         sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
         cos_m = np.sqrt(1 - sin_m**2)
@@ -352,6 +359,10 @@ class _Search:
         t_mid = t_ref[:, 1]
         extra = np.stack([o["sat_offset_max_hz"] + drift * np.abs(t_mid - self.t_c), np.full_like(span, drift),
                           np.zeros_like(span)], axis=1)
+        if self.moving:  # the receiver's own velocity (3 sigma) moves each feature by up to k v x the LOS change
+            v3 = 3 * self.k * o["rx_speed_sigma_mps"]
+            turn = np.minimum(2.0, _SAT_RATE_MAX_RAD_PER_S * span)
+            extra = extra + v3 * np.stack([np.ones_like(span), turn / span, turn], axis=1)
         tol_other = dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
         tol = reach * feat_grad + tol_other
         # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
@@ -500,36 +511,44 @@ class _Search:
         sat = sats[which]
         sig_c = o["sat_offset_sigma_hz"]
         sig_tau = o["along_track_sigma_m"] / _SPEED_SV_MPS
-        x = np.zeros(5 + 2 * m)  # dpos(3), clock, drift, c_j, tau_j
+        n_vel = 3 if self.moving else 0
+        x = np.zeros(5 + 2 * m + n_vel)  # dpos(3), clock, drift, c_j, tau_j[, vel(3)]
         x[3] = clock0
+        dt = t - self.t_c
         for _ in range(10):
-            pos = pos0 + x[:3]
-            tau = x[5 + m:][which]
+            vel_rx = x[5 + 2 * m:] if n_vel else np.zeros(3)
+            pos = pos0 + x[:3] + dt[:, None] * vel_rx
+            tau = x[5 + m:5 + 2 * m][which]
             p, v = self.eph.state_received(sat, t + tau, pos)
-            dop, grad = _doppler(p, v, pos, self.k)
+            dop, grad, u = _doppler(p, v - vel_rx, pos, self.k, los=True)
             pa, va = self.eph.state(sat, t + tau + 0.5)
             pb, vb = self.eph.state(sat, t + tau - 0.5)
             rate = _doppler(pa, va, pos, self.k)[0] - _doppler(pb, vb, pos, self.k)[0]
-            model = dop + x[3] + x[4] * (t - self.t_c) + x[5:5 + m][which]
+            model = dop + x[3] + x[4] * dt + x[5:5 + m][which]
             res = (f - model) / sig
             J = np.zeros((len(t), len(x)))
             J[:, :3] = grad
             J[:, 3] = 1
-            J[:, 4] = t - self.t_c
+            J[:, 4] = dt
             J[np.arange(len(t)), 5 + which] = 1
             J[np.arange(len(t)), 5 + m + which] = rate
+            if n_vel:
+                J[:, 5 + 2 * m:] = self.k * u + grad * dt[:, None]
             J /= sig[:, None]
-            # Priors: satellite offsets and time offsets, horizontal position, height.
-            P = np.zeros((2 * m + 3, len(x)))
-            pr = np.zeros(2 * m + 3)
+            # Priors: satellite offsets and time offsets, horizontal position, height[, velocity].
+            axes = [(0, C[:, 0], prior_sigma_m), (0, C[:, 1], prior_sigma_m), (0, up, o["alt_sigma_m"])]
+            if n_vel:
+                axes += [(5 + 2 * m, C[:, 0], o["rx_speed_sigma_mps"]), (5 + 2 * m, C[:, 1], o["rx_speed_sigma_mps"]),
+                         (5 + 2 * m, up, o["rx_climb_sigma_mps"])]
+            P = np.zeros((2 * m + len(axes), len(x)))
+            pr = np.zeros(len(P))
             P[np.arange(m), 5 + np.arange(m)] = 1 / sig_c
             pr[:m] = -x[5:5 + m] / sig_c
             P[m + np.arange(m), 5 + m + np.arange(m)] = 1 / sig_tau
-            pr[m:2 * m] = -x[5 + m:] / sig_tau
-            for r, (axis, s) in enumerate([(C[:, 0], prior_sigma_m), (C[:, 1], prior_sigma_m),
-                                           (up, o["alt_sigma_m"])]):
-                P[2 * m + r, :3] = axis / s
-                pr[2 * m + r] = -(axis @ x[:3]) / s
+            pr[m:2 * m] = -x[5 + m:5 + 2 * m] / sig_tau
+            for r, (i0, axis, s) in enumerate(axes):
+                P[2 * m + r, i0:i0 + 3] = axis / s
+                pr[2 * m + r] = -(axis @ x[i0:i0 + 3]) / s
             A = np.vstack([J, P])
             y = np.concatenate([res, pr])
             dx = np.linalg.solve(A.T @ A, A.T @ y)
@@ -541,7 +560,7 @@ class _Search:
         cov = np.linalg.inv(A.T @ A)
         nrms = np.sqrt(np.bincount(which, res**2, m) / np.bincount(which, minlength=m))
         return {"pos": pos0 + x[:3], "cov": cov[:3, :3], "clock": x[3], "drift": x[4], "used": used,
-                "nrms_used": nrms, "chi2": float(res @ res)}
+                "vel": x[5 + 2 * m:] if n_vel else np.zeros(3), "nrms_used": nrms, "chi2": float(res @ res)}
 
     # Identification ------------------------------------------------------
 
@@ -553,7 +572,7 @@ class _Search:
         list of dict per track: sat, chi2, rms_hz, margin, runner_up (sat or -1).
         """
         o = self.o
-        pos, cov = sol["pos"], sol["cov"]
+        pos, cov, vel_rx = sol["pos"], sol["cov"], sol["vel"]
         up = pos / np.linalg.norm(pos)
         sin_mask = np.sin(np.radians(o["mask_deg"] - o["id_mask_slack_deg"]))
         out = []
@@ -564,10 +583,11 @@ class _Search:
             cand = np.flatnonzero(el_ok & self.eph.ok)
             # Only the candidates nearest in Doppler at the middle (rate-scaled) can fit; the rest
             # are kHz away and would only add to the cost.
+            pos_mid = pos + (tr.t_mid_s - self.t_c) * vel_rx
             pm, vm = self.eph.state(cand, tr.t_mid_s)
-            dm = _doppler(pm, vm, pos, self.k)[0]
+            dm = _doppler(pm, vm - vel_rx, pos_mid, self.k)[0]
             pm2, vm2 = self.eph.state(cand, tr.t_mid_s + 1.0)
-            slope = np.abs(_doppler(pm2, vm2, pos, self.k)[0] - dm)
+            slope = np.abs(_doppler(pm2, vm2 - vel_rx, pos_mid + vel_rx, self.k)[0] - dm)
             off = np.abs(tr.f_ref_hz[1] - sol["clock"] - sol["drift"] * (tr.t_mid_s - self.t_c) - dm)
             cand = cand[np.argsort(off / (10.0 + slope * o["along_track_sigma_m"] / _SPEED_SV_MPS))[:_ID_CANDIDATES]]
             idx = tr.sample
@@ -580,12 +600,13 @@ class _Search:
             sat = cand[:, None]
             tau = np.zeros((len(cand), 1))
             sig_c, sig_tau = o["sat_offset_sigma_hz"], o["along_track_sigma_m"] / _SPEED_SV_MPS
+            pos_t = pos + (t - self.t_c)[:, None] * vel_rx
             for _ in range(2):  # the time offset enters non-linearly: re-linearise once
-                p, v = self.eph.state_received(sat, t[None, :] + tau, pos)
-                dop, grad = _doppler(p, v, pos, self.k)
+                p, v = self.eph.state_received(sat, t[None, :] + tau, pos_t)
+                dop, grad = _doppler(p, v - vel_rx, pos_t, self.k)
                 pa, va = self.eph.state(sat, t[None, :] + tau + 0.5)
                 pb, vb = self.eph.state(sat, t[None, :] + tau - 0.5)
-                rate = _doppler(pa, va, pos, self.k)[0] - _doppler(pb, vb, pos, self.k)[0]
+                rate = _doppler(pa, va, pos_t, self.k)[0] - _doppler(pb, vb, pos_t, self.k)[0]
                 # The fix's own uncertainty inflates the sigma, but only up to a cap: a fix too poor
                 # to test a candidate must not make every candidate pass.
                 var = sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
@@ -644,12 +665,15 @@ class _Search:
 #: ``false_alarm`` sets the chi-square acceptance, ``min_margin`` the chi-square lead over the
 #: runner-up; ``pos_sigma_cap_hz`` caps the fix-uncertainty inflation; ``min_identified`` is the
 #: fewest identities a solution must give; ``final_spacing_m`` ends the cell refinement and
-#: ``n_final`` cells go on to the least squares.
+#: ``n_final`` cells go on to the least squares; ``rx_speed_sigma_mps`` > 0 makes the receiver
+#: move at a constant velocity estimated in the least squares (horizontal prior sigma; vertical
+#: ``rx_climb_sigma_mps``), 0 holds it static.
 _DEFAULTS = dict(
     mask_slack_deg=5.0, id_mask_slack_deg=2.0, cross_track_max_m=300.0, alt_tol_m=1000.0,
     along_track_max_m=1500.0, along_track_sigma_m=600.0, sat_offset_max_hz=30.0, sat_offset_sigma_hz=8.0,
     clock_drift_max_hz_per_s=5.0, model_sigma_hz=1.0, alt_sigma_m=300.0, track_gate=4.0, false_alarm=1e-4,
     min_margin=25.0, final_spacing_m=1500.0, n_final=3, pos_sigma_cap_hz=3.0, min_identified=3,
+    rx_speed_sigma_mps=0.0, rx_climb_sigma_mps=2.0,
 )
 
 

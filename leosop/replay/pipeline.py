@@ -237,6 +237,11 @@ class ReplayResult:
 #: from such a recording errs ~5x its sigma (0.7x with no offsets).
 SAT_OFFSET_SIGMA_HZ = 1.5
 
+#: Prior sigma of the receiver's horizontal speed [m/s] in identification
+#: when it may move (no ``static``): a road vehicle. Identification fits one
+#: constant velocity over the recording.
+RX_SPEED_SIGMA_MPS = 30.0
+
 
 def track_measurements(tracks, carrier_hz, model_sigma_hz=0.0):
     """The identified tracks as measurement rows (DESIGN 4.3), time-ordered.
@@ -339,7 +344,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     for tr in tracks:
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,
-                            carrier_hz=comb.carrier_hz) if tracks else None
+                            carrier_hz=comb.carrier_hz,
+                            rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
     position = None

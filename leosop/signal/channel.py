@@ -165,8 +165,8 @@ def light_time_positions(constellation, pos_rx_ecef_m, times_utc, *, orbit_error
     Parameters
     ----------
     constellation : Constellation
-    pos_rx_ecef_m : array_like, (3,)
-        Static receiver.
+    pos_rx_ecef_m : array_like, (3,) or (n, 3)
+        Receiver at the reception times (one row: static).
     times_utc : array_like of datetime64, (n,)
         Reception times.
     orbit_error : OrbitError, optional
@@ -187,6 +187,8 @@ def light_time_positions(constellation, pos_rx_ecef_m, times_utc, *, orbit_error
     along_s, radial_m, cross_m = (np.repeat(np.broadcast_to(v, (n_sats,)), n)
                                   for v in (err.along_s, err.radial_m, err.cross_m))
     rx = np.asarray(pos_rx_ecef_m, dtype=float)
+    if rx.ndim == 2:
+        rx = np.tile(rx, (n_sats, 1))
     sat = np.repeat(np.arange(n_sats), n)
     t_all = np.tile(t_rx, n_sats)
     tau = np.zeros(n_sats * n)
@@ -204,17 +206,22 @@ def light_time_positions(constellation, pos_rx_ecef_m, times_utc, *, orbit_error
     return p.reshape(n_sats, n, 3), tau.reshape(n_sats, n)
 
 
-def site_geometry(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_step_s=0.1, orbit_error=None):
-    """Light-time range and elevation of every satellite seen from a static site, on a node grid.
+def site_geometry(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_step_s=0.1, orbit_error=None,
+                  vel_rx_ecef_mps=None):
+    """Light-time range and elevation of every satellite seen from a receiver, on a node grid.
 
     Parameters
     ----------
     constellation : Constellation
     pos_rx_ecef_m : array_like, (3,)
+        Receiver at ``start_utc``.
     start_utc : datetime64
     duration_s : float
     node_step_s : float
     orbit_error : OrbitError, optional
+    vel_rx_ecef_mps : array_like, (3,), optional
+        Constant receiver velocity (a straight line through ``pos_rx_ecef_m``);
+        None for a static site.
 
     Returns
     -------
@@ -230,8 +237,11 @@ def site_geometry(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_s
     n_nodes = int(np.ceil(duration_s / node_step_s)) + 3
     t_nodes = (np.arange(n_nodes) - 1) * node_step_s
     times = np.datetime64(start_utc, "ns") + np.round(t_nodes * 1e9).astype("timedelta64[ns]")
-    pos, tau = light_time_positions(constellation, pos_rx_ecef_m, times, orbit_error=orbit_error)
-    _, elev, _ = azimuth_elevation_range(pos, np.asarray(pos_rx_ecef_m, dtype=float))
+    rx = np.asarray(pos_rx_ecef_m, dtype=float)
+    if vel_rx_ecef_mps is not None:
+        rx = rx + t_nodes[:, None] * np.asarray(vel_rx_ecef_mps, dtype=float)
+    pos, tau = light_time_positions(constellation, rx, times, orbit_error=orbit_error)
+    _, elev, _ = azimuth_elevation_range(pos, rx)
     return t_nodes, tau * C_MPS, elev
 
 
@@ -263,7 +273,7 @@ def cn0_geometry_dbhz(cn0_ref_dbhz, range_m, elev_rad, *, ref_range_m=CN0_REF_RA
 
 @dataclass
 class SiteChannel:
-    """Pilot combs of several satellites received at a static site.
+    """Pilot combs of several satellites received at a site (static or moving: ``range_m`` holds the motion).
 
     Attributes
     ----------
