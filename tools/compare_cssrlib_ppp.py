@@ -24,7 +24,7 @@ one: ``python -m pip install --target /tmp/cssr_site --no-deps cssrlib==1.2.1`` 
 numpy, scipy and bitstruct, which are here) and ``--cssrlib-path /tmp/cssr_site``.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python tools/compare_cssrlib_ppp.py [--hours 24] [--mode static|kinematic]
-[--cssrlib-path DIR]``
+[--cssrlib-path DIR] [--save FILE.npz]``
 """
 
 import argparse
@@ -111,6 +111,8 @@ def theirs(n_epochs, static, tmp):
     nav.elmin = np.radians(MASK_DEG)
     nav.cnr_min = nav.cnr_min_gpy = 0.0
     nav.sat_ant, nav.rcv_ant = [], None
+    if static:  # its pmode 0 re-estimates the position every epoch (100 m/sqrt(s)); its samples zero that for a station
+        nav.q[0:3] = 0.0
     pos = np.full((n_epochs, 3), np.nan)
     obs = rnx.decode_obs()
     nav.t = deepcopy(obs.t)
@@ -134,10 +136,14 @@ def report(name, t_read, t_run, pos, ref, static, converge_min):
     norm = np.linalg.norm(err, axis=1)
     if static:
         e = err[ok][-1]
-        bad = np.flatnonzero(~ok | (norm >= 0.05))
-        stay = t_h[bad[-1] + 1] if bad.size and bad[-1] + 1 < len(pos) else (0.0 if not bad.size else None)
+        good = np.flatnonzero(ok)
+        bad = good[norm[good] >= 0.05]
+        later = good[good > bad[-1]] if bad.size else good
+        stay = t_h[later[0]] if later.size else None
+        at = [h for h in (1, 2, 6, 12) if h < t_h[-1]]
         acc = (f"final 3-D error {100 * np.linalg.norm(e):.1f} cm, ENU {np.round(100 * C.T @ e, 1).tolist()} cm, "
-               + (f"below 5 cm from {stay:.2f} h" if stay is not None else "not below 5 cm at the end"))
+               + (f"below 5 cm from {stay:.2f} h" if stay is not None else "not below 5 cm at the end")
+               + "".join(f", {h} h: {100 * norm[int(h * 3600 / EPOCH_S)]:.1f} cm" for h in at))
     else:
         sel = ok & (t_h >= converge_min / 60.0)
         acc = f"3-D RMS after {converge_min:g} min {100 * np.sqrt(np.mean(norm[sel] ** 2)):.1f} cm"
@@ -151,6 +157,7 @@ def main():
     ap.add_argument("--mode", choices=("static", "kinematic"), default="static")
     ap.add_argument("--converge-min", type=float, default=60.0)
     ap.add_argument("--cssrlib-path", help="folder cssrlib was installed into (pip install --target)")
+    ap.add_argument("--save", metavar="FILE.npz", help="both solutions per epoch and the reference")
     a = ap.parse_args()
     if a.cssrlib_path:
         sys.path.insert(0, a.cssrlib_path)
@@ -161,7 +168,10 @@ def main():
     ref = etrf2000_to_itrf2014(header_ecef_m, decimal_year(np.datetime64("2020-06-25T12:00")))
     report("leosop", t_read, t_run, pos, ref, static, a.converge_min)
     with tempfile.TemporaryDirectory() as tmp:
-        report("cssrlib", *theirs(n, static, tmp), ref, static, a.converge_min)
+        c_read, c_run, c_pos = theirs(n, static, tmp)
+    report("cssrlib", c_read, c_run, c_pos, ref, static, a.converge_min)
+    if a.save:
+        np.savez(a.save, leosop_ecef_m=pos, cssrlib_ecef_m=c_pos, ref_ecef_m=ref)
 
 
 if __name__ == "__main__":
