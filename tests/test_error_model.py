@@ -117,7 +117,7 @@ def test_discretize_rejects_bad_shapes():
 
 
 def test_table3_reproduces_seed001():
-    from leosop.ins.error_model_study import table3
+    from leosop.repro.error_model import table3
 
     for row in table3()["rows"]:
         paper = row["paper"]
@@ -130,7 +130,7 @@ def test_table3_reproduces_seed001():
 
 
 def test_models_against_two_strapdown_runs():
-    from leosop.ins.error_model_study import validate
+    from leosop.repro.error_model import validate
 
     res = validate()
     rel15 = res["relative_error"]["model15"]

@@ -12,7 +12,7 @@ from leosop.montecarlo import spec as spec_module
 from leosop.montecarlo.parameters import apply
 from leosop.orbits import CARRIERS
 from leosop.scenarios import XIAN_BAOJI, load_scenario
-from leosop.simulate_study import PAPER_TABLE5, PAPER_TABLE6
+from leosop.repro.fusion_tables import PAPER_TABLE5, PAPER_TABLE6
 
 GOOD = {"fixed": {"level": "measurement"}, "parameters": {"correction_period_s": [1, 30]}, "n_seeds": 2}
 

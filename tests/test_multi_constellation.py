@@ -461,7 +461,7 @@ def test_tight_mixed_families_filter_is_consistent():
     # alone (tools/multi_constellation_goals.py runs 20 full flights).
     from consistency import assert_filter_consistent
 
-    from leosop.multi_study import lag_pairs
+    from leosop.repro.multi import lag_pairs
     from leosop.simulate import run_scenario
 
     sc = _short("xian-baoji-multi", 100.0)

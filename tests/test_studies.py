@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from leosop.ins.alignment_study import sweep
+from leosop.repro.alignment import sweep
 from leosop.studies import chunk_generators, map_chunks
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import scipy.linalg
 
 from leosop.ins import error_model as em
-from leosop.ins.error_model_study import _seed001_rolling
+from leosop.repro.error_model import _seed001_rolling
 
 
 def main():

@@ -2,7 +2,7 @@
 
 Runs the bundled degraded-sky scenarios (leosop/data/scenarios) at
 measurement level, N seeds each, loose and tight, with every family and with
-Starlink alone (leosop.multi_study.run_case; Dask-parallel through
+Starlink alone (leosop.repro.multi.run_case; Dask-parallel through
 leosop.studies), and prints
 
 - high latitude (68 N, 25 deg mask, real 2021-08-06 snapshot; skipped when
@@ -26,7 +26,7 @@ import argparse
 import numpy as np
 from scipy import stats
 
-from leosop.multi_study import available, run_case
+from leosop.repro.multi import available, run_case
 from leosop.studies import map_chunks
 
 COUPLINGS = ("loose", "tight")

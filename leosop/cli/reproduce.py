@@ -1,55 +1,33 @@
 """``leosop reproduce TARGET``: a table or figure of the seed papers, ours beside theirs.
 
-Each target is one line of :data:`TARGETS`: ``name: ("module:function",
-help)``. The function lives in a study module, takes keyword-only options
-among ``seed``, ``scheduler``, ``full`` and ``out_dir`` (it receives those it
-declares) and returns the JSON document, with the paper's numbers under
-``"paper"``. Without ``--json`` the document is printed as text: by the study
-module's ``format_table(doc)`` when it has one, else as a flat table of its
-``rows``.
+The targets, their papers and functions are the registry
+:data:`leosop.repro.TARGETS`. Without ``--json`` the document is printed as
+text: by the target module's ``format_table(doc)`` when it has one, else as a
+flat table of its ``rows``.
 """
 
-import importlib
+import argparse
 import inspect
 import sys
 
-from ..errors import InputError
+from ..repro import TARGETS, target_function, target_module
 from . import add_command
-
-#: Registry of reproducible targets.
-TARGETS = {
-    "align-fig2": ("leosop.ins.alignment_study:fig2", "[Qu 2024] Fig. 1-2: max alignment errors vs pitch"),
-    "align-table1": ("leosop.ins.alignment_study:table1", "[Qu 2024] Table 1: turntable alignment at 80 deg pitch"),
-    "errmodel-table3": ("leosop.ins.error_model_study:table3", "[Chu 2009] Table 3: 150 s errors of the 9-state model"),
-    "errmodel-validate": ("leosop.ins.error_model_study:validate", "[Chu 2009] sec. 3: error models vs strapdown"),
-    "table2": ("leosop.signal.tables:table2", "[Shen 2024] Table 2: grid ML vs FMLEF (and fast) time, N = 3e5"),
-    "table3": ("leosop.signal.tables:table3", "[Shen 2024] Table 3: grid ML vs FMLEF (and fast) time per block length"),
-    "table4": ("leosop.simulate_study:table4", "[Shen 2024] Table 4: INS alone vs Starlink/INS, Xi'an-Baoji"),
-    "table5": ("leosop.simulate_study:table5", "[Shen 2024] Table 5: Starlink/INS errors vs correction period"),
-    "table6": ("leosop.simulate_study:table6", "[Shen 2024] Table 6: Starlink/INS errors vs orbit error"),
-    "ppp-ins": ("leosop.gnss.ppp_ins_study:ppp_ins_table", "[Liu 2016] vehicle test, simulated: float vs fixed PPP/INS"),
-    "multi": ("leosop.multi_study:multi", "multi-constellation LEO/INS in thin skies: loose vs tight, Starlink vs all"),
-}
 
 
 def register(subparsers):
+    width = max(map(len, TARGETS))
     p = add_command(subparsers, "reproduce", sys.modules[__name__],
                     help="reproduce a table or figure of the seed papers beside the published numbers",
-                    description="Targets: " + "; ".join(f"{k}: {v[1]}" for k, v in TARGETS.items()))
+                    description="Reproduce a table or figure of the seed papers; ours beside the published "
+                                "numbers.\n\ntargets:\n"
+                                + "\n".join(f"  {k:<{width}}  {t.help}" for k, t in TARGETS.items()))
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("target", metavar="TARGET", help=f"one of: {', '.join(TARGETS)}")
     p.add_argument("--seed", type=int, default=0, help="random seed of Monte Carlo targets (default 0)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler address for parallel targets (default: a local cluster; 'serial' runs "
                         "in this process)")
     p.add_argument("--full", action="store_true", help="the paper's full grid / more trials (slower)")
-
-
-def target_function(name):
-    """The study function registered as ``name``."""
-    if name not in TARGETS:
-        raise InputError(f"reproduce: unknown target {name!r}; expected one of {', '.join(TARGETS)}")
-    module, func = TARGETS[name][0].split(":")
-    return getattr(importlib.import_module(module), func)
 
 
 def run(args):
@@ -77,10 +55,10 @@ def _cell(v):
 
 
 def summary(doc):
-    module = importlib.import_module(TARGETS[doc["target"]][0].split(":")[0])
+    module = target_module(doc["target"])
     if hasattr(module, "format_table"):
         return module.format_table(doc)
-    lines = [f"{doc['target']}: {TARGETS[doc['target']][1]}"]
+    lines = [f"{doc['target']}: {TARGETS[doc['target']].help}"]
     rows = [_flat(r) for r in doc.get("rows", [])]
     if rows:
         cols = list(dict.fromkeys(k for r in rows for k in r))

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .scenarios import load_scenario
-from .simulate import metrics, run_scenario
-from .studies import map_chunks
+from ..scenarios import load_scenario
+from ..simulate import metrics, run_scenario
+from ..studies import map_chunks
 
 __all__ = ["SCENARIOS", "run_case", "available", "lag_pairs", "multi", "format_table"]
 

@@ -23,8 +23,8 @@ import numpy as np
 from ..constants import G0_MPS2
 from ..earth import radii_m
 from ..rotations import euler_to_dcm
-from . import error_model as em
-from . import strapdown, trajectory
+from ..ins import error_model as em
+from ..ins import strapdown, trajectory
 
 __all__ = ["table3", "validate"]
 

@@ -23,7 +23,7 @@ from ..figure import pyplot, save_png
 from ..fileio import write_csv, write_json
 from ..rotations import euler_to_dcm
 from ..studies import map_chunks
-from .alignment import align
+from ..ins.alignment import align
 
 __all__ = ["attitude_errors", "sweep", "fig2", "table1"]
 

@@ -19,9 +19,9 @@ errors the way the run draws them (per satellite, or three shared states).
 
 import numpy as np
 
-from .scenarios import XIAN_BAOJI
-from .simulate import metrics, run_scenario
-from .studies import map_chunks
+from ..scenarios import XIAN_BAOJI
+from ..simulate import metrics, run_scenario
+from ..studies import map_chunks
 
 __all__ = ["table4", "table5", "table6"]
 

@@ -1,0 +1,107 @@
+"""Paper reproductions: one home for every table and figure of the seed papers, ours beside theirs.
+
+:data:`TARGETS` is the registry ``leosop reproduce`` takes its choices and
+help from: one :class:`Target` per name, naming its paper ([Shen 2024],
+[Qu 2024], [Chu 2009], [Liu 2016]), what it reproduces and the function that
+does it. A target function takes keyword-only options among ``seed``,
+``scheduler``, ``full`` and ``out_dir`` (it receives those it declares) and
+returns a JSON document with the paper's numbers under ``"paper"``; its
+module may define ``format_table(doc)`` for the text output.
+
+Modules: :mod:`.doppler_tables` ([Shen 2024] Tables 2-3, estimator run
+time), :mod:`.fusion_tables` ([Shen 2024] Tables 4-6, Starlink/INS),
+:mod:`.multi` (multi-constellation LEO/INS in thin skies), :mod:`.alignment`
+([Qu 2024], coarse alignment), :mod:`.error_model` ([Chu 2009], short-time
+INS error models). [Liu 2016]'s PPP/INS study stays in
+:mod:`leosop.gnss.ppp_ins_study` and is registered here.
+
+Dependencies point downward only: this package imports the domain packages
+(signal, ins, fusion, gnss, ...); no domain package imports ``repro`` or
+``cli``. Target functions are imported when a target runs, so listing the
+targets costs nothing.
+
+Figures: a stage's figures live beside the stage (``orbits/plots``,
+``signal/plots``, ``gnss/figures``, ``montecarlo/figures``; the simulate
+run's in :mod:`leosop.plots`, the study maps in :mod:`leosop.maps`), a
+reproduction's in its module here; :mod:`leosop.figure` is the one place
+matplotlib is configured and figures are saved.
+"""
+
+import dataclasses
+import importlib
+
+from ..errors import InputError
+
+__all__ = ["Target", "TARGETS", "target_function", "target_module"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """One reproducible table or figure.
+
+    Attributes
+    ----------
+    paper : str
+        The paper's citation key, e.g. ``"[Shen 2024]"``.
+    item : str
+        What of the paper it reproduces, e.g. ``"Table 4"``.
+    description : str
+        One line on what is compared.
+    function : str
+        ``"module:function"`` computing the JSON document.
+    """
+
+    paper: str
+    item: str
+    description: str
+    function: str
+
+    @property
+    def help(self):
+        """One-line help: ``"[Shen 2024] Table 4: ..."``."""
+        return f"{self.paper} {self.item}: {self.description}"
+
+
+#: Registry of reproducible targets (names are part of the CLI contract).
+TARGETS = {
+    "align-fig2": Target("[Qu 2024]", "Fig. 1-2", "max alignment errors vs pitch, all attitudes",
+                         "leosop.repro.alignment:fig2"),
+    "align-table1": Target("[Qu 2024]", "Table 1", "turntable alignment at 80 deg pitch",
+                           "leosop.repro.alignment:table1"),
+    "errmodel-table3": Target("[Chu 2009]", "Table 3", "150 s errors of the 9-state error model",
+                              "leosop.repro.error_model:table3"),
+    "errmodel-validate": Target("[Chu 2009]", "sec. 3", "short-time error models vs strapdown",
+                                "leosop.repro.error_model:validate"),
+    "table2": Target("[Shen 2024]", "Table 2", "grid ML vs FMLEF (and fast) run time, N = 3e5",
+                     "leosop.repro.doppler_tables:table2"),
+    "table3": Target("[Shen 2024]", "Table 3", "grid ML vs FMLEF (and fast) run time per block length",
+                     "leosop.repro.doppler_tables:table3"),
+    "table4": Target("[Shen 2024]", "Table 4", "INS alone vs Starlink/INS, Xi'an-Baoji flight",
+                     "leosop.repro.fusion_tables:table4"),
+    "table5": Target("[Shen 2024]", "Table 5", "Starlink/INS errors vs correction period",
+                     "leosop.repro.fusion_tables:table5"),
+    "table6": Target("[Shen 2024]", "Table 6", "Starlink/INS errors vs orbit error",
+                     "leosop.repro.fusion_tables:table6"),
+    "ppp-ins": Target("[Liu 2016]", "sec. 4", "vehicle test, simulated: float vs fixed PPP/INS",
+                      "leosop.gnss.ppp_ins_study:ppp_ins_table"),
+    "multi": Target("[Shen 2024]", "extension", "multi-constellation LEO/INS in thin skies: loose vs tight, "
+                    "Starlink vs all", "leosop.repro.multi:multi"),
+}
+
+
+def target_module(name):
+    """The module holding target ``name``'s function.
+
+    Raises
+    ------
+    InputError
+        ``name`` is not a registered target.
+    """
+    if name not in TARGETS:
+        raise InputError(f"reproduce: unknown target {name!r}; expected one of {', '.join(TARGETS)}")
+    return importlib.import_module(TARGETS[name].function.split(":")[0])
+
+
+def target_function(name):
+    """The function computing target ``name``'s JSON document (see :func:`target_module`)."""
+    return getattr(target_module(name), TARGETS[name].function.split(":")[1])
