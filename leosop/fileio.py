@@ -19,7 +19,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["atomic_path", "atomic_files", "atomic_outputs", "check_output_file", "check_output_dir", "write_json",
+__all__ = ["atomic_path", "atomic_files", "atomic_outputs", "check_input_file", "check_output_file", "check_output_dir", "write_json",
            "write_csv"]
 
 
@@ -53,6 +53,32 @@ def _renamed(exc, tmp, path):
     if tmp is None and Path(name).name.startswith(f".{Path(path).name}."):
         return OSError(exc.errno, exc.strerror, str(path))
     return exc
+
+
+def check_input_file(path, what):
+    """Refuse an input path that is not a readable regular file, saying which of those it is.
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str
+        What the file should be, for the message (``"measurement file"``).
+
+    Raises
+    ------
+    InputError
+        ``path`` does not exist, is a directory, is not a regular file (a
+        device such as ``/dev/null``, a pipe, a socket) or cannot be read.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such {what}")
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, expected a {what}")
+    if not path.is_file():
+        raise InputError(f"{path}: not a regular file (a device, pipe or socket), expected a {what}")
+    if not os.access(path, os.R_OK):
+        raise InputError(f"{path}: no permission to read the {what}")
 
 
 def check_output_file(path, option):

@@ -105,6 +105,16 @@ def test_bad_options_are_exit_2(capsys, table, argv, message):
     assert status == 2 and message in err
 
 
+@pytest.mark.parametrize("path, message", [
+    ("/nonexistent.csv", "no such measurement file"),
+    ("/dev/null", "not a regular file (a device, pipe or socket), expected a measurement file"),
+    ("/", "is a directory, expected a measurement file"),
+])
+def test_measurement_path_that_is_no_file_says_what_it_is(capsys, path, message):
+    status, _, err = _run(capsys, path)
+    assert status == 2 and message in err
+
+
 def test_static_with_pass_id_column_solves_passes_jointly(capsys, tmp_path):
     """Two VHF passes (satellite states in the table), each with its own transmitter offset."""
     f0 = 145.87e6

@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
+from ..geometry.doppler import N_DOPPLER_STATES
 from ..orbits import load_constellation
 from ..positioning.robust_ls import FixStatus
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
@@ -137,7 +138,7 @@ def solutions_doc(res, meas):
         solutions = [
             _solution(res.t_s[k], utc(k), f.pos_ecef_m[k], f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k],
                       res.n_sats[k], f.n_used[k], f.iterations[k], rms[k], f.status[k], f.cov[k, :3, :3])
-            for k in np.flatnonzero(res.n_sats >= (7 if res.n_need is None else res.n_need))
+            for k in np.flatnonzero(res.n_sats >= (N_DOPPLER_STATES if res.n_need is None else res.n_need))
         ]
         if len(res.clock_labels) > 1:
             names = [res.clock_labels[j] for j in f.clock_labels]

@@ -9,6 +9,7 @@ from sgp4 import omm
 from sgp4.api import Satrec
 
 from ..errors import InputError
+from ..fileio import check_input_file
 from .constellation import Constellation
 from .tle import check_elements, satrec_epoch_utc
 
@@ -35,8 +36,7 @@ def read_omm(path):
     Constellation
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such OMM file")
+    check_input_file(path, "OMM file")
     text = path.read_text(encoding="utf-8-sig", errors="replace")  # a BOM (spreadsheet exports) is not a field
     if not text.strip():
         raise InputError(f"{path}: empty file, expected OMM element sets")

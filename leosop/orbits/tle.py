@@ -18,6 +18,7 @@ import numpy as np
 from sgp4.api import Satrec
 
 from ..errors import InputError
+from ..fileio import check_input_file
 from .constellation import Constellation
 
 __all__ = ["read_tle", "parse_tle_lines", "tle_checksum", "satrec_epoch_utc", "check_elements"]
@@ -196,10 +197,7 @@ def read_tle(path, *, skip_bad=False):
     Constellation
     """
     path = Path(path)
-    if path.is_dir():
-        raise InputError(f"{path}: is a directory, expected a TLE file")
-    if not path.exists():
-        raise InputError(f"{path}: no such TLE file")
+    check_input_file(path, "TLE file")
     data = path.read_bytes()
     if not data.strip():
         raise InputError(f"{path}: empty file, expected TLE records")

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..constants import C_MPS, DAY_S, OMEGA_E_RAD_PER_S, STARLINK_PILOT_HZ
 from ..errors import InputError
-from ..fileio import write_csv
+from ..fileio import check_input_file, write_csv
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import format_utc, seconds_since
 
@@ -138,8 +138,7 @@ def read_measurements(path, *, carrier_hz=None, constellation=None):
         Only accepted rows; the others are listed in ``rejected``.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such measurement file")
+    check_input_file(path, "measurement file")
     with open(path, newline="", encoding="utf-8", errors="replace") as fh:
         rows = [r for r in csv.reader(fh)]
     numbered = [(k + 1, r) for k, r in enumerate(rows) if r and any(c.strip() for c in r)]

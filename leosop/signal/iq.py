@@ -16,7 +16,7 @@ import numpy as np
 
 from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
-from ..fileio import atomic_files
+from ..fileio import atomic_files, check_input_file
 from ..timebase import format_utc, parse_utc
 
 __all__ = ["DATATYPES", "Capture", "Recording", "open_sigmf", "open_raw", "write_sigmf", "write_sigmf_files"]
@@ -92,10 +92,12 @@ class Recording:
     def duration_s(self):
         return self.n_samples / self.sample_rate_hz
 
-    def read(self, start, count):
+    def read(self, start, count, check_finite=True):
         """Samples ``start .. start+count-1`` as complex64, shape (count,).
 
-        Raises InputError if the range leaves the recording or holds NaN/inf.
+        Raises InputError if the range leaves the recording or (with
+        ``check_finite``, for a caller that does not detect them itself)
+        holds NaN/inf.
         """
         if start < 0 or count < 0 or start + count > self.n_samples:
             raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
@@ -107,7 +109,7 @@ class Recording:
         del mm
         if scale != 1.0:
             raw *= scale
-        elif not np.all(np.isfinite(raw)):
+        elif check_finite and not np.all(np.isfinite(raw)):
             bad = start + int(np.flatnonzero(~np.isfinite(raw))[0]) // 2
             raise InputError(f"{self.data_path}: sample {bad} is NaN or inf")
         return raw.view(np.complex64)
@@ -170,8 +172,7 @@ def open_sigmf(meta_path, *, verify=True):
         meta_path = meta_path.with_suffix(".sigmf-meta")
     if meta_path.suffix != ".sigmf-meta":
         raise InputError(f"{meta_path}: expected a .sigmf-meta file")
-    if not meta_path.is_file():
-        raise InputError(f"{meta_path}: no such SigMF metadata file")
+    check_input_file(meta_path, "SigMF metadata file")
     data_path = meta_path.with_suffix(".sigmf-data")
     if not data_path.is_file():
         raise InputError(f"{data_path}: missing SigMF data file for {meta_path.name}")
@@ -338,8 +339,7 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
     if datatype not in DATATYPES:
         raise InputError(f"--dtype {dtype!r}: expected cf32 or ci16")
     fs = _check_rate(sample_rate_hz, "--sample-rate-hz")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    check_input_file(path, "raw IQ file")
     try:
         start_utc = parse_utc(start, name="--start") if start is not None else None
     except ValueError as exc:
