@@ -218,10 +218,21 @@ def _clear(stage):
         stage.rmdir()
 
 
-def write_json(path, obj):
-    """Write ``obj`` as indented JSON, atomically."""
+def write_json(path, obj, *, compact=False):
+    """Write ``obj`` as JSON, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    obj : JSON-serialisable object
+    compact : bool
+        One line without spaces, for large documents (per-epoch lists such as
+        ``visibility.json``: indenting puts every number on its own line and
+        makes the file several times larger); else indented by 2 for reading.
+    """
+    text = json.dumps(obj, separators=(",", ":")) if compact else json.dumps(obj, indent=2)
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2) + "\n")
+        tmp.write_text(text + "\n")
 
 
 def write_csv(path, header, rows):

@@ -30,7 +30,9 @@ def test_json_contract_and_outputs(tmp_path, capsys):
         assert (g is None) == (n < 7)
     for name in ("visibility.json", "visibility.csv", "passes.csv", "visibility.png", "skyplot.png"):
         assert (tmp_path / name).stat().st_size > 0
-    assert json.loads((tmp_path / "visibility.json").read_text()) == doc
+    text = (tmp_path / "visibility.json").read_text()
+    assert json.loads(text) == doc
+    assert text.count("\n") == 1 and ", " not in text  # compact: the per-epoch lists make it large
     # The CSV's Doppler GDOP column carries its unit in the header and the JSON's values (4 decimals written).
     with open(tmp_path / "visibility.csv") as fh:
         rows = list(csv.DictReader(fh))

@@ -218,7 +218,7 @@ def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f
 
     keys = ["t_s", "time_utc", "doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz", "status"]
     write_csv(out / "doppler.csv", keys, [[e[k] for k in keys] for e in doc["estimates"]])
-    write_json(out / "doppler.json", doc)
+    write_json(out / "doppler.json", doc, compact=True)
     power = np.concatenate(fig_cols, axis=1)
     f_hz = (np.arange(nperseg) - nperseg // 2) * fs / nperseg
     rows = nperseg // power.shape[0]

@@ -136,7 +136,7 @@ def _write_outputs(out, doc, vis, gdop, times, mask, title):
 def _write_files(out, doc, vis, gdop, times, mask, title):
     from ..orbits.plots import plot_skyplot, plot_visibility
 
-    write_json(out / "visibility.json", doc)
+    write_json(out / "visibility.json", doc, compact=True)
     t_s = seconds_since(times, times[0])
     dops = vis.range_dops()
     blank = lambda x: "" if not np.isfinite(x) else f"{x:.4f}"  # noqa: E731
