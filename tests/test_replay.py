@@ -170,6 +170,24 @@ def test_truncated_recording_is_refused_without_outputs(snapshot_recording, tmp_
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
 
 
+def test_nan_samples_are_refused_naming_the_file_and_samples(snapshot_recording, tmp_path, capsys):
+    # replay reads without a pass over the samples for NaN/inf: the block's FFT shows them.
+    path, _ = snapshot_recording
+    raw = np.fromfile(path.with_suffix(".sigmf-data"), dtype=np.float32)
+    raw[2 * 123_456 + 1] = np.nan  # the imaginary part of sample 123,456 (the third snapshot)
+    bad = tmp_path / "nan.sigmf-meta"
+    meta = json.loads(path.read_text())
+    meta["global"].pop("core:sha512", None)
+    bad.write_text(json.dumps(meta))
+    raw.tofile(tmp_path / "nan.sigmf-data")
+    code, _, err = _replay(capsys, str(bad), "--out", str(tmp_path / "o"))
+    assert code == 2 and err.count("\n") == 1
+    assert "nan.sigmf-data" in err and "NaN or inf" in err
+    lo, hi = (int(v) for v in err.split("samples ")[1].split(" hold")[0].split(".."))
+    assert lo <= 123_456 <= hi
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
 def test_narrow_keeps_each_tone_with_its_phase_at_the_decimated_times():
     from leosop.replay.pipeline import narrow
 

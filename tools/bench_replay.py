@@ -1,6 +1,6 @@
 """Replay benchmarks: identification, static fix, throughput and memory.
 
-    python tools/bench_replay.py [--quick] [--memory-gb G]
+    python tools/bench_replay.py [--quick] [--memory-gb G] [--sats N] [--parts fix,throughput,memory]
 
 1. Static fix from 150 snapshots of 20 ms (2.5 MS/s, the satellites above
    40 deg, along-track orbit errors of a few hundred metres and satellite
@@ -9,8 +9,8 @@
    ideal estimator that knows the identities (the recording's truth labels
    given to the same tracks, then the same solver), and both without the
    per-satellite time-offset states. Errors against the generating site.
-2. Throughput: a continuous 2.5 MS/s recording with the satellites above
-   40 deg, replayed in 0.1 s blocks; the real-time factor is recording
+2. Throughput: a continuous 2.5 MS/s recording with ``--sats`` of the
+   satellites above 40 deg (7, as the goal), replayed in 0.1 s blocks; the real-time factor is recording
    length over processor time (one thread), for the streaming stage (read,
    search, track: what grows with the recording) and end to end
    (identification and fix run once per recording, a few seconds).
@@ -111,20 +111,25 @@ def bench_fix(tmp, seeds):
           f"{np.median(a[:, 5]):.1f} m")
 
 
-def bench_throughput(tmp, seconds):
+def bench_throughput(tmp, seconds, n_sats, repeats=3):
     path = Path(tmp) / "cont.sigmf-meta"
-    _generate(path, "--duration-s", str(seconds), "--seed", "1")
+    _generate(path, "--duration-s", "0.1", "--seed", "1")
+    visible = [s["sat_id"] for s in json.loads(path.read_text())["global"]["leosop:satellites"]]
+    _generate(path, "--duration-s", str(seconds), "--seed", "1", "--sat", *visible[:n_sats])
     rec = open_sigmf(path)
     const = load_constellation()
-    t0 = time.process_time()
-    res = replay(rec, const, block_s=0.1, init_pos_ecef_m=INIT_ECEF, static=True)
-    dt = time.process_time() - t0
-    n_sats = len({a.get("leosop:sat_id") for a in rec.annotations if "leosop:sat_id" in a})
+    runs = []
+    for _ in range(repeats):  # the least CPU of a few runs: other processes only ever add to it
+        t0 = time.process_time()
+        res = replay(rec, const, block_s=0.1, init_pos_ecef_m=INIT_ECEF, static=True)
+        runs.append((res.cpu_s["blocks"], time.process_time() - t0, res))
+    blocks_s, total_s, res = min(runs, key=lambda r: r[0])
     cpu = res.cpu_s
-    print(f"throughput: {seconds:g} s at 2.5 MS/s with {n_sats} satellites: blocks (read, search, track) "
-          f"{cpu['blocks']:.1f} s CPU = {seconds / cpu['blocks']:.1f}x real time; identification "
-          f"{cpu['identify']:.1f} s and fix {cpu['fix']:.1f} s once per recording; end to end "
-          f"{seconds / dt:.1f}x ({len(res.tracks)} tracks, {sum(t.sat_id is not None for t in res.tracks)} "
+    print(f"throughput: {seconds:g} s at 2.5 MS/s with {min(n_sats, len(visible))} satellites (best of {repeats}; "
+          f"load {os.getloadavg()[0]:.1f}): blocks (read, search, track) {blocks_s:.2f} s CPU = "
+          f"{seconds / blocks_s:.1f}x real time (runs: {', '.join(f'{seconds / r[0]:.1f}x' for r in runs)}); "
+          f"identification {cpu['identify']:.1f} s and fix {cpu['fix']:.1f} s once per recording; end to end "
+          f"{seconds / total_s:.1f}x ({len(res.tracks)} tracks, {sum(t.sat_id is not None for t in res.tracks)} "
           "identified)")
     return path
 
@@ -150,9 +155,12 @@ def bench_memory(tmp, small, gigabytes):
     meta["annotations"] = []
     big.write_text(json.dumps(meta))
     size_gb = big.with_suffix(".sigmf-data").stat().st_size / 1e9
-    small_mb = _peak_rss_mb(["replay", str(small), "--static", "--json"])
+    # With the prior: the tiled file breaks every track at each seam, and a global search over
+    # hundreds of fragments measures the search, not the streaming this test is about.
+    init = "34.98,109.71,0"
+    small_mb = _peak_rss_mb(["replay", str(small), "--static", "--init", init, "--json"])
     t0 = time.perf_counter()
-    big_mb = _peak_rss_mb(["replay", str(big), "--static", "--json"])
+    big_mb = _peak_rss_mb(["replay", str(big), "--static", "--init", init, "--json"])
     print(f"memory: peak RSS {small_mb:.0f} MB on {len(data) / 1e6:.0f} MB, {big_mb:.0f} MB on {size_gb:.1f} GB "
           f"(ratio {big_mb / small_mb:.2f}; {time.perf_counter() - t0:.0f} s)")
 
@@ -161,9 +169,15 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="2 recordings instead of 10, 5 s continuous")
     ap.add_argument("--memory-gb", type=float, default=3.0, help="size of the memory test file (0 to skip)")
+    ap.add_argument("--sats", type=int, default=7, help="satellites in the throughput recording (default 7)")
+    ap.add_argument("--parts", default="fix,throughput,memory", help="which benchmarks, comma-separated "
+                    "(default fix,throughput,memory)")
     a = ap.parse_args()
+    parts = set(a.parts.split(","))
     with tempfile.TemporaryDirectory() as tmp:
-        bench_fix(tmp, range(2) if a.quick else range(10))
-        small = bench_throughput(tmp, 5.0 if a.quick else 20.0)
-        if a.memory_gb > 0:
+        if "fix" in parts:
+            bench_fix(tmp, range(2) if a.quick else range(10))
+        if parts & {"throughput", "memory"}:
+            small = bench_throughput(tmp, 5.0 if a.quick else 20.0, a.sats)
+        if "memory" in parts and a.memory_gb > 0:
             bench_memory(tmp, small, a.memory_gb)

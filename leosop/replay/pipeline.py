@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import InputError
 from ..positioning.measurements import MAX_TLE_AGE_DAYS, Measurements
 from ..signal.fine import cubic_bias_hz
-from ..signal.multicomb import find_combs
+from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
 from .tracks import Detections, Tracker, join_fragments, remove_outliers
@@ -317,19 +317,25 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     spec_t, spec = [], []
     block_len = {}
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
-        iq = narrow(rec.read(b.start, b.n_samples), factor)
+        # NaN/inf samples: find_combs sees them in the block's FFT (every bin turns NaN), which
+        # spares read() a pass over the samples (~5 % of the streaming time).
+        iq = narrow(rec.read(b.start, b.n_samples, check_finite=False), factor)
         # Tracking mode between full searches, where blocks follow each other.
         # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
         contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
         pred = tracker.predictions(b.t_s) if contiguous else None
-        if pred is None:
-            found = find_combs(iq, fs, comb=comb)
-        else:
-            # Every SEARCH_EVERY-th block also searches the spectrum for new
-            # combs, with the tracked ones fitted first and removed.
-            search = k % SEARCH_EVERY == 0
-            found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                               search=search, gate_hz=TRACK_GATE_HZ, n_refine=2 if search else TRACK_REFINE)
+        try:
+            if pred is None:
+                found = find_combs(iq, fs, comb=comb)
+            else:
+                # Every SEARCH_EVERY-th block also searches the spectrum for new
+                # combs, with the tracked ones fitted first and removed.
+                search = k % SEARCH_EVERY == 0
+                found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
+                                   search=search, gate_hz=TRACK_GATE_HZ, n_refine=2 if search else TRACK_REFINE)
+        except NonFiniteSamples:
+            raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
+                             "inf") from None
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
         shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz

@@ -33,6 +33,15 @@ def fft(x, n=None, *, scratch=False):
     """
     x = np.asarray(x)
     dtype = np.complex64 if x.dtype == np.complex64 else np.complex128
-    plan = _plan(x.shape, int(n or x.shape[-1]), np.dtype(dtype).str)
-    out = plan(x.astype(dtype, copy=False))
+    n = int(n or x.shape[-1])
+    plan = _plan(x.shape, n, np.dtype(dtype).str)
+    # Filled and executed directly: the plan's __call__ checks and copies the
+    # input again (~0.4 ms of a 1.4 ms FFT at N = 2.5e5).
+    buf = plan.input_array
+    m = min(n, x.shape[-1])
+    buf[..., :m] = x[..., :m]
+    if m < n:
+        buf[..., m:] = 0
+    plan.execute()
+    out = plan.output_array
     return out if scratch else out.copy()

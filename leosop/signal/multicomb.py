@@ -86,7 +86,7 @@ from .fine import (_decimation, _dechirped_peak, _newton, _phasors, _rate_dpt, _
 from .fft import fft
 from .pilot import PilotComb
 
-__all__ = ["Combs", "find_combs"]
+__all__ = ["Combs", "NonFiniteSamples", "find_combs"]
 
 #: Tone positions decimated beyond each end of a comb for the coherent position check.
 _EXTRA = 2
@@ -98,6 +98,10 @@ _ALIAS_BANDS = 2
 _LEAK_BANDS = _ALIAS_BANDS + 0.5
 #: Decimated rate over the band a tracked tone can cover (the search uses 8).
 _TRACK_OVERSAMPLE = 4.0
+
+
+class NonFiniteSamples(InputError):
+    """The block holds NaN or inf samples (seen in its FFT: every bin turns NaN)."""
 
 
 @dataclass(frozen=True)
@@ -187,7 +191,7 @@ class _Grid:
         if self._spectrum is None:
             self._spectrum = fft(self._iq, self.n_fft, scratch=True)  # valid for this block's work
             if not np.isfinite(self._spectrum[0]):
-                raise InputError("IQ samples contain NaN or inf")
+                raise NonFiniteSamples("IQ samples contain NaN or inf")
         return self._spectrum
 
     def channels(self, f_c):
@@ -562,7 +566,7 @@ def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa):
     n = iq.shape[-1]
     spectrum = fft(iq)
     if not np.isfinite(spectrum[0]):
-        raise InputError("IQ samples contain NaN or inf")
+        raise NonFiniteSamples("IQ samples contain NaN or inf")
     n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * n / fs)))
     for d, r, a in zip(found.doppler_hz, found.doppler_rate_hz_per_s, found.amplitudes):
         _subtract_spectrum(spectrum, comb, _Comb(d, None, doppler_hz=d, rate=r, amp=a), n, fs, n_seg_s)
@@ -712,7 +716,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     if search and len(combs) < max_combs:
         spectrum = grid.spectrum.copy() if grid.n_fft == n else fft(iq)
         if not np.isfinite(spectrum[0]):
-            raise InputError("IQ samples contain NaN or inf")
+            raise NonFiniteSamples("IQ samples contain NaN or inf")
         n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * dur)))
         for c in combs:
             _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
