@@ -123,3 +123,16 @@ def test_bad_waypoints_are_input_errors():
         trajectory.flight([[34.0, 108.0], [34.1, 108.0]], alt_m=100.0, speed_mps=0.0)
     with pytest.raises(InputError, match="too short"):
         trajectory.flight([[34.0, 108.0, 0.0], [34.01, 108.0, 5000.0]], speed_mps=100.0)
+
+
+def test_blockwise_imu_integration_is_identical_to_one_block(monkeypatch):
+    # The IMU increments are integrated a block of intervals at a time to bound memory;
+    # the block size must not change a single bit (per-interval arithmetic only).
+    from leosop.ins import trajectory as tr
+
+    wps = [[34.342, 108.940, 3000.0], [34.363, 108.5, 3000.0], [34.5, 108.4, 3100.0]]
+    one = tr.flight(wps, rate_hz=100.0, duration_s=60.0)
+    monkeypatch.setattr(tr, "_BLOCK_INTERVALS", 7)
+    blocks = tr.flight(wps, rate_hz=100.0, duration_s=60.0)
+    assert np.array_equal(one.dtheta_b_rad, blocks.dtheta_b_rad)
+    assert np.array_equal(one.dvel_b_mps, blocks.dvel_b_mps)

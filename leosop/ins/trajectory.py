@@ -40,6 +40,8 @@ XIAN_DEG = (34.342, 108.940)
 BAOJI_DEG = (34.363, 107.239)
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+#: IMU intervals integrated per block (bounds the memory of long trajectories).
+_BLOCK_INTERVALS = 20_000
 _RTOL = 1e-12
 _ATOL = np.array([1e-14, 1e-14, 1e-8, 1e-14, 1e-12])  # lat, lon [rad], h [m], heading, roll [rad]
 
@@ -221,13 +223,17 @@ class _Builder:
             raise InputError(f"duration_s={duration_s} is longer than the profile ({self.t} s)")
         t = np.arange(n) / rate_hz
         truth = self._evaluate(t)
-        # Gauss-Legendre nodes of every interval, shape (n - 1, 4).
+        # Gauss-Legendre nodes of every interval, (intervals, 4), a block of
+        # intervals at a time: the evaluation's temporaries (~2 kB per
+        # interval) would otherwise grow with the duration (5 GB for 6 h).
         half = 0.5 / rate_hz
-        nodes = (t[:-1, None] + half) + half * _GL_X[None, :]
-        at_nodes = self._evaluate(nodes.ravel())
         w = (half * _GL_W)[None, :, None]
-        dtheta = np.sum(at_nodes["w_ib_b"].reshape(n - 1, 4, 3) * w, axis=1)
-        dvel = np.sum(at_nodes["f_b"].reshape(n - 1, 4, 3) * w, axis=1)
+        dtheta, dvel = np.empty((n - 1, 3)), np.empty((n - 1, 3))
+        for k0 in range(0, n - 1, _BLOCK_INTERVALS):
+            tk = t[k0: min(k0 + _BLOCK_INTERVALS, n - 1)]
+            at_nodes = self._evaluate(((tk[:, None] + half) + half * _GL_X[None, :]).ravel())
+            dtheta[k0: k0 + tk.size] = np.sum(at_nodes["w_ib_b"].reshape(tk.size, 4, 3) * w, axis=1)
+            dvel[k0: k0 + tk.size] = np.sum(at_nodes["f_b"].reshape(tk.size, 4, 3) * w, axis=1)
         return Trajectory(t, truth["lat"], truth["lon"], truth["h"], truth["vel"], truth["C_n_b"], dtheta, dvel)
 
     def _evaluate(self, t):
