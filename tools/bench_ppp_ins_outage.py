@@ -9,13 +9,14 @@ run, from the float one. Printed per run and as median / worst over the seeds:
 - ``sigma_end_m``: the filter's 3-D position sigma at the last outage epoch;
 - ``wl_s``: seconds after the outage until ``min_fixed`` wide-lanes are fixed;
 - ``refix_s``: seconds after the outage until the first narrow-lane fix;
-- ``wrong``: fixed epochs after the outage whose 3-D error exceeds half a narrow-lane wavelength (5 cm).
+- ``wrong``: fixed epochs after the outage whose 3-D error exceeds half a narrow-lane wavelength (5 cm);
+  ``wrong_run`` the same over the whole run; ``first_fix_s`` the first fix of the run.
 
 Beside them, the closed form of the horizontal drift from gyro angle random walk alone (tilt random walk
 ``q``; per axis ``g q t^2.5 / sqrt(20)``), the floor no filter tuning removes.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ins_outage.py [--seeds 10] [--grades fog navigation]
-[--duration 900] [--jobs 2]``
+[--duration 900] [--jobs 2] [--set wl_min_epochs=3 ...]``
 """
 
 import argparse
@@ -35,9 +36,11 @@ OUTAGE_S = 60.0
 
 
 def one(args):
-    seed, grade, bridge, duration, outage_at = args
+    seed, grade, bridge, duration, outage_at, overrides = args
     products = ppp_ins_study._products()
-    opts = dataclasses.replace(ppp_ins.PppInsOptions(), bridge_fixed=bridge)
+    # The baseline: the default options, bridged from the float solution.
+    opts = (dataclasses.replace(ppp_ins.PppInsOptions(), **overrides) if bridge
+            else dataclasses.replace(ppp_ins.PppInsOptions(), bridge_fixed=False))
     truth, res = ppp_ins_study.scenario(seed, duration_s=duration, outage_at_s=outage_at, products=products,
                                         grade=grade, options=opts)
     t = res.t_s - res.t_s[0]
@@ -53,7 +56,9 @@ def one(args):
             "max_err_m": float(err_f[during].max()), "sigma_end_m": float(sig[during][-1]),
             "wl_s": float(t[wl[0]] - end) if wl.size else np.nan,
             "refix_s": float(t[nl[0]] - end) if nl.size else np.nan,
-            "wrong": int(np.sum(err_x[nl] > 0.05))}
+            "wrong": int(np.sum(err_x[nl] > 0.05)),
+            "wrong_run": int(np.sum(err_x[np.isfinite(err_x)] > 0.05)),
+            "first_fix_s": float(t[np.argmax(np.isfinite(err_x))]) if np.isfinite(err_x).any() else np.nan}
 
 
 def arw_drift_m(grade, t_s):
@@ -67,9 +72,15 @@ def main():
     ap.add_argument("--grades", nargs="+", default=["fog", "navigation"], choices=sorted(ppp_ins_study.GRADES))
     ap.add_argument("--duration", type=float, default=900.0)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--set", nargs="*", default=[], metavar="OPTION=VALUE",
+                    help="PppInsOptions fields changed in the bridged runs (e.g. wl_min_epochs=3)")
     a = ap.parse_args()
+    fields = {f.name: f.type for f in dataclasses.fields(ppp_ins.PppInsOptions)}
+    overrides = {k: (lambda v: v == "True") if fields[k] is bool else fields[k](v)
+                 for k, v in (kv.split("=", 1) for kv in a.set)}
     outage_at = 2.0 * a.duration / 3.0
-    cases = [(s, g, b, a.duration, outage_at) for g in a.grades for b in (True, False) for s in range(a.seeds)]
+    cases = [(s, g, b, a.duration, outage_at, overrides) for g in a.grades for b in (True, False)
+             for s in range(a.seeds)]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(a.jobs) as pool:
         rows = list(pool.map(one, cases))
@@ -82,14 +93,17 @@ def main():
               f"in {OUTAGE_S:g} s")
         for b in (True, False):
             sel = [r for r in rows if r["grade"] == g and r["bridge"] == b]
-            name = "bridged from the fixed solution" if b else "bridged from the float solution (baseline)"
+            name = (f"bridged from the fixed solution {overrides or ''}" if b
+                    else "bridged from the float solution (baseline)")
             parts = []
             for k in ("max_err_m", "sigma_end_m", "wl_s", "refix_s"):
                 v = np.array([r[k] for r in sel])
                 ok = np.isfinite(v)
                 parts.append(f"{k} median {np.median(v[ok]):.2f} worst {v[ok].max():.2f}"
                              + ("" if ok.all() else f" (none in {np.sum(~ok)} runs)") if ok.any() else f"{k} -")
-            print(f"  {name}: " + "; ".join(parts) + f"; wrong fixes {sum(r['wrong'] for r in sel)} epochs")
+            print(f"  {name}: " + "; ".join(parts) + f"; wrong fixes {sum(r['wrong'] for r in sel)} epochs after "
+                  f"the outage, {sum(r['wrong_run'] for r in sel)} in the runs; first fix median "
+                  f"{np.nanmedian([r['first_fix_s'] for r in sel]):.0f} s")
 
 
 if __name__ == "__main__":
