@@ -20,10 +20,7 @@ fuzz_readers = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(fuzz_readers)
 
 #: Findings still open, by file name: where the fix belongs.
-OPEN = {
-    "scenario/crash-235ef9dd2faf8ce7": "scenarios.py load_scenario: a non-UTF-8 file raises UnicodeDecodeError "
-                                       "(the CLI turns it into exit 2, but without the file name)",
-}
+OPEN = {}
 
 
 def _cases():
