@@ -1,19 +1,21 @@
 """Replay benchmarks: identification, static fix, throughput and memory.
 
     python tools/bench_replay.py [--quick] [--memory-gb G] [--sats N] [--parts fix,throughput,memory]
+                                 [--tle FILE --start ISO]
 
-1. Static fix from 150 snapshots of 20 ms (2.5 MS/s, the satellites above
-   40 deg, along-track orbit errors of a few hundred metres and satellite
+1. Static fix from 150 snapshots of 20 ms (2.5 MS/s, ``--sats`` of the
+   satellites above 40 deg drawn per recording, along-track orbit errors of a few hundred metres and satellite
    clock offsets of a few Hz drawn by ``leosop generate``), identified against
    the element sets with a prior 100 km off. Beside it, in the same run, the
    ideal estimator that knows the identities (the recording's truth labels
    given to the same tracks, then the same solver), and both without the
    per-satellite time-offset states. Errors against the generating site.
 2. Throughput: a continuous 2.5 MS/s recording with ``--sats`` of the
-   satellites above 40 deg (7, as the goal), replayed in 0.1 s blocks; the real-time factor is recording
-   length over processor time (one thread), for the streaming stage (read,
-   search, track: what grows with the recording) and end to end
-   (identification and fix run once per recording, a few seconds).
+   satellites above 40 deg (7, as the goal), replayed in 0.1 s blocks; the
+   real-time factor is recording length over processor time (one thread),
+   for the streaming stage (read, search, track: what grows with the
+   recording) and end to end (identification and fix run once per
+   recording, a few seconds).
 3. Memory: peak RSS of ``leosop replay`` on a large recording (the data of
    a short generated recording repeated to ``--memory-gb``), beside the peak
    RSS on the short one: bounded by the block, not the file.
@@ -44,11 +46,23 @@ START = "2025-01-01T19:40:00Z"
 INIT_ECEF = geodetic_to_ecef(np.radians(34.98), np.radians(109.71), 0.0)  # ~100 km off
 
 
+#: Element sets and start of the generated recordings (``--tle``, ``--start``; default the bundled set).
+SKY = {"tle": None, "start": START}
+
+
 def _generate(path, *extra):
-    argv = ["generate", "-o", str(path), "--site", ",".join(map(str, SITE)), "--start", START,
-            "--sample-rate-hz", "2.5e6", "--mask-deg", "40", *extra]
+    argv = ["generate", "-o", str(path), "--site", ",".join(map(str, SITE)), "--start", SKY["start"],
+            "--sample-rate-hz", "2.5e6", "--mask-deg", "40", *(["--tle", SKY["tle"]] if SKY["tle"] else []), *extra]
     if main(argv) != 0:
         raise SystemExit("generate failed")
+
+
+def _visible(tmp, n_sats, seed):
+    """``n_sats`` of the satellites above 40 deg at the start, drawn with ``seed`` (all if fewer)."""
+    path = Path(tmp) / "probe.sigmf-meta"
+    _generate(path, "--duration-s", "0.1")
+    ids = [s["sat_id"] for s in json.loads(path.read_text())["global"]["leosop:satellites"]]
+    return list(np.random.default_rng(seed).permutation(ids)[:n_sats])
 
 
 def _truth_ids(rec, tracks):
@@ -75,14 +89,14 @@ def _error_m(position, site_ecef):
     return float(np.linalg.norm(f.pos_ecef_m - site_ecef))
 
 
-def bench_fix(tmp, seeds):
-    const = load_constellation()
+def bench_fix(tmp, seeds, n_sats):
+    const = load_constellation(SKY["tle"])
     site = geodetic_to_ecef(np.radians(SITE[0]), np.radians(SITE[1]), SITE[2])
     rows = []
     for seed in seeds:
         path = Path(tmp) / f"snap{seed}.sigmf-meta"
         _generate(path, "--duration-s", "150", "--snapshot-s", "0.02", "--period-s", "1", "--seed", str(seed),
-                  "--orbit-error-along-m", "300", "--sat-offset-max-hz", "5")
+                  "--orbit-error-along-m", "300", "--sat-offset-max-hz", "5", "--sat", *_visible(tmp, n_sats, seed))
         rec = open_sigmf(path)
         t0 = time.perf_counter()
         res = replay(rec, const, block_s=0.02, init_pos_ecef_m=INIT_ECEF, static=True)
@@ -104,7 +118,8 @@ def bench_fix(tmp, seeds):
               f"ideal {rows[-1][5]:.1f} m, ideal without time offsets {rows[-1][6]:.1f} m, replay {run_s:.1f} s",
               flush=True)
     a = np.array([r[1:] for r in rows], dtype=float)
-    print(f"static fix, 150 x 20 ms snapshots, 300 m along-track errors, {len(rows)} recordings: tracks "
+    print(f"static fix, {len(const)} candidates, {n_sats} satellites, 150 x 20 ms snapshots, 300 m along-track "
+          f"errors, {len(rows)} recordings: tracks "
           f"{int(a[:, 0].sum())}, identified right {int(a[:, 1].sum())}, wrong {int(a[:, 2].sum())}; "
           f"median error replay {np.median(a[:, 3]):.1f} m, ideal (identities known) {np.median(a[:, 4]):.1f} m, "
           f"ratio {np.median(a[:, 3]) / np.median(a[:, 4]):.2f}; without orbit-error states "
@@ -113,11 +128,10 @@ def bench_fix(tmp, seeds):
 
 def bench_throughput(tmp, seconds, n_sats, repeats=3):
     path = Path(tmp) / "cont.sigmf-meta"
-    _generate(path, "--duration-s", "0.1", "--seed", "1")
-    visible = [s["sat_id"] for s in json.loads(path.read_text())["global"]["leosop:satellites"]]
-    _generate(path, "--duration-s", str(seconds), "--seed", "1", "--sat", *visible[:n_sats])
+    visible = _visible(tmp, n_sats, 1)
+    _generate(path, "--duration-s", str(seconds), "--seed", "1", "--sat", *visible)
     rec = open_sigmf(path)
-    const = load_constellation()
+    const = load_constellation(SKY["tle"])
     runs = []
     for _ in range(repeats):  # the least CPU of a few runs: other processes only ever add to it
         t0 = time.process_time()
@@ -125,7 +139,7 @@ def bench_throughput(tmp, seconds, n_sats, repeats=3):
         runs.append((res.cpu_s["blocks"], time.process_time() - t0, res))
     blocks_s, total_s, res = min(runs, key=lambda r: r[0])
     cpu = res.cpu_s
-    print(f"throughput: {seconds:g} s at 2.5 MS/s with {min(n_sats, len(visible))} satellites (best of {repeats}; "
+    print(f"throughput: {seconds:g} s at 2.5 MS/s with {len(visible)} satellites (best of {repeats}; "
           f"load {os.getloadavg()[0]:.1f}): blocks (read, search, track) {blocks_s:.2f} s CPU = "
           f"{seconds / blocks_s:.1f}x real time (runs: {', '.join(f'{seconds / r[0]:.1f}x' for r in runs)}); "
           f"identification {cpu['identify']:.1f} s and fix {cpu['fix']:.1f} s once per recording; end to end "
@@ -169,14 +183,19 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="2 recordings instead of 10, 5 s continuous")
     ap.add_argument("--memory-gb", type=float, default=3.0, help="size of the memory test file (0 to skip)")
-    ap.add_argument("--sats", type=int, default=7, help="satellites in the throughput recording (default 7)")
+    ap.add_argument("--sats", type=int, default=7, help="satellites per recording, drawn from those above "
+                    "40 deg (default 7)")
+    ap.add_argument("--tle", help="element sets to draw the satellites from and identify against (default the "
+                    "bundled Walker set), e.g. ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt")
+    ap.add_argument("--start", default=START, help=f"UTC start of the recordings (default {START})")
     ap.add_argument("--parts", default="fix,throughput,memory", help="which benchmarks, comma-separated "
                     "(default fix,throughput,memory)")
     a = ap.parse_args()
     parts = set(a.parts.split(","))
+    SKY.update(tle=a.tle, start=a.start)
     with tempfile.TemporaryDirectory() as tmp:
         if "fix" in parts:
-            bench_fix(tmp, range(2) if a.quick else range(10))
+            bench_fix(tmp, range(2) if a.quick else range(10), a.sats)
         if parts & {"throughput", "memory"}:
             small = bench_throughput(tmp, 5.0 if a.quick else 20.0, a.sats)
         if "memory" in parts and a.memory_gb > 0:
