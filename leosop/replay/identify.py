@@ -268,13 +268,9 @@ class _Search:
         sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
         cos_m = np.sqrt(1 - sin_m**2)
         n_sats = len(eph.ok)
-        # States of every satellite at each track's reference times and 0.5 s either side,
-        # (n_tracks, n_sats, 3 offsets, 3 ref times, 3); the vote only indexes them.
         t_ref = np.array([tr.t_ref_s for tr in tracks])
-        t_eval = t_ref[:, None, :] + np.array([0.0, -0.5, 0.5])[:, None]  # (n_tracks, 3, 3)
-        self.ref_pos, self.ref_vel = eph.state(np.arange(n_sats)[None, :, None, None], t_eval[:, None])
         # Unit vectors of the satellites at each track's middle time and their footprint half-angles.
-        p = self.ref_pos[:, :, 0, 1]
+        p, _ = eph.state(np.arange(n_sats)[None, :], t_ref[:, None, 1])  # (n_tracks, n_sats, 3)
         r = np.linalg.norm(p, axis=-1)
         self.unit = p / np.where(r > 0, r, 1.0)[..., None]
         lam = np.arccos(np.clip(WGS84_A_M * cos_m / np.where(eph.ok, r, 1e12), -1, 1)) - np.arcsin(sin_m)
@@ -283,6 +279,15 @@ class _Search:
             centre, radius_m = region
             cos_sep = self.unit @ (centre / np.linalg.norm(centre))
             self.half_angle[np.arccos(np.clip(cos_sep, -1, 1)) > self.half_angle + radius_m / WGS84_A_M] = -1.0
+        # States of the satellites some track may pair with (all but those no point of the region
+        # sees) at each track's reference times and 0.5 s either side, (n_tracks, n_cand, 3 offsets,
+        # 3 ref times, 3), indexed through ``local``: memory grows with tracks x candidates, ~50 of a
+        # 10,000-satellite snapshot with a prior.
+        cand = np.flatnonzero((self.half_angle > 0).any(axis=0))
+        self.local = np.full(n_sats, -1)
+        self.local[cand] = np.arange(len(cand))
+        t_eval = t_ref[:, None, :] + np.array([0.0, -0.5, 0.5])[:, None]  # (n_tracks, 3, 3)
+        self.ref_pos, self.ref_vel = eph.state(cand[None, :, None, None], t_eval[:, None])
 
     def _pairs(self, cells, radius_m):
         """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3)."""
@@ -340,13 +345,14 @@ class _Search:
         # Cheap screen at the middle time: the offset must fit the clock range.
         reach = _LINEAR_MARGIN * (radius_m + o["cross_track_max_m"] + o["alt_tol_m"])
         dt_max = o["along_track_max_m"] / _SPEED_SV_MPS + _LIGHT_TIME_MAX_S
-        dm, gm = _doppler(self.ref_pos[k, s, 0, 1], self.ref_vel[k, s, 0, 1], cells[c], self.k)
+        s_loc = self.local[s]
+        dm, gm = _doppler(self.ref_pos[k, s_loc, 0, 1], self.ref_vel[k, s_loc, 0, 1], cells[c], self.k)
         near = np.abs(f_ref[:, 1] - dm) <= (o["clock_search_hz"] + reach * np.linalg.norm(gm, axis=1)
                                             + dt_max * _RATE_MAX_HZ_PER_S + o["sat_offset_max_hz"]
                                             + o["clock_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
         c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
         pos_rx = cells[c][:, None, :]
-        p, v = self.ref_pos[k, s], self.ref_vel[k, s]  # (m, 3 offsets, 3 ref times, 3)
+        p, v = self.ref_pos[k, s_loc[near]], self.ref_vel[k, s_loc[near]]  # (m, 3 offsets, 3 ref times, 3)
         dop, grad = _doppler(p[:, 0], v[:, 0], pos_rx, self.k)
         rate = _doppler(p[:, 2], v[:, 2], pos_rx, self.k)[0] - _doppler(p[:, 1], v[:, 1], pos_rx, self.k)[0]
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
