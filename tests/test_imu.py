@@ -80,3 +80,26 @@ def test_same_seed_same_noise_and_bad_input():
         imu.corrupt(x[:, :2], x, 0.01, imu.SEED004_TABLE1, np.random.default_rng(3))
     with pytest.raises(InputError, match="corr_time"):
         imu.ImuErrors(gyro_bias_corr_time_s=0.0)
+
+
+def test_corruption_in_blocks_is_identical_to_corrupt_on_the_whole():
+    # Every error term on (Gauss-Markov biases, quantization, scale and misalignment): consecutive
+    # blocks of any size must reproduce corrupt() bit for bit and leave the generator where it does.
+    e = imu.ImuErrors.from_quoted(
+        gyro_bias_deg_per_h=1.0, gyro_arw_deg_per_rt_h=0.1, gyro_bias_instability_deg_per_h=0.5,
+        gyro_bias_corr_time_s=10.0, gyro_scale_factor_ppm=[100.0, -50.0, 30.0],
+        gyro_misalignment_arcsec=[1, 2, 3, 4, 5, 6], gyro_quantum_arcsec=0.1, accel_bias_g=1e-3,
+        accel_vrw_g_per_rt_hz=1e-4, accel_bias_instability_g=1e-4, accel_bias_corr_time_s=20.0,
+        accel_scale_factor_ppm=40.0, accel_misalignment_arcsec=[3, 1, 2, 6, 5, 4], accel_quantum_ug_s=10.0)
+    x = np.random.default_rng(1).standard_normal((1001, 3)) * 1e-3
+    rng_whole, rng_blocks = np.random.default_rng(9), np.random.default_rng(9)
+    whole = imu.corrupt(x, 10 * x, 0.01, e, rng_whole)
+    c = imu.Corruption(e, 0.01, 1001, rng_blocks)
+    for _ in range(2):  # and again after reset()
+        parts = [c.apply(x[k0:k1], 10 * x[k0:k1]) for k0, k1 in ((0, 1), (1, 8), (8, 500), (500, 1001))]
+        assert np.array_equal(whole[0], np.concatenate([p[0] for p in parts]))
+        assert np.array_equal(whole[1], np.concatenate([p[1] for p in parts]))
+        c.reset()
+    assert rng_whole.standard_normal() == rng_blocks.standard_normal()
+    with pytest.raises(InputError, match="more than"):
+        c.apply(np.zeros((1002, 3)), np.zeros((1002, 3)))

@@ -15,6 +15,7 @@ IMU does. :class:`ImuErrors` holds everything in SI;
 :meth:`ImuErrors.from_quoted` takes the units of data sheets and papers.
 """
 
+import copy
 import dataclasses
 import math
 
@@ -24,9 +25,11 @@ from scipy.signal import lfilter
 from ..constants import G0_MPS2
 from ..errors import InputError
 
-__all__ = ["ImuErrors", "SEED004_TABLE1", "corrupt"]
+__all__ = ["ImuErrors", "SEED004_TABLE1", "Corruption", "corrupt"]
 
 _DEG = math.pi / 180.0
+#: Rows of normals drawn at a time when skipping ahead in a generator (bounds memory).
+_SKIP_ROWS = 65_536
 
 
 def _vec(x, name):
@@ -136,20 +139,99 @@ SEED004_TABLE1 = ImuErrors.from_quoted(gyro_bias_deg_per_h=0.03, gyro_arw_deg_pe
                                        accel_vrw_g_per_rt_hz=1e-5)
 
 
-def _gauss_markov(n, dt_s, sigma, tau_s, rng):
-    """Stationary first-order Gauss-Markov sequences, shape (n, 3)."""
-    a = math.exp(-dt_s / tau_s)
-    w = rng.standard_normal((n, 3)) * (sigma * math.sqrt(1.0 - a * a))
-    w[0] = rng.standard_normal(3) * sigma
-    return lfilter([1.0], [1.0, -a], w, axis=0)
+def _skip_normals(rng, n_rows):
+    """Advance ``rng`` past ``n_rows`` rows of 3 standard normals, a block at a time."""
+    for k0 in range(0, n_rows, _SKIP_ROWS):
+        rng.standard_normal((min(_SKIP_ROWS, n_rows - k0), 3))
 
 
-def _quantize(x, quantum):
-    """Integrating quantizer: output multiples of the quantum, carrying the residual."""
-    if quantum == 0.0:
-        return x
-    total = np.rint(np.cumsum(x, axis=0) / quantum)
-    return np.diff(total, axis=0, prepend=np.zeros((1, 3))) * quantum
+class Corruption:
+    """:func:`corrupt`'s errors added to ``n`` increments one block after another, drawing the same numbers.
+
+    :func:`corrupt` draws, per sensor (gyro, then accelerometer), the white
+    noise of every interval, then with a Gauss-Markov bias its driving
+    noise and its start. Here each of those blocks gets its own generator,
+    a copy of ``rng`` placed at the block's start, and the Gauss-Markov
+    filter and the quantizer carry their state from one block to the next;
+    so any division of the ``n`` intervals into consecutive blocks gives
+    bit for bit what :func:`corrupt` gives on the whole, while memory stays
+    that of a block. ``rng`` is left after all the draws, as :func:`corrupt`
+    leaves it.
+
+    Parameters
+    ----------
+    errors : ImuErrors
+    dt_s : float
+        Sample interval [s].
+    n : int
+        Intervals in the whole series.
+    rng : numpy.random.Generator
+    """
+
+    def __init__(self, errors, dt_s, n, rng):
+        if not dt_s > 0:
+            raise InputError(f"dt_s={dt_s} must be > 0")
+        if not isinstance(rng, np.random.Generator):
+            raise InputError("rng must be a numpy.random.Generator")
+        e = errors
+        self.dt_s, self.n = float(dt_s), int(n)
+        self._sensors = []
+        for M, bias, noise, sig, tau, q in (
+            (e.gyro_scale_misalign, e.gyro_bias_rad_per_s, e.gyro_arw_rad_per_rt_s,
+             e.gyro_bias_instability_rad_per_s, e.gyro_bias_corr_time_s, e.gyro_quantum_rad),
+            (e.accel_scale_misalign, e.accel_bias_mps2, e.accel_vrw_mps_per_rt_s,
+             e.accel_bias_instability_mps2, e.accel_bias_corr_time_s, e.accel_quantum_mps),
+        ):
+            noise_rng = copy.deepcopy(rng)
+            _skip_normals(rng, self.n)
+            gm = None
+            if np.any(sig > 0):
+                a = math.exp(-dt_s / tau)
+                gm_rng = copy.deepcopy(rng)
+                _skip_normals(rng, self.n)
+                gm = (a, sig * math.sqrt(1.0 - a * a), gm_rng, rng.standard_normal(3) * sig)
+            self._sensors.append((M, bias, noise * math.sqrt(dt_s), noise_rng, gm, q))
+        self.reset()
+
+    def reset(self):
+        """Start again at the first interval (the same numbers again)."""
+        self.done = 0
+        self._rngs = [(copy.deepcopy(s[3]), None if s[4] is None else copy.deepcopy(s[4][2])) for s in self._sensors]
+        self._gm_state = [np.zeros((1, 3)) for _ in self._sensors]
+        self._sum = [np.zeros((1, 3)) for _ in self._sensors]
+        self._total = [np.zeros((1, 3)) for _ in self._sensors]
+
+    def apply(self, dtheta_b_rad, dvel_b_mps):
+        """Measured increments of the next ``m`` intervals from their ideal ones, each shape (m, 3)."""
+        th = np.asarray(dtheta_b_rad, dtype=float)
+        dv = np.asarray(dvel_b_mps, dtype=float)
+        if th.ndim != 2 or th.shape[1] != 3 or dv.shape != th.shape:
+            raise InputError(f"dtheta_b_rad and dvel_b_mps must both have shape (n, 3), got {th.shape} and "
+                             f"{dv.shape}")
+        m = th.shape[0]
+        if self.done + m > self.n:
+            raise InputError(f"{self.done} + {m} intervals: more than the {self.n} this corruption was drawn for")
+        out = []
+        for i, (x, (M, bias, noise_rt, _, gm, q), (noise_rng, gm_rng)) in enumerate(
+                zip((th, dv), self._sensors, self._rngs)):
+            y = x + x @ M.T + bias * self.dt_s + noise_rng.standard_normal((m, 3)) * noise_rt
+            if gm is not None:
+                a, drive, _, start = gm
+                w = gm_rng.standard_normal((m, 3)) * drive
+                if self.done == 0 and m:
+                    w[0] = start
+                b, self._gm_state[i] = lfilter([1.0], [1.0, -a], w, axis=0, zi=self._gm_state[i])
+                y += b * self.dt_s
+            if q != 0.0 and m:
+                # Integrating quantizer: multiples of the quantum, the residual carried (also across blocks).
+                running = np.cumsum(np.concatenate([self._sum[i], y]), axis=0)[1:]
+                total = np.rint(running / q)
+                self._sum[i] = running[-1:]
+                y = np.diff(np.concatenate([self._total[i], total]), axis=0) * q
+                self._total[i] = total[-1:]
+            out.append(y)
+        self.done += m
+        return out[0], out[1]
 
 
 def corrupt(dtheta_b_rad, dvel_b_mps, dt_s, errors, rng):
@@ -170,25 +252,4 @@ def corrupt(dtheta_b_rad, dvel_b_mps, dt_s, errors, rng):
     dtheta_b_rad, dvel_b_mps : ndarray, shape (n, 3)
     """
     th = np.asarray(dtheta_b_rad, dtype=float)
-    dv = np.asarray(dvel_b_mps, dtype=float)
-    if th.ndim != 2 or th.shape[1] != 3 or dv.shape != th.shape:
-        raise InputError(f"dtheta_b_rad and dvel_b_mps must both have shape (n, 3), got {th.shape} and {dv.shape}")
-    if not dt_s > 0:
-        raise InputError(f"dt_s={dt_s} must be > 0")
-    if not isinstance(rng, np.random.Generator):
-        raise InputError("rng must be a numpy.random.Generator")
-    e = errors
-    n = th.shape[0]
-    rt = math.sqrt(dt_s)
-    out = []
-    for x, M, bias, noise, sig, tau, q in (
-        (th, e.gyro_scale_misalign, e.gyro_bias_rad_per_s, e.gyro_arw_rad_per_rt_s,
-         e.gyro_bias_instability_rad_per_s, e.gyro_bias_corr_time_s, e.gyro_quantum_rad),
-        (dv, e.accel_scale_misalign, e.accel_bias_mps2, e.accel_vrw_mps_per_rt_s,
-         e.accel_bias_instability_mps2, e.accel_bias_corr_time_s, e.accel_quantum_mps),
-    ):
-        y = x + x @ M.T + bias * dt_s + rng.standard_normal((n, 3)) * (noise * rt)
-        if np.any(sig > 0):
-            y += _gauss_markov(n, dt_s, sig, tau, rng) * dt_s
-        out.append(_quantize(y, q))
-    return out[0], out[1]
+    return Corruption(errors, dt_s, th.shape[0] if th.ndim == 2 else 0, rng).apply(th, dvel_b_mps)
