@@ -15,6 +15,9 @@ shared data do not have, and what is given instead:
 - a Bias-SINEX file of observable-specific biases (without one its biases are NaN): zero biases are
   given; the GRG clocks refer to the signals both use (GPS C1W/C2W and L1C/L2W, Galileo C1C/C5Q and
   L1C/L5Q), so zero is the consistent value for float PPP;
+- the antenna reference point: its PPP reads the header's ``ANTENNA: DELTA H/E/N`` but does not
+  apply it, so its solution is of the antenna reference point (0.216 m above the ESBC marker); the
+  header's eccentricity is subtracted from its positions here (leosop applies it in the filter);
 - plain-text files: the Hatanaka/gzip inputs are expanded to a temporary folder first (counted in its
   read time; leosop reads them as they are).
 
@@ -59,7 +62,7 @@ EPOCH_S = 30.0
 
 
 def ours(n_epochs, static):
-    """leosop float PPP: (read s, run s, positions (n, 3), header position (3,))."""
+    """leosop float PPP: (read s, run s, positions (n, 3), header position (3,), header H/E/N (3,))."""
     t0 = time.perf_counter()
     obs = read_obs(OBS, codes=CODES)
     orb, clk = read_sp3(SP3), read_clk(CLK)
@@ -68,7 +71,7 @@ def ours(n_epochs, static):
                               obs={k: v[:n_epochs] for k, v in obs.obs.items()},
                               lli={k: v[:n_epochs] for k, v in obs.lli.items()})
     res = run_ppp(obs, orb, clk, PppOptions(static=static, systems="GE", mask_deg=MASK_DEG))
-    return t1 - t0, time.perf_counter() - t1, res.pos_ecef_m, obs.approx_pos_ecef_m
+    return t1 - t0, time.perf_counter() - t1, res.pos_ecef_m, obs.approx_pos_ecef_m, obs.antenna_delta_hen_m
 
 
 class _ZeroBiases:
@@ -163,12 +166,14 @@ def main():
         sys.path.insert(0, a.cssrlib_path)
     n = int(round(a.hours * 3600 / EPOCH_S))
     static = a.mode == "static"
-    t_read, t_run, pos, header_ecef_m = ours(n, static)
+    t_read, t_run, pos, header_ecef_m, delta_hen_m = ours(n, static)
     # The header position is the station's ETRF2000 coordinate; the products' frame is ITRF2014.
     ref = etrf2000_to_itrf2014(header_ecef_m, decimal_year(np.datetime64("2020-06-25T12:00")))
     report("leosop", t_read, t_run, pos, ref, static, a.converge_min)
     with tempfile.TemporaryDirectory() as tmp:
-        c_read, c_run, c_pos = theirs(n, static, tmp)
+        c_read, c_run, c_arp = theirs(n, static, tmp)
+    lat, lon, _ = ecef_to_geodetic(ref)
+    c_pos = c_arp - C_e_n(lat, lon) @ delta_hen_m[[1, 2, 0]]  # antenna reference point -> marker
     report("cssrlib", c_read, c_run, c_pos, ref, static, a.converge_min)
     if a.save:
         np.savez(a.save, leosop_ecef_m=pos, cssrlib_ecef_m=c_pos, ref_ecef_m=ref)
