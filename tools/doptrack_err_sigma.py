@@ -7,7 +7,7 @@ start given, time offsets on (``--off``: off, for comparison). Prints, per
 set, the number of fixes, failures (no finite solution), the median error,
 the median and the largest err/sigma and how many are below 3.
 
-Usage: OPENBLAS_NUM_THREADS=1 python tools/doptrack_err_sigma.py [--data DIR] [--off] [--no-single]
+Usage: OPENBLAS_NUM_THREADS=1 python tools/doptrack_err_sigma.py [--data DIR] [--off] [--sets day,single,all]
 """
 
 import argparse
@@ -38,7 +38,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DATA)
     ap.add_argument("--off", action="store_true", help="time offsets off (the comparison)")
-    ap.add_argument("--no-single", action="store_true")
+    ap.add_argument("--sets", default="day,single,all", help="comma-separated: day, single, all")
     args = ap.parse_args()
     passes = read_doptrack(args.data / "leo-doppler" / "doptrack_delfi-c3_2020-04")
     kw = {"time_bias": not args.off}
@@ -48,11 +48,14 @@ def main():
           f"{'max_e/s':>8s} {'e/s<3':>7s}")
     days = np.array([str(p.meas.time_utc[0])[:10] for p in passes])
     by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
-    r = _row("per day", [fix_passes(s, **kw) for s in progress(by_day, desc="days")], p0)
-    print(f"{'':>9s} per-day err/sigma: {' '.join(f'{x:.1f}' for x in r)}")
-    if not args.no_single:
+    sets = args.sets.split(",")
+    if "day" in sets:
+        r = _row("per day", [fix_passes(s, **kw) for s in progress(by_day, desc="days")], p0)
+        print(f"{'':>9s} per-day err/sigma: {' '.join(f'{x:.1f}' for x in r)}")
+    if "single" in sets:
         _row("one pass", [fix_passes([p], **kw) for p in progress(passes, desc="passes")], p0)
-    _row("all", [fix_passes(passes, **kw)], p0)
+    if "all" in sets:
+        _row("all", [fix_passes(passes, **kw)], p0)
 
 
 if __name__ == "__main__":

@@ -97,16 +97,19 @@ def combine_passes(passes, pos_rx_ecef_m=None):
 def fix_passes(passes, **kw):
     """Multi-pass static fix, height known, no start given; light time recomputed at the first fix.
 
-    ``kw`` goes to position_static_passes (the time-bias options).
+    The second solve starts from the first fix and its mirror solution (so
+    that an ambiguous fix stays flagged, with the mirror in its covariance);
+    if it fails, the first fix stands. ``kw`` goes to position_static_passes
+    (the time-bias options).
     """
-    pos_rx = None
-    for _ in range(2):
-        meas, pass_id = combine_passes(passes, pos_rx)
-        res = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx, **kw)
-        if not np.isfinite(res.fixes.pos_ecef_m).all():
-            break
-        pos_rx = res.fixes.pos_ecef_m
-    return res.fixes
+    meas, pass_id = combine_passes(passes)
+    first = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, **kw).fixes
+    if not np.isfinite(first.pos_ecef_m).all():
+        return first
+    starts = np.vstack([first.pos_ecef_m] + [first.mirror_pos_ecef_m] * bool(np.isfinite(first.mirror_chi2)))
+    meas, pass_id = combine_passes(passes, first.pos_ecef_m)
+    again = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=starts, **kw).fixes
+    return again if np.isfinite(again.pos_ecef_m).all() else first
 
 
 def _horizontal(fix, p):

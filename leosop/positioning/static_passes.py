@@ -5,6 +5,25 @@ terms (its own polynomial, or a satellite offset on a shared receiver clock)
 and optionally a time offset of its satellite states. The linear terms are
 eliminated exactly (variable projection) inside
 :func:`~leosop.positioning.robust_ls.solve_robust`'s iteration.
+
+Two safeguards for real passes (DopTrack, design note):
+
+- A solution from which a pass's satellite would be below the horizon
+  (:data:`HORIZON_TOL_DEG`) cannot have received it: among the starts, such
+  solutions lose to any that see every used row (a single pass otherwise
+  fits a receiver thousands of km away about as well).
+- Residuals correlated in time (unmodelled orbit, clock and ionosphere
+  terms vary slowly over a pass) carry fewer independent samples than rows,
+  so a white-noise sigma makes the posterior too confident by
+  ``sqrt(tau)``, ``tau`` the integrated autocorrelation time of the
+  residuals in samples. Each pass's ``tau`` is estimated from its residuals
+  (:func:`integrated_autocorrelation`); where it is significantly above 1
+  the pass's variance is raised to ``tau`` times its residuals' mean square
+  (about ``sqrt(tau)`` on the sigma when the sigma came from the residuals;
+  never lowered) and the fix solved again from its solution (the effective-sample-size treatment of an AR/Gauss-Markov
+  error; white residuals leave the fix unchanged). ``tau`` is the larger of
+  the integrated autocorrelation time and the AR(1) one from the lag-1
+  correlation (:func:`_pass_tau`).
 """
 
 from dataclasses import dataclass
@@ -18,7 +37,8 @@ from ..geometry.doppler import doppler_jacobian, doppler_rate
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
 from .starts import grid_starts, subpoint_centroid_ecef_m
 
-__all__ = ["PassesFix", "solve_static_passes", "TIME_OFFSET_SIGMA_S", "SAT_OFFSET_SIGMA_HZ"]
+__all__ = ["PassesFix", "solve_static_passes", "integrated_autocorrelation", "TIME_OFFSET_SIGMA_S",
+           "SAT_OFFSET_SIGMA_HZ", "HORIZON_TOL_DEG"]
 
 #: Default prior standard deviation of a pass's time offset of its satellite states [s]: an element
 #: set's along-track error of a few hundred metres to a few km at ~7.5 km/s.
@@ -28,6 +48,13 @@ TIME_OFFSET_SIGMA_S = 0.5
 SAT_OFFSET_SIGMA_HZ = 5.0
 #: Fixes also stop when a step is below this fraction of the posterior sigma along it.
 _STEP_SIGMA_TOL = 1e-3
+#: A solution sees a used row's satellite if it is above minus this elevation [deg]: refraction at VHF
+#: near the horizon is below 1 deg; the margin also covers a station on a mast or a hill.
+HORIZON_TOL_DEG = 2.0
+#: Sokal's window constant: the autocorrelation sum runs to the first lag M >= C tau(M).
+_SOKAL_C = 5.0
+#: A pass's sigma is scaled only when its tau exceeds 1 by this many white-noise standard deviations.
+_TAU_SIGNIFICANCE = 3.0
 
 @dataclass(frozen=True)
 class PassesFix:
@@ -49,7 +76,11 @@ class PassesFix:
         Posterior covariance of ``[pos, clock_poly_hz.ravel(), time_bias_s]``
         (clock ``"per_pass"``) or ``[pos, rx_clock_poly_hz, sat_offset_hz,
         time_bias_s]`` (clock ``"common"``); no ``time_bias_s`` states
-        without time biases. Priors are included.
+        without time biases. Priors are included. With a mirror solution the
+        position block is that of the two-point mixture, ``+ w (1 - w) d d^T``
+        (``d`` from the fix to the mirror, ``w = 1 / (1 + exp(dchi2 / 2))``):
+        a mirror that fits as well (a short low pass) puts the distance
+        between the two into the sigma; one that fits far worse adds nothing.
     gdop : float
         ``sqrt(trace((H^T W H)^-1))`` of the position with the clocks
         eliminated, weights relative to the median Doppler weight.
@@ -85,6 +116,13 @@ class PassesFix:
         The ``clock_group`` value of each receiver clock; ``()`` without.
     pass_clock : ndarray of int, (n_pass,), or None
         Index of each pass's receiver clock.
+    tau : ndarray, (n_pass,), or None
+        Correlation time of each pass's residuals [rows] (:func:`_pass_tau`);
+        1 where they are white; None with ``decorrelate=False``.
+    sigma_scale : ndarray, (n_pass,), or None
+        Factor applied to each pass's sigma, ``sqrt(max(1, tau * mean((r /
+        sigma)^2)))``: the variance the correlated residuals imply, never
+        below the sigma given; None with ``decorrelate=False``.
     """
 
     pos_ecef_m: np.ndarray
@@ -110,6 +148,8 @@ class PassesFix:
     rx_clock_polys_hz: np.ndarray = None
     clock_labels: tuple = ()
     pass_clock: np.ndarray = None
+    tau: np.ndarray = None
+    sigma_scale: np.ndarray = None
 
     @property
     def clock_offset_hz(self):
@@ -143,11 +183,80 @@ def _shift_poly(coef, shift):
     powers = np.asarray(shift, dtype=float)[..., None, None] ** np.maximum(k[None, :] - k[:, None], 0)
     return np.einsum("...j,ij,...ij->...i", coef, binom, powers)
 
+def integrated_autocorrelation(residuals, c=_SOKAL_C):
+    """Integrated autocorrelation time of a series, with Sokal's automatic window.
+
+    ``tau = 1 + 2 sum_{k=1}^{M} rho_k`` (``rho_k`` the sample autocorrelation
+    at lag k, mean removed), M the first lag with ``M >= c tau(M)``: the
+    number of rows per independent sample, so that a mean of ``n``
+    correlated rows has the variance of ``n / tau`` independent ones. For
+    white noise ``tau`` scatters about 1 with standard deviation
+    ``2 sqrt(M / n)``.
+
+    Parameters
+    ----------
+    residuals : array_like, (n,)
+        Equally spaced in time (gaps are taken as one step).
+    c : float
+
+    Returns
+    -------
+    tau : float
+    M : int
+        The window (0 for fewer than 4 values or a constant series: tau 1).
+    """
+    x = np.asarray(residuals, dtype=float).ravel()
+    n = x.size
+    x = x - x.mean() if n else x
+    if n < 4 or not np.any(x):
+        return 1.0, 0
+    f = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f), 2 * n)[:n]
+    taus = 1.0 + 2.0 * np.cumsum(acf[1:] / acf[0])
+    lags = np.arange(1, n)
+    reached = lags >= c * taus
+    M = int(lags[np.argmax(reached)]) if reached.any() else n - 1
+    return float(taus[M - 1]), M
+
+
+def _pass_tau(residuals_hz, used, gi, n_pass):
+    """Each pass's residual correlation time [rows], (n_pass,); 1 where the residuals are white.
+
+    The larger of two estimates, each kept only when significantly above 1:
+    the integrated autocorrelation time (:func:`integrated_autocorrelation`,
+    long-range structure) and that of a first-order Gauss-Markov (AR(1))
+    error with the residuals' lag-1 correlation rho, ``(1 + rho) / (1 - rho)``.
+    The second matters because the per-pass polynomial absorbs the
+    low-frequency part of the noise, which biases the first low (AR(1) with
+    tau = 9 on 230 rows: estimated 3-4), while rho is hardly affected.
+    """
+    tau = np.ones(n_pass)
+    for p in range(n_pass):
+        r = residuals_hz[(gi == p) & used]
+        t, M = integrated_autocorrelation(r)
+        if M and t > 1.0 + _TAU_SIGNIFICANCE * 2.0 * np.sqrt(M / r.size):
+            tau[p] = t
+        x = r - r.mean() if r.size > 3 else np.zeros(1)
+        rho = float(x[1:] @ x[:-1] / (x @ x)) if np.any(x) else 0.0
+        if rho > _TAU_SIGNIFICANCE / np.sqrt(r.size):
+            tau[p] = max(tau[p], (1.0 + rho) / (1.0 - rho))
+    return tau
+
+
+def _sees(pos_ecef_m, pos_sv_ecef_m, used):
+    """Whether each solution (k, 3) has every used row's satellite above ``-HORIZON_TOL_DEG``, (k,) bool."""
+    lat, lon, _ = ecef_to_geodetic(pos_ecef_m)
+    up = C_e_n(lat, lon)[..., 2]
+    los = pos_sv_ecef_m[None] - pos_ecef_m[:, None]
+    sin_el = np.einsum("kni,ki->kn", los, up) / np.linalg.norm(los, axis=-1)
+    return ~((sin_el < np.sin(np.radians(-HORIZON_TOL_DEG))) & used).any(axis=1)
+
+
 def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
-                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3,
+                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=1000, alpha=1e-3,
                         clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
                         time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
-                        ambiguity_m=10e3, clock_group=None):
+                        ambiguity_m=10e3, clock_group=None, decorrelate=True):
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has
@@ -200,6 +309,8 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         Known height above the ellipsoid, standard deviation ``alt_sigma_m``.
     mask : array_like of bool, (m,), optional
     max_iter : int
+        Per solve. A weak geometry (two DopTrack passes, one at 11 deg) crawls
+        along a flat valley: 2020-04-02 takes ~1,800 iterations over its solves.
     alpha : float or None
         Significance of the chi-square outlier test; None disables it.
     clock : {"per_pass", "common"}
@@ -216,6 +327,10 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         constellation); each distinct value among the unmasked rows gets its
         own receiver polynomial (a pass takes the clock of its first row).
         Ignored by ``"per_pass"`` (every pass has its own terms already).
+    decorrelate : bool
+        Raise each pass's variance to its residuals' correlation time times
+        their mean square where that exceeds the sigma given (module
+        docstring), and solve again.
 
     Returns
     -------
@@ -363,11 +478,13 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         starts = np.zeros((1, 3))
     x, res, J, Q, used, iterations, chi2, status = solve(starts, m, None)
     solved = np.isin(status, (FixStatus.OK, FixStatus.INCONSISTENT))
-    cost = np.where(solved, chi2, np.inf)
+    sees = solved & _sees(x, r_s, used[:, :n])
+    candidate = sees if sees.any() else solved  # below the horizon only when nothing else converged
+    cost = np.where(candidate, chi2, np.inf)
     best = int(np.argmin(cost))
     dof = max(int(used[best].sum()) - n_states, 1)
-    fits = solved & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
-    apart = solved & (np.linalg.norm(x - x[best], axis=-1) > ambiguity_m)
+    fits = candidate & (cost <= cost[best] + 3.0 * np.sqrt(2.0 * dof))
+    apart = candidate & (np.linalg.norm(x - x[best], axis=-1) > ambiguity_m)
     ambiguous = bool((fits & apart).any())
     other = int(np.argmin(np.where(apart, cost, np.inf))) if apart.any() else None
     x_mirror = x[other:other + 1].copy() if other is not None else None
@@ -378,6 +495,18 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         x, res, J, Q, used, it, chi2, status = solve(x, used, alpha)
         iterations = iterations + it
     ok = status[0] in (FixStatus.OK, FixStatus.INCONSISTENT)
+    tau = _pass_tau(res[0, :n], used[0, :n], gi, n_pass) if decorrelate and ok else np.ones(n_pass)
+    # Each pass's variance raised to tau x its whitened residuals' mean square, never lowered: a
+    # sigma already above the residuals (noise-free or conservative input) is kept.
+    z2 = np.bincount(gi, np.where(used[0, :n], (res[0, :n] / sigma[:n]) ** 2, 0.0), n_pass) / \
+        np.maximum(np.bincount(gi, used[0, :n], n_pass), 1)
+    sigma_scale = np.sqrt(np.maximum(tau * z2, 1.0))
+    if (sigma_scale > 1.0).any():
+        sigma = sigma.copy()  # the solves below and the covariance use the scaled sigmas
+        sigma[:n] *= sigma_scale[gi]
+        x, res, J, Q, used, it, chi2, status = solve(x, used, None)
+        iterations = iterations + it
+        ok = status[0] in (FixStatus.OK, FixStatus.INCONSISTENT)
     mirror_pos, mirror_chi2 = np.full(3, np.nan), np.nan
     if x_mirror is not None and ok:
         xm, _, _, _, _, _, chi2_m, status_m = solve(x_mirror, used, None)
@@ -412,6 +541,11 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     n_poly_loc = n_loc - tb
     perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_poly_loc].ravel(), loc[:, n_poly_loc:].ravel()])
     cov = cov[np.ix_(perm, perm)]
+    if np.isfinite(mirror_chi2):
+        # Two solutions: the covariance of the two-point mixture, weights from the chi-square difference.
+        w_mirror = 1.0 / (1.0 + np.exp(min(0.5 * (mirror_chi2 - float(chi2[0])), 700.0)))
+        d = mirror_pos - x[0]
+        cov[:3, :3] += w_mirror * (1.0 - w_mirror) * np.outer(d, d)
     w_rel = np.where(used[0], np.median(sigma[:n][m[:n]]) ** 2 / sigma**2, 0.0) if m[:n].any() \
         else used[0].astype(float)
     gdop = float(np.sqrt(np.trace(cofactor(J[0], w_rel))))
@@ -438,5 +572,6 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         sat_offset_hz=nan_unless(c_loc[:, 0].copy()) if common else None,
         rx_clock_polys_hz=nan_unless(rx_polys.copy()) if common else None,
         clock_labels=tuple(clock_labels.tolist()) if common and clock_group is not None else (),
-        pass_clock=pass_clk.copy() if common else None,
+        pass_clock=pass_clk.copy() if common else None, tau=tau if decorrelate else None,
+        sigma_scale=sigma_scale if decorrelate else None,
     )
