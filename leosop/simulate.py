@@ -4,7 +4,9 @@
 table reproductions call it. For a scenario it
 
 1. flies the truth trajectory and corrupts its ideal IMU increments
-   ([Shen 2024] Table 1; bias signs drawn per run);
+   ([Shen 2024] Table 1; bias signs drawn per run), both made a block at a
+   time and consumed as made (the INS alone, then the EKF, read the same
+   numbers), so that memory does not grow with the run's duration;
 2. finds the visible satellites at the fix rate, 1 Hz (:mod:`leosop.orbits.visibility`)
    and their true Doppler, plus a constant clock-induced offset per satellite
    drawn uniformly in [0, max] and the receiver's fixed offset;
@@ -79,6 +81,9 @@ STALE_TLE_DAYS = 14.0
 BLOCK_S = 0.01
 SAMPLE_RATE_HZ = 400e3
 SEARCH_HZ = 20e3
+#: Fix epochs of IMU increments made at a time (10,000 at 100 Hz and 1 Hz fixes):
+#: memory then stays flat in the run's duration.
+IMU_BLOCK_STEPS = 100
 #: The bundled sky of the other families (OneWeb, Iridium NEXT, Orbcomm Walker
 #: shells at the bundled Starlink set's epoch; tools/make_family_walker_tle.py).
 FAMILIES_TLE = Path(str(files("leosop") / "data" / "leo_families_walker.tle"))
@@ -391,18 +396,20 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     models = _family_models(scenario.leo)
     carrier_sat = models["carrier_hz"][family_sat]
 
-    # 1. Truth and IMU.
-    truth = trajectory.flight(np.asarray(scenario.waypoints), speed_mps=scenario.speed_mps,
-                              rate_hz=scenario.imu.rate_hz, duration_s=scenario.duration_s)
+    # 1. Truth and IMU, made a block at a time (never the whole run at the IMU rate).
+    flight = trajectory.plan_flight(np.asarray(scenario.waypoints), speed_mps=scenario.speed_mps,
+                                    rate_hz=scenario.imu.rate_hz, duration_s=scenario.duration_s)
     errors = _imu_errors(scenario.imu, rng_imu)
-    dtheta, dvel = imu.corrupt(truth.dtheta_b_rad, truth.dvel_b_mps, truth.dt_s, errors, rng_imu)
+    dt_s = flight.dt_s
     # Fixes and fusion at leo.fix_rate_hz ([Shen 2024]: 1 Hz), on the IMU's two-sample grid.
     per_step = int(round(scenario.imu.rate_hz / scenario.leo.fix_rate_hz))
     if per_step < 2 or per_step % 2 or abs(per_step * scenario.leo.fix_rate_hz - scenario.imu.rate_hz) > 1e-6:
         raise InputError(f"{scenario.name}: leo.fix_rate_hz={scenario.leo.fix_rate_hz:g} must divide "
                          f"imu.rate_hz={scenario.imu.rate_hz:g} into an even number of IMU samples")
-    n_ep = (truth.t_s.size - 1) // per_step + 1
-    truth1 = truth.at(truth.t_s[: (n_ep - 1) * per_step + 1: per_step])
+    measured = imu.MeasuredIncrements(flight.increments, imu.Corruption(errors, dt_s, flight.n_samples - 1, rng_imu),
+                                      IMU_BLOCK_STEPS * per_step)
+    truth1 = flight.trajectory(every=per_step)
+    n_ep = truth1.t_s.size
     t_s = truth1.t_s
     times_utc = scenario.start_utc + (t_s * 1e9).round().astype("timedelta64[ns]")
     pos_rx = truth1.pos_ecef_m
@@ -411,8 +418,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
 
     # 2. INS alone.
     state0 = _initial_state(truth1, scenario.init_error)
-    ins = strapdown.integrate(state0, dtheta[: (n_ep - 1) * per_step], dvel[: (n_ep - 1) * per_step], truth.dt_s,
-                              out_every=per_step // 2)
+    ins = strapdown.integrate_blocks(state0, measured.blocks((n_ep - 1) * per_step), dt_s, out_every=per_step // 2)
     ins_pos = frames.geodetic_to_ecef(ins.lat_rad, ins.lon_rad, ins.alt_m)
     ins_vel_ecef = np.einsum("kij,kj->ki", frames.C_e_n(ins.lat_rad, ins.lon_rad), ins.vel_enu_mps)
 
@@ -477,15 +483,16 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     if coupling == "loose":
         fix_errors, cov_white = _fix_error_model(vis, fixes, good, sigma_hz, sigma_est, pos_sv_known, carrier, fam,
                                                  offset_max_sat, orbit_error_m, orbit_error_model)
-        fused = loose.run(state0, dtheta, dvel, truth.dt_s, (fix_pos, fix_vel, cov_white), settings,
-                          fix_errors=fix_errors, progress=progress)
+        fused = loose.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s, (fix_pos, fix_vel, cov_white),
+                          settings, fix_errors=fix_errors, progress=progress)
     else:
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,
                                      sat_offset_sigma_hz=offset_max_sat / np.sqrt(12), orbit_sigma_m=orbit_error_m,
                                      orbit_model=orbit_error_model, n_clocks=n_families)
         meas = tight.DopplerMeasurements(ep, sat, doppler_meas, sigma_est, pos_sv_known, vis.vel_sv_ecef_mps,
                                          carrier_hz=carrier, clock_index=fam)
-        fused = tight.run(state0, dtheta, dvel, truth.dt_s, meas, priors, settings, n_ep, progress=progress)
+        fused = tight.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s, meas, priors, settings, n_ep,
+                          progress=progress)
     fix_vel_enu = np.einsum("kji,kj->ki", C_e_n, fix_vel)
     return SimulationResult(
         scenario=scenario, level=level, coupling=coupling, correction_period_s=float(correction_period_s),

@@ -69,3 +69,24 @@ def test_fix_error_is_the_gain_times_the_satellite_errors():
     expected = np.zeros((vis.n_visible.size, 6, 6))
     np.add.at(expected, model.epoch_index, 0.05**2 * np.einsum("mi,mj->mij", model.gain_ecef, model.gain_ecef))
     np.testing.assert_allclose(cov_white[good], expected[good], rtol=1e-9, atol=1e-12)
+
+
+def test_imu_made_in_blocks_gives_the_same_run_as_one_block(monkeypatch):
+    # run_scenario makes the 100 Hz truth and IMU a block at a time and reads them twice (INS alone,
+    # then the EKF); the block size must not change a bit of anything the run stores.
+    import dataclasses
+
+    sc = dataclasses.replace(XIAN_BAOJI, duration_s=120.0)
+
+    def arrays(res):
+        out = {f.name: getattr(res, f.name) for f in dataclasses.fields(res)}
+        out.update({"fused." + f.name: getattr(res.fused, f.name) for f in dataclasses.fields(res.fused)})
+        return {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
+
+    monkeypatch.setattr(simulate, "IMU_BLOCK_STEPS", 1000)  # one block for the whole run
+    one = arrays(simulate.run_scenario(sc, level="measurement", seed=3))
+    monkeypatch.setattr(simulate, "IMU_BLOCK_STEPS", 7)
+    blocks = arrays(simulate.run_scenario(sc, level="measurement", seed=3))
+    assert one.keys() == blocks.keys() and "fused.lat_rad" in one
+    for k in one:
+        assert np.array_equal(one[k], blocks[k], equal_nan=one[k].dtype.kind == "f"), k

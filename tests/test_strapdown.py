@@ -63,6 +63,21 @@ def test_rolling_flight_at_180_deg_per_s():
     assert np.abs(dvel).max() < 3e-4
 
 
+def test_integrate_in_blocks_is_identical_to_integrate(xb):
+    # Blocks of whole updates: the same float operations in the same order, so bit for bit;
+    # out_every (50) need not divide a block's updates (300, 1, 399 and the rest).
+    n = 3001
+    whole = strapdown.integrate(_start(xb), xb.dtheta_b_rad[:n], xb.dvel_b_mps[:n], xb.dt_s, out_every=50)
+    cuts = [0, 600, 602, 1400, n]
+    blocks = [(xb.dtheta_b_rad[a:b], xb.dvel_b_mps[a:b]) for a, b in zip(cuts[:-1], cuts[1:])]
+    parts = strapdown.integrate_blocks(_start(xb), blocks, xb.dt_s, out_every=50)
+    for name in ("t_s", "lat_rad", "lon_rad", "alt_m", "vel_enu_mps", "q_n_b"):
+        assert np.array_equal(getattr(whole, name), getattr(parts, name)), name
+    with pytest.raises(InputError, match="inside an update"):
+        strapdown.integrate_blocks(_start(xb), [blocks[0], (xb.dtheta_b_rad[:3], xb.dvel_b_mps[:3]), blocks[1]],
+                                   xb.dt_s)
+
+
 def test_step_by_step_update_equals_integrate(xb):
     n = 200
     hist = strapdown.integrate(_start(xb), xb.dtheta_b_rad[:n], xb.dvel_b_mps[:n], xb.dt_s)

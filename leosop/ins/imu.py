@@ -25,7 +25,7 @@ from scipy.signal import lfilter
 from ..constants import G0_MPS2
 from ..errors import InputError
 
-__all__ = ["ImuErrors", "SEED004_TABLE1", "Corruption", "corrupt"]
+__all__ = ["ImuErrors", "SEED004_TABLE1", "Corruption", "MeasuredIncrements", "corrupt"]
 
 _DEG = math.pi / 180.0
 #: Rows of normals drawn at a time when skipping ahead in a generator (bounds memory).
@@ -232,6 +232,73 @@ class Corruption:
             out.append(y)
         self.done += m
         return out[0], out[1]
+
+
+class MeasuredIncrements:
+    """A series of measured increments made on demand, a block at a time: ideal ones from a source, corrupted.
+
+    Only one block is held. :attr:`dtheta_b_rad` and :attr:`dvel_b_mps`
+    act as (n, 3) arrays read forward by slices, as the filters' INS reads
+    them (:class:`leosop.fusion.common.FeedbackIns`); reading an earlier
+    slice starts the series again (same numbers: the corruption is reset).
+
+    Parameters
+    ----------
+    ideal : callable
+        ``ideal(k0, k1)``: the ideal ``dtheta_b_rad, dvel_b_mps`` of intervals
+        ``k0 .. k1 - 1``, each shape (k1 - k0, 3) (e.g.
+        :meth:`leosop.ins.trajectory.Flight.increments`).
+    corruption : Corruption
+        Its ``n`` is the length of the series.
+    block : int
+        Intervals made at a time.
+    """
+
+    def __init__(self, ideal, corruption, block):
+        if int(block) != block or block < 1:
+            raise InputError(f"block={block} must be a positive integer")
+        self.ideal, self.corruption, self.block = ideal, corruption, int(block)
+        self.n = corruption.n
+        self.dtheta_b_rad, self.dvel_b_mps = _Column(self, 0), _Column(self, 1)
+        self._restart()
+
+    def _restart(self):
+        self.corruption.reset()
+        self._b0 = self._b1 = 0
+        self._held = (np.empty((0, 3)), np.empty((0, 3)))
+
+    def read(self, start, stop):
+        """Measured ``dtheta_b_rad, dvel_b_mps`` of intervals ``start .. stop - 1``, each (stop - start, 3)."""
+        if not 0 <= start <= stop <= self.n:
+            raise InputError(f"intervals {start}..{stop}: outside 0..{self.n}")
+        if start < self._b0:
+            self._restart()
+        while self._b1 < stop:
+            k1 = min(self._b1 + self.block, self.n)
+            new = self.corruption.apply(*self.ideal(self._b1, k1))
+            keep = min(max(start, self._b0), self._b1) - self._b0
+            self._held = tuple(np.concatenate([h[keep:], x]) for h, x in zip(self._held, new))
+            self._b0, self._b1 = self._b0 + keep, k1
+        return tuple(h[start - self._b0: stop - self._b0] for h in self._held)
+
+    def blocks(self, stop):
+        """The measured increments of intervals ``0 .. stop - 1``, a block (a pair of (m, 3) arrays) at a time."""
+        for k0 in range(0, stop, self.block):
+            yield self.read(k0, min(k0 + self.block, stop))
+
+
+class _Column:
+    """One of :class:`MeasuredIncrements`' two series, as an (n, 3) array read by forward slices."""
+
+    def __init__(self, source, index):
+        self._source, self._index = source, index
+        self.shape = (source.n, 3)
+
+    def __getitem__(self, sl):
+        if not isinstance(sl, slice) or sl.step not in (None, 1):
+            raise TypeError("measured increments are read by contiguous slices only")
+        start, stop, _ = sl.indices(self.shape[0])
+        return self._source.read(start, max(start, stop))[self._index]
 
 
 def corrupt(dtheta_b_rad, dvel_b_mps, dt_s, errors, rng):

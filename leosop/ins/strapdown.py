@@ -44,7 +44,7 @@ from .. import earth
 from ..errors import InputError
 from ..rotations import dcm_to_quat, quat_to_dcm, rotvec_to_dcm
 
-__all__ = ["NavState", "NavHistory", "coning_sculling", "update", "integrate"]
+__all__ = ["NavState", "NavHistory", "coning_sculling", "update", "integrate", "integrate_blocks"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -277,25 +277,56 @@ def integrate(state0, dtheta_b_rad, dvel_b_mps, dt_s, *, update_every=2, out_eve
     -------
     NavHistory
     """
+    return integrate_blocks(state0, [(dtheta_b_rad, dvel_b_mps)], dt_s, update_every=update_every,
+                            out_every=out_every)
+
+
+def integrate_blocks(state0, blocks, dt_s, *, update_every=2, out_every=1):
+    """:func:`integrate` over consecutive blocks of increments, holding one block at a time.
+
+    The result is bit for bit :func:`integrate`'s on the blocks joined.
+
+    Parameters
+    ----------
+    state0 : NavState
+    blocks : iterable of (dtheta_b_rad, dvel_b_mps)
+        Consecutive increments, each pair shape (n_i, 3); every block but
+        the last a whole number of updates (``n_i`` a multiple of ``update_every``).
+    dt_s, update_every, out_every
+        As in :func:`integrate`.
+
+    Returns
+    -------
+    NavHistory
+    """
     if not dt_s > 0:
         raise InputError(f"dt_s={dt_s} must be > 0")
     if int(out_every) != out_every or out_every < 1:
         raise InputError(f"out_every={out_every} must be a positive integer")
-    phi, dv = coning_sculling(dtheta_b_rad, dvel_b_mps, update_every)
     T = update_every * dt_s
-    m = phi.shape[0]
-    n_out = m // out_every + 1
-    out = np.empty((n_out, 10))
     v, q = state0.vel_enu_mps, state0.q_n_b
     s = (float(state0.lat_rad), float(state0.lon_rad), float(state0.alt_m), float(v[0]), float(v[1]), float(v[2]),
          float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-    out[0] = s
+    rows = [np.array([s])]
     step = _step
-    j = 1
-    for i, (p, f) in enumerate(zip(phi.tolist(), dv.tolist()), start=1):
-        s = step(*s, *p, *f, T)
-        if i % out_every == 0:
-            out[j] = s
-            j += 1
-    t = np.arange(n_out) * out_every * T
+    i = 0
+    left_over = 0
+    for dtheta_b_rad, dvel_b_mps in blocks:
+        if left_over:
+            raise InputError(f"a block of increments ends inside an update ({left_over} samples left over) "
+                             "and is not the last")
+        phi, dv = coning_sculling(dtheta_b_rad, dvel_b_mps, update_every)
+        left_over = np.shape(dtheta_b_rad)[0] % update_every
+        m = phi.shape[0]
+        out = np.empty(((i + m) // out_every - i // out_every, 10))
+        j = 0
+        for p, f in zip(phi.tolist(), dv.tolist()):
+            s = step(*s, *p, *f, T)
+            i += 1
+            if i % out_every == 0:
+                out[j] = s
+                j += 1
+        rows.append(out)
+    out = np.concatenate(rows)
+    t = np.arange(out.shape[0]) * out_every * T
     return NavHistory(t, out[:, 0], out[:, 1], out[:, 2], out[:, 3:6], out[:, 6:10])

@@ -33,7 +33,8 @@ from ..constants import G0_MPS2
 from ..errors import InputError
 from ..rotations import dcm_to_euler, dcm_to_quat, euler_to_dcm, heading_from_yaw
 
-__all__ = ["Trajectory", "Segment", "from_segments", "flight", "xian_baoji", "rolling_flight", "static"]
+__all__ = ["Trajectory", "Flight", "Segment", "plan_flight", "from_segments", "flight", "xian_baoji", "rolling_flight",
+           "static"]
 
 #: [Shen 2024], section 4.1: Xi'an and Baoji [deg], 3 km, 200 m/s, 782 s.
 XIAN_DEG = (34.342, 108.940)
@@ -126,6 +127,76 @@ class Trajectory:
         return self.at(self.t_s[::every])
 
 
+class Flight:
+    """A flown profile sampled on demand: the truth at chosen samples, the ideal increments a block at a time.
+
+    It gives what :class:`Trajectory` holds for every sample without holding
+    it, for long flights (a 100 Hz Trajectory holds ~270 B per sample with
+    its increments: 580 MB for 6 h). Every value is computed per sample or
+    interval, so it is bit for bit the one a Trajectory holds.
+
+    Attributes
+    ----------
+    rate_hz : float
+        Sample rate.
+    n_samples : int
+        Samples; the increments cover the ``n_samples - 1`` intervals.
+    """
+
+    def __init__(self, builder, rate_hz, n_samples):
+        self._builder, self.rate_hz, self.n_samples = builder, rate_hz, n_samples
+
+    @property
+    def dt_s(self):
+        """Sample interval [s]."""
+        return 1.0 / self.rate_hz
+
+    def increments(self, k0, k1):
+        """Ideal increments of intervals ``k0 .. k1 - 1``: ``dtheta_b_rad``, ``dvel_b_mps``, each shape (k1 - k0, 3).
+
+        Gauss-Legendre nodes of every interval, (intervals, 4), a block of
+        intervals at a time: the evaluation's temporaries (~2 kB per interval)
+        would otherwise grow with the duration (5 GB for 6 h).
+        """
+        if not 0 <= k0 <= k1 <= self.n_samples - 1:
+            raise InputError(f"intervals {k0}..{k1}: outside 0..{self.n_samples - 1}")
+        half = 0.5 / self.rate_hz
+        w = (half * _GL_W)[None, :, None]
+        dtheta, dvel = np.empty((k1 - k0, 3)), np.empty((k1 - k0, 3))
+        for b0 in range(k0, k1, _BLOCK_INTERVALS):
+            tk = np.arange(b0, min(b0 + _BLOCK_INTERVALS, k1)) / self.rate_hz
+            at_nodes = self._builder._evaluate(((tk[:, None] + half) + half * _GL_X[None, :]).ravel())
+            dtheta[b0 - k0: b0 - k0 + tk.size] = np.sum(at_nodes["w_ib_b"].reshape(tk.size, 4, 3) * w, axis=1)
+            dvel[b0 - k0: b0 - k0 + tk.size] = np.sum(at_nodes["f_b"].reshape(tk.size, 4, 3) * w, axis=1)
+        return dtheta, dvel
+
+    def trajectory(self, every=1):
+        """The :class:`Trajectory` at samples ``0, every, 2 every, ...``.
+
+        Its increments are the sums of the ideal ones between the selected
+        samples (with ``every=1``: the ideal increments themselves), summed a
+        block at a time so that only the selected samples are held.
+        """
+        if int(every) != every or every < 1:
+            raise InputError(f"every={every} must be a positive integer")
+        every = int(every)
+        k = np.arange(0, self.n_samples, every)
+        t = k / self.rate_hz
+        truth = self._builder._evaluate(t)
+        n_int = k.size - 1
+        dtheta, dvel = np.empty((n_int, 3)), np.empty((n_int, 3))
+        per_block = max(1, _BLOCK_INTERVALS // every)
+        for j0 in range(0, n_int, per_block):
+            j1 = min(j0 + per_block, n_int)
+            th, dv = self.increments(j0 * every, j1 * every)
+            if every == 1:
+                dtheta[j0:j1], dvel[j0:j1] = th, dv
+            else:
+                dtheta[j0:j1] = th.reshape(j1 - j0, every, 3).sum(axis=1)
+                dvel[j0:j1] = dv.reshape(j1 - j0, every, 3).sum(axis=1)
+        return Trajectory(t, truth["lat"], truth["lon"], truth["h"], truth["vel"], truth["C_n_b"], dtheta, dvel)
+
+
 @dataclasses.dataclass(frozen=True)
 class Segment:
     """One piece of a flight profile; the commands ramp to these values over it.
@@ -213,6 +284,7 @@ class _Builder:
         return piece
 
     def build(self, rate_hz, duration_s=None):
+        """The :class:`Flight` of the pieces so far, sampled at ``rate_hz`` for ``duration_s`` (default all)."""
         duration_s = self.t if duration_s is None else duration_s
         if rate_hz <= 0 or not np.isfinite(rate_hz):
             raise InputError(f"rate_hz={rate_hz} must be a positive number")
@@ -221,20 +293,7 @@ class _Builder:
             raise InputError(f"duration_s={duration_s} is shorter than one sample at rate_hz={rate_hz}")
         if (n - 1) / rate_hz > self.t + 1e-9:
             raise InputError(f"duration_s={duration_s} is longer than the profile ({self.t} s)")
-        t = np.arange(n) / rate_hz
-        truth = self._evaluate(t)
-        # Gauss-Legendre nodes of every interval, (intervals, 4), a block of
-        # intervals at a time: the evaluation's temporaries (~2 kB per
-        # interval) would otherwise grow with the duration (5 GB for 6 h).
-        half = 0.5 / rate_hz
-        w = (half * _GL_W)[None, :, None]
-        dtheta, dvel = np.empty((n - 1, 3)), np.empty((n - 1, 3))
-        for k0 in range(0, n - 1, _BLOCK_INTERVALS):
-            tk = t[k0: min(k0 + _BLOCK_INTERVALS, n - 1)]
-            at_nodes = self._evaluate(((tk[:, None] + half) + half * _GL_X[None, :]).ravel())
-            dtheta[k0: k0 + tk.size] = np.sum(at_nodes["w_ib_b"].reshape(tk.size, 4, 3) * w, axis=1)
-            dvel[k0: k0 + tk.size] = np.sum(at_nodes["f_b"].reshape(tk.size, 4, 3) * w, axis=1)
-        return Trajectory(t, truth["lat"], truth["lon"], truth["h"], truth["vel"], truth["C_n_b"], dtheta, dvel)
+        return Flight(self, float(rate_hz), n)
 
     def _evaluate(self, t):
         """Position, velocity, attitude, body rate and specific force at times t (analytic in the state)."""
@@ -306,7 +365,7 @@ def from_segments(lat_deg, lon_deg, alt_m, heading_deg, segments, *, pitch_deg=0
         b.add(seg.duration_s, seg.speed_mps,
               seg.climb_rate_mps, None if seg.turn_rate_deg_s is None else math.radians(seg.turn_rate_deg_s),
               math.radians(seg.roll_rate_deg_s))
-    return b.build(rate_hz)
+    return b.build(rate_hz).trajectory()
 
 
 def static(lat_deg, lon_deg, alt_m, pitch_deg, roll_deg, heading_deg, duration_s, rate_hz=100.0):
@@ -328,7 +387,7 @@ def rolling_flight(lat_deg=XIAN_DEG[0], lon_deg=XIAN_DEG[1], alt_m=3000.0, speed
     b = _Builder(math.radians(lat_deg), math.radians(lon_deg), alt_m, math.radians(heading_deg))
     b.speed = speed_mps
     b.add(duration_s, roll_rate=math.radians(roll_rate_deg_s))
-    return b.build(rate_hz)
+    return b.build(rate_hz).trajectory()
 
 
 def _target_enu(y, target_ecef):
@@ -341,8 +400,8 @@ def _wrap(a):
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def flight(waypoints_deg, alt_m=None, speed_mps=200.0, rate_hz=100.0, duration_s=None, *, turn_rate_deg_s=3.0,
-           roll_in_s=2.0, climb_rate_mps=10.0):
+def plan_flight(waypoints_deg, alt_m=None, speed_mps=200.0, rate_hz=100.0, duration_s=None, *,
+                turn_rate_deg_s=3.0, roll_in_s=2.0, climb_rate_mps=10.0):
     """Fly geodesic legs between waypoints at constant ground speed.
 
     The flight starts at the first waypoint heading for the second. Each leg
@@ -371,7 +430,8 @@ def flight(waypoints_deg, alt_m=None, speed_mps=200.0, rate_hz=100.0, duration_s
 
     Returns
     -------
-    Trajectory
+    Flight
+        Sampled on demand; :func:`flight` gives the :class:`Trajectory`.
     """
     wp = np.asarray(waypoints_deg, dtype=float)
     if wp.ndim != 2 or wp.shape[0] < 2 or wp.shape[1] not in (2, 3):
@@ -426,6 +486,11 @@ def flight(waypoints_deg, alt_m=None, speed_mps=200.0, rate_hz=100.0, duration_s
         if duration_s is not None and b.t >= duration_s:
             break
     return b.build(rate_hz, duration_s)
+
+
+def flight(waypoints_deg, alt_m=None, speed_mps=200.0, rate_hz=100.0, duration_s=None, **kwargs):
+    """The :class:`Trajectory` of :func:`plan_flight` (same parameters), every sample held."""
+    return plan_flight(waypoints_deg, alt_m, speed_mps, rate_hz, duration_s, **kwargs).trajectory()
 
 
 def _turn_towards(b, target_ecef, turn_max, roll_in_s):
