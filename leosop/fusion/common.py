@@ -14,9 +14,10 @@ import dataclasses
 
 import numpy as np
 
-from .. import earth, frames
+from .. import earth
 from ..ins import error_model, strapdown
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+from ..ins.track import NavTrack
 
 __all__ = ["FilterSettings", "FusionResult", "FeedbackIns", "SatelliteStates", "Track", "Corrections", "epochs",
            "pos_jacobian", "initial_covariance", "ORBIT_MODELS", "DROP_AFTER_S", "N_INS", "GATE_PROBABILITY"]
@@ -57,15 +58,14 @@ class FilterSettings:
 
 
 @dataclasses.dataclass(frozen=True)
-class FusionResult:
-    """Filter output at every step epoch (n epochs, the first is the initial state).
+class FusionResult(NavTrack):
+    """Filter output at every step epoch (n epochs, the first is the initial state): a track and its record.
 
     Attributes
     ----------
-    t_s : ndarray, (n,)
-    lat_rad, lon_rad, alt_m : ndarray, (n,)
-    vel_enu_mps : ndarray, (n, 3)
-    C_n_b : ndarray, (n, 3, 3)
+    t_s, lat_rad, lon_rad, alt_m, vel_enu_mps, C_n_b
+        The corrected INS (:class:`leosop.ins.track.NavTrack`): shapes (n,),
+        (n,), (n,), (n,), (n, 3), (n, 3, 3).
     P : ndarray, (n, 15, 15)
         Covariance of the remaining INS errors (after feedback).
     updated : ndarray of bool, (n,)
@@ -87,12 +87,6 @@ class FusionResult:
         in ``S``); None for loose coupling.
     """
 
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    alt_m: np.ndarray
-    vel_enu_mps: np.ndarray
-    C_n_b: np.ndarray
     P: np.ndarray
     updated: np.ndarray
     rejected: np.ndarray
@@ -103,11 +97,6 @@ class FusionResult:
     innovation: np.ndarray | None = None
     innovation_cov: np.ndarray | None = None
     doppler_innovation: np.ndarray | None = None
-
-    @property
-    def pos_ecef_m(self):
-        """ECEF position, (n, 3)."""
-        return frames.geodetic_to_ecef(self.lat_rad, self.lon_rad, self.alt_m)
 
     def pos_vel_cov_enu(self):
         """Covariance of ``[dv_enu, dpos_enu]`` in m/s and m, (n, 6, 6)."""

@@ -32,6 +32,7 @@ from .. import earth, frames
 from ..constants import G0_MPS2
 from ..errors import InputError
 from ..rotations import dcm_to_euler, dcm_to_quat, euler_to_dcm, heading_from_yaw
+from .track import NavTrack
 
 __all__ = ["Trajectory", "Flight", "Segment", "plan_flight", "from_segments", "flight", "xian_baoji", "rolling_flight",
            "static"]
@@ -48,31 +49,20 @@ _ATOL = np.array([1e-14, 1e-14, 1e-8, 1e-14, 1e-12])  # lat, lon [rad], h [m], h
 
 
 @dataclasses.dataclass(frozen=True)
-class Trajectory:
-    """True motion sampled at the IMU rate, with the ideal IMU increments.
+class Trajectory(NavTrack):
+    """True motion sampled at the IMU rate (a :class:`~leosop.ins.track.NavTrack`), with the ideal IMU increments.
 
     Attributes
     ----------
-    t_s : ndarray, shape (n,)
-        Sample times [s] since the start of the trajectory.
-    lat_rad, lon_rad, alt_m : ndarray, shape (n,)
-        WGS84 geodetic position.
-    vel_enu_mps : ndarray, shape (n, 3)
-        Velocity relative to the Earth in ENU.
-    C_n_b : ndarray, shape (n, 3, 3)
-        Attitude, body (Right-Forward-Up) to ENU.
+    t_s, lat_rad, lon_rad, alt_m, vel_enu_mps, C_n_b
+        As in :class:`~leosop.ins.track.NavTrack`: shapes (n,), (n,), (n,),
+        (n,), (n, 3), (n, 3, 3); ``t_s`` on a uniform sample grid from 0.
     dtheta_b_rad : ndarray, shape (n - 1, 3)
         Integral of the true body rate ``omega_ib^b`` over each interval.
     dvel_b_mps : ndarray, shape (n - 1, 3)
         Integral of the true specific force ``f^b`` over each interval.
     """
 
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    alt_m: np.ndarray
-    vel_enu_mps: np.ndarray
-    C_n_b: np.ndarray
     dtheta_b_rad: np.ndarray
     dvel_b_mps: np.ndarray
 
@@ -80,11 +70,6 @@ class Trajectory:
     def dt_s(self):
         """Sample interval [s]."""
         return float(self.t_s[1] - self.t_s[0])
-
-    @property
-    def pos_ecef_m(self):
-        """ECEF position, shape (n, 3)."""
-        return frames.geodetic_to_ecef(self.lat_rad, self.lon_rad, self.alt_m)
 
     @property
     def quat_n_b(self):
