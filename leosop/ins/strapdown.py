@@ -43,6 +43,7 @@ import numpy as np
 from .. import earth
 from ..errors import InputError
 from ..rotations import dcm_to_quat, quat_to_dcm, rotvec_to_dcm
+from .track import NavTrack
 
 __all__ = ["NavState", "NavHistory", "coning_sculling", "update", "integrate", "integrate_blocks"]
 
@@ -96,29 +97,19 @@ class NavState:
 
 
 @dataclasses.dataclass(frozen=True)
-class NavHistory:
-    """Navigation solution over time.
+class NavHistory(NavTrack):
+    """Navigation solution over time: a :class:`~leosop.ins.track.NavTrack` and its quaternions.
 
     Attributes
     ----------
-    t_s : ndarray, shape (m,)
-        Seconds since the initial state.
-    lat_rad, lon_rad, alt_m : ndarray, shape (m,)
-    vel_enu_mps : ndarray, shape (m, 3)
+    t_s, lat_rad, lon_rad, alt_m, vel_enu_mps, C_n_b
+        As in :class:`~leosop.ins.track.NavTrack` (``t_s`` in seconds since the
+        initial state); shapes (m,), (m,), (m,), (m,), (m, 3), (m, 3, 3).
     q_n_b : ndarray, shape (m, 4)
+        The attitude as integrated, scalar-first quaternions (``C_n_b`` is made from them).
     """
 
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    alt_m: np.ndarray
-    vel_enu_mps: np.ndarray
     q_n_b: np.ndarray
-
-    @property
-    def C_n_b(self):
-        """Attitude matrices, shape (m, 3, 3)."""
-        return quat_to_dcm(self.q_n_b)
 
     def state(self, i):
         """The :class:`NavState` of epoch ``i``."""
@@ -329,4 +320,4 @@ def integrate_blocks(state0, blocks, dt_s, *, update_every=2, out_every=1):
         rows.append(out)
     out = np.concatenate(rows)
     t = np.arange(out.shape[0]) * out_every * T
-    return NavHistory(t, out[:, 0], out[:, 1], out[:, 2], out[:, 3:6], out[:, 6:10])
+    return NavHistory(t, out[:, 0], out[:, 1], out[:, 2], out[:, 3:6], quat_to_dcm(out[:, 6:10]), out[:, 6:10])
