@@ -63,7 +63,8 @@ def test_spec_file_errors(tmp_path):
     bad.write_text("{\"n_seeds\": 2,")
     with pytest.raises(InputError, match=r"bad.json: not valid JSON"):
         load_spec(bad)
-    with pytest.raises(InputError, match=r"nope.json: no such spec file \(bundled specs: cn0_imu, families, table5, table6\)"):
+    with pytest.raises(InputError,
+                       match=r"nope.json: no such spec file \(bundled specs: cn0_imu, families, table5, table6\)"):
         load_spec(tmp_path / "nope.json")
 
 
@@ -83,7 +84,8 @@ def test_constellation_mix_is_a_parameter():
     spec = spec_from_dict(_with(parameters={"constellations": mixes, "coupling": ["loose", "tight"]}))
     assert spec.axes["constellations"] == (("starlink",), ("starlink", "oneweb", "iridium", "orbcomm"))
     scenario, options = apply(XIAN_BAOJI, spec.cells()[3], "test")
-    assert scenario.leo.constellations == ("starlink", "oneweb", "iridium", "orbcomm") and options["coupling"] == "tight"
+    assert scenario.leo.constellations == ("starlink", "oneweb", "iridium", "orbcomm")
+    assert options["coupling"] == "tight"
     ds = to_dataset(spec, np.zeros((spec.n_runs, len(METRICS))))
     assert list(ds["constellations"].values) == ["starlink", "starlink+oneweb+iridium+orbcomm"]
     assert json.loads(ds.attrs["spec"])["parameters"]["constellations"] == mixes
