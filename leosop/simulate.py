@@ -408,7 +408,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
                          f"imu.rate_hz={scenario.imu.rate_hz:g} into an even number of IMU samples")
     measured = imu.MeasuredIncrements(flight.increments, imu.Corruption(errors, dt_s, flight.n_samples - 1, rng_imu),
                                       IMU_BLOCK_STEPS * per_step)
-    truth1 = flight.trajectory(every=per_step)
+    truth1 = flight.track(every=per_step)
     n_ep = truth1.t_s.size
     t_s = truth1.t_s
     times_utc = scenario.start_utc + (t_s * 1e9).round().astype("timedelta64[ns]")
