@@ -16,8 +16,8 @@
    for the streaming stage (read, search, track: what grows with the
    recording) and end to end (identification and fix run once per
    recording, a few seconds).
-3. Memory: peak RSS of ``leosop replay`` on a large recording (the data of
-   a short generated recording repeated to ``--memory-gb``), beside the peak
+3. Memory: peak RSS of ``leosop replay`` on a large continuous recording
+   (``--memory-gb``, generated whole), beside the peak
    RSS on the short one: bounded by the block, not the file.
 """
 
@@ -157,26 +157,24 @@ def _peak_rss_mb(argv):
     return float(out.stderr.strip().splitlines()[-1])
 
 
-def bench_memory(tmp, small, gigabytes):
-    meta = json.loads(small.read_text())
-    data = small.with_suffix(".sigmf-data").read_bytes()
+def bench_memory(tmp, small, gigabytes, n_sats):
+    """Peak RSS of replay on a continuous recording of ``gigabytes`` beside the short one's.
+
+    The long recording is generated whole (cf32 at 2.5 MS/s: 20 MB per second), not tiled from
+    the short one: tiling breaks every track at each seam, and hundreds of fragments would
+    measure the identification of fragments rather than a recording people make.
+    """
     big = Path(tmp) / "big.sigmf-meta"
-    reps = max(1, int(gigabytes * 1e9 // len(data)))
-    with open(big.with_suffix(".sigmf-data"), "wb") as fh:
-        for _ in range(reps):
-            fh.write(data)
-    meta["global"].pop("core:sha512", None)
-    meta["annotations"] = []
-    big.write_text(json.dumps(meta))
+    seconds = gigabytes * 1e9 / (2.5e6 * 8)
+    _generate(big, "--duration-s", f"{seconds:.1f}", "--seed", "1", "--sat", *_visible(tmp, n_sats, 1))
     size_gb = big.with_suffix(".sigmf-data").stat().st_size / 1e9
-    # With the prior: the tiled file breaks every track at each seam, and a global search over
-    # hundreds of fragments measures the search, not the streaming this test is about.
     init = "34.98,109.71,0"
     small_mb = _peak_rss_mb(["replay", str(small), "--static", "--init", init, "--json"])
     t0 = time.perf_counter()
     big_mb = _peak_rss_mb(["replay", str(big), "--static", "--init", init, "--json"])
-    print(f"memory: peak RSS {small_mb:.0f} MB on {len(data) / 1e6:.0f} MB, {big_mb:.0f} MB on {size_gb:.1f} GB "
-          f"(ratio {big_mb / small_mb:.2f}; {time.perf_counter() - t0:.0f} s)")
+    print(f"memory: peak RSS {small_mb:.0f} MB on {small.with_suffix('.sigmf-data').stat().st_size / 1e6:.0f} MB, "
+          f"{big_mb:.0f} MB on {size_gb:.1f} GB ({seconds:.0f} s continuous; ratio {big_mb / small_mb:.2f}; "
+          f"{time.perf_counter() - t0:.0f} s)")
 
 
 if __name__ == "__main__":
@@ -199,4 +197,4 @@ if __name__ == "__main__":
         if parts & {"throughput", "memory"}:
             small = bench_throughput(tmp, 5.0 if a.quick else 20.0, a.sats)
         if "memory" in parts and a.memory_gb > 0:
-            bench_memory(tmp, small, a.memory_gb)
+            bench_memory(tmp, small, a.memory_gb, a.sats)
