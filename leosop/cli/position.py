@@ -1,4 +1,12 @@
-"""``leosop position MEAS.csv``: Doppler fixes from a measurement table (DESIGN 4.1, 4.3).
+"""``leosop position MEAS.csv``: Doppler fixes from a measurement table.
+
+The table (CSV with a header row, one Doppler measurement per row): ``time_utc``
+(ISO 8601) or ``t_s``, ``sat_id`` (NORAD number, looked up in ``--tle``) and
+``doppler_hz`` (received minus nominal carrier, positive when approaching);
+optional ``sigma_hz``, ``carrier_hz``, the satellite's ECEF state at the
+measurement time ``x_sv_m, y_sv_m, z_sv_m, vx_sv_mps, vy_sv_mps, vz_sv_mps``
+(then no element sets are needed) and ``pass_id`` (rows of one pass share a
+transmitter frequency offset in a static fix).
 
 Without ``--static`` one snapshot fix per epoch with at least 7 satellites
 (position, velocity, frequency offset); with ``--static`` one batch fix of a
@@ -11,7 +19,7 @@ and drift are those of the pass nearest the middle). Besides the contract's
 ``solutions``, the JSON document lists the ``rejected`` rows and
 ``unsolved`` epochs with their reasons; each solution carries a ``status``.
 
-Rows of several constellations may be mixed (DESIGN 4.3): a row's carrier is
+Rows of several constellations may be mixed: a row's carrier is
 its ``carrier_hz``, else its satellite's family's (the ``--tle`` names, the
 carrier table), else ``--carrier-hz``; each constellation gets its own
 receiver clock (a snapshot epoch then needs 6 + one satellite per
@@ -37,20 +45,21 @@ from ..timebase import format_utc
 from . import add_command
 from .options import parse_site
 
-_DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
+_DESCRIPTION = " ".join(__doc__.split("\n\n")[1:3]).replace("\n", " ")
 
 
 def register(subparsers):
     p = add_command(subparsers, "position", sys.modules[__name__], help="Doppler positioning from a measurement CSV",
                     description=_DESCRIPTION)
-    p.add_argument("meas", metavar="MEAS.csv", help="Doppler measurements (DESIGN 4.3 columns)")
+    p.add_argument("meas", metavar="MEAS.csv", help="Doppler measurements: columns time_utc or t_s, sat_id, doppler_hz; optional sigma_hz, carrier_hz, "
+                   "pass_id and the satellite state x_sv_m ... vz_sv_mps")
     p.add_argument("--tle", metavar="FILE", help="element sets for rows without satellite state columns "
                    "(default: the bundled constellation)")
     p.add_argument("--carrier-hz", type=float, metavar="F",
                    help="carrier of rows without carrier_hz and of no known constellation (default "
                    f"{DEFAULT_CARRIER_HZ:g} unless the file mixes carriers)")
     p.add_argument("--static", action="store_true", help="one batch fix of a receiver at rest; with a pass_id "
-                   "column (optional, extends DESIGN 4.3) a cubic frequency offset per pass, position shared")
+                   "column a cubic frequency offset per pass, position shared")
     p.add_argument("--clock", choices=("per_pass", "common"), default="per_pass",
                    help="with --static and pass_id: a frequency polynomial per pass (default), or one receiver "
                    "clock (offset, drift) plus a constant offset per satellite (multi-satellite receiver)")
