@@ -36,8 +36,12 @@ def test_cf32_round_trip(tmp_path):
     np.testing.assert_array_equal(rec.read(0, 5_000), x.astype(np.complex64))
     np.testing.assert_array_equal(rec.read(1234, 10), x[1234:1244].astype(np.complex64))
     assert rec.annotations[0]["leosop:doppler_hz"] == 1.5
-    # The sigmf package's own reader (checksum verified) sees the same samples.
-    np.testing.assert_array_equal(sigmffile.fromfile(str(meta)).read_samples(), x.astype(np.complex64))
+    # The sigmf package's own reader (checksum verified) sees the same samples, and the
+    # leosop: keys are declared as an optional extension that its schema validates.
+    theirs = sigmffile.fromfile(str(meta))
+    np.testing.assert_array_equal(theirs.read_samples(), x.astype(np.complex64))
+    theirs.validate()
+    assert theirs.get_global_field("core:extensions") == [{"name": "leosop", "version": "1.0.0", "optional": True}]
     blocks = list(rec.blocks(2_000))
     assert [s for s, _ in blocks] == [0, 2_000]  # whole blocks only
 

@@ -26,6 +26,10 @@ DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0), "ci16_le": (np.dtype("<i2"), 1.0
 _RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le"}
 #: Slack of the capture overlap check: writers may round core:datetime to the microsecond.
 _OVERLAP_TOL_S = 1e-6
+#: Version of the ``leosop:`` SigMF extension (``core:extensions``): the comb's
+#: ``leosop:n_tones`` / ``leosop:tone_spacing_hz``, the generator's truth
+#: annotations and draws; readers that do not know it may ignore it.
+SIGMF_EXTENSION_VERSION = "1.0.0"
 
 
 @dataclass(frozen=True)
@@ -431,6 +435,10 @@ def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz
     info = {sigmf.DATATYPE_KEY: datatype, sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
             sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(data_file)}
     info.update(global_extra or {})
+    if any(str(k).startswith("leosop:") for k in info) or any(
+            str(k).startswith("leosop:") for _, _, md in annotations for k in md):
+        # The leosop: keys (comb layout, truth, draws) are declared as an optional extension.
+        info[sigmf.EXTENSIONS_KEY] = [{"name": "leosop", "version": SIGMF_EXTENSION_VERSION, "optional": True}]
     meta = SigMFFile(global_info=info)
     if starts[-1] >= n:
         raise InputError(f"write_sigmf: capture at sample {starts[-1]} but only {n} samples were written")
