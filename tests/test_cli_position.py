@@ -157,3 +157,31 @@ def test_static_summary_counts_measurements_and_satellites(capsys, table):
     assert main(["position", str(path), "--static"]) == 0
     out = capsys.readouterr().out
     assert f"{s['n_used']} measurements of {s['n_sats']} sats" in out and s["n_used"] > s["n_sats"]
+
+
+def test_format_fll_reads_a_gnu_radio_log_and_needs_the_satellite(capsys, tmp_path):
+    # A synthetic FLL log in the GNU Radio format (index, doppler_offset, timestamp,
+    # measured_freq), carrier 145.88 MHz; the real FOX-1D log is read in test_position_realdata.
+    log = tmp_path / "fll.csv"
+    log.write_text("index,doppler_offset,timestamp,measured_freq\n"
+                   "0,2240.5,2018-01-13T16:12:01.862011Z,145882240.5\n"
+                   "1,2239.0,2018-01-13T16:12:01.962011Z,145882239.0\n")
+    from leosop.positioning.datasets import read_fll
+
+    meas = read_fll(log, "43137")
+    np.testing.assert_allclose(meas.carrier_hz, 145.88e6)
+    np.testing.assert_allclose(meas.doppler_hz, [2240.5, 2239.0])
+    np.testing.assert_allclose(meas.t_s, [0.0, 0.1], atol=1e-9)
+    assert main(["position", str(log), "--format", "fll"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--sat-id" in err
+    bad = tmp_path / "bad.csv"
+    bad.write_text("index,doppler_offset,timestamp\n0,1.0,2018-01-13T16:12:01Z\n")
+    assert main(["position", str(bad), "--format", "fll", "--sat-id", "43137"]) == 2
+    assert "measured_freq" in capsys.readouterr().err
+
+
+def test_format_doptrack_names_the_missing_archive(capsys, tmp_path):
+    assert main(["position", str(tmp_path), "--format", "doptrack", "--static"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "data.tar.xz" in err

@@ -11,11 +11,9 @@ import numpy as np
 from conftest import data_path
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import read_tle
-from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
+from leosop.positioning.datasets import doptrack_table, read_doptrack, read_fll, read_gsdc
 from leosop.positioning.robust_ls import FixStatus
-from leosop.positioning.measurements import Measurements
-from leosop.positioning.solve import position_snapshots, position_static, position_static_passes, satellite_states
-from leosop.timebase import seconds_since
+from leosop.positioning.solve import position_snapshots, position_static, position_static_passes
 
 
 def test_doptrack_single_pass_static_fixes():
@@ -41,15 +39,8 @@ def test_doptrack_single_pass_static_fixes():
 
 def _passes_fix(passes, pos_rx_ecef_m=None, **kw):
     """Joint fix of DopTrack passes, states from each pass's own element set (light time for pos_rx_ecef_m)."""
-    states = [satellite_states(p.meas, p.constellation, pos_rx_ecef_m)[:2] for p in passes]
-    t = np.concatenate([p.meas.time_utc for p in passes])
-    cat = lambda name: np.concatenate([getattr(p.meas, name) for p in passes])  # noqa: E731
-    meas = Measurements(t_s=seconds_since(t, t.min()), time_utc=t, sat_id=cat("sat_id"), doppler_hz=cat("doppler_hz"),
-                        sigma_hz=cat("sigma_hz"), carrier_hz=cat("carrier_hz"),
-                        pos_sv_ecef_m=np.concatenate([s[0] for s in states]),
-                        vel_sv_ecef_mps=np.concatenate([s[1] for s in states]), line=np.arange(len(t)))
-    pass_id = np.repeat(np.arange(len(passes)), [len(p.meas) for p in passes])
-    return position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx_ecef_m,
+    meas = doptrack_table(passes, pos_rx_ecef_m)
+    return position_static_passes(meas, meas.pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=pos_rx_ecef_m,
                                   **kw).fixes
 
 
@@ -130,15 +121,25 @@ def test_doptrack_short_pass_fix_and_mirror_fit_alike_and_the_sigma_says_so():
     assert err > 1000e3 and err / np.sqrt(np.trace(fix.cov[:3, :3])) < 3
 
 
-def test_fox1d_pass_with_its_catalogue_number():
+def test_fox1d_pass_with_its_catalogue_number(capsys):
     folder = data_path("leo-doppler", "fox1d_vtgs_2018-01-13")
-    meas = read_fox1d(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv", "43137")
+    meas = read_fll(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv", "43137")
     site = geodetic_to_ecef(np.radians(37.229976), np.radians(-80.439627), 610.0)
     fix = position_static(meas, constellation=read_tle(folder / "pslv40_st.tle"), alt_m=610.0).fixes
     # Achieved 12.3 km with 2018-004AC (TLEs of the first days after launch, 21 Hz residual rms);
     # bound 20 km.
     assert fix.status == FixStatus.OK
     assert np.linalg.norm(fix.pos_ecef_m - site) < 20e3
+    # The CLI reads the log itself (--format fll) and solves the same fix.
+    import json
+
+    from leosop.cli import main
+
+    argv = ["position", str(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv"), "--format", "fll",
+            "--sat-id", "43137", "--tle", str(folder / "pslv40_st.tle"), "--static", "--alt-m", "610", "--json"]
+    assert main(argv) == 0
+    (sol,) = json.loads(capsys.readouterr().out)["solutions"]
+    assert np.linalg.norm(np.array([sol["x_m"], sol["y_m"], sol["z_m"]]) - fix.pos_ecef_m) < 1e-3
 
 
 def _gsdc(sub):

@@ -24,11 +24,10 @@ import numpy as np
 
 from leosop.frames import C_e_n, ecef_to_enu, geodetic_to_ecef
 from leosop.orbits import read_tle
-from leosop.positioning.datasets import read_doptrack, read_fox1d, read_gsdc
-from leosop.positioning.measurements import Measurements, write_measurements
+from leosop.positioning.datasets import doptrack_table, read_doptrack, read_fll, read_gsdc
+from leosop.positioning.measurements import write_measurements
 from leosop.positioning.solve import position_snapshots, position_static, position_static_passes, satellite_states
 from leosop.progress import progress
-from leosop.timebase import seconds_since
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FOX_SITE = (37.229976, -80.439627, 610.0)
@@ -77,23 +76,6 @@ def doptrack_single(passes, export):
           f"(median; quartiles {q1:+.2f}, {q3:+.2f} s; element sets and station as given)")
 
 
-def combine_passes(passes, pos_rx_ecef_m=None):
-    """One table of several DopTrack passes, satellite states from each pass's own element set.
-
-    Light time for ``pos_rx_ecef_m`` (none without it). Returns the
-    Measurements (with the state columns) and each row's pass index.
-    """
-    parts = [(p.meas, *satellite_states(p.meas, p.constellation, pos_rx_ecef_m)[:2]) for p in passes]
-    time_utc = np.concatenate([m.time_utc for m, _, _ in parts])
-    cat = lambda name: np.concatenate([getattr(m, name) for m, _, _ in parts])  # noqa: E731
-    meas = Measurements(t_s=seconds_since(time_utc, time_utc.min()), time_utc=time_utc, sat_id=cat("sat_id"),
-                        doppler_hz=cat("doppler_hz"), sigma_hz=cat("sigma_hz"), carrier_hz=cat("carrier_hz"),
-                        pos_sv_ecef_m=np.concatenate([p for _, p, _ in parts]),
-                        vel_sv_ecef_mps=np.concatenate([v for _, _, v in parts]), line=np.arange(len(time_utc)),
-                        source="DopTrack passes")
-    return meas, np.repeat(np.arange(len(passes)), [len(m) for m, _, _ in parts])
-
-
 def fix_passes(passes, **kw):
     """Multi-pass static fix, height known, no start given; light time recomputed at the first fix.
 
@@ -102,13 +84,13 @@ def fix_passes(passes, **kw):
     if it fails, the first fix stands. ``kw`` goes to position_static_passes
     (the time-bias options).
     """
-    meas, pass_id = combine_passes(passes)
-    first = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, **kw).fixes
+    meas = doptrack_table(passes)
+    first = position_static_passes(meas, meas.pass_id, alt_m=passes[0].station_alt_m, **kw).fixes
     if not np.isfinite(first.pos_ecef_m).all():
         return first
     starts = np.vstack([first.pos_ecef_m] + [first.mirror_pos_ecef_m] * bool(np.isfinite(first.mirror_chi2)))
-    meas, pass_id = combine_passes(passes, first.pos_ecef_m)
-    again = position_static_passes(meas, pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=starts, **kw).fixes
+    meas = doptrack_table(passes, first.pos_ecef_m)
+    again = position_static_passes(meas, meas.pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=starts, **kw).fixes
     return again if np.isfinite(again.pos_ecef_m).all() else first
 
 
@@ -178,7 +160,7 @@ def fox1d(data, export):
     site = geodetic_to_ecef(np.radians(FOX_SITE[0]), np.radians(FOX_SITE[1]), FOX_SITE[2])
     print("\nFOX-1D over VTGS, trimmed pass, static fix, height known (610 m)")
     for sat_id in ("43135", "43136", "43137"):
-        meas = read_fox1d(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv", sat_id)
+        meas = read_fll(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv", sat_id)
         res = position_static(meas, constellation=const, alt_m=FOX_SITE[2])
         d = ecef_to_enu(res.fixes.pos_ecef_m - site, np.radians(FOX_SITE[0]), np.radians(FOX_SITE[1]))
         print(f"  as {sat_id}: rms {res.fixes.residual_rms_hz:6.2f} Hz  status {res.fixes.status.name}  "

@@ -39,6 +39,7 @@ from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from ..geometry.doppler import N_DOPPLER_STATES
 from ..orbits import load_constellation
 from ..positioning.robust_ls import FixStatus
+from ..positioning.datasets import doptrack_table, read_doptrack, read_fll
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
 from ..positioning.solve import position_snapshots, position_static, position_static_passes
 from ..timebase import format_utc
@@ -51,6 +52,12 @@ _DESCRIPTION = " ".join(__doc__.split("\n\n")[1:3]).replace("\n", " ")
 def register(subparsers):
     p = add_command(subparsers, "position", sys.modules[__name__], help="Doppler positioning from a measurement CSV",
                     description=_DESCRIPTION)
+    p.add_argument("--format", choices=("table", "doptrack", "fll"), default="table",
+                   help="table: the measurement CSV above (default); doptrack: MEAS is a folder with DopTrack's "
+                   "data.tar.xz and metadata.tar.xz (one pass per file, each with its own element set and "
+                   "pass_id; use --static); fll: a GNU Radio frequency-locked-loop log, CSV with "
+                   "doppler_offset, timestamp (ISO UTC) and measured_freq columns, of the satellite --sat-id")
+    p.add_argument("--sat-id", metavar="ID", help="catalogue number of the satellite of a --format fll log")
     p.add_argument("meas", metavar="MEAS.csv", help="Doppler measurements: columns time_utc or t_s, sat_id, doppler_hz; optional sigma_hz, carrier_hz, "
                    "pass_id and the satellite state x_sv_m ... vz_sv_mps")
     p.add_argument("--tle", metavar="FILE", help="element sets for rows without satellite state columns "
@@ -187,15 +194,24 @@ def fixes_csv_rows(solutions):
 def run(args):
     _check(args)
     # Element sets give the rows' families (carrier, receiver clock) and, without state columns, the states.
-    constellation = load_constellation(args.tle) if args.tle else None
-    meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
-    if meas.pos_sv_ecef_m is None and constellation is None:
-        constellation = load_constellation(None)
-        meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
     init = None
     if args.init:
         lat, lon, alt = parse_site(args.init, "--init")
         init = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
+    constellation = load_constellation(args.tle) if args.tle else None
+    if args.format == "doptrack":
+        # Each pass's own element set gives its states (light time at --init when given).
+        meas = doptrack_table(read_doptrack(args.meas), init)
+    elif args.format == "fll":
+        if not args.sat_id:
+            raise InputError("--format fll: give the satellite's catalogue number with --sat-id")
+        meas = read_fll(args.meas, args.sat_id)
+        constellation = constellation or load_constellation(None)
+    else:
+        meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
+        if meas.pos_sv_ecef_m is None and constellation is None:
+            constellation = load_constellation(None)
+            meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
     alpha = args.alpha or None
     if args.static and meas.pass_id is not None:
         res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,

@@ -23,18 +23,17 @@ import numpy as np
 
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
+from ..fileio import check_input_file
 from ..frames import geodetic_to_ecef
 from ..orbits.tle import parse_tle_lines
 from .measurements import Measurements
 
-__all__ = ["DopTrackPass", "read_doptrack", "read_fox1d", "GsdcEpochs", "read_gsdc",
-           "DELFI_C3_CARRIER_HZ", "FOX1D_CARRIER_HZ", "GPS_L1_HZ"]
+__all__ = ["DopTrackPass", "read_doptrack", "doptrack_table", "read_fll", "GsdcEpochs", "read_gsdc",
+           "DELFI_C3_CARRIER_HZ", "GPS_L1_HZ"]
 
 #: Delfi-C3 telemetry downlink, nominal [Hz]; the transmitter's own offset
 #: (about -2 kHz in April 2020) is left to the solver's frequency offset.
 DELFI_C3_CARRIER_HZ = 145.870e6
-#: FOX-1D (AO-92) downlink and the VTGS receiver's centre frequency [Hz].
-FOX1D_CARRIER_HZ = 145.880e6
 #: GPS L1 / Galileo E1 carrier [Hz].
 GPS_L1_HZ = 1575.42e6
 #: GSDC signal types on the L1/E1 carrier.
@@ -133,33 +132,90 @@ def read_doptrack(folder):
     return passes
 
 
-def read_fox1d(csv_path, sat_id="43137"):
-    """The FOX-1D pass recorded at VTGS (``index,doppler_offset,timestamp,measured_freq``).
+def doptrack_table(passes, pos_rx_ecef_m=None):
+    """One measurement table of several DopTrack passes, states from each pass's own element set.
+
+    Parameters
+    ----------
+    passes : list of DopTrackPass
+    pos_rx_ecef_m : array_like, (3,), optional
+        Receiver position for the light time (none without it: ~0.1 Hz at
+        145.87 MHz, 3 ms of a ~30 Hz/s Doppler rate).
+
+    Returns
+    -------
+    Measurements
+        With the satellite state columns and ``pass_id`` the pass name; rows
+        whose element set cannot be propagated are dropped into ``rejected``.
+    """
+    from ..timebase import seconds_since
+    from .solve import satellite_states
+
+    parts, rejected = [], []
+    for p in passes:
+        pos, vel, reason = satellite_states(p.meas, p.constellation, pos_rx_ecef_m)[:3]
+        ok = reason == ""
+        rejected += [(int(line), f"{p.name}: {r}") for line, r in zip(p.meas.line[~ok], reason[~ok])]
+        parts.append((p, ok, pos[ok], vel[ok]))
+    if not any(ok.any() for _, ok, _, _ in parts):
+        raise InputError(f"{passes[0].meas.source if passes else 'DopTrack'}: no row has a usable element set")
+    time_utc = np.concatenate([p.meas.time_utc[ok] for p, ok, _, _ in parts])
+
+    def cat(name):
+        return np.concatenate([getattr(p.meas, name)[ok] for p, ok, _, _ in parts])
+
+    return Measurements(t_s=seconds_since(time_utc, time_utc.min()), time_utc=time_utc, sat_id=cat("sat_id"),
+                        doppler_hz=cat("doppler_hz"), sigma_hz=cat("sigma_hz"), carrier_hz=cat("carrier_hz"),
+                        pos_sv_ecef_m=np.concatenate([pos for _, _, pos, _ in parts]),
+                        vel_sv_ecef_mps=np.concatenate([vel for _, _, _, vel in parts]), line=cat("line"),
+                        pass_id=np.concatenate([np.full(ok.sum(), p.name) for p, ok, _, _ in parts]),
+                        rejected=tuple(rejected), source=f"DopTrack passes ({len(passes)})")
+
+
+def read_fll(csv_path, sat_id):
+    """A GNU Radio frequency-locked-loop Doppler log (``doppler_offset, timestamp, measured_freq`` columns).
+
+    The format of the FOX-1D pass recorded at VTGS (``index, doppler_offset,
+    timestamp, measured_freq``): ``doppler_offset`` [Hz] is the received
+    minus the nominal carrier, ``timestamp`` ISO 8601 UTC, and the carrier
+    of each row is ``measured_freq - doppler_offset``.
 
     Parameters
     ----------
     csv_path : str or Path
     sat_id : str
-        Catalogue number to attach; the first element sets after launch do
-        not tell FOX-1D (43137 = 2018-004AC in later catalogues) from its
-        neighbours 43135/43136 (PROVENANCE.md).
+        Catalogue number to attach (the log does not name its satellite; for
+        FOX-1D the first element sets after launch do not tell 43137 =
+        2018-004AC from its neighbours 43135/43136, PROVENANCE.md).
 
     Returns
     -------
     Measurements
-        Doppler against :data:`FOX1D_CARRIER_HZ`, sigma unknown (NaN).
+        Sigma unknown (NaN).
     """
     path = Path(csv_path)
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    if not rows or not {"doppler_offset", "timestamp"} <= set(rows[0]):
-        raise InputError(f"{path}: expected columns doppler_offset and timestamp")
-    time_utc = np.array([_utc(r["timestamp"]) for r in rows], dtype="datetime64[ns]")
+    check_input_file(path, "FLL log")
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.DictReader(fh))
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file; expected a CSV FLL log") from None
+    need = {"doppler_offset", "timestamp", "measured_freq"}
+    if not rows or not need <= set(rows[0]):
+        raise InputError(f"{path}: expected columns {', '.join(sorted(need))} and at least one row")
+    try:
+        time_utc = np.array([_utc(r["timestamp"]) for r in rows], dtype="datetime64[ns]")
+        doppler = np.array([float(r["doppler_offset"]) for r in rows])
+        carrier = np.array([float(r["measured_freq"]) for r in rows]) - doppler
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{path}: a timestamp, doppler_offset or measured_freq is not valid ({exc})") from None
+    if not (np.all(np.isfinite(doppler)) and np.all(carrier > 0)):
+        raise InputError(f"{path}: doppler_offset must be finite and measured_freq - doppler_offset positive")
     n = len(rows)
     return Measurements(
         t_s=(time_utc - time_utc[0]).astype(np.int64) * 1e-9, time_utc=time_utc, sat_id=np.full(n, str(sat_id)),
-        doppler_hz=np.array([float(r["doppler_offset"]) for r in rows]), sigma_hz=np.full(n, np.nan),
-        carrier_hz=np.full(n, FOX1D_CARRIER_HZ), line=np.arange(2, n + 2), source=str(path),
+        doppler_hz=doppler, sigma_hz=np.full(n, np.nan), carrier_hz=carrier, line=np.arange(2, n + 2),
+        source=str(path),
     )
 
 
