@@ -496,11 +496,12 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         iterations = iterations + it
     ok = status[0] in (FixStatus.OK, FixStatus.INCONSISTENT)
     tau = _pass_tau(res[0, :n], used[0, :n], gi, n_pass) if decorrelate and ok else np.ones(n_pass)
-    # Each pass's variance raised to tau x its whitened residuals' mean square, never lowered: a
-    # sigma already above the residuals (noise-free or conservative input) is kept.
+    # Each correlated pass's variance raised to tau x its whitened residuals' mean square, never
+    # lowered: a sigma already above the residuals (noise-free or conservative input) is kept, and
+    # a pass with white residuals (tau = 1) keeps its sigma (its chi-square scatter is no evidence).
     z2 = np.bincount(gi, np.where(used[0, :n], (res[0, :n] / sigma[:n]) ** 2, 0.0), n_pass) / \
         np.maximum(np.bincount(gi, used[0, :n], n_pass), 1)
-    sigma_scale = np.sqrt(np.maximum(tau * z2, 1.0))
+    sigma_scale = np.where(tau > 1.0, np.sqrt(np.maximum(tau * z2, 1.0)), 1.0)
     if (sigma_scale > 1.0).any():
         sigma = sigma.copy()  # the solves below and the covariance use the scaled sigmas
         sigma[:n] *= sigma_scale[gi]
