@@ -22,7 +22,7 @@ from scipy.stats import norm as norm_dist
 
 from ..geometry.dop import cofactor
 
-__all__ = ["FixStatus", "solve_robust", "XTOL_POS_M", "EQUAL_FIT_SIGMAS"]
+__all__ = ["FixStatus", "UsedResiduals", "solve_robust", "XTOL_POS_M", "EQUAL_FIT_SIGMAS"]
 
 #: Step threshold of convergence of a position [m]: 0.1 mm.
 XTOL_POS_M = 1e-4
@@ -42,6 +42,16 @@ _RETRY_ALPHA = 1e-3
 #: state has a residual variance of zero up to round-off).
 _RESIDUAL_VAR_FLOOR = 1e-12
 
+
+class UsedResiduals:
+    """Mixin of a fix with ``residuals_hz``, ``used`` and ``n_used``: their RMS."""
+
+    @property
+    def residual_rms_hz(self):
+        """RMS of the used residuals [Hz]."""
+        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
+
+
 class FixStatus(IntEnum):
     """Outcome of one fix."""
 
@@ -54,6 +64,7 @@ class FixStatus(IntEnum):
     TOO_FEW = 3
     #: Residuals fail the chi-square test and no single outlier can be isolated.
     INCONSISTENT = 4
+
 
 def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
     """Damped Gauss-Newton over independent problems.
@@ -105,6 +116,7 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
         active = active[~done]
     return x, iterations, converged
 
+
 def _group_argmax(values, groups):
     """Index of the largest of ``values`` (k, m) within each group of ``groups`` (m,), -1 for an empty group.
 
@@ -118,6 +130,7 @@ def _group_argmax(values, groups):
             best = rows[np.argmax(values[:, rows], axis=-1)]
             out[:, g] = np.where(np.isfinite(values[np.arange(len(values)), best]), best, -1)
     return out
+
 
 def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, fixed=None, x_alt=None,
                   groups=None, step_sigma_tol=None):

@@ -16,7 +16,7 @@ import numpy as np
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
 from ..geometry.doppler import doppler_jacobian
-from .robust_ls import EQUAL_FIT_SIGMAS, XTOL_POS_M, FixStatus, solve_robust
+from .robust_ls import EQUAL_FIT_SIGMAS, XTOL_POS_M, FixStatus, UsedResiduals, solve_robust
 from .starts import track_starts
 
 __all__ = ["StaticFix", "solve_static"]
@@ -27,8 +27,9 @@ _XTOL_STATIC = np.array([XTOL_POS_M] * 3 + [1e-5, 1e-7])
 #: Cross-track offsets of the default starts, in units of ``start_offset_m``.
 _START_FRACTIONS = np.array([0.0, 1 / 6, -1 / 6, 1 / 3, -1 / 3, 0.6, -0.6, 1.0, -1.0])
 
+
 @dataclass(frozen=True)
-class StaticFix:
+class StaticFix(UsedResiduals):
     """Batch fix of a receiver at rest.
 
     Attributes
@@ -90,10 +91,6 @@ class StaticFix:
     clock_polys_hz: np.ndarray = None
     clock_labels: tuple = ()
 
-    @property
-    def residual_rms_hz(self):
-        """RMS of the used residuals [Hz]."""
-        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
 
 def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, *, pos0_ecef_m=None,
                  alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3, start_offset_m=1.5e6,

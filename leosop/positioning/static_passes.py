@@ -34,7 +34,7 @@ import numpy as np
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
 from ..geometry.doppler import doppler_jacobian, doppler_rate
-from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
+from .robust_ls import XTOL_POS_M, FixStatus, UsedResiduals, solve_robust
 from .starts import grid_starts, subpoint_centroid_ecef_m
 
 __all__ = ["PassesFix", "solve_static_passes", "integrated_autocorrelation", "TIME_OFFSET_SIGMA_S",
@@ -56,8 +56,9 @@ _SOKAL_C = 5.0
 #: A pass's sigma is scaled only when its tau exceeds 1 by this many white-noise standard deviations.
 _TAU_SIGNIFICANCE = 3.0
 
+
 @dataclass(frozen=True)
-class PassesFix:
+class PassesFix(UsedResiduals):
     """Batch fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     Attributes
@@ -161,10 +162,6 @@ class PassesFix:
         """Each pass's frequency drift at its ``t_ref_s``, ndarray (n_pass,)."""
         return self.clock_poly_hz[:, 1] if self.clock_poly_hz.shape[1] > 1 else np.zeros(len(self.pass_ids))
 
-    @property
-    def residual_rms_hz(self):
-        """RMS of the used residuals [Hz]."""
-        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
 
 def _inverse_or_nan(N, rcond=1e-12):
     """Inverse of a symmetric positive semi-definite matrix, judged on its unit-diagonal scaling; NaN if singular."""
@@ -175,6 +172,7 @@ def _inverse_or_nan(N, rcond=1e-12):
         return np.full(N.shape, np.nan)
     return (V / lam) @ V.T * d[:, None] * d[None, :]
 
+
 def _shift_poly(coef, shift):
     """Coefficients (..., d + 1) of ``p(s + shift)`` for ``p(s) = sum coef_k s^k``, lowest first."""
     d = coef.shape[-1] - 1
@@ -182,6 +180,7 @@ def _shift_poly(coef, shift):
     binom = np.array([[comb(j, i) if j >= i else 0 for j in k] for i in k], dtype=float)
     powers = np.asarray(shift, dtype=float)[..., None, None] ** np.maximum(k[None, :] - k[:, None], 0)
     return np.einsum("...j,ij,...ij->...i", coef, binom, powers)
+
 
 def integrated_autocorrelation(residuals, c=_SOKAL_C):
     """Integrated autocorrelation time of a series, with Sokal's automatic window.
