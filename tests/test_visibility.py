@@ -99,3 +99,19 @@ def test_gdop_passes_and_counts_are_consistent():
     for p in passes:
         assert p.rise_utc <= p.culmination_utc <= p.set_utc and 40.0 <= p.max_elev_deg <= 90.0
         assert p.truncated == (p.rise_utc == times[0] or p.set_utc == times[-1])
+
+
+def test_blocks_do_not_change_the_result(real_subset):
+    # A moving receiver for 20 min: blocks of 7 coarse steps (the last one short) against a single block.
+    times = _grid("2026-04-08T12:00:00", 1200)
+    t_s = np.arange(len(times), dtype=float)
+    pos = geodetic_to_ecef(np.radians(45.0), np.radians(10.0) + 4e-5 * t_s, 10e3)
+    vel = np.gradient(pos, t_s, axis=0)
+    runs = [compute_visibility(real_subset, times, pos, 20.0, vel_rx_ecef_mps=vel, block_s=b, show_progress=False)
+            for b in (420.0, None)]
+    runs.append(compute_visibility(real_subset, times, pos, 20.0, vel_rx_ecef_mps=vel, screen=False,
+                                   show_progress=False))
+    assert len(runs[0].epoch_index) > 100
+    for other in runs[1:]:
+        for name in ("epoch_index", "sat_index", "az_rad", "elev_rad", "range_m", "pos_sv_ecef_m", "vel_sv_ecef_mps"):
+            np.testing.assert_array_equal(getattr(runs[0], name), getattr(other, name), err_msg=name)

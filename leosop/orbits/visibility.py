@@ -6,7 +6,8 @@ propagated on a coarse grid, and a satellite-epoch is propagated finely only
 if a nearby coarse sample passes a *dilated* elevation test that no visible
 point can fail (see :func:`_screen_margin_m`). The result is the same set as
 propagating every satellite at every epoch (``screen=False``), at a small
-fraction of the cost.
+fraction of the cost. The screened run goes through the window in blocks of
+coarse steps, so its working memory is set by the block, not by the window.
 """
 
 from dataclasses import dataclass
@@ -217,7 +218,7 @@ def _screen_margin_m(speed_sv_max_mps, speed_rx_max_mps, half_step_s, range_m, s
 
 
 def compute_visibility(constellation, times_utc, pos_rx_ecef_m, mask_deg, *, vel_rx_ecef_mps=None,
-                       screen=True, coarse_step_s=60.0, show_progress=True):
+                       screen=True, coarse_step_s=60.0, block_s=3600.0, show_progress=True):
     """Visible satellites above an elevation mask at every epoch.
 
     Parameters
@@ -235,6 +236,11 @@ def compute_visibility(constellation, times_utc, pos_rx_ecef_m, mask_deg, *, vel
         uniform grids). Non-uniform grids are always evaluated in full.
     coarse_step_s : float
         Coarse grid step for screening.
+    block_s : float or None
+        The screened run goes through the window in blocks of about this
+        length (whole coarse steps), so that its working memory does not grow
+        with the window: only the visible pairs are kept. None: one block.
+        The result does not depend on it.
     show_progress : bool
         Progress bar on stderr (only when it is a terminal).
 
@@ -248,43 +254,83 @@ def compute_visibility(constellation, times_utc, pos_rx_ecef_m, mask_deg, *, vel
     vel_rx = np.zeros((n_t, 3)) if vel_rx_ecef_mps is None else \
         np.broadcast_to(np.asarray(vel_rx_ecef_mps, dtype=float), (n_t, 3)).copy()
     lat, lon, _ = ecef_to_geodetic(pos_rx)
-    up_e = C_e_n(lat, lon)[..., 2]
+    enu_e = C_e_n(lat, lon)
     sin_mask = np.sin(np.radians(mask_deg))
     jd, fr = jd_utc(t)
     ujd, ufr = jd_ut1(t)
-    n_sats = len(constellation)
 
     steps = np.diff(t).astype(np.int64)
     uniform = n_t > 2 and np.all(steps == steps[0]) and steps[0] > 0
     stride = int(round(coarse_step_s * 1e9 / steps[0])) if uniform else 1
-    geometry = (jd, fr, ujd, ufr, pos_rx, up_e, sin_mask)
+    geometry = (jd, fr, ujd, ufr, pos_rx, enu_e[..., 2], sin_mask)
     if screen and stride >= 2:
-        cand_sat, cand_ep = _screen(constellation, t, geometry, vel_rx, stride, show_progress)
-        found = _evaluate_pairs(constellation, cand_sat, cand_ep, geometry)
+        coarse = np.unique(np.r_[np.arange(0, n_t, stride), n_t - 1])
+        n_seg = len(coarse) - 1
+        per_block = n_seg if block_s is None else max(1, int(round(block_s * 1e9 / (stride * steps[0]))))
+        starts = range(0, n_seg, per_block)
+        speed_rx_max = float(np.linalg.norm(vel_rx, axis=-1).max())
+        half_step_s = 0.5 * stride * steps[0] * 1e-9
+        blocks = []
+        for s0 in progress(starts, desc="screening", unit="block") if show_progress else starts:
+            cand_sat, cand_ep = _screen(constellation, coarse, s0, min(s0 + per_block, n_seg), n_t, geometry,
+                                        speed_rx_max, half_step_s)
+            blocks.append(_pairs_geometry(*_evaluate_pairs(constellation, cand_sat, cand_ep, geometry),
+                                          pos_rx, enu_e))
     else:
-        found = _evaluate_all(constellation, geometry, show_progress)
-    if found:
-        sat_i, ep_i, pos_sv, vel_sv = (np.concatenate(x) for x in zip(*found))
-    else:
-        sat_i, ep_i = np.zeros(0, int), np.zeros(0, int)
-        pos_sv, vel_sv = np.zeros((0, 3)), np.zeros((0, 3))
+        blocks = [_pairs_geometry(*_evaluate_all(constellation, geometry, show_progress), pos_rx, enu_e)]
+    return Visibility(times_utc=t, sat_ids=constellation.sat_ids, **_joined(blocks),
+                      pos_rx_ecef_m=pos_rx, vel_rx_ecef_mps=vel_rx)
+
+
+def _pairs_geometry(sat_i, ep_i, pos_sv, vel_sv, pos_rx, enu_e):
+    """Visible pairs of one block sorted by epoch then satellite, with azimuth, elevation and range.
+
+    Parameters
+    ----------
+    sat_i, ep_i : ndarray of int, (m,)
+    pos_sv, vel_sv : ndarray, (m, 3)
+    pos_rx : ndarray, (n_epochs, 3)
+    enu_e : ndarray, (n_epochs, 3, 3)
+        ``C_e_n`` of every epoch: its columns are the East, North, Up axes.
+
+    Returns
+    -------
+    dict of ndarray
+        The per-pair fields of :class:`Visibility`, (m,) or (m, 3).
+    """
     order = np.lexsort((sat_i, ep_i))
     sat_i, ep_i, pos_sv, vel_sv = sat_i[order], ep_i[order], pos_sv[order], vel_sv[order]
-    los_n = np.einsum("...ji,...j->...i", C_e_n(lat[ep_i], lon[ep_i]), pos_sv - pos_rx[ep_i])
+    los_n = np.einsum("...ji,...j->...i", enu_e[ep_i], pos_sv - pos_rx[ep_i])
     rng = np.linalg.norm(los_n, axis=-1)
-    return Visibility(
-        times_utc=t,
-        sat_ids=constellation.sat_ids,
-        epoch_index=ep_i,
-        sat_index=sat_i,
-        az_rad=np.mod(np.arctan2(los_n[:, 0], los_n[:, 1]), 2 * np.pi),
-        elev_rad=np.arcsin(np.clip(los_n[:, 2] / np.where(rng > 0, rng, 1.0), -1, 1)),
-        range_m=rng,
-        pos_sv_ecef_m=pos_sv,
-        vel_sv_ecef_mps=vel_sv,
-        pos_rx_ecef_m=pos_rx,
-        vel_rx_ecef_mps=vel_rx,
-    )
+    return dict(epoch_index=ep_i, sat_index=sat_i, az_rad=np.mod(np.arctan2(los_n[:, 0], los_n[:, 1]), 2 * np.pi),
+                elev_rad=np.arcsin(np.clip(los_n[:, 2] / np.where(rng > 0, rng, 1.0), -1, 1)), range_m=rng,
+                pos_sv_ecef_m=pos_sv, vel_sv_ecef_mps=vel_sv)
+
+
+def _joined(blocks):
+    """The blocks' fields end to end, each output filled in place while the blocks are let go.
+
+    Parameters
+    ----------
+    blocks : list of dict of ndarray
+        Emptied on return.
+
+    Returns
+    -------
+    dict of ndarray
+        Indices as ``np.intp``.
+    """
+    m = sum(len(b["epoch_index"]) for b in blocks)
+    out = {key: np.empty((m,) + v.shape[1:], np.intp if key.endswith("index") else v.dtype)
+           for key, v in blocks[0].items()}
+    i = 0
+    while blocks:
+        b = blocks.pop(0)
+        n = len(b["epoch_index"])
+        for key, v in b.items():
+            out[key][i:i + n] = v
+        i += n
+    return out
 
 
 def _visible(r_km, v_kmps, err, ep, geometry):
@@ -297,64 +343,95 @@ def _visible(r_km, v_kmps, err, ep, geometry):
 
 
 def _evaluate_all(constellation, geometry, show_progress):
-    """Brute force: every satellite at every epoch, SatrecArray in chunks."""
+    """Brute force: every satellite at every epoch, SatrecArray in chunks.
+
+    Returns
+    -------
+    sat_i, ep_i : ndarray of int, (m,)
+    pos_sv, vel_sv : ndarray, (m, 3)
+    """
     jd, fr = geometry[:2]
     ep = np.arange(len(jd))
     chunk = max(1, _CHUNK_POINTS // len(jd))
     starts = range(0, len(constellation), chunk)
-    found = []
+    found = [(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros((0, 3)))]
     for s0 in progress(starts, desc="propagating", unit="chunk") if show_progress else starts:
         sub = constellation.subset(slice(s0, s0 + chunk))
         err, r_km, v_kmps = sub.satrec_array.sgp4(jd, fr)
         pos, vel, vis = _visible(r_km, v_kmps, err, ep, geometry)
         k, j = np.nonzero(vis)
         found.append((k + s0, j, pos[k, j], vel[k, j]))
-    return found
+    return tuple(np.concatenate(x) for x in zip(*found))
 
 
 def _evaluate_pairs(constellation, cand_sat, cand_ep, geometry):
-    """Exact test of candidate pairs, one vectorised call per satellite."""
+    """Exact test of candidate pairs, one vectorised call per satellite.
+
+    Parameters
+    ----------
+    cand_sat, cand_ep : ndarray of int32, (n_cand,)
+        Sorted by satellite.
+
+    Returns
+    -------
+    sat_i, ep_i : ndarray of int32, (m,)
+    pos_sv, vel_sv : ndarray, (m, 3)
+    """
     jd, fr = geometry[:2]
-    order = np.lexsort((cand_ep, cand_sat))
-    cand_sat, cand_ep = cand_sat[order], cand_ep[order]
     bounds = np.searchsorted(cand_sat, np.arange(len(constellation) + 1))
-    found = []
-    for k in np.unique(cand_sat):
+    found = [(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 3)), np.zeros((0, 3)))]
+    for k in np.flatnonzero(np.diff(bounds)):
         ep = cand_ep[bounds[k]:bounds[k + 1]]
         err, r_km, v_kmps = constellation.satrecs[k].sgp4_array(jd[ep], fr[ep])
         pos, vel, vis = _visible(r_km, v_kmps, err, ep, geometry)
-        found.append((np.full(vis.sum(), k), ep[vis], pos[vis], vel[vis]))
-    return found
+        found.append((np.full(vis.sum(), k, np.int32), ep[vis], pos[vis], vel[vis]))
+    return tuple(np.concatenate(x) for x in zip(*found))
 
 
-def _screen(constellation, t, geometry, vel_rx, stride, show_progress):
-    """Candidate (satellite, epoch) pairs from a coarse grid with a safe margin."""
+def _screen(constellation, coarse, s0, s1, n_t, geometry, speed_rx_max, half_step_s):
+    """Candidate (satellite, epoch) pairs of the coarse intervals ``s0 .. s1 - 1``, with a safe margin.
+
+    Parameters
+    ----------
+    coarse : ndarray of int, (n_coarse,)
+        Epochs of the coarse grid; interval s is ``[coarse[s], coarse[s+1])``,
+        the last one closed.
+    s0, s1 : int
+        The block of intervals screened.
+    n_t : int
+        Number of epochs.
+    speed_rx_max : float
+        Receiver speed bound [m/s].
+    half_step_s : float
+        Half the coarse step [s].
+
+    Returns
+    -------
+    cand_sat, cand_ep : ndarray of int32, (n_cand,)
+        Sorted by satellite, then epoch.
+    """
     jd, fr, ujd, ufr, pos_rx, up_e, sin_mask = geometry
-    n_t = len(t)
-    coarse = np.unique(np.r_[np.arange(0, n_t, stride), n_t - 1])
-    half_step_s = 0.5 * stride * (t[1] - t[0]).astype(np.int64) * 1e-9
-    speed_rx_max = float(np.linalg.norm(vel_rx, axis=-1).max())
-    chunk = max(1, _CHUNK_POINTS // len(coarse))
+    ce = coarse[s0:s1 + 1]
+    chunk = max(1, _CHUNK_POINTS // len(ce))
     cand_sat, cand_ep = [], []
-    starts = range(0, len(constellation), chunk)
-    for s0 in progress(starts, total=len(starts), desc="screening", unit="chunk") if show_progress else starts:
-        sub = constellation.subset(slice(s0, s0 + chunk))
-        err, r_km, v_kmps = sub.satrec_array.sgp4(jd[coarse], fr[coarse])
-        pos, vel = teme_to_ecef(r_km * 1e3, v_kmps * 1e3, ujd[coarse], ufr[coarse])
+    for c0 in range(0, len(constellation), chunk):
+        sub = constellation.subset(slice(c0, c0 + chunk))
+        err, r_km, v_kmps = sub.satrec_array.sgp4(jd[ce], fr[ce])
+        pos, vel = teme_to_ecef(r_km * 1e3, v_kmps * 1e3, ujd[ce], ufr[ce])
         speed = np.linalg.norm(vel, axis=-1)
-        # Speeds are sampled, not bounded: 10 % headroom covers the variation
-        # of any bound orbit between coarse samples.
+        # Speeds are sampled (the block's coarse samples), not bounded: 10 %
+        # headroom covers the variation of any bound orbit between them.
         speed_max = 1.1 * np.nanmax(np.where(err == 0, speed, np.nan), axis=1, initial=0.0)
-        up, rng, _ = _geometry(pos, pos_rx[coarse], up_e[coarse])
+        up, rng, _ = _geometry(pos, pos_rx[ce], up_e[ce])
         margin = _screen_margin_m(speed_max[:, None], speed_rx_max, half_step_s, rng, sin_mask)
         # A failed coarse propagation keeps its neighbourhood as candidates.
         near = (up - sin_mask * rng >= -margin) | (err != 0)
-        # Fine epochs of interval s, [coarse[s], coarse[s+1]) (the last one
-        # closed), are candidates if either bounding coarse sample passes.
+        # Fine epochs of an interval are candidates if either bounding coarse sample passes.
         k, seg = np.nonzero(near[:, :-1] | near[:, 1:])
-        lo, hi = coarse[seg], np.where(seg == len(coarse) - 2, n_t, coarse[np.minimum(seg + 1, len(coarse) - 1)])
+        lo = ce[seg]
+        hi = np.where(seg + s0 == len(coarse) - 2, n_t, ce[seg + 1])
         n = hi - lo
-        offsets = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-        cand_sat.append(np.repeat(k + s0, n))
-        cand_ep.append(np.repeat(lo, n) + offsets)
+        offsets = np.arange(n.sum(), dtype=np.int32) - np.repeat((np.cumsum(n) - n).astype(np.int32), n)
+        cand_sat.append(np.repeat((k + c0).astype(np.int32), n))
+        cand_ep.append(np.repeat(lo.astype(np.int32), n) + offsets)
     return np.concatenate(cand_sat), np.concatenate(cand_ep)
