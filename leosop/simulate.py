@@ -477,13 +477,16 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     fix_pos = np.where(good[:, None], fixes.pos_ecef_m, np.nan)
     fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
     fix_cov = np.where(good[:, None, None], fixes.cov, np.nan)
+    # The loose filter takes only fixes with redundancy (loose.checkable_fixes): all are reported.
+    checked = good & loose.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
 
     # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
     if coupling == "loose":
-        fix_errors, cov_white = _fix_error_model(vis, fixes, good, sigma_hz, sigma_est, pos_sv_known, carrier, fam,
-                                                 offset_max_sat, orbit_error_m, orbit_error_model)
-        fused = loose.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s, (fix_pos, fix_vel, cov_white),
+        fix_errors, cov_white = _fix_error_model(vis, fixes, checked, sigma_hz, sigma_est, pos_sv_known, carrier,
+                                                 fam, offset_max_sat, orbit_error_m, orbit_error_model)
+        fused = loose.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s,
+                          (np.where(checked[:, None], fix_pos, np.nan), fix_vel, cov_white),
                           settings, fix_errors=fix_errors, progress=progress)
     else:
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,

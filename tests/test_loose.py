@@ -198,3 +198,42 @@ def test_common_orbit_shift_moves_the_fixes_and_the_filter_knows_it():
         pos.append(r.errors()["fused"][0][30:])
     assert abs(np.mean(pos) - np.sqrt(3) * 30.0) < 15.0
     assert 0.5 * 6 <= np.concatenate(nees).mean() <= 2.0 * 6
+
+
+def test_checkable_fixes_need_redundancy_or_a_good_geometry():
+    # Table of cases: 6 + k states (k clocks, NaN rows for an absent clock), Doppler used, GDOP.
+    two_clocks = np.eye(8)
+    one_of_two = np.eye(8)
+    one_of_two[7, 7] = np.nan  # second family not in the sky: 7 states
+    failed = np.full((8, 8), np.nan)
+    lim = loose.MAX_GDOP_UNCHECKED
+    cases = [  # (cov, n_used, gdop, usable)
+        (two_clocks, 9, 5.0 * lim, True),  # one spare Doppler: checked by its residuals, any geometry
+        (two_clocks, 8, 0.5 * lim, True),  # no spare Doppler, good geometry
+        (two_clocks, 8, 2.0 * lim, False),  # no spare Doppler, near-singular geometry
+        (one_of_two, 8, 5.0 * lim, True),  # 7 states: the 8th Doppler is spare
+        (one_of_two, 7, 2.0 * lim, False),
+        (failed, 0, np.nan, False),
+    ]
+    cov, n_used, gdop, usable = (np.array(c) for c in zip(*cases))
+    assert loose.checkable_fixes(n_used, cov, gdop).tolist() == usable.tolist()
+
+
+def test_gate_reopens_after_a_run_of_rejected_fixes():
+    # A filter confidently wrong: the INS starts 2 km off but the filter claims 1 m, so every
+    # fix fails the gate (NIS ~ (2 km / 25 m)^2). Without re-opening it never recovers; with
+    # it, the REOPEN_AFTER + 1-th fix is taken and the filter is back within 4 sigma of the
+    # truth (and within 3 fix sigmas, 75 m) from then on.
+    state0, dth, dvl, dt, fixes, t1, _ = _case(5)
+    state0 = dataclasses.replace(state0, alt_m=state0.alt_m + 2000.0)
+    settings = _settings(pos_sigma_m=(1.0,) * 3)
+    locked = loose.run(state0, dth, dvl, dt, fixes, settings, reopen_after=None)
+    assert locked.rejected[1:].all() and not locked.updated.any()
+    res = loose.run(state0, dth, dvl, dt, fixes, settings)
+    first = loose.REOPEN_AFTER + 1
+    assert np.flatnonzero(res.reopened).tolist() == [first]
+    assert res.rejected[1:first].all() and res.updated[first:].all()
+    err = _error_enu(res, t1)[first:]
+    sig = np.sqrt(np.diagonal(res.pos_vel_cov_enu()[first:], axis1=1, axis2=2))
+    assert np.all(np.abs(err) < 4 * sig)
+    assert np.all(np.linalg.norm(err[:, 3:], axis=1) < 3 * np.linalg.norm(FIX_SIGMA_M))

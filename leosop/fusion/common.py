@@ -85,6 +85,9 @@ class FusionResult(NavTrack):
         Tight coupling: one row per Doppler used, fields ``epoch``, ``sat``
         and ``normalized`` (innovation over the square root of its variance
         in ``S``); None for loose coupling.
+    reopened : ndarray of bool, (n,), or None
+        Loose coupling: the innovation gate was re-opened at this epoch after
+        a run of rejected fixes (:func:`leosop.fusion.loose.run`); None for tight coupling.
     """
 
     P: np.ndarray
@@ -97,6 +100,7 @@ class FusionResult(NavTrack):
     innovation: np.ndarray | None = None
     innovation_cov: np.ndarray | None = None
     doppler_innovation: np.ndarray | None = None
+    reopened: np.ndarray | None = None
 
     def pos_vel_cov_enu(self):
         """Covariance of ``[dv_enu, dpos_enu]`` in m/s and m, (n, 6, 6)."""

@@ -30,6 +30,15 @@ rate; the filter predicts every ``step_s`` (1 s) and updates every
 ``correction_period_s`` when a fix exists. When no fix exists (fewer than the
 fix's 6 + k states for k constellations in view) the INS carries the solution
 and the filter resumes at the next fix, so every epoch has an output.
+
+Fixes that cannot be checked. The caller hands the filter only fixes with
+a spare Doppler or, without one, a well-conditioned geometry
+(:func:`checkable_fixes`): a zero-redundancy fix near a singular geometry
+is far from linear in its Doppler errors and its linearised covariance lets
+it through the innovation gate kilometres off. And a run of
+:data:`REOPEN_AFTER` fixes failing the gate re-opens it (:func:`_reopened`),
+so a filter misled once is not locked out of every later fix.
+leosop/data/studies/README.md has the run that showed both.
 """
 
 import dataclasses
@@ -43,7 +52,14 @@ from . import kalman
 from .common import (GATE_PROBABILITY, N_INS, Corrections, FeedbackIns, SatelliteStates, Track, epochs,
                      initial_covariance, pos_jacobian)
 
-__all__ = ["FixErrorModel", "measurement", "run"]
+__all__ = ["FixErrorModel", "checkable_fixes", "measurement", "run", "MIN_REDUNDANCY", "MAX_GDOP_UNCHECKED", "REOPEN_AFTER"]
+
+#: Fewest measurements beyond the fix's states for the filter to use it (see :func:`checkable_fixes`).
+MIN_REDUNDANCY = 1
+#: Largest Doppler GDOP of a fix without redundancy that the filter uses.
+MAX_GDOP_UNCHECKED = 300.0
+#: Consecutive fixes failing the gate after which the filter re-opens it (see :func:`run`).
+REOPEN_AFTER = 10
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +108,38 @@ def _enu_from_ecef_pv(lat_rad, lon_rad):
     return T
 
 
+def checkable_fixes(n_used, cov, gdop):
+    """Whether each snapshot fix is fit for the filter: redundant, or of a well-conditioned geometry.
+
+    A fix of ``6 + k`` states (k receiver clocks) from ``6 + k`` Doppler fits
+    them exactly: its residuals are zero whatever its errors, so neither the
+    fix's chi-square test nor its outlier test can see anything. That is
+    harmless while the geometry is good, but near a singular geometry the
+    fix is far from linear in the Doppler errors: its linearised covariance
+    (and the gain of :class:`FixErrorModel`) understate it, and the filter's
+    innovation gate, whose ``S`` is dominated by that huge covariance,
+    passes fixes kilometres off. So a fix without redundancy is used only up
+    to a Doppler GDOP of :data:`MAX_GDOP_UNCHECKED`; a fix with at least
+    :data:`MIN_REDUNDANCY` spare Doppler is always used (its residuals were checked).
+
+    Parameters
+    ----------
+    n_used : ndarray of int, (n,)
+        Doppler in each fix.
+    cov : ndarray, (n, 6 + k, 6 + k)
+        The fixes' covariance; a state's NaN diagonal means it is absent (a clock not in the sky).
+    gdop : ndarray, (n,)
+        The fixes' Doppler GDOP ([Shen 2024] eq. 10).
+
+    Returns
+    -------
+    ndarray of bool, (n,)
+    """
+    n_states = np.isfinite(np.diagonal(np.asarray(cov), axis1=-2, axis2=-1)).sum(axis=-1)
+    redundant = np.asarray(n_used) - n_states >= MIN_REDUNDANCY
+    return (n_states > 0) & (redundant | (np.asarray(gdop) <= MAX_GDOP_UNCHECKED))
+
+
 def measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, cov_fix_pv_ecef):
     """INS-minus-fix measurement of [Shen 2024] eq. 13.
 
@@ -135,7 +183,27 @@ def _satellite_rows(state, sats, model, rows, n_states):
     return M
 
 
-def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=None, progress=None):
+def _reopened(P, z, state):
+    """``P`` with each INS position and velocity variance raised by the square of its innovation.
+
+    A consistent filter rejects a good fix one time in a million
+    (:data:`~leosop.fusion.common.GATE_PROBABILITY`); a run of rejections
+    means the filter is confidently wrong (e.g. misled by fixes worse than
+    their covariance), and the gate would otherwise lock it out of every
+    later fix while the INS drifts. Adding ``z_i**2`` to the variance of the
+    INS error that ``z_i`` measures makes the current INS-minus-fix
+    difference a one-sigma event, so the fix can correct the INS; the
+    correlations and the other states are kept.
+    """
+    P = P.copy()
+    P[DV, DV] += np.diag(z[0:3] ** 2)
+    J_inv = np.linalg.inv(pos_jacobian(state.lat_rad, state.alt_m))
+    P[DPOS, DPOS] += J_inv @ np.diag(z[3:6] ** 2) @ J_inv.T
+    return P
+
+
+def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=None, reopen_after=REOPEN_AFTER,
+        progress=None):
     """Run the INS with loose-coupling feedback over a whole flight.
 
     Parameters
@@ -154,6 +222,9 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
     fix_errors : FixErrorModel, optional
         The satellites' constant errors behind the fixes, estimated as
         states (module docstring); None treats the fix errors as white.
+    reopen_after : int or None
+        After this many consecutive fixes failed the innovation gate, the
+        next failing fix re-opens it (:func:`_reopened`); None never re-opens.
     progress : callable, optional
         Wraps the epoch iterator (e.g. :func:`leosop.progress.progress`).
 
@@ -176,6 +247,8 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
         x_hat, P = sats.initial(x_hat, P)
         bounds = np.searchsorted(fix_errors.epoch_index, np.arange(n + 1))
     corrections = Corrections(settings.correction_period_s)
+    reopened = np.zeros(n, dtype=bool)
+    n_rejected = 0  # consecutive fixes that failed the gate
     for k, t_s in epochs(n, settings.step_s, progress):
         if k > 0:
             P = ins.predict(k, P)
@@ -191,7 +264,13 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
                 H = np.hstack([H, _satellite_rows(ins.state, sats, fix_errors, rows, P.shape[0])[:, N_INS:]])
             x, P_post, y, S = kalman.update(x_hat, P, z, H, R)
             nis = kalman.nis(y, S)
+            if nis > gate and reopen_after is not None and n_rejected >= reopen_after:
+                P = _reopened(P, z, ins.state)
+                x, P_post, y, S = kalman.update(x_hat, P, z, H, R)
+                nis = kalman.nis(y, S)
+                reopened[k] = True
             if nis <= gate:
+                n_rejected = 0
                 P = P_post
                 ins.feedback(x - x_hat)
                 x_hat = np.concatenate([np.zeros(N_INS), x[N_INS:]])
@@ -200,5 +279,6 @@ def run(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=N
                 innovation[k], innovation_cov[k], track.nis[k], track.nis_dof[k] = y, S, nis, 6
             else:
                 track.rejected[k] = True
+                n_rejected += 1
         track.record(k, ins, P)
-    return track.result(settings.step_s, innovation=innovation, innovation_cov=innovation_cov)
+    return track.result(settings.step_s, innovation=innovation, innovation_cov=innovation_cov, reopened=reopened)
