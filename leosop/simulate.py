@@ -477,7 +477,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     fix_pos = np.where(good[:, None], fixes.pos_ecef_m, np.nan)
     fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
     fix_cov = np.where(good[:, None, None], fixes.cov, np.nan)
-    # The loose filter takes only fixes with redundancy (loose.checkable_fixes): all are reported.
+    # The loose filter takes only redundant or well-conditioned fixes (loose.checkable_fixes); all are reported.
     checked = good & loose.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
 
     # 5. EKF.

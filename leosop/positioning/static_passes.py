@@ -24,6 +24,25 @@ Two safeguards for real passes (DopTrack, design note):
   error; white residuals leave the fix unchanged). ``tau`` is the larger of
   the integrated autocorrelation time and the AR(1) one from the lag-1
   correlation (:func:`_pass_tau`).
+- A bias common to a pass (its element set's radial and cross-track error;
+  the time offset takes the along-track part) shows in no residual of that
+  pass: the position absorbs it. It shows only as disagreement between
+  passes, so the fix tests for it (``pass_offsets``): each pass's satellite
+  offset ``b_p`` (radial, cross-track) enters its rows as ``-H_pos . b_p``;
+  with the fix's states eliminated, the offsets' score ``g`` (weighted
+  residuals on their columns) has covariance ``F`` (their information with
+  the states eliminated) when there are none, so ``T = g^T F^+ g`` is
+  chi-square with ``rank F`` dof (Rao's score test; it needs no solve with
+  the offsets). Where ``T`` is more than 3 standard deviations above its
+  dof, the offsets are taken as ``N(0, s^2 I)``: ``s^2`` is the fixed
+  point of Foerstner's variance-component iteration (``E[z_i^2] = lam_i +
+  lam_i^2 s^2`` in F's eigenbasis; the moment estimate weighted by
+  ``lam_i^2`` underestimates it: position NEES 16 instead of 6 in the
+  simulated test), capped at :data:`PASS_OFFSET_MAX_M`, and the covariance of the fix (unchanged) gets
+  the sandwich term ``N^-1 G (s^2 I) G^T N^-1`` (``G`` the offsets' cross
+  information with the states). Consistent passes leave the covariance
+  unchanged, bit for bit. DopTrack per-day fixes (2-4 passes, weak
+  geometry): 1 km per-pass offsets move the fix by ~3.5 km.
 """
 
 from dataclasses import dataclass
@@ -51,6 +70,11 @@ _STEP_SIGMA_TOL = 1e-3
 #: A solution sees a used row's satellite if it is above minus this elevation [deg]: refraction at VHF
 #: near the horizon is below 1 deg; the margin also covers a station on a mast or a hill.
 HORIZON_TOL_DEG = 2.0
+#: Largest per-pass satellite offset (radial, cross-track) the passes' disagreement may put into the
+#: covariance [m]: element-set radial and cross-track errors of a LEO object are 0.1-0.3 km at epoch
+#: (Flohrer et al. 2008, AMOS, TLE accuracy assessment) and grow over the 1-2 days to a pass; the few-pass
+#: test cannot tell offsets from other disagreement in its weakly observed directions.
+PASS_OFFSET_MAX_M = 1000.0
 #: Sokal's window constant: the autocorrelation sum runs to the first lag M >= C tau(M).
 _SOKAL_C = 5.0
 #: A pass's sigma is scaled only when its tau exceeds 1 by this many white-noise standard deviations.
@@ -124,6 +148,15 @@ class PassesFix(UsedResiduals):
         Factor applied to each pass's sigma, ``sqrt(max(1, tau * mean((r /
         sigma)^2)))``: the variance the correlated residuals imply, never
         below the sigma given; None with ``decorrelate=False``.
+    pass_offset_sigma_m : float or None
+        Standard deviation of each pass's radial and cross-track satellite
+        offset estimated from the passes' disagreement (module docstring) and
+        included in ``cov``; 0 when the test finds none; None with
+        ``pass_offsets=False``.
+    pass_offset_chi2 : float or None
+        The test's statistic, chi-square with ``pass_offset_dof`` degrees of
+        freedom when the passes have no such offsets.
+    pass_offset_dof : int or None
     """
 
     pos_ecef_m: np.ndarray
@@ -151,6 +184,9 @@ class PassesFix(UsedResiduals):
     pass_clock: np.ndarray = None
     tau: np.ndarray = None
     sigma_scale: np.ndarray = None
+    pass_offset_sigma_m: float = None
+    pass_offset_chi2: float = None
+    pass_offset_dof: int = None
 
     @property
     def clock_offset_hz(self):
@@ -242,6 +278,73 @@ def _pass_tau(residuals_hz, used, gi, n_pass):
     return tau
 
 
+def _offset_blocks(pos_sv_ecef_m, vel_sv_ecef_mps, pos_ecef_m, carrier_hz, w, D, B_glob, A, seg, residuals_hz):
+    """Information blocks of each pass's (radial, cross-track) satellite offset at the solution.
+
+    A satellite offset ``db`` (ECEF) changes a row's Doppler by ``-H_pos . db``
+    (the range rate depends on the difference of the positions), ``H_pos`` the
+    receiver position derivative; radial is along the satellite position,
+    cross-track along ``r x v`` (ECEF velocity: within a few degrees of the
+    orbit normal, enough for a variance). Returns the cross information with
+    the fix's states ``G`` (n_states, 2 n_pass; state order of the normal
+    matrix: position, global terms, per-pass terms pass-major), the offsets'
+    own block ``M`` (2 n_pass, 2 n_pass, block diagonal) and their score
+    ``g`` (2 n_pass,), the weighted residuals projected on their columns.
+    """
+    n_pass = len(seg)
+    H = doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_ecef_m[None], np.zeros((1, 3)), carrier_hz)[0, :, :3]
+    e_r = pos_sv_ecef_m / np.linalg.norm(pos_sv_ecef_m, axis=-1, keepdims=True)
+    h = np.cross(pos_sv_ecef_m, vel_sv_ecef_mps)
+    norm_h = np.linalg.norm(h, axis=-1, keepdims=True)
+    e_c = np.divide(h, norm_h, out=np.zeros_like(h), where=norm_h > 0)
+    q = -np.stack([np.einsum("mi,mi->m", H, e_r), np.einsum("mi,mi->m", H, e_c)], -1)  # (m, 2)
+    wq = w[:, None] * q
+    blocks = [np.add.reduceat(a[:, :, None] * wq[:, None, :], seg, axis=0) for a in (D, B_glob, A)]
+    n_glob, n_loc = B_glob.shape[1], A.shape[1]
+    G = np.zeros((3 + n_glob + n_pass * n_loc, n_pass, 2))
+    G[:3] = blocks[0].transpose(1, 0, 2)
+    G[3:3 + n_glob] = blocks[1].transpose(1, 0, 2)
+    for p in range(n_pass):
+        G[3 + n_glob + p * n_loc:3 + n_glob + (p + 1) * n_loc, p] = blocks[2][p]
+    M = np.zeros((n_pass, 2, n_pass, 2))
+    M[np.arange(n_pass), :, np.arange(n_pass)] = np.add.reduceat(q[:, :, None] * wq[:, None, :], seg, axis=0)
+    g = np.add.reduceat(np.where(w[:, None] > 0, wq * residuals_hz[:, None], 0.0), seg, axis=0)
+    return G.reshape(-1, 2 * n_pass), M.reshape(2 * n_pass, 2 * n_pass), g.ravel()
+
+
+def _pass_offset_variance(F, g, max_iter=200):
+    """Score test for the pass offsets and, if significant, their variance component [m].
+
+    ``F`` is the offsets' information with the fix's states eliminated (the
+    covariance of their score ``g`` at the fix when there are none): the
+    statistic ``T = g^T F^+ g`` is then chi-square with ``rank F`` degrees of
+    freedom. Significant (``T`` more than :data:`_TAU_SIGNIFICANCE` standard
+    deviations above its dof): offsets ``~ N(0, s^2 I)`` make ``E[z_i^2] =
+    lam_i + lam_i^2 s^2`` in F's eigenbasis (``z = V^T g``), and ``s^2`` is the
+    fixed point of Foerstner's variance-component iteration
+    ``s^2 <- |b|^2 / (redundancy)``, ``b`` the offsets' posterior mean with
+    prior ``s^2``, started from the ``lam^2``-weighted moment estimate and
+    capped at :data:`PASS_OFFSET_MAX_M` (weakly observed directions can drive
+    it to tens of km on a few passes). Returns ``(s, T, dof)``, ``s = 0`` when
+    not significant.
+    """
+    lam, V = np.linalg.eigh(0.5 * (F + F.T))
+    keep = lam > 1e-9 * max(lam[-1], 0.0) if lam.size and lam[-1] > 0 else np.zeros(lam.size, bool)
+    lam, z2 = lam[keep], (V[:, keep].T @ g) ** 2
+    dof = int(keep.sum())
+    T = float(np.sum(z2 / lam)) if dof else 0.0
+    if not dof or T <= dof + _TAU_SIGNIFICANCE * np.sqrt(2.0 * dof):
+        return 0.0, T, dof
+    s2 = max(float(np.sum(z2 - lam) / np.sum(lam**2)), (1e-3 * PASS_OFFSET_MAX_M) ** 2)
+    for _ in range(max_iter):
+        new = float(np.sum(z2 * s2**2 / (1.0 + lam * s2) ** 2) / np.sum(lam * s2 / (1.0 + lam * s2)))
+        done = abs(new - s2) <= 1e-6 * s2 or new > 4.0 * PASS_OFFSET_MAX_M**2
+        s2 = new
+        if done:
+            break
+    return min(float(np.sqrt(s2)), PASS_OFFSET_MAX_M), T, dof
+
+
 def _sees(pos_ecef_m, pos_sv_ecef_m, used):
     """Whether each solution (k, 3) has every used row's satellite above ``-HORIZON_TOL_DEG``, (k,) bool."""
     lat, lon, _ = ecef_to_geodetic(pos_ecef_m)
@@ -252,10 +355,10 @@ def _sees(pos_ecef_m, pos_sv_ecef_m, used):
 
 
 def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
-                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=1000, alpha=1e-3,
+                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=4000, alpha=1e-3,
                         clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
                         time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
-                        ambiguity_m=10e3, clock_group=None, decorrelate=True):
+                        ambiguity_m=10e3, clock_group=None, decorrelate=True, pass_offsets=True):
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has
@@ -309,7 +412,8 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     mask : array_like of bool, (m,), optional
     max_iter : int
         Per solve. A weak geometry (two DopTrack passes, one at 11 deg) crawls
-        along a flat valley: 2020-04-02 takes ~1,800 iterations over its solves.
+        along a flat valley: 2020-04-02 takes ~1,800 iterations over its solves (with 1,000 it
+        ended NOT_CONVERGED; 2,259 in all with 4,000).
     alpha : float or None
         Significance of the chi-square outlier test; None disables it.
     clock : {"per_pass", "common"}
@@ -330,6 +434,12 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         Raise each pass's variance to its residuals' correlation time times
         their mean square where that exceeds the sigma given (module
         docstring), and solve again.
+    pass_offsets : bool
+        Test the passes for a common offset of each one's satellite states
+        (radial and cross-track, the element-set errors the time offsets do
+        not take up) and, where the test is significant, add the variance
+        they imply to the covariance (module docstring; the fix itself is
+        unchanged).
 
     Returns
     -------
@@ -535,7 +645,17 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     scale_loc = np.ones((n_pass, n_loc)) if common else \
         np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
     scale = np.concatenate([np.ones(3), scale_glob, scale_loc.ravel()])
-    cov = _inverse_or_nan(N) * scale[:, None] * scale[None, :] if ok else np.full((n_states, n_states), np.nan)
+    N_inv = _inverse_or_nan(N) if ok else np.full((n_states, n_states), np.nan)
+    offset_sigma_m, offset_chi2, offset_dof = (0.0, 0.0, 0) if pass_offsets else (None, None, None)
+    if pass_offsets and n_pass and np.isfinite(N_inv).all():
+        # Each pass's satellite offset (radial, cross-track) as a random effect the fix does not estimate:
+        # its score test, variance component and sandwich term on the covariance (module docstring).
+        G, M_b, g_b = _offset_blocks(r_s, v_s, x[0], f0, wd, D, B_glob, A, seg, res[0, :n])
+        offset_sigma_m, offset_chi2, offset_dof = _pass_offset_variance(M_b - G.T @ N_inv @ G, g_b)
+        if offset_sigma_m > 0:
+            NG = N_inv @ G
+            N_inv = N_inv + offset_sigma_m**2 * (NG @ NG.T)
+    cov = N_inv * scale[:, None] * scale[None, :]
     # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
     loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
     n_poly_loc = n_loc - tb
@@ -573,5 +693,6 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         rx_clock_polys_hz=nan_unless(rx_polys.copy()) if common else None,
         clock_labels=tuple(clock_labels.tolist()) if common and clock_group is not None else (),
         pass_clock=pass_clk.copy() if common else None, tau=tau if decorrelate else None,
-        sigma_scale=sigma_scale if decorrelate else None,
+        sigma_scale=sigma_scale if decorrelate else None, pass_offset_sigma_m=offset_sigma_m,
+        pass_offset_chi2=offset_chi2, pass_offset_dof=offset_dof,
     )
