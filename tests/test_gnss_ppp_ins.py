@@ -156,3 +156,57 @@ def test_outage_bridged_from_the_fixed_solution(products):
     assert abs(err[True] - err_fixed) < 0.01 and abs(err[False] - err_float) < 0.01
     var = {b: np.trace(r.cov_pos_enu_m2[k]) for b, (_, r) in runs.items()}
     assert var[True] < var[False]
+    # After the gap the wide-lanes come from the INS geometry at its first epoch (wl_inertial), and none is
+    # contradicted by the Melbourne-Wuebbena rule once its averages fix the same arcs (within the run's 20 s).
+    k1 = k + int(np.flatnonzero(res.gnss[k:])[0])
+    assert res.n_wl[k1] >= ppp_ins.PppInsOptions().min_fixed
+    assert res.n_wl_checked > 0 and res.n_wl_mismatch == 0
+
+
+def _gap_case(pos_sigma_m, seed=1):
+    """Synthetic wide-lane bookkeeping across a 60 s gap: 8 satellites, new integers after it.
+
+    ``g = kappa I_gf + N + b + wsb + clock`` per satellite (see ppp_ins._InertialWideLane); the
+    geometry-free phase ramps linearly (slopes of a few mm/s, 3 mm noise); after the gap the range is
+    predicted at a position ``pos_sigma_m`` (per axis) off, which the filter's covariance says.
+    """
+    rng = np.random.default_rng(seed)
+    n, k0, k1 = 8, 199, 260
+    t = np.arange(300.0)
+    rate = rng.uniform(-3e-3, 3e-3, n)
+    iono = 1.0 + rate * t[:, None]
+    gf = iono + rng.uniform(-5, 5, n) + 0.003 * rng.normal(size=(300, n))
+    gf[k0 + 1:k1] = np.nan
+    new_arc = np.zeros((300, n), bool)
+    new_arc[0] = True
+    n_old, n_new = rng.integers(-20, 20, n), rng.integers(-20, 20, n)
+    wsb = rng.uniform(-0.5, 0.5, n)
+    b_rx = 0.3
+    kap = ppp_ins.KAPPA_WL_PER_GF
+    los = rng.normal(size=(n, 3))
+    los /= np.linalg.norm(los, axis=1)[:, None]
+    P_sub = np.diag([pos_sigma_m**2] * 3 + [1e-6])
+    dr = rng.normal(size=3) * pos_sigma_m
+    o = ppp_ins.PppInsOptions()
+    iwl = ppp_ins._InertialWideLane(n)
+    js = np.arange(n)
+    sin_el = np.full(n, 0.7)
+    iwl.store(js, kap * iono[k0] + n_old + b_rx + wsb + 12.3, sin_el, t[k0], k0, np.zeros((n, 4)), np.zeros((4, 4)))
+    iwl.snapshot(t, gf, new_arc, n_old + b_rx + wsb + 1e-3 * rng.normal(size=n), np.full(n, 1e-6),
+                 o.wl_iono_window_s)
+    g1 = kap * iono[k1] + n_new + b_rx + wsb - 40.1 + los @ dr / ppp_ins.LAM_WL_M
+    iwl.new_arcs(np.ones(n, bool), js, t[k1])
+    ref = 0
+    H = np.column_stack([los - los[ref], np.zeros(n)])
+    iwl.fix(js, ref, g1, sin_el, t[k1], H, P_sub, wsb, o)
+    return iwl, n_new, wsb, ref
+
+
+def test_inertial_wide_lane_across_a_gap():
+    # 5 cm per axis (a navigation-grade INS after 60 s): the new integers at the first epoch, every one.
+    iwl, n_new, wsb, ref = _gap_case(0.05)
+    assert iwl.on.all()
+    np.testing.assert_array_equal(np.round(iwl.wl_cyc - iwl.wl_cyc[ref] - (wsb - wsb[ref])), n_new - n_new[ref])
+    # 2 m per axis: more than two wide-lane wavelengths, the success-rate bound refuses to fix.
+    iwl, *_ = _gap_case(2.0)
+    assert not iwl.on.any()

@@ -37,6 +37,16 @@ ambiguity is dropped in the gap, so nothing is held beyond it, and the
 outage starts from centimetres instead of the float solution's
 decimetre (``tools/bench_ppp_ins_outage.py``).
 
+After a gap every arc restarts; [Liu 2016]'s fast re-fix uses the INS:
+with ``wl_inertial`` the new arcs' wide-lanes are fixed at the first
+epochs from the wide-lane phase less the range predicted at the bridged
+position, the ionosphere carried over the gap by the geometry-free
+phase's slope before it, and the old arcs' Melbourne-Wuebbena means
+(:class:`_InertialWideLane`: LAMBDA on the INS covariance, a bootstrapped
+success rate of at least ``wl_success_min``), and the fixed wide-lanes,
+as ranges, update the float solution; otherwise they wait for the
+Melbourne-Wuebbena averages.
+
 Measured (``leosop reproduce ppp-ins``, ``tools/bench_ppp_ins.py``): on the
 simulated car, 20 seeds of 15 min, the float-position NEES averaged over
 the seeds is 2.57 (3 expected; inside its 95 % band at 95 % of epochs).
@@ -61,7 +71,12 @@ __all__ = ["PppInsOptions", "PppInsResult", "run", "if_combinations"]
 
 _ZWD = N_INS  # state index of the zenith wet delay; the SD ambiguities follow, one slot per satellite
 _A0 = N_INS + 1
+_POS_ZWD = np.r_[np.arange(N_INS)[DPOS], _ZWD]  # position errors and the wet delay
 LAM_NL_M = C_MPS / (F1_HZ + F2_HZ)
+LAM_WL_M = C_MPS / (F1_HZ - F2_HZ)
+# Ionosphere in the wide-lane phase [cycles] per metre of geometry-free phase L1 - L2 [m]: (f1/f2) I1 / LAM_WL
+# against (f1^2/f2^2 - 1) I1.
+KAPPA_WL_PER_GF = (F1_HZ / F2_HZ) / (LAM_WL_M * ((F1_HZ / F2_HZ) ** 2 - 1.0))
 BETA_M = C_MPS * F2_HZ / (F1_HZ**2 - F2_HZ**2)  # IF ambiguity [m] = LAM_NL N1 + BETA N_WL
 
 
@@ -86,6 +101,11 @@ class PppInsOptions:
     wl_se_max_cyc: float = 0.1
     wl_min_epochs: int = 5
     bridge_fixed: bool = True
+    wl_inertial: bool = True
+    wl_inertial_window_s: float = 20.0
+    wl_iono_window_s: float = 120.0
+    wl_phase_sigma_cyc: float = 0.015
+    wl_success_min: float = 1.0 - 1e-4
 
 
 @dataclass
@@ -106,6 +126,11 @@ class PppInsResult:
     gnss : ndarray of bool
         A GNSS update was made.
     n_slips, n_outliers, n_ref_changes : int
+    n_wl_checked, n_wl_mismatch : int
+        Satellite-epochs where a wide-lane fixed from the INS geometry after
+        a gap is also fixed by the Melbourne-Wuebbena rule on the same arc,
+        and those where the two differ (the check of the inertial
+        wide-lanes).
     """
 
     t_s: np.ndarray
@@ -120,6 +145,8 @@ class PppInsResult:
     n_slips: int
     n_outliers: int
     n_ref_changes: int
+    n_wl_checked: int = 0
+    n_wl_mismatch: int = 0
 
 
 def if_combinations(P1_m, P2_m, L1_cyc, L2_cyc):
@@ -179,6 +206,158 @@ class _Ambiguities:
         self.ref = new
 
 
+class _InertialWideLane:
+    """Wide-lanes of the arcs that restart after a GNSS gap, from the INS geometry ([Liu 2016]'s fast re-fix).
+
+    Per satellite, undifferenced, with a term common to all satellites at
+    each epoch (receiver clock and biases) that the single differences
+    cancel: ``g = (L_WL - range) / LAM_WL`` [cycles], the wide-lane phase
+    less the predicted range (troposphere included) at the filter's
+    position. Across a gap, ``g`` changes by the new arc's wide-lane
+    ambiguity less the old one and by the ionosphere's change, so the new
+    arc's Melbourne-Wuebbena mean is predicted at its first epoch as
+    ``u = m + g(t) - g(t0) - KAPPA_WL_PER_GF * gf_rate * (t - t0)``: ``m`` the
+    old arc's Melbourne-Wuebbena mean, ``t0`` the last epoch before the gap
+    (at the fixed solution when there is one), ``gf_rate`` the slope of the
+    geometry-free phase over the last ``wl_iono_window_s`` of the old arc.
+    The SD ``u`` less the satellites' wide-lane biases is fixed by LAMBDA
+    with the covariance of the position and wet delay mapped through the
+    SD lines of sight (the INS drift over the gap dominates) plus each
+    satellite's own terms, when the ratio test passes and the bootstrapped
+    success rate is at least ``wl_success_min``; what is fixed is kept in
+    ``wl_cyc`` (undifferenced, SD minus SD wide-lane biases = the integers)
+    until that satellite's arc ends. The fixed SD wide-lanes, less their
+    integers, are then ranges of centimetre noise (the predicted ionosphere
+    included) and update the float filter once, which brings the position
+    to the centimetres the narrow-lane needs; their noise's correlation
+    with the same epoch's ionosphere-free phase is neglected.
+
+    Attributes
+    ----------
+    g_last : ndarray, shape (n_sv,)
+        ``g`` at the last GNSS epoch (NaN where not used), ``t_last_s`` its time.
+    m, var_m, g0, rate_gf_mps, var_rate : ndarray, shape (n_sv,)
+        Snapshot of the last epoch before the gap; ``ok`` where usable.
+    on : ndarray of bool, shape (n_sv,)
+        Wide-lane fixed this way on the current arc; ``wl_cyc`` its value.
+    """
+
+    def __init__(self, n_sv):
+        self.g_last = np.full(n_sv, np.nan)
+        self.sin_last = np.full(n_sv, np.nan)
+        self.t_last_s = np.nan
+        self.k_last = -1
+        self.ok = np.zeros(n_sv, bool)
+        self.seen = np.zeros(n_sv, bool)
+        self.on = np.zeros(n_sv, bool)
+        self.wl_cyc = np.zeros(n_sv)
+        self.t_end_s = np.nan  # first GNSS epoch after the gap
+        self.m = self.var_m = self.g0 = self.rate_gf_mps = self.var_rate = self.sin0 = np.zeros(n_sv)
+        self.t0_s = np.nan
+        self.H_last = np.zeros((n_sv, 4))
+        self.P_last = self.P0 = np.zeros((4, 4))
+
+    def snapshot(self, t_s, gf_m, new_arc, mw_mean, mw_var_mean, window_s):
+        """At the first epoch of a gap: keep the old arcs' MW means, ``g`` and geometry-free slopes."""
+        k0 = self.k_last
+        self.ok = np.isfinite(self.g_last)
+        self.m, self.var_m = mw_mean.copy(), mw_var_mean.copy()
+        self.g0, self.sin0, self.t0_s = self.g_last.copy(), self.sin_last.copy(), self.t_last_s
+        self.H0, self.P0 = self.H_last.copy(), self.P_last
+        self.rate_gf_mps = np.zeros_like(self.m)
+        self.var_rate = np.full_like(self.m, np.inf)
+        lo = int(np.searchsorted(t_s, t_s[k0] - window_s))
+        for j in np.flatnonzero(self.ok):
+            starts = np.flatnonzero(new_arc[lo:k0 + 1, j])
+            rows = np.arange(lo + (starts[-1] if starts.size else 0), k0 + 1)
+            rows = rows[np.isfinite(gf_m[rows, j])]
+            if rows.size < 10:
+                self.ok[j] = False
+                continue
+            tt = t_s[rows] - t_s[rows].mean()
+            slope, icpt = np.polyfit(tt, gf_m[rows, j], 1)
+            res = gf_m[rows, j] - (slope * tt + icpt)
+            # The residuals are correlated over seconds (multipath): their variance counted twice.
+            self.rate_gf_mps[j] = slope
+            self.var_rate[j] = 2.0 * res.var() * rows.size / (rows.size - 2) / np.sum(tt**2)
+        self.ok &= np.isfinite(self.var_m)
+        self.seen[:] = False
+        self.on[:] = False
+        self.t_end_s = np.nan
+
+    def new_arcs(self, fresh, js, t_s):
+        """Arcs that end lose their wide-lane; after a gap, a second arc start makes a satellite unusable."""
+        self.on[fresh] = False
+        if np.isnan(self.t_end_s):
+            self.t_end_s = t_s
+        self.ok[fresh & self.seen] = False
+        self.seen[js] = True
+
+    def store(self, js, g, sin_el, t_s, k, H, P_sub):
+        """Keep this GNSS epoch's ``g``, sin(elevation), range Jacobian ``H`` (shape (m, p)) of the
+        satellites ``js`` and the covariance ``P_sub`` of its position and wet delay (the last before a gap)."""
+        self.g_last[:] = np.nan
+        self.g_last[js], self.sin_last[js] = g, sin_el
+        self.H_last[js] = H
+        self.t_last_s, self.k_last, self.P_last = t_s, k, P_sub
+
+    def fix(self, js, ref, g, sin_el, t_s, H_sd, P_sub, wsb, o):
+        """Fix the SD wide-lanes of ``js`` (reference ``ref``) from the INS geometry.
+
+        Parameters
+        ----------
+        js : ndarray of int, shape (m,)
+            The epoch's satellites, ``ref`` among them.
+        g, sin_el : ndarray, shape (m,)
+            ``g`` [cycles] and sin(elevation) at this epoch.
+        H_sd : ndarray, shape (m, p)
+            SD range [m] against the position and wet-delay errors (reference row zero).
+        P_sub : ndarray, shape (p, p)
+            Their covariance.
+        wsb : ndarray, shape (n_sv,)
+            Satellite wide-lane biases [cycles].
+
+        Returns
+        -------
+        rows : ndarray of int, shape (f,)
+            Indices into ``js`` of the wide-lanes fixed now (empty when none).
+        y_m : ndarray, shape (f,)
+            SD wide-lane phase less the range, the ionosphere and the fixed
+            integer [m]: a measurement of ``H_sd[rows] @ (position, wet delay)
+            error``, what the fixed wide-lanes give the float filter.
+        R_m2 : ndarray, shape (f, f)
+            Its covariance.
+        """
+        none = np.zeros(0, int), np.zeros(0), np.zeros((0, 0))
+        if not self.ok[ref] or t_s - self.t_end_s > o.wl_inertial_window_s:
+            return none
+        dt = t_s - self.t0_s
+        u = self.m[js] + g - self.g0[js] - KAPPA_WL_PER_GF * self.rate_gf_mps[js] * dt
+        var_u = (self.var_m[js] + (o.wl_phase_sigma_cyc / sin_el) ** 2 + (o.wl_phase_sigma_cyc / self.sin0[js]) ** 2
+                 + (KAPPA_WL_PER_GF * dt) ** 2 * self.var_rate[js])
+        iref = int(np.flatnonzero(js == ref)[0])
+        sel = np.flatnonzero(self.ok[js] & ~self.on[js] & (js != ref))
+        if sel.size < o.min_fixed:
+            return none
+        a_hat = u[sel] - u[iref] - (wsb[js[sel]] - wsb[ref])
+        Hs = H_sd[sel] / LAM_WL_M
+        # The position error at the last epoch before the gap is in g0: counted as independent of today's.
+        H0 = (self.H0[js[sel]] - self.H0[ref]) / LAM_WL_M
+        Q_own = H0 @ self.P0 @ H0.T + np.diag(var_u[sel]) + var_u[iref]
+        Q = Hs @ P_sub @ Hs.T + Q_own
+        fixed, n_wl, _ = partial_fix(a_hat, Q, ratio_min=o.ratio_min, min_fixed=o.min_fixed,
+                                     success_min=o.wl_success_min)
+        if not fixed.any():
+            return none
+        base = self.wl_cyc[ref] if self.on[ref] else 0.0
+        jf = js[sel[fixed]]
+        self.wl_cyc[jf] = base + n_wl[fixed] + wsb[jf] - wsb[ref]
+        self.on[jf] = True
+        if not self.on[ref]:
+            self.wl_cyc[ref], self.on[ref] = 0.0, True
+        return sel[fixed], LAM_WL_M * (a_hat[fixed] - n_wl[fixed]), LAM_WL_M**2 * Q_own[np.ix_(fixed, fixed)]
+
+
 def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, options=PppInsOptions()):
     """Run the tightly coupled PPP/INS filter.
 
@@ -210,6 +389,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
     t = gnss.t_s[:n_ep]
     have = np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t, MW, GF, gnss.lli[:n_ep], have, PppOptions(max_gap_s=1.5 * settings.step_s))
+    LW = (gnss.L1_cyc[:n_ep] - gnss.L2_cyc[:n_ep]) * LAM_WL_M  # wide-lane phase [m]
     n_x = _A0 + n_sv
     day = np.datetime64(orbits.ref_gps, "D")
     doy = float((day - day.astype("datetime64[Y]")).astype(int) + 1)
@@ -219,6 +399,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
     x[_ZWD], P[_ZWD, _ZWD] = o.zwd0_m, o.zwd_sigma_m**2
     amb = _Ambiguities(n_sv)
     mw_sum, mw_sq, mw_n = np.zeros(n_sv), np.zeros(n_sv), np.zeros(n_sv, int)
+    iwl = _InertialWideLane(n_sv)
     out = PppInsResult(t_s=t, pos_float_ecef_m=np.full((n_ep, 3), np.nan), pos_fixed_ecef_m=np.full((n_ep, 3), np.nan),
                        cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan), n_sats=np.zeros(n_ep, int),
                        n_fixed=np.zeros(n_ep, int), n_wl=np.zeros(n_ep, int), ratio=np.full(n_ep, np.nan),
@@ -247,6 +428,10 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
             keep = elev > np.radians(o.mask_deg)
             js, rho, rate, los, elev = js[keep], rho[keep], rate[keep], los[keep], elev[keep]
         if js.size < 2:
+            if o.wl_inertial and iwl.k_last == k - 1:
+                mean, var_mean = _mw_mean(mw_sum, mw_sq, mw_n)
+                var_mean[mw_n < o.wl_min_epochs] = np.inf
+                iwl.snapshot(t, GF, new_arc, mean, var_mean, o.wl_iono_window_s)
             amb.drop(P, x, np.flatnonzero(amb.on))
             amb.ref = -1
             mw_sum[:], mw_sq[:], mw_n[:] = 0.0, 0.0, 0
@@ -268,6 +453,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         mw_sum[js] += MW[k, js]
         mw_sq[js] += MW[k, js] ** 2
         mw_n[js] += 1
+        iwl.new_arcs(fresh, js, t[k])
         if not (amb.ref in js and not new_arc[k, amb.ref]):
             cand = [js[i] for i in np.argsort(-elev) if amb.on[js[i]] and not nw[i]]
             if cand and amb.ref >= 0:
@@ -302,6 +488,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         dx, P, _, _ = kalman.update(np.zeros(n_x), P, y, H, R)
         ins.feedback(dx)
         x[N_INS:] += dx[N_INS:]
+        C_prior, J_prior = C, J
         s = ins.state
         C = C_e_n(s.lat_rad, s.lon_rad)
         J = pos_jacobian(s.lat_rad, s.alt_m)
@@ -309,9 +496,38 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
         _record(out, k, ins, P, r_ins, C, J)
         out.gnss[k] = True
         out.n_sats[k] = js.size
+        # Wide-lane phase less the range at the updated state [cycles], undifferenced (see _InertialWideLane).
+        h_pos = los @ C_prior @ J_prior
+        g = (LW[k, js] + clk_m - zhd - rho - m_wet * x[_ZWD] - h_pos @ dx[DPOS]) / LAM_WL_M
         if o.ar:
-            held = _fix(out, k, ins, P, x, jo, amb.ref, (mw_sum, mw_sq, mw_n), gnss.wsb_cyc, o)
+            if o.wl_inertial:
+                H_sd = np.column_stack([h_pos - h_pos[iref], m_wet - m_wet[iref]])
+                rows, y_wl, R_wl = iwl.fix(js, amb.ref, g, np.sin(elev), t[k], H_sd, P[np.ix_(_POS_ZWD, _POS_ZWD)],
+                                           gnss.wsb_cyc, o)
+                if rows.size:  # the fixed wide-lanes as ranges: the position to centimetres for the narrow-lane
+                    H_wl = np.zeros((rows.size, n_x))
+                    H_wl[:, _POS_ZWD] = H_sd[rows]
+                    dx2, P, _, _ = kalman.update(np.zeros(n_x), P, y_wl, H_wl, R_wl)
+                    ins.feedback(dx2)
+                    x[N_INS:] += dx2[N_INS:]
+                    g = g - (h_pos @ dx2[DPOS] + m_wet * dx2[_ZWD]) / LAM_WL_M
+                    s = ins.state
+                    C, J = C_e_n(s.lat_rad, s.lon_rad), pos_jacobian(s.lat_rad, s.alt_m)
+                    _record(out, k, ins, P, geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m), C, J)
+            held = _fix(out, k, ins, P, x, jo, amb.ref, (mw_sum, mw_sq, mw_n), (iwl.on, iwl.wl_cyc), gnss.wsb_cyc, o)
+        P_last = P
+        if held is not None:
+            g = g - (h_pos @ held[0][DPOS] + m_wet * held[0][_ZWD]) / LAM_WL_M
+            P_last = held[1]
+        iwl.store(js, g, np.sin(elev), t[k], k, np.column_stack([h_pos, m_wet]), P_last[np.ix_(_POS_ZWD, _POS_ZWD)])
     return out
+
+
+def _mw_mean(mw_sum, mw_sq, mw_n):
+    """Means of the Melbourne-Wuebbena arcs and their variances (from the scatter), shape (n_sv,)."""
+    mean = mw_sum / np.maximum(mw_n, 1)
+    var_mean = np.maximum(mw_sq / np.maximum(mw_n, 1) - mean**2, 0.0) / np.maximum(mw_n - 1, 1)
+    return mean, var_mean
 
 
 @dataclass
@@ -386,7 +602,7 @@ def _record(out, k, ins, P, r_ins, C, J):
     out.cov_pos_enu_m2[k] = J @ P[DPOS, DPOS] @ J.T
 
 
-def _fix(out, k, ins, P, x, jo, ref, mw, wsb, o):
+def _fix(out, k, ins, P, x, jo, ref, mw, inertial, wsb, o):
     """Wide-lane rounding, narrow-lane LAMBDA; the fixed position into ``out`` when a subset passes.
 
     Returns the fixed solution as the state increment ``dx`` (shape (n_x,))
@@ -396,18 +612,23 @@ def _fix(out, k, ins, P, x, jo, ref, mw, wsb, o):
     ``mw`` holds the running sums, sums of squares and counts of each
     satellite's Melbourne-Wuebbena arc; a SD wide-lane is rounded when both
     arcs have ``wl_min_epochs``, the standard error of the SD mean is below
-    ``wl_se_max_cyc`` and the rounding is below ``wl_tol_cyc``.
+    ``wl_se_max_cyc`` and the rounding is below ``wl_tol_cyc``. ``inertial``
+    holds which satellites have a wide-lane fixed from the INS geometry
+    after a gap and its value (:class:`_InertialWideLane`); those are used
+    where the reference has one too.
     """
     mw_sum, mw_sq, mw_n = mw
-    ok = (mw_n[jo] >= o.wl_min_epochs) & (mw_n[ref] >= o.wl_min_epochs)
-    jo = jo[ok]
-    if jo.size < o.min_fixed:
-        return None
-    mean = mw_sum / np.maximum(mw_n, 1)
-    var_mean = np.maximum(mw_sq / np.maximum(mw_n, 1) - mean**2, 0.0) / np.maximum(mw_n - 1, 1)
-    wl = mean[jo] - mean[ref] - (wsb[jo] - wsb[ref])
-    n_wl = np.round(wl)
-    good = (np.abs(wl - n_wl) < o.wl_tol_cyc) & (np.sqrt(var_mean[jo] + var_mean[ref]) < o.wl_se_max_cyc)
+    on, wl_cyc = inertial
+    mean, var_mean = _mw_mean(mw_sum, mw_sq, mw_n)
+    by_ins = on[jo] & on[ref]
+    wl_mw = mean[jo] - mean[ref] - (wsb[jo] - wsb[ref])
+    n_mw = np.round(wl_mw)
+    by_mw = ((mw_n[jo] >= o.wl_min_epochs) & (mw_n[ref] >= o.wl_min_epochs) & (np.abs(wl_mw - n_mw) < o.wl_tol_cyc)
+             & (np.sqrt(var_mean[jo] + var_mean[ref]) < o.wl_se_max_cyc))
+    n_wl = np.where(by_ins, np.round(wl_cyc[jo] - wl_cyc[ref] - (wsb[jo] - wsb[ref])), n_mw)
+    out.n_wl_checked += int(np.sum(by_ins & by_mw))
+    out.n_wl_mismatch += int(np.sum(by_ins & by_mw & (n_wl != n_mw)))
+    good = by_ins | by_mw
     jo, n_wl = jo[good], n_wl[good]
     out.n_wl[k] = jo.size
     if jo.size < o.min_fixed:
