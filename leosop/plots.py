@@ -4,7 +4,8 @@ They follow [Shen 2024]'s Fig. 4 (trajectory), 8 (errors), 9 (visible satellites
 
 Every title names the run (scenario, coupling, level, seed) and every time
 axis its UTC origin. Besides the paper's four, ``errors_enu.png`` splits the
-fused position error into east, north and up with the filter's +-3 sigma.
+fused position error into east, north and up with the filter's +-3 sigma,
+and a scenario of several constellations adds ``visible_by_family.png``.
 Matplotlib is imported lazily with the Agg backend; every figure is written
 atomically (:func:`leosop.figure.save_png`).
 """
@@ -18,7 +19,7 @@ from .frames import ecef_to_enu, ecef_to_geodetic
 from .timebase import format_utc
 
 __all__ = ["write_figures", "trajectory_figure", "errors_figure", "errors_enu_figure", "visible_figure",
-           "gdop_figure", "run_label", "time_label"]
+           "gdop_figure", "visible_by_family_figure", "run_label", "time_label"]
 
 
 def _save(fig, path):
@@ -40,7 +41,7 @@ def trajectory_figure(result, path):
     plt = pyplot()
     fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 4.2), gridspec_kw={"width_ratios": [2, 1]})
     for label, pos, style in (("truth", result.truth_pos_ecef_m, "k-"), ("INS only", result.ins_pos_ecef_m, "C1--"),
-                              ("Starlink/INS", result.fused.pos_ecef_m, "C0:")):
+                              (result.fused_label, result.fused.pos_ecef_m, "C0:")):
         lat, lon, alt = ecef_to_geodetic(pos)
         ax.plot(np.degrees(lon), np.degrees(lat), style, label=label)
         ax_h.plot(result.t_s, alt, style, label=label)
@@ -64,8 +65,8 @@ def errors_figure(result, path):
     for i, (ax, unit) in enumerate(zip(axes, ("position error [m]", "velocity error [m/s]"))):
         ax.semilogy(result.t_s, err["leo_fix"][i], ".", color="0.7", ms=2, label="LEO fix")
         ax.semilogy(result.t_s, err["ins_only"][i], "C1-", label="INS only")
-        ax.semilogy(result.t_s, err["fused"][i], "C0-", label="Starlink/INS")
-        ax.semilogy(result.t_s, bound_3d[i], "C0--", lw=0.8, label="Starlink/INS filter 3 sigma (3D)")
+        ax.semilogy(result.t_s, err["fused"][i], "C0-", label=result.fused_label)
+        ax.semilogy(result.t_s, bound_3d[i], "C0--", lw=0.8, label=f"{result.fused_label} filter 3 sigma (3D)")
         ax.set_ylabel(unit)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(ncol=4, loc="upper left", fontsize="small", framealpha=0.9, markerscale=4)
@@ -83,7 +84,7 @@ def errors_enu_figure(result, path):
     for k, (ax, name) in enumerate(zip(axes, ("east", "north", "up"))):
         ax.fill_between(result.t_s, -3 * sigma[:, k], 3 * sigma[:, k], color="C0", alpha=0.2,
                         label="filter +-3 sigma")
-        ax.plot(result.t_s, err[:, k], "C0-", lw=1, label="Starlink/INS error")
+        ax.plot(result.t_s, err[:, k], "C0-", lw=1, label=f"{result.fused_label} error")
         inside = np.mean(np.abs(err[1:, k]) <= 3 * sigma[1:, k])
         ax.set_ylabel(f"{name} error [m]")
         ax.text(0.99, 0.95, f"{inside:.1%} inside +-3 sigma", transform=ax.transAxes, ha="right", va="top",
@@ -134,13 +135,32 @@ def gdop_figure(result, path):
     _save(fig, path)
 
 
+def visible_by_family_figure(result, path):
+    """Tracked satellites of each family, stacked, with the states a snapshot fix needs (6 + k)."""
+    plt = pyplot()
+    families = result.scenario.leo.constellations
+    counts = result.n_visible_by_family
+    fig, ax = plt.subplots(figsize=(9, 3.4))
+    ax.stackplot(result.t_s, counts.T, labels=families, step="mid", alpha=0.8)
+    need = 6 + (counts > 0).sum(axis=1)
+    ax.step(result.t_s, np.where(counts.sum(axis=1) > 0, need, np.nan), "k:", where="mid",
+            label="6 + k needed for a snapshot fix")
+    ax.set_xlabel(time_label(result))
+    ax.set_ylabel("tracked satellites")
+    ax.set_title(f"{run_label(result)}: satellites above the {result.scenario.mask_deg:g} deg mask per family")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")  # beside: the stack fills the axes
+    _save(fig, path)
+
+
 def write_figures(result, out_dir):
-    """All five figures into ``out_dir``; returns their paths."""
+    """The five figures, and ``visible_by_family.png`` for several constellations, into ``out_dir``; their paths."""
     out = Path(out_dir)
+    figures = [("trajectory.png", trajectory_figure), ("errors_3d.png", errors_figure),
+               ("errors_enu.png", errors_enu_figure), ("visible.png", visible_figure), ("gdop.png", gdop_figure)]
+    if len(result.scenario.leo.constellations) > 1:
+        figures.append(("visible_by_family.png", visible_by_family_figure))
     paths = []
-    for name, func in (("trajectory.png", trajectory_figure), ("errors_3d.png", errors_figure),
-                       ("errors_enu.png", errors_enu_figure), ("visible.png", visible_figure),
-                       ("gdop.png", gdop_figure)):
+    for name, func in figures:
         func(result, out / name)
         paths.append(out / name)
     return paths

@@ -143,6 +143,11 @@ class SimulationResult:
     runtime_s: float
     n_visible_by_family: np.ndarray = None
 
+    @property
+    def fused_label(self):
+        """``Starlink/INS`` for a Starlink-only scenario, ``LEO/INS`` for a mix: the fused solution's name."""
+        return fusion_label(self.scenario.leo.constellations)
+
     def errors(self):
         """3D position [m] and velocity [m/s] errors, dict of (n,) arrays per solution."""
         out = {}
@@ -537,6 +542,11 @@ def metrics(result):
         "gdop": {"max": float(gdop.max()) if gdop.size else None},
         "runtime_s": float(result.runtime_s),
     }
+
+
+def fusion_label(constellations):
+    """The fused solution's name from the scenario's constellations: ``Starlink/INS`` or ``LEO/INS``."""
+    return "Starlink/INS" if tuple(constellations) == ("starlink",) else "LEO/INS"
 
 
 def solution_table(result):

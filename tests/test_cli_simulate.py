@@ -38,7 +38,8 @@ def test_json_contract_files_and_figures(tmp_path, capsys):
     assert status == 0
     doc = json.loads(out)
     assert set(doc) == set(CONTRACT) | {"run"}  # "run": an extension naming what was run
-    assert doc["run"] == {"coupling": "loose", "level": "measurement", "seed": 0, "correction_period_s": 1.0}
+    assert doc["run"] == {"coupling": "loose", "level": "measurement", "seed": 0, "correction_period_s": 1.0,
+                          "constellations": ["starlink"]}
     for key, sub in CONTRACT.items():
         if sub is not None:
             assert set(doc[key]) == sub

@@ -469,3 +469,19 @@ def test_tight_mixed_families_filter_is_consistent():
     lag = np.concatenate([lag_pairs(r) for r in runs], axis=1)
     assert_filter_consistent(np.concatenate([r.nees()[1:] for r in runs]), sum(r.nis()[0].sum() for r in runs),
                              sum(r.nis()[1].sum() for r in runs), *lag)
+
+
+def test_simulate_mixed_scenario_names_the_fusion_and_draws_the_families(capsys, tmp_path):
+    from leosop.scenarios import BUNDLED_DIR
+
+    doc = json.loads((BUNDLED_DIR / "xian-baoji-multi.json").read_text())
+    doc["duration_s"] = 120
+    path = tmp_path / "short.json"
+    path.write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    assert main(["simulate", "--scenario", str(path), "--level", "measurement", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    # Several constellations: the fused solution is LEO/INS, not Starlink/INS, and the per-family figure is written.
+    assert "LEO/INS" in text and "Starlink/INS" not in text
+    assert json.loads((out / "metrics.json").read_text())["run"]["constellations"] == doc["leo"]["constellations"]
+    assert (out / "visible_by_family.png").stat().st_size > 0

@@ -5,7 +5,7 @@ import warnings
 
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..scenarios import load_scenario
-from ..simulate import COUPLINGS, LEVELS, metrics, run_scenario, solution_table
+from ..simulate import COUPLINGS, LEVELS, fusion_label, metrics, run_scenario, solution_table
 from . import add_command
 
 
@@ -42,7 +42,8 @@ def run(args):
     doc = metrics(result)
     # Beyond the contract's keys: what was run, so a metrics.json names its coupling, level and seed.
     doc["run"] = {"coupling": args.coupling, "level": args.level, "seed": args.seed,
-                  "correction_period_s": args.correction_period_s}
+                  "correction_period_s": args.correction_period_s,
+                  "constellations": list(scenario.leo.constellations)}
     if args.out:
         from ..plots import write_figures
 
@@ -51,10 +52,6 @@ def run(args):
             write_csv(stage / "solution.csv", header, rows)
             write_json(stage / "metrics.json", doc)
             write_figures(result, stage)
-            if len(scenario.leo.constellations) > 1:
-                from ..plots_families import visible_by_family_figure
-
-                visible_by_family_figure(result, stage / "visible_by_family.png")
     return doc
 
 
@@ -73,7 +70,7 @@ def summary(doc):
         f"{_num(i['vel_err_mean_mps'], '.3f')} m/s (mean 3D error)",
         f"  LEO fixes     position {_num(x['pos_err_mean_m'], '10.2f')} m   velocity "
         f"{_num(x['vel_err_mean_mps'], '.3f')} m/s ({x['n_fixes']} fixes)",
-        f"  Starlink/INS  position {_num(f['pos_err_mean_m'], '10.2f')} m   velocity "
+        f"  {fusion_label(run['constellations']):<12}  position {_num(f['pos_err_mean_m'], '10.2f')} m   velocity "
         f"{_num(f['vel_err_mean_mps'], '.3f')} m/s (RMS {_num(f['pos_err_rms_m'], '.2f')} m, "
         f"availability {f['availability']:.3f})",
         f"  runtime {doc['runtime_s']:.1f} s",
