@@ -55,6 +55,7 @@ __all__ = [
     "model9",
     "discretize",
     "propagate",
+    "position_budget",
 ]
 
 #: Slices of the 15-state vector.
@@ -276,3 +277,60 @@ def propagate(F, G, u, dt_s, x0):
     for k in range(n_steps):
         x[k + 1] = E[k, :n, :n] @ x[k] + E[k, :n, n]
     return x
+
+
+def position_budget(F, G, Qc, dt_s, P0, groups):
+    """Position covariance after a run of steps without aiding (a GNSS gap), split by its sources.
+
+    ``P(T) = Phi P0 Phi^T + Q_gyro + Q_accel`` with ``Phi`` the product of
+    the steps' transitions and each sensor's process noise propagated over
+    the steps (Van Loan, :func:`discretize`). Each group's share is what its
+    block of ``P0`` alone would give, ``Phi[DPOS, g] P0[g, g] Phi[DPOS, g]^T``;
+    the shares of correlated groups do not add up to the total (tilt and
+    horizontal accelerometer bias, anti-correlated after GNSS aiding, are
+    best one group).
+
+    Parameters
+    ----------
+    F : array_like, shape (n_steps, n, n)
+        Coefficients of each step (:func:`model15` or :func:`model9`; rows
+        :data:`DPOS` are the position errors).
+    G : array_like, shape (n_steps, n, 6)
+    Qc : array_like, shape (6,)
+        Power spectral densities of ``[w_gyro_b, w_accel_b]``: (rad/s)^2 s
+        and (m/s^2)^2 s.
+    dt_s : float
+    P0 : array_like, shape (n, n)
+        Covariance at the start.
+    groups : dict of str to sequence of int
+        Named sets of state indices into ``P0``.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (3, 3)
+        Covariance of the position errors (the units of :data:`DPOS`) at the
+        end: one entry per group, ``"gyro noise"``, ``"accel noise"`` and
+        ``"total"`` (``P0`` whole, correlations included, and both noises).
+    """
+    F = np.asarray(F, dtype=float)
+    P0 = np.asarray(P0, dtype=float)
+    Qc = np.asarray(Qc, dtype=float)
+    n = F.shape[-1]
+    if F.ndim != 3 or P0.shape != (n, n) or Qc.shape != (6,):
+        raise ValueError(f"F {F.shape} must be (n_steps, n, n), P0 {P0.shape} (n, n) and Qc {Qc.shape} (6,)")
+    gyro = np.r_[Qc[:3], np.zeros(3)]
+    Phi_k, Qg_k = discretize(F, G, gyro, dt_s)
+    _, Qa_k = discretize(F, G, Qc - gyro, dt_s)
+    Phi, Qg, Qa = np.eye(n), np.zeros((n, n)), np.zeros((n, n))
+    for Ph, qg, qa in zip(Phi_k, Qg_k, Qa_k):
+        Phi = Ph @ Phi
+        Qg = Ph @ Qg @ Ph.T + qg
+        Qa = Ph @ Qa @ Ph.T + qa
+    T = Phi[DPOS]
+    out = {}
+    for name, idx in groups.items():
+        idx = np.asarray(idx, dtype=int)
+        out[name] = T[:, idx] @ P0[np.ix_(idx, idx)] @ T[:, idx].T
+    out["gyro noise"], out["accel noise"] = Qg[DPOS, DPOS], Qa[DPOS, DPOS]
+    out["total"] = T @ P0 @ T.T + out["gyro noise"] + out["accel noise"]
+    return out
