@@ -19,8 +19,15 @@ seeds:
 Beside them, the closed form of the horizontal drift from gyro angle random walk alone (tilt random walk
 ``q``; per axis ``g q t^2.5 / sqrt(20)``), the floor no filter tuning removes.
 
+With ``--budget``, the error budget of the first seed's outage (main options): the filter's INS-error
+covariance at the first outage epoch (``PppInsResult.cov_ins``) propagated to the last one along the true
+trajectory (:func:`leosop.gnss.ppp_ins_study.outage_budget`), the 1-sigma ENU drift each group of initial
+errors and each sensor's noise would give alone, the total (correlations included) and the filter's own
+sigma there. Tilt and horizontal accelerometer bias are anti-correlated after the GNSS aiding (what the
+position sees is their sum), so they are shown together and alone.
+
 Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ins_outage.py [--seeds 10] [--grades fog navigation]
-[--duration 900] [--jobs 2] [--set wl_min_epochs=3 ...] [--baseline wl_inertial=False ...]``
+[--duration 900] [--jobs 2] [--set wl_min_epochs=3 ...] [--baseline wl_inertial=False ...] [--budget]``
 """
 
 import argparse
@@ -40,7 +47,7 @@ OUTAGE_S = 60.0
 
 
 def one(args):
-    seed, grade, main, duration, outage_at, overrides = args
+    seed, grade, main, duration, outage_at, overrides, with_budget = args
     products = ppp_ins_study._products()
     opts = dataclasses.replace(ppp_ins.PppInsOptions(), **overrides[main])
     truth, res = ppp_ins_study.scenario(seed, duration_s=duration, outage_at_s=outage_at, products=products,
@@ -54,7 +61,9 @@ def one(args):
     sig = np.sqrt(np.trace(res.cov_pos_enu_m2, axis1=1, axis2=2))
     wl = np.flatnonzero(after & (res.n_wl >= opts.min_fixed))
     nl = np.flatnonzero(after & np.isfinite(err_x))
-    return {"seed": seed, "grade": grade, "main": main,
+    gap = np.flatnonzero(during)
+    doc = {} if not with_budget else {"budget": ppp_ins_study.outage_budget(res, grade, duration, gap[0], gap[-1])}
+    return doc | {"seed": seed, "grade": grade, "main": main,
             "max_err_m": float(err_f[during].max()), "sigma_end_m": float(sig[during][-1]),
             "wl_s": float(t[wl[0]] - end) if wl.size else np.nan,
             "refix_s": float(t[nl[0]] - end) if nl.size else np.nan,
@@ -79,6 +88,7 @@ def main():
                     help="PppInsOptions fields changed in the runs (e.g. wl_min_epochs=3)")
     ap.add_argument("--baseline", nargs="*", default=["wl_inertial=False"], metavar="OPTION=VALUE",
                     help="PppInsOptions fields changed in the baseline runs")
+    ap.add_argument("--budget", action="store_true", help="print the error budget of the first seed's outage")
     a = ap.parse_args()
     fields = {f.name: f.type for f in dataclasses.fields(ppp_ins.PppInsOptions)}
 
@@ -87,12 +97,17 @@ def main():
 
     overrides = {True: parse(a.set), False: parse(a.baseline)}
     outage_at = 2.0 * a.duration / 3.0
-    cases = [(s, g, m, a.duration, outage_at, overrides) for g in a.grades for m in (True, False)
-             for s in range(a.seeds)]
+    cases = [(s, g, m, a.duration, outage_at, overrides, a.budget and m and s == 0) for g in a.grades
+             for m in (True, False) for s in range(a.seeds)]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(a.jobs) as pool:
         rows = list(pool.map(one, cases))
     for r in rows:
+        b = r.pop("budget", None)
+        if b is not None:
+            print(f"error budget, {r['grade']} seed {r['seed']}: 1-sigma drift over the outage E N U [m]")
+            for k, v in b.items():
+                print(f"  {k:24s}" + " ".join(f"{x:7.3f}" for x in v))
         print(" ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()))
     print(f"{a.seeds} seeds, {a.duration:g} s runs, {OUTAGE_S:g} s outage at {outage_at:g} s, "
           f"{time.perf_counter() - t0:.0f} s")

@@ -120,6 +120,10 @@ class PppInsResult:
         no subset passes the ratio test).
     cov_pos_enu_m2 : ndarray, shape (n, 3, 3)
         Covariance of the float position, ENU.
+    cov_ins : ndarray, shape (n, 15, 15)
+        Covariance of the INS errors (:mod:`leosop.ins.error_model` order
+        and units) after the epoch's update; in a gap, after the prediction
+        (at its first epoch from the fixed solution's, with ``bridge_fixed``).
     n_sats, n_fixed, n_wl : ndarray of int
         Satellites used, narrow-lane and wide-lane ambiguities fixed.
     ratio : ndarray
@@ -137,6 +141,7 @@ class PppInsResult:
     pos_float_ecef_m: np.ndarray
     pos_fixed_ecef_m: np.ndarray
     cov_pos_enu_m2: np.ndarray
+    cov_ins: np.ndarray
     n_sats: np.ndarray
     n_fixed: np.ndarray
     n_wl: np.ndarray
@@ -401,9 +406,9 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
     mw_sum, mw_sq, mw_n = np.zeros(n_sv), np.zeros(n_sv), np.zeros(n_sv, int)
     iwl = _InertialWideLane(n_sv)
     out = PppInsResult(t_s=t, pos_float_ecef_m=np.full((n_ep, 3), np.nan), pos_fixed_ecef_m=np.full((n_ep, 3), np.nan),
-                       cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan), n_sats=np.zeros(n_ep, int),
-                       n_fixed=np.zeros(n_ep, int), n_wl=np.zeros(n_ep, int), ratio=np.full(n_ep, np.nan),
-                       gnss=np.zeros(n_ep, bool), n_slips=0, n_outliers=0, n_ref_changes=0)
+                       cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan), cov_ins=np.full((n_ep, N_INS, N_INS), np.nan),
+                       n_sats=np.zeros(n_ep, int), n_fixed=np.zeros(n_ep, int), n_wl=np.zeros(n_ep, int),
+                       ratio=np.full(n_ep, np.nan), gnss=np.zeros(n_ep, bool), n_slips=0, n_outliers=0, n_ref_changes=0)
     held = None  # the previous epoch's fixed solution: (state increment, conditioned covariance)
     for k in range(n_ep):
         if k > 0:
@@ -600,6 +605,7 @@ def _sd_measurements(g, observed, x, C, J, use, o):
 def _record(out, k, ins, P, r_ins, C, J):
     out.pos_float_ecef_m[k] = r_ins
     out.cov_pos_enu_m2[k] = J @ P[DPOS, DPOS] @ J.T
+    out.cov_ins[k] = P[:N_INS, :N_INS]
 
 
 def _fix(out, k, ins, P, x, jo, ref, mw, inertial, wsb, o):

@@ -9,7 +9,8 @@ true biases drawn per run from the filter's prior), and the alignment is
 replaced by initial errors drawn from the filter's prior (0.02 deg level,
 0.3 deg heading, 0.05 m/s, 1 m). GNSS: the real GRG orbits and clocks of
 2020-06-25 from 06:00 GPST around Esbjerg (:mod:`leosop.gnss.simulate`),
-1 Hz, 10 deg mask; vehicle: 15 m/s with a 90 deg turn every 4.5 min; a 60 s
+1 Hz, 10 deg mask; vehicle: 15 m/s with a 46.5 deg turn (turn rate ramped
+to 3 deg/s over 30 s, back to 0 in 1 s) every 4.5 min; a 60 s
 GNSS outage starts 20 min into the run (before the last 30 min of the
 statistics, as the paper's run had none).
 """
@@ -22,7 +23,7 @@ import numpy as np
 from ..constants import G0_MPS2
 from ..errors import InputError
 from ..fusion.common import FilterSettings, pos_jacobian
-from ..ins import strapdown
+from ..ins import error_model, strapdown
 from ..ins.imu import ImuErrors, corrupt
 from ..ins.trajectory import Segment, from_segments
 from . import ppp_ins
@@ -30,7 +31,8 @@ from .figures import ppp_ins_figure
 from .products import read_clk, read_sp3
 from .simulate import SimSettings, simulate
 
-__all__ = ["PAPER", "GRADES", "filter_settings", "scenario", "statistics", "ppp_ins_table", "format_table"]
+__all__ = ["PAPER", "GRADES", "BUDGET_GROUPS", "filter_settings", "scenario", "outage_budget", "statistics",
+           "ppp_ins_table", "format_table"]
 
 #: [Liu 2016] table 2 and section 4.2.
 PAPER = {"float_rms_3d_m": 0.1514, "fixed_rms_3d_m": 0.0392, "first_fix_s": 600.0}
@@ -115,6 +117,55 @@ def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None,
     res = ppp_ins.run(gnss, orbits, clocks, state0, dth, dvl, traj.dt_s, settings,
                       dataclasses.replace(options, ar=ar))
     return gnss.pos_ecef_m[:n], res
+
+
+#: Groups of the 15 INS error states in :func:`outage_budget` (the car is level: body x, y horizontal).
+#: Tilt and horizontal accelerometer bias are anti-correlated after the GNSS aiding (the position sees
+#: their sum), so they come together and alone.
+BUDGET_GROUPS = {"tilt + accel bias x, y": [0, 1, 12, 13], "  tilt alone": [0, 1], "  accel bias x, y alone": [12, 13],
+                 "heading": [2], "velocity": [3, 4, 5], "position": [6, 7, 8], "gyro bias x, y": [9, 10],
+                 "gyro bias z": [11], "accel bias z": [14]}
+
+
+def outage_budget(res, grade, duration_s, k0, k1):
+    """Error budget of a GNSS gap of a :func:`scenario` run: what each source adds to the drift.
+
+    The filter's INS-error covariance at epoch ``k0`` (``res.cov_ins``)
+    propagated to epoch ``k1`` along the true trajectory in steps of the
+    filter's (:func:`leosop.ins.error_model.position_budget`, groups
+    :data:`BUDGET_GROUPS`).
+
+    Parameters
+    ----------
+    res : leosop.gnss.ppp_ins.PppInsResult
+    grade : str
+        Key of :data:`GRADES` the run used.
+    duration_s : float
+        The run's duration (its trajectory).
+    k0, k1 : int
+        First and last epoch of the gap.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (3,)
+        1-sigma ENU position drift [m] at ``k1`` per group, ``"gyro noise"``,
+        ``"accel noise"``, ``"total"`` (correlations included) and
+        ``"filter sigma"`` (the filter's own, ``res.cov_pos_enu_m2[k1]``).
+    """
+    settings = filter_settings(grade)
+    traj = _trajectory(duration_s)
+    per = int(round(settings.step_s / traj.dt_s))
+    i0 = np.arange(k0, k1) * per
+    # Mean specific force of each step in ENU from the ideal increments.
+    f_n = np.stack([np.einsum("kij,kj->i", traj.C_n_b[i:i + per], traj.dvel_b_mps[i:i + per]) for i in i0])
+    F, G = error_model.model15(traj.C_n_b[i0], f_n / settings.step_s, traj.vel_enu_mps[i0], traj.lat_rad[i0],
+                               traj.alt_m[i0])
+    Qc = np.r_[np.full(3, settings.gyro_arw_rad_per_rt_s**2), np.full(3, settings.accel_vrw_mps2_per_rt_hz**2)]
+    out = error_model.position_budget(F, G, Qc, settings.step_s, res.cov_ins[k0], BUDGET_GROUPS)
+    J = pos_jacobian(traj.lat_rad[k1 * per], traj.alt_m[k1 * per])
+    doc = {k: np.sqrt(np.diag(J @ c @ J.T)) for k, c in out.items()}
+    doc["filter sigma"] = np.sqrt(np.diag(res.cov_pos_enu_m2[k1]))
+    return doc
 
 
 def statistics(truth, res, *, last_s=1800.0, outage_at_s=OUTAGE_AT_S, outage_s=60.0):
