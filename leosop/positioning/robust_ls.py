@@ -14,6 +14,7 @@ one measurement at a time, while at least two redundant measurements remain.
 Failures come back as data in ``status`` (:class:`FixStatus`).
 """
 
+from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
@@ -22,7 +23,7 @@ from scipy.stats import norm as norm_dist
 
 from ..geometry.dop import cofactor
 
-__all__ = ["FixStatus", "UsedResiduals", "solve_robust", "XTOL_POS_M", "EQUAL_FIT_SIGMAS"]
+__all__ = ["FixStatus", "BatchFit", "batch_rows", "solve_robust", "XTOL_POS_M", "EQUAL_FIT_SIGMAS"]
 
 #: Step threshold of convergence of a position [m]: 0.1 mm.
 XTOL_POS_M = 1e-4
@@ -43,15 +44,6 @@ _RETRY_ALPHA = 1e-3
 _RESIDUAL_VAR_FLOOR = 1e-12
 
 
-class UsedResiduals:
-    """Mixin of a fix with ``residuals_hz``, ``used`` and ``n_used``: their RMS."""
-
-    @property
-    def residual_rms_hz(self):
-        """RMS of the used residuals [Hz]."""
-        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
-
-
 class FixStatus(IntEnum):
     """Outcome of one fix."""
 
@@ -64,6 +56,66 @@ class FixStatus(IntEnum):
     TOO_FEW = 3
     #: Residuals fail the chi-square test and no single outlier can be isolated.
     INCONSISTENT = 4
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchFit:
+    """What a batch fix reports beside its states (its subclass documents the shapes).
+
+    Attributes
+    ----------
+    cov : ndarray
+        Covariance of the states.
+    gdop : float
+    residuals_hz : ndarray, (m,)
+    used : ndarray of bool, (m,)
+    n_used, iterations : int
+    chi2 : float
+        Sum of the used rows' squared normalised residuals.
+    status : FixStatus
+    ambiguous : bool
+        A mirror solution fits about as well (``mirror_pos_ecef_m``, ``mirror_chi2``).
+    mirror_pos_ecef_m : ndarray, (3,) or None
+    mirror_chi2 : float
+    """
+
+    cov: np.ndarray
+    gdop: float
+    residuals_hz: np.ndarray
+    used: np.ndarray
+    n_used: int
+    iterations: int
+    chi2: float
+    status: FixStatus
+    ambiguous: bool = False
+    mirror_pos_ecef_m: np.ndarray = None
+    mirror_chi2: float = np.nan
+
+    @property
+    def residual_rms_hz(self):
+        """RMS of the used residuals [Hz]."""
+        return float(np.sqrt(np.mean(self.residuals_hz[self.used] ** 2))) if self.n_used else np.nan
+
+
+def batch_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, mask=None):
+    """The rows of a batch fix as flat float arrays, and which of them are usable.
+
+    Returns ``(y, sigma, f0, t, r_s, v_s, m)``: Doppler, sigma and carrier
+    [Hz] and time [s], each (m,); satellite position [m] and velocity [m/s],
+    (m, 3); and ``m`` (m,) bool, the rows of ``mask`` (all when None) whose
+    values are all finite with positive sigma and carrier.
+    """
+    y = np.asarray(doppler_hz, dtype=float).ravel()
+    n = y.size
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n, 3)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(n, 3)
+    sigma = np.broadcast_to(np.asarray(sigma_hz, dtype=float), y.shape)
+    f0 = np.broadcast_to(np.asarray(carrier_hz, dtype=float), y.shape)
+    t = np.asarray(t_s, dtype=float).ravel()
+    m = np.ones(n, bool) if mask is None else np.asarray(mask, bool).ravel()
+    m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
+    m &= np.isfinite(t)
+    return y, sigma, f0, t, r_s, v_s, m
 
 
 def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):

@@ -16,7 +16,7 @@ import numpy as np
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
 from ..geometry.doppler import doppler_jacobian
-from .robust_ls import EQUAL_FIT_SIGMAS, XTOL_POS_M, FixStatus, UsedResiduals, solve_robust
+from .robust_ls import EQUAL_FIT_SIGMAS, XTOL_POS_M, BatchFit, FixStatus, batch_rows, solve_robust
 from .starts import track_starts
 
 __all__ = ["StaticFix", "solve_static"]
@@ -29,7 +29,7 @@ _START_FRACTIONS = np.array([0.0, 1 / 6, -1 / 6, 1 / 3, -1 / 3, 0.6, -0.6, 1.0, 
 
 
 @dataclass(frozen=True)
-class StaticFix(UsedResiduals):
+class StaticFix(BatchFit):
     """Batch fix of a receiver at rest.
 
     Attributes
@@ -76,18 +76,7 @@ class StaticFix(UsedResiduals):
     clock_offset_hz: float
     clock_drift_hz_per_s: float
     t_ref_s: float
-    cov: np.ndarray
-    gdop: float
-    residuals_hz: np.ndarray
-    used: np.ndarray
-    n_used: int
-    iterations: int
-    chi2: float
-    status: FixStatus
-    ambiguous: bool = False
     clock_poly_hz: np.ndarray = None
-    mirror_pos_ecef_m: np.ndarray = None
-    mirror_chi2: float = np.nan
     clock_polys_hz: np.ndarray = None
     clock_labels: tuple = ()
 
@@ -156,16 +145,9 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     if degrees[0] < 0 or deg_side < 0:
         raise ValueError("clock degrees must be non-negative")
     deg = deg_side
-    y = np.asarray(doppler_hz, dtype=float).ravel()
+    y, sigma, f0, t, r_s, v_s, m = batch_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s,
+                                              mask)
     n_rows = y.size
-    r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n_rows, 3)
-    v_s = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(n_rows, 3)
-    sigma = np.broadcast_to(np.asarray(sigma_hz, dtype=float), y.shape)
-    f0 = np.broadcast_to(np.asarray(carrier_hz, dtype=float), y.shape)
-    t = np.asarray(t_s, dtype=float).ravel()
-    m = np.ones(n_rows, bool) if mask is None else np.asarray(mask, bool).ravel()
-    m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
-    m &= np.isfinite(t)
     y, sigma, f0, t = (np.where(m, a, fill) for a, fill in ((y, 0.0), (sigma, 1.0), (f0, 1.0), (t, 0.0)))
     r_s = np.where(m[:, None], r_s, [2e7, 0.0, 0.0])
     v_s = np.where(m[:, None], v_s, 0.0)

@@ -53,7 +53,7 @@ import numpy as np
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
 from ..geometry.doppler import doppler_jacobian, doppler_rate
-from .robust_ls import XTOL_POS_M, FixStatus, UsedResiduals, solve_robust
+from .robust_ls import XTOL_POS_M, BatchFit, FixStatus, batch_rows, solve_robust
 from .starts import grid_starts, subpoint_centroid_ecef_m
 
 __all__ = ["PassesFix", "solve_static_passes", "integrated_autocorrelation", "TIME_OFFSET_SIGMA_S",
@@ -82,7 +82,7 @@ _TAU_SIGNIFICANCE = 3.0
 
 
 @dataclass(frozen=True)
-class PassesFix(UsedResiduals):
+class PassesFix(BatchFit):
     """Batch fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     Attributes
@@ -163,17 +163,6 @@ class PassesFix(UsedResiduals):
     pass_ids: np.ndarray
     t_ref_s: np.ndarray
     clock_poly_hz: np.ndarray
-    cov: np.ndarray
-    gdop: float
-    residuals_hz: np.ndarray
-    used: np.ndarray
-    n_used: int
-    iterations: int
-    chi2: float
-    status: FixStatus
-    ambiguous: bool
-    mirror_pos_ecef_m: np.ndarray
-    mirror_chi2: float
     time_bias_s: np.ndarray = None
     clock: str = "per_pass"
     rx_clock_poly_hz: np.ndarray = None
@@ -463,17 +452,10 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     if tb and time_bias_sigma_s is not None:
         prior[-1] = 1.0 / float(time_bias_sigma_s) ** 2
     prior_cols = np.flatnonzero(prior > 0)
-    y = np.asarray(doppler_hz, dtype=float).ravel()
+    y, sigma, f0, t, r_s, v_s, m = batch_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s,
+                                              mask)
     n = y.size
-    r_s = np.asarray(pos_sv_ecef_m, dtype=float).reshape(n, 3)
-    v_s = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(n, 3)
-    sigma = np.broadcast_to(np.asarray(sigma_hz, dtype=float), y.shape)
-    f0 = np.broadcast_to(np.asarray(carrier_hz, dtype=float), y.shape)
-    t = np.asarray(t_s, dtype=float).ravel()
     labels, gi = np.unique(np.asarray(pass_id).ravel(), return_inverse=True)
-    m = np.ones(n, bool) if mask is None else np.asarray(mask, bool).ravel()
-    m = m & np.isfinite(y) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1) & (sigma > 0) & (f0 > 0)
-    m &= np.isfinite(t)
     keep = np.bincount(gi[m], minlength=len(labels)) >= n_loc + 1 - len(prior_cols)
     m &= keep[gi]
     labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
