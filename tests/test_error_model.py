@@ -116,7 +116,7 @@ def test_discretize_rejects_bad_shapes():
         em.discretize(np.zeros((2, 2)), np.zeros((2, 1)), np.ones(1), 0.0)
 
 
-def test_table3_reproduces_seed001():
+def test_table3_reproduces_chu2009():
     from leosop.repro.error_model import table3
 
     for row in table3()["rows"]:

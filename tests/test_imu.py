@@ -9,8 +9,8 @@ from leosop.ins import imu
 DEG_PER_H = np.pi / 180.0 / 3600.0
 
 
-def test_seed004_table1_in_si():
-    e = imu.SEED004_TABLE1
+def test_shen2024_table1_in_si():
+    e = imu.SHEN2024_TABLE1
     # 0.03 deg/h; 0.01 deg/sqrt(h) = 0.01 * pi/180 / 60 rad/sqrt(s); 1e-4 g; 1e-5 g/sqrt(Hz).
     np.testing.assert_allclose(e.gyro_bias_rad_per_s, 0.03 * DEG_PER_H, rtol=1e-15)
     np.testing.assert_allclose(e.gyro_arw_rad_per_rt_s, 0.01 * np.pi / 180.0 / 60.0, rtol=1e-15)
@@ -19,7 +19,7 @@ def test_seed004_table1_in_si():
 
 
 def test_biases_and_random_walks_are_recovered():
-    e = imu.SEED004_TABLE1
+    e = imu.SHEN2024_TABLE1
     n, dt = 400_000, 0.01
     th, dv = imu.corrupt(np.zeros((n, 3)), np.zeros((n, 3)), dt, e, np.random.default_rng(4))
     for x, bias, density in ((th, e.gyro_bias_rad_per_s, e.gyro_arw_rad_per_rt_s),
@@ -71,13 +71,13 @@ def test_quantization_carries_the_residual():
 
 def test_same_seed_same_noise_and_bad_input():
     x = np.zeros((10, 3))
-    a = imu.corrupt(x, x, 0.01, imu.SEED004_TABLE1, np.random.default_rng(3))
-    b = imu.corrupt(x, x, 0.01, imu.SEED004_TABLE1, np.random.default_rng(3))
+    a = imu.corrupt(x, x, 0.01, imu.SHEN2024_TABLE1, np.random.default_rng(3))
+    b = imu.corrupt(x, x, 0.01, imu.SHEN2024_TABLE1, np.random.default_rng(3))
     np.testing.assert_array_equal(a[0], b[0])
     with pytest.raises(InputError, match="Generator"):
-        imu.corrupt(x, x, 0.01, imu.SEED004_TABLE1, 3)
+        imu.corrupt(x, x, 0.01, imu.SHEN2024_TABLE1, 3)
     with pytest.raises(InputError, match="shape"):
-        imu.corrupt(x[:, :2], x, 0.01, imu.SEED004_TABLE1, np.random.default_rng(3))
+        imu.corrupt(x[:, :2], x, 0.01, imu.SHEN2024_TABLE1, np.random.default_rng(3))
     with pytest.raises(InputError, match="corr_time"):
         imu.ImuErrors(gyro_bias_corr_time_s=0.0)
 

@@ -9,7 +9,7 @@ from leosop.errors import InputError
 from leosop.scenarios import XIAN_BAOJI, load_scenario, scenario_from_dict, to_dict
 
 
-def test_xian_baoji_carries_seed004_table1_and_section_4_1():
+def test_xian_baoji_carries_shen2024_table1_and_section_4_1():
     s = load_scenario("xian-baoji")
     assert s.waypoints == ((34.342, 108.940, 3000.0), (34.363, 107.239, 3000.0))
     assert (s.speed_mps, s.mask_deg, s.duration_s) == (200.0, 40.0, 782.0)

@@ -22,7 +22,7 @@ def turns():
     return wps, trajectory.flight(wps, speed_mps=150.0)
 
 
-def test_xian_baoji_is_seed_004_section_4_1(xb):
+def test_xian_baoji_is_shen2024_section_4_1(xb):
     assert xb.t_s[-1] == pytest.approx(782.0) and xb.dt_s == pytest.approx(0.01)
     assert np.degrees([xb.lat_rad[0], xb.lon_rad[0]]) == pytest.approx([34.342, 108.940], abs=1e-12)
     # 3 km and 200 m/s throughout (integration tolerances are ~1e-8 m).
@@ -65,7 +65,7 @@ def test_static_increments_are_earth_rate_and_gravity():
     np.testing.assert_allclose(tr.vel_enu_mps, 0.0, atol=0)
 
 
-def test_rolling_flight_is_seed_001_table_2():
+def test_rolling_flight_is_chu2009_table_2():
     tr = trajectory.rolling_flight(duration_s=2.0)
     roll = np.arctan2(-tr.C_n_b[:, 2, 0], tr.C_n_b[:, 2, 2])
     t_mid = 0.5 * (tr.t_s[1:] + tr.t_s[:-1])

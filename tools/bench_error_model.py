@@ -13,11 +13,11 @@ import numpy as np
 import scipy.linalg
 
 from leosop.ins import error_model as em
-from leosop.repro.error_model import _seed001_rolling
+from leosop.repro.error_model import _chu2009_rolling
 
 
 def main():
-    C_n_b, f_n, dt = _seed001_rolling(100.0)
+    C_n_b, f_n, dt = _chu2009_rolling(100.0)
     F, G = em.model9(C_n_b, f_n)
     u = np.r_[np.full(3, np.radians(10.0) / 3600), np.full(3, 0.01 * 9.80665)]
     A = np.zeros((F.shape[0], 10, 10))

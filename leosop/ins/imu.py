@@ -25,7 +25,7 @@ from scipy.signal import lfilter
 from ..constants import G0_MPS2
 from ..errors import InputError
 
-__all__ = ["ImuErrors", "SEED004_TABLE1", "Corruption", "MeasuredIncrements", "corrupt"]
+__all__ = ["ImuErrors", "SHEN2024_TABLE1", "Corruption", "MeasuredIncrements", "corrupt"]
 
 _DEG = math.pi / 180.0
 #: Rows of normals drawn at a time when skipping ahead in a generator (bounds memory).
@@ -135,7 +135,7 @@ class ImuErrors:
 #: [Shen 2024] Table 1: gyro constant drift 0.03 deg/h, gyro random walk
 #: 0.01 deg/sqrt(h), accelerometer constant bias 1e-4 g, accelerometer random
 #: walk 1e-5 g/sqrt(Hz), on every axis.
-SEED004_TABLE1 = ImuErrors.from_quoted(gyro_bias_deg_per_h=0.03, gyro_arw_deg_per_rt_h=0.01, accel_bias_g=1e-4,
+SHEN2024_TABLE1 = ImuErrors.from_quoted(gyro_bias_deg_per_h=0.03, gyro_arw_deg_per_rt_h=0.01, accel_bias_g=1e-4,
                                        accel_vrw_g_per_rt_hz=1e-5)
 
 

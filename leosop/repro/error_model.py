@@ -53,7 +53,7 @@ DURATION_S = 150.0
 ROLL_RATE_RAD_PER_S = np.radians(180.0)
 
 
-def _seed001_rolling(rate_hz):
+def _chu2009_rolling(rate_hz):
     """Attitude at step midpoints and ENU specific force of [Chu 2009] Table 2, flown East."""
     dt = 1.0 / rate_hz
     t_mid = (np.arange(int(round(DURATION_S * rate_hz))) + 0.5) * dt
@@ -73,7 +73,7 @@ def table3(*, rate_hz=100.0):
     ``rate_hz`` is the step rate of the propagation (the roll turns 0.18 deg
     per step at 100 Hz; the roll-axis rows are exact at any step).
     """
-    C_n_b, f_n, dt = _seed001_rolling(rate_hz)
+    C_n_b, f_n, dt = _chu2009_rolling(rate_hz)
     forward = np.array([0.0, 1.0, 0.0])
     rows = []
     for gyro, accel, att, vel, pos in PAPER_TABLE3:
