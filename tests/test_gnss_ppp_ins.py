@@ -156,10 +156,12 @@ def test_outage_bridged_from_the_fixed_solution(products):
     assert abs(err[True] - err_fixed) < 0.01 and abs(err[False] - err_float) < 0.01
     var = {b: np.trace(r.cov_pos_enu_m2[k]) for b, (_, r) in runs.items()}
     assert var[True] < var[False]
-    # After the gap the wide-lanes come from the INS geometry at its first epoch (wl_inertial), and none is
+    # After the gap the wide-lanes come from the INS geometry at its first epochs (wl_inertial), and none is
     # contradicted by the Melbourne-Wuebbena rule once its averages fix the same arcs (within the run's 20 s).
+    # Here at the second epoch: the old arcs are 250 s long and their means' variances count the multipath
+    # correlation (_mw_var_mean), which holds the success-rate gate one epoch (the first, before it).
     k1 = k + int(np.flatnonzero(res.gnss[k:])[0])
-    assert res.n_wl[k1] >= ppp_ins.PppInsOptions().min_fixed
+    assert res.n_wl[k1:k1 + 2].max() >= ppp_ins.PppInsOptions().min_fixed
     assert res.n_wl_checked > 0 and res.n_wl_mismatch == 0
 
 
@@ -221,3 +223,39 @@ def test_inertial_wide_lane_across_a_gap():
     # 2 m per axis: more than two wide-lane wavelengths, the success-rate bound refuses to fix.
     iwl, *_ = _gap_case(2.0)
     assert not iwl.on.any()
+
+
+def test_mw_mean_variance_counts_the_multipath_correlation():
+    # Melbourne-Wuebbena noise as simulated: white plus a 2 s Gauss-Markov (the code multipath), equal
+    # powers. 2000 arcs of 300 s: the spread of their means is what _mw_var_mean must give (Bartlett
+    # weights bias it low by a few %; 15 % allowed), and the white scatter over n - 1 (_mw_mean) is 1.6x
+    # too small in sigma, the defect that made the inertial wide-lane ranges too tight.
+    rng = np.random.default_rng(0)
+    n_arc, n = 2000, 300
+    rho = np.exp(-1.0 / 2.0)
+    gm = np.zeros((n, n_arc))
+    gm[0] = rng.normal(size=n_arc)
+    for k in range(1, n):
+        gm[k] = rho * gm[k - 1] + np.sqrt(1.0 - rho**2) * rng.normal(size=n_arc)
+    mw = 0.1 * (gm + rng.normal(size=(n, n_arc)))
+    mean = mw.mean(axis=0)
+    var = ppp_ins._mw_var_mean(mw, np.full(n_arc, n), mean, ppp_ins.PppInsOptions().wl_mw_lags)
+    _, var_white = ppp_ins._mw_mean(mw.sum(axis=0), (mw**2).sum(axis=0), np.full(n_arc, n))
+    assert np.sqrt(np.mean(var) / mean.var()) == pytest.approx(1.0, abs=0.15)
+    assert np.sqrt(mean.var() / np.mean(var_white)) > 1.4
+
+
+@needs_data
+def test_float_after_the_gap_not_worse_with_the_inertial_wide_lanes(products):
+    # The fixed inertial wide-lanes update the float filter once as ranges; with their error model right
+    # (NIS 0.93 per row over 6 seeds) that can only help on average: over 10 seeds of the 60-min run the
+    # float 3-D RMS of the last 30 min is 3.2 cm with them, 3.6 cm without. One seed can go either way
+    # (the update's few-cm error stays in the new float ambiguities for tens of minutes): seed 0, 140 s
+    # after the gap, measured 7.43 against 7.41 cm; 10 % allowed.
+    rms = {}
+    for on in (True, False):
+        truth, res = ppp_ins_study.scenario(0, duration_s=600.0, outage_at_s=400.0, products=products,
+                                            options=ppp_ins.PppInsOptions(wl_inertial=on))
+        after = res.t_s - res.t_s[0] >= 460.0
+        rms[on] = np.sqrt(np.mean(np.sum((res.pos_float_ecef_m[after] - truth[after]) ** 2, axis=1)))
+    assert rms[True] < 1.1 * rms[False]
