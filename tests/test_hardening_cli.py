@@ -212,12 +212,12 @@ def test_generate_warns_about_old_element_sets(tmp_path, capsys):
 
 
 def test_visibility_out_is_all_or_nothing(tmp_path, capsys, monkeypatch):
-    from leosop.orbits import plots
+    from leosop.plots import sky
 
     def broken(*args, **kwargs):
         raise RuntimeError("no fonts")
 
-    monkeypatch.setattr(plots, "plot_skyplot", broken)
+    monkeypatch.setattr(sky, "plot_skyplot", broken)
     status, _, err = _run(capsys, "visibility", "--duration-s", "10", "--out", str(tmp_path / "vis"))
     assert status == 1 and "no fonts" in err
     assert list(tmp_path.iterdir()) == []
@@ -355,13 +355,13 @@ def test_scenario_file_not_utf8_is_bad_input(tmp_path, capsys):
 
 
 def test_simulate_out_is_all_or_nothing(tmp_path, capsys, monkeypatch):
-    from leosop import plots
+    from leosop.plots import simulation
 
     def broken(*args, **kwargs):
         raise RuntimeError("no fonts")
 
     # The last figure fails after the CSV, the JSON and three figures are made: none of them may stay.
-    monkeypatch.setattr(plots, "gdop_figure", broken)
+    monkeypatch.setattr(simulation, "gdop_figure", broken)
     scenario = tmp_path / "short.json"
     scenario.write_text(json.dumps({"name": "short", "duration_s": 5.0}))
     status, _, err = _run(capsys, "simulate", "--scenario", str(scenario), "--level", "measurement",

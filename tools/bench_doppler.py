@@ -26,7 +26,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from leosop.figure import pyplot, save_png  # noqa: E402
+from leosop.plots import pyplot, save_png  # noqa: E402
 from leosop.fileio import write_json  # noqa: E402
 from leosop.frames import geodetic_to_ecef  # noqa: E402
 from leosop.orbits import load_constellation  # noqa: E402

@@ -214,7 +214,7 @@ def _correct_rate_change(estimates, block_len, fs):
 
 
 def _write_outputs(out, doc, fig_cols, fig_t, coarse_t, coarse_f, fs, nperseg, f_lim_hz, x_label):
-    from ..signal.plots import plot_spectrogram
+    from ..plots.spectra import plot_spectrogram
 
     keys = ["t_s", "time_utc", "doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz", "status"]
     write_csv(out / "doppler.csv", keys, [[e[k] for k in keys] for e in doc["estimates"]])

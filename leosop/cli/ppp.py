@@ -20,11 +20,11 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import C_e_n, ecef_to_geodetic
-from ..gnss.figures import ppp_figure
 from ..gnss.etrf import decimal_year, itrf2014_to_etrf2000
 from ..gnss.ppp import PppOptions, gps_to_utc, run_ppp
 from ..gnss.products import read_clk, read_sp3
 from ..gnss.rinex import check_nav, read_obs
+from ..plots.ppp import ppp_figure
 from ..timebase import format_utc
 from . import add_command
 

@@ -86,7 +86,7 @@ def run(args):
 
 
 def _write_outputs(out, doc, res, name, start_utc):
-    from ..signal.plots import plot_spectrogram
+    from ..plots.spectra import plot_spectrogram
     from .position import fixes_csv_rows
 
     with atomic_outputs(out) as stage:

@@ -121,7 +121,7 @@ def run(args):
 
 
 def _figures(stage, ds, label):
-    from ..maps import plot_fix_fraction, plot_small_multiples
+    from ..plots.maps import plot_fix_fraction, plot_small_multiples
 
     lat, lon = ds["lat"].values, ds["lon"].values
     gdop = ds["gdop"].values
@@ -169,7 +169,7 @@ def _check_workers(n_workers):
 def _run_montecarlo(args):
     from ..fileio import atomic_outputs
     from ..montecarlo import cell_table, load_spec, run_study, to_dataset, write_netcdf
-    from ..montecarlo.figures import plot_study
+    from ..plots.montecarlo import plot_study
 
     _check_workers(args.workers)
     spec = load_spec(args.spec)

@@ -134,7 +134,7 @@ def _write_outputs(out, doc, vis, gdop, times, mask, title):
 
 
 def _write_files(out, doc, vis, gdop, times, mask, title):
-    from ..orbits.plots import plot_skyplot, plot_visibility
+    from ..plots.sky import plot_skyplot, plot_visibility
 
     write_json(out / "visibility.json", doc, compact=True)
     t_s = seconds_since(times, times[0])

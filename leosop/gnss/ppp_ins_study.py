@@ -27,7 +27,6 @@ from ..ins import error_model, strapdown
 from ..ins.imu import ImuErrors, corrupt
 from ..ins.trajectory import Segment, from_segments
 from . import ppp_ins
-from .figures import ppp_ins_figure
 from .products import read_clk, read_sp3
 from .simulate import SimSettings, simulate
 
@@ -211,6 +210,8 @@ def ppp_ins_table(*, seed=0, full=False, out_dir=None):
 
 
 def _figure(truth, res, path, seed):
+    from ..plots.ppp import ppp_ins_figure  # figures depend on gnss, not the reverse
+
     path.parent.mkdir(parents=True, exist_ok=True)
     t = res.t_s - res.t_s[0]
     ppp_ins_figure(t, np.linalg.norm(res.pos_float_ecef_m - truth, axis=1),

@@ -8,8 +8,10 @@
 - :mod:`.runs`: one simulation reduced to a row of metrics;
 - :mod:`.execute`: chunks run serially or on Dask, bounded in flight, each kept on
   disk when finished (:mod:`leosop.chunkstore`: resume after an interruption);
-- :mod:`.dataset`: the xarray Dataset (parameter axes x seed) and its NetCDF file;
-- :mod:`.figures`: error against each parameter with its spread over seeds.
+- :mod:`.dataset`: the xarray Dataset (parameter axes x seed) and its NetCDF file.
+
+Its figures (error against each parameter with its spread over seeds) are in
+:mod:`leosop.plots.montecarlo`.
 """
 
 from .dataset import cell_table, to_dataset, write_netcdf

@@ -20,11 +20,9 @@ Dependencies point downward only: this package imports the domain packages
 ``cli``. Target functions are imported when a target runs, so listing the
 targets costs nothing.
 
-Figures: a stage's figures live beside the stage (``orbits/plots``,
-``signal/plots``, ``gnss/figures``, ``montecarlo/figures``; the simulate
-run's in :mod:`leosop.plots`, the study maps in :mod:`leosop.maps`), a
-reproduction's in its module here; :mod:`leosop.figure` is the one place
-matplotlib is configured and figures are saved.
+Figures: a reproduction's live in its module here, every other in
+:mod:`leosop.plots` (one module per source of data); :mod:`leosop.plots.core`
+is the one place matplotlib is configured and figures are saved.
 """
 
 import dataclasses

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from ..figure import pyplot, save_png
+from .core import pyplot, save_png
 
 __all__ = ["ppp_figure", "ppp_ins_figure"]
 

@@ -4,7 +4,7 @@ Matplotlib is imported only when a figure is drawn, so the numerical core
 never pays for it.
 """
 
-from .fileio import atomic_path
+from ..fileio import atomic_path
 
 __all__ = ["pyplot", "save_png"]
 

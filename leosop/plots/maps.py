@@ -2,7 +2,7 @@
 
 Plate carree (longitude, latitude in degrees) with the bundled Natural Earth
 1:110m coastline (``leosop/data/coastline_110m.npz``, public domain; see the
-README there). Matplotlib is loaded only here, through :mod:`leosop.figure`.
+README there). Matplotlib is loaded only here, through :mod:`leosop.plots.core`.
 """
 
 import functools
@@ -10,7 +10,7 @@ from importlib.resources import files
 
 import numpy as np
 
-from .figure import pyplot, save_png
+from .core import pyplot, save_png
 
 __all__ = ["coastline_lon_lat_deg", "plot_fix_fraction", "plot_small_multiples"]
 

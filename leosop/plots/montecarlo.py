@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from ..figure import pyplot, save_png
+from .core import pyplot, save_png
 
 __all__ = ["plot_study", "MAX_LINES"]
 

@@ -7,16 +7,16 @@ axis its UTC origin. Besides the paper's four, ``errors_enu.png`` splits the
 fused position error into east, north and up with the filter's +-3 sigma,
 and a scenario of several constellations adds ``visible_by_family.png``.
 Matplotlib is imported lazily with the Agg backend; every figure is written
-atomically (:func:`leosop.figure.save_png`).
+atomically (:func:`leosop.plots.save_png`).
 """
 
 from pathlib import Path
 
 import numpy as np
 
-from .figure import pyplot, save_png
-from .frames import ecef_to_enu, ecef_to_geodetic
-from .timebase import format_utc
+from ..frames import ecef_to_enu, ecef_to_geodetic
+from ..timebase import format_utc
+from .core import pyplot, save_png
 
 __all__ = ["write_figures", "trajectory_figure", "errors_figure", "errors_enu_figure", "visible_figure",
            "gdop_figure", "visible_by_family_figure", "run_label", "time_label"]

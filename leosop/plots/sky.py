@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from ..figure import pyplot, save_png
 from ..timebase import format_utc
+from .core import pyplot, save_png
 
 __all__ = ["plot_visibility", "plot_skyplot"]
 
