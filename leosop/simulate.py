@@ -26,10 +26,15 @@ table reproductions call it. For a scenario it
    (:mod:`leosop.fusion.tight`, the Doppler measurements); both model the
    orbit errors as the scenario draws them (independent or common).
 
+Steps 3 and 4 go through the run :data:`FIX_BLOCK_EPOCHS` epochs at a
+time, keeping only each epoch's fix and what the EKF needs of it.
+
 Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent
 streams for the IMU, the satellite offsets and orbit errors, and the
 measurement noise, so that the IMU errors of a seed are the same at both
-levels and for every correction period.
+levels and for every correction period. The measurement noise is drawn
+block by block (in a block, the pilot blocks at signal level first), which
+is the same sequence as one block whenever one level measures all pairs.
 
 The fix's weights account for every error source the receiver knows the
 size of: estimator noise, the spread of the satellite offsets about their
@@ -81,6 +86,10 @@ STALE_TLE_DAYS = 14.0
 BLOCK_S = 0.01
 SAMPLE_RATE_HZ = 400e3
 SEARCH_HZ = 20e3
+#: Fix epochs measured and solved at a time (the Doppler, the padded per-epoch
+#: arrays and the snapshot fixes; the visibility screening goes through the
+#: same length of time at a time): memory then stays flat in the run's duration.
+FIX_BLOCK_EPOCHS = 600
 #: Fix epochs of IMU increments made at a time (10,000 at 100 Hz and 1 Hz fixes):
 #: memory then stays flat in the run's duration.
 IMU_BLOCK_STEPS = 100
@@ -357,6 +366,146 @@ def _tracked(vis, t_s, outage_s, max_sats):
         "epoch_index", "sat_index", "az_rad", "elev_rad", "range_m", "pos_sv_ecef_m", "vel_sv_ecef_mps")})
 
 
+def _leo_fixes(scenario, constellation, family_sat, models, times_utc, t_s, pos_rx_ecef_m, vel_rx_ecef_mps,
+               ins_pos_ecef_m, ins_vel_ecef_mps, sat_offset_hz, offset_max_sat_hz, orbit_err_ecef_m, *, level, coupling,
+               orbit_error_m, orbit_error_model, rng_meas, progress):
+    """Steps 2-4 of the module docstring: the tracked satellites, their Doppler and the snapshot fixes.
+
+    The visible pairs are found for the whole run; the Doppler, the padded
+    per-epoch arrays and the fixes are made :data:`FIX_BLOCK_EPOCHS` epochs
+    at a time, and only what the EKF and the result need is kept, so that
+    the working memory is that of a block.
+
+    Parameters
+    ----------
+    family_sat : ndarray of int, (n_sats,)
+    times_utc : ndarray of datetime64[ns], (n,)
+    t_s : ndarray, (n,)
+        Seconds since the start.
+    pos_rx_ecef_m, vel_rx_ecef_mps : ndarray, (n, 3)
+        Truth.
+    ins_pos_ecef_m, ins_vel_ecef_mps : ndarray, (n, 3)
+        The INS alone (the fixes' start, the signal level's prediction).
+    sat_offset_hz, offset_max_sat_hz : ndarray, (n_sats,)
+        Each satellite's clock-induced offset and its bound.
+    orbit_err_ecef_m : ndarray, (n_sats, 3)
+        Each satellite's orbit error.
+
+    Returns
+    -------
+    per_epoch : dict of ndarray, (n, ...)
+        See :func:`_measure_and_solve`, plus ``n_visible`` (n,) and
+        ``n_visible_by_family`` (n, k).
+    per_pair : dict of ndarray, (m, ...)
+        See :func:`_measure_and_solve`, with run-wide epoch indices.
+    """
+    vis = compute_visibility(constellation, times_utc, pos_rx_ecef_m, scenario.mask_deg,
+                             vel_rx_ecef_mps=vel_rx_ecef_mps, block_s=FIX_BLOCK_EPOCHS / scenario.leo.fix_rate_hz,
+                             show_progress=progress is not None)
+    vis = _tracked(vis, t_s, scenario.leo.outage_s, scenario.leo.outage_max_sats)
+    if not vis.n_visible.any():
+        warnings.warn(f"{scenario.name}: no satellite rises above the {scenario.mask_deg:g} deg mask during the "
+                      "flight; the result is the INS alone", stacklevel=3)
+    # One receiver clock per family tracked in the run, the same in every block.
+    clock_labels = None if len(scenario.leo.constellations) == 1 else np.unique(family_sat[vis.sat_index])
+    blocks = [_measure_and_solve(
+        vis.epochs(e0, e0 + FIX_BLOCK_EPOCHS), e0, ins_pos_ecef_m[e0:e0 + FIX_BLOCK_EPOCHS],
+        ins_vel_ecef_mps[e0:e0 + FIX_BLOCK_EPOCHS], family_sat, models, sat_offset_hz, offset_max_sat_hz,
+        orbit_err_ecef_m, level=level, coupling=coupling, cn0_dbhz=scenario.leo.cn0_dbhz,
+        orbit_error_m=orbit_error_m, orbit_error_model=orbit_error_model, clock_labels=clock_labels,
+        rng_meas=rng_meas, progress=progress) for e0 in range(0, len(times_utc), FIX_BLOCK_EPOCHS)]
+    per_epoch, per_pair = ({k: np.concatenate([b[i][k] for b in blocks]) for k in blocks[0][i]} for i in (0, 1))
+    per_epoch.update(n_visible=vis.n_visible, n_visible_by_family=vis.n_visible_by_group(family_sat))
+    return per_epoch, per_pair
+
+
+def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat, models, sat_offset_hz,
+                       offset_max_sat_hz, orbit_err_ecef_m, *, level, coupling, cn0_dbhz, orbit_error_m,
+                       orbit_error_model, clock_labels, rng_meas, progress):
+    """The Doppler and snapshot fixes of a block of ``n_b`` epochs, from epoch ``epoch0`` of the run.
+
+    Parameters
+    ----------
+    vis : leosop.orbits.visibility.Visibility
+        The tracked pairs of the block, along the true flight.
+    ins_pos_ecef_m, ins_vel_ecef_mps : ndarray, (n_b, 3)
+    clock_labels : ndarray of int, (k,), or None
+        The families of the run, one receiver clock each; None for one family.
+
+    Other parameters as :func:`_leo_fixes`.
+
+    Returns
+    -------
+    per_epoch : dict of ndarray, (n_b, ...)
+        ``fix_pos_ecef_m``, ``fix_vel_ecef_mps`` (n_b, 3) and ``fix_cov``
+        (n_b, 6 + k, 6 + k): NaN without a fix; ``checked`` (n_b,): the fixes
+        the loose filter may take; ``gdop`` (n_b,): eq. 10 along the true
+        flight; loose coupling: ``cov_white`` (n_b, 6, 6) of
+        :func:`_fix_error_model`.
+    per_pair : dict of ndarray, (m_b, ...)
+        Loose coupling: the :class:`leosop.fusion.loose.FixErrorModel` rows
+        (``epoch_index``, ``sat_index``, ``gain_ecef``, ``orbit_hz_per_m``);
+        tight: the :class:`leosop.fusion.tight.DopplerMeasurements` fields.
+    """
+    pos_rx, vel_rx = vis.pos_rx_ecef_m, vis.vel_rx_ecef_mps
+    n_ep = len(vis.times_utc)
+    ep, sat = vis.epoch_index, vis.sat_index
+    fam = family_sat[sat]
+    carrier_sat = models["carrier_hz"][family_sat]
+    carrier = carrier_sat[sat]
+    range_rate = frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, pos_rx[ep], vel_rx[ep])
+    doppler_geom = -range_rate * carrier / C_MPS
+    clock_hz = sat_offset_hz[sat] + models["rx_offset_hz"][fam]
+    pos_sv_known = vis.pos_sv_ecef_m + orbit_err_ecef_m[sat]
+    H_known = doppler_jacobian(pos_sv_known[:, None], vis.vel_sv_ecef_mps[:, None], ins_pos_ecef_m[ep],
+                               ins_vel_ecef_mps[ep], carrier[:, None])[:, 0]
+    # Measurement-level sigma of each family; Starlink's is the comb's (fast estimator).
+    sigma_est = np.where(fam == models["starlink"],
+                         doppler_sigma_hz(cn0_dbhz, BLOCK_S, sample_rate_hz=SAMPLE_RATE_HZ), models["sigma_hz"][fam])
+    doppler_meas = np.full(doppler_geom.shape, np.nan)
+    comb = (fam == models["starlink"]) & (level == "signal")
+    if comb.any():
+        # Starlink at signal level: prediction from the INS alone and the known
+        # orbits (range-rate part of the Jacobian).
+        predicted = np.einsum("mi,mi->m", H_known[comb, 3:6], ins_vel_ecef_mps[ep[comb]] - vis.vel_sv_ecef_mps[comb])
+        # Only the shape of the generated chirp depends on the rate (the aircraft's acceleration neglected).
+        rate = doppler_rate(vis.pos_sv_ecef_m[comb, None], vis.vel_sv_ecef_mps[comb, None], pos_rx[ep[comb]],
+                            carrier[comb, None], vel_rx[ep[comb], None])[0][:, 0]
+        doppler_meas[comb], sigma_est[comb] = _signal_level(doppler_geom[comb], rate, clock_hz[comb], predicted,
+                                                            cn0_dbhz, rng_meas, progress)
+    modelled = ~comb
+    doppler_meas[modelled] = (doppler_geom[modelled] + clock_hz[modelled]
+                              + sigma_est[modelled] * rng_meas.standard_normal(int(modelled.sum())))
+
+    # Snapshot fixes from what the receiver knows: orbits with their errors; 6 + k states for k families.
+    offset_max = offset_max_sat_hz[sat]
+    sigma_hz = np.sqrt(sigma_est**2 + offset_max**2 / 12.0
+                       + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
+    x0 = np.concatenate([ins_pos_ecef_m, ins_vel_ecef_mps, np.zeros((n_ep, 1))], axis=-1)
+    clock_group = None if clock_labels is None else np.nan_to_num(vis.padded(fam.astype(float))).astype(int)
+    fixes = solve_snapshots(vis.padded(doppler_meas), vis.padded(sigma_hz), vis.padded(pos_sv_known),
+                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(carrier), x0=x0, clock_group=clock_group,
+                            clock_labels=clock_labels)
+    good = fixes.status == FixStatus.OK
+    # The loose filter takes only redundant or well-conditioned fixes (loose.checkable_fixes); all are reported.
+    checked = good & loose.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
+    per_epoch = {"fix_pos_ecef_m": np.where(good[:, None], fixes.pos_ecef_m, np.nan),
+                 "fix_vel_ecef_mps": np.where(good[:, None], fixes.vel_ecef_mps, np.nan),
+                 "fix_cov": np.where(good[:, None, None], fixes.cov, np.nan), "checked": checked,
+                 "gdop": vis.doppler_gdop(carrier_sat, None if clock_labels is None else family_sat)}
+    if coupling == "tight":
+        per_pair = {"epoch_index": ep + epoch0, "sat_index": sat, "doppler_hz": doppler_meas, "sigma_hz": sigma_est,
+                    "pos_sv_ecef_m": pos_sv_known, "vel_sv_ecef_mps": vis.vel_sv_ecef_mps, "carrier_hz": carrier,
+                    "clock_index": fam}
+        return per_epoch, per_pair
+    fix_errors, per_epoch["cov_white"] = _fix_error_model(
+        vis, fixes, checked, sigma_hz, sigma_est, pos_sv_known, carrier, fam, offset_max_sat_hz, orbit_error_m,
+        orbit_error_model)
+    per_pair = {"epoch_index": fix_errors.epoch_index + epoch0, "sat_index": fix_errors.sat_index,
+                "gain_ecef": fix_errors.gain_ecef, "orbit_hz_per_m": fix_errors.orbit_hz_per_m}
+    return per_epoch, per_pair
+
+
 def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_error_m=None, orbit_error_model=None,
                  seed=0, tle=None, coupling="loose", progress=None):
     """Simulate one flight end to end.
@@ -399,7 +548,6 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
                       "nearest element-set epoch; satellite positions will be off by many kilometres",
                       stacklevel=2)
     models = _family_models(scenario.leo)
-    carrier_sat = models["carrier_hz"][family_sat]
 
     # 1. Truth and IMU, made a block at a time (never the whole run at the IMU rate).
     flight = trajectory.plan_flight(np.asarray(scenario.waypoints), speed_mps=scenario.speed_mps,
@@ -427,78 +575,33 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     ins_pos = frames.geodetic_to_ecef(ins.lat_rad, ins.lon_rad, ins.alt_m)
     ins_vel_ecef = np.einsum("kij,kj->ki", frames.C_e_n(ins.lat_rad, ins.lon_rad), ins.vel_enu_mps)
 
-    # 3. Visibility (the satellites tracked: all above the mask, or the highest few in an outage) and Doppler.
-    vis = compute_visibility(constellation, times_utc, pos_rx, scenario.mask_deg, vel_rx_ecef_mps=vel_rx,
-                             show_progress=progress is not None)
-    vis = _tracked(vis, t_s, scenario.leo.outage_s, scenario.leo.outage_max_sats)
-    n_visible = vis.n_visible
-    n_families = len(scenario.leo.constellations)
-    if not n_visible.any():
-        warnings.warn(f"{scenario.name}: no satellite rises above the {scenario.mask_deg:g} deg mask during the "
-                      "flight; the result is the INS alone", stacklevel=2)
-    groups = None if n_families == 1 else family_sat
-    gdop = vis.doppler_gdop(carrier_sat, groups)
+    # 3-4. Visibility, Doppler and snapshot fixes; satellite offsets and orbit errors drawn per satellite.
     offset_max_sat = scenario.leo.sat_doppler_offset_max_hz * models["clock_scale"][family_sat]
     sat_offset_hz = offset_max_sat * rng_sat.uniform(0.0, 1.0, len(constellation))
     orbit_err = orbit_error_m * rng_sat.standard_normal((len(constellation), 3))
     if orbit_error_model == "common":
         orbit_err = np.full((len(constellation), 3), orbit_error_m)
-    ep, sat = vis.epoch_index, vis.sat_index
-    fam, carrier = family_sat[sat], carrier_sat[sat]
-    range_rate = frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, pos_rx[ep], vel_rx[ep])
-    doppler_geom = -range_rate * carrier / C_MPS
-    clock_hz = sat_offset_hz[sat] + models["rx_offset_hz"][fam]
-    pos_sv_known = vis.pos_sv_ecef_m + orbit_err[sat]
-    H_known = doppler_jacobian(pos_sv_known[:, None], vis.vel_sv_ecef_mps[:, None], ins_pos[ep], ins_vel_ecef[ep],
-                               carrier[:, None])[:, 0]
-    # Measurement-level sigma of each family; Starlink's is the comb's (fast estimator).
-    sigma_est = np.where(fam == models["starlink"],
-                         doppler_sigma_hz(scenario.leo.cn0_dbhz, BLOCK_S, sample_rate_hz=SAMPLE_RATE_HZ),
-                         models["sigma_hz"][fam])
-    doppler_meas = np.full(doppler_geom.shape, np.nan)
-    comb = (fam == models["starlink"]) & (level == "signal")
-    if comb.any():
-        # Starlink at signal level: prediction from the INS alone and the known
-        # orbits (range-rate part of the Jacobian).
-        predicted = np.einsum("mi,mi->m", H_known[comb, 3:6], ins_vel_ecef[ep[comb]] - vis.vel_sv_ecef_mps[comb])
-        # Only the shape of the generated chirp depends on the rate (the aircraft's acceleration neglected).
-        rate = doppler_rate(vis.pos_sv_ecef_m[comb, None], vis.vel_sv_ecef_mps[comb, None], pos_rx[ep[comb]],
-                            carrier[comb, None], vel_rx[ep[comb], None])[0][:, 0]
-        doppler_meas[comb], sigma_est[comb] = _signal_level(doppler_geom[comb], rate, clock_hz[comb], predicted,
-                                                            scenario.leo.cn0_dbhz, rng_meas, progress)
-    modelled = ~comb
-    doppler_meas[modelled] = (doppler_geom[modelled] + clock_hz[modelled]
-                              + sigma_est[modelled] * rng_meas.standard_normal(int(modelled.sum())))
-
-    # 4. Snapshot fixes from what the receiver knows: orbits with their errors; 6 + k states for k families seen.
-    offset_max = offset_max_sat[sat]
-    sigma_hz = np.sqrt(sigma_est**2 + offset_max**2 / 12.0
-                       + (np.linalg.norm(H_known[:, :3], axis=-1) * orbit_error_m) ** 2)
-    x0 = np.concatenate([ins_pos, ins_vel_ecef, np.zeros((n_ep, 1))], axis=-1)
-    clock_group = None if groups is None else np.nan_to_num(vis.padded(fam.astype(float))).astype(int)
-    fixes = solve_snapshots(vis.padded(doppler_meas), vis.padded(sigma_hz), vis.padded(pos_sv_known),
-                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(carrier), x0=x0, clock_group=clock_group)
-    good = fixes.status == FixStatus.OK
-    fix_pos = np.where(good[:, None], fixes.pos_ecef_m, np.nan)
-    fix_vel = np.where(good[:, None], fixes.vel_ecef_mps, np.nan)
-    fix_cov = np.where(good[:, None, None], fixes.cov, np.nan)
-    # The loose filter takes only redundant or well-conditioned fixes (loose.checkable_fixes); all are reported.
-    checked = good & loose.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
+    per_epoch, per_pair = _leo_fixes(
+        scenario, constellation, family_sat, models, times_utc, t_s, pos_rx, vel_rx, ins_pos, ins_vel_ecef,
+        sat_offset_hz, offset_max_sat, orbit_err, level=level, coupling=coupling, orbit_error_m=orbit_error_m,
+        orbit_error_model=orbit_error_model, rng_meas=rng_meas, progress=progress)
+    fix_pos, fix_vel, checked = per_epoch["fix_pos_ecef_m"], per_epoch["fix_vel_ecef_mps"], per_epoch["checked"]
 
     # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
     if coupling == "loose":
-        fix_errors, cov_white = _fix_error_model(vis, fixes, checked, sigma_hz, sigma_est, pos_sv_known, carrier,
-                                                 fam, offset_max_sat, orbit_error_m, orbit_error_model)
+        fix_errors = loose.FixErrorModel(
+            epoch_index=per_pair["epoch_index"], sat_index=per_pair["sat_index"], gain_ecef=per_pair["gain_ecef"],
+            orbit_hz_per_m=per_pair["orbit_hz_per_m"], offset_sigma_hz=offset_max_sat / np.sqrt(12.0),
+            orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
         fused = loose.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s,
-                          (np.where(checked[:, None], fix_pos, np.nan), fix_vel, cov_white),
+                          (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["cov_white"]),
                           settings, fix_errors=fix_errors, progress=progress)
     else:
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,
                                      sat_offset_sigma_hz=offset_max_sat / np.sqrt(12), orbit_sigma_m=orbit_error_m,
-                                     orbit_model=orbit_error_model, n_clocks=n_families)
-        meas = tight.DopplerMeasurements(ep, sat, doppler_meas, sigma_est, pos_sv_known, vis.vel_sv_ecef_mps,
-                                         carrier_hz=carrier, clock_index=fam)
+                                     orbit_model=orbit_error_model, n_clocks=len(scenario.leo.constellations))
+        meas = tight.DopplerMeasurements(**per_pair)
         fused = tight.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s, meas, priors, settings, n_ep,
                           progress=progress)
     fix_vel_enu = np.einsum("kji,kj->ki", C_e_n, fix_vel)
@@ -507,9 +610,9 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         orbit_error_m=orbit_error_m, seed=int(seed), times_utc=times_utc, t_s=t_s,
         truth_pos_ecef_m=pos_rx, truth_vel_enu_mps=truth1.vel_enu_mps, truth_lat_rad=truth1.lat_rad,
         truth_lon_rad=truth1.lon_rad, ins_pos_ecef_m=ins_pos, ins_vel_enu_mps=ins.vel_enu_mps,
-        fix_pos_ecef_m=fix_pos, fix_vel_enu_mps=fix_vel_enu, fix_cov=fix_cov, fused=fused, n_visible=n_visible,
-        gdop=gdop, tle_age_days=tle_age_days, runtime_s=time.perf_counter() - tic,
-        n_visible_by_family=vis.n_visible_by_group(family_sat))
+        fix_pos_ecef_m=fix_pos, fix_vel_enu_mps=fix_vel_enu, fix_cov=per_epoch["fix_cov"], fused=fused,
+        n_visible=per_epoch["n_visible"], gdop=per_epoch["gdop"], tle_age_days=tle_age_days,
+        runtime_s=time.perf_counter() - tic, n_visible_by_family=per_epoch["n_visible_by_family"])
 
 
 def metrics(result):

@@ -96,6 +96,32 @@ def test_imu_made_in_blocks_gives_the_same_run_as_one_block(monkeypatch):
         assert np.array_equal(one[k], blocks[k], equal_nan=one[k].dtype.kind == "f"), k
 
 
+@pytest.mark.parametrize("constellations, coupling", [(("starlink",), "loose"), (("starlink",), "tight"),
+                                                      (("starlink", "orbcomm", "oneweb"), "loose")])
+def test_fixes_made_in_blocks_give_the_same_run_as_one_block(monkeypatch, constellations, coupling):
+    # run_scenario measures and solves the fixes a block of epochs at a time (one receiver clock per
+    # family of the whole run in every block); the block size must not change a bit of anything the
+    # run stores, the noise drawn in block order included. Three families at a 25 deg mask, of which
+    # Orbcomm does not rise: fixes of 8 states in blocks of 7 epochs.
+    import dataclasses
+
+    sc = dataclasses.replace(XIAN_BAOJI, duration_s=120.0, mask_deg=25.0,
+                             leo=dataclasses.replace(XIAN_BAOJI.leo, constellations=constellations))
+
+    def arrays(res):
+        out = {f.name: getattr(res, f.name) for f in dataclasses.fields(res)}
+        out.update({"fused." + f.name: getattr(res.fused, f.name) for f in dataclasses.fields(res.fused)})
+        return {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
+
+    monkeypatch.setattr(simulate, "FIX_BLOCK_EPOCHS", 1000)  # one block for the whole run
+    one = arrays(simulate.run_scenario(sc, level="measurement", coupling=coupling, seed=3))
+    monkeypatch.setattr(simulate, "FIX_BLOCK_EPOCHS", 7)
+    blocks = arrays(simulate.run_scenario(sc, level="measurement", coupling=coupling, seed=3))
+    assert one.keys() == blocks.keys() and np.isfinite(one["fix_pos_ecef_m"]).all()
+    assert one["fix_cov"].shape[-1] == 6 + len(constellations) - ("orbcomm" in constellations)
+    for k in one:
+        assert np.array_equal(one[k], blocks[k], equal_nan=one[k].dtype.kind == "f"), k
+
 def test_loose_filter_leaves_out_near_singular_fixes_of_the_cn0_imu_outlier():
     # leosop/data/studies/README.md: cn0_imu, MEMS grade at 50 dB-Hz, run seed 1488067860. At
     # 684-689 s seven satellites give zero-redundancy fixes of Doppler GDOP 540-2,200 that are
@@ -106,18 +132,19 @@ def test_loose_filter_leaves_out_near_singular_fixes_of_the_cn0_imu_outlier():
     spec = load_spec("cn0_imu")
     cell = next(c for c in spec.cells() if c["cn0_dbhz"] == 50 and c["imu_grade"] == "mems")
     scenario, options = apply(spec.scenario, cell, spec.source)
-    captured = {}
+    captured = []  # one call per block of epochs (simulate.FIX_BLOCK_EPOCHS)
 
     def solve(*args, **kwargs):
-        captured["fixes"] = solve_snapshots(*args, **kwargs)
-        return captured["fixes"]
+        captured.append(solve_snapshots(*args, **kwargs))
+        return captured[-1]
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(simulate, "solve_snapshots", solve)
         res = simulate.run_scenario(scenario, seed=1488067860, **options)
-    fixes = captured["fixes"]
-    ok = fixes.status == FixStatus.OK
-    usable = ok & loose.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
+    status, n_used, cov, gdop = (np.concatenate([getattr(f, k) for f in captured])
+                                 for k in ("status", "n_used", "cov", "gdop"))
+    ok = status == FixStatus.OK
+    usable = ok & loose.checkable_fixes(n_used, cov, gdop)
     assert np.all(~usable[684:690] & ok[684:690])  # the six bad fixes exist and are left out
     assert np.array_equal(res.fused.updated, usable & (np.arange(usable.size) > 0))
     assert not res.fused.rejected.any()

@@ -6,8 +6,10 @@ leg flown on beyond Baoji), run at measurement level as a child process
 its peak resident set size from ``os.wait4``'s rusage (``ru_maxrss``, kB
 on Linux). Printed beside it: what a run needs to keep, the bytes of the
 numpy arrays held by its :class:`leosop.simulate.SimulationResult` (1 Hz
-outputs); the 100 Hz truth and IMU are made and consumed a block at a time,
-so a flat memory means the peak grows by no more than that.
+outputs), in all and per fix epoch; the 100 Hz truth and IMU, and the
+Doppler and snapshot fixes, are made and consumed a block at a time, so a
+flat memory means the peak grows by no more than that. ``peak_ratio`` is
+each run's peak over the first's.
 
 Usage: python tools/bench_simulate_memory.py [--durations-s 3600 21600]
 """
@@ -58,17 +60,21 @@ def main():
     a = ap.parse_args()
     from leosop.simulate import run_scenario
 
-    print(f"{'duration_s':>10} {'peak_rss_MB':>11} {'result_MB':>9} {'runtime_s':>9}")
+    print(f"{'duration_s':>10} {'peak_rss_MB':>11} {'peak_ratio':>10} {'result_MB':>9} {'result_B_per_epoch':>18} "
+          f"{'runtime_s':>9}")
+    first_kb = None
     with tempfile.TemporaryDirectory() as tmp:
         for duration_s in a.durations_s:
             path = Path(tmp) / f"xb_{duration_s:.0f}.json"
             path.write_text(json.dumps({"name": f"xian-baoji-{duration_s:.0f}s", "duration_s": duration_s}))
             rss_kb, doc = peak_rss_kb(path)
+            first_kb = first_kb or rss_kb
             # Retained outputs, measured in this process (a separate run: its peak does not mix with the child's).
             sc = dataclasses.replace(XIAN_BAOJI, duration_s=duration_s)
             res = run_scenario(sc, level="measurement")
-            print(f"{duration_s:10.0f} {rss_kb / 1024:11.1f} {result_bytes(res) / 1e6:9.1f} {doc['runtime_s']:9.1f}",
-                  flush=True)
+            kept = result_bytes(res)
+            print(f"{duration_s:10.0f} {rss_kb / 1024:11.1f} {rss_kb / first_kb:10.2f} {kept / 1e6:9.1f} "
+                  f"{kept / res.t_s.size:18.0f} {doc['runtime_s']:9.1f}", flush=True)
             del res
 
 

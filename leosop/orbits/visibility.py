@@ -10,7 +10,7 @@ fraction of the cost. The screened run goes through the window in blocks of
 coarse steps, so its working memory is set by the block, not by the window.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -83,6 +83,21 @@ class Visibility:
         bounds = np.searchsorted(self.epoch_index, np.arange(len(self.times_utc) + 1))
         ids = self.sat_ids[self.sat_index]
         return [ids[a:b].tolist() for a, b in zip(bounds[:-1], bounds[1:])]
+
+    def epochs(self, start, stop):
+        """The pairs of epochs ``start .. stop - 1``: a Visibility of those epochs, indexed from 0.
+
+        Returns
+        -------
+        Visibility
+            Its per-pair arrays are views of this one's.
+        """
+        a, b = np.searchsorted(self.epoch_index, [start, stop])
+        pairs = {f: getattr(self, f)[a:b] for f in (
+            "sat_index", "az_rad", "elev_rad", "range_m", "pos_sv_ecef_m", "vel_sv_ecef_mps")}
+        return replace(self, times_utc=self.times_utc[start:stop], epoch_index=self.epoch_index[a:b] - start,
+                       pos_rx_ecef_m=self.pos_rx_ecef_m[start:stop], vel_rx_ecef_mps=self.vel_rx_ecef_mps[start:stop],
+                       **pairs)
 
     def padded(self, values):
         """Per-pair values laid out per epoch, padded with NaN.

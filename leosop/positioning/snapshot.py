@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.dop import cofactor
 from ..geometry.doppler import N_DOPPLER_STATES, clock_group_rows, doppler_jacobian
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
@@ -81,7 +82,7 @@ class SnapshotFixes:
             return np.sqrt(r2.sum(-1) / self.n_used)
 
 def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, mask=None, x0=None, *,
-                    max_iter=50, alpha=1e-3, clock_group=None):
+                    max_iter=50, alpha=1e-3, clock_group=None, clock_labels=None):
     """Snapshot Doppler fixes of many epochs at once ([Shen 2024] eq. 4-12).
 
     Parameters
@@ -112,6 +113,12 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
         start by a pseudo-row that is never excluded (outlier tests, degrees
         of freedom and GDOP are those of the ``6 + k_e`` states). None: one
         clock ([Shen 2024]'s 7 states).
+    clock_labels : array_like, (k,), optional
+        With ``clock_group``: the clocks to estimate, sorted, e.g. the
+        groups of a longer run solved a block of epochs at a time, so that
+        every block has the same states; a clock absent from all the epochs
+        is held at its start at each. Default the distinct groups among the
+        unmasked rows.
 
     Returns
     -------
@@ -133,7 +140,14 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     v_s = np.where(m[..., None], v_s, 0.0)
     # Receiver clocks: one offset state per distinct group among the unmasked rows.
     groups = np.zeros(y.shape, int) if clock_group is None else np.broadcast_to(np.asarray(clock_group), y.shape)
-    clock_labels, g_idx = np.unique(groups[m], return_inverse=True)
+    if clock_labels is None:
+        clock_labels, g_idx = np.unique(groups[m], return_inverse=True)
+    else:
+        clock_labels = np.asarray(clock_labels)
+        g_idx = np.searchsorted(clock_labels, groups[m])
+        if np.any(clock_labels[np.minimum(g_idx, len(clock_labels) - 1)] != groups[m]):
+            raise InputError(f"clock_group values {sorted(set(groups[m].tolist()) - set(clock_labels.tolist()))} "
+                             f"are not among {clock_labels=}")
     n_clk = max(len(clock_labels), 1)
     n_states = 6 + n_clk
     gi = np.zeros(y.shape, int)
