@@ -19,7 +19,7 @@ from .orbits import CARRIERS
 from .timebase import format_utc, parse_utc
 
 __all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN", "load_scenario",
-           "scenario_from_dict", "to_dict", "bundled_names", "BUNDLED_DIR"]
+           "scenario_from_dict", "to_dict", "bundled_names", "BUNDLED_DIR", "family_masks_deg", "mask_label"]
 
 
 @dataclass(frozen=True)
@@ -59,9 +59,13 @@ class LeoSpec:
     :data:`leosop.simulate_families.FAMILY_MODELS`; Starlink's is
     ``cn0_dbhz``). The satellites' offsets scale with the carrier the same way
     (the same fractional oscillator error as Starlink's 0-5 Hz at 11.325 GHz).
-    ``outage_s``: ``[start, end]`` seconds of the flight during which only
-    the ``outage_max_sats`` highest satellites are tracked (a degraded sky:
-    foliage, banking, jamming of the other bands); None: no outage.
+    ``mask_deg_by_family``: a family's elevation mask [deg] (its own antenna:
+    the omnidirectional L-band and VHF antennas of Iridium NEXT and Orbcomm
+    track far lower than a Ku-band dish); missing families use the scenario's
+    ``mask_deg`` (:func:`family_masks_deg`). ``outage_s``: ``[start, end]``
+    seconds of the flight during which only the ``outage_max_sats`` highest
+    satellites are tracked (a degraded sky: foliage, banking, jamming of the
+    other bands); None: no outage.
     """
 
     sat_doppler_offset_max_hz: float = 5.0
@@ -73,6 +77,7 @@ class LeoSpec:
     constellations: tuple = ("starlink",)
     rx_freq_offsets_hz: dict = field(default_factory=dict)
     cn0_dbhz_by_family: dict = field(default_factory=dict)
+    mask_deg_by_family: dict = field(default_factory=dict)
     outage_s: tuple | None = None
     outage_max_sats: int = 3
 
@@ -233,6 +238,8 @@ def _leo_value(key, value, where):
         return _per_family(value, where, -1e6, 1e6)
     if key == "cn0_dbhz_by_family":
         return _per_family(value, where, 0.0, 100.0)
+    if key == "mask_deg_by_family":
+        return _per_family(value, where, 0.0, 89.0)
     if key == "outage_s":
         return _outage(value, where)
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 1000:
@@ -240,7 +247,8 @@ def _leo_value(key, value, where):
     return value
 
 
-_LEO_KEYS = ("constellations", "rx_freq_offsets_hz", "cn0_dbhz_by_family", "outage_s", "outage_max_sats")
+_LEO_KEYS = ("constellations", "rx_freq_offsets_hz", "cn0_dbhz_by_family", "mask_deg_by_family", "outage_s",
+             "outage_max_sats")
 
 
 def _section(cls, doc, base, where):
@@ -314,7 +322,32 @@ def scenario_from_dict(doc, *, source="scenario", base=XIAN_BAOJI):
     for key, cls in (("imu", ImuSpec), ("leo", LeoSpec), ("init_error", InitError)):
         if key in doc:
             values[key] = _section(cls, doc[key], getattr(base, key), f"{source}.{key}")
+    # A family's mask given here must be of a family received; masks inherited from ``base`` for
+    # families this document drops (a study narrowing leo.constellations) are left unused.
+    leo = values.get("leo", base.leo)
+    unselected = sorted(set(doc.get("leo", {}).get("mask_deg_by_family", {})) - set(leo.constellations))
+    if unselected:
+        raise InputError(f"{source}.leo.mask_deg_by_family: {unselected[0]!r} is not in leo.constellations "
+                         f"({', '.join(leo.constellations)})")
     return replace(base, **values)
+
+
+def family_masks_deg(scenario):
+    """The elevation mask of each of ``scenario.leo.constellations`` [deg], ndarray (k,).
+
+    A family's ``leo.mask_deg_by_family`` entry, else the scenario's ``mask_deg``.
+    """
+    return np.array([scenario.leo.mask_deg_by_family.get(f, scenario.mask_deg) for f in scenario.leo.constellations])
+
+
+def mask_label(scenario):
+    """The masks in words for titles and messages: ``"40 deg"``, or ``"40 deg (iridium 15, orbcomm 15)"``.
+
+    Only the families of ``leo.constellations`` whose mask differs from ``mask_deg`` are named.
+    """
+    own = [f"{f} {m:g}" for f, m in zip(scenario.leo.constellations, family_masks_deg(scenario))
+           if m != scenario.mask_deg]
+    return f"{scenario.mask_deg:g} deg" + (f" ({', '.join(own)})" if own else "")
 
 
 def bundled_names():

@@ -7,9 +7,11 @@ table reproductions call it. For a scenario it
    ([Shen 2024] Table 1; bias signs drawn per run), both made a block at a
    time and consumed as made (the INS alone, then the EKF, read the same
    numbers), so that memory does not grow with the run's duration;
-2. finds the visible satellites at the fix rate, 1 Hz (:mod:`leosop.orbits.visibility`)
-   and their true Doppler, plus a constant clock-induced offset per satellite
-   drawn uniformly in [0, max] and the receiver's fixed offset;
+2. finds the visible satellites at the fix rate, 1 Hz (:mod:`leosop.orbits.visibility`),
+   each family above its own mask (``leo.mask_deg_by_family``, else
+   ``mask_deg``), and their true Doppler, plus a constant clock-induced
+   offset per satellite drawn uniformly in [0, max] and the receiver's
+   fixed offset;
 3. measures every Doppler, either at signal level (a pilot block per
    satellite-epoch, estimated by the ``fast`` estimator) or at measurement
    level (the estimator's error model); the families other than Starlink
@@ -63,6 +65,7 @@ from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
 from .positioning.robust_ls import FixStatus
 from .positioning.snapshot import solve_snapshots
+from .scenarios import family_masks_deg, mask_label
 from .signal.doppler import estimate_block
 from .signal.error_model import doppler_sigma_hz
 from .signal.pilot import PilotComb, add_noise, comb_baseband
@@ -353,6 +356,29 @@ def _family_models(leo):
     }
 
 
+def _keep_pairs(vis, keep):
+    """The pairs of ``vis`` where ``keep`` (m,) is true."""
+    return dataclasses.replace(vis, **{f: getattr(vis, f)[keep] for f in (
+        "epoch_index", "sat_index", "az_rad", "elev_rad", "range_m", "pos_sv_ecef_m", "vel_sv_ecef_mps")})
+
+
+def _above_family_masks(vis, family_sat, masks_deg):
+    """The pairs above their family's mask, from pairs found above the lowest mask.
+
+    Parameters
+    ----------
+    vis : Visibility
+        Found with the mask ``masks_deg.min()``.
+    family_sat : ndarray of int, (n_sats,)
+    masks_deg : ndarray, (k,)
+        Each family's mask. The pairs of the families at the lowest mask are
+        kept as found (one mask: ``vis`` itself).
+    """
+    mask_pair_deg = masks_deg[family_sat[vis.sat_index]]
+    keep = (mask_pair_deg == masks_deg.min()) | (vis.elev_rad >= np.radians(mask_pair_deg))
+    return vis if keep.all() else _keep_pairs(vis, keep)
+
+
 def _tracked(vis, t_s, outage_s, max_sats):
     """The visible pairs the receiver tracks: all, except in the outage ``[start, end]`` the ``max_sats`` highest."""
     if outage_s is None:
@@ -362,8 +388,7 @@ def _tracked(vis, t_s, outage_s, max_sats):
     rank[order] = np.arange(order.size) - np.searchsorted(vis.epoch_index[order], vis.epoch_index[order])
     t = t_s[vis.epoch_index]
     keep = (t < outage_s[0]) | (t > outage_s[1]) | (rank < max_sats)
-    return dataclasses.replace(vis, **{f: getattr(vis, f)[keep] for f in (
-        "epoch_index", "sat_index", "az_rad", "elev_rad", "range_m", "pos_sv_ecef_m", "vel_sv_ecef_mps")})
+    return _keep_pairs(vis, keep)
 
 
 def _leo_fixes(scenario, constellation, family_sat, models, times_utc, t_s, pos_rx_ecef_m, vel_rx_ecef_mps,
@@ -399,12 +424,14 @@ def _leo_fixes(scenario, constellation, family_sat, models, times_utc, t_s, pos_
     per_pair : dict of ndarray, (m, ...)
         See :func:`_measure_and_solve`, with run-wide epoch indices.
     """
-    vis = compute_visibility(constellation, times_utc, pos_rx_ecef_m, scenario.mask_deg,
+    masks_deg = family_masks_deg(scenario)
+    vis = compute_visibility(constellation, times_utc, pos_rx_ecef_m, masks_deg.min(),
                              vel_rx_ecef_mps=vel_rx_ecef_mps, block_s=FIX_BLOCK_EPOCHS / scenario.leo.fix_rate_hz,
                              show_progress=progress is not None)
+    vis = _above_family_masks(vis, family_sat, masks_deg)
     vis = _tracked(vis, t_s, scenario.leo.outage_s, scenario.leo.outage_max_sats)
     if not vis.n_visible.any():
-        warnings.warn(f"{scenario.name}: no satellite rises above the {scenario.mask_deg:g} deg mask during the "
+        warnings.warn(f"{scenario.name}: no satellite rises above the {mask_label(scenario)} mask during the "
                       "flight; the result is the INS alone", stacklevel=3)
     # One receiver clock per family tracked in the run, the same in every block.
     clock_labels = None if len(scenario.leo.constellations) == 1 else np.unique(family_sat[vis.sat_index])

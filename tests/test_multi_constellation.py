@@ -1,5 +1,6 @@
 """Several constellations in one Doppler fix: one receiver clock per constellation (DESIGN 4.3)."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -363,8 +364,6 @@ def test_cli_position_sgp4_starlink_oneweb_from_family_carriers(capsys, tmp_path
 # --- simulation with several families (issue 10) ---------------------------------------------------------------
 
 def _short(name, duration_s, **leo):
-    import dataclasses
-
     from leosop.scenarios import load_scenario
 
     sc = load_scenario(name)
@@ -396,6 +395,44 @@ def test_simulate_unknown_family_and_family_absent_from_the_tle_exit_2(capsys, t
     assert main(["simulate", "--scenario", str(path), "--tle", str(DEFAULT_TLE), "--level", "measurement"]) == 2
     err = capsys.readouterr().err.strip()
     assert "'oneweb'" in err and len(err.splitlines()) == 1
+
+
+def test_simulate_mask_of_an_unselected_family_is_exit_2(capsys, tmp_path):
+    path = tmp_path / "bad.json"
+    leo = {"constellations": ["starlink", "oneweb"], "mask_deg_by_family": {"iridium": 15}}
+    path.write_text(json.dumps({"leo": leo}))
+    assert main(["simulate", "--scenario", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "mask_deg_by_family" in err and "'iridium'" in err and "starlink, oneweb" in err
+    assert len(err.splitlines()) == 1
+
+
+def test_each_family_tracked_above_its_own_mask():
+    # Starting 18:42:00 on the bundled sky, two Iridium satellites are between
+    # 15 and 40 deg along the Xi'an-Baoji flight, one of them setting through
+    # 15 deg within the 120 s. Iridium at 15 deg, Starlink at the scenario's 40:
+    # the tracked counts per family must be those of the elevations computed
+    # here from the propagated satellites, epoch by epoch.
+    from leosop.frames import azimuth_elevation_range
+    from leosop.orbits.propagate import state_ecef
+    from leosop.simulate import _constellation, run_scenario
+
+    sc = _short("xian-baoji-multi", 120.0, constellations=("starlink", "iridium"), mask_deg_by_family={"iridium": 15})
+    sc = dataclasses.replace(sc, start_utc=np.datetime64("2025-01-01T18:42:00", "ns"))
+    r = run_scenario(sc, level="measurement", seed=0)
+    constellation, family_sat = _constellation(sc.leo.constellations, None)
+    pos_sv, _, _ = state_ecef(constellation, r.times_utc)
+    _, elev_rad, _ = azimuth_elevation_range(pos_sv, r.truth_pos_ecef_m)
+    elev_deg = np.degrees(elev_rad)  # (n_sats, n_epochs)
+    starlink, iridium = elev_deg[family_sat == 0], elev_deg[family_sat == 1]
+    np.testing.assert_array_equal(r.n_visible_by_family[:, 0], (starlink >= 40.0).sum(axis=0))
+    np.testing.assert_array_equal(r.n_visible_by_family[:, 1], (iridium >= 15.0).sum(axis=0))
+    # The case is the one meant: Iridium tracked below 40 deg, one satellite lost as it sets through 15 deg,
+    # and Starlink satellites between 15 and 40 deg that the 40 deg mask keeps out.
+    between = (iridium >= 15.0) & (iridium < 40.0)
+    assert between.any(axis=0).all()
+    assert ((iridium > 0.0) & (iridium < 15.0)).any() and r.n_visible_by_family[:, 1].max() == 2
+    assert (((starlink >= 15.0) & (starlink < 40.0)).sum(axis=0) > 0).all()
 
 
 def test_simulate_scenario_with_an_absent_tle_is_exit_2_without_output(capsys, tmp_path):

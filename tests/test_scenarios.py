@@ -94,6 +94,12 @@ def test_multi_constellation_keys_validated_and_round_tripped():
     ({"constellations": []}, ["constellations", "non-empty"]),
     ({"constellations": ["oneweb", "oneweb"]}, ["twice"]),
     ({"rx_freq_offsets_hz": {"gps": 1.0}}, ["rx_freq_offsets_hz", "gps"]),
+    ({"mask_deg_by_family": {"galileo": 15}}, ["mask_deg_by_family", "galileo", "iridium, oneweb, orbcomm, starlink"]),
+    ({"mask_deg_by_family": {"starlink": 90}}, ["mask_deg_by_family.starlink", "90.0", "89.0"]),
+    ({"mask_deg_by_family": {"starlink": -1}}, ["mask_deg_by_family.starlink", "-1.0"]),
+    ({"mask_deg_by_family": {"iridium": 15}}, ["mask_deg_by_family", "'iridium'", "leo.constellations (starlink)"]),
+    ({"constellations": ["starlink", "oneweb"], "mask_deg_by_family": {"orbcomm": 15}},
+     ["mask_deg_by_family", "'orbcomm'", "(starlink, oneweb)"]),
     ({"outage_s": [100, 50]}, ["outage_s[1]"]),
     ({"outage_max_sats": 2.5}, ["outage_max_sats", "whole number"]),
 ])
@@ -101,6 +107,19 @@ def test_bad_multi_constellation_keys_name_the_field(leo, words):
     with pytest.raises(InputError) as exc:
         scenario_from_dict({"leo": leo}, source="f.json")
     assert all(w in str(exc.value) for w in words), str(exc.value)
+    assert len(str(exc.value).splitlines()) == 1
+
+
+def test_family_masks_default_to_the_scenario_mask():
+    from leosop.scenarios import family_masks_deg, mask_label
+
+    s = scenario_from_dict({"mask_deg": 35, "leo": {"constellations": ["starlink", "iridium", "orbcomm"],
+                                                    "mask_deg_by_family": {"iridium": 15, "orbcomm": 10.5}}})
+    assert s.leo.mask_deg_by_family == {"iridium": 15.0, "orbcomm": 10.5}
+    np.testing.assert_array_equal(family_masks_deg(s), [35.0, 15.0, 10.5])
+    assert mask_label(s) == "35 deg (iridium 15, orbcomm 10.5)"
+    assert mask_label(XIAN_BAOJI) == "40 deg"
+    assert scenario_from_dict(json.loads(json.dumps(to_dict(s)))) == s
 
 
 def test_bundled_scenarios_load_by_name_and_resolve_their_tle():
@@ -111,3 +130,11 @@ def test_bundled_scenarios_load_by_name_and_resolve_their_tle():
     assert s.tle.endswith("shared/data/tle/active_3le_2021-08-06_atqlong.txt") and s.mask_deg == 25.0
     assert load_scenario("urban-canyon").mask_deg == 60.0
     assert load_scenario("outage").leo.outage_s == (300.0, 480.0)
+
+
+def test_narrowing_the_families_of_a_base_with_family_masks_is_allowed():
+    # A study's cell {"leo": {"constellations": ["starlink"]}} on xian-baoji-multi: the base's
+    # Iridium and Orbcomm masks stay in the spec, unused, rather than refusing the cell.
+    base = load_scenario("xian-baoji-multi")
+    s = scenario_from_dict({"leo": {"constellations": ["starlink"]}}, base=base)
+    assert s.leo.constellations == ("starlink",) and s.leo.mask_deg_by_family == {"iridium": 15.0, "orbcomm": 15.0}

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..frames import ecef_to_enu, ecef_to_geodetic
+from ..scenarios import mask_label
 from ..timebase import format_utc
 from .core import pyplot, save_png
 
@@ -110,7 +111,7 @@ def visible_figure(result, path):
     ax.step(result.t_s, result.n_visible, where="mid")
     ax.axhline(7, color="C3", ls=":", label="7 needed for a snapshot fix")
     ax.set_xlabel(time_label(result))
-    ax.set_ylabel(f"visible satellites (mask {result.scenario.mask_deg:g} deg)")
+    ax.set_ylabel(f"visible satellites (mask {mask_label(result.scenario)})")
     ax.set_title(f"{run_label(result)}: visible satellites")
     ax.legend()
     _save(fig, path)
@@ -147,7 +148,7 @@ def visible_by_family_figure(result, path):
             label="6 + k needed for a snapshot fix")
     ax.set_xlabel(time_label(result))
     ax.set_ylabel("tracked satellites")
-    ax.set_title(f"{run_label(result)}: satellites above the {result.scenario.mask_deg:g} deg mask per family")
+    ax.set_title(f"{run_label(result)}: satellites above the {mask_label(result.scenario)} mask per family")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")  # beside: the stack fills the axes
     _save(fig, path)
 

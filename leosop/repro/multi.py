@@ -39,7 +39,9 @@ def _scenario(name, sky, outage=True):
     sc = load_scenario(name)
     leo = sc.leo
     if sky == "starlink":
-        leo = dataclasses.replace(leo, constellations=("starlink",))
+        # Starlink keeps its own mask; the other families' masks go with them.
+        leo = dataclasses.replace(leo, constellations=("starlink",), mask_deg_by_family={
+            f: m for f, m in leo.mask_deg_by_family.items() if f == "starlink"})
     if not outage:
         leo = dataclasses.replace(leo, outage_s=None)
     return dataclasses.replace(sc, leo=leo)
