@@ -9,7 +9,8 @@ reader must return or raise InputError, nothing else.
 import json
 import math
 
-from hypothesis import HealthCheck, given, settings
+import pytest
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from leosop.errors import InputError
@@ -50,6 +51,8 @@ _OMM = {"OBJECT_NAME": "STARLINK-1007", "NORAD_CAT_ID": 44713, "EPOCH": "2025-01
 
 @MANY
 @given(st.lists(_maybe_broken(_OMM), min_size=1, max_size=2) | json_value)
+@example([{**_OMM, "CLASSIFICATION_TYPE": []}])  # found by this test in CI: sgp4 raised TypeError on "[]"
+@example([{**_OMM, "CLASSIFICATION_TYPE": "SECRET"}])
 def test_omm_json_fields_of_any_type(tmp_path, doc):
     path = tmp_path / "set.json"
     path.write_text(json.dumps(doc))
@@ -93,3 +96,12 @@ def test_scenario_fields_of_any_type(tmp_path, doc):
     path = tmp_path / "scenario.json"
     path.write_text(json.dumps(doc))
     _read_or_refuse(lambda: load_scenario(path))
+
+
+def test_omm_classification_must_be_one_character(tmp_path):
+    path = tmp_path / "set.json"
+    path.write_text(json.dumps([{**_OMM, "CLASSIFICATION_TYPE": []}]))
+    with pytest.raises(InputError, match=r"record 1: OMM field CLASSIFICATION_TYPE: expected one character"):
+        read_omm(path)
+    path.write_text(json.dumps([{**_OMM, "CLASSIFICATION_TYPE": "C"}]))
+    assert read_omm(path).names == ("STARLINK-1007",)

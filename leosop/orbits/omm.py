@@ -62,10 +62,13 @@ def read_omm(path):
         fields = {**_DEFAULTS, **{k: str(v) for k, v in fields.items() if v is not None}}
         if "." not in fields["EPOCH"]:
             fields["EPOCH"] += ".0"
+        if len(fields["CLASSIFICATION_TYPE"]) != 1:
+            raise InputError(f"{at}: OMM field CLASSIFICATION_TYPE: expected one character (U, C or S), "
+                             f"found {fields['CLASSIFICATION_TYPE']!r}")
         sat = Satrec()
         try:
             omm.initialize(sat, fields)
-        except (ValueError, KeyError, OverflowError) as exc:
+        except (ValueError, KeyError, OverflowError, TypeError) as exc:
             raise InputError(f"{at}: bad OMM field value ({exc})") from None
         check_elements(sat, at)
         if sat.error:
