@@ -266,9 +266,10 @@ class _InertialWideLane:
         self.on = np.zeros(n_sv, bool)
         self.wl_cyc = np.zeros(n_sv)
         self.t_end_s = np.nan  # first GNSS epoch after the gap
-        self.m = self.var_m = self.g0 = self.rate_gf_mps = self.var_rate = self.sin0 = np.zeros(n_sv)
+        # Separate arrays (not one aliased array): snapshot() replaces them, fix() reads them.
+        self.m, self.var_m, self.g0, self.rate_gf_mps, self.var_rate, self.sin0 = np.zeros((6, n_sv))
         self.t0_s = np.nan
-        self.H_last = np.zeros((n_sv, 4))
+        self.H_last, self.H0 = np.zeros((2, n_sv, 4))
         self.P_last = self.P0 = np.zeros((4, 4))
 
     def snapshot(self, t_s, gf_m, new_arc, mw_mean, mw_var_mean, window_s):
