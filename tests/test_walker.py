@@ -30,3 +30,22 @@ def test_bundled_constellation_has_the_published_shells():
         assert abs(alt_mean - shell.alt_m) < 15e3, (shell, alt_mean)
         raan = np.degrees([s.nodeo for s in const.satrecs[a:b]])
         assert len(np.unique(np.round(raan, 3))) == shell.n_planes
+
+
+def test_bundled_families_are_the_published_walker_stars():
+    # Published plane spacing (Iridium: 31.6 deg, 22 deg across the seam; OneWeb: 15.225 deg,
+    # 12.525 deg across the seam): the node of plane p is p times the spacing, so the
+    # northbound half of the last plane and the southbound half of the first are the seam apart.
+    from leosop.simulate import FAMILIES_TLE
+
+    const = load_constellation(FAMILIES_TLE)
+    for family, n_planes, spacing_deg, seam_deg in (("iridium", 6, 31.6, 22.0), ("oneweb", 12, 15.225, 12.525)):
+        sats = [s for s, f in zip(const.satrecs, const.families) if f == family]
+        nodes = np.unique(np.round(np.degrees([s.nodeo for s in sats]), 3))
+        assert nodes.size == n_planes
+        np.testing.assert_allclose(np.diff(nodes), spacing_deg, atol=1e-3)  # TLE prints 4 decimals
+        np.testing.assert_allclose(180.0 - (nodes[-1] - nodes[0]), seam_deg, atol=1e-3)
+        # Adjacent planes half a slot apart in argument of latitude (phasing F = P / 2).
+        slot = 360.0 / (len(sats) // n_planes)
+        u = np.degrees([s.mo + s.argpo for s in sats]).reshape(n_planes, -1)
+        np.testing.assert_allclose(np.mod(u[1, 0] - u[0, 0], slot), slot / 2, atol=1e-3)

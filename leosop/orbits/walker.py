@@ -1,4 +1,4 @@
-"""Walker-delta constellations written as SGP4 element sets.
+"""Walker constellations (delta and star) written as SGP4 element sets.
 
 Used to make the bundled default constellation (``tools/make_walker_tle.py``)
 from the published Starlink shell parameters, so that every command runs
@@ -24,7 +24,7 @@ _GM_WGS72 = 398_600.8e9
 
 @dataclass(frozen=True)
 class Shell:
-    """One Walker-delta shell ``inclination: total/planes/phasing``.
+    """One Walker shell ``inclination: total/planes/phasing``.
 
     Attributes
     ----------
@@ -33,6 +33,11 @@ class Shell:
     incl_deg : float
     n_planes, sats_per_plane, phasing : int
         Walker P, T/P and F.
+    node_spread_deg : float
+        Right ascensions of the nodes are ``k * node_spread_deg / n_planes``:
+        360 for a Walker delta; about 180 for a near-polar Walker star, whose
+        ascending and descending halves then interleave instead of
+        overlapping (Iridium, OneWeb).
     """
 
     alt_m: float
@@ -40,6 +45,7 @@ class Shell:
     n_planes: int
     sats_per_plane: int
     phasing: int = 1
+    node_spread_deg: float = 360.0
 
 
 #: Starlink first-generation shells as filed with the FCC (2018 filing as
@@ -56,7 +62,7 @@ STARLINK_GEN1_SHELLS = (
 
 
 def walker_delta(shells, epoch_utc, *, first_id=70001, name_prefix="STARLINK-W", ecc=1e-4):
-    """Element sets of Walker-delta shells at a common epoch.
+    """Element sets of Walker shells at a common epoch.
 
     Parameters
     ----------
@@ -82,7 +88,7 @@ def walker_delta(shells, epoch_utc, *, first_id=70001, name_prefix="STARLINK-W",
         no_kozai_rad_per_min = np.sqrt(_GM_WGS72 / a_m**3) * 60.0
         total = shell.n_planes * shell.sats_per_plane
         for p in range(shell.n_planes):
-            raan = 2 * np.pi * p / shell.n_planes
+            raan = np.radians(shell.node_spread_deg) * p / shell.n_planes
             for s in range(shell.sats_per_plane):
                 mean_anom = 2 * np.pi * (s / shell.sats_per_plane + shell.phasing * p / total)
                 sat = Satrec()
