@@ -257,7 +257,7 @@ def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_db
 
 def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, carrier_hz, family, offset_max_sat_hz,
                      orbit_error_m, orbit_error_model):
-    """How each fix depends on the satellites' constant errors, and its white part.
+    """What each fix is made of: gains, Jacobian rows, residuals and receiver offsets.
 
     The fix is the weighted least squares ``x = x_true + G e`` (to first order)
     with ``G = cov H^T W`` at the solution, over the Doppler it used (``H``
@@ -269,6 +269,10 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
 
     Parameters
     ----------
+    sigma_hz : ndarray, (m,)
+        The sigma each Doppler was weighted by in the fix.
+    sigma_est_hz : float or ndarray, (m,)
+        The estimator's white noise.
     carrier_hz : ndarray, (m,)
     family : ndarray of int, (m,)
         Clock group of each pair (the ``clock_group`` of the fixes).
@@ -277,9 +281,8 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
 
     Returns
     -------
-    fix_errors : leosop.fusion.loose.FixErrorModel
-    cov_white : ndarray, (n_ep, 6, 6)
-        ``G_pv diag(sigma_est^2) G_pv^T`` (ECEF), NaN without a fix.
+    leosop.fusion.loose.FixErrorModel
+        Rows of the pairs used in the fixes ``good``.
     """
     H = doppler_jacobian(vis.padded(pos_sv_known), vis.padded(vis.vel_sv_ecef_mps), fixes.pos_ecef_m,
                          fixes.vel_ecef_mps, vis.padded(carrier_hz))
@@ -291,18 +294,18 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
     used = fixes.used & good[:, None]
     w = np.where(used, 1.0 / np.nan_to_num(vis.padded(sigma_hz), nan=1.0) ** 2, 0.0)
     G = np.nan_to_num(fixes.cov) @ np.swapaxes(np.nan_to_num(H) * w[..., None], 1, 2)  # (n_ep, 6 + k, n_sv)
-    G_pv = G[:, :6, :]
-    sigma_white = np.nan_to_num(vis.padded(np.broadcast_to(sigma_est_hz, sigma_hz.shape)))
-    cov_white = np.einsum("kis,ks,kjs->kij", G_pv, sigma_white**2 * used, G_pv)
-    cov_white[~good] = np.nan
     slot = np.arange(len(vis.epoch_index)) - np.searchsorted(vis.epoch_index, vis.epoch_index)
     ep = vis.epoch_index
     pair_used = used[ep, slot]
-    fix_errors = loose.FixErrorModel(
-        epoch_index=ep[pair_used], sat_index=vis.sat_index[pair_used], gain_ecef=G_pv[ep, :, slot][pair_used],
-        orbit_hz_per_m=H[ep, slot, :3][pair_used], offset_sigma_hz=offset_max_sat_hz / np.sqrt(12.0),
-        orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
-    return fix_errors, cov_white
+    sel = (ep[pair_used], slot[pair_used])
+    return loose.FixErrorModel(
+        epoch_index=sel[0], sat_index=vis.sat_index[pair_used], gain_ecef=np.swapaxes(G, 1, 2)[sel],
+        jacobian_pv=H[..., :6][sel], clock_index=clock[pair_used], weight_sqrt=1.0 / sigma_hz[pair_used],
+        residual_hz=fixes.residuals_hz[sel],
+        sigma_white_hz=np.broadcast_to(sigma_est_hz, sigma_hz.shape)[pair_used],
+        fix_clock_hz=np.where(good[:, None], fixes.clock_offsets_hz, np.nan),
+        offset_sigma_hz=offset_max_sat_hz / np.sqrt(12.0), orbit_sigma_m=orbit_error_m,
+        orbit_model=orbit_error_model)
 
 
 def _constellation(families, tle):
@@ -467,12 +470,12 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
         ``fix_pos_ecef_m``, ``fix_vel_ecef_mps`` (n_b, 3) and ``fix_cov``
         (n_b, 6 + k, 6 + k): NaN without a fix; ``checked`` (n_b,): the fixes
         the loose filter may take; ``gdop`` (n_b,): eq. 10 along the true
-        flight; loose coupling: ``cov_white`` (n_b, 6, 6) of
-        :func:`_fix_error_model`.
+        flight; loose coupling: ``fix_clock_hz`` (n_b, k), the fixes'
+        receiver offsets.
     per_pair : dict of ndarray, (m_b, ...)
         Loose coupling: the :class:`leosop.fusion.loose.FixErrorModel` rows
-        (``epoch_index``, ``sat_index``, ``gain_ecef``, ``orbit_hz_per_m``);
-        tight: the :class:`leosop.fusion.tight.DopplerMeasurements` fields.
+        (:data:`leosop.fusion.loose.PAIR_FIELDS`); tight: the
+        :class:`leosop.fusion.tight.DopplerMeasurements` fields.
     """
     pos_rx, vel_rx = vis.pos_rx_ecef_m, vis.vel_rx_ecef_mps
     n_ep = len(vis.times_utc)
@@ -525,11 +528,11 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
                     "pos_sv_ecef_m": pos_sv_known, "vel_sv_ecef_mps": vis.vel_sv_ecef_mps, "carrier_hz": carrier,
                     "clock_index": fam}
         return per_epoch, per_pair
-    fix_errors, per_epoch["cov_white"] = _fix_error_model(
-        vis, fixes, checked, sigma_hz, sigma_est, pos_sv_known, carrier, fam, offset_max_sat_hz, orbit_error_m,
-        orbit_error_model)
-    per_pair = {"epoch_index": fix_errors.epoch_index + epoch0, "sat_index": fix_errors.sat_index,
-                "gain_ecef": fix_errors.gain_ecef, "orbit_hz_per_m": fix_errors.orbit_hz_per_m}
+    fix_errors = _fix_error_model(vis, fixes, checked, sigma_hz, sigma_est, pos_sv_known, carrier, fam,
+                                  offset_max_sat_hz, orbit_error_m, orbit_error_model)
+    per_epoch["fix_clock_hz"] = fix_errors.fix_clock_hz
+    per_pair = {f: getattr(fix_errors, f) for f in loose.PAIR_FIELDS}
+    per_pair["epoch_index"] = per_pair["epoch_index"] + epoch0
     return per_epoch, per_pair
 
 
@@ -617,12 +620,11 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
     if coupling == "loose":
-        fix_errors = loose.FixErrorModel(
-            epoch_index=per_pair["epoch_index"], sat_index=per_pair["sat_index"], gain_ecef=per_pair["gain_ecef"],
-            orbit_hz_per_m=per_pair["orbit_hz_per_m"], offset_sigma_hz=offset_max_sat / np.sqrt(12.0),
-            orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
+        fix_errors = loose.FixErrorModel(**per_pair, fix_clock_hz=per_epoch["fix_clock_hz"],
+                                         offset_sigma_hz=offset_max_sat / np.sqrt(12.0), orbit_sigma_m=orbit_error_m,
+                                         orbit_model=orbit_error_model)
         fused = loose.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s,
-                          (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["cov_white"]),
+                          (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["fix_cov"][:, :6, :6]),
                           settings, fix_errors=fix_errors, progress=progress)
     else:
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,

@@ -160,14 +160,16 @@ def test_filter_is_consistent_with_the_simulated_time_correlated_fixes():
     # and velocity within [0.5, 2] of its dimension (12 seeds: 0.85 x 6 measured;
     # the 782 s flight gives 0.98 x 6 over 20 seeds), NIS and whiteness as above.
     scenario = dataclasses.replace(XIAN_BAOJI, duration_s=90.0)
-    nees, nis, white = [], [], []
+    nees, nis, dof, white = [], [], [], []
     for seed in range(12):
         r = run_scenario(scenario, level="measurement", seed=seed)
         nees.append(r.nees()[1:])
         nis.append(r.nis()[0])
+        dof.append(r.nis()[1])
         white.append(_whitened(r))
-    nis = np.concatenate(nis)  # n = 12 x 89 x 6 whitened pairs below
-    assert_filter_consistent(np.concatenate(nees), nis.sum(), 6 * nis.size,
+    # Each update holds the fix, its receiver offset and its residuals (one value per Doppler);
+    # n = 12 x 89 x 6 whitened pairs of the fix rows below.
+    assert_filter_consistent(np.concatenate(nees), np.concatenate(nis).sum(), np.concatenate(dof).sum(),
                              np.concatenate([w[:-1] for w in white]), np.concatenate([w[1:] for w in white]))
 
 

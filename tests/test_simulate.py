@@ -5,7 +5,8 @@ import pytest
 
 from leosop import frames, simulate
 from leosop.constants import C_MPS
-from leosop.fusion import loose
+from leosop.fusion import common, loose
+from leosop.ins import strapdown
 from leosop.ins import trajectory
 from leosop.montecarlo.parameters import apply
 from leosop.montecarlo.spec import load_spec
@@ -53,26 +54,97 @@ def test_fix_error_is_the_gain_times_the_satellite_errors():
                             clock_group=np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
     good = fixes.status == FixStatus.OK
     assert (vis.n_visible_by_group(family_sat)[good][:, [0, 2]] > 0).all()  # both constellations in every fix
-    model, cov_white = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
-                                                 np.full(len(constellation), 5.0), 30.0, "independent")
+    model = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
+                                      np.full(len(constellation), 5.0), 30.0, "independent")
+    assert model.gain_ecef.shape[1] == 6 + 2 and model.n_clocks == 2
     e_dopp = offset_hz[model.sat_index] + np.sum(model.orbit_hz_per_m * orbit_m[model.sat_index], axis=-1)
-    predicted = np.zeros((vis.n_visible.size, 6))
+    predicted = np.zeros((vis.n_visible.size, 8))
     np.add.at(predicted, model.epoch_index, model.gain_ecef * e_dopp[:, None])
-    actual = np.concatenate([fixes.pos_ecef_m - truth.pos_ecef_m, fixes.vel_ecef_mps - vel_rx], axis=-1)
+    rx_hz = np.array([5.0, -40.0])  # the clocks present, Starlink's and OneWeb's
+    actual = np.concatenate([fixes.pos_ecef_m - truth.pos_ecef_m, fixes.vel_ecef_mps - vel_rx,
+                             fixes.clock_offsets_hz - rx_hz], axis=-1)
     assert good.sum() >= 35
     # The errors are tens to hundreds of metres; what the first-order model leaves
     # out is of relative size |error| / range (1e-4 at 700 km), amplified by the
     # geometry (0.2-0.3 % measured here): 1 % of the largest error plus 0.1 m
-    # (1 mm/s), while a wrong sign of the orbit term would leave ~100 %.
+    # (1 mm/s, 0.01 Hz), while a wrong sign of the orbit term would leave ~100 %.
     scale = np.abs(actual[good]).max(axis=0)
     # Errors of metres at least on every axis (tens horizontally), so that a
     # wrong gain (~100 % off) cannot hide in the 0.1 m floor.
     assert np.all(scale[:3] > 2.0) and scale[:3].max() > 10.0
-    assert np.all(np.abs(predicted[good] - actual[good]) <= 0.01 * scale + np.r_[0.1, 0.1, 0.1, 1e-3, 1e-3, 1e-3])
-    # The white part is the estimator noise (0.05 Hz) mapped by the same gains, pair by pair.
-    expected = np.zeros((vis.n_visible.size, 6, 6))
-    np.add.at(expected, model.epoch_index, 0.05**2 * np.einsum("mi,mj->mij", model.gain_ecef, model.gain_ecef))
-    np.testing.assert_allclose(cov_white[good], expected[good], rtol=1e-9, atol=1e-12)
+    floor = np.r_[0.1, 0.1, 0.1, 1e-3, 1e-3, 1e-3, 0.01, 0.01]
+    assert np.all(np.abs(predicted[good] - actual[good]) <= 0.01 * scale + floor)
+    # The residuals are what the fix left of the same errors: e_j - J_j G e to first order.
+    J = np.concatenate([model.jacobian_pv, model.clock_index[:, None] == [0, 1]], -1)
+    res_first_order = e_dopp - np.einsum("mi,mi->m", J, predicted[model.epoch_index])
+    assert np.abs(res_first_order).max() > 1.0  # Hz: the offsets alone are 0-5 Hz
+    np.testing.assert_allclose(model.residual_hz, res_first_order, atol=0.01 * np.abs(res_first_order).max())
+
+
+def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
+    # What the loose filter takes of a fix (loose._fix_measurement): the 6 fix
+    # values, its receiver offsets and its residuals in the space orthogonal to
+    # its states. Independent references: (1) the residual rows hold the fix's
+    # whole weighted residual sum, the solver's own chi-square; (2) with the INS
+    # at the truth and the filter's states at the true receiver offsets and
+    # satellite errors, the measurement is H x to first order (noise-free
+    # Doppler), which checks every sign of H on the clock and satellite columns.
+    truth = trajectory.flight(np.asarray(XIAN_BAOJI.waypoints), speed_mps=200.0, rate_hz=100.0,
+                              duration_s=20.0).resample(1.0)
+    times = XIAN_BAOJI.start_utc + (truth.t_s * 1e9).astype("timedelta64[ns]")
+    C_e_n = frames.C_e_n(truth.lat_rad, truth.lon_rad)
+    vel_rx = np.einsum("kij,kj->ki", C_e_n, truth.vel_enu_mps)
+    constellation, family_sat = simulate._constellation(("starlink", "oneweb"), None)
+    vis = compute_visibility(constellation, times, truth.pos_ecef_m, 35.0, vel_rx_ecef_mps=vel_rx,
+                             show_progress=False)
+    fam = family_sat[vis.sat_index]
+    f0 = np.array([CARRIERS[f].default_hz for f in ("starlink", "oneweb")])[fam]
+    rng = np.random.default_rng(5)
+    offset_hz = rng.uniform(0.0, 5.0, len(constellation))
+    orbit_m = 30.0 * rng.standard_normal((len(constellation), 3))
+    rx_hz = np.array([5.0, -12.0])
+    ep, sat = vis.epoch_index, vis.sat_index
+    doppler = (-frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, truth.pos_ecef_m[ep], vel_rx[ep]) * f0
+               / C_MPS + offset_hz[sat] + rx_hz[fam])
+    pos_known = vis.pos_sv_ecef_m + orbit_m[sat]
+    h = doppler_jacobian(pos_known[:, None], vis.vel_sv_ecef_mps[:, None], truth.pos_ecef_m[ep], vel_rx[ep],
+                         f0[:, None])
+    sigma = np.sqrt(0.05**2 + 25.0 / 12.0 + (np.linalg.norm(h[:, 0, :3], axis=-1) * 30.0) ** 2)
+    x0 = np.concatenate([truth.pos_ecef_m + 50.0, vel_rx, np.zeros((vel_rx.shape[0], 1))], axis=-1)
+    fixes = solve_snapshots(vis.padded(doppler), vis.padded(sigma), vis.padded(pos_known),
+                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(f0), x0=x0,
+                            clock_group=np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
+    good = fixes.status == FixStatus.OK
+    assert good.sum() >= 18
+    model = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
+                                      np.full(len(constellation), 5.0), 30.0, "independent")
+    n_states = loose.N_INS + 2
+    sats = common.SatelliteStates(n_states, "independent", 0.0, 1.0, 30.0)
+    bounds = np.searchsorted(model.epoch_index, np.arange(good.size + 1))
+    checked = 0
+    for k in np.flatnonzero(good):
+        rows = np.arange(bounds[k], bounds[k + 1])
+        x_true, P = sats.see(np.zeros(n_states), np.eye(n_states), model.sat_index[rows], float(k))
+        n_states = x_true.size
+        x_true[loose.N_INS:loose.N_INS + 2] = rx_hz
+        for j in sats.ids:
+            c_off, c_orbit = sats.columns(j)
+            x_true[c_off], x_true[c_orbit] = offset_hz[j], orbit_m[j]
+        state = strapdown.NavState.from_dcm(truth.lat_rad[k], truth.lon_rad[k], truth.alt_m[k],
+                                            truth.vel_enu_mps[k], np.eye(3))
+        z, H, R = loose._fix_measurement(state, fixes.pos_ecef_m[k], fixes.vel_ecef_mps[k], k, sats, model, rows,
+                                         n_states)
+        n_res = rows.size - 8
+        assert z.shape == (6 + 2 + n_res,) and H.shape == (z.size, n_states) and R.shape == (z.size, z.size)
+        np.testing.assert_allclose(np.sum(z[8:] ** 2), fixes.chi2[k], rtol=1e-6)
+        # First-order leftovers as in test_fix_error_is_the_gain_times_the_satellite_errors: 1 % of the
+        # largest value of each kind of row plus 0.1 m, 1 mm/s, 0.01 Hz and 0.01 for the whitened residuals.
+        scale = np.r_[np.full(3, np.abs(z[:3]).max()), np.full(3, np.abs(z[3:6]).max()), np.abs(z[6:8]),
+                      np.full(n_res, np.abs(z[8:]).max())]
+        floor = np.r_[np.full(3, 1e-3), np.full(3, 0.1), np.full(2, 0.01), np.full(n_res, 0.01)]
+        assert np.all(np.abs(z - H @ x_true) <= 0.01 * scale + floor), k
+        checked += 1
+    assert checked >= 18
 
 
 def test_imu_made_in_blocks_gives_the_same_run_as_one_block(monkeypatch):

@@ -220,6 +220,11 @@ class FeedbackIns:
         self.accel_bias_mps2 = self.accel_bias_mps2 + dx[NABLA]
 
 
+#: Prior sigma of each receiver frequency offset [Hz] and its random walk [Hz^2/s], for both couplings.
+RX_OFFSET_SIGMA_HZ = 10.0
+RX_OFFSET_PSD_HZ2_PER_S = 1e-6
+
+
 class SatelliteStates:
     """Bookkeeping of the satellites' constant error states, after the first ``n_before`` states.
 

@@ -37,8 +37,8 @@ from .. import frames
 from ..ins.error_model import DPOS, DV
 from ..geometry.doppler import doppler_jacobian
 from . import kalman
-from .common import (GATE_PROBABILITY, N_INS, Corrections, FeedbackIns, SatelliteStates, Track, epochs,
-                     initial_covariance, pos_jacobian)
+from .common import (GATE_PROBABILITY, N_INS, RX_OFFSET_PSD_HZ2_PER_S, RX_OFFSET_SIGMA_HZ, Corrections,
+                     FeedbackIns, SatelliteStates, Track, epochs, initial_covariance, pos_jacobian)
 
 __all__ = ["DopplerPriors", "DopplerMeasurements", "run"]
 
@@ -61,8 +61,8 @@ class DopplerPriors:
     sat_offset_mean_hz: float | np.ndarray
     sat_offset_sigma_hz: float | np.ndarray
     orbit_sigma_m: float
-    rx_offset_sigma_hz: float = 10.0
-    rx_offset_psd_hz2_per_s: float = 1e-6
+    rx_offset_sigma_hz: float = RX_OFFSET_SIGMA_HZ
+    rx_offset_psd_hz2_per_s: float = RX_OFFSET_PSD_HZ2_PER_S
     orbit_model: str = "independent"
     n_clocks: int = 1
 
