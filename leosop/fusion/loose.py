@@ -23,8 +23,8 @@ included them.
 What a fix hands the filter. The 6 position and velocity values alone
 discard what the fix's residuals show of each satellite's constant errors,
 and re-estimating the receiver offsets at every fix discards that they are
-constant; in a mixed sky (13-14 satellites, 2 clocks) that lost all the gain
-of the mix. So each update takes the fix with its receiver offsets (one
+constant; in a mixed sky (9-17 satellites, 2-4 clocks) that lost all the
+gain of the mix. So each update takes the fix with its receiver offsets (one
 near-constant state per clock, as the tight filter has) and its residuals
 in the space orthogonal to the fix's states (:func:`_fix_measurement`): to
 first order what the epoch's Doppler hold. The filter stays loose in what it
@@ -63,7 +63,8 @@ from . import kalman
 from .common import (GATE_PROBABILITY, N_INS, RX_OFFSET_PSD_HZ2_PER_S, RX_OFFSET_SIGMA_HZ, Corrections,
                      FeedbackIns, SatelliteStates, Track, epochs, initial_covariance, pos_jacobian)
 
-__all__ = ["FixErrorModel", "PAIR_FIELDS", "checkable_fixes", "measurement", "run", "MIN_REDUNDANCY", "MAX_GDOP_UNCHECKED", "REOPEN_AFTER"]
+__all__ = ["FixErrorModel", "PAIR_FIELDS", "checkable_fixes", "measurement", "run", "MIN_REDUNDANCY",
+           "MAX_GDOP_UNCHECKED", "REOPEN_AFTER"]
 
 #: Fewest measurements beyond the fix's states for the filter to use it (see :func:`checkable_fixes`).
 MIN_REDUNDANCY = 1
