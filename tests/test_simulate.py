@@ -18,15 +18,19 @@ from leosop.positioning.snapshot import solve_snapshots
 from leosop.scenarios import XIAN_BAOJI
 
 
-def test_fix_error_is_the_gain_times_the_satellite_errors():
-    # Independent reference: the nonlinear least-squares fix itself. Noise-free
-    # Doppler with per-satellite offsets (uniform 0-5 Hz) and orbit errors
-    # (30 m per axis) along the first 40 s of the xian-baoji flight: the fix
-    # error must equal sum_j G_j (o_j + h_j . dr_j) from _fix_error_model.
-    # Two constellations (Starlink and OneWeb of the bundled sky, 35 deg mask):
-    # two carriers, two receiver clocks (5 and -40 Hz), 8 states per fix.
-    # Orbcomm is asked for too and never rises: the fixes' clocks are those of
-    # the groups present (0 and 2), which the gains must follow.
+#: Receiver offsets of the case below by family (Starlink, Orbcomm, OneWeb) [Hz]; Orbcomm never rises.
+RX_HZ = np.array([5.0, 0.0, -40.0])
+
+
+def _noise_free_mixed_fixes():
+    """Snapshot fixes of noise-free Doppler with satellite offsets and orbit errors, and their FixErrorModel.
+
+    The first 40 s of the xian-baoji flight; Starlink and OneWeb of the bundled
+    sky above a 35 deg mask: two carriers, two receiver clocks (:data:`RX_HZ`),
+    8 states per fix. Orbcomm is asked for too and never rises: the fixes'
+    clocks are those of the groups present (0 and 2), which the gains must
+    follow. Offsets uniform 0-5 Hz, orbit errors 30 m per axis.
+    """
     truth = trajectory.flight(np.asarray(XIAN_BAOJI.waypoints), speed_mps=200.0, rate_hz=100.0,
                               duration_s=40.0).resample(1.0)
     times = XIAN_BAOJI.start_utc + (truth.t_s * 1e9).astype("timedelta64[ns]")
@@ -43,7 +47,7 @@ def test_fix_error_is_the_gain_times_the_satellite_errors():
     orbit_m = 30.0 * rng.standard_normal((len(constellation), 3))
     ep, sat = vis.epoch_index, vis.sat_index
     doppler = (-frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, truth.pos_ecef_m[ep], vel_rx[ep]) * f0
-               / C_MPS + offset_hz[sat] + np.array([5.0, 0.0, -40.0])[fam])
+               / C_MPS + offset_hz[sat] + RX_HZ[fam])
     pos_known = vis.pos_sv_ecef_m + orbit_m[sat]
     h = doppler_jacobian(pos_known[:, None], vis.vel_sv_ecef_mps[:, None], truth.pos_ecef_m[ep], vel_rx[ep],
                          f0[:, None])
@@ -53,17 +57,24 @@ def test_fix_error_is_the_gain_times_the_satellite_errors():
                             vis.padded(vis.vel_sv_ecef_mps), vis.padded(f0), x0=x0,
                             clock_group=np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
     good = fixes.status == FixStatus.OK
+    assert good.sum() >= 35
     assert (vis.n_visible_by_group(family_sat)[good][:, [0, 2]] > 0).all()  # both constellations in every fix
     model = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
                                       np.full(len(constellation), 5.0), 30.0, "independent")
+    return truth, vel_rx, fixes, good, model, offset_hz, orbit_m
+
+
+def test_fix_error_is_the_gain_times_the_satellite_errors():
+    # Independent reference: the nonlinear least-squares fix itself. The fix
+    # error must equal sum_j G_j (o_j + h_j . dr_j) from _fix_error_model,
+    # clocks included, and the residuals what the fix leaves of those errors.
+    truth, vel_rx, fixes, good, model, offset_hz, orbit_m = _noise_free_mixed_fixes()
     assert model.gain_ecef.shape[1] == 6 + 2 and model.n_clocks == 2
     e_dopp = offset_hz[model.sat_index] + np.sum(model.orbit_hz_per_m * orbit_m[model.sat_index], axis=-1)
-    predicted = np.zeros((vis.n_visible.size, 8))
+    predicted = np.zeros((good.size, 8))
     np.add.at(predicted, model.epoch_index, model.gain_ecef * e_dopp[:, None])
-    rx_hz = np.array([5.0, -40.0])  # the clocks present, Starlink's and OneWeb's
     actual = np.concatenate([fixes.pos_ecef_m - truth.pos_ecef_m, fixes.vel_ecef_mps - vel_rx,
-                             fixes.clock_offsets_hz - rx_hz], axis=-1)
-    assert good.sum() >= 35
+                             fixes.clock_offsets_hz - RX_HZ[[0, 2]]], axis=-1)
     # The errors are tens to hundreds of metres; what the first-order model leaves
     # out is of relative size |error| / range (1e-4 at 700 km), amplified by the
     # geometry (0.2-0.3 % measured here): 1 % of the largest error plus 0.1 m
@@ -89,35 +100,7 @@ def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
     # at the truth and the filter's states at the true receiver offsets and
     # satellite errors, the measurement is H x to first order (noise-free
     # Doppler), which checks every sign of H on the clock and satellite columns.
-    truth = trajectory.flight(np.asarray(XIAN_BAOJI.waypoints), speed_mps=200.0, rate_hz=100.0,
-                              duration_s=20.0).resample(1.0)
-    times = XIAN_BAOJI.start_utc + (truth.t_s * 1e9).astype("timedelta64[ns]")
-    C_e_n = frames.C_e_n(truth.lat_rad, truth.lon_rad)
-    vel_rx = np.einsum("kij,kj->ki", C_e_n, truth.vel_enu_mps)
-    constellation, family_sat = simulate._constellation(("starlink", "oneweb"), None)
-    vis = compute_visibility(constellation, times, truth.pos_ecef_m, 35.0, vel_rx_ecef_mps=vel_rx,
-                             show_progress=False)
-    fam = family_sat[vis.sat_index]
-    f0 = np.array([CARRIERS[f].default_hz for f in ("starlink", "oneweb")])[fam]
-    rng = np.random.default_rng(5)
-    offset_hz = rng.uniform(0.0, 5.0, len(constellation))
-    orbit_m = 30.0 * rng.standard_normal((len(constellation), 3))
-    rx_hz = np.array([5.0, -12.0])
-    ep, sat = vis.epoch_index, vis.sat_index
-    doppler = (-frames.range_rate(vis.pos_sv_ecef_m, vis.vel_sv_ecef_mps, truth.pos_ecef_m[ep], vel_rx[ep]) * f0
-               / C_MPS + offset_hz[sat] + rx_hz[fam])
-    pos_known = vis.pos_sv_ecef_m + orbit_m[sat]
-    h = doppler_jacobian(pos_known[:, None], vis.vel_sv_ecef_mps[:, None], truth.pos_ecef_m[ep], vel_rx[ep],
-                         f0[:, None])
-    sigma = np.sqrt(0.05**2 + 25.0 / 12.0 + (np.linalg.norm(h[:, 0, :3], axis=-1) * 30.0) ** 2)
-    x0 = np.concatenate([truth.pos_ecef_m + 50.0, vel_rx, np.zeros((vel_rx.shape[0], 1))], axis=-1)
-    fixes = solve_snapshots(vis.padded(doppler), vis.padded(sigma), vis.padded(pos_known),
-                            vis.padded(vis.vel_sv_ecef_mps), vis.padded(f0), x0=x0,
-                            clock_group=np.nan_to_num(vis.padded(fam.astype(float))).astype(int))
-    good = fixes.status == FixStatus.OK
-    assert good.sum() >= 18
-    model = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
-                                      np.full(len(constellation), 5.0), 30.0, "independent")
+    truth, _, fixes, good, model, offset_hz, orbit_m = _noise_free_mixed_fixes()
     n_states = loose.N_INS + 2
     sats = common.SatelliteStates(n_states, "independent", 0.0, 1.0, 30.0)
     bounds = np.searchsorted(model.epoch_index, np.arange(good.size + 1))
@@ -126,7 +109,7 @@ def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
         rows = np.arange(bounds[k], bounds[k + 1])
         x_true, P = sats.see(np.zeros(n_states), np.eye(n_states), model.sat_index[rows], float(k))
         n_states = x_true.size
-        x_true[loose.N_INS:loose.N_INS + 2] = rx_hz
+        x_true[loose.N_INS:loose.N_INS + 2] = RX_HZ[[0, 2]]
         for j in sats.ids:
             c_off, c_orbit = sats.columns(j)
             x_true[c_off], x_true[c_orbit] = offset_hz[j], orbit_m[j]
@@ -144,7 +127,7 @@ def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
         floor = np.r_[np.full(3, 1e-3), np.full(3, 0.1), np.full(2, 0.01), np.full(n_res, 0.01)]
         assert np.all(np.abs(z - H @ x_true) <= 0.01 * scale + floor), k
         checked += 1
-    assert checked >= 18
+    assert checked >= 35
 
 
 def test_imu_made_in_blocks_gives_the_same_run_as_one_block(monkeypatch):
