@@ -33,22 +33,28 @@ Two safeguards for real passes (DopTrack, design note):
   residuals on their columns) has covariance ``F`` (their information with
   the states eliminated) when there are none, so ``T = g^T F^+ g`` is
   chi-square with ``rank F`` dof (Rao's score test; it needs no solve with
-  the offsets). Where ``T`` is more than 3 standard deviations above its
-  dof, the offsets are taken as ``N(0, s^2 I)``: ``s^2`` is the fixed
-  point of Foerstner's variance-component iteration (``E[z_i^2] = lam_i +
-  lam_i^2 s^2`` in F's eigenbasis; the moment estimate weighted by
-  ``lam_i^2`` underestimates it: position NEES 16 instead of 6 in the
-  simulated test), capped at :data:`PASS_OFFSET_MAX_M`, and the covariance of the fix (unchanged) gets
-  the sandwich term ``N^-1 G (s^2 I) G^T N^-1`` (``G`` the offsets' cross
-  information with the states). Consistent passes leave the covariance
-  unchanged, bit for bit. DopTrack per-day fixes (2-4 passes, weak
-  geometry): 1 km per-pass offsets move the fix by ~3.5 km.
+  the offsets). Two random effects explain an excess: the offsets
+  ``~ N(0, s^2 I)`` and a factor ``k2`` on the white sigmas (an error slow
+  enough to pass for each pass's own terms, which the residuals'
+  correlation time underrates); in F's eigenbasis ``E[z_i^2] = k2 lam_i +
+  lam_i^2 s^2``. Both are fitted by maximum likelihood (:func:`_pass_disagreement`;
+  ``k2 >= 1``, ``s`` capped at :data:`PASS_OFFSET_MAX_M`) and the
+  covariance of the fix (unchanged) becomes ``k2 N^-1 + s^2 N^-1 G G^T
+  N^-1`` (``G`` the offsets' cross information with the states). Passes
+  whose disagreement is likeliest without either leave the covariance
+  unchanged, bit for bit. Simulated per-pass offsets of 30 m are found as
+  such (``s`` 29 m, ``k2`` 1, position NEES 5.9 on 3 dof); on DopTrack the
+  disagreement is a factor (all 98 passes: ``k2`` 4.7, ``s`` 0), which fits
+  it better than offsets alone (those would have to be 3 km cross-track, 8
+  km on low passes, for 1-2 day old element sets) and leaves each day's fix
+  within 3 sigma (tools/doptrack_err_sigma.py).
 """
 
 from dataclasses import dataclass
 from math import comb
 
 import numpy as np
+from scipy import optimize
 
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
@@ -151,12 +157,15 @@ class PassesFix(BatchFit):
     pass_offset_sigma_m : float or None
         Standard deviation of each pass's radial and cross-track satellite
         offset estimated from the passes' disagreement (module docstring) and
-        included in ``cov``; 0 when the test finds none; None with
+        included in ``cov``; 0 when the disagreement needs none; None with
         ``pass_offsets=False``.
     pass_offset_chi2 : float or None
-        The test's statistic, chi-square with ``pass_offset_dof`` degrees of
-        freedom when the passes have no such offsets.
+        The disagreement test's statistic, chi-square with ``pass_offset_dof``
+        degrees of freedom when the passes agree.
     pass_offset_dof : int or None
+    pass_variance_factor : float or None
+        Factor (>= 1) on the covariance that the disagreement implies beside
+        the offsets; 1 when none; None with ``pass_offsets=False``.
     """
 
     pos_ecef_m: np.ndarray
@@ -176,6 +185,7 @@ class PassesFix(BatchFit):
     pass_offset_sigma_m: float = None
     pass_offset_chi2: float = None
     pass_offset_dof: int = None
+    pass_variance_factor: float = None
 
     @property
     def clock_offset_hz(self):
@@ -301,37 +311,53 @@ def _offset_blocks(pos_sv_ecef_m, vel_sv_ecef_mps, pos_ecef_m, carrier_hz, w, D,
     return G.reshape(-1, 2 * n_pass), M.reshape(2 * n_pass, 2 * n_pass), g.ravel()
 
 
-def _pass_offset_variance(F, g, max_iter=200):
-    """Score test for the pass offsets and, if significant, their variance component [m].
+def _pass_disagreement(F, g):
+    """Score test of the passes' disagreement and its two variance components.
 
-    ``F`` is the offsets' information with the fix's states eliminated (the
-    covariance of their score ``g`` at the fix when there are none): the
-    statistic ``T = g^T F^+ g`` is then chi-square with ``rank F`` degrees of
-    freedom. Significant (``T`` more than :data:`_TAU_SIGNIFICANCE` standard
-    deviations above its dof): offsets ``~ N(0, s^2 I)`` make ``E[z_i^2] =
-    lam_i + lam_i^2 s^2`` in F's eigenbasis (``z = V^T g``), and ``s^2`` is the
-    fixed point of Foerstner's variance-component iteration
-    ``s^2 <- |b|^2 / (redundancy)``, ``b`` the offsets' posterior mean with
-    prior ``s^2``, started from the ``lam^2``-weighted moment estimate and
-    capped at :data:`PASS_OFFSET_MAX_M` (weakly observed directions can drive
-    it to tens of km on a few passes). Returns ``(s, T, dof)``, ``s = 0`` when
-    not significant.
+    ``F`` is the pass offsets' information with the fix's states eliminated
+    (the covariance of their score ``g`` at the fix when the passes agree):
+    ``T = g^T F^+ g`` is then chi-square with ``rank F`` degrees of freedom.
+    In F's eigenbasis (``z = V^T g``) two departures make ``E[z_i^2] = k2 lam_i
+    + s^2 lam_i^2``: white sigmas too small by a factor ``k2`` (an error slow
+    enough to pass for each pass's own terms: its variance shows in every
+    direction alike) and per-pass radial and cross-track satellite offsets
+    ``~ N(0, s^2 I)`` (weighted by ``lam_i`` once more: they show most where
+    the passes see them best). Both are fitted by maximum likelihood, ``z``
+    Gaussian, with ``k2 >= 1`` (a sigma is never lowered, as the Particle Data
+    Group's scale factor) and ``0 <= s <= PASS_OFFSET_MAX_M``: on a grid, then
+    refined. Returns ``(k2, s, T, dof)``; ``(1, 0, T, dof)`` when the passes
+    agree (their likelihood is largest without either).
     """
     lam, V = np.linalg.eigh(0.5 * (F + F.T))
     keep = lam > 1e-9 * max(lam[-1], 0.0) if lam.size and lam[-1] > 0 else np.zeros(lam.size, bool)
     lam, z2 = lam[keep], (V[:, keep].T @ g) ** 2
     dof = int(keep.sum())
-    T = float(np.sum(z2 / lam)) if dof else 0.0
-    if not dof or T <= dof + _TAU_SIGNIFICANCE * np.sqrt(2.0 * dof):
-        return 0.0, T, dof
-    s2 = max(float(np.sum(z2 - lam) / np.sum(lam**2)), (1e-3 * PASS_OFFSET_MAX_M) ** 2)
-    for _ in range(max_iter):
-        new = float(np.sum(z2 * s2**2 / (1.0 + lam * s2) ** 2) / np.sum(lam * s2 / (1.0 + lam * s2)))
-        done = abs(new - s2) <= 1e-6 * s2 or new > 4.0 * PASS_OFFSET_MAX_M**2
-        s2 = new
-        if done:
-            break
-    return min(float(np.sqrt(s2)), PASS_OFFSET_MAX_M), T, dof
+    if not dof:
+        return 1.0, 0.0, 0.0, 0
+    T = float(np.sum(z2 / lam))
+
+    def nll(k2, s):
+        v = np.multiply.outer(k2, lam) + np.multiply.outer(s**2, lam**2)
+        return 0.5 * np.sum(np.log(v) + z2 / v, axis=-1)
+
+    k2_grid = np.concatenate([[1.0], np.logspace(0.0, 4.0, 161)[1:]])
+    s_grid = np.concatenate([[0.0], np.logspace(-1.0, np.log10(PASS_OFFSET_MAX_M), 81)])
+    cost = nll(k2_grid[:, None], s_grid[None, :])
+    i, j = np.unravel_index(np.argmin(cost), cost.shape)
+    if i == 0 and j == 0:
+        return 1.0, 0.0, T, dof
+    start = [np.log(k2_grid[i]), s_grid[j] / PASS_OFFSET_MAX_M]
+    res = optimize.minimize(lambda p: nll(*_disagreement_params(p)), start, method="Nelder-Mead",
+                            options={"xatol": 1e-4, "fatol": 1e-9})
+    k2, s_m = _disagreement_params(res.x)
+    if nll(k2, s_m) > cost[i, j]:
+        k2, s_m = k2_grid[i], s_grid[j]
+    return float(k2), float(s_m), T, dof
+
+
+def _disagreement_params(p):
+    """``(k2, s)`` of :func:`_pass_disagreement` from its search variables ``(log k2, s / cap)``, inside the bounds."""
+    return np.exp(max(p[0], 0.0)), min(max(p[1], 0.0), 1.0) * PASS_OFFSET_MAX_M
 
 
 def _sees(pos_ecef_m, pos_sv_ecef_m, used):
@@ -628,15 +654,15 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         np.concatenate([1.0 / half_span_s[:, None] ** np.arange(deg + 1), np.ones((n_pass, tb))], -1)
     scale = np.concatenate([np.ones(3), scale_glob, scale_loc.ravel()])
     N_inv = _inverse_or_nan(N) if ok else np.full((n_states, n_states), np.nan)
-    offset_sigma_m, offset_chi2, offset_dof = (0.0, 0.0, 0) if pass_offsets else (None, None, None)
+    variance_factor, offset_sigma_m, offset_chi2, offset_dof = (1.0, 0.0, 0.0, 0) if pass_offsets else (None,) * 4
     if pass_offsets and n_pass and np.isfinite(N_inv).all():
         # Each pass's satellite offset (radial, cross-track) as a random effect the fix does not estimate:
         # its score test, variance component and sandwich term on the covariance (module docstring).
         G, M_b, g_b = _offset_blocks(r_s, v_s, x[0], f0, wd, D, B_glob, A, seg, res[0, :n])
-        offset_sigma_m, offset_chi2, offset_dof = _pass_offset_variance(M_b - G.T @ N_inv @ G, g_b)
-        if offset_sigma_m > 0:
+        variance_factor, offset_sigma_m, offset_chi2, offset_dof = _pass_disagreement(M_b - G.T @ N_inv @ G, g_b)
+        if variance_factor > 1.0 or offset_sigma_m > 0.0:
             NG = N_inv @ G
-            N_inv = N_inv + offset_sigma_m**2 * (NG @ NG.T)
+            N_inv = variance_factor * N_inv + offset_sigma_m**2 * (NG @ NG.T)
     cov = N_inv * scale[:, None] * scale[None, :]
     # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
     loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
@@ -676,5 +702,5 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         clock_labels=tuple(clock_labels.tolist()) if common and clock_group is not None else (),
         pass_clock=pass_clk.copy() if common else None, tau=tau if decorrelate else None,
         sigma_scale=sigma_scale if decorrelate else None, pass_offset_sigma_m=offset_sigma_m,
-        pass_offset_chi2=offset_chi2, pass_offset_dof=offset_dof,
+        pass_offset_chi2=offset_chi2, pass_offset_dof=offset_dof, pass_variance_factor=variance_factor,
     )
