@@ -56,6 +56,11 @@ class FilterSettings:
     step_s: float = 1.0
     gate: bool = True
 
+    @property
+    def noise_psd(self):
+        """Power spectral densities of ``[w_gyro_b, w_accel_b]``, (6,): the ``Qc`` of :mod:`leosop.ins.error_model`."""
+        return np.r_[np.full(3, self.gyro_arw_rad_per_rt_s**2), np.full(3, self.accel_vrw_mps2_per_rt_hz**2)]
+
 
 @dataclasses.dataclass(frozen=True)
 class FusionResult(NavTrack):
@@ -79,8 +84,9 @@ class FusionResult(NavTrack):
     gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
         Accumulated bias estimates.
     innovation, innovation_cov : ndarray, (n, 6), (n, 6, 6), or None
-        Loose coupling: ``z - H x`` (velocity [m/s], position [m] ENU) and
-        ``S`` at updates, NaN elsewhere; None for tight coupling.
+        Loose coupling: ``z - H x`` and ``S`` of each update's fix rows
+        (velocity [m/s], position [m] ENU; the offset and residual rows are
+        in ``nis``), NaN elsewhere; None for tight coupling.
     doppler_innovation : structured ndarray or None
         Tight coupling: one row per Doppler used, fields ``epoch``, ``sat``
         and ``normalized`` (innovation over the square root of its variance
@@ -185,8 +191,7 @@ class FeedbackIns:
             raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
         self.dtheta_b_rad, self.dvel_b_mps, self.dt_s, self.step_s = dtheta_b_rad, dvel_b_mps, dt_s, settings.step_s
         self.n_epochs = dtheta_b_rad.shape[0] // self.per_step + 1
-        self.Qc = np.concatenate([np.full(3, settings.gyro_arw_rad_per_rt_s**2),
-                                  np.full(3, settings.accel_vrw_mps2_per_rt_hz**2)])
+        self.Qc = settings.noise_psd
         self.state = state0
         self.gyro_bias_rad_per_s = np.zeros(3)
         self.accel_bias_mps2 = np.zeros(3)

@@ -205,15 +205,21 @@ def measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, cov_fix_pv_ecef):
     H : ndarray, (6, 15)
     R : ndarray, (6, 6)
     """
+    z, H, T = _ins_minus_fix(state, pos_fix_ecef_m, vel_fix_ecef_mps)
+    return z, H, T @ np.asarray(cov_fix_pv_ecef) @ T.T
+
+
+def _ins_minus_fix(state, pos_fix_ecef_m, vel_fix_ecef_mps):
+    """``z`` and ``H`` of :func:`measurement`, and ``T`` (:func:`_enu_from_ecef_pv`) at the INS position."""
     lat, lon, alt = state.lat_rad, state.lon_rad, state.alt_m
-    C_n_e = frames.C_e_n(lat, lon).T
+    T = _enu_from_ecef_pv(lat, lon)
+    C_n_e = T[0:3, 3:6]
     pos_ins = frames.geodetic_to_ecef(lat, lon, alt)
     z = np.concatenate([state.vel_enu_mps - C_n_e @ vel_fix_ecef_mps, C_n_e @ (pos_ins - pos_fix_ecef_m)])
     H = np.zeros((6, 15))
     H[0:3, DV] = np.eye(3)
     H[3:6, DPOS] = pos_jacobian(lat, alt)
-    T = _enu_from_ecef_pv(lat, lon)
-    return z, H, T @ np.asarray(cov_fix_pv_ecef) @ T.T
+    return z, H, T
 
 
 def _fix_measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, k, sats, model, rows, n_states):
@@ -239,14 +245,14 @@ def _fix_measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, k, sats, model, ro
     H : ndarray, (6 + c + r, n_states)
     R : ndarray, (6 + c + r, 6 + c + r)
     """
-    z_fix, H_fix, _ = measurement(state, pos_fix_ecef_m, vel_fix_ecef_mps, np.zeros((6, 6)))
+    z_fix, H_fix, T = _ins_minus_fix(state, pos_fix_ecef_m, vel_fix_ecef_mps)
     clk = np.flatnonzero(np.isfinite(model.fix_clock_hz[k]))
     w = model.weight_sqrt[rows]
     A = w[:, None] * np.hstack([model.jacobian_pv[rows], model.clock_index[rows, None] == clk])
     U, sv, _ = np.linalg.svd(A)
     Q = U[:, int(np.sum(sv > sv[0] * 1e-9)):]
     G = model.gain_ecef[rows]
-    B = np.vstack([-_enu_from_ecef_pv(state.lat_rad, state.lon_rad) @ G[:, :6].T, -G[:, 6 + clk].T, Q.T * w])
+    B = np.vstack([-T @ G[:, :6].T, -G[:, 6 + clk].T, Q.T * w])
     z = np.concatenate([z_fix, -model.fix_clock_hz[k, clk], Q.T @ (w * model.residual_hz[rows])])
     H = np.zeros((z.size, n_states))
     H[:6, :N_INS] = H_fix

@@ -159,8 +159,7 @@ def outage_budget(res, grade, duration_s, k0, k1):
     f_n = np.stack([np.einsum("kij,kj->i", traj.C_n_b[i:i + per], traj.dvel_b_mps[i:i + per]) for i in i0])
     F, G = error_model.model15(traj.C_n_b[i0], f_n / settings.step_s, traj.vel_enu_mps[i0], traj.lat_rad[i0],
                                traj.alt_m[i0])
-    Qc = np.r_[np.full(3, settings.gyro_arw_rad_per_rt_s**2), np.full(3, settings.accel_vrw_mps2_per_rt_hz**2)]
-    out = error_model.position_budget(F, G, Qc, settings.step_s, res.cov_ins[k0], BUDGET_GROUPS)
+    out = error_model.position_budget(F, G, settings.noise_psd, settings.step_s, res.cov_ins[k0], BUDGET_GROUPS)
     J = pos_jacobian(traj.lat_rad[k1 * per], traj.alt_m[k1 * per])
     doc = {k: np.sqrt(np.diag(J @ c @ J.T)) for k, c in out.items()}
     doc["filter sigma"] = np.sqrt(np.diag(res.cov_pos_enu_m2[k1]))
