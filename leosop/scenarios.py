@@ -14,12 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .datadir import is_data_ref, resolve_data_ref
 from .errors import InputError
 from .orbits import CARRIERS
 from .timebase import format_utc, parse_utc
 
 __all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN", "load_scenario",
-           "scenario_from_dict", "to_dict", "bundled_names", "BUNDLED_DIR", "family_masks_deg", "mask_label"]
+           "scenario_from_dict", "to_dict", "bundled_names", "BUNDLED_DIR", "family_masks_deg", "mask_label",
+           "scenario_tle"]
 
 
 @dataclass(frozen=True)
@@ -108,9 +110,11 @@ class Scenario:
     leo : LeoSpec
     init_error : InitError
     tle : str or None
-        Element-set file of the scenario (an absolute path, or resolved
-        against the scenario file's folder); None: the bundled sky. The
-        ``--tle`` option overrides it.
+        Element-set file of the scenario: an absolute path (a relative one
+        in a file is resolved against the file's folder), or a file of the
+        data folder, ``$LEOSOP_DATA/<path>`` (:mod:`leosop.datadir`, resolved
+        when the run needs it by :func:`scenario_tle`); None: the bundled
+        sky. The ``--tle`` option overrides it.
     """
 
     name: str
@@ -367,7 +371,8 @@ def load_scenario(name_or_path):
     Returns
     -------
     Scenario
-        Its ``tle``, when given, resolved against the file's folder.
+        Its ``tle``, when a relative path, resolved against the file's
+        folder; a ``$LEOSOP_DATA/...`` reference is kept (:func:`scenario_tle`).
     """
     key = str(name_or_path)
     if key in BUILTIN:
@@ -392,6 +397,27 @@ def load_scenario(name_or_path):
     scenario = scenario_from_dict(doc, source=str(path))
     if "name" not in doc:
         scenario = replace(scenario, name=path.stem)
-    if scenario.tle is not None:
+    if scenario.tle is not None and not is_data_ref(scenario.tle):
         scenario = replace(scenario, tle=str((path.parent / scenario.tle).resolve()))
     return scenario
+
+
+def scenario_tle(scenario, data_dir=None):
+    """The element-set file a run of ``scenario`` reads: a path, or None for the bundled sky.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    data_dir : path-like, optional
+        The data folder (``--data``) for a ``$LEOSOP_DATA/...`` ``tle``;
+        default the environment variable.
+
+    Raises
+    ------
+    InputError
+        The scenario's file is in the data folder and the folder is not
+        given or lacks it (:func:`leosop.datadir.resolve_data_ref`).
+    """
+    if not is_data_ref(scenario.tle):
+        return scenario.tle
+    return str(resolve_data_ref(scenario.tle, data_dir=data_dir, needed_by=f"scenario {scenario.name}"))

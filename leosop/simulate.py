@@ -65,7 +65,7 @@ from .orbits import CARRIERS, Constellation, load_constellation
 from .orbits.visibility import compute_visibility
 from .positioning.robust_ls import FixStatus
 from .positioning.snapshot import solve_snapshots
-from .scenarios import family_masks_deg, mask_label
+from .scenarios import family_masks_deg, mask_label, scenario_tle
 from .signal.doppler import estimate_block
 from .signal.error_model import doppler_sigma_hz
 from .signal.pilot import PilotComb, add_noise, comb_baseband
@@ -553,7 +553,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         Default the scenario's (``leo.orbit_error_model``).
     seed : int
     tle : path, optional
-        Element-set file; default the bundled constellation.
+        Element-set file; default the scenario's (:func:`leosop.scenarios.scenario_tle`:
+        a file of the data folder from ``$LEOSOP_DATA``), else the bundled constellation.
     coupling : {"loose", "tight"}
         Loose: the EKF on the snapshot fixes; tight: on each Doppler.
     progress : callable, optional
@@ -571,7 +572,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         raise InputError(f"orbit error model {orbit_error_model!r}: expected one of {', '.join(common.ORBIT_MODELS)}")
     rng_imu, rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
 
-    constellation, family_sat = _constellation(scenario.leo.constellations, tle if tle is not None else scenario.tle)
+    tle = tle if tle is not None else scenario_tle(scenario)
+    constellation, family_sat = _constellation(scenario.leo.constellations, tle)
     tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / 86_400.0)
     if tle_age_days > STALE_TLE_DAYS:
         warnings.warn(f"scenario start {format_utc(scenario.start_utc)} is {tle_age_days:.0f} days from the "

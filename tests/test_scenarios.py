@@ -127,7 +127,7 @@ def test_bundled_scenarios_load_by_name_and_resolve_their_tle():
 
     assert {"xian-baoji", "xian-baoji-multi", "high-latitude", "urban-canyon", "outage"} <= set(bundled_names())
     s = load_scenario("high-latitude")
-    assert s.tle.endswith("shared/data/tle/active_3le_2021-08-06_atqlong.txt") and s.mask_deg == 25.0
+    assert s.tle == "$LEOSOP_DATA/tle/active_3le_2021-08-06_atqlong.txt" and s.mask_deg == 25.0
     assert load_scenario("urban-canyon").mask_deg == 60.0
     assert load_scenario("outage").leo.outage_s == (300.0, 480.0)
 

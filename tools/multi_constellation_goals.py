@@ -6,7 +6,7 @@ Starlink alone (leosop.repro.multi.run_case; Dask-parallel through
 leosop.studies), and prints
 
 - high latitude (68 N, 25 deg mask, real 2021-08-06 snapshot; skipped when
-  the shared file is absent): fused mean errors, availability, INS alone
+  the data folder, $LEOSOP_DATA, lacks it): fused mean errors, availability, INS alone
   (goals: tight <= 10 m and <= 0.05 m/s, availability 1.0, INS ~1 km);
 - the default flight with all four families against Starlink alone;
 - the outage (3 satellites from 300 to 480 s): mean and final error over the
@@ -17,7 +17,7 @@ leosop.studies), and prints
   dimension (goal 0.5-2), NIS per degree of freedom with its 99 % interval,
   lag-1 correlation of the whitened innovations with its null 3-sigma bound.
 
-Usage: OPENBLAS_NUM_THREADS=1 python tools/multi_constellation_goals.py [--seeds 20] [--scheduler serial]
+Usage: LEOSOP_DATA=../shared/data OPENBLAS_NUM_THREADS=1 python tools/multi_constellation_goals.py [--seeds 20] [--scheduler serial]
        [--only high-latitude xian-baoji-multi outage urban-canyon]
 """
 
@@ -27,6 +27,7 @@ import numpy as np
 from scipy import stats
 
 from leosop.repro.multi import available, run_case
+from leosop.scenarios import load_scenario, scenario_tle
 from leosop.studies import map_chunks
 
 COUPLINGS = ("loose", "tight")
@@ -35,11 +36,12 @@ NAMES = ("high-latitude", "xian-baoji-multi", "outage", "urban-canyon")
 
 def _cases(names, seeds):
     chunks = []
+    tle = {name: scenario_tle(load_scenario(name)) for name in names}
     for name in names:
         for sky in ("all", "starlink") if name == "xian-baoji-multi" else ("all",):
-            chunks += [(name, sky, c, s, True) for c in COUPLINGS for s in seeds]
+            chunks += [(name, sky, c, s, True, tle[name]) for c in COUPLINGS for s in seeds]
     if "outage" in names:
-        chunks += [("outage", "all", c, s, False) for c in COUPLINGS for s in seeds]
+        chunks += [("outage", "all", c, s, False, tle["outage"]) for c in COUPLINGS for s in seeds]
     return chunks
 
 
@@ -72,7 +74,7 @@ def main():
         print(f"high-latitude: skipped ({missing})")
         names.remove("high-latitude")
     chunks = _cases(names, seeds)
-    res = dict(zip(chunks, map_chunks(run_case, chunks, scheduler=args.scheduler, desc="runs")))
+    res = {ch[:5]: r for ch, r in zip(chunks, map_chunks(run_case, chunks, scheduler=args.scheduler, desc="runs"))}
 
     def runs(name, sky, coupling, outage=True):
         return [res[(name, sky, coupling, s, outage)] for s in seeds]

@@ -4,7 +4,8 @@ import sys
 import warnings
 
 from ..fileio import atomic_outputs, write_csv, write_json
-from ..scenarios import load_scenario
+from ..datadir import ENV_VAR
+from ..scenarios import load_scenario, scenario_tle
 from ..simulate import COUPLINGS, LEVELS, fusion_label, metrics, run_scenario, solution_table
 from . import add_command
 
@@ -18,6 +19,9 @@ def register(subparsers):
                         "urban-canyon, outage) or a scenario JSON file (default xian-baoji)")
     p.add_argument("--tle", metavar="FILE",
                    help="TLE or OMM file (default: the scenario's, else the bundled sky)")
+    p.add_argument("--data", metavar="DIR",
+                   help=f"data folder of the real data sets a scenario names as ${ENV_VAR}/... (high-latitude: "
+                        f"tle/active_3le_2021-08-06_atqlong.txt; default: ${ENV_VAR})")
     p.add_argument("--correction-period-s", type=float, default=1.0, metavar="P",
                    help="seconds between EKF corrections of the INS (default 1)")
     p.add_argument("--orbit-error-m", type=float, metavar="E",
@@ -30,12 +34,13 @@ def register(subparsers):
 
 def run(args):
     scenario = load_scenario(args.scenario)
+    tle = args.tle if args.tle is not None else scenario_tle(scenario, args.data)
     from ..progress import progress
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = run_scenario(scenario, level=args.level, correction_period_s=args.correction_period_s,
-                              orbit_error_m=args.orbit_error_m, seed=args.seed, tle=args.tle,
+                              orbit_error_m=args.orbit_error_m, seed=args.seed, tle=tle,
                               coupling=args.coupling, progress=progress)
     for w in caught:
         print(f"leosop simulate: warning: {w.message}", file=sys.stderr)

@@ -13,16 +13,18 @@ the same seeds (a seed gives the same IMU errors in every column):
   from 300 to 480 s; its ``outage`` columns are the mean errors over that
   window, beside the same window of the open-sky run.
 
-The high-latitude row needs the shared snapshot its scenario names; when the
-file is absent the row says so and is skipped (nothing is substituted).
+The high-latitude row needs the real snapshot its scenario names in the data
+folder (``$LEOSOP_DATA``, :mod:`leosop.datadir`); without it the row says why
+and is skipped, with a warning (nothing is substituted).
 """
 
 import dataclasses
-from pathlib import Path
+import warnings
 
 import numpy as np
 
-from ..scenarios import load_scenario
+from ..errors import InputError
+from ..scenarios import load_scenario, scenario_tle
 from ..simulate import metrics, run_scenario
 from ..studies import map_chunks
 
@@ -48,7 +50,9 @@ def _scenario(name, sky, outage=True):
 
 
 def run_case(chunk, rng=None):
-    """One run: ``chunk = (scenario name, sky, coupling, seed, outage)``; ``rng`` unused (the seed is in the chunk).
+    """One run: ``chunk = (scenario name, sky, coupling, seed, outage, tle)``; ``rng`` unused (the seed is in the chunk).
+
+    ``tle`` is the scenario's element-set file (:func:`leosop.scenarios.scenario_tle`), None for the bundled sky.
 
     Returns
     -------
@@ -60,9 +64,9 @@ def run_case(chunk, rng=None):
         whitened innovations at consecutive updates (loose: the 6-vectors;
         tight: each satellite's normalised Doppler), (2, m).
     """
-    name, sky, coupling, seed, outage = chunk
+    name, sky, coupling, seed, outage, tle = chunk
     sc = _scenario(name, sky, outage)
-    r = run_scenario(sc, level="measurement", coupling=coupling, seed=seed)
+    r = run_scenario(sc, level="measurement", coupling=coupling, seed=seed, tle=tle)
     m = metrics(r)
     err = r.errors()["fused"]
     window = load_scenario(name).leo.outage_s
@@ -98,29 +102,40 @@ def lag_pairs(result):
     return np.stack([d["normalized"][:-1][nxt], d["normalized"][1:][nxt]])
 
 
-def available(name):
-    """None if the scenario can run here, else why not (its element-set file is absent)."""
-    sc = load_scenario(name)
-    if sc.tle is not None and not Path(sc.tle).exists():
-        return f"element-set file {sc.tle} not found"
+def available(name, data_dir=None):
+    """None if the scenario can run here, else why not (its element-set file is absent).
+
+    ``data_dir``: the data folder (default ``$LEOSOP_DATA``) of a file the scenario names there.
+    """
+    try:
+        scenario_tle(load_scenario(name), data_dir)
+    except InputError as exc:
+        return str(exc)
     return None
 
 
-def multi(*, seed=0, scheduler=None, full=False):
+def multi(*, seed=0, scheduler=None, full=False, data_dir=None):
     """Loose vs tight, Starlink alone vs all families, for every scenario of :data:`SCENARIOS`.
 
     Means over 2 seeds (``full``: 10) at measurement level; ``outage`` adds
-    the open-sky run's errors over the outage window.
+    the open-sky run's errors over the outage window. ``data_dir``: the data
+    folder (default ``$LEOSOP_DATA``) for ``high-latitude``'s snapshot; a
+    scenario that cannot run is skipped with a warning and its row says why.
     """
     seeds = [seed + k for k in range(10 if full else 2)]
-    names = [n for n in SCENARIOS if available(n) is None]
-    chunks = [(n, sky, c, s, True) for n in names for sky in SKIES for c in COUPLINGS for s in seeds]
-    chunks += [("outage", "all", c, s, False) for c in COUPLINGS for s in seeds if "outage" in names]
-    results = dict(zip(chunks, map_chunks(run_case, chunks, seed=0, scheduler=scheduler, desc="multi")))
+    skipped = {n: why for n in SCENARIOS if (why := available(n, data_dir)) is not None}
+    for n, why in skipped.items():
+        warnings.warn(f"multi: row {n} skipped: {why}", stacklevel=2)
+    tles = {n: scenario_tle(load_scenario(n), data_dir) for n in SCENARIOS if n not in skipped}
+    chunks = [(n, sky, c, s, True, tle) for n, tle in tles.items() for sky in SKIES for c in COUPLINGS
+              for s in seeds]
+    chunks += [("outage", "all", c, s, False, tles["outage"]) for c in COUPLINGS for s in seeds if "outage" in tles]
+    results = {ch[:5]: r for ch, r in zip(chunks, map_chunks(run_case, chunks, seed=0, scheduler=scheduler,
+                                                             desc="multi"))}
     rows = []
     for n in SCENARIOS:
-        if n not in names:
-            rows.append({"scenario": n, "skipped": available(n)})
+        if n in skipped:
+            rows.append({"scenario": n, "skipped": skipped[n]})
             continue
         row = {"scenario": n, "ins_pos_err_m": float(np.mean([results[(n, "all", "loose", s, True)]["ins_pos"]
                                                                for s in seeds]))}
