@@ -72,7 +72,7 @@ from .signal.pilot import PilotComb, add_noise, comb_baseband
 from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz
 from .timebase import format_utc, seconds_since
 
-__all__ = ["SimulationResult", "run_scenario", "metrics", "LEVELS", "COUPLINGS"]
+__all__ = ["SimulationResult", "run_scenario", "metrics", "aided", "LEVELS", "COUPLINGS"]
 
 LEVELS = ("signal", "measurement")
 COUPLINGS = ("loose", "tight")
@@ -646,11 +646,30 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         runtime_s=time.perf_counter() - tic, n_visible_by_family=per_epoch["n_visible_by_family"])
 
 
+def aided(result):
+    """Which output epochs the LEO measurements aided, (n,) bool.
+
+    An epoch is aided when the filter's last update (a fix taken, loose; at
+    least one Doppler taken, tight) is less than a correction period old
+    (at least one output step): with corrections every 30 s the 29 epochs
+    after an update are aided too. The start is never aided.
+    """
+    t = result.t_s
+    step_s = float(t[1] - t[0]) if t.size > 1 else 1.0
+    last_s = np.maximum.accumulate(np.where(result.fused.updated, t, -np.inf))
+    return t - last_s < max(result.correction_period_s, step_s) - 1e-9
+
+
 def metrics(result):
     """The ``simulate`` JSON document (DESIGN.md 4.1), every key present.
 
     Means are over the output epochs (1 Hz by default) after the start;
-    ``availability`` is the fraction of those epochs with a fused output.
+    ``availability`` is the fraction of those epochs with a fused output
+    (the INS alone counts: the filter always has one). Beyond the contract,
+    ``fused`` also says how much of it rests on LEO: ``aided_fraction``, the
+    fraction of those epochs the LEO measurements aided (:func:`aided`), and
+    ``n_updates``, the filter's updates (loose: the fixes it took; tight:
+    the epochs whose Doppler it took).
     """
     err = result.errors()
     out = slice(1, None)
@@ -671,7 +690,8 @@ def metrics(result):
                     "n_fixes": int(fix_ok.sum())},
         "fused": {"pos_err_mean_m": mean(err["fused"][0]), "vel_err_mean_mps": mean(err["fused"][1]),
                   "pos_err_rms_m": float(np.sqrt(np.nanmean(fused_pos**2))) if np.isfinite(fused_pos).any() else None,
-                  "availability": float(np.isfinite(fused_pos).mean())},
+                  "availability": float(np.isfinite(fused_pos).mean()),
+                  "aided_fraction": float(aided(result)[out].mean()), "n_updates": int(result.fused.updated.sum())},
         "visible": {"min": int(result.n_visible.min()), "max": int(result.n_visible.max())},
         "gdop": {"max": float(gdop.max()) if gdop.size else None},
         "runtime_s": float(result.runtime_s),

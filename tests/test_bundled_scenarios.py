@@ -98,3 +98,26 @@ def test_simulate_high_latitude_from_another_directory(tmp_path):
     # mean the wrong sky or no fixes, and the INS alone drifts about 1 km.
     assert doc["leo_fix"]["n_fixes"] == 900 and doc["visible"]["min"] >= 7
     assert doc["fused"]["pos_err_mean_m"] < 30.0 < 500.0 < doc["ins_only"]["pos_err_mean_m"]
+
+
+@pytest.mark.parametrize("coupling", ["loose", "tight"])
+def test_urban_canyon_says_how_much_was_aided(capsys, coupling):
+    # The 60 deg canyon holds 0-3 Starlink satellites (scenario README): never the 7 of a snapshot
+    # fix, so the loose filter has nothing to take and is the INS alone (availability 1.0 all the
+    # same), while the tight filter takes the Doppler of most epochs.
+    from leosop.cli import main
+    from leosop.cli.simulate import summary
+
+    assert main(["simulate", "--scenario", "urban-canyon", "--level", "measurement", "--coupling", coupling,
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    fused = doc["fused"]
+    assert doc["leo_fix"]["n_fixes"] == 0 and fused["availability"] == 1.0
+    if coupling == "loose":
+        assert fused["aided_fraction"] == 0.0 and fused["n_updates"] == 0
+        assert fused["pos_err_mean_m"] == pytest.approx(doc["ins_only"]["pos_err_mean_m"], rel=1e-9)
+        assert "the INS alone" in summary(doc)
+    else:
+        # Epochs with at least one satellite above 60 deg: most of the flight, not all of it.
+        assert 0.5 < fused["aided_fraction"] < 1.0 and fused["n_updates"] > 400
+        assert "the INS alone" not in summary(doc)

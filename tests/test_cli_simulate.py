@@ -42,9 +42,12 @@ def test_json_contract_files_and_figures(tmp_path, capsys):
                           "constellations": ["starlink"]}
     for key, sub in CONTRACT.items():
         if sub is not None:
-            assert set(doc[key]) == sub
+            assert sub <= set(doc[key])  # the contract's keys; extensions may be added
+    assert set(doc["fused"]) - CONTRACT["fused"] == {"aided_fraction", "n_updates"}
     assert doc["scenario"] == "short" and doc["duration_s"] == 60.0
     assert doc["fused"]["availability"] == 1.0
+    # A fix every second, each taken: every epoch after the start is aided.
+    assert doc["fused"]["aided_fraction"] == 1.0 and doc["fused"]["n_updates"] == 60
     # The default start sees 7-11 satellites in the first minute (tools/search_start_time.py).
     assert doc["visible"]["min"] >= 7 and doc["leo_fix"]["n_fixes"] == 60
     # Fusion beats both of its inputs by a wide margin even in one minute.
@@ -108,9 +111,27 @@ def test_no_satellite_visible_still_writes_the_ins_result(tmp_path, capsys):
     assert "warning: short: no satellite rises above the 88 deg mask" in err
     doc = json.loads(out)
     assert doc["leo_fix"]["n_fixes"] == 0 and doc["visible"]["max"] == 0 and doc["gdop"]["max"] is None
+    # Available (the INS always gives an output) but never aided, and the summary says so.
     assert doc["fused"]["availability"] == 1.0
+    assert doc["fused"]["aided_fraction"] == 0.0 and doc["fused"]["n_updates"] == 0
     assert doc["fused"]["pos_err_mean_m"] == pytest.approx(doc["ins_only"]["pos_err_mean_m"], rel=1e-9)
     assert (out_dir / "solution.csv").exists()
+    from leosop.cli.simulate import summary
+
+    text = summary(doc)
+    assert "LEO fixes     none" in text and "no LEO fix, no update: the INS alone" in text
+
+
+def test_aided_fraction_with_a_correction_every_30_s(tmp_path, capsys):
+    # 60 s with a fix every second and a correction due every 30 s: updates at 30 and 60 s;
+    # epochs 30..60 are within 30 s of an update and 1..29 precede the first, so 31 of the
+    # 60 epochs after the start are aided (closed form; exact).
+    status, out, _ = _run(capsys, "--scenario", _scenario(tmp_path), "--level", "measurement", "--json",
+                          "--correction-period-s", "30")
+    assert status == 0
+    fused = json.loads(out)["fused"]
+    assert fused["n_updates"] == 2 and fused["aided_fraction"] == pytest.approx(31 / 60, abs=1e-12)
+    assert fused["availability"] == 1.0
 
 
 def test_start_far_from_the_element_sets_warns_with_the_age(tmp_path, capsys):

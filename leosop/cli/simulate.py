@@ -64,8 +64,18 @@ def _num(value, fmt):
     return "n/a" if value is None else format(value, fmt)
 
 
+def _aid(fused, leo_fix):
+    """How much of the fused solution rests on LEO, in words."""
+    if fused["n_updates"] == 0:
+        fixes = "no LEO fix" if leo_fix["n_fixes"] == 0 else "no fix taken"
+        return f"{fixes}, no update: the INS alone"
+    return f"aided {fused['aided_fraction']:.3f}, {fused['n_updates']} updates"
+
+
 def summary(doc):
     f, i, x, run = doc["fused"], doc["ins_only"], doc["leo_fix"], doc["run"]
+    fixes = (f"position {_num(x['pos_err_mean_m'], '10.2f')} m   velocity {_num(x['vel_err_mean_mps'], '.3f')} m/s "
+             f"({x['n_fixes']} fixes)" if x["n_fixes"] else "none")
     return "\n".join([
         f"scenario {doc['scenario']} ({run['coupling']} coupling, {run['level']} level, seed {run['seed']}, "
         f"correction every {run['correction_period_s']:g} s): {doc['duration_s']:g} s, "
@@ -73,10 +83,9 @@ def summary(doc):
         f"{_num(doc['gdop']['max'], '.1f')} m/Hz",
         f"  INS only      position {_num(i['pos_err_mean_m'], '10.2f')} m   velocity "
         f"{_num(i['vel_err_mean_mps'], '.3f')} m/s (mean 3D error)",
-        f"  LEO fixes     position {_num(x['pos_err_mean_m'], '10.2f')} m   velocity "
-        f"{_num(x['vel_err_mean_mps'], '.3f')} m/s ({x['n_fixes']} fixes)",
+        f"  LEO fixes     {fixes}",
         f"  {fusion_label(run['constellations']):<12}  position {_num(f['pos_err_mean_m'], '10.2f')} m   velocity "
         f"{_num(f['vel_err_mean_mps'], '.3f')} m/s (RMS {_num(f['pos_err_rms_m'], '.2f')} m, "
-        f"availability {f['availability']:.3f})",
+        f"availability {f['availability']:.3f}; {_aid(f, x)})",
         f"  runtime {doc['runtime_s']:.1f} s",
     ])
