@@ -62,6 +62,7 @@ from .fusion import common, kalman, loose, tight
 from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
+from .orbits.propagate import drop_failing
 from .orbits.visibility import compute_visibility
 from .positioning.robust_ls import FixStatus
 from .positioning.snapshot import solve_snapshots
@@ -308,13 +309,15 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
         orbit_model=orbit_error_model)
 
 
-def _constellation(families, tle):
+def _constellation(families, tle, span_utc):
     """The transmitting satellites of ``families`` and each one's family index, (n_sats,) int.
 
     Without ``tle``: the bundled Starlink-like set, plus the bundled sky of
     the other families (:data:`FAMILIES_TLE`) when they are asked for. A file
     without names (2-line TLEs) is taken whole as Starlink when only Starlink
-    is asked for.
+    is asked for. Satellites SGP4 cannot propagate over ``span_utc`` (first
+    and last epoch; decayed) are left out with a warning
+    (:func:`leosop.orbits.propagate.drop_failing`).
 
     Raises
     ------
@@ -329,7 +332,9 @@ def _constellation(families, tle):
     else:
         every = load_constellation(tle)
     if tuple(families) == ("starlink",) and not (every.families != "").any():
+        every = drop_failing(every, span_utc, what="the flight")
         return every, np.zeros(len(every), int)
+    every = drop_failing(every.subset(np.isin(every.families, families)), span_utc, what="the flight")
     index = [np.flatnonzero(every.families == f) for f in families]
     for f, idx in zip(families, index):
         if idx.size == 0:
@@ -573,12 +578,6 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     rng_imu, rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
 
     tle = tle if tle is not None else scenario_tle(scenario)
-    constellation, family_sat = _constellation(scenario.leo.constellations, tle)
-    tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / 86_400.0)
-    if tle_age_days > STALE_TLE_DAYS:
-        warnings.warn(f"scenario start {format_utc(scenario.start_utc)} is {tle_age_days:.0f} days from the "
-                      "nearest element-set epoch; satellite positions will be off by many kilometres",
-                      stacklevel=2)
     models = _family_models(scenario.leo)
 
     # 1. Truth and IMU, made a block at a time (never the whole run at the IMU rate).
@@ -597,6 +596,12 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     n_ep = truth1.t_s.size
     t_s = truth1.t_s
     times_utc = scenario.start_utc + (t_s * 1e9).round().astype("timedelta64[ns]")
+    constellation, family_sat = _constellation(scenario.leo.constellations, tle, times_utc[[0, -1]])
+    tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / 86_400.0)
+    if tle_age_days > STALE_TLE_DAYS:
+        warnings.warn(f"scenario start {format_utc(scenario.start_utc)} is {tle_age_days:.0f} days from the "
+                      "nearest element-set epoch; satellite positions will be off by many kilometres",
+                      stacklevel=2)
     pos_rx = truth1.pos_ecef_m
     C_e_n = frames.C_e_n(truth1.lat_rad, truth1.lon_rad)
     vel_rx = np.einsum("kij,kj->ki", C_e_n, truth1.vel_enu_mps)

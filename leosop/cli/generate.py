@@ -95,11 +95,14 @@ def register(subparsers):
     p.add_argument("--period-s", type=float, metavar="P", help="snapshot period (with --snapshot-s)")
 
 
-def _select(const, pos_rx, start, ids, mask):
-    from ..orbits.propagate import state_ecef
+def _select(const, pos_rx, start, duration_s, ids, mask):
+    """The ``--sat`` satellites, else those above ``mask`` at the start; those SGP4 cannot propagate left out."""
+    from ..orbits.propagate import drop_failing, state_ecef
 
+    span = np.array([start, start + np.timedelta64(int(round(duration_s * 1e9)), "ns")])
     if ids:
-        return const.select_ids(ids)
+        return drop_failing(const.select_ids(ids), span, what=f"the recording from {format_utc(start)}")
+    const = drop_failing(const, span, what=f"the recording from {format_utc(start)}")
     pos, _, status = state_ecef(const, np.array([start]))
     _, elev, _ = azimuth_elevation_range(pos[:, 0], pos_rx)
     keep = (status[:, 0] == 0) & (np.degrees(elev) >= mask)
@@ -207,7 +210,7 @@ def run(args):
     pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     const = load_constellation(args.tle)
     warn_stale(const, start)
-    const = _select(const, pos_rx, start, args.sat, mask)
+    const = _select(const, pos_rx, start, n / fs, args.sat, mask)
     clock = rng.uniform(0.0, args.sat_offset_max_hz, len(const)) + args.rx_offset_hz
     phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
     speed = inertial_speed_mps(const, start)

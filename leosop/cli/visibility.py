@@ -17,6 +17,7 @@ from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import CARRIERS, load_constellation
+from ..orbits.propagate import drop_failing
 from ..orbits.visibility import compute_visibility
 from ..timebase import format_utc, seconds_since
 from . import add_command
@@ -85,6 +86,8 @@ def run(args):
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
     warn_stale(const, start)
+    times = start + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
+    const = drop_failing(const, times[[0, -1]], what=f"{format_utc(times[0])} .. {format_utc(times[-1])}")
     family = families[0] if families else next((f for f in const.families if f), "starlink")
     carrier_hz = args.carrier_hz or CARRIERS[family].default_hz
     clock_group = None
@@ -93,7 +96,6 @@ def run(args):
         clock_group = np.array([families.index(f) for f in const.families])
         carrier_hz = np.array([CARRIERS[f].default_hz for f in const.families])
 
-    times = start + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
     site = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     vis = compute_visibility(const, times, site, mask, screen=not args.no_screen)
     gdop = vis.doppler_gdop(carrier_hz, clock_group)

@@ -2,15 +2,24 @@
 
 Errors come back as data: a satellite-epoch that SGP4 cannot propagate (decay,
 eccentricity out of range, ...) has NaN position and velocity and its SGP4
-error code in ``status``; nothing raises in the middle of a batch.
+error code in ``status``; nothing raises in the middle of a batch. Before a
+run, :func:`drop_failing` leaves out (with a warning) the satellites that
+cannot be propagated over it, e.g. those that have re-entered.
 """
 
-import numpy as np
+import warnings
 
+import numpy as np
+from sgp4.api import SGP4_ERRORS
+
+from ..errors import InputError
 from ..frames import teme_to_ecef
 from ..timebase import jd_ut1, jd_utc
 
-__all__ = ["state_teme", "state_ecef", "state_ecef_pairs"]
+__all__ = ["state_teme", "state_ecef", "state_ecef_pairs", "drop_failing"]
+
+#: Satellites named in :func:`drop_failing`'s message (then "and N more").
+_NAMED = 3
 
 
 def _times(times_utc):
@@ -95,3 +104,51 @@ def state_ecef_pairs(constellation, sat_index, times_utc):
     ujd, ufr = jd_ut1(t)
     pos, vel = teme_to_ecef(r, v, ujd, ufr)
     return pos, vel, status
+
+
+def drop_failing(constellation, times_utc, *, what):
+    """The satellites SGP4 propagates at every one of ``times_utc``; the others left out with one warning.
+
+    A satellite that has re-entered (or whose elements have gone bad) makes
+    SGP4 fail from some time on; propagating it would give NaN states that a
+    recording or a fix cannot use. Give the first and last instants of a
+    run: a decay does not undo itself.
+
+    Parameters
+    ----------
+    constellation : Constellation
+    times_utc : array_like of datetime64, (n_epochs,)
+    what : str
+        The span, for messages (e.g. ``"the recording"``).
+
+    Returns
+    -------
+    Constellation
+        The satellites without an SGP4 error at any of ``times_utc``.
+
+    Warns
+    -----
+    UserWarning
+        One line naming the satellites left out (the first few) and the SGP4 error.
+
+    Raises
+    ------
+    InputError
+        No satellite is left.
+    """
+    _, _, status = state_teme(constellation, times_utc)
+    bad = (status != 0).any(axis=1)
+    if not bad.any():
+        return constellation
+    idx = np.flatnonzero(bad)
+    code = status[idx].max(axis=1)
+    named = ", ".join(f"{' '.join([constellation.sat_ids[i], constellation.names[i].strip()]).strip()} (error {c}: "
+                      f"{SGP4_ERRORS.get(int(c), 'unknown')})" for i, c in zip(idx[:_NAMED], code[:_NAMED]))
+    more = f" and {idx.size - _NAMED} more" if idx.size > _NAMED else ""
+    source = constellation.source or "element sets"
+    if bad.all():
+        raise InputError(f"{source}: no satellite left: SGP4 cannot propagate any over {what} (decayed or bad "
+                         f"elements): {named}{more}")
+    warnings.warn(f"{source}: left out {idx.size} satellite(s) SGP4 cannot propagate over {what} (decayed or bad "
+                  f"elements): {named}{more}", stacklevel=2)
+    return constellation.subset(np.flatnonzero(~bad))
