@@ -12,6 +12,7 @@ output that is not made are removed again. :func:`check_output_file` and
 
 import contextlib
 import csv
+import errno
 import json
 import os
 import tempfile
@@ -195,8 +196,7 @@ def atomic_outputs(out_dir):
         out_dir.mkdir(parents=True, exist_ok=True)
         stage = Path(tempfile.mkdtemp(prefix=".stage.", suffix=".part", dir=out_dir))
         yield stage
-        for item in sorted(stage.iterdir()):
-            os.replace(item, out_dir / item.name)
+        _commit(stage, out_dir)
     except BaseException as exc:
         _clear(stage)
         _remove_dirs(created)
@@ -205,6 +205,40 @@ def atomic_outputs(out_dir):
             raise renamed from None
         raise
     _clear(stage)
+
+
+def _commit(stage, out_dir):
+    """Move every file of ``stage`` into ``out_dir``: all, or none and ``out_dir`` as it was.
+
+    A directory in the way of one file fails before anything moves; the
+    files being replaced are kept aside until every move is done and put
+    back should one fail.
+    """
+    items = sorted(stage.iterdir())
+    for item in items:
+        target = out_dir / item.name
+        if target.is_dir() and not target.is_symlink():
+            raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(target))
+    aside = Path(tempfile.mkdtemp(prefix=".old.", suffix=".part", dir=out_dir))
+    kept, moved = [], []
+    try:
+        for item in items:
+            target = out_dir / item.name
+            if target.exists() or target.is_symlink():
+                os.replace(target, aside / item.name)
+                kept.append(item.name)
+            os.replace(item, target)
+            moved.append(item.name)
+    except BaseException:
+        for name in moved:
+            with contextlib.suppress(OSError):
+                (out_dir / name).unlink()
+        for name in kept:
+            with contextlib.suppress(OSError):
+                os.replace(aside / name, out_dir / name)
+        raise
+    finally:
+        _clear(aside)
 
 
 def _clear(stage):

@@ -7,10 +7,9 @@ flat table of its ``rows``.
 """
 
 import argparse
-import inspect
 import sys
 
-from ..repro import TARGETS, target_function, target_module
+from ..repro import TARGETS, flat_row, run_target, target_module
 from . import add_command
 
 
@@ -31,23 +30,8 @@ def register(subparsers):
 
 
 def run(args):
-    func = target_function(args.target)
-    options = {"seed": args.seed, "scheduler": args.scheduler, "full": args.full, "out_dir": args.out}
-    accepted = inspect.signature(func).parameters
-    doc = func(**{k: v for k, v in options.items() if k in accepted})
-    return {"target": args.target, **doc}
-
-
-def _flat(obj, prefix=""):
-    """Nested dicts as ``{"a.b": value}``; lists of numbers joined with '/'."""
-    if isinstance(obj, dict):
-        out = {}
-        for k, v in obj.items():
-            out.update(_flat(v, f"{prefix}{k}."))
-        return out
-    if isinstance(obj, list):
-        obj = "/".join(_cell(v) for v in obj)
-    return {prefix[:-1]: obj}
+    # --out: NAME.json, NAME.csv and the target's figures, all or nothing (leosop.repro.run_target).
+    return run_target(args.target, out_dir=args.out, seed=args.seed, scheduler=args.scheduler, full=args.full)
 
 
 def _cell(v):
@@ -59,12 +43,12 @@ def summary(doc):
     if hasattr(module, "format_table"):
         return module.format_table(doc)
     lines = [f"{doc['target']}: {TARGETS[doc['target']].help}"]
-    rows = [_flat(r) for r in doc.get("rows", [])]
+    rows = [flat_row(r) for r in doc.get("rows", [])]
     if rows:
         cols = list(dict.fromkeys(k for r in rows for k in r))
         table = [cols] + [[_cell(r.get(c)) for c in cols] for r in rows]
         widths = [max(len(t[i]) for t in table) for i in range(len(cols))]
         lines += ["  ".join(x.rjust(w) for x, w in zip(t, widths)) for t in table]
     rest = {k: v for k, v in doc.items() if k not in ("target", "rows")}
-    lines += [f"{k}: {_cell(v)}" for k, v in _flat(rest).items()]
+    lines += [f"{k}: {_cell(v)}" for k, v in flat_row(rest).items()]
     return "\n".join(lines)

@@ -8,6 +8,13 @@ does it. A target function takes keyword-only options among ``seed``,
 returns a JSON document with the paper's numbers under ``"paper"``; its
 module may define ``format_table(doc)`` for the text output.
 
+:func:`run_target` runs one; with an output directory (``reproduce --out
+DIR``) it writes, all or nothing, ``NAME.json`` (the document, NAME the
+target with ``_`` for ``-``), ``NAME.csv`` (its ``rows``, one column per
+value, nested keys joined by ``.``; a target that lays out its own table
+writes it) and the target's figures: the function gets ``out_dir`` (the
+staging directory) when it declares it.
+
 Modules: :mod:`.doppler_tables` ([Shen 2024] Tables 2-3, estimator run
 time), :mod:`.fusion_tables` ([Shen 2024] Tables 4-6, Starlink/INS),
 :mod:`.multi` (multi-constellation LEO/INS in thin skies), :mod:`.alignment`
@@ -27,10 +34,12 @@ is the one place matplotlib is configured and figures are saved.
 
 import dataclasses
 import importlib
+import inspect
 
 from ..errors import InputError
+from ..fileio import atomic_outputs, write_csv, write_json
 
-__all__ = ["Target", "TARGETS", "target_function", "target_module"]
+__all__ = ["Target", "TARGETS", "target_function", "target_module", "run_target", "flat_row"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,3 +112,46 @@ def target_module(name):
 def target_function(name):
     """The function computing target ``name``'s JSON document (see :func:`target_module`)."""
     return getattr(target_module(name), TARGETS[name].function.split(":")[1])
+
+
+def flat_row(obj, prefix=""):
+    """A nested dict as one level, ``{"a.b": value}``; lists of values joined with ``/``."""
+    if isinstance(obj, dict):
+        out = {}
+        for k, v in obj.items():
+            out.update(flat_row(v, f"{prefix}{k}."))
+        return out
+    if isinstance(obj, list):
+        obj = "/".join("" if v is None else f"{v:.6g}" if isinstance(v, float) else str(v) for v in obj)
+    return {prefix[:-1]: obj}
+
+
+def run_target(name, *, out_dir=None, **options):
+    """Run target ``name`` with the ``options`` its function declares; its document, ``{"target": name, ...}``.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`TARGETS`.
+    out_dir : path-like, optional
+        Where to write ``NAME.json``, ``NAME.csv`` and the figures (module
+        docstring); nothing of them is left there should the run fail.
+    **options
+        Among ``seed``, ``scheduler``, ``full``; those the function does not
+        declare are not passed.
+    """
+    func = target_function(name)
+    accepted = inspect.signature(func).parameters
+    kwargs = {k: v for k, v in options.items() if k in accepted}
+    if out_dir is None:
+        return {"target": name, **func(**kwargs)}
+    with atomic_outputs(out_dir) as stage:
+        doc = {"target": name, **func(**kwargs, **({"out_dir": stage} if "out_dir" in accepted else {}))}
+        stem = name.replace("-", "_")
+        write_json(stage / f"{stem}.json", doc)
+        rows = [flat_row(r) for r in doc.get("rows", [])]
+        if rows and not (stage / f"{stem}.csv").exists():
+            header = list(dict.fromkeys(k for r in rows for k in r))
+            write_csv(stage / f"{stem}.csv", header, [["" if r.get(k) is None else r.get(k) for k in header]
+                                                     for r in rows])
+    return doc

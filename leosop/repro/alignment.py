@@ -19,7 +19,7 @@ import numpy as np
 
 from ..constants import G0_MPS2, OMEGA_E_RAD_PER_S
 from ..earth import normal_gravity_mps2
-from ..fileio import write_csv, write_json
+from ..fileio import write_csv
 from ..plots import pyplot, save_png
 from ..rotations import euler_to_dcm
 from ..studies import map_chunks
@@ -199,6 +199,9 @@ def _plot_fig2(path_pr, path_yaw, doc):
 def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):
     """[Qu 2024] Fig. 1-2: maximum alignment errors versus pitch (JSON document).
 
+    ``out_dir``: ``align_fig2.csv`` (one row per pitch) and the two figures
+    (the JSON document is written by :func:`leosop.repro.run_target`).
+
     The default grid (14 pitches, yaw and roll every 15 deg, 100 shots) runs
     in seconds; ``full`` uses every degree of pitch and 5 deg yaw/roll steps.
     """
@@ -216,7 +219,6 @@ def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):
         from pathlib import Path
 
         out = Path(out_dir)
-        write_json(out / "align_fig2.json", doc)
         labels = list(doc["max_yaw_err_deg"])
         header = ["pitch_deg"] + [f"max_{a}_err_deg_{m}" for a in ("pitch", "roll", "yaw") for m in labels]
         rows = [[p] + [doc[f"max_{a}_err_deg"][m][i] for a in ("pitch", "roll", "yaw") for m in labels]
@@ -232,7 +234,8 @@ def table1(*, seed=0, full=False, out_dir=None):
     ``n_shots`` trials (1000, or 10000 with ``full``) of the 12 attitudes
     with gyro 1 deg/h and accelerometer 0.1 mg errors (1 sigma per axis),
     each trial one IMU whose errors are fixed in the body frame while the
-    turntable visits the 12 attitudes.
+    turntable visits the 12 attitudes. ``out_dir``: ``align_table1.csv``, one
+    row per attitude (the JSON document is written by :func:`leosop.repro.run_target`).
     """
     n_shots = 10000 if full else 1000
     lat_rad = np.radians(31.5)
@@ -272,7 +275,6 @@ def table1(*, seed=0, full=False, out_dir=None):
         from pathlib import Path
 
         out = Path(out_dir)
-        write_json(out / "align_table1.json", doc)
         labels = list(LABELS.values())
         header = (["yaw_deg", "pitch_deg", "roll_deg"] + [f"yaw_err_rms_deg_{m}" for m in labels]
                   + ["paper_yaw_err_deg_alg1", "paper_yaw_err_deg_alg2"])

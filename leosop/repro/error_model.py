@@ -101,8 +101,18 @@ def _nav_errors_enu(nav, truth):
     return phi, nav.vel_enu_mps - truth.vel_enu_mps, dpos
 
 
-def validate(*, rate_hz=100.0):
+def validate(*, rate_hz=100.0, out_dir=None):
     """Error models against the strapdown over 150 s of the rolling flight.
+
+    Parameters
+    ----------
+    rate_hz : float
+        IMU rate of the flight.
+    out_dir : pathlib.Path, optional
+        Where to write ``errmodel_validate.csv`` (one row per quantity and
+        ENU axis: strapdown, 9- and 15-state model at the end, relative
+        errors) and ``errmodel_validate.png`` (velocity and position errors
+        against time, as [Chu 2009]'s figures compare them).
 
     Returns
     -------
@@ -126,21 +136,24 @@ def validate(*, rate_hz=100.0):
     idx = np.arange(traj.dvel_b_mps.shape[0])
     C_mid = 0.5 * (traj.C_n_b[idx] + traj.C_n_b[idx + 1])
     f_n = np.einsum("kij,kj->ki", C_mid, traj.dvel_b_mps / dt)
-    x9 = _propagate9(C_mid, f_n, dt, eps_b, nabla_b)[-1]
+    x9_t = _propagate9(C_mid, f_n, dt, eps_b, nabla_b)
+    x9 = x9_t[-1]
     lat = 0.5 * (traj.lat_rad[idx] + traj.lat_rad[idx + 1])
     alt = 0.5 * (traj.alt_m[idx] + traj.alt_m[idx + 1])
     vel = 0.5 * (traj.vel_enu_mps[idx] + traj.vel_enu_mps[idx + 1])
     F15, G15 = em.model15(C_mid, f_n, vel, lat, alt)
     # The sensor errors enter the navigation states as G's noise does.
-    x15 = em.propagate(F15[:, :9, :9], G15[:, :9, :], np.concatenate([eps_b, nabla_b]), dt, np.zeros(9))[-1]
-    R_M, R_N = radii_m(traj.lat_rad[-1])
-    h = traj.alt_m[-1]
-    dpos15 = np.array([x15[7] * (R_N + h) * np.cos(traj.lat_rad[-1]), x15[6] * (R_M + h), x15[8]])
+    x15_t = em.propagate(F15[:, :9, :9], G15[:, :9, :], np.concatenate([eps_b, nabla_b]), dt, np.zeros(9))
+    R_M, R_N = radii_m(traj.lat_rad)
+    h = traj.alt_m
+    # 15-state position errors (dlat, dlon, dalt) as ENU metres at every sample.
+    dpos15_t = np.stack([x15_t[:, 7] * (R_N + h) * np.cos(traj.lat_rad), x15_t[:, 6] * (R_M + h), x15_t[:, 8]], -1)
+    x15, dpos15 = x15_t[-1], dpos15_t[-1]
 
     def rel(model, ref):
         return ((model - ref) / ref).tolist()
 
-    return {
+    doc = {
         "duration_s": float(bad.t_s[-1]),
         "strapdown": {"att_err_deg": np.degrees(phi_s[-1]).tolist(), "vel_err_mps": dv_s[-1].tolist(),
                       "pos_err_m": dpos_s[-1].tolist()},
@@ -154,3 +167,41 @@ def validate(*, rate_hz=100.0):
         },
         "paper_relative_error_max": {"x": 0.20, "y": 0.04, "z": 0.04},
     }
+    if out_dir is not None:
+        _write_validation(out_dir, doc, bad.t_s, np.concatenate([dv_s, dpos_s], -1), np.arange(idx.size + 1) * dt,
+                          x9_t[:, 3:9], np.concatenate([x15_t[:, 3:6], dpos15_t], -1))
+    return doc
+
+
+def _write_validation(out_dir, doc, t_strapdown_s, err_strapdown, t_model_s, err9, err15):
+    """``errmodel_validate.csv`` and ``.png``; errors ``[dv_enu, dpos_enu]`` (n, 6), m/s and m, per time (n,)."""
+    from ..fileio import write_csv
+    from ..plots import pyplot, save_png
+
+    rows = []
+    for quantity, key in (("attitude_deg", "att_err_deg"), ("velocity_mps", "vel_err_mps"), ("position_m", "pos_err_m")):
+        rel = {"velocity_mps": "vel", "position_m": "pos"}.get(quantity)
+        for i, axis in enumerate("ENU"):
+            rows.append([quantity, axis] + [f"{doc[src][key][i]:.9g}" for src in ("strapdown", "model9", "model15")]
+                        + ([f"{doc['relative_error'][m][rel][i]:.6g}" for m in ("model9", "model15")] if rel
+                           else ["", ""]))
+    write_csv(out_dir / "errmodel_validate.csv", ["quantity", "axis", "strapdown", "model9", "model15",
+                                                  "relative_error_model9", "relative_error_model15"], rows)
+    plt = pyplot()
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6), sharex=True, constrained_layout=True)
+    for row, (label, unit) in enumerate((("velocity error", "m/s"), ("position error", "m"))):
+        for i, axis in enumerate("ENU"):
+            ax = axes[row, i]
+            j = 3 * row + i
+            ax.plot(t_strapdown_s, err_strapdown[:, j], color="k", lw=2.5, alpha=0.5, label="strapdown difference")
+            ax.plot(t_model_s, err9[:, j], color="C0", lw=1.2, ls="--", label="9-state model")
+            ax.plot(t_model_s, err15[:, j], color="C1", lw=1.2, ls=":", label="15-state model")
+            ax.set_title(f"{label}, {axis}", fontsize=9)
+            ax.set_ylabel(f"[{unit}]")
+            ax.grid(True, alpha=0.3)
+            if row == 1:
+                ax.set_xlabel("time [s]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("[Chu 2009] sec. 3: short-time error models against two strapdown runs (rolling flight, "
+                 "IMU errors of its Table 1)", fontsize=9)
+    save_png(fig, out_dir / "errmodel_validate.png")

@@ -39,12 +39,17 @@ def _run(chunk, rng):
     result = run_scenario(XIAN_BAOJI, **chunk)
     doc = metrics(result)
     nis, dof = result.nis()
-    return {
+    out = {
         "ins_pos": doc["ins_only"]["pos_err_mean_m"], "ins_vel": doc["ins_only"]["vel_err_mean_mps"],
         "pos": doc["fused"]["pos_err_mean_m"], "vel": doc["fused"]["vel_err_mean_mps"],
         "nees": float(np.nanmean(result.nees()[1:])), "nis_per_dof": float(np.nansum(nis) / max(dof.sum(), 1)),
         "runtime_s": doc["runtime_s"],
     }
+    if chunk.get("level") == "signal":
+        # The run behind Table 4's figure (the paper's Fig. 8): 3D errors at every epoch.
+        err = result.errors()
+        out["series"] = {"t_s": result.t_s, "ins_only": err["ins_only"], "fused": err["fused"]}
+    return out
 
 
 def _seeds(seed, full):
@@ -90,8 +95,12 @@ def _grid(values, key, paper, seed, scheduler, full, label, variants=((None, {})
             "paper": {str(v): {"pos_err_m": p[0], "vel_err_mps": p[1]} for v, p in paper.items()}}
 
 
-def table4(*, seed=0, scheduler=None, full=False):
-    """Table 4: INS alone vs Starlink/INS, 1 s correction, 1 m orbit error."""
+def table4(*, seed=0, scheduler=None, full=False, out_dir=None):
+    """Table 4: INS alone vs Starlink/INS, 1 s correction, 1 m orbit error.
+
+    ``out_dir``: ``table4.png``, the position and velocity errors of the
+    signal-level runs against time (the paper's Fig. 8 and 10 show them).
+    """
     seeds = _seeds(seed, full)
     configs = [(("measurement", c), {"level": "measurement", "coupling": c}) for c in COUPLINGS]
     configs += [(("signal", c), {"level": "signal", "coupling": c}) for c in COUPLINGS]
@@ -111,8 +120,33 @@ def table4(*, seed=0, scheduler=None, full=False):
              {c: runs[("signal", c)] for c in COUPLINGS}),
     ]
     rows[2]["runtime_s"] = {c: runs[("signal", c)][0]["runtime_s"] for c in COUPLINGS}
-    return {"level": "measurement and signal", "seeds": seeds, "rows": rows,
-            "paper": {k: {"pos_err_m": v[0], "vel_err_mps": v[1]} for k, v in PAPER_TABLE4.items()}}
+    doc = {"level": "measurement and signal", "seeds": seeds, "rows": rows,
+           "paper": {k: {"pos_err_m": v[0], "vel_err_mps": v[1]} for k, v in PAPER_TABLE4.items()}}
+    if out_dir is not None:
+        _plot_table4(out_dir / "table4.png", {c: runs[("signal", c)][0]["series"] for c in COUPLINGS}, seeds[0])
+    return doc
+
+
+def _plot_table4(path, series, seed):
+    """INS alone and Starlink/INS (loose, tight) 3D errors against time, log scale, the paper's means marked."""
+    from ..plots import pyplot, save_png
+
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    first = series[COUPLINGS[0]]
+    for k, (ax, unit) in enumerate(zip(axes, ("m", "m/s"))):
+        t = first["t_s"][1:]
+        ax.semilogy(t, first["ins_only"][k][1:], color="C3", lw=1.2, label="INS alone")
+        # Loose drawn thick and pale underneath: the two couplings nearly coincide in an open sky.
+        for c, style in zip(COUPLINGS, ({"color": "C0", "lw": 2.6, "alpha": 0.45}, {"color": "C2", "lw": 0.9})):
+            ax.semilogy(t, series[c]["fused"][k][1:], label=f"Starlink/INS, {c}", **style)
+        ax.axhline(PAPER_TABLE4["fused"][k], color="k", ls="--", lw=0.8, label="[Shen 2024] Table 4 mean, Starlink/INS")
+        ax.axhline(PAPER_TABLE4["ins_only"][k], color="C3", ls="--", lw=0.8, label="[Shen 2024] Table 4 mean, INS alone")
+        ax.set(xlabel="time since take-off [s]", ylabel=f"3D {('position', 'velocity')[k]} error [{unit}]")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"[Shen 2024] Table 4 (Fig. 8, 10): Xi'an-Baoji flight, signal level, seed {seed}", fontsize=9)
+    save_png(fig, path)
 
 
 def table5(*, seed=0, scheduler=None, full=False):
