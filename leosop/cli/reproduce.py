@@ -35,6 +35,8 @@ def run(args):
 
 
 def _cell(v):
+    if isinstance(v, list):
+        return "/".join(_cell(x) for x in v)
     return "-" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)
 
 

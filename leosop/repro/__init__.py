@@ -11,7 +11,7 @@ module may define ``format_table(doc)`` for the text output.
 :func:`run_target` runs one; with an output directory (``reproduce --out
 DIR``) it writes, all or nothing, ``NAME.json`` (the document, NAME the
 target with ``_`` for ``-``), ``NAME.csv`` (its ``rows``, one column per
-value, nested keys joined by ``.``; a target that lays out its own table
+value, nested keys joined by ``.``, lists by ``/``; a target that lays out its own table
 writes it) and the target's figures: the function gets ``out_dir`` (the
 staging directory) when it declares it.
 
@@ -115,15 +115,20 @@ def target_function(name):
 
 
 def flat_row(obj, prefix=""):
-    """A nested dict as one level, ``{"a.b": value}``; lists of values joined with ``/``."""
+    """A nested dict as one level, ``{"a.b": value}`` (lists kept as values)."""
     if isinstance(obj, dict):
         out = {}
         for k, v in obj.items():
             out.update(flat_row(v, f"{prefix}{k}."))
         return out
-    if isinstance(obj, list):
-        obj = "/".join("" if v is None else f"{v:.6g}" if isinstance(v, float) else str(v) for v in obj)
     return {prefix[:-1]: obj}
+
+
+def _csv_cell(value):
+    """A CSV cell: empty for None, lists joined with ``/``."""
+    if isinstance(value, list):
+        return "/".join(_csv_cell(v) for v in value)
+    return "" if value is None else str(value)
 
 
 def run_target(name, *, out_dir=None, **options):
@@ -152,6 +157,5 @@ def run_target(name, *, out_dir=None, **options):
         rows = [flat_row(r) for r in doc.get("rows", [])]
         if rows and not (stage / f"{stem}.csv").exists():
             header = list(dict.fromkeys(k for r in rows for k in r))
-            write_csv(stage / f"{stem}.csv", header, [["" if r.get(k) is None else r.get(k) for k in header]
-                                                     for r in rows])
+            write_csv(stage / f"{stem}.csv", header, [[_csv_cell(r.get(k)) for k in header] for r in rows])
     return doc

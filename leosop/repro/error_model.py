@@ -179,7 +179,8 @@ def _write_validation(out_dir, doc, t_strapdown_s, err_strapdown, t_model_s, err
     from ..plots import pyplot, save_png
 
     rows = []
-    for quantity, key in (("attitude_deg", "att_err_deg"), ("velocity_mps", "vel_err_mps"), ("position_m", "pos_err_m")):
+    quantities = (("attitude_deg", "att_err_deg"), ("velocity_mps", "vel_err_mps"), ("position_m", "pos_err_m"))
+    for quantity, key in quantities:
         rel = {"velocity_mps": "vel", "position_m": "pos"}.get(quantity)
         for i, axis in enumerate("ENU"):
             rows.append([quantity, axis] + [f"{doc[src][key][i]:.9g}" for src in ("strapdown", "model9", "model15")]

@@ -140,8 +140,8 @@ def _plot_table4(path, series, seed):
         # Loose drawn thick and pale underneath: the two couplings nearly coincide in an open sky.
         for c, style in zip(COUPLINGS, ({"color": "C0", "lw": 2.6, "alpha": 0.45}, {"color": "C2", "lw": 0.9})):
             ax.semilogy(t, series[c]["fused"][k][1:], label=f"Starlink/INS, {c}", **style)
-        ax.axhline(PAPER_TABLE4["fused"][k], color="k", ls="--", lw=0.8, label="[Shen 2024] Table 4 mean, Starlink/INS")
-        ax.axhline(PAPER_TABLE4["ins_only"][k], color="C3", ls="--", lw=0.8, label="[Shen 2024] Table 4 mean, INS alone")
+        for key, color, what in (("fused", "k", "Starlink/INS"), ("ins_only", "C3", "INS alone")):
+            ax.axhline(PAPER_TABLE4[key][k], color=color, ls="--", lw=0.8, label=f"[Shen 2024] Table 4 mean, {what}")
         ax.set(xlabel="time since take-off [s]", ylabel=f"3D {('position', 'velocity')[k]} error [{unit}]")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=7)

@@ -50,7 +50,7 @@ def _scenario(name, sky, outage=True):
 
 
 def run_case(chunk, rng=None):
-    """One run: ``chunk = (scenario name, sky, coupling, seed, outage, tle)``; ``rng`` unused (the seed is in the chunk).
+    """One run: ``chunk = (scenario name, sky, coupling, seed, outage, tle)``; ``rng`` unused (the seed is in it).
 
     ``tle`` is the scenario's element-set file (:func:`leosop.scenarios.scenario_tle`), None for the bundled sky.
 
