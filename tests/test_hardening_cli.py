@@ -151,6 +151,25 @@ def test_atomic_write_errors_name_the_users_path(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def _strict(text):
+    """Parse JSON as a strict (RFC 8259) reader does: NaN and Infinity are errors."""
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_files_are_strict(tmp_path):
+    # Python's json writes NaN/Infinity as bare tokens that other parsers
+    # refuse; the toolkit's JSON writer turns them (and numpy's) into null.
+    doc = {"a": float("nan"), "b": [1.0, float("inf"), np.float64("-inf")], "c": np.array([np.nan, 2.5]),
+           "d": np.int64(3)}
+    fileio.write_json(tmp_path / "x.json", doc)
+    fileio.write_json(tmp_path / "y.json", doc, compact=True)
+    expected = {"a": None, "b": [1.0, None, None], "c": [None, 2.5], "d": 3}
+    for name in ("x.json", "y.json"):
+        assert _strict((tmp_path / name).read_text()) == expected
+
+
 def test_staged_output_errors_name_the_file_in_out_dir(tmp_path):
     out = tmp_path / "new" / "out"
     with pytest.raises(OSError) as info:

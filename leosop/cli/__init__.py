@@ -22,7 +22,6 @@ import argparse
 import contextlib
 import importlib
 import json
-import math
 import os
 import re
 import signal
@@ -36,7 +35,7 @@ import warnings
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from ..errors import ExternalError, InputError  # noqa: E402
-from ..fileio import check_output_dir, check_output_file  # noqa: E402
+from ..fileio import check_output_dir, check_output_file, json_ready  # noqa: E402
 from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
@@ -79,19 +78,6 @@ def build_parser():
     for name in COMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(subparsers)
     return parser
-
-
-def _clean(obj):
-    """JSON-ready copy: NaN/inf become null, numpy scalars become Python numbers."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if hasattr(obj, "tolist"):
-        return _clean(obj.tolist())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _check_common(args):
@@ -153,7 +139,7 @@ def _run(args):
     module = args._module
     try:
         _check_common(args)
-        doc = _clean(module.run(args))
+        doc = json_ready(module.run(args))
         if args.json:
             text = json.dumps(doc, allow_nan=False) + "\n"
         else:
