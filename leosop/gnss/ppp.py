@@ -88,6 +88,9 @@ class PppOptions:
     init_pos_sigma_m: float = 100.0
     init_amb_sigma_m: float = 30.0
     clk_sigma_m: float = 100.0
+    phase_gm_sigma_m: float = 0.0
+    phase_gm_tau_s: float = 1800.0
+    code_corr_s: float = 0.0
     k_outlier: float = 5.0
     gf_slip_m: float = 0.05
     mw_slip_cycles: float = 4.0
@@ -107,6 +110,7 @@ class PppResult:
     sv: list
     n_slips: int
     n_outliers: int
+    no_antenna: list
 
 
 def _pick(obs, s, codes):
@@ -223,7 +227,51 @@ def spp_position(pos_sv_ecef_m, p_corr_m, *, iterations=8):
     return x[:3]
 
 
-def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions()):
+def _antenna_if(antex, obs, RS, pos_rx_ecef_m, sun, C_en, elev):
+    """Satellite phase-centre positions and receiver range corrections from ANTEX, ionosphere-free.
+
+    Returns
+    -------
+    RS : ndarray, shape (n_epochs, n_sats, 3)
+        Satellite antenna phase centres (centre of mass plus the body-frame
+        offset; nominal yaw attitude; satellite PCV not applied).
+    d_rx_m : ndarray, shape (n_epochs, n_sats)
+        To subtract from code and phase: ``-e . PCO + PCV(zenith)`` of the
+        receiver antenna (its reference point is what the filter estimates).
+    missing : list of str
+        Satellites with no block valid on the day (left out).
+    """
+    day = obs.time_gps[0].astype("datetime64[D]")
+    rx = antex.receiver(obs.antenna_type)
+    bx, by, bz = models.satellite_axes(RS, sun)
+    RS = RS.copy()
+    d_rx = np.full(elev.shape, np.nan)
+    missing = []
+    for j, s in enumerate(obs.sv):
+        if s[0] not in SIGNALS:
+            continue
+        f1, f2 = SIGNALS[s[0]][4:6]
+        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
+        codes = (f"{s[0]}01", f"{s[0]}02" if s[0] == "G" else f"{s[0]}05")
+        sat = antex.satellite(s, day)
+        sat_f = None if sat is None else [sat.pco_pcv(c, receiver=False) for c in codes]
+        rx_f = [rx.pco_pcv(c, receiver=True) for c in codes]
+        if sat_f is None or None in sat_f or None in rx_f:
+            missing.append(s)
+            continue
+        pco_sat = g1 * sat_f[0][0] - g2 * sat_f[1][0]
+        RS[:, j] += pco_sat[0] * bx[:, j] + pco_sat[1] * by[:, j] + pco_sat[2] * bz[:, j]
+        pco_neu = g1 * rx_f[0][0] - g2 * rx_f[1][0]
+        pcv = g1 * rx_f[0][1] - g2 * rx_f[1][1]
+        pco_ecef = C_en @ np.array([pco_neu[1], pco_neu[0], pco_neu[2]])
+        los = RS[:, j] - pos_rx_ecef_m
+        e = los / np.linalg.norm(los, axis=-1, keepdims=True)
+        zen = 90.0 - np.degrees(elev[:, j])
+        d_rx[:, j] = -e @ pco_ecef + np.interp(zen, rx.zen_deg, pcv)
+    return RS, d_rx, missing
+
+
+def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
     """Corrected IF observations and geometry for every (epoch, satellite).
 
     Returns
@@ -301,18 +349,25 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / 86400.0)[:, None])
     zhd = models.saastamoinen_zhd_m(lat0, alt0)
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
+    missing = []
+    if antex is not None:
+        RS, d_ant, missing = _antenna_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev)
+        corr = -d_ant  # NaN for the satellites without a block: left out below
+    else:
+        corr = 0.0
     shap = models.shapiro_m(RS, x0)
-    corr = C_MPS * DTS - zhd * m_dry - shap  # add to observations: P + c dts - T_dry - shapiro
+    corr = corr + C_MPS * DTS - zhd * m_dry - shap  # add to observations: P + c dts - T_dry - shapiro
     Pc = meas["P"] + corr
     Lc = meas["L"] + corr - wind * meas["lam_nl"]
     ok &= elev > np.radians(opt.mask_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
     return dict(Pc=Pc, Lc=Lc, RS=RS, elev=elev, m_wet=m_wet, ok=ok, new_arc=new_arc, tide=tide, arp_ecef=arp_ecef,
+                no_antenna=missing,
                 x0=x0, t_s=t_s, lat0=lat0, lon0=lon0, MW=meas["MW"])
 
 
-def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions()):
+def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
     """Float PPP over every epoch of ``obs``.
 
     Returns
@@ -322,7 +377,7 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         with fewer than 5 usable satellites.
     """
     opt = options
-    d = prepare(obs, orbits, clocks, options)
+    d = prepare(obs, orbits, clocks, options, antex)
     Pc, Lc, RS, elev, m_wet, ok, new_arc = (d[k] for k in ("Pc", "Lc", "RS", "elev", "m_wet", "ok", "new_arc"))
     tide, arp_ecef, x0, t_s, lat0, lon0 = (d[k] for k in ("tide", "arp_ecef", "x0", "t_s", "lat0", "lon0"))
     sv = obs.sv
@@ -330,7 +385,8 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     # Filter.
     sysof = np.array([s[0] for s in sv])
     clk_col = np.where(sysof == "E", 4, 3)
-    n_x = 6 + n_sv
+    n_x = 6 + 2 * n_sv
+    gm0 = 6 + n_sv  # first Gauss-Markov phase error state
     x = np.zeros(n_x)
     P = np.zeros((n_x, n_x))
     x[:3] = x0
@@ -355,7 +411,16 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         # Prediction: ZWD random walk, clocks white, position static or white (kinematic).
         Q = np.zeros(n_x)
         Q[5] = opt.zwd_rw_m_per_rt_s**2 * dt
-        x, P = x.copy(), P.copy()
+        rho_c = np.exp(-dt / opt.code_corr_s) if opt.code_corr_s > 0 and dt > 0 else 0.0
+        code_infl = (1.0 + rho_c) / (1.0 - rho_c)
+        phi = np.ones(n_x)
+        phi[gm0:] = np.exp(-dt / opt.phase_gm_tau_s)
+        el_factor = np.ones(n_sv)
+        el_factor[js_i] = 0.5 * (1.0 + 1.0 / np.sin(elev[i, js_i]) ** 2)
+        gm_var = opt.phase_gm_sigma_m**2 * el_factor
+        Q[gm0:] = gm_var * (1.0 - phi[gm0:] ** 2)
+        x = x * phi
+        P = phi[:, None] * P * phi[None, :]
         if not opt.static:
             P[:3, :] = 0.0
             P[:, :3] = 0.0
@@ -377,11 +442,12 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         reset = js_i[new_arc[i, js_i] | ~amb_on[js_i]]
         n_slips += int(np.sum(amb_on[reset]))
         for j in reset:
-            a = 6 + j
-            P[a, :] = 0.0
-            P[:, a] = 0.0
-            P[a, a] = opt.init_amb_sigma_m**2
-            x[a] = Lc[i, j] - Pc[i, j]
+            for a, var in ((6 + j, opt.init_amb_sigma_m**2), (gm0 + j, gm_var[j])):
+                P[a, :] = 0.0
+                P[:, a] = 0.0
+                P[a, a] = var
+                x[a] = 0.0
+            x[6 + j] = Lc[i, j] - Pc[i, j]
             amb_on[j] = True
         use_code = np.ones(len(js_i), bool)
         use_phase = np.ones(len(js_i), bool)
@@ -402,11 +468,12 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
                 pred = rho[rows] + x[cs[rows]] + m_wet[i, jj] * x[5]
                 if is_phase:
                     H[sl.start + np.arange(len(rows)), 6 + jj] = 1.0
-                    z[sl] = Lc[i, jj] - pred - x[6 + jj]
+                    H[sl.start + np.arange(len(rows)), gm0 + jj] = 1.0
+                    z[sl] = Lc[i, jj] - pred - x[6 + jj] - x[gm0 + jj]
                     r_var[sl] = opt.sigma_phase_m**2 * 0.5 * (1.0 + 1.0 / sin_el[rows] ** 2)
                 else:
                     z[sl] = Pc[i, jj] - pred
-                    r_var[sl] = opt.sigma_code_m**2 * 0.5 * (1.0 + 1.0 / sin_el[rows] ** 2)
+                    r_var[sl] = code_infl * opt.sigma_code_m**2 * 0.5 * (1.0 + 1.0 / sin_el[rows] ** 2)
             PHt = P @ H.T
             S = H @ PHt + np.diag(r_var)
             w = np.abs(z) / np.sqrt(np.diag(S))
@@ -435,4 +502,4 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         out_clk[i] = x[3:5]
         n_used[i] = len(js_i)
     return PppResult(time_gps=obs.time_gps, pos_ecef_m=out_pos, sigma_enu_m=out_sig, zwd_m=out_zwd, clock_m=out_clk,
-                     n_used=n_used, sv=sv, n_slips=n_slips, n_outliers=n_outl)
+                     n_used=n_used, sv=sv, n_slips=n_slips, n_outliers=n_outl, no_antenna=d["no_antenna"])
