@@ -51,8 +51,8 @@ class Antenna:
     pco_m: dict = field(default_factory=dict)
     zen_deg: np.ndarray = field(default_factory=lambda: np.zeros(1))
     pcv_m: dict = field(default_factory=dict)
-    valid_from: np.datetime64 = np.datetime64("1900-01-01")
-    valid_until: np.datetime64 = np.datetime64("2200-01-01")
+    valid_from: np.datetime64 = field(default_factory=lambda: np.datetime64("1900-01-01"))
+    valid_until: np.datetime64 = field(default_factory=lambda: np.datetime64("2200-01-01"))
 
     def pco_pcv(self, freq, *, receiver):
         """Offset (3,) and variation row (n_zen,) of ``freq``; a receiver may fall back to GPS L1/L2."""
