@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
+from leosop.cli import ppp as ppp_cli
 from leosop.errors import InputError
 from leosop.frames import C_e_n, ecef_to_geodetic
 from leosop.gnss.antex import read_antex
@@ -189,6 +190,20 @@ def test_cli_json_contract(tmp_path, capsys, monkeypatch):
     # The header-frame comparison: the metre-level plate motion is gone, decimetres of 1 h float PPP remain.
     assert np.linalg.norm(doc["summary"]["minus_header_approx_m"]) > 0.5
     assert np.linalg.norm(doc["summary"]["minus_header_if_etrf2000_m"]) < 0.3
+    # The text says the frame: ENU, the same numbers as the JSON's ENU keys.
+    text = ppp_cli.summary(doc)
+    d = doc["summary"]["minus_header_if_etrf2000_enu_m"]
+    assert "ENU: E " in text and f"U {d[2]:+.4f}" in text
+    assert np.isclose(np.linalg.norm(d), np.linalg.norm(doc["summary"]["minus_header_if_etrf2000_m"]))
+    # Kinematic: the RMS against the header coordinate (as ETRF2000, in ITRF2014), 3-D and per ENU axis.
+    code = main(["ppp", str(p), "--nav", str(NAV), "--sp3", str(SP3), "--clk", str(CLK), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    rms = doc["summary"]["kinematic_rms"]["all"]
+    e = np.array([[s["x_m"], s["y_m"], s["z_m"]] for s in doc["solutions"]]) - REF_ITRF_ECEF_M
+    # The CLI maps the header at the file's mid-epoch (00:30), REF_ITRF_ECEF_M at noon: 0.04 mm of plate motion.
+    assert code == 0 and rms["rms_3d_m"] == pytest.approx(np.sqrt(np.mean(np.sum(e**2, axis=1))), abs=1e-4)
+    assert np.linalg.norm(rms["rms_enu_m"]) == pytest.approx(rms["rms_3d_m"])
+    assert "RMS against the header" in ppp_cli.summary(doc) and "after_1h" not in doc["summary"]["kinematic_rms"]
 
 
 ATX = DAY / "esbc_2020-177.atx"
