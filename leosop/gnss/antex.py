@@ -23,9 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
+from .models import satellite_axes
 from .rinex import read_text
 
-__all__ = ["Antenna", "Antex", "read_antex"]
+__all__ = ["Antenna", "Antex", "antenna_corrections_if", "read_antex"]
 
 #: Receiver frequencies standing in for a missing one (the IGS convention).
 _FALLBACK = {"E01": "G01", "E05": "G02", "E07": "G02", "E08": "G02", "E06": "G02"}
@@ -149,3 +150,65 @@ def read_antex(path):
         except (ValueError, IndexError):
             raise InputError(f"{path}: line {lineno}: cannot read {label or 'the record'}") from None
     return Antex(str(path), receivers, satellites)
+
+
+def antenna_corrections_if(antex, obs, RS, pos_rx_ecef_m, sun, C_en, elev, freqs_hz):
+    """Satellite phase-centre positions and receiver range corrections, ionosphere-free.
+
+    Parameters
+    ----------
+    antex : Antex
+    obs : leosop.gnss.rinex.ObsData
+        Its ``sv``, first epoch and ``antenna_type``.
+    RS : ndarray, shape (n_epochs, n_sats, 3)
+        Satellite centres of mass (ECEF m).
+    pos_rx_ecef_m : ndarray, shape (3,)
+        A priori receiver position.
+    sun : ndarray, shape (n_epochs, 3)
+        Sun in ECEF (satellite attitude).
+    C_en : ndarray, shape (3, 3)
+        ENU axes of the receiver in ECEF (columns).
+    elev : ndarray, shape (n_epochs, n_sats)
+        Elevations [rad].
+    freqs_hz : dict of str -> (float, float)
+        The two frequencies per system letter (``G``: L1, L2; ``E``: E1, E5a).
+
+    Returns
+    -------
+    RS : ndarray, shape (n_epochs, n_sats, 3)
+        Satellite antenna phase centres (centre of mass plus the body-frame
+        offset; nominal yaw attitude; satellite PCV not applied).
+    d_rx_m : ndarray, shape (n_epochs, n_sats)
+        To subtract from code and phase: ``-e . PCO + PCV(zenith)`` of the
+        receiver antenna (its reference point is what the filter estimates).
+    missing : list of str
+        Satellites with no block valid on the day (left out).
+    """
+    day = obs.time_gps[0].astype("datetime64[D]")
+    rx = antex.receiver(obs.antenna_type)
+    bx, by, bz = satellite_axes(RS, sun)
+    RS = RS.copy()
+    d_rx = np.full(elev.shape, np.nan)
+    missing = []
+    for j, s in enumerate(obs.sv):
+        if s[0] not in freqs_hz:
+            continue
+        f1, f2 = freqs_hz[s[0]]
+        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
+        codes = (f"{s[0]}01", f"{s[0]}02" if s[0] == "G" else f"{s[0]}05")
+        sat = antex.satellite(s, day)
+        sat_f = None if sat is None else [sat.pco_pcv(c, receiver=False) for c in codes]
+        rx_f = [rx.pco_pcv(c, receiver=True) for c in codes]
+        if sat_f is None or None in sat_f or None in rx_f:
+            missing.append(s)
+            continue
+        pco_sat = g1 * sat_f[0][0] - g2 * sat_f[1][0]
+        RS[:, j] += pco_sat[0] * bx[:, j] + pco_sat[1] * by[:, j] + pco_sat[2] * bz[:, j]
+        pco_neu = g1 * rx_f[0][0] - g2 * rx_f[1][0]
+        pcv = g1 * rx_f[0][1] - g2 * rx_f[1][1]
+        pco_ecef = C_en @ np.array([pco_neu[1], pco_neu[0], pco_neu[2]])
+        los = RS[:, j] - pos_rx_ecef_m
+        e = los / np.linalg.norm(los, axis=-1, keepdims=True)
+        zen = 90.0 - np.degrees(elev[:, j])
+        d_rx[:, j] = -e @ pco_ecef + np.interp(zen, rx.zen_deg, pcv)
+    return RS, d_rx, missing

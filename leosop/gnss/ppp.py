@@ -68,6 +68,7 @@ from ..constants import C_MPS
 from ..errors import InputError
 from ..frames import C_e_n, ecef_to_geodetic
 from . import models
+from .antex import antenna_corrections_if
 from .products import Clocks, Orbits, seconds_gps
 from .rinex import ObsData
 
@@ -249,50 +250,6 @@ def spp_position(pos_sv_ecef_m, p_corr_m, *, iterations=8):
     return x[:3]
 
 
-def _antenna_if(antex, obs, RS, pos_rx_ecef_m, sun, C_en, elev):
-    """Satellite phase-centre positions and receiver range corrections from ANTEX, ionosphere-free.
-
-    Returns
-    -------
-    RS : ndarray, shape (n_epochs, n_sats, 3)
-        Satellite antenna phase centres (centre of mass plus the body-frame
-        offset; nominal yaw attitude; satellite PCV not applied).
-    d_rx_m : ndarray, shape (n_epochs, n_sats)
-        To subtract from code and phase: ``-e . PCO + PCV(zenith)`` of the
-        receiver antenna (its reference point is what the filter estimates).
-    missing : list of str
-        Satellites with no block valid on the day (left out).
-    """
-    day = obs.time_gps[0].astype("datetime64[D]")
-    rx = antex.receiver(obs.antenna_type)
-    bx, by, bz = models.satellite_axes(RS, sun)
-    RS = RS.copy()
-    d_rx = np.full(elev.shape, np.nan)
-    missing = []
-    for j, s in enumerate(obs.sv):
-        if s[0] not in SIGNALS:
-            continue
-        f1, f2 = SIGNALS[s[0]][4:6]
-        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
-        codes = (f"{s[0]}01", f"{s[0]}02" if s[0] == "G" else f"{s[0]}05")
-        sat = antex.satellite(s, day)
-        sat_f = None if sat is None else [sat.pco_pcv(c, receiver=False) for c in codes]
-        rx_f = [rx.pco_pcv(c, receiver=True) for c in codes]
-        if sat_f is None or None in sat_f or None in rx_f:
-            missing.append(s)
-            continue
-        pco_sat = g1 * sat_f[0][0] - g2 * sat_f[1][0]
-        RS[:, j] += pco_sat[0] * bx[:, j] + pco_sat[1] * by[:, j] + pco_sat[2] * bz[:, j]
-        pco_neu = g1 * rx_f[0][0] - g2 * rx_f[1][0]
-        pcv = g1 * rx_f[0][1] - g2 * rx_f[1][1]
-        pco_ecef = C_en @ np.array([pco_neu[1], pco_neu[0], pco_neu[2]])
-        los = RS[:, j] - pos_rx_ecef_m
-        e = los / np.linalg.norm(los, axis=-1, keepdims=True)
-        zen = 90.0 - np.degrees(elev[:, j])
-        d_rx[:, j] = -e @ pco_ecef + np.interp(zen, rx.zen_deg, pcv)
-    return RS, d_rx, missing
-
-
 def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
     """Corrected IF observations and geometry for every (epoch, satellite).
 
@@ -373,7 +330,8 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
     missing = []
     if antex is not None:
-        RS, d_ant, missing = _antenna_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev)
+        RS, d_ant, missing = antenna_corrections_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev,
+                                                     {k: v[4:6] for k, v in SIGNALS.items()})
         corr = -d_ant  # NaN for the satellites without a block: left out below
     else:
         corr = 0.0
