@@ -28,11 +28,13 @@ def register(subparsers):
                    help="Dask scheduler address for parallel targets (default: a local cluster; 'serial' runs "
                         "in this process)")
     p.add_argument("--full", action="store_true", help="the paper's full grid / more trials (slower)")
+    p.add_argument("--data", metavar="DIR", help="folder of the real data a target needs (ppp-ins: the GRG "
+                   "orbits and clocks of 2020-06-25; default $LEOSOP_DATA)")
 
 
 def run(args):
     func = target_function(args.target)
-    options = {"seed": args.seed, "scheduler": args.scheduler, "full": args.full, "out_dir": args.out}
+    options = {"seed": args.seed, "scheduler": args.scheduler, "full": args.full, "out_dir": args.out, "data_dir": args.data}
     accepted = inspect.signature(func).parameters
     doc = func(**{k: v for k, v in options.items() if k in accepted})
     return {"target": args.target, **doc}
