@@ -33,13 +33,12 @@ def test_json_contract_and_outputs(tmp_path, capsys):
     text = (tmp_path / "visibility.json").read_text()
     assert json.loads(text) == doc
     assert text.count("\n") == 1 and ", " not in text  # compact: the per-epoch lists make it large
-    # The CSV's Doppler GDOP column carries its unit in the header and the JSON's values (4 decimals written).
+    # The CSV's Doppler GDOP column has the JSON's (and gdop_map.nc's) name and values (4 decimals written).
     with open(tmp_path / "visibility.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["time_utc"] for r in rows] == doc["epochs_utc"]
     for r, g in zip(rows, doc["gdop"]):
-        assert (r["gdop_doppler_m_per_hz"] == "") if g is None else float(r["gdop_doppler_m_per_hz"]) == \
-            pytest.approx(g, abs=5e-5)
+        assert (r["gdop"] == "") if g is None else float(r["gdop"]) == pytest.approx(g, abs=5e-5)
 
 
 @pytest.mark.parametrize("args, message", [
