@@ -41,6 +41,14 @@ def test_json_contract_and_outputs(tmp_path, capsys):
         assert (r["gdop"] == "") if g is None else float(r["gdop"]) == pytest.approx(g, abs=5e-5)
 
 
+def test_sub_second_steps_print_whole_instants(capsys):
+    # 3 x 0.3 s in floating point is 0.8999999999 s: the epoch is 00.900000, neither 00.899999 nor 1 ns early.
+    assert main(["visibility", "--start", "2025-01-01T00:00:00Z", "--duration-s", "1", "--step-s", "0.3",
+                 "--json"]) == 0
+    epochs = json.loads(capsys.readouterr().out)["epochs_utc"]
+    assert epochs == [f"2025-01-01T00:00:00.{k * 300_000:06d}Z" for k in range(4)]
+
+
 @pytest.mark.parametrize("args, message", [
     (["--site", "91,0,0"], "latitude 91 deg is outside"),
     (["--site", "10,20"], "expected LAT_DEG,LON_DEG,ALT_M"),

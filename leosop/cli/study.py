@@ -23,7 +23,7 @@ from ..montecarlo import bundled_specs
 from ..montecarlo.parameters import PARAMETERS
 from ..orbits import CARRIERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
-from ..timebase import format_utc
+from ..timebase import format_utc, utc_from_seconds
 from . import add_action, add_command
 from .options import mask_deg, parse_time, positive
 
@@ -91,7 +91,7 @@ def run(args):
         start = parse_time(args.start)
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
-    times = np.datetime64(start, "ns") + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
+    times = utc_from_seconds(np.arange(n_epochs) * step, start)
     out = _out_dir(args.out)
     work_dir = out / f"gdop-map-chunks-{_gdop_digest(args, grid_deg, mask)[:12]}"
     ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler, n_workers=args.workers, work_dir=work_dir)

@@ -18,7 +18,7 @@ from ..fileio import atomic_outputs, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import CARRIERS, load_constellation
 from ..orbits.visibility import compute_visibility
-from ..timebase import format_utc, seconds_since
+from ..timebase import format_utc, seconds_since, utc_from_seconds
 from . import add_command
 from .options import mask_deg, parse_site, parse_time, positive, warn_stale
 
@@ -93,7 +93,7 @@ def run(args):
         clock_group = np.array([families.index(f) for f in const.families])
         carrier_hz = np.array([CARRIERS[f].default_hz for f in const.families])
 
-    times = start + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
+    times = utc_from_seconds(np.arange(n_epochs) * step, start)
     site = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     vis = compute_visibility(const, times, site, mask, screen=not args.no_screen)
     gdop = vis.doppler_gdop(carrier_hz, clock_group)
