@@ -122,3 +122,37 @@ def test_tle_fetch_failures_leave_no_file(tmp_path, server):
     code, _, stderr = run_cli("tle", "fetch", "starlink", "-o", str(out), "--url", "http://127.0.0.1:9/gp.php")
     assert code == 1 and "cannot download" in stderr and len(stderr.strip().splitlines()) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["tle", "--json", "info", str(DEFAULT_TLE)], ["tle", "info", str(DEFAULT_TLE), "--json"]])
+def test_tle_info_json_before_or_after_the_action(capsys, argv):
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)  # one JSON document, whichever side of `info` --json stands
+    assert doc["n_sats"] == 4408 and doc["by_family"] == {"starlink": 4408}
+
+
+def test_tle_info_out_writes_the_summary_and_one_row_per_satellite(tmp_path, capsys):
+    out = tmp_path / "info"
+    assert main(["tle", "info", str(DEFAULT_TLE), "--out", str(out)]) == 0
+    assert "4408 satellites" in capsys.readouterr().out
+    assert json.loads((out / "tle_info.json").read_text())["n_sats"] == 4408
+    with open(out / "satellites.csv") as fh:
+        rows = {r["sat_id"]: r for r in csv.DictReader(fh)}
+    # Independent reference: the element-set text itself (TLE line 2, fixed columns).
+    lines = [s for s in DEFAULT_TLE.read_text().splitlines() if s.startswith("2 ")]
+    assert len(rows) == len(lines) == 4408
+    for line in lines[::97]:
+        r = rows[line[2:7].strip()]
+        assert r["family"] == "starlink" and r["epoch_utc"].endswith("Z")
+        assert float(r["inclination_deg"]) == pytest.approx(float(line[8:16]), abs=5e-5)
+        assert float(r["eccentricity"]) == pytest.approx(float("0." + line[26:33]), abs=5e-8)
+        assert float(r["mean_motion_rev_per_day"]) == pytest.approx(float(line[52:63]), abs=5e-9)
+
+
+def test_tle_fetch_refuses_out(tmp_path, capsys):
+    # Not an abbreviation of --output: the one file fetch writes is named by -o.
+    with pytest.raises(SystemExit) as info:
+        main(["tle", "fetch", "starlink", "-o", str(tmp_path / "s.tle"), "--out", str(tmp_path / "d")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and err.startswith("leosop tle fetch: error: --out") and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
