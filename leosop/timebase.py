@@ -13,7 +13,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["parse_utc", "round_utc", "format_utc", "seconds_since", "utc_from_seconds", "jd_utc", "jd_ut1", "ut1_minus_utc_s"]
+__all__ = ["parse_utc", "round_utc", "format_utc", "seconds_since", "utc_from_seconds", "jd_utc", "jd_ut1",
+           "ut1_minus_utc_s"]
 
 _UNIX_EPOCH_JD = 2_440_587.5
 _NS_PER_DAY = 86_400 * 1_000_000_000

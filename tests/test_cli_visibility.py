@@ -124,7 +124,8 @@ def test_tle_fetch_failures_leave_no_file(tmp_path, server):
     assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("argv", [["tle", "--json", "info", str(DEFAULT_TLE)], ["tle", "info", str(DEFAULT_TLE), "--json"]])
+@pytest.mark.parametrize("argv", [["tle", "--json", "info", str(DEFAULT_TLE)],
+                                  ["tle", "info", str(DEFAULT_TLE), "--json"]])
 def test_tle_info_json_before_or_after_the_action(capsys, argv):
     assert main(argv) == 0
     doc = json.loads(capsys.readouterr().out)  # one JSON document, whichever side of `info` --json stands

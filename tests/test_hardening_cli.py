@@ -57,7 +57,8 @@ def test_option_errors_are_one_line(capsys, argv):
                                              "(did you mean --skip-bad?) (see leosop tle info --help)"),
     (["study", "gdop-map", "--out", "d", "--grid-degs=5"], "leosop study gdop-map: error: unrecognized arguments: "
      "--grid-degs=5 (did you mean --grid-deg?) (see leosop study gdop-map --help)"),
-    (["visibility", "--xyzzy"], "leosop visibility: error: unrecognized arguments: --xyzzy (see leosop visibility --help)"),
+    (["visibility", "--xyzzy"],
+     "leosop visibility: error: unrecognized arguments: --xyzzy (see leosop visibility --help)"),
 ])
 def test_unknown_options_name_the_subcommand_and_the_nearest_option(capsys, argv, line):
     with pytest.raises(SystemExit) as info:

@@ -35,8 +35,8 @@ _DESCRIPTION = (
     "[m/s] and receiver frequency offset [Hz], H in Hz per state unit: the root-sum-square of their standard "
     "deviations for 1 Hz of Doppler noise. Position dominates, so GDOP x Doppler sigma [Hz] ~ 3D position error "
     "[m]; empty/null below 7 satellites (6 + one per constellation). --out DIR writes visibility.csv "
-    "(n_visible, gdop: the Doppler GDOP in m per Hz, and the unitless range DOPs per epoch), passes.csv (rise, culmination, set, "
-    "max elevation per pass), visibility.json, visibility.png and skyplot.png.")
+    "(n_visible, gdop: the Doppler GDOP in m per Hz, and the unitless range DOPs per epoch), passes.csv (rise, "
+    "culmination, set, max elevation per pass), visibility.json, visibility.png and skyplot.png.")
 
 
 def register(subparsers):
