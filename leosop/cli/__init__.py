@@ -20,6 +20,7 @@ Each subcommand lives in its own module of this package with two functions:
 
 import argparse
 import contextlib
+import difflib
 import importlib
 import json
 import os
@@ -56,13 +57,53 @@ class _Parser(argparse.ArgumentParser):
         """Print one line (no usage block) and exit with status 2."""
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
+    def parse_known_args(self, args=None, namespace=None):
+        """Parse, refusing unknown arguments here, so the error names this (sub)command.
 
-def add_command(subparsers, name, module, *, help, description=None):
-    """Add a subcommand parser with the common ``--json`` and ``--out`` options."""
+        argparse hands a subcommand's unknown arguments up to the top parser,
+        whose error would read ``leosop: error``; each parser refuses its own
+        instead, with the nearest option it has when one is close.
+        """
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._suggestion(extras)}")
+        return namespace, extras
+
+    def _suggestion(self, extras):
+        """`` (did you mean --x?)`` for the first unknown option close to one of this parser's options."""
+        options = list(self._option_string_actions)  # argparse keeps no public list of a parser's options
+        for arg in extras:
+            if arg.startswith("-"):
+                close = difflib.get_close_matches(arg.split("=", 1)[0], options, n=1)
+                if close:
+                    return f" (did you mean {close[0]}?)"
+        return ""
+
+
+def add_command(subparsers, name, module, *, help, description=None, out=True):
+    """Add a subcommand parser with the common ``--json`` and ``--out`` options.
+
+    ``out=False`` leaves ``--out`` to the actions of a command that has them
+    (``tle``, ``study``): each says what, if anything, it writes there.
+    """
     parser = subparsers.add_parser(name, help=help, description=description or help)
     parser.add_argument("--json", action="store_true", help="print one JSON document on stdout")
-    parser.add_argument("--out", metavar="DIR", help="directory for output files (CSV, PNG, JSON)")
+    if out:
+        parser.add_argument("--out", metavar="DIR", help="directory for output files (CSV, PNG, JSON)")
     parser.set_defaults(_module=module)
+    return parser
+
+
+def add_action(actions, name, *, help, description=None):
+    """Add an action parser (``leosop tle info``) below a command made by :func:`add_command`.
+
+    Its ``--json`` leaves the attribute unset when absent (argparse would
+    otherwise overwrite the command's ``--json`` with False), so the flag
+    works before or after the action's name.
+    """
+    parser = actions.add_parser(name, help=help, description=description or help)
+    parser.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                        help="print one JSON document on stdout")
     return parser
 
 
