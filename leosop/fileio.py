@@ -14,6 +14,7 @@ import contextlib
 import csv
 import errno
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -252,8 +253,34 @@ def _clear(stage):
         stage.rmdir()
 
 
+def json_ready(obj):
+    """JSON-ready copy: NaN/inf become null, numpy arrays and scalars become Python values.
+
+    Strict JSON (RFC 8259) has no NaN or Infinity; ``json.dumps`` writes them
+    as bare tokens that other parsers refuse, so every JSON the toolkit
+    writes goes through here and then ``json.dumps(..., allow_nan=False)``.
+    """
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return json_ready(obj.tolist())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def json_text(obj, *, compact=False):
+    """Strict JSON text of ``obj`` (see `json_ready`); indented by 2 unless ``compact``."""
+    obj = json_ready(obj)
+    if compact:
+        return json.dumps(obj, separators=(",", ":"), allow_nan=False)
+    return json.dumps(obj, indent=2, allow_nan=False)
+
+
 def write_json(path, obj, *, compact=False):
-    """Write ``obj`` as JSON, atomically.
+    """Write ``obj`` as strict JSON (NaN and inf as null), atomically.
 
     Parameters
     ----------
@@ -264,7 +291,7 @@ def write_json(path, obj, *, compact=False):
         ``visibility.json``: indenting puts every number on its own line and
         makes the file several times larger); else indented by 2 for reading.
     """
-    text = json.dumps(obj, separators=(",", ":")) if compact else json.dumps(obj, indent=2)
+    text = json_text(obj, compact=compact)
     with atomic_path(path) as tmp:
         tmp.write_text(text + "\n")
 

@@ -13,7 +13,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["parse_utc", "format_utc", "seconds_since", "jd_utc", "jd_ut1", "ut1_minus_utc_s"]
+__all__ = ["parse_utc", "round_utc", "format_utc", "seconds_since", "utc_from_seconds", "jd_utc", "jd_ut1",
+           "ut1_minus_utc_s"]
 
 _UNIX_EPOCH_JD = 2_440_587.5
 _NS_PER_DAY = 86_400 * 1_000_000_000
@@ -63,11 +64,35 @@ def parse_utc(value, *, name="time"):
     return out[()]
 
 
+def round_utc(times, unit="us"):
+    """UTC instants rounded to the nearest ``unit`` (halves up), not truncated as ``astype`` does.
+
+    A block centre 9999.5 us after a capture start is ``...00.010000``, not
+    ``...00.009999``; NaT stays NaT.
+
+    Parameters
+    ----------
+    times : datetime64 or array_like of datetime64, (...)
+    unit : str
+        A numpy time unit no finer than ``ns``: ``"us"``, ``"ms"``, ``"s"``.
+
+    Returns
+    -------
+    numpy.datetime64 or ndarray of datetime64[unit], (...)
+    """
+    t = np.asarray(times, dtype="datetime64[ns]")
+    step_ns = int(np.timedelta64(1, unit) // np.timedelta64(1, "ns"))
+    rounded = ((t.astype(np.int64) + step_ns // 2) // step_ns).astype(f"datetime64[{unit}]")
+    return np.where(np.isnat(t), np.datetime64("NaT", unit), rounded)[()]
+
+
 def format_utc(times):
-    """ISO 8601 text with a trailing Z, microsecond precision; list for arrays."""
-    t = np.asarray(times, dtype="datetime64[us]")
-    text = np.datetime_as_string(t, unit="us")
-    if t.ndim == 0:
+    """ISO 8601 text with a trailing Z, rounded to the microsecond (:func:`round_utc`); list for arrays.
+
+    Every UTC instant the toolkit prints or writes goes through here.
+    """
+    text = np.datetime_as_string(round_utc(times, "us"), unit="us")
+    if np.ndim(text) == 0:
         return str(text) + "Z"
     return [s + "Z" for s in text.ravel().tolist()]
 
@@ -76,6 +101,25 @@ def seconds_since(times, epoch):
     """Float seconds of ``times`` after ``epoch`` (both UTC datetime64)."""
     dt = np.asarray(times, dtype="datetime64[ns]") - np.datetime64(epoch, "ns")
     return dt.astype(np.int64) * 1e-9
+
+
+def utc_from_seconds(t_s, epoch):
+    """UTC instants ``t_s`` float seconds after ``epoch``, rounded to the nanosecond (inverse of :func:`seconds_since`).
+
+    ``k * step_s * 1e9`` is often a hair below a whole number (0.3 s x 3 is
+    0.8999999999 s): cast straight to ``timedelta64`` it would lose a nanosecond.
+
+    Parameters
+    ----------
+    t_s : float or array_like, (...)
+    epoch : datetime64 or ISO 8601 text
+
+    Returns
+    -------
+    numpy.datetime64 or ndarray of datetime64[ns], (...)
+    """
+    offset = np.round(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+    return (np.datetime64(epoch, "ns") + offset)[()]
 
 
 def jd_utc(times):

@@ -36,7 +36,7 @@ def test_generate_and_recover(recording, capsys, tmp_path):
     for e in doc["estimates"]:
         assert keys <= set(e) and e["status"] == "ok" and e["truth_sat_id"] == SAT
     assert doc["estimates"][0]["t_s"] == pytest.approx(49_999.5 / 1e6)
-    assert doc["estimates"][0]["time_utc"] == "2025-01-01T19:40:00.049999Z"  # microseconds, truncated
+    assert doc["estimates"][0]["time_utc"] == "2025-01-01T19:40:00.050000Z"  # 49 999.5 us, rounded to the us
     err = np.array([e["doppler_hz"] - e["truth_doppler_hz"] for e in doc["estimates"]])
     bound = doppler_sigma_hz(45.0, 0.1, sample_rate_hz=1e6)
     # Four blocks at the bound: |error| < 4.5 sigma each (false failure ~3e-5 per run).

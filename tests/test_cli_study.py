@@ -21,14 +21,24 @@ def test_gdop_map_netcdf_and_figures(tmp_path, capsys):
         assert str(ds["time"].values[-1]) == "2025-01-01T00:04:00.000000000"
         n, g = ds["n_visible"].values, ds["gdop"].values
         np.testing.assert_array_equal(np.isfinite(g), n >= 7)  # no singular geometry in this window
-        assert ds["gdop"].attrs["units"] == "1" and ds["lat"].attrs["units"] == "degrees_north"
+        assert ds["gdop"].attrs["units"] == "m Hz-1" and ds["lat"].attrs["units"] == "degrees_north"
+        assert ds["gdop"].attrs["long_name"].startswith("Doppler GDOP")
         assert doc["n_visible_max"] == n.max()
+        # One name, one quantity: the cell at 30 N 110 E is `leosop visibility`'s `gdop` at that site.
+        cell_n, cell_gdop = n[:, 12, 29], g[:, 12, 29]
+    assert main(["visibility", "--site", "30,110,0", "--start", "2025-01-01T00:00:00Z", "--duration-s", "240",
+                 "--step-s", "120", "--mask-deg", "40", "--json"]) == 0
+    vis = json.loads(capsys.readouterr().out)
+    np.testing.assert_array_equal(vis["n_visible"], cell_n)
+    assert np.isfinite(cell_gdop).any()
+    # The map stores float32: 6e-8 relative rounding, within 1e-6.
+    np.testing.assert_allclose(np.array(vis["gdop"], dtype=float), cell_gdop, rtol=1e-6)
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["fix_fraction.png", "gdop_map.nc", "gdop_maps.png", "n_visible_maps.png"]
 
 
 @pytest.mark.parametrize("args, code, message", [
-    (["--grid-deg", "7"], 2, "--grid-deg 7: must divide 180 and 360 into whole steps; nearest valid: 6.92308 or 7.2"),
+    (["--grid-deg", "7"], 2, "--grid-deg 7: must divide 180 and 360 into whole steps; nearest valid: 6 or 7.2"),
     (["--constellation", "oneweb"], 2, "--constellation: no oneweb satellites"),
     (["--mask-deg", "95"], 2, "--mask-deg 95: elevation mask must be in [0, 90)"),
     (["--workers", "0"], 2, "--workers 0: expected an integer >= 1"),

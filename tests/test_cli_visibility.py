@@ -33,13 +33,20 @@ def test_json_contract_and_outputs(tmp_path, capsys):
     text = (tmp_path / "visibility.json").read_text()
     assert json.loads(text) == doc
     assert text.count("\n") == 1 and ", " not in text  # compact: the per-epoch lists make it large
-    # The CSV's Doppler GDOP column carries its unit in the header and the JSON's values (4 decimals written).
+    # The CSV's Doppler GDOP column has the JSON's (and gdop_map.nc's) name and values (4 decimals written).
     with open(tmp_path / "visibility.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["time_utc"] for r in rows] == doc["epochs_utc"]
     for r, g in zip(rows, doc["gdop"]):
-        assert (r["gdop_doppler_m_per_hz"] == "") if g is None else float(r["gdop_doppler_m_per_hz"]) == \
-            pytest.approx(g, abs=5e-5)
+        assert (r["gdop"] == "") if g is None else float(r["gdop"]) == pytest.approx(g, abs=5e-5)
+
+
+def test_sub_second_steps_print_whole_instants(capsys):
+    # 3 x 0.3 s in floating point is 0.8999999999 s: the epoch is 00.900000, neither 00.899999 nor 1 ns early.
+    assert main(["visibility", "--start", "2025-01-01T00:00:00Z", "--duration-s", "1", "--step-s", "0.3",
+                 "--json"]) == 0
+    epochs = json.loads(capsys.readouterr().out)["epochs_utc"]
+    assert epochs == [f"2025-01-01T00:00:00.{k * 300_000:06d}Z" for k in range(4)]
 
 
 @pytest.mark.parametrize("args, message", [
@@ -115,3 +122,38 @@ def test_tle_fetch_failures_leave_no_file(tmp_path, server):
     code, _, stderr = run_cli("tle", "fetch", "starlink", "-o", str(out), "--url", "http://127.0.0.1:9/gp.php")
     assert code == 1 and "cannot download" in stderr and len(stderr.strip().splitlines()) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["tle", "--json", "info", str(DEFAULT_TLE)],
+                                  ["tle", "info", str(DEFAULT_TLE), "--json"]])
+def test_tle_info_json_before_or_after_the_action(capsys, argv):
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)  # one JSON document, whichever side of `info` --json stands
+    assert doc["n_sats"] == 4408 and doc["by_family"] == {"starlink": 4408}
+
+
+def test_tle_info_out_writes_the_summary_and_one_row_per_satellite(tmp_path, capsys):
+    out = tmp_path / "info"
+    assert main(["tle", "info", str(DEFAULT_TLE), "--out", str(out)]) == 0
+    assert "4408 satellites" in capsys.readouterr().out
+    assert json.loads((out / "tle_info.json").read_text())["n_sats"] == 4408
+    with open(out / "satellites.csv") as fh:
+        rows = {r["sat_id"]: r for r in csv.DictReader(fh)}
+    # Independent reference: the element-set text itself (TLE line 2, fixed columns).
+    lines = [s for s in DEFAULT_TLE.read_text().splitlines() if s.startswith("2 ")]
+    assert len(rows) == len(lines) == 4408
+    for line in lines[::97]:
+        r = rows[line[2:7].strip()]
+        assert r["family"] == "starlink" and r["epoch_utc"].endswith("Z")
+        assert float(r["inclination_deg"]) == pytest.approx(float(line[8:16]), abs=5e-5)
+        assert float(r["eccentricity"]) == pytest.approx(float("0." + line[26:33]), abs=5e-8)
+        assert float(r["mean_motion_rev_per_day"]) == pytest.approx(float(line[52:63]), abs=5e-9)
+
+
+def test_tle_fetch_refuses_out(tmp_path, capsys):
+    # Not an abbreviation of --output: the one file fetch writes is named by -o.
+    with pytest.raises(SystemExit) as info:
+        main(["tle", "fetch", "starlink", "-o", str(tmp_path / "s.tle"), "--out", str(tmp_path / "d")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and err.startswith("leosop tle fetch: error: --out") and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []

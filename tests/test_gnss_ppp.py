@@ -8,7 +8,10 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
+from leosop.cli import ppp as ppp_cli
 from leosop.errors import InputError
+from leosop.frames import C_e_n, ecef_to_geodetic
+from leosop.gnss.antex import read_antex
 from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014
 from leosop.gnss.ppp import PppOptions, gps_to_utc, run_ppp
 from leosop.gnss.products import read_clk, read_sp3
@@ -187,3 +190,75 @@ def test_cli_json_contract(tmp_path, capsys, monkeypatch):
     # The header-frame comparison: the metre-level plate motion is gone, decimetres of 1 h float PPP remain.
     assert np.linalg.norm(doc["summary"]["minus_header_approx_m"]) > 0.5
     assert np.linalg.norm(doc["summary"]["minus_header_if_etrf2000_m"]) < 0.3
+    # The text says the frame: ENU, the same numbers as the JSON's ENU keys.
+    text = ppp_cli.summary(doc)
+    d = doc["summary"]["minus_header_if_etrf2000_enu_m"]
+    assert "ENU: E " in text and f"U {d[2]:+.4f}" in text
+    assert np.isclose(np.linalg.norm(d), np.linalg.norm(doc["summary"]["minus_header_if_etrf2000_m"]))
+    # Kinematic: the RMS against the header coordinate (as ETRF2000, in ITRF2014), 3-D and per ENU axis.
+    code = main(["ppp", str(p), "--nav", str(NAV), "--sp3", str(SP3), "--clk", str(CLK), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    rms = doc["summary"]["kinematic_rms"]["all"]
+    e = np.array([[s["x_m"], s["y_m"], s["z_m"]] for s in doc["solutions"]]) - REF_ITRF_ECEF_M
+    # The CLI maps the header at the file's mid-epoch (00:30), REF_ITRF_ECEF_M at noon: 0.04 mm of plate motion.
+    assert code == 0 and rms["rms_3d_m"] == pytest.approx(np.sqrt(np.mean(np.sum(e**2, axis=1))), abs=1e-4)
+    assert np.linalg.norm(rms["rms_enu_m"]) == pytest.approx(rms["rms_3d_m"])
+    assert "RMS against the header" in ppp_cli.summary(doc) and "after_1h" not in doc["summary"]["kinematic_rms"]
+
+
+ATX = DAY / "esbc_2020-177.atx"
+#: The header coordinate's own uncertainty is not in the filter's sigma; the provenance calls it cm-level.
+COVERAGE_GOAL = 0.95  # issue 20: >= 95 % of epoch-axis errors within 3 sigma after convergence
+
+
+def _enu_errors(res):
+    lat, lon, _ = ecef_to_geodetic(REF_ITRF_ECEF_M)
+    ok = np.isfinite(res.pos_ecef_m).all(axis=1)
+    t_s = (res.time_gps - res.time_gps[0]).astype("timedelta64[s]").astype(float)
+    return (res.pos_ecef_m - REF_ITRF_ECEF_M) @ C_e_n(lat, lon), res.sigma_enu_m, t_s, ok
+
+
+@needs_data
+def test_antex_receiver_offset_if():
+    atx = read_antex(ATX)
+    rx = atx.receiver("ASH701945E_M    SCIS")
+    # The file's G01 / G02 up offsets, 89.04 and 118.96 mm; Galileo E01 falls back to G01 (IGS convention).
+    assert rx.pco_m["G01"][2] == pytest.approx(0.08904) and rx.pco_m["G02"][2] == pytest.approx(0.11896)
+    assert rx.pco_pcv("E01", receiver=True)[0] is rx.pco_m["G01"]
+    sat = atx.satellite("G01", np.datetime64("2020-06-25"))
+    assert sat.pco_m["G01"][2] == pytest.approx(1.5018)
+    assert atx.satellite("E13", np.datetime64("2020-06-25")) is None  # no block (PROVENANCE.md)
+    with pytest.raises(InputError, match="no block for the receiver antenna 'TRM59800.00     NONE'"):
+        atx.receiver("TRM59800.00     NONE")
+
+
+def test_antex_bad_file(tmp_path):
+    p = tmp_path / "bad.atx"
+    p.write_text("not antex\n")
+    with pytest.raises(InputError, match=r"bad\.atx: line 1: not an ANTEX file"):
+        read_antex(p)
+
+
+@needs_data
+def test_sigmas_cover_the_errors_on_real_data(day):
+    """3-sigma coverage of the real day's errors against the station's ITRF2014 coordinate (24 h, ~10 s).
+
+    Kinematic: after 2 h (taken as converged, as in the issue), per epoch and
+    ENU axis; measured 99.0 % with ANTEX (3-D RMS 4.4 cm), 96.0 % without (8.2 cm; a larger floor
+    for the unmodelled antenna offsets). White noise alone gave 51 %. Static: the error within 3 sigma at
+    1, 3, 6 and 24 h (measured at most 1.9 sigma with ANTEX; white noise alone gave 13 to 40 sigma at 1-6 h).
+    """
+    obs, orb, clk = day
+    atx = read_antex(ATX)
+    for antex, rms_max in ((atx, 0.05), (None, 0.09)):
+        e, s, t_s, ok = _enu_errors(run_ppp(obs, orb, clk, PppOptions(static=False), antex=antex))
+        sel = ok & (t_s >= 7200.0)
+        assert np.mean(np.abs(e[sel]) <= 3 * s[sel]) >= COVERAGE_GOAL
+        # Not by inflating alone: the 1-sigma band holds about half of them (measured 63 % / 50 %).
+        assert np.mean(np.abs(e[sel]) <= s[sel]) < 0.8
+        assert np.sqrt(np.mean(np.sum(e[sel] ** 2, axis=1))) < rms_max  # 4.4 / 8.2 cm measured
+    e, s, t_s, ok = _enu_errors(run_ppp(obs, orb, clk, PppOptions(static=True), antex=atx))
+    for hours in (1, 3, 6, 24):
+        k = np.flatnonzero(ok & (t_s < 3600.0 * hours))[-1]
+        assert np.all(np.abs(e[k]) <= 3 * s[k]), (hours, e[k], s[k])
+    assert np.linalg.norm(e[k]) < 0.02  # final 1.5 cm

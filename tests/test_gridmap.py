@@ -1,6 +1,7 @@
 """Grid visibility and Doppler GDOP maps: footprints against brute force, grid rules."""
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ from leosop.errors import InputError
 from leosop.orbits import load_constellation
 from leosop.orbits.gridmap import (
     FOOTPRINT_MARGIN_DEG, ConstellationSource, _normal_gdop, brute_force_epoch, check_grid_deg, epoch_maps,
-    footprint_pairs, gdop_map, make_grid, satellite_carriers_hz,
+    READABLE_GRID_DEG, footprint_pairs, gdop_map, make_grid, satellite_carriers_hz,
 )
 from leosop.orbits.propagate import state_ecef
 from leosop.geometry.dop import gdop
@@ -85,8 +86,10 @@ def test_valid_grid_steps(grid_deg):
 
 
 @pytest.mark.parametrize("grid_deg, message", [
-    (7.0, "nearest valid: 6.92308 or 7.2"),
-    (0.7, "nearest valid: 0.697674 or 0.700389"),
+    (7.0, "nearest valid: 6 or 7.2"),
+    (0.7, "nearest valid: 0.6 or 0.72"),
+    (89.0, "nearest valid: 60 or 90"),
+    (0.11, "nearest valid: 0.1 or 0.12"),
     (0.0, "must be in (0, 90]"),
     (120.0, "must be in (0, 90]"),
 ])
@@ -94,6 +97,17 @@ def test_bad_grid_steps(grid_deg, message):
     with pytest.raises(InputError, match=r"--grid-deg") as err:
         check_grid_deg(grid_deg)
     assert message in str(err.value)
+
+
+def test_offered_grid_steps_are_readable_and_valid():
+    """Each offered step has at most two decimals and makes the contract's grid; none is missing in between."""
+    exact = {Fraction(k, 100) for k in range(10, 9_001) if Fraction(180) / Fraction(k, 100) % 1 == 0}
+    assert {Fraction(str(g)) for g in READABLE_GRID_DEG} == exact
+    for g in READABLE_GRID_DEG:
+        assert check_grid_deg(g) == g
+    for g in READABLE_GRID_DEG[READABLE_GRID_DEG >= 1.0]:  # finer grids: ~100 MB each, the rule is the same
+        grid = make_grid(g)
+        assert len(grid.lat_deg) == Fraction(180) / Fraction(str(g)) + 1 and math.isclose(grid.lat_deg[-1], 90.0)
 
 
 def test_empty_family_selection():

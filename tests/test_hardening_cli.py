@@ -50,6 +50,35 @@ def test_option_errors_are_one_line(capsys, argv):
     assert "error:" in line and "usage:" not in line
 
 
+@pytest.mark.parametrize("argv, line", [
+    (["position", "m.csv", "--statc"],
+     "leosop position: error: unrecognized arguments: --statc (did you mean --static?) (see leosop position --help)"),
+    (["tle", "info", "x.tle", "--skip-bda"], "leosop tle info: error: unrecognized arguments: --skip-bda "
+                                             "(did you mean --skip-bad?) (see leosop tle info --help)"),
+    (["study", "gdop-map", "--out", "d", "--grid-degs=5"], "leosop study gdop-map: error: unrecognized arguments: "
+     "--grid-degs=5 (did you mean --grid-deg?) (see leosop study gdop-map --help)"),
+    (["visibility", "--xyzzy"],
+     "leosop visibility: error: unrecognized arguments: --xyzzy (see leosop visibility --help)"),
+])
+def test_unknown_options_name_the_subcommand_and_the_nearest_option(capsys, argv, line):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2 and _one_line(capsys.readouterr().err) == line
+
+
+def test_action_groups_show_only_options_that_work(capsys):
+    """`study --out` was listed and ignored; `tle/study --json ACTION` was overwritten by the action's default."""
+    from leosop.cli import build_parser
+
+    parser = build_parser()
+    with pytest.raises(SystemExit):
+        parser.parse_args(["study", "--help"])
+    assert "--out" not in capsys.readouterr().out
+    assert parser.parse_args(["study", "--json", "gdop-map", "--out", "d"]).json is True
+    assert parser.parse_args(["study", "gdop-map", "--out", "d"]).json is False
+    assert parser.parse_args(["tle", "--json", "info", "f"]).json is True
+
+
 def test_negative_numbers_are_option_values(capsys):
     status, out, err = _run(capsys, "visibility", "--site", "-33.9,18.4,0", "--start", "2025-01-01T00:00:00Z",
                             "--duration-s", "10", "--step-s", "5", "--json")
@@ -149,6 +178,25 @@ def test_atomic_write_errors_name_the_users_path(tmp_path):
             raise OSError(errno.ENOSPC, "No space left on device", str(tmp))
     assert info.value.filename == str(target) and info.value.errno == errno.ENOSPC
     assert list(tmp_path.iterdir()) == []
+
+
+def _strict(text):
+    """Parse JSON as a strict (RFC 8259) reader does: NaN and Infinity are errors."""
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_files_are_strict(tmp_path):
+    # Python's json writes NaN/Infinity as bare tokens that other parsers
+    # refuse; the toolkit's JSON writer turns them (and numpy's) into null.
+    doc = {"a": float("nan"), "b": [1.0, float("inf"), np.float64("-inf")], "c": np.array([np.nan, 2.5]),
+           "d": np.int64(3)}
+    fileio.write_json(tmp_path / "x.json", doc)
+    fileio.write_json(tmp_path / "y.json", doc, compact=True)
+    expected = {"a": None, "b": [1.0, None, None], "c": [None, 2.5], "d": 3}
+    for name in ("x.json", "y.json"):
+        assert _strict((tmp_path / name).read_text()) == expected
 
 
 def test_staged_output_errors_name_the_file_in_out_dir(tmp_path):

@@ -3,13 +3,18 @@
 The bundled element set is package data; this test catches it being found
 through the source tree again (a plain ``pip install .`` broke ``leosop
 simulate`` that way). The wheel is built without isolation and installed
-without dependencies into a venv that sees this environment's packages, so
-the test needs no network.
+without dependencies into a fresh venv that sees the running environment's
+site-packages through a ``.pth`` file (whatever that environment is: a venv,
+a user install, the system Python), so the test needs no network. The venv's
+own site-packages comes first on its path, so it imports the wheel, not the
+source tree or an editable install (the ``.pth`` lines add directories only;
+the ``.pth`` hooks inside them, such as an editable finder, do not run).
 """
 
 import json
 import os
 import shutil
+import site
 import subprocess
 import sys
 import venv
@@ -27,6 +32,23 @@ def _run(cmd, cwd, **kw):
     return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=600, **kw)
 
 
+def _site_dirs():
+    """The running interpreter's package directories (venv, system, user)."""
+    dirs = list(site.getsitepackages())
+    if site.ENABLE_USER_SITE:
+        dirs.append(site.getusersitepackages())
+    dirs += [p for p in sys.path if p.rstrip("/").endswith(("site-packages", "dist-packages"))]
+    return [d for d in dict.fromkeys(dirs) if Path(d).is_dir()]
+
+
+def _see_running_environment(python, cwd):
+    """Make the new venv see the running environment's dependencies."""
+    probe = _run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd=cwd)
+    assert probe.returncode == 0, probe.stderr
+    own = Path(probe.stdout.strip())
+    (own / "_leosop_test_deps.pth").write_text("\n".join(_site_dirs()) + "\n")
+
+
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     base = tmp_path_factory.mktemp("wheel")
@@ -39,8 +61,9 @@ def installed(tmp_path_factory):
                   "-w", str(base / "dist"), str(src)], cwd=base)
     assert built.returncode == 0, built.stderr
     (wheel,) = (base / "dist").glob("leosop-*.whl")
-    venv.create(base / "env", system_site_packages=True, with_pip=True)
+    venv.create(base / "env", system_site_packages=False, with_pip=True)
     python = base / "env" / "bin" / "python"
+    _see_running_environment(python, base)
     inst = _run([str(python), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)], cwd=base)
     assert inst.returncode == 0, inst.stderr
     return python, base / "elsewhere"

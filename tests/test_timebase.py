@@ -35,3 +35,42 @@ def test_parse_and_format_round_trip():
 def test_parse_refuses_bad_or_offset_times(text):
     with pytest.raises(ValueError, match="--start"):
         timebase.parse_utc(text, name="--start")
+
+
+def _reference_text(ns):
+    """ISO text of ``ns`` nanoseconds since 1970 rounded half up to the microsecond, by integer arithmetic and
+    :mod:`datetime` (an implementation independent of numpy's datetime64)."""
+    import datetime
+
+    us = (int(ns) + 500) // 1000
+    t = datetime.datetime(1970, 1, 1) + datetime.timedelta(microseconds=us)
+    return t.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def test_format_rounds_to_the_microsecond_not_truncates():
+    start = np.datetime64("2025-01-01T19:40:04", "ns")
+    # A 20 000-sample block at 1 MS/s is centred 9999.5 us after its start: printed ...04.010000, not ...04.009999.
+    assert timebase.format_utc(start + np.timedelta64(9_999_500, "ns")) == "2025-01-01T19:40:04.010000Z"
+    assert timebase.format_utc(start + np.timedelta64(9_999_499, "ns")) == "2025-01-01T19:40:04.009999Z"
+    # Before 1970 the integer count is negative: rounding must still go to the nearest microsecond.
+    assert timebase.format_utc(np.datetime64("1969-12-31T23:59:59.9999995", "ns")) == "1970-01-01T00:00:00.000000Z"
+    assert timebase.format_utc(np.array(["NaT"], dtype="datetime64[ns]")) == ["NaTZ"]
+    rng = np.random.default_rng(20)
+    ns = np.concatenate([rng.integers(-2 * 10**18, 4 * 10**18, 2000), rng.integers(0, 10**9, 2000) // 500 * 500])
+    assert timebase.format_utc(ns.astype("datetime64[ns]")) == [_reference_text(n) for n in ns]
+
+
+@pytest.mark.parametrize("unit, text", [("ms", "2025-01-01T19:40:04.010"), ("s", "2025-01-01T19:40:04")])
+def test_round_utc_to_coarser_units(unit, text):
+    t = np.datetime64("2025-01-01T19:40:04.0099995", "ns")
+    assert str(timebase.round_utc(t, unit)) == text
+    assert timebase.round_utc(np.array([t, t]), unit).dtype == np.dtype(f"datetime64[{unit}]")
+
+
+def test_time_grids_from_float_steps_land_on_whole_nanoseconds():
+    # k * 0.3 * 1e9 is a hair below k * 3e8 for a quarter of the k: a cast would lose 1 ns there.
+    k = np.arange(100_000)
+    times = timebase.utc_from_seconds(k * 0.3, "2025-01-01T00:00:00")
+    exact = np.datetime64("2025-01-01T00:00:00", "ns") + (k * 300_000_000).astype("timedelta64[ns]")
+    np.testing.assert_array_equal(times, exact)
+    assert timebase.seconds_since(times, "2025-01-01T00:00:00") == pytest.approx(k * 0.3, abs=1e-9)

@@ -12,6 +12,7 @@ Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ins.py [--seeds 20] [--dura
 
 import argparse
 import os
+from pathlib import Path
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -30,7 +31,7 @@ def main():
     ap.add_argument("--grade", default="fog", choices=sorted(ppp_ins_study.GRADES))
     ap.add_argument("--outage", action="store_true", help="a 60 s outage 2/3 into each run")
     a = ap.parse_args()
-    products = ppp_ins_study._products()
+    products = ppp_ins_study._products(Path(__file__).resolve().parents[2] / "shared" / "data")
     nees, rows = [], []
     t0 = time.perf_counter()
     outage = 2.0 * a.duration / 3.0 if a.outage else None

@@ -33,6 +33,7 @@ Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ins_outage.py [--seeds 10] 
 import argparse
 import dataclasses
 import os
+from pathlib import Path
 import time
 from concurrent.futures import ProcessPoolExecutor
 
@@ -48,7 +49,7 @@ OUTAGE_S = 60.0
 
 def one(args):
     seed, grade, main, duration, outage_at, overrides, with_budget = args
-    products = ppp_ins_study._products()
+    products = ppp_ins_study._products(Path(__file__).resolve().parents[2] / "shared" / "data")
     opts = dataclasses.replace(ppp_ins.PppInsOptions(), **overrides[main])
     truth, res = ppp_ins_study.scenario(seed, duration_s=duration, outage_at_s=outage_at, products=products,
                                         grade=grade, options=opts)

@@ -20,9 +20,9 @@ Each subcommand lives in its own module of this package with two functions:
 
 import argparse
 import contextlib
+import difflib
 import importlib
 import json
-import math
 import os
 import re
 import signal
@@ -36,7 +36,7 @@ import warnings
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from ..errors import ExternalError, InputError  # noqa: E402
-from ..fileio import check_output_dir, check_output_file  # noqa: E402
+from ..fileio import check_output_dir, check_output_file, json_ready  # noqa: E402
 from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
@@ -57,13 +57,53 @@ class _Parser(argparse.ArgumentParser):
         """Print one line (no usage block) and exit with status 2."""
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
+    def parse_known_args(self, args=None, namespace=None):
+        """Parse, refusing unknown arguments here, so the error names this (sub)command.
 
-def add_command(subparsers, name, module, *, help, description=None):
-    """Add a subcommand parser with the common ``--json`` and ``--out`` options."""
+        argparse hands a subcommand's unknown arguments up to the top parser,
+        whose error would read ``leosop: error``; each parser refuses its own
+        instead, with the nearest option it has when one is close.
+        """
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._suggestion(extras)}")
+        return namespace, extras
+
+    def _suggestion(self, extras):
+        """`` (did you mean --x?)`` for the first unknown option close to one of this parser's options."""
+        options = list(self._option_string_actions)  # argparse keeps no public list of a parser's options
+        for arg in extras:
+            if arg.startswith("-"):
+                close = difflib.get_close_matches(arg.split("=", 1)[0], options, n=1)
+                if close:
+                    return f" (did you mean {close[0]}?)"
+        return ""
+
+
+def add_command(subparsers, name, module, *, help, description=None, out=True):
+    """Add a subcommand parser with the common ``--json`` and ``--out`` options.
+
+    ``out=False`` leaves ``--out`` to the actions of a command that has them
+    (``tle``, ``study``): each says what, if anything, it writes there.
+    """
     parser = subparsers.add_parser(name, help=help, description=description or help)
     parser.add_argument("--json", action="store_true", help="print one JSON document on stdout")
-    parser.add_argument("--out", metavar="DIR", help="directory for output files (CSV, PNG, JSON)")
+    if out:
+        parser.add_argument("--out", metavar="DIR", help="directory for output files (CSV, PNG, JSON)")
     parser.set_defaults(_module=module)
+    return parser
+
+
+def add_action(actions, name, *, help, description=None):
+    """Add an action parser (``leosop tle info``) below a command made by :func:`add_command`.
+
+    Its ``--json`` leaves the attribute unset when absent (argparse would
+    otherwise overwrite the command's ``--json`` with False), so the flag
+    works before or after the action's name.
+    """
+    parser = actions.add_parser(name, help=help, description=description or help)
+    parser.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                        help="print one JSON document on stdout")
     return parser
 
 
@@ -79,19 +119,6 @@ def build_parser():
     for name in COMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(subparsers)
     return parser
-
-
-def _clean(obj):
-    """JSON-ready copy: NaN/inf become null, numpy scalars become Python numbers."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if hasattr(obj, "tolist"):
-        return _clean(obj.tolist())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _check_common(args):
@@ -153,7 +180,7 @@ def _run(args):
     module = args._module
     try:
         _check_common(args)
-        doc = _clean(module.run(args))
+        doc = json_ready(module.run(args))
         if args.json:
             text = json.dumps(doc, allow_nan=False) + "\n"
         else:

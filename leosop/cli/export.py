@@ -16,7 +16,6 @@ Writes ``STEM.geojson``, ``STEM.kml`` and (solutions only) ``STEM.nmea`` into
 """
 
 import csv
-import json
 import sys
 from pathlib import Path
 
@@ -24,7 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..export import Layer, nmea_gga, nmea_rmc, to_geojson, to_kml
-from ..fileio import atomic_files
+from ..fileio import atomic_files, json_text
 from ..frames import ecef_to_geodetic
 from ..orbits import load_constellation
 from ..orbits.propagate import state_ecef_pairs
@@ -174,7 +173,7 @@ def run(args):
         layers, nmea = _passes(src, header, body, args.tle, step_s), []
     out = Path(args.out) if args.out else src.parent
     texts = {
-        "geojson": lambda: json.dumps(to_geojson(layers)) + "\n",
+        "geojson": lambda: json_text(to_geojson(layers), compact=True) + "\n",
         "kml": lambda: to_kml(layers, name=f"leosop {src.name}"),
         "nmea": lambda: "\r\n".join(nmea) + "\r\n",
     }

@@ -20,7 +20,6 @@ The truth (Doppler at each block centre, its rate, C/N0, satellite id) goes
 into the SigMF annotations, the per-satellite draws into ``leosop:satellites``.
 """
 
-import json
 import sys
 from pathlib import Path
 
@@ -28,7 +27,7 @@ import numpy as np
 
 from ..constants import STARLINK_N_TONES, STARLINK_PILOT_HZ, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
-from ..fileio import atomic_files
+from ..fileio import atomic_files, json_text
 from ..frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
 from ..progress import progress
@@ -281,7 +280,7 @@ def run(args):
                           datatype=args.datatype, annotations=annotations, global_extra=extra,
                           ci16_full_scale=full_scale)
         if args.out:
-            tmps[2].write_text(json.dumps(doc, indent=2) + "\n")
+            tmps[2].write_text(json_text(doc) + "\n")
     return doc
 
 

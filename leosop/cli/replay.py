@@ -21,7 +21,7 @@ from ..orbits import load_constellation
 from ..positioning.measurements import write_measurements
 from ..signal.iq import open_sigmf
 from ..timebase import format_utc
-from . import _clean, add_command
+from . import add_command
 from .options import mask_deg, parse_site, positive
 
 _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
@@ -90,7 +90,7 @@ def _write_outputs(out, doc, res, name, start_utc):
     from .position import fixes_csv_rows
 
     with atomic_outputs(out) as stage:
-        write_json(stage / "replay.json", _clean(doc))
+        write_json(stage / "replay.json", doc)
         keys = ["sat_id", "n_blocks", "start_utc", "end_utc", "cn0_dbhz", "match_rms_hz",
                 "doppler_hz_start", "doppler_hz_end"]
         write_csv(stage / "tracks.csv", keys, [["" if t[k] is None else t[k] for k in keys] for t in doc["tracks"]])

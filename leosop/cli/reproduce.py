@@ -27,11 +27,15 @@ def register(subparsers):
                    help="Dask scheduler address for parallel targets (default: a local cluster; 'serial' runs "
                         "in this process)")
     p.add_argument("--full", action="store_true", help="the paper's full grid / more trials (slower)")
+    p.add_argument("--data", metavar="DIR", help="folder of the real data a target needs (ppp-ins: the GRG "
+                   "orbits and clocks of 2020-06-25; multi: the 2021-08-06 TLE snapshot of its high-latitude row; "
+                   "default $LEOSOP_DATA)")
 
 
 def run(args):
     # --out: NAME.json, NAME.csv and the target's figures, all or nothing (leosop.repro.run_target).
-    return run_target(args.target, out_dir=args.out, seed=args.seed, scheduler=args.scheduler, full=args.full)
+    return run_target(args.target, out_dir=args.out, seed=args.seed, scheduler=args.scheduler, full=args.full,
+                      data_dir=args.data)
 
 
 def _cell(v):

@@ -23,8 +23,8 @@ from ..montecarlo import bundled_specs
 from ..montecarlo.parameters import PARAMETERS
 from ..orbits import CARRIERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
-from ..timebase import format_utc
-from . import add_command
+from ..timebase import format_utc, utc_from_seconds
+from . import add_action, add_command
 from .options import mask_deg, parse_time, positive
 
 # Output values (epochs x cells) above which a run would not fit in memory.
@@ -32,11 +32,11 @@ _MAX_VALUES = 400_000_000
 
 
 def register(subparsers):
-    p = add_command(subparsers, "study", sys.modules[__name__], help="studies at scale (gdop-map, montecarlo)")
+    p = add_command(subparsers, "study", sys.modules[__name__], help="studies at scale (gdop-map, montecarlo)",
+                    out=False)
     sub = p.add_subparsers(dest="study", metavar="STUDY", required=True)
-    g = sub.add_parser("gdop-map", help="visible satellites and Doppler GDOP over a lat/lon grid and time, "
-                                        "to NetCDF and world maps")
-    g.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    g = add_action(sub, "gdop-map", help="visible satellites and Doppler GDOP over a lat/lon grid and time, "
+                                         "to NetCDF and world maps")
     g.add_argument("--out", metavar="DIR", required=True, help="directory for gdop_map.nc and the figures")
     g.add_argument("--tle", metavar="FILE", help="TLE or OMM file (default: bundled Walker set)")
     g.add_argument("--start", metavar="ISO", help="UTC start (default: the median element-set epoch)")
@@ -51,7 +51,7 @@ def register(subparsers):
     g.add_argument("--scheduler", metavar="ADDR",
                    help="Dask scheduler address (default: a local cluster; 'serial' runs in this process)")
     g.set_defaults(_module=sys.modules[__name__])
-    m = sub.add_parser("montecarlo", help="sweep scenario parameters x seeds of the simulate flight, to NetCDF and "
+    m = add_action(sub, "montecarlo", help="sweep scenario parameters x seeds of the simulate flight, to NetCDF and "
                                           "error-vs-parameter figures",
                        description="SPEC: a bundled spec name "
                                    f"({', '.join(sorted(bundled_specs()))}) or a JSON file: an object with "
@@ -64,7 +64,6 @@ def register(subparsers):
                                    "montecarlo.nc (the simulate metrics of every run: grid cell x seed) and "
                                    "error_vs_<parameter>.png.")
     m.add_argument("spec", metavar="SPEC", help="JSON spec file or bundled spec name")
-    m.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     m.add_argument("--out", metavar="DIR", required=True,
                    help="directory for montecarlo.nc, the figures and the chunks of an unfinished study")
     m.add_argument("--workers", type=int, metavar="N", help="workers of the local Dask cluster (default: the cores)")
@@ -92,7 +91,7 @@ def run(args):
         start = parse_time(args.start)
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
-    times = np.datetime64(start, "ns") + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
+    times = utc_from_seconds(np.arange(n_epochs) * step, start)
     out = _out_dir(args.out)
     work_dir = out / f"gdop-map-chunks-{_gdop_digest(args, grid_deg, mask)[:12]}"
     ds = gdop_map(source, times, grid_deg, mask, scheduler=args.scheduler, n_workers=args.workers, work_dir=work_dir)

@@ -1,28 +1,47 @@
-"""``leosop tle``: fetch current element sets, or summarise a file."""
+"""``leosop tle``: fetch current element sets, or summarise a file.
 
+``info FILE --out DIR`` writes the summary as ``tle_info.json`` and one row
+per satellite as ``satellites.csv``. ``fetch`` writes the one file named by
+``-o`` and refuses ``--out``.
+"""
+
+import argparse
 import sys
 
 import numpy as np
 
+from ..fileio import atomic_outputs, write_csv, write_json
 from ..orbits import load_constellation
 from ..orbits.fetch import fetch_group
 from ..timebase import format_utc
-from . import add_command
+from . import add_action, add_command
+
+#: Columns of ``satellites.csv``.
+SATELLITE_COLUMNS = ("sat_id", "name", "family", "epoch_utc", "inclination_deg", "eccentricity",
+                     "mean_motion_rev_per_day")
+
+
+class _RefuseOut(argparse.Action):
+    """``fetch --out``: an option error, not a silent abbreviation of ``--output``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.error(f"--out {values}: fetch writes one file, named by -o/--output; --out has no meaning here")
 
 
 def register(subparsers):
-    p = add_command(subparsers, "tle", sys.modules[__name__], help="fetch or summarise element-set files")
+    p = add_command(subparsers, "tle", sys.modules[__name__], help="fetch or summarise element-set files", out=False)
     sub = p.add_subparsers(dest="tle_command", metavar="ACTION", required=True)
-    f = sub.add_parser("fetch", help="download a CelesTrak group (needs the network)")
+    f = add_action(sub, "fetch", help="download a CelesTrak group (needs the network)")
     f.add_argument("group", metavar="GROUP", help="CelesTrak group, e.g. starlink, oneweb, iridium-NEXT, active")
     f.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
     f.add_argument("--format", default="tle", choices=("tle", "json", "csv"), help="TLE or OMM JSON/CSV")
     f.add_argument("--url", help="endpoint instead of CelesTrak's gp.php")
-    i = sub.add_parser("info", help="count satellites by family and show the epoch span")
+    f.add_argument("--out", action=_RefuseOut, help=argparse.SUPPRESS)
+    i = add_action(sub, "info", help="count satellites by family and show the epoch span")
     i.add_argument("file", metavar="FILE")
     i.add_argument("--skip-bad", action="store_true", help="skip malformed records with a warning")
-    for q in (f, i):
-        q.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    i.add_argument("--out", metavar="DIR", help="directory for tle_info.json (this summary) and satellites.csv "
+                                                f"(one row per satellite: {', '.join(SATELLITE_COLUMNS)})")
 
 
 def run(args):
@@ -31,7 +50,13 @@ def run(args):
         doc = _describe(const)
         doc["written"] = args.output
         return doc
-    return _describe(load_constellation(args.file, skip_bad=args.skip_bad))
+    const = load_constellation(args.file, skip_bad=args.skip_bad)
+    doc = _describe(const)
+    if args.out:
+        with atomic_outputs(args.out) as stage:
+            write_json(stage / "tle_info.json", doc)
+            write_csv(stage / "satellites.csv", SATELLITE_COLUMNS, _satellite_rows(const))
+    return doc
 
 
 def _describe(const):
@@ -45,6 +70,15 @@ def _describe(const):
         "epoch_median_utc": format_utc(ep[len(ep) // 2]),
         "epoch_max_utc": format_utc(ep[-1]),
     }
+
+
+def _satellite_rows(const):
+    """One CSV row per satellite: identity, epoch and three mean elements (SGP4's, at the epoch)."""
+    rev_per_day = 1440.0 / (2.0 * np.pi)  # SGP4 keeps the mean motion in rad/min
+    return ([sid, name, fam or "other", epoch, f"{np.degrees(s.inclo):.4f}", f"{s.ecco:.7f}",
+             f"{s.no_kozai * rev_per_day:.8f}"]
+            for sid, name, fam, epoch, s in zip(const.sat_ids, const.names, const.families,
+                                                format_utc(const.epochs_utc), const.satrecs))
 
 
 def summary(doc):

@@ -19,7 +19,7 @@ from ..frames import geodetic_to_ecef
 from ..orbits import CARRIERS, load_constellation
 from ..orbits.propagate import drop_failing
 from ..orbits.visibility import compute_visibility
-from ..timebase import format_utc, seconds_since
+from ..timebase import format_utc, seconds_since, utc_from_seconds
 from . import add_command
 from .options import mask_deg, parse_site, parse_time, positive, warn_stale
 
@@ -36,8 +36,8 @@ _DESCRIPTION = (
     "[m/s] and receiver frequency offset [Hz], H in Hz per state unit: the root-sum-square of their standard "
     "deviations for 1 Hz of Doppler noise. Position dominates, so GDOP x Doppler sigma [Hz] ~ 3D position error "
     "[m]; empty/null below 7 satellites (6 + one per constellation). --out DIR writes visibility.csv "
-    "(n_visible, gdop_doppler_m_per_hz and the unitless range DOPs per epoch), passes.csv (rise, culmination, set, "
-    "max elevation per pass), visibility.json, visibility.png and skyplot.png.")
+    "(n_visible, gdop: the Doppler GDOP in m per Hz, and the unitless range DOPs per epoch), passes.csv (rise, "
+    "culmination, set, max elevation per pass), visibility.json, visibility.png and skyplot.png.")
 
 
 def register(subparsers):
@@ -86,7 +86,7 @@ def run(args):
     else:
         start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
     warn_stale(const, start)
-    times = start + (np.arange(n_epochs) * step * 1e9).astype("timedelta64[ns]")
+    times = utc_from_seconds(np.arange(n_epochs) * step, start)
     const = drop_failing(const, times[[0, -1]], what=f"{format_utc(times[0])} .. {format_utc(times[-1])}")
     family = families[0] if families else next((f for f in const.families if f), "starlink")
     carrier_hz = args.carrier_hz or CARRIERS[family].default_hz
@@ -145,7 +145,7 @@ def _write_files(out, doc, vis, gdop, times, mask, title):
     by_family = doc.get("n_visible_by_family", {})
     per_family = list(zip(*by_family.values())) if by_family else [()] * len(t_s)
     write_csv(out / "visibility.csv",
-              ["time_utc", "t_s", "n_visible", "gdop_doppler_m_per_hz", "gdop_range", "pdop_range", "hdop_range", "vdop_range"]
+              ["time_utc", "t_s", "n_visible", "gdop", "gdop_range", "pdop_range", "hdop_range", "vdop_range"]
               + [f"n_visible_{f}" for f in by_family],
               ([e, f"{t:.3f}", n, blank(g), blank(a), blank(b), blank(c), blank(d), *nf]
                for e, t, n, g, a, b, c, d, nf in

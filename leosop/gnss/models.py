@@ -14,7 +14,8 @@ from ..constants import C_MPS, GM_M3_PER_S2, JD_J2000, OMEGA_E_RAD_PER_S, WGS84_
 from ..frames import gmst1982
 
 __all__ = [
-    "saastamoinen_zhd_m", "niell_mapping", "sun_moon_ecef_m", "solid_tide_ecef_m", "windup_cycles",
+    "saastamoinen_zhd_m", "niell_mapping", "sun_moon_ecef_m", "solid_tide_ecef_m", "satellite_axes",
+    "windup_cycles",
     "relativistic_clock_s", "sagnac_rotate", "shapiro_m", "TT_MINUS_GPST_S",
 ]
 
@@ -182,6 +183,28 @@ def solid_tide_ecef_m(pos_ecef_m, sun_ecef_m, moon_ecef_m):
     return out
 
 
+def satellite_axes(pos_sv_ecef_m, sun_ecef_m):
+    """Body axes of satellites in nominal yaw attitude (eclipse manoeuvres not modelled).
+
+    z to the Earth's centre, y = z x (Sun - satellite) normalised, x = y x z.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m : ndarray, shape (n_epochs, n_sats, 3)
+    sun_ecef_m : ndarray, shape (n_epochs, 3)
+
+    Returns
+    -------
+    x, y, z : ndarray, shape (n_epochs, n_sats, 3)
+        Unit vectors in ECEF.
+    """
+    rs = np.asarray(pos_sv_ecef_m, float)
+    z = -rs / np.linalg.norm(rs, axis=-1, keepdims=True)
+    y = np.cross(z, sun_ecef_m[:, None, :] - rs)
+    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    return np.cross(y, z), y, z
+
+
 def windup_cycles(pos_sv_ecef_m, pos_rx_ecef_m, sun_ecef_m, lat_rad, lon_rad):
     """Carrier phase wind-up [Wu 1993], satellites in nominal yaw attitude.
 
@@ -204,10 +227,7 @@ def windup_cycles(pos_sv_ecef_m, pos_rx_ecef_m, sun_ecef_m, lat_rad, lon_rad):
         satellite position is NaN); subtract ``lambda * windup`` from phase.
     """
     rs = np.asarray(pos_sv_ecef_m, float)
-    z = -rs / np.linalg.norm(rs, axis=-1, keepdims=True)
-    y = np.cross(z, sun_ecef_m[:, None, :] - rs)
-    y /= np.linalg.norm(y, axis=-1, keepdims=True)
-    x = np.cross(y, z)
+    x, y, _ = satellite_axes(rs, sun_ecef_m)
     k = np.asarray(pos_rx_ecef_m) - rs
     k /= np.linalg.norm(k, axis=-1, keepdims=True)
     sl, cl, so, co = np.sin(lat_rad), np.cos(lat_rad), np.sin(lon_rad), np.cos(lon_rad)

@@ -16,6 +16,7 @@ statistics, as the paper's run had none).
 """
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -62,16 +63,38 @@ ESBJERG_DEG = (55.4936, 8.4568, 60.0)
 OUTAGE_AT_S = 1200.0
 
 
-DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rinex" / "esbc_2020-177"
+#: The real products the simulation is built on, and where they sit under a data folder.
+SP3_NAME, CLK_NAME = "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz", "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
+DAY_SUBDIR = Path("rinex") / "esbc_2020-177"
+DATA_ENV = "LEOSOP_DATA"
 
 
-def _products():
-    d = DATA_DIR
-    if not d.is_dir():
-        raise InputError(f"{d}: the ESBC 2020-177 products (shared data folder) are needed for this simulation")
+def _products(data_dir=None):
+    """GRG orbits and clocks of 2020-06-25 (GPS) from ``data_dir``, else from ``$LEOSOP_DATA``.
+
+    The folder is either the one holding the two files or a data root with
+    them under ``rinex/esbc_2020-177/`` (the project's public data folder).
+    They are not shipped with the package (public IGS/CNES products, 4 MB).
+
+    Raises
+    ------
+    InputError
+        Neither names a folder with the two files (both named in the message).
+    """
+    root = data_dir or os.environ.get(DATA_ENV)
+    found = None
+    if root:
+        for d in (Path(root), Path(root) / DAY_SUBDIR):
+            if (d / SP3_NAME).is_file() and (d / CLK_NAME).is_file():
+                found = d
+                break
+    if found is None:
+        where = f"not in {root} nor {Path(root) / DAY_SUBDIR}" if root else "no folder given"
+        raise InputError(f"--data DIR / {DATA_ENV}: the GRG products of 2020-06-25 ({SP3_NAME}, {CLK_NAME}) are "
+                         f"needed for this simulation; {where}")
     day = np.datetime64("2020-06-25", "ns")
-    return (read_sp3(d / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz", systems="G", ref_gps=day),
-            read_clk(d / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz", systems="G", ref_gps=day))
+    return (read_sp3(found / SP3_NAME, systems="G", ref_gps=day),
+            read_clk(found / CLK_NAME, systems="G", ref_gps=day))
 
 
 def _trajectory(duration_s):
@@ -187,12 +210,13 @@ def statistics(truth, res, *, last_s=1800.0, outage_at_s=OUTAGE_AT_S, outage_s=6
     return doc
 
 
-def ppp_ins_table(*, seed=0, full=False, out_dir=None):
+def ppp_ins_table(*, seed=0, full=False, out_dir=None, data_dir=None):
     """``leosop reproduce ppp-ins``: one 60-min run (``full``: three seeds, their mean) beside the paper.
 
-    With ``out_dir``, ``ppp_ins.png``: errors, sigma and fixed ambiguities of the first run.
+    With ``out_dir``, ``ppp_ins.png``: errors, sigma and fixed ambiguities of the first run. The real
+    products come from ``data_dir`` or ``$LEOSOP_DATA`` (:func:`_products`).
     """
-    products = _products()
+    products = _products(data_dir)
     seeds = [seed] if not full else [seed, seed + 1, seed + 2]
     runs = []
     for i, s in enumerate(seeds):

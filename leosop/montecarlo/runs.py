@@ -9,6 +9,7 @@ import warnings
 
 import numpy as np
 
+from ..orbits.gridmap import GDOP_UNITS
 from ..simulate import metrics, run_scenario
 
 __all__ = ["METRICS", "REPRODUCIBLE", "run_one", "run_chunk"]
@@ -27,7 +28,7 @@ METRICS = {
     "n_fixes": ("1", "number of LEO snapshot fixes"),
     "n_visible_min": ("1", "fewest satellites visible along the flight"),
     "n_visible_max": ("1", "most satellites visible along the flight"),
-    "gdop_max": ("1", "largest Doppler GDOP along the flight ([Shen 2024] eq. 10)"),
+    "gdop_max": (GDOP_UNITS, "largest Doppler GDOP along the flight ([Shen 2024] eq. 10)"),
     "nees_per_dim": ("1", "mean NEES of fused position and velocity per dimension (1 when consistent)"),
     "nis_per_dof": ("1", "NIS of the filter updates per degree of freedom (1 when consistent)"),
     "runtime_s": ("s", "wall time of the run (not reproducible)"),

@@ -42,7 +42,7 @@ from .propagate import state_ecef
 __all__ = [
     "Grid", "make_grid", "check_grid_deg", "ConstellationSource", "satellite_carriers_hz",
     "footprint_pairs", "epoch_maps", "brute_force_epoch", "maps_for_times", "gdop_map", "write_netcdf",
-    "FOOTPRINT_MARGIN_DEG",
+    "FOOTPRINT_MARGIN_DEG", "READABLE_GRID_DEG", "GDOP_UNITS",
 ]
 
 #: Widening of the spherical footprint cap [deg]: covers the tilt of the
@@ -92,15 +92,31 @@ class Grid:
         return len(self.lat_deg) * len(self.lon_deg)
 
 
+#: CF (UDUNITS) units of the Doppler GDOP: metres of position per hertz of
+#: Doppler noise, its dominant part. Not CF's "1", which declares a
+#: dimensionless quantity; the classic range DOPs are, this one is not.
+GDOP_UNITS = "m Hz-1"
+
+#: Grid steps offered when a step does not divide 180 [deg]: those in [0.1, 90]
+#: with at most two decimals (1/100 deg times a divisor of 18000), e.g. 0.25, 2.5, 6, 7.2.
+READABLE_GRID_DEG = np.arange(10, 9_001)[18_000 % np.arange(10, 9_001) == 0] / 100.0
+
+
 def check_grid_deg(grid_deg, option="--grid-deg"):
-    """``grid_deg`` if it divides 180 (hence 360) into whole steps, else InputError with the nearest valid."""
+    """``grid_deg`` if it divides 180 (hence 360) into whole steps, else InputError with readable ones near it.
+
+    The grid is lat = -90, -90 + G, ..., 90 and lon = -180, ..., < 180, so
+    only steps G with 180 / G whole make it honestly; the message offers the
+    nearest of :data:`READABLE_GRID_DEG` below and above.
+    """
     if not (math.isfinite(grid_deg) and 0.0 < grid_deg <= 90.0):
         raise InputError(f"{option} {grid_deg:g}: must be in (0, 90] deg")
     n = 180.0 / grid_deg
     if abs(n - round(n)) > 1e-9 * n:
-        lo, hi = 180.0 / math.ceil(n), 180.0 / math.floor(n)
-        raise InputError(f"{option} {grid_deg:g}: must divide 180 and 360 into whole steps; "
-                         f"nearest valid: {lo:.6g} or {hi:.6g}")
+        below = READABLE_GRID_DEG[READABLE_GRID_DEG < grid_deg]
+        above = READABLE_GRID_DEG[READABLE_GRID_DEG > grid_deg]
+        near = " or ".join(f"{g:g}" for g in (*below[-1:], *above[:1]))
+        raise InputError(f"{option} {grid_deg:g}: must divide 180 and 360 into whole steps; nearest valid: {near}")
     if grid_deg < 0.1:
         raise InputError(f"{option} {grid_deg:g}: at least 0.1 deg (a finer grid does not fit in memory)")
     return 180.0 / round(n)
@@ -496,10 +512,13 @@ def _dataset(times, grid, mask_deg, counts, gdops, const):
                 "units": "1",
             }),
             "gdop": (("time", "lat", "lon"), gdops, {
-                "long_name": "geometric dilution of precision of Doppler positioning "
+                "long_name": "Doppler GDOP: geometric dilution of precision of Doppler positioning "
                              "(7 states: position, velocity, frequency offset; static receiver on the ellipsoid)",
-                "units": "1",
-                "comment": "sqrt(trace((H^T H)^-1)), Shen 2024 eq. 10; NaN where fewer than 7 satellites",
+                "units": GDOP_UNITS,
+                "comment": "sqrt(trace((H^T H)^-1)), Shen 2024 eq. 10, H in Hz per state unit: the root-sum-square "
+                           "of the state standard deviations for 1 Hz of Doppler noise. Not dimensionless: the "
+                           "position terms (m per Hz) dominate; the velocity (m/s per Hz) and frequency-offset "
+                           "(Hz per Hz) terms are added as numbers. NaN where fewer than 7 satellites",
             }),
         },
         coords={

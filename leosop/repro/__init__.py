@@ -4,7 +4,7 @@
 help from: one :class:`Target` per name, naming its paper ([Shen 2024],
 [Qu 2024], [Chu 2009], [Liu 2016]), what it reproduces and the function that
 does it. A target function takes keyword-only options among ``seed``,
-``scheduler``, ``full`` and ``out_dir`` (it receives those it declares) and
+``scheduler``, ``full``, ``data_dir`` and ``out_dir`` (it receives those it declares) and
 returns a JSON document with the paper's numbers under ``"paper"``; its
 module may define ``format_table(doc)`` for the text output.
 
@@ -142,8 +142,9 @@ def run_target(name, *, out_dir=None, **options):
         Where to write ``NAME.json``, ``NAME.csv`` and the figures (module
         docstring); nothing of them is left there should the run fail.
     **options
-        Among ``seed``, ``scheduler``, ``full``; those the function does not
-        declare are not passed.
+        Among ``seed``, ``scheduler``, ``full``, ``data_dir`` (the data
+        folder, :mod:`leosop.datadir`); those the function does not declare
+        are not passed.
     """
     func = target_function(name)
     accepted = inspect.signature(func).parameters
