@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from leosop.constants import C_MPS
+from leosop.datadir import ENV_VAR
 from leosop.errors import InputError
 from leosop.gnss import ppp_ins, ppp_ins_study
 from leosop.gnss.geometry import range_and_rate
@@ -266,13 +267,13 @@ def test_study_products_from_option_or_environment(monkeypatch, tmp_path, capsys
     # No path to the repository's neighbours: the folder comes from --data or LEOSOP_DATA, else exit 2 naming both.
     from leosop.cli import main
 
-    monkeypatch.delenv(ppp_ins_study.DATA_ENV, raising=False)
+    monkeypatch.delenv(ENV_VAR, raising=False)
     assert main(["reproduce", "ppp-ins", "--data", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--data DIR / LEOSOP_DATA" in err[0] and str(tmp_path) in err[0]
     with pytest.raises(InputError, match="no folder given"):
         ppp_ins_study._products()
     if SP3.exists() and CLK.exists():
-        monkeypatch.setenv(ppp_ins_study.DATA_ENV, str(DAY.parents[1]))  # a data root: rinex/esbc_2020-177 below
+        monkeypatch.setenv(ENV_VAR, str(DAY.parents[1]))  # a data root: rinex/esbc_2020-177 below
         orbits, _ = ppp_ins_study._products()
         assert orbits.sv[0].startswith("G")

@@ -16,12 +16,12 @@ statistics, as the paper's run had none).
 """
 
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..constants import G0_MPS2
+from ..datadir import ENV_VAR, data_folder
 from ..errors import InputError
 from ..fusion.common import FilterSettings, pos_jacobian
 from ..ins import error_model, strapdown
@@ -66,7 +66,6 @@ OUTAGE_AT_S = 1200.0
 #: The real products the simulation is built on, and where they sit under a data folder.
 SP3_NAME, CLK_NAME = "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz", "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
 DAY_SUBDIR = Path("rinex") / "esbc_2020-177"
-DATA_ENV = "LEOSOP_DATA"
 
 
 def _products(data_dir=None):
@@ -81,7 +80,7 @@ def _products(data_dir=None):
     InputError
         Neither names a folder with the two files (both named in the message).
     """
-    root = data_dir or os.environ.get(DATA_ENV)
+    root = data_folder(data_dir)
     found = None
     if root:
         for d in (Path(root), Path(root) / DAY_SUBDIR):
@@ -90,7 +89,7 @@ def _products(data_dir=None):
                 break
     if found is None:
         where = f"not in {root} nor {Path(root) / DAY_SUBDIR}" if root else "no folder given"
-        raise InputError(f"--data DIR / {DATA_ENV}: the GRG products of 2020-06-25 ({SP3_NAME}, {CLK_NAME}) are "
+        raise InputError(f"--data DIR / {ENV_VAR}: the GRG products of 2020-06-25 ({SP3_NAME}, {CLK_NAME}) are "
                          f"needed for this simulation; {where}")
     day = np.datetime64("2020-06-25", "ns")
     return (read_sp3(found / SP3_NAME, systems="G", ref_gps=day),
