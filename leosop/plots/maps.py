@@ -12,7 +12,10 @@ import numpy as np
 
 from .core import pyplot, save_png
 
-__all__ = ["coastline_lon_lat_deg", "plot_fix_fraction", "plot_small_multiples"]
+__all__ = ["coastline_lon_lat_deg", "plot_fix_fraction", "plot_small_multiples", "MAX_PANELS"]
+
+#: Maps in one small-multiples figure at most (a 3 x 3 grid).
+MAX_PANELS = 9
 
 
 @functools.lru_cache(maxsize=1)
@@ -55,15 +58,22 @@ def plot_fix_fraction(path, lat_deg, lon_deg, fix_fraction, *, title=""):
 
 def plot_small_multiples(path, lat_deg, lon_deg, values, labels, *, cbar_label, vmin=None, vmax=None,
                          cmap="viridis", log_colors=False, title=""):
-    """One world map per selected epoch, shared colour scale.
+    """One world map per epoch, shared colour scale; beyond :data:`MAX_PANELS` epochs, evenly spaced ones.
+
+    The title says how many of the epochs are shown when not all are.
 
     Parameters
     ----------
-    values : ndarray, (n_panels, n_lat, n_lon)
-    labels : list of str, (n_panels,)
+    values : ndarray, (n_epochs, n_lat, n_lon)
+    labels : list of str, (n_epochs,)
     log_colors : bool
         Logarithmic colour scale (for quantities spanning decades, like GDOP); ``vmin`` must then be > 0.
     """
+    n_epochs = len(values)
+    pick = np.unique(np.linspace(0, n_epochs - 1, min(MAX_PANELS, n_epochs)).round().astype(int))
+    if len(pick) < n_epochs:
+        title = f"{title}\n{len(pick)} of the {n_epochs} epochs, evenly spaced"
+    values, labels = values[pick], [labels[k] for k in pick]
     plt = pyplot()
     n = len(values)
     cols = min(n, 3)

@@ -38,20 +38,39 @@ def time_label(result):
 
 
 def trajectory_figure(result, path):
-    """Fig. 4: truth, INS-only and fused tracks in longitude/latitude and height."""
+    """Fig. 4: truth, INS-only and fused tracks in the local east/north plane of the start, and heights.
+
+    Equal aspect, so a turn looks like a turn; the truth drawn thick and light, the fused solution thin and
+    dark on top of it (metres apart on a flight of kilometres), start and end marked.
+    """
     plt = pyplot()
-    fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 4.2), gridspec_kw={"width_ratios": [2, 1]})
-    for label, pos, style in (("truth", result.truth_pos_ecef_m, "k-"), ("INS only", result.ins_pos_ecef_m, "C1--"),
-                              (result.fused_label, result.fused.pos_ecef_m, "C0:")):
-        lat, lon, alt = ecef_to_geodetic(pos)
-        ax.plot(np.degrees(lon), np.degrees(lat), style, label=label)
-        ax_h.plot(result.t_s, alt, style, label=label)
-    ax.set_xlabel("longitude [deg]")
-    ax.set_ylabel("latitude [deg]")
-    ax.set_title(f"{run_label(result)}: trajectory")
-    ax.legend()
+    fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 4.6), gridspec_kw={"width_ratios": [3, 2]},
+                                   constrained_layout=True)
+    origin = result.truth_pos_ecef_m[0]
+    lat0, lon0, _ = ecef_to_geodetic(origin)
+    tracks = [(pos, ecef_to_enu(pos - origin, lat0, lon0))
+              for pos in (result.truth_pos_ecef_m, result.ins_pos_ecef_m, result.fused.pos_ecef_m)]
+    span_m = np.ptp(tracks[0][1][:, :2], axis=0).max()
+    unit, scale = ("km", 1e3) if span_m > 20e3 else ("m", 1.0)
+    styles = (("truth", dict(color="0.75", lw=5, solid_capstyle="round")),
+              ("INS only", dict(color="C1", lw=1.2, ls="--")),
+              (result.fused_label, dict(color="C0", lw=1.0)))
+    for (label, style), (pos, enu) in zip(styles, tracks):
+        ax.plot(enu[:, 0] / scale, enu[:, 1] / scale, label=label, **style)
+        ax_h.plot(result.t_s, ecef_to_geodetic(pos)[2], label=label, **style)
+    east, north = tracks[0][1][[0, -1], 0] / scale, tracks[0][1][[0, -1], 1] / scale
+    ax.plot(east[0], north[0], "k^", ms=8, label="start", zorder=5)
+    ax.plot(east[1], north[1], "ks", ms=7, label="end", zorder=5)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"east of the start [{unit}]")
+    ax.set_ylabel(f"north of the start [{unit}]")
+    ax.set_title(f"{run_label(result)}: trajectory\n(local east/north at "
+                 f"lat {np.degrees(lat0):.4f} deg, lon {np.degrees(lon0):.4f} deg)", fontsize=10)
+    ax.legend(fontsize="small")
+    ax.grid(True, alpha=0.3)
     ax_h.set_xlabel(time_label(result))
-    ax_h.set_ylabel("height [m]")
+    ax_h.set_ylabel("height above the ellipsoid [m]")
+    ax_h.grid(True, alpha=0.3)
     _save(fig, path)
 
 
