@@ -104,13 +104,14 @@ def test_skyplot_of_a_crowded_sky_labels_only_the_highest_and_names_its_rings(dr
     coloured = [line for line in ax.lines if line.get_color() != "0.55" and line.get_marker() in ("None", "")]
     assert len(coloured) == sky.MAX_LABELS
     rings = [tick.get_text() for tick in ax.get_yticklabels()]
-    assert rings == ["60", "40", "30", "0"]
+    assert rings == ["60", "30", "40"]
     assert any(a.get_text() == "elevation [deg]" for a in ax.texts)
     assert "61 satellites" in ax.get_title() and "12 highest labelled" in ax.get_title()
 
 
 def _flight():
-    """A 300 s straight flight 30 km east and 40 km north at 1000 m, start at Xi'an: ENU end known."""
+    """A 300 s straight flight 30 km east and 40 km north at 1000 m from Xi'an, INS 300 m and fused 2 m east of
+    it (in the start's east/north plane, the figure's)."""
     lat0, lon0 = np.radians(34.342), np.radians(108.940)
     frac = np.linspace(0.0, 1.0, 301)
     enu = np.stack([30e3 * frac, 40e3 * frac, np.zeros_like(frac)], axis=1)
@@ -118,8 +119,8 @@ def _flight():
     truth = start + enu_to_ecef(enu, lat0, lon0)
     run = SimpleNamespace(name="straight")
     return SimpleNamespace(
-        truth_pos_ecef_m=truth, ins_pos_ecef_m=truth + [300.0, 0.0, 0.0],
-        fused=SimpleNamespace(pos_ecef_m=truth + [2.0, 0.0, 0.0]), fused_label="Starlink/INS", t_s=300 * frac,
+        truth_pos_ecef_m=truth, ins_pos_ecef_m=truth + enu_to_ecef([300.0, 0.0, 0.0], lat0, lon0),
+        fused=SimpleNamespace(pos_ecef_m=truth + enu_to_ecef([2.0, 0.0, 0.0], lat0, lon0)), fused_label="Starlink/INS", t_s=300 * frac,
         times_utc=np.datetime64("2025-01-01T00:00:00") + (300e9 * frac).astype("timedelta64[ns]"),
         scenario=run, coupling="loose", level="measurement", seed=0)
 
@@ -138,6 +139,10 @@ def test_trajectory_has_equal_scales_start_end_and_both_tracks_visible(drawn, tm
     # The fused track is drawn after (on top of) the truth, thinner and darker, so both show.
     assert ax.lines.index(fused) > ax.lines.index(truth)
     assert fused.get_linewidth() < truth.get_linewidth() / 2
+    # The inset shows the end in metres: the fused track 2 m east of the truth, half-width 3 x 2 m.
+    inset, = ax.child_axes
+    np.testing.assert_allclose(inset.get_xlim(), (-6.0, 6.0))
+    np.testing.assert_allclose(inset.lines[2].get_xdata()[-1], 2.0, atol=1e-6)
 
 
 def _study():
@@ -201,3 +206,13 @@ def test_small_multiples_show_every_epoch_or_say_which(drawn, tmp_path, n_epochs
     assert len(titles) == shown and titles[0] == "epoch 0" and titles[-1] == f"epoch {n_epochs - 1}"
     said = f"{shown} of the {n_epochs} epochs" in fig._suptitle.get_text()
     assert said == (shown < n_epochs)
+
+
+def test_world_map_cells_cover_every_longitude(drawn, tmp_path):
+    # A 5 deg grid of cell centres -180..175: drawn centred, the cells must still reach +180 (the -180 column
+    # repeated), or a blank strip runs down the right edge.
+    lat, lon = np.arange(-90.0, 91.0, 5.0), np.arange(-180.0, 180.0, 5.0)
+    maps.plot_fix_fraction(tmp_path / "f.png", lat, lon, np.full((lat.size, lon.size), 0.5))
+    fig, = drawn
+    edges_lon = fig.axes[0].collections[0].get_coordinates()[..., 0]
+    assert edges_lon.min() <= -180.0 and edges_lon.max() >= 180.0

@@ -14,6 +14,8 @@ MAX_LABELS = 12
 #: Label geometry on the plot plane, in degrees of zenith distance: the polar axes of the 6.4 in figure
 #: span 180 deg in about 345 pt, so a 7 pt label of 5 digits is ~11 x 4.7 deg, drawn 5 pt right, 3 pt up.
 _PT_PER_DEG = 1.9
+#: Colours of the labelled satellites: the default cycle less its grey (C7), kept for the unlabelled ones.
+_COLOURS = tuple(f"C{k}" for k in range(10) if k != 7)
 _LABEL_BOX_DEG = np.array([11.0, 4.7])
 _LABEL_OFFSET_DEG = np.array([5.0, 3.0]) / _PT_PER_DEG
 
@@ -116,7 +118,7 @@ def plot_skyplot(path, az_rad, elev_rad, t_s, sat_label, start_utc, *, mask_deg,
             ax.plot(az[track], zen[track], lw=0.5, color="0.55", zorder=1)
             ax.plot(az[i0], zen[i0], "o", color="0.55", ms=2.5, zorder=1)
             continue
-        color = f"C{len(placed) % 10}"
+        color = _COLOURS[len(placed) % len(_COLOURS)]
         ax.plot(az[track], zen[track], lw=1.0, color=color, zorder=2)
         ax.plot(az[i0], zen[i0], "o", color=color, ms=4.5, zorder=3)
         # Lift a label until its box clears every label placed before (neighbours in a shell).
@@ -130,11 +132,13 @@ def plot_skyplot(path, az_rad, elev_rad, t_s, sat_label, start_utc, *, mask_deg,
                     fontsize=7, color=color, zorder=4, bbox=dict(boxstyle="round,pad=0.1", fc="white", alpha=0.7,
                                                                   lw=0))
     ax.set_rlim(0, 90)
-    rings = sorted({30.0, 60.0, 90.0 - mask_deg, 90.0})  # zenith distances: 60, 30, mask and 0 deg up
-    ax.set_rticks(rings)
-    ax.set_yticklabels([f"{90 - r:g}" for r in rings], fontsize=7)
+    # Elevation rings 60, 30 (unless crowding the mask's) and the mask; their name in the shaded band.
+    elevations = [e for e in (60.0, 30.0) if abs(e - mask_deg) > 8] + [mask_deg]
+    ax.set_rticks([90.0 - e for e in elevations])
+    ax.set_yticklabels([f"{e:g}" for e in elevations], fontsize=7)
     ax.set_rlabel_position(112.5)
-    ax.text(np.radians(112.5), 100, "elevation [deg]", fontsize=7, ha="left", va="top")
+    ax.text(np.radians(125.0), 90.0 - mask_deg / 2 if mask_deg >= 10 else 100.0, "elevation [deg]", fontsize=7,
+            ha="center", va="center")
     ax.set_xticks(np.radians(np.arange(0, 360, 45)))
     ax.set_xticklabels(["N", "NE", "E", "SE", "S", "SW", "W", "NW"])
     ax.legend(loc="lower right", bbox_to_anchor=(1.1, -0.12), fontsize=8)
