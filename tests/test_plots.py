@@ -120,7 +120,8 @@ def _flight():
     run = SimpleNamespace(name="straight")
     return SimpleNamespace(
         truth_pos_ecef_m=truth, ins_pos_ecef_m=truth + enu_to_ecef([300.0, 0.0, 0.0], lat0, lon0),
-        fused=SimpleNamespace(pos_ecef_m=truth + enu_to_ecef([2.0, 0.0, 0.0], lat0, lon0)), fused_label="Starlink/INS", t_s=300 * frac,
+        fused=SimpleNamespace(pos_ecef_m=truth + enu_to_ecef([2.0, 0.0, 0.0], lat0, lon0)),
+        fused_label="Starlink/INS", t_s=300 * frac,
         times_utc=np.datetime64("2025-01-01T00:00:00") + (300e9 * frac).astype("timedelta64[ns]"),
         scenario=run, coupling="loose", level="measurement", seed=0)
 
