@@ -64,8 +64,6 @@ def test_relative_links_resolve(page):
         if "://" in target or target.startswith("mailto:"):
             continue
         path = (DOCS / target).resolve()
-        if target.startswith("gallery/") and target.endswith(".png"):
-            continue  # drawn by tools/make_gallery.py, not committed
         assert path.exists(), f"{page}: broken link {target}"
         if anchor and path.suffix == ".md":
             headings = re.findall(r"^#+ (.*)$", path.read_text(), re.M)

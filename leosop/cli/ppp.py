@@ -119,10 +119,9 @@ def run(args):
             ok = np.isfinite(res.pos_ecef_m).all(axis=1)
             ref_pos = res.pos_ecef_m[ok][-1]
             lat0, lon0, _ = ecef_to_geodetic(ref_pos)
-            t_h = (res.time_gps[ok] - res.time_gps[0]).astype("timedelta64[ms]").astype(float) / 3.6e6
-            ppp_figure(t_h, (res.pos_ecef_m[ok] - ref_pos) @ C_e_n(lat0, lon0), res.sigma_enu_m[ok], res.n_used[ok],
-                       stage / "ppp.png", title=f"{obs.marker} {summary['mode']} float PPP, offsets from the "
-                                                "final position")
+            ppp_figure(res.time_gps[ok], (res.pos_ecef_m[ok] - ref_pos) @ C_e_n(lat0, lon0), res.sigma_enu_m[ok],
+                       res.n_used[ok], stage / "ppp.png",
+                       title=f"{obs.marker} {summary['mode']} float PPP, offsets from the final position")
             write_csv(stage / "ppp.csv", ["time_utc", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m",
                                          "sigma_e_m", "sigma_n_m", "sigma_u_m", "zwd_m", "n_sats"],
                       [[s["time_utc"], s["x_m"], s["y_m"], s["z_m"], s["lat_deg"], s["lon_deg"], s["alt_m"],

@@ -130,14 +130,13 @@ def _figures(stage, ds, label):
              f"{ds.attrs['grid_step_deg']:g} deg grid")
     plot_fix_fraction(stage / "fix_fraction.png", lat, lon, np.isfinite(gdop).mean(axis=0),
                       title=f"{title}\n{len(times)} epochs from {minute(times[0])} to {minute(times[-1])}")
-    pick = np.unique(np.linspace(0, len(times) - 1, min(6, len(times))).round().astype(int))
-    labels = [minute(t) for t in times[pick]]
-    plot_small_multiples(stage / "n_visible_maps.png", lat, lon, ds["n_visible"].values[pick].astype(float), labels,
+    labels = [minute(t) for t in times]
+    plot_small_multiples(stage / "n_visible_maps.png", lat, lon, ds["n_visible"].values.astype(float), labels,
                          cbar_label="visible satellites", vmin=0, title=title)
-    finite = gdop[pick][np.isfinite(gdop[pick]) & (gdop[pick] > 0)]
+    finite = gdop[np.isfinite(gdop) & (gdop > 0)]
     # GDOP spans decades near the fix threshold: log colours between the 1st and 99th percentiles.
     vmin, vmax = np.percentile(finite, [1, 99]) if finite.size else (1.0, 10.0)
-    plot_small_multiples(stage / "gdop_maps.png", lat, lon, gdop[pick], labels,
+    plot_small_multiples(stage / "gdop_maps.png", lat, lon, gdop, labels,
                          cbar_label="Doppler GDOP [m per Hz] ([Shen 2024] eq. 10)", vmin=float(vmin),
                          vmax=float(max(vmax, vmin * 10)), cmap="magma_r", log_colors=True,
                          title=title + " (blank: < 7 satellites)")

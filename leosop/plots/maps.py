@@ -12,7 +12,10 @@ import numpy as np
 
 from .core import pyplot, save_png
 
-__all__ = ["coastline_lon_lat_deg", "plot_fix_fraction", "plot_small_multiples"]
+__all__ = ["coastline_lon_lat_deg", "plot_fix_fraction", "plot_small_multiples", "MAX_PANELS"]
+
+#: Maps in one small-multiples figure at most (a 3 x 3 grid).
+MAX_PANELS = 9
 
 
 @functools.lru_cache(maxsize=1)
@@ -33,6 +36,23 @@ def _world_axes(ax):
     ax.tick_params(labelsize=7)
 
 
+def _wrap_lon(lon_deg, values):
+    """Repeat the first longitude column at +360 deg when the grid closes the circle.
+
+    Cells are drawn centred on their longitude (``shading="nearest"``): without the repeat, the cell at -180
+    covers -182.5..-177.5 on a 5 deg grid and the last half cell before +180 stays blank.
+
+    Parameters
+    ----------
+    lon_deg : ndarray, (n_lon,)
+    values : ndarray, (..., n_lat, n_lon)
+    """
+    step = lon_deg[1] - lon_deg[0] if lon_deg.size > 1 else 0.0
+    if step > 0 and np.isclose(lon_deg[0] + 360.0 - lon_deg[-1], step):
+        return np.r_[lon_deg, lon_deg[0] + 360.0], np.concatenate([values, values[..., :1]], axis=-1)
+    return lon_deg, values
+
+
 def plot_fix_fraction(path, lat_deg, lon_deg, fix_fraction, *, title=""):
     """Fraction of epochs with a Doppler fix (>= 7 satellites) per cell.
 
@@ -44,7 +64,8 @@ def plot_fix_fraction(path, lat_deg, lon_deg, fix_fraction, *, title=""):
     """
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.6), constrained_layout=True)
-    mesh = ax.pcolormesh(lon_deg, lat_deg, fix_fraction, shading="nearest", cmap="viridis", vmin=0, vmax=1)
+    lon_wrapped, fraction = _wrap_lon(lon_deg, fix_fraction)
+    mesh = ax.pcolormesh(lon_wrapped, lat_deg, fraction, shading="nearest", cmap="viridis", vmin=0, vmax=1)
     _world_axes(ax)
     fig.colorbar(mesh, ax=ax, shrink=0.8, label="fraction of epochs with >= 7 satellites")
     ax.set_title(title, fontsize=9)
@@ -55,15 +76,23 @@ def plot_fix_fraction(path, lat_deg, lon_deg, fix_fraction, *, title=""):
 
 def plot_small_multiples(path, lat_deg, lon_deg, values, labels, *, cbar_label, vmin=None, vmax=None,
                          cmap="viridis", log_colors=False, title=""):
-    """One world map per selected epoch, shared colour scale.
+    """One world map per epoch, shared colour scale; beyond :data:`MAX_PANELS` epochs, evenly spaced ones.
+
+    The title says how many of the epochs are shown when not all are.
 
     Parameters
     ----------
-    values : ndarray, (n_panels, n_lat, n_lon)
-    labels : list of str, (n_panels,)
+    values : ndarray, (n_epochs, n_lat, n_lon)
+    labels : list of str, (n_epochs,)
     log_colors : bool
         Logarithmic colour scale (for quantities spanning decades, like GDOP); ``vmin`` must then be > 0.
     """
+    n_epochs = len(values)
+    pick = np.unique(np.linspace(0, n_epochs - 1, min(MAX_PANELS, n_epochs)).round().astype(int))
+    if len(pick) < n_epochs:
+        title = f"{title}\n{len(pick)} of the {n_epochs} epochs, evenly spaced"
+    lon_deg, values = _wrap_lon(lon_deg, values[pick])
+    labels = [labels[k] for k in pick]
     plt = pyplot()
     n = len(values)
     cols = min(n, 3)

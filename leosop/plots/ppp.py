@@ -7,31 +7,50 @@ from .core import pyplot, save_png
 __all__ = ["ppp_figure", "ppp_ins_figure"]
 
 
-def ppp_figure(t_h, d_enu_m, sigma_enu_m, n_sats, path, *, title):
-    """ENU offsets from a reference with +-1 sigma, and the satellites used.
+def ppp_figure(time_gps, d_enu_m, sigma_enu_m, n_sats, path, *, title):
+    """ENU offsets from a reference in centimetres with the filter's +-3 sigma, and the satellites used.
+
+    The band is drawn with its edges, and each panel prints its median 3 sigma, so a band far thinner than
+    the offsets still shows (and says so) instead of vanishing under the line.
 
     Parameters
     ----------
-    t_h : ndarray, shape (n,)
-        Hours since the start.
+    time_gps : ndarray of datetime64, shape (n,)
+        Epochs (GPS time); the axis counts hours from the first, whose date and time label it.
     d_enu_m, sigma_enu_m : ndarray, shape (n, 3)
+        Offsets east, north, up [m] and their 1-sigma [m].
     n_sats : ndarray of int, shape (n,)
     path : str or Path
+    title : str
     """
+    from matplotlib.ticker import MaxNLocator
+
     plt = pyplot()
-    fig, ax = plt.subplots(4, 1, figsize=(8, 8), sharex=True)
-    for i, name in enumerate("ENU"):
-        ax[i].plot(t_h, d_enu_m[:, i], lw=0.8, label=name)
-        ax[i].fill_between(t_h, -sigma_enu_m[:, i], sigma_enu_m[:, i], color="0.8", label="+-1 sigma")
-        ax[i].set_ylabel(f"{name} [m]")
-        lim = np.nanpercentile(np.abs(d_enu_m[:, i]), 99) * 1.5
+    time_gps = np.asarray(time_gps, "datetime64[ns]")
+    t_h = (time_gps - time_gps[0]).astype(np.int64) / 3.6e12
+    d_cm, band_cm = 100.0 * np.asarray(d_enu_m), 300.0 * np.asarray(sigma_enu_m)
+    fig, ax = plt.subplots(4, 1, figsize=(8, 8), sharex=True, constrained_layout=True,
+                           gridspec_kw={"height_ratios": [1, 1, 1, 0.7]})
+    for i, name in enumerate(("east", "north", "up")):
+        ax[i].fill_between(t_h, -band_cm[:, i], band_cm[:, i], color="C1", alpha=0.3, lw=0,
+                           label="filter +-3 sigma")
+        for sign in (-1, 1):
+            ax[i].plot(t_h, sign * band_cm[:, i], color="C1", lw=0.7)
+        ax[i].plot(t_h, d_cm[:, i], color="C0", lw=0.8, label="offset")
+        ax[i].set_ylabel(f"{name} [cm]")
+        # The bulk of the run: neither the first epochs' metres nor a lone outlier set the scale.
+        lim = 1.2 * np.nanpercentile(np.abs(np.concatenate([d_cm[:, i], band_cm[:, i]])), 99)
         if np.isfinite(lim) and lim > 0:
             ax[i].set_ylim(-lim, lim)
+        ax[i].text(0.99, 0.04, f"median 3 sigma {np.nanmedian(band_cm[:, i]):.2f} cm", transform=ax[i].transAxes,
+                   ha="right", va="bottom", fontsize="small", bbox=dict(fc="white", alpha=0.8, lw=0))
         ax[i].grid(alpha=0.3)
-    ax[0].legend(loc="upper right", fontsize=8)
+    ax[0].legend(loc="upper right", fontsize=8, ncol=2)
     ax[3].step(t_h, n_sats, where="post", lw=0.8)
-    ax[3].set_ylabel("satellites")
-    ax[3].set_xlabel("time [h]")
+    ax[3].yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax[3].set_ylabel("satellites used")
+    ax[3].grid(alpha=0.3)
+    ax[3].set_xlabel(f"hours since {str(time_gps[0].astype('datetime64[s]')).replace('T', ' ')} GPS time")
     ax[0].set_title(title)
     save_png(fig, path)
 

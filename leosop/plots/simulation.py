@@ -38,21 +38,68 @@ def time_label(result):
 
 
 def trajectory_figure(result, path):
-    """Fig. 4: truth, INS-only and fused tracks in longitude/latitude and height."""
+    """Fig. 4: truth, INS-only and fused tracks in the local east/north plane of the start, and heights.
+
+    Equal aspect, so a turn looks like a turn; the truth drawn thick and light, the fused solution thin and
+    dark on top of it, start and end marked. The fused track lies metres from the truth on a flight of
+    kilometres, so an inset shows the end of the flight in metres (:func:`_end_inset`).
+    """
     plt = pyplot()
-    fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 4.2), gridspec_kw={"width_ratios": [2, 1]})
-    for label, pos, style in (("truth", result.truth_pos_ecef_m, "k-"), ("INS only", result.ins_pos_ecef_m, "C1--"),
-                              (result.fused_label, result.fused.pos_ecef_m, "C0:")):
-        lat, lon, alt = ecef_to_geodetic(pos)
-        ax.plot(np.degrees(lon), np.degrees(lat), style, label=label)
-        ax_h.plot(result.t_s, alt, style, label=label)
-    ax.set_xlabel("longitude [deg]")
-    ax.set_ylabel("latitude [deg]")
-    ax.set_title(f"{run_label(result)}: trajectory")
-    ax.legend()
+    fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 5), gridspec_kw={"width_ratios": [3, 2]},
+                                   layout="constrained")
+    origin = result.truth_pos_ecef_m[0]
+    lat0, lon0, _ = ecef_to_geodetic(origin)
+    positions = (result.truth_pos_ecef_m, result.ins_pos_ecef_m, result.fused.pos_ecef_m)
+    enus = [ecef_to_enu(pos - origin, lat0, lon0) for pos in positions]
+    unit, scale = ("km", 1e3) if np.ptp(enus[0][:, :2], axis=0).max() > 20e3 else ("m", 1.0)
+    styles = (("truth", dict(color="0.75", lw=5, solid_capstyle="round")),
+              ("INS only", dict(color="C1", lw=1.2, ls="--")),
+              (result.fused_label, dict(color="C0", lw=1.0)))
+    for (label, style), enu, pos in zip(styles, enus, positions):
+        ax.plot(enu[:, 0] / scale, enu[:, 1] / scale, label=label, **style)
+        ax_h.plot(result.t_s, ecef_to_geodetic(pos)[2], **style)
+    ends = enus[0][[0, -1], :2] / scale
+    ax.plot(*ends[0], "k^", ms=8, label="start", zorder=5)
+    ax.plot(*ends[1], "ks", ms=7, label="end", zorder=5)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"east of the start [{unit}]")
+    ax.set_ylabel(f"north of the start [{unit}]")
+    ax.set_title(f"{run_label(result)}: trajectory\n(local east/north at "
+                 f"lat {np.degrees(lat0):.4f} deg, lon {np.degrees(lon0):.4f} deg)", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    _end_inset(ax, enus, styles, scale)
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncol=5, fontsize="small")
     ax_h.set_xlabel(time_label(result))
-    ax_h.set_ylabel("height [m]")
+    ax_h.set_ylabel("height above the ellipsoid [m]")
+    ax_h.grid(True, alpha=0.3)
     _save(fig, path)
+
+
+def _end_inset(ax, enus, styles, scale):
+    """The last epochs in metres around the truth's end, in the quarter of ``ax`` the tracks leave emptiest.
+
+    Half-width: 3 x the fused solution's largest horizontal distance from the truth over the last 20
+    epochs, at least 5 m, so the two tracks are seen apart.
+    """
+    truth, _, fused = enus
+    last = slice(max(len(truth) - 20, 0), None)
+    half_m = max(3 * np.hypot(*(fused[last, :2] - truth[last, :2]).T).max(initial=0.0), 5.0)
+    ax.apply_aspect()
+    frac = ax.transAxes.inverted().transform(ax.transData.transform(truth[:, :2] / scale))
+    corners = [(0.03, 0.04), (0.55, 0.04), (0.03, 0.54), (0.55, 0.54)]
+    crowd = [np.sum((frac[:, 0] > x - 0.03) & (frac[:, 0] < x + 0.45) & (frac[:, 1] > y - 0.04)
+                    & (frac[:, 1] < y + 0.45)) for x, y in corners]
+    inset = ax.inset_axes([*corners[int(np.argmin(crowd))], 0.42, 0.42])
+    centre = truth[-1, :2]
+    for (_, style), enu in zip(styles, enus):
+        inset.plot(enu[:, 0] - centre[0], enu[:, 1] - centre[1], **style)
+    inset.plot(0.0, 0.0, "ks", ms=5)
+    inset.set_xlim(-half_m, half_m)
+    inset.set_ylim(-half_m, half_m)
+    inset.set_aspect("equal")
+    inset.tick_params(labelsize=6)
+    inset.set_title("end of the flight [m]", fontsize=7)
+    inset.grid(True, alpha=0.3)
 
 
 def errors_figure(result, path):

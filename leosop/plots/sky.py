@@ -9,11 +9,13 @@ __all__ = ["plot_visibility", "plot_skyplot"]
 
 #: Sky-plot window: tracks over the first ten minutes read as passes; a day of them is a solid disc.
 SKYPLOT_WINDOW_S = 600.0
-#: Satellites labelled at most (the highest first).
-MAX_LABELS = 25
+#: Satellites labelled and coloured at most (the highest first); the others are drawn thin and grey.
+MAX_LABELS = 12
 #: Label geometry on the plot plane, in degrees of zenith distance: the polar axes of the 6.4 in figure
 #: span 180 deg in about 345 pt, so a 7 pt label of 5 digits is ~11 x 4.7 deg, drawn 5 pt right, 3 pt up.
 _PT_PER_DEG = 1.9
+#: Colours of the labelled satellites: the default cycle less its grey (C7), kept for the unlabelled ones.
+_COLOURS = tuple(f"C{k}" for k in range(10) if k != 7)
 _LABEL_BOX_DEG = np.array([11.0, 4.7])
 _LABEL_OFFSET_DEG = np.array([5.0, 3.0]) / _PT_PER_DEG
 
@@ -66,10 +68,12 @@ def plot_skyplot(path, az_rad, elev_rad, t_s, sat_label, start_utc, *, mask_deg,
                  title=""):
     """Sky plot at the first epoch with the tracks of the following ``window_s``, saved to ``path`` (PNG).
 
-    North up, azimuth clockwise, compass points marked, the sky below the mask
-    shaded. Satellites above the mask at the first epoch are dots labelled
-    with their id (the :data:`MAX_LABELS` highest), each with its track over
-    the window as a line starting at the dot.
+    North up, azimuth clockwise, compass points marked, elevation rings
+    labelled in degrees, the sky below the mask shaded. Satellites above the
+    mask at the first epoch are dots, each with its track over the window as
+    a line starting at the dot; the :data:`MAX_LABELS` highest are coloured
+    and labelled with their id, any others drawn thin and grey, so a dense
+    shell stays readable.
 
     Parameters
     ----------
@@ -106,33 +110,41 @@ def plot_skyplot(path, az_rad, elev_rad, t_s, sat_label, start_utc, *, mask_deg,
     ids, start = np.unique(labels[order], return_index=True)
     first = order[start]
     # Label the highest MAX_LABELS satellites; a crowd of labels reads as none.
-    labelled = set(np.argsort(zen[first])[:MAX_LABELS].tolist())
+    labelled = set(np.argsort(zen[first], kind="stable")[:MAX_LABELS].tolist())
     placed = []  # lower-left corners of the labels so far, on the plane of the plot [deg]
     for k, (a, b) in enumerate(zip(start, np.r_[start[1:], len(order)])):
         track, i0 = order[a:b], first[k]
-        color = f"C{k % 10}"
-        ax.plot(az[track], zen[track], lw=0.9, color=color)
-        ax.plot(az[i0], zen[i0], "o", color=color, ms=4)
-        if k in labelled:
-            # Lift a label until its box clears every label placed before (neighbours in a shell).
-            corner = zen[i0] * np.array([np.sin(az[i0]), np.cos(az[i0])]) + _LABEL_OFFSET_DEG
-            while any(abs(corner[0] - c[0]) < _LABEL_BOX_DEG[0] and abs(corner[1] - c[1]) < _LABEL_BOX_DEG[1]
-                      for c in placed):
-                corner[1] += _LABEL_BOX_DEG[1]
-            placed.append(corner)
-            lift_pt = (corner[1] - zen[i0] * np.cos(az[i0]) - _LABEL_OFFSET_DEG[1]) * _PT_PER_DEG
-            ax.annotate(ids[k], (az[i0], zen[i0]), xytext=(5, 3 + lift_pt), textcoords="offset points",
-                        fontsize=7, color=color)
+        if k not in labelled:
+            ax.plot(az[track], zen[track], lw=0.5, color="0.55", zorder=1)
+            ax.plot(az[i0], zen[i0], "o", color="0.55", ms=2.5, zorder=1)
+            continue
+        color = _COLOURS[len(placed) % len(_COLOURS)]
+        ax.plot(az[track], zen[track], lw=1.0, color=color, zorder=2)
+        ax.plot(az[i0], zen[i0], "o", color=color, ms=4.5, zorder=3)
+        # Lift a label until its box clears every label placed before (neighbours in a shell).
+        corner = zen[i0] * np.array([np.sin(az[i0]), np.cos(az[i0])]) + _LABEL_OFFSET_DEG
+        while any(abs(corner[0] - c[0]) < _LABEL_BOX_DEG[0] and abs(corner[1] - c[1]) < _LABEL_BOX_DEG[1]
+                  for c in placed):
+            corner[1] += _LABEL_BOX_DEG[1]
+        placed.append(corner)
+        lift_pt = (corner[1] - zen[i0] * np.cos(az[i0]) - _LABEL_OFFSET_DEG[1]) * _PT_PER_DEG
+        ax.annotate(ids[k], (az[i0], zen[i0]), xytext=(5, 3 + lift_pt), textcoords="offset points",
+                    fontsize=7, color=color, zorder=4, bbox=dict(boxstyle="round,pad=0.1", fc="white", alpha=0.7,
+                                                                  lw=0))
     ax.set_rlim(0, 90)
-    ax.set_rticks([0, 30, 60, 90 - mask_deg])
-    ax.set_yticklabels(["90", "60", "30", f"{mask_deg:g}"], fontsize=7)
+    # Elevation rings 60, 30 (unless crowding the mask's) and the mask; their name in the shaded band.
+    elevations = [e for e in (60.0, 30.0) if abs(e - mask_deg) > 8] + [mask_deg]
+    ax.set_rticks([90.0 - e for e in elevations])
+    ax.set_yticklabels([f"{e:g}" for e in elevations], fontsize=7)
     ax.set_rlabel_position(112.5)
+    ax.text(np.radians(125.0), 90.0 - mask_deg / 2 if mask_deg >= 10 else 100.0, "elevation [deg]", fontsize=7,
+            ha="center", va="center")
     ax.set_xticks(np.radians(np.arange(0, 360, 45)))
     ax.set_xticklabels(["N", "NE", "E", "SE", "S", "SW", "W", "NW"])
     ax.legend(loc="lower right", bbox_to_anchor=(1.1, -0.12), fontsize=8)
     span_min = min(window_s, t_s.max(initial=0.0)) / 60
     stamp = format_utc(start_utc)[:19] + "Z"
-    shown = f", the {MAX_LABELS} highest labelled" if len(ids) > MAX_LABELS else ""
+    shown = f", the {MAX_LABELS} highest labelled, the others grey" if len(ids) > MAX_LABELS else ""
     ax.set_title(f"{title}\nsky at {stamp}: {len(ids)} satellites above {mask_deg:g} deg (dots{shown}),\n"
                  f"their tracks over the next {span_min:.0f} min", fontsize=9, pad=18)
     save_png(fig, path, dpi=110, bbox_inches="tight")

@@ -1,6 +1,7 @@
 """Spectrogram of a recording with the Doppler track over it."""
 
 import numpy as np
+from scipy.optimize import isotonic_regression
 
 from .core import pyplot, save_png
 
@@ -29,8 +30,8 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
     f_lim_hz : float, optional
         Show only |f| <= this.
     labelled_tracks : sequence of (t_s, doppler_hz, label)
-        Several satellites' central-tone tracks, each drawn and labelled at its end; labels that would
-        overprint are moved apart and tied to their track's end by a thin line.
+        Several satellites' central-tone tracks, each drawn and labelled in a column right of the data,
+        tied to its track's end by a thin line that crosses no label.
     x_label : str
         Time-axis label (say the UTC origin).
     """
@@ -61,28 +62,28 @@ def plot_spectrogram(path, t_s, f_hz, power, *, track_t_s=None, track_hz=None, c
 
 
 def _label_track_ends(ax, tracks, extent):
-    """Label each track at its end; labels of ends close in time are spread apart in frequency.
+    """Label every track in one column right of the data, tied to its track's end by a thin leader line.
 
-    The time axis is widened so labels at the right edge stay inside it.
+    The labels keep the order of the ends' frequencies and stand at least :data:`_LABEL_GAP` apart; as every
+    leader line runs left of the column and every label sits in it, no line crosses a label. The time axis
+    is widened to hold the column.
     """
     t_end = np.array([t[-1] for t, _, _ in tracks], float)
     f_end_khz = np.array([f[-1] / 1e3 for _, f, _ in tracks], float)
     y_lo, y_hi = ax.get_ylim()
     gap = _LABEL_GAP * (y_hi - y_lo)
     span = extent[1] - extent[0]
-    y_text = f_end_khz.copy()
-    # Groups of ends close in time; in each, from the bottom, every label at least `gap` above the previous.
-    by_time = np.argsort(t_end, kind="stable")
-    groups = np.split(by_time, np.flatnonzero(np.diff(t_end[by_time]) > 0.15 * span) + 1)
-    for group in groups:
-        previous = -np.inf
-        for i in group[np.argsort(f_end_khz[group], kind="stable")]:
-            y_text[i] = previous = max(f_end_khz[i], previous + gap)
-    x_text = t_end + 0.02 * span
-    for k, (_, _, label) in enumerate(tracks):
+    order = np.argsort(f_end_khz, kind="stable")
+    steps = gap * np.arange(len(order))
+    # Labels as near their ends as `gap` apart in the ends' order allows (least squares), inside the axes.
+    y_text = isotonic_regression(f_end_khz[order] - steps).x + steps
+    y_text = np.clip(y_text, y_lo + gap / 2 + steps, y_hi - gap / 2 - steps[::-1])
+    x_text = extent[1] + 0.03 * span
+    for rank, k in enumerate(order):
         color = f"C{k % 10}"
-        ax.annotate(label, (t_end[k], f_end_khz[k]), xytext=(x_text[k], y_text[k]), textcoords="data",
-                    color=color, fontsize=7, va="center",
+        ax.annotate(tracks[k][2], (t_end[k], f_end_khz[k]), xytext=(x_text, y_text[rank]), textcoords="data",
+                    color=color, fontsize=7, ha="left", va="center", annotation_clip=False,
                     bbox=dict(boxstyle="round,pad=0.15", fc="white", alpha=0.8, lw=0),
-                    arrowprops=dict(arrowstyle="-", color=color, lw=0.6))
-    ax.set_xlim(extent[0], extent[1] + 0.14 * span)
+                    arrowprops=dict(arrowstyle="-", color=color, lw=0.6, shrinkA=0, shrinkB=0))
+    ax.set_xlim(extent[0], extent[1] + 0.16 * span)
+
