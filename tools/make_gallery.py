@@ -122,8 +122,10 @@ RUNS = {
         ["ppp", ESBC + "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz",
          "--nav", ESBC + "ESBC00DNK_R_20201770000_01D_MN.rnx.gz",
          "--sp3", ESBC + "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz",
-         "--clk", ESBC + "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"],
-        "Kinematic float PPP of the IGS station ESBC00DNK over 24 h (the [PPP](ppp.md) page's day; needs "
+         "--clk", ESBC + "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz",
+         "--antex", ESBC + "esbc_2020-177.atx"],
+        "Kinematic float PPP of the IGS station ESBC00DNK over 24 h with its antenna calibrations (the "
+        "[PPP](ppp.md) page's day; needs "
         "`../shared/data`).",
         {"ppp.png": "Offsets east, north and up from the final position in cm with the filter's +-3 sigma band "
                     "(edges drawn, median printed, so a band thinner than the wander still shows), and the "
