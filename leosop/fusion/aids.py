@@ -4,8 +4,10 @@ Each aid is a small object at one time ``t_s`` that answers two questions
 about the INS it is shown (an :class:`InsView`):
 
 * :meth:`Aid.predict`: the nonlinear measurement the INS implies, ``h(ins)``;
-* :meth:`Aid.matrices`: the innovation ``z = h(ins) - measured``, its design
-  matrix ``H`` over the 15 INS errors and its noise covariance ``R``, so that
+* :meth:`Aid.design`: the design matrix ``H`` over the 15 INS errors;
+
+and :meth:`Aid.matrices` returns the innovation ``z = h(ins) - measured``,
+``H`` and the noise covariance ``R``, so that
   ``z = H dx + v`` with ``dx`` the INS errors in the sense of
   :mod:`leosop.ins.error_model` (computed minus true, misalignment ``phi`` with
   ``C_n_b_computed = (I - [phi x]) C_n_b_true``, position ``[dlat, dlon, dalt]``,
@@ -19,9 +21,11 @@ Every ``H`` is checked against finite differences of :meth:`Aid.predict` in
 """
 
 import dataclasses
+import math
 
 import numpy as np
 
+from ..constants import OMEGA_E_RAD_PER_S
 from ..earth import earth_rate_enu
 from ..ins.error_model import DPOS, DV, EPS, PHI
 from ..rotations import skew
@@ -56,12 +60,16 @@ def _enu_offset_m(state, lat_rad, lon_rad, alt_m):
 
 
 class Aid:
-    """One aiding measurement at ``t_s``; subclasses set :attr:`name` and implement :meth:`predict` / :meth:`matrices`.
+    """One aiding measurement at ``t_s``; subclasses set the attributes and implement :meth:`predict`, :meth:`design`.
 
     Attributes
     ----------
     t_s : float
         Time of the measurement [s], on the filter's clock.
+    measured : ndarray, (m,)
+        The measurement, in the units of :meth:`predict`.
+    R : ndarray, (m, m)
+        Its noise covariance.
     name : str
         Kind of aid, the key of the run's aid counts.
     needs_heading : bool
@@ -78,9 +86,13 @@ class Aid:
         """The measurement the INS implies, ``h(ins)``, shape (m,)."""
         raise NotImplementedError
 
+    def design(self, ins):
+        """``H = dz / dx``, shape (m, 15)."""
+        raise NotImplementedError
+
     def matrices(self, ins):
         """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` (m, 15), ``R`` (m, m)."""
-        raise NotImplementedError
+        return self.predict(ins) - self.measured, self.design(ins), self.R
 
 
 class GnssPosition(Aid):
@@ -102,6 +114,7 @@ class GnssPosition(Aid):
     def __init__(self, t_s, lat_rad, lon_rad, alt_m, cov_enu_m2, lever_arm_b_m):
         super().__init__(t_s)
         self.lat_rad, self.lon_rad, self.alt_m = float(lat_rad), float(lon_rad), float(alt_m)
+        self.measured = np.zeros(3)  # the offset of the measured point from itself
         self.R = np.asarray(cov_enu_m2, dtype=float).reshape(3, 3)
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
 
@@ -109,12 +122,12 @@ class GnssPosition(Aid):
         s = ins.state
         return _enu_offset_m(s, self.lat_rad, self.lon_rad, self.alt_m) + s.C_n_b @ self.lever_arm_b_m
 
-    def matrices(self, ins):
+    def design(self, ins):
         s = ins.state
         H = np.zeros((3, N_INS))
         H[:, PHI] = skew(s.C_n_b @ self.lever_arm_b_m)
         H[:, DPOS] = pos_jacobian(s.lat_rad, s.alt_m)
-        return self.predict(ins), H, self.R
+        return H
 
 
 class GnssVelocity(Aid):
@@ -132,7 +145,7 @@ class GnssVelocity(Aid):
 
     def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m):
         super().__init__(t_s)
-        self.vel_enu_mps = np.asarray(vel_enu_mps, dtype=float).reshape(3)
+        self.vel_enu_mps = self.measured = np.asarray(vel_enu_mps, dtype=float).reshape(3)
         self.R = np.asarray(cov_enu_m2ps2, dtype=float).reshape(3, 3)
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
 
@@ -140,14 +153,14 @@ class GnssVelocity(Aid):
         s = ins.state
         return s.vel_enu_mps + s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
 
-    def matrices(self, ins):
+    def design(self, ins):
         C = ins.state.C_n_b
         H = np.zeros((3, N_INS))
         H[:, PHI] = skew(C @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m))
         H[:, DV] = np.eye(3)
         # omega_computed = omega_true + eps_b: the rate error moves the lever-arm velocity by -C [l x] eps_b.
         H[:, EPS] = -C @ skew(self.lever_arm_b_m)
-        return self.predict(ins) - self.vel_enu_mps, H, self.R
+        return H
 
 
 class ZeroVelocity(Aid):
@@ -158,14 +171,15 @@ class ZeroVelocity(Aid):
     def __init__(self, t_s, sigma_mps):
         super().__init__(t_s)
         self.R = np.eye(3) * float(sigma_mps) ** 2
+        self.measured = np.zeros(3)
 
     def predict(self, ins):
         return ins.state.vel_enu_mps.copy()
 
-    def matrices(self, ins):
+    def design(self, ins):
         H = np.zeros((3, N_INS))
         H[:, DV] = np.eye(3)
-        return self.predict(ins), H, self.R
+        return H
 
 
 class ZeroRate(Aid):
@@ -189,17 +203,19 @@ class ZeroRate(Aid):
         super().__init__(t_s)
         self.omega_mean_b = np.asarray(omega_mean_b_rad_per_s, dtype=float).reshape(3)
         self.R = np.eye(3) * float(sigma_rad_per_s) ** 2
+        self.measured = np.zeros(3)
 
     def predict(self, ins):
         s = ins.state
         return self.omega_mean_b - ins.gyro_bias_rad_per_s - s.C_n_b.T @ earth_rate_enu(s.lat_rad)
 
-    def matrices(self, ins):
+    def design(self, ins):
         s = ins.state
         H = np.zeros((3, N_INS))
         H[:, PHI] = s.C_n_b.T @ skew(earth_rate_enu(s.lat_rad))
+        H[:, DPOS.start] = -s.C_n_b.T @ (OMEGA_E_RAD_PER_S * np.array([0.0, -math.sin(s.lat_rad), math.cos(s.lat_rad)]))
         H[:, EPS] = np.eye(3)
-        return self.predict(ins), H, self.R
+        return H
 
 
 class NonHolonomic(Aid):
@@ -224,20 +240,21 @@ class NonHolonomic(Aid):
     def __init__(self, t_s, sigma_mps, C_v_b=np.eye(3)):
         super().__init__(t_s)
         self.R = np.eye(2) * float(sigma_mps) ** 2
+        self.measured = np.zeros(2)
         self.C_v_b = np.asarray(C_v_b, dtype=float).reshape(3, 3)
 
     def predict(self, ins):
         s = ins.state
         return (self.C_v_b @ s.C_n_b.T @ s.vel_enu_mps)[self._ROWS]
 
-    def matrices(self, ins):
+    def design(self, ins):
         s = ins.state
         A = self.C_v_b @ s.C_n_b.T
         H = np.zeros((2, N_INS))
         # C_computed^T = C^T (I + [phi x]): the body velocity moves by -C^T [v x] phi.
         H[:, PHI] = -(A @ skew(s.vel_enu_mps))[self._ROWS]
         H[:, DV] = A[self._ROWS]
-        return self.predict(ins), H, self.R
+        return H
 
 
 class Height(Aid):
@@ -248,13 +265,14 @@ class Height(Aid):
     def __init__(self, t_s, alt_m, sigma_m):
         super().__init__(t_s)
         self.alt_m = float(alt_m)
+        self.measured = np.array([self.alt_m])
         self.R = np.eye(1) * float(sigma_m) ** 2
 
     def predict(self, ins):
         return np.array([ins.state.alt_m])
 
-    def matrices(self, ins):
+    def design(self, ins):
         H = np.zeros((1, N_INS))
         H[0, DPOS.start + 2] = 1.0
-        return self.predict(ins) - self.alt_m, H, self.R
+        return H
 
