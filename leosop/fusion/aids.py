@@ -74,10 +74,18 @@ class Aid:
         Kind of aid, the key of the run's aid counts.
     needs_heading : bool
         The model assumes a known heading (not applied before the yaw is initialised).
+    gated : bool
+        Its innovations go through the filter's chi-square gate. Constraints
+        (ZUPT, NHC, ...) are: a skid or a wrongly detected stop must not pull
+        the INS. GNSS fixes are not: their quality flag and sigmas are the
+        receiver's own check, and rejecting fixes after a GNSS outage, when
+        the INS has drifted further than its covariance says, only lets it
+        drift on (measured on the rtklibexplorer drive and walk).
     """
 
     name = "aid"
     needs_heading = False
+    gated = True
 
     def __init__(self, t_s):
         self.t_s = float(t_s)
@@ -110,6 +118,7 @@ class GnssPosition(Aid):
     """
 
     name = "gnss_position"
+    gated = False
 
     def __init__(self, t_s, lat_rad, lon_rad, alt_m, cov_enu_m2, lever_arm_b_m):
         super().__init__(t_s)
@@ -142,6 +151,7 @@ class GnssVelocity(Aid):
     """
 
     name = "gnss_velocity"
+    gated = False
 
     def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m):
         super().__init__(t_s)

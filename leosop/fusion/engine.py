@@ -44,9 +44,10 @@ class EngineSettings:
     ``gyro_arw_rad_per_rt_s`` and ``accel_vrw_mps_per_rt_s`` are the white
     noise densities of the increments; ``*_bias_rw_*`` the random walks of the
     biases (rad/s/sqrt(s), m/s^2/sqrt(s)). ``step_s`` is the longest interval
-    of one covariance propagation. Innovations beyond the ``gate_probability``
-    chi-square quantile are rejected, unless ``reopen_after`` aids of that
-    kind in a row were (the INS, not the aids, is then wrong).
+    of one covariance propagation. Innovations of gated aids (``aid.gated``)
+    beyond the ``gate_probability`` chi-square quantile are rejected, unless
+    ``reopen_after`` aids of that kind in a row were (the INS, not the aids,
+    is then wrong).
     """
 
     gyro_arw_rad_per_rt_s: float
@@ -165,7 +166,7 @@ class _Filter:
         run = self.rejected_run.get(aid.name, 0)
         if z.size not in self.gate:
             self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
-        if nis > self.gate[z.size] and run < self.settings.reopen_after:
+        if aid.gated and nis > self.gate[z.size] and run < self.settings.reopen_after:
             count[1] += 1
             self.rejected_run[aid.name] = run + 1
             return
