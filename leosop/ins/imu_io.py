@@ -370,8 +370,14 @@ def read_csv_columns(path, columns, *, C_b_s=np.eye(3), delimiter=",", skip_rows
     n_cols = len(lines[0].split(delimiter)) if lines else 0
     if n_cols <= max(idx):
         raise InputError(f"{path}:{skip_rows + 1}: {n_cols} column(s); the column map needs {max(idx) + 1}")
-    data = _table(path, lines, skip_rows + 1, n_cols, delimiter)
-    col = {q: data[:, int(columns[name])] * CSV_COLUMNS[name] for q, name in picks.items()}
+    used = []
+    for i, line in enumerate(lines):
+        fields = line.split(delimiter)
+        if len(fields) <= max(idx):
+            raise InputError(f"{path}:{skip_rows + 1 + i}: {len(fields)} column(s); the column map needs {max(idx) + 1}")
+        used.append(",".join(fields[j] for j in idx))
+    data = _table(path, used, skip_rows + 1, len(idx), ",")
+    col = {q: data[:, k] * CSV_COLUMNS[name] for k, (q, name) in enumerate(picks.items())}
     t = col["t"]
     epoch = None
     if picks["t"] == "t_gpst_s":
