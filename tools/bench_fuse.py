@@ -15,7 +15,7 @@ Our filter reads the raw IMU CSV with its ``.tag``, the mounting, lever arm
 and IMU time offset of the peer's configuration files, the ``consumer``
 grade, ``--nhc --zupt`` on the drive and ``--zupt`` on the walk.
 
-Usage: ``python tools/bench_fuse.py [--data DIR] [--anchor DIR] [--json]``.
+Usage: ``python tools/bench_fuse.py [--data DIR] [--anchor DIR] [--logs drive walk] [--json]``.
 Goals (issue 21): mean <= 0.5 x the peer's, worst no worse, >= 95 % of the
 withheld-fix errors inside our 3 sigma, run time <= 0.1 x the log.
 """
@@ -73,7 +73,7 @@ def _horiz_errors(t_s, lat_deg, lon_deg, alt_m, sol, t0, outages):
 
 def ours(data, name, length_s):
     folder, _, _, imu, mount, (f, r, d), offset, aids, start, end = LOGS[name]
-    sol = read_pos(next((data / folder).glob("gnss_*_sf.pos")))
+    sol = read_pos(data / folder / f"gnss_{LOGS[name][2]}.pos")
     log = imu_io.read_rtklib_csv(data / folder / imu, C_b_s=imu_io.mount_C_b_s(*mount))
     outages = schedule(sol.t_gpst_s[-1] - sol.t_gpst_s[0], start, end, length_s)
     opts = real.FuseOptions(spec=real.GRADES["consumer"], outages=outages, lever_arm_b_m=(r, f, -d), **aids)
@@ -125,7 +125,7 @@ def peer(data, anchor, name, length_s, outages):
         subprocess.run([sys.executable, str(main)], cwd=src, env=env, check=True, stdout=subprocess.DEVNULL,
                        stderr=subprocess.PIPE)
         runtime = time.perf_counter() - t
-        sol = read_pos(next(dat.glob("gnss_*_sf.pos")))
+        sol = read_pos(dat / f"gnss_{stem}.pos")
         t_s, lat, lon, alt = _read_peer_pos(dat / f"gnss_imu_{stem}.pos")
     t0 = sol.t_gpst_s[0]
     return {"max_horiz_err_m": _horiz_errors(t_s - t0, lat, lon, alt, sol, t0, outages), "runtime_s": runtime}
@@ -135,10 +135,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=ROOT / "shared" / "data" / "gnss-ins")
     ap.add_argument("--anchor", type=Path, default=ROOT / "shared" / "anchors" / "gnss_imu")
+    ap.add_argument("--logs", nargs="+", choices=tuple(LOGS), default=tuple(LOGS))
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     rows = []
-    for name in LOGS:
+    for name in args.logs:
         for length in OUTAGE_LENGTHS_S:
             a, outages = ours(args.data, name, length)
             b = peer(args.data, args.anchor, name, length, outages)
