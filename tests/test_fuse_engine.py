@@ -11,12 +11,12 @@ import math
 import numpy as np
 import pytest
 
-from leosop import earth, frames
+from leosop import frames
 from leosop.fusion import aids, engine
 from leosop.fusion.common import N_INS, pos_jacobian
 from leosop.ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from leosop.ins.strapdown import NavState
-from leosop.ins.trajectory import Segment, from_segments, static
+from leosop.ins.trajectory import static
 from leosop.rotations import euler_to_dcm, quat_to_dcm, rotvec_to_dcm
 
 LAT, LON, ALT = math.radians(40.1), math.radians(-105.15), 1600.0

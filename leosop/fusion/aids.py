@@ -31,7 +31,7 @@ from ..ins.error_model import DPOS, DV, EPS, PHI
 from ..rotations import skew
 from .common import N_INS, pos_jacobian
 
-__all__ = ["InsView", "Aid", "GnssPosition", "GnssVelocity", "ZeroVelocity", "ZeroRate", "NonHolonomic", "Height"]
+__all__ = ["Aid", "GnssPosition", "GnssVelocity", "Height", "InsView", "NonHolonomic", "ZeroRate", "ZeroVelocity"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -34,7 +34,7 @@ from . import kalman
 from .aids import InsView
 from .common import GATE_PROBABILITY, N_INS, pos_jacobian
 
-__all__ = ["EngineSettings", "CourseAlignment", "EngineResult", "run"]
+__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "run"]
 
 
 @dataclasses.dataclass(frozen=True)

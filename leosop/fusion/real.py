@@ -35,8 +35,17 @@ from . import aids as aid_models
 from . import engine
 from .common import N_INS, pos_jacobian
 
-__all__ = ["ImuSpec", "GRADES", "imu_spec", "FuseOptions", "FuseRun", "stationary_windows", "fuse",
-           "outage_errors", "INSIDE_3SIGMA_CHI2"]
+__all__ = [
+    "GRADES",
+    "INSIDE_3SIGMA_CHI2",
+    "FuseOptions",
+    "FuseRun",
+    "ImuSpec",
+    "fuse",
+    "imu_spec",
+    "outage_errors",
+    "stationary_windows",
+]
 
 #: Chi-square (2 degrees of freedom) of the probability of a 1-D 3-sigma interval, 0.9973: a horizontal
 #: error inside the filter's 3-sigma ellipse.

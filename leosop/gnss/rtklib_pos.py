@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import atomic_path
 
-__all__ = ["PosSolution", "read_pos", "write_pos", "Q_FIX", "Q_FLOAT", "Q_SINGLE", "Q_DR"]
+__all__ = ["Q_DR", "Q_FIX", "Q_FLOAT", "Q_SINGLE", "PosSolution", "read_pos", "write_pos"]
 
 Q_FIX, Q_FLOAT, Q_SINGLE, Q_DR = 1, 2, 5, 7
 #: GPS week 0 began 1980-01-06 (GPST), in Unix-style GPST seconds.
@@ -67,7 +67,7 @@ class PosSolution:
 def _cov_enu(sd):
     """ENU covariance from RTKLIB's ``sdn sde sdu sdne sdeu sdun`` (signed square roots), (n, 6) -> (n, 3, 3)."""
     sn, se, su, sne, seu, sun = (sd[:, i] for i in range(6))
-    c = lambda x: np.sign(x) * x * x  # noqa: E731  (RTKLIB stores sgn(c) sqrt|c|)
+    c = lambda x: np.sign(x) * x * x  # RTKLIB stores sgn(c) sqrt|c|
     cov = np.empty((sd.shape[0], 3, 3))
     cov[:, 0, 0], cov[:, 1, 1], cov[:, 2, 2] = se**2, sn**2, su**2
     cov[:, 0, 1] = cov[:, 1, 0] = c(sne)
@@ -78,7 +78,7 @@ def _cov_enu(sd):
 
 def _signed_roots(cov):
     """RTKLIB's ``sdn sde sdu sdne sdeu sdun`` of ENU covariances, (n, 3, 3) -> (n, 6)."""
-    r = lambda x: np.sign(x) * np.sqrt(np.abs(x))  # noqa: E731
+    r = lambda x: np.sign(x) * np.sqrt(np.abs(x))
     return np.stack([np.sqrt(cov[:, 1, 1]), np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 2, 2]),
                      r(cov[:, 0, 1]), r(cov[:, 0, 2]), r(cov[:, 1, 2])], axis=-1)
 
@@ -184,8 +184,7 @@ def write_pos(path, sol, *, comments=()):
     sdv = _signed_roots(sol.cov_vel_enu_m2ps2)
     v = sol.vel_enu_mps
     with atomic_path(path) as tmp, open(tmp, "w") as fh:
-        for c in comments:
-            fh.write(f"% {c}\n")
+        fh.writelines(f"% {c}\n" for c in comments)
         fh.write(_HEADER + "\n")
         for k in range(t.size):
             date, time = text[k].split("T")

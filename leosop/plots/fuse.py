@@ -5,7 +5,7 @@ import numpy as np
 from ..frames import ecef_to_enu, geodetic_to_ecef
 from .core import pyplot, save_png
 
-__all__ = ["track", "outage_errors", "biases"]
+__all__ = ["biases", "outage_errors", "track"]
 
 
 def _enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m):
