@@ -15,6 +15,9 @@ Formats (see ``../shared/data/gnss-ins/PROVENANCE.md``):
   data's own repository).
 * rtklibexplorer converted CSV (``read_rtklib_sf_csv``): ``t [s GPST since
   1970] ax ay az [g] gx gy gz [rad/s]`` and four unused columns.
+* Any delimited text (``read_csv_columns``) with a column map naming the
+  unit of each column (:data:`CSV_COLUMNS`), e.g. ``{"t_gpst_s": 0, "ax_g": 1,
+  ..., "gz_deg_per_s": 6}``.
 
 Sensor axes are rotated into the body frame with ``C_b_s``; the mountings of
 the two rtklibexplorer data sets are :data:`DRIVE_0708_C_B_S` and
@@ -41,7 +44,8 @@ from ..constants import G0_MPS2
 from ..errors import InputError
 from ..rotations import euler_to_dcm
 
-__all__ = ["ImuLog", "read_psins", "read_rtklib_csv", "read_rtklib_sf_csv", "DRIVE_0708_C_B_S", "WALK_0827_C_B_S"]
+__all__ = ["ImuLog", "read_psins", "read_rtklib_csv", "read_rtklib_sf_csv", "read_csv_columns", "CSV_COLUMNS",
+           "DRIVE_0708_C_B_S", "WALK_0827_C_B_S", "mount_C_b_s"]
 
 _GAP_FACTOR = 2.5
 _RATE_RANGE_HZ = (1.0, 10_000.0)
@@ -58,6 +62,26 @@ _RFU_FROM_FRD = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 DRIVE_0708_C_B_S = _RFU_FROM_FRD @ np.diag([-1.0, 1.0, -1.0])
 #: Sensor to body (RFU) rotation of the rtklibexplorer walk_0827 IMU: R = -x, F = -y, U = z.
 WALK_0827_C_B_S = _RFU_FROM_FRD @ np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def mount_C_b_s(roll_deg, pitch_deg, yaw_deg):
+    """Sensor-to-body (Right-Forward-Up) rotation of an IMU mounted at roll, pitch, yaw in a forward-right-down body.
+
+    The convention of rtklibexplorer/GNSS_IMU's ``imu_misalign`` (DESIGN 4.5):
+    ``f_frd = C f_sensor`` with ``C`` Groves' (2013) ``Euler_to_CTM`` of the
+    three angles, ``Rx(roll) Ry(pitch) Rz(yaw)`` as passive rotations; the rows
+    are then re-ordered to Right-Forward-Up.
+
+    Returns
+    -------
+    ndarray, (3, 3)
+    """
+    r, p, y = np.radians([roll_deg, pitch_deg, yaw_deg])
+    sr, cr, sp, cp, sy, cy = np.sin(r), np.cos(r), np.sin(p), np.cos(p), np.sin(y), np.cos(y)
+    C = np.array([[cp * cy, cp * sy, -sp],
+                  [-cr * sy + sr * sp * cy, cr * cy + sr * sp * sy, sr * cp],
+                  [sr * sy + cr * sp * cy, -sr * cy + cr * sp * sy, cr * cp]])
+    return _RFU_FROM_FRD @ C
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,6 +123,14 @@ class ImuLog:
     def accel_mps2(self):
         """Mean specific force over each interval, shape (n, 3)."""
         return self.dvel_b_mps / self.dt_s[:, None]
+
+    @property
+    def epoch_gpst_s(self):
+        """``epoch`` as Unix-style GPST seconds (GPST since 1970 without leap seconds); None unless in GPST."""
+        if self.epoch is None or not self.epoch.endswith("Z GPST"):
+            return None
+        iso = self.epoch[:-len("Z GPST")]
+        return float((np.datetime64(iso, "ns") - np.datetime64("1970-01-01T00:00:00", "ns")) / np.timedelta64(1, "s"))
 
     @property
     def rate_hz(self):
@@ -292,3 +324,65 @@ def read_rtklib_sf_csv(path, *, C_b_s=np.eye(3)):
     _check_gpst(path, "first time", t[0])
     metadata = {"format": "rtklib_sf_csv", "C_b_s": np.asarray(C_b_s, dtype=float).tolist()}
     return _from_rates(path, t - t[0], data[:, 1:4] * G0_MPS2, data[:, 4:7], 1, C_b_s, _gpst_iso(t[0]), metadata)
+
+
+#: Column names of :func:`read_csv_columns` and their factors to SI: time (Unix-style GPST seconds, or seconds
+#: of no stated epoch), specific force per axis in m/s^2 or g, body rate in rad/s or deg/s.
+CSV_COLUMNS = {"t_gpst_s": 1.0, "t_s": 1.0,
+               **{f"a{x}_mps2": 1.0 for x in "xyz"}, **{f"a{x}_g": G0_MPS2 for x in "xyz"},
+               **{f"g{x}_rad_per_s": 1.0 for x in "xyz"}, **{f"g{x}_deg_per_s": math.pi / 180.0 for x in "xyz"}}
+
+
+def read_csv_columns(path, columns, *, C_b_s=np.eye(3), delimiter=",", skip_rows=0):
+    """Read a delimited IMU log of rates with a column map.
+
+    Parameters
+    ----------
+    path : path-like
+    columns : dict of str to int
+        0-based column of each quantity, named as in :data:`CSV_COLUMNS`: one
+        time (``t_gpst_s`` or ``t_s``), one accelerometer and one gyro column
+        per axis, each in one unit (``ax_g`` or ``ax_mps2``, ...).
+    C_b_s : array_like, (3, 3)
+        Sensor-to-body rotation.
+    delimiter : str
+    skip_rows : int
+        Header lines to skip.
+
+    Returns
+    -------
+    ImuLog
+        ``epoch`` the first sample's GPST time with ``t_gpst_s``, else None.
+    """
+    unknown = sorted(set(columns) - set(CSV_COLUMNS))
+    if unknown:
+        raise InputError(f"{path}: unknown IMU column name(s) {', '.join(unknown)}; known: {', '.join(CSV_COLUMNS)}")
+    picks = {}
+    for q in ["t"] + [f"{s}{x}" for s in "ag" for x in "xyz"]:
+        names = [c for c in columns if c.startswith(q + "_")]
+        if len(names) != 1:
+            raise InputError(f"{path}: the column map needs exactly one {q}_* column, got {names or 'none'}")
+        picks[q] = names[0]
+    idx = [int(columns[picks[q]]) for q in picks]
+    if min(idx) < 0 or len(set(idx)) != len(idx):
+        raise InputError(f"{path}: column indices {idx} must be distinct and >= 0")
+    lines = _read_lines(path)[skip_rows:]
+    n_cols = len(lines[0].split(delimiter)) if lines else 0
+    if n_cols <= max(idx):
+        raise InputError(f"{path}:{skip_rows + 1}: {n_cols} column(s); the column map needs {max(idx) + 1}")
+    used = []
+    for i, line in enumerate(lines):
+        fields = line.split(delimiter)
+        if len(fields) <= max(idx):
+            raise InputError(f"{path}:{skip_rows + 1 + i}: {len(fields)} column(s); the column map needs {max(idx) + 1}")
+        used.append(",".join(fields[j] for j in idx))
+    data = _table(path, used, skip_rows + 1, len(idx), ",")
+    col = {q: data[:, k] * CSV_COLUMNS[name] for k, (q, name) in enumerate(picks.items())}
+    t = col["t"]
+    epoch = None
+    if picks["t"] == "t_gpst_s":
+        epoch = _gpst_iso(_check_gpst(path, "first time", t[0]))
+    accel = np.stack([col["ax"], col["ay"], col["az"]], axis=-1)
+    gyro = np.stack([col["gx"], col["gy"], col["gz"]], axis=-1)
+    metadata = {"format": "csv", "columns": dict(columns), "C_b_s": np.asarray(C_b_s, dtype=float).tolist()}
+    return _from_rates(path, t - t[0], accel, gyro, skip_rows + 1, C_b_s, epoch, metadata)

@@ -1,0 +1,206 @@
+"""``leosop fuse``: a real IMU log fused with GNSS fixes (DESIGN 4.1, 4.5), simulated outages scored.
+
+JSON (all present): ``n_epochs``, ``duration_s``, ``aids`` (used per kind),
+``outages`` (``start_s``, ``duration_s``, ``max_horiz_err_m``,
+``end_horiz_err_m``, ``n_ref``, ``n_inside_3sigma``), ``runtime_s``; and
+``aids_rejected``, ``reference`` (``"Q=1"`` or ``"all withheld"``), ``mean_max_horiz_err_m``,
+``worst_max_horiz_err_m``, ``inside_3sigma_fraction``, ``yaw_aligned_s``, ``imu``, ``gnss``.
+``--out``: ``solution.pos`` (RTKLIB, the antenna at every INS update: half the
+IMU rate), ``solution.csv``, ``fuse.json``, ``track.png``, ``outage_errors.png``
+(with outages), ``biases.png``; all or none.
+"""
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
+from ..fusion import real
+from ..gnss import rtklib_pos
+from ..ins import imu_io
+from ..progress import progress
+from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
+from . import add_command
+
+IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv")
+
+
+def register(subparsers):
+    p = add_command(subparsers, "fuse", sys.modules[__name__],
+                    help="fuse a real IMU log with GNSS fixes (RTKLIB .pos); score simulated outages")
+    p.add_argument("--imu", required=True, metavar="FILE", help="IMU log")
+    p.add_argument("--imu-format", choices=IMU_FORMATS,
+                   help="rtklib-csv (raw CSV with FILE.tag), rtklib-sf-csv (its converted _sf.csv), or csv with "
+                        "--imu-columns (default: rtklib-csv when FILE.tag exists, else rtklib-sf-csv)")
+    p.add_argument("--imu-columns", metavar="MAP",
+                   help="for --imu-format csv: NAME=COLUMN,... (0-based), names with units, e.g. "
+                        "t_gpst_s=0,ax_g=1,ay_g=2,az_g=3,gx_deg_per_s=4,gy_deg_per_s=5,gz_deg_per_s=6")
+    p.add_argument("--gnss", metavar="FILE.pos", help="RTKLIB solution file (GPST, lat/lon form)")
+    p.add_argument("--leo", metavar="MEAS.csv", help="LEO Doppler aids (not yet: stage 2)")
+    p.add_argument("--leo-sim", action="store_true", help="simulated LEO Doppler aids (not yet: stage 2)")
+    p.add_argument("--tle", metavar="FILE", help="with --leo/--leo-sim (stage 2)")
+    p.add_argument("--constellation", nargs="+", metavar="NAME", help="with --leo-sim (stage 2)")
+    p.add_argument("--coupling", choices=("loose", "tight"), help="LEO coupling (stage 2)")
+    p.add_argument("--outage", action="append", default=[], metavar="START_S,DURATION_S",
+                   help="withhold the GNSS aids from START_S for DURATION_S (seconds after the first GNSS epoch); "
+                        "repeatable")
+    p.add_argument("--zupt", action="store_true", help="zero-velocity and zero-rate updates when the IMU is at rest")
+    p.add_argument("--nhc", action="store_true", help="non-holonomic constraint (a wheeled vehicle)")
+    p.add_argument("--mount-rpy-deg", default="0,0,0", metavar="R,P,Y",
+                   help="IMU mounting in the forward-right-down vehicle body, as GNSS_IMU's imu_misalign "
+                        "(default 0,0,0: the IMU axes are forward-right-down)")
+    p.add_argument("--lever-arm-m", default="0,0,0", metavar="F,R,D",
+                   help="GNSS antenna minus IMU in the body frame, forward-right-down [m]")
+    p.add_argument("--imu-time-offset-s", type=float, default=0.0, metavar="T", help="added to the IMU time tags")
+    p.add_argument("--imu-spec", default="consumer", metavar="FILE|GRADE",
+                   help=f"IMU noise: a grade ({', '.join(real.GRADES)}; default consumer) or a JSON file with "
+                        "the fields of leosop.fusion.real.ImuSpec")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated LEO aids (--leo-sim, stage 2)")
+
+
+def _triple(text, option):
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3 or not all(np.isfinite(values)):
+        raise InputError(f"{option} {text!r}: expected three numbers A,B,C")
+    return values
+
+
+def _outages(texts):
+    out = []
+    for text in texts:
+        try:
+            start, duration = (float(x) for x in text.split(","))
+        except ValueError:
+            raise InputError(f"--outage {text!r}: expected START_S,DURATION_S") from None
+        if not (np.isfinite(start) and np.isfinite(duration) and start >= 0 and duration > 0):
+            raise InputError(f"--outage {text!r}: START_S must be >= 0 and DURATION_S > 0")
+        out.append((start, duration))
+    return tuple(out)
+
+
+def _columns(text):
+    if not text:
+        raise InputError("--imu-format csv needs --imu-columns NAME=COLUMN,...")
+    cols = {}
+    for item in text.split(","):
+        name, _, index = item.partition("=")
+        if not index.strip().isdigit():
+            raise InputError(f"--imu-columns {item!r}: expected NAME=COLUMN with a column index >= 0")
+        cols[name.strip()] = int(index)
+    return cols
+
+
+def _read_imu(args, C_b_s):
+    path = Path(args.imu)
+    check_input_file(path, "IMU log (--imu)")
+    fmt = args.imu_format or ("rtklib-csv" if Path(f"{path}.tag").exists() else "rtklib-sf-csv")
+    if fmt == "rtklib-csv":
+        return imu_io.read_rtklib_csv(path, C_b_s=C_b_s)
+    if fmt == "rtklib-sf-csv":
+        return imu_io.read_rtklib_sf_csv(path, C_b_s=C_b_s)
+    return imu_io.read_csv_columns(path, _columns(args.imu_columns), C_b_s=C_b_s)
+
+
+def run(args):
+    if args.leo or args.leo_sim or args.coupling or args.tle or args.constellation:
+        raise InputError("--leo, --leo-sim, --tle, --constellation and --coupling are not yet supported "
+                         "(issue 21 stage 2); fuse GNSS with --gnss")
+    if not args.gnss:
+        raise InputError("--gnss FILE.pos is required (the only aid source so far)")
+    if args.imu_columns and args.imu_format != "csv":
+        raise InputError("--imu-columns goes with --imu-format csv")
+    mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
+    f, r, d = _triple(args.lever_arm_m, "--lever-arm-m")
+    options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=_outages(args.outage),
+                               lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc)
+    check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
+    sol = rtklib_pos.read_pos(args.gnss)
+    log = _read_imu(args, imu_io.mount_C_b_s(*mount))
+    t_start = time.perf_counter()
+    fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s,
+                      progress=lambda it: progress(it, desc="fuse", unit="update"))
+    outages, reference = real.outage_errors(fused, sol, options)
+    runtime = time.perf_counter() - t_start
+    doc = _document(fused, sol, log, outages, reference, runtime, args)
+    if args.out:
+        _write(args.out, fused, sol, outages, doc)
+    return doc
+
+
+def _document(fused, sol, log, outages, reference, runtime, args):
+    res = fused.result
+    scored = [o for o in outages if o["n_ref"]]
+    n_ref = sum(o["n_ref"] for o in scored)
+    maxima = [o["max_horiz_err_m"] for o in scored]
+    keys = ("start_s", "duration_s", "max_horiz_err_m", "end_horiz_err_m", "n_ref", "n_inside_3sigma")
+    return {
+        "n_epochs": int(res.t_s.size), "duration_s": float(res.t_s[-1] - res.t_s[0]),
+        "aids": {k: int(v[0]) for k, v in res.aids.items()},
+        "aids_rejected": {k: int(v[1]) for k, v in res.aids.items()},
+        "outages": [{k: o[k] for k in keys} for o in outages],
+        "reference": reference,
+        "mean_max_horiz_err_m": float(np.mean(maxima)) if maxima else None,
+        "worst_max_horiz_err_m": float(np.max(maxima)) if maxima else None,
+        "inside_3sigma_fraction": sum(o["n_inside_3sigma"] for o in scored) / n_ref if n_ref else None,
+        "yaw_aligned_s": res.yaw_aligned_s,
+        "imu": {"source": log.source, "format": log.metadata["format"], "rate_hz": log.rate_hz,
+                "n_samples": int(log.t_s.size), "time_offset_s": args.imu_time_offset_s},
+        "gnss": {"source": sol.source, "n_epochs": int(sol.t_gpst_s.size), "n_fix": int((sol.q == 1).sum()),
+                 "n_withheld": int(fused.withheld.sum())},
+        "runtime_s": runtime,
+    }
+
+
+def _solution(fused):
+    res = fused.result
+    return rtklib_pos.PosSolution(fused.t0_gpst_s + res.t_s, fused.lat_deg, fused.lon_deg, fused.alt_m, fused.q,
+                                  np.zeros(res.t_s.size, dtype=int), res.cov_pos_enu_m2, res.vel_enu_mps,
+                                  res.cov_vel_enu_m2ps2, "leosop fuse")
+
+
+def _write(out_dir, fused, sol, outages, doc):
+    from ..plots import fuse as plots
+
+    res = fused.result
+    pitch, roll, yaw = dcm_to_euler(quat_to_dcm(res.q_n_b))
+    sd = np.sqrt(np.diagonal(res.cov_pos_enu_m2, axis1=1, axis2=2))
+    header = ["t_s", "lat_deg", "lon_deg", "alt_m", "vel_e_mps", "vel_n_mps", "vel_u_mps", "roll_deg", "pitch_deg",
+              "heading_deg", "sigma_e_m", "sigma_n_m", "sigma_u_m", "gyro_bias_r_deg_per_s", "gyro_bias_f_deg_per_s",
+              "gyro_bias_u_deg_per_s", "accel_bias_r_mps2", "accel_bias_f_mps2", "accel_bias_u_mps2", "q"]
+    table = np.column_stack([res.t_s, fused.lat_deg, fused.lon_deg, fused.alt_m, res.vel_enu_mps,
+                             np.degrees(roll), np.degrees(pitch), np.degrees(heading_from_yaw(yaw)), sd,
+                             np.degrees(res.gyro_bias_rad_per_s), res.accel_bias_mps2, fused.q])
+    fmt = ["%.3f", "%.9f", "%.9f", "%.4f"] + ["%.5f"] * 15 + ["%d"]
+    rows = [[f % v for f, v in zip(fmt, row)] for row in table]
+    title = Path(doc["imu"]["source"]).name
+    with atomic_outputs(out_dir) as stage:
+        rtklib_pos.write_pos(stage / "solution.pos", _solution(fused), comments=(
+            "leosop fuse: the GNSS antenna from the INS at every INS update; Q 7 = dead reckoning",
+            f"imu {doc['imu']['source']}, gnss {doc['gnss']['source']}"))
+        write_csv(stage / "solution.csv", header, rows)
+        write_json(stage / "fuse.json", doc)
+        plots.track(stage / "track.png", fused, sol, title)
+        if any(o["n_ref"] for o in outages):
+            plots.outage_errors(stage / "outage_errors.png", outages, title)
+        plots.biases(stage / "biases.png", res)
+
+
+def summary(doc):
+    lines = [f"fused {doc['duration_s']:.1f} s ({doc['n_epochs']} epochs) in {doc['runtime_s']:.1f} s; aids used: "
+             + ", ".join(f"{k} {v}" for k, v in doc["aids"].items())]
+    for o in doc["outages"]:
+        if o["n_ref"]:
+            lines.append(f"  outage {o['start_s']:7.1f} s + {o['duration_s']:4.1f} s: max {o['max_horiz_err_m']:.2f} m, "
+                         f"end {o['end_horiz_err_m']:.2f} m, {o['n_inside_3sigma']}/{o['n_ref']} inside 3 sigma")
+        else:
+            lines.append(f"  outage {o['start_s']:7.1f} s + {o['duration_s']:4.1f} s: no reference epoch")
+    if doc["mean_max_horiz_err_m"] is not None:
+        lines.append(f"mean of the maxima {doc['mean_max_horiz_err_m']:.2f} m, worst {doc['worst_max_horiz_err_m']:.2f} m, "
+                     f"{100 * doc['inside_3sigma_fraction']:.1f} % inside 3 sigma (reference {doc['reference']})")
+    return "\n".join(lines)

@@ -1,0 +1,288 @@
+"""Aiding measurements of the INS error-state filter (:mod:`leosop.fusion.engine`).
+
+Each aid is a small object at one time ``t_s`` that answers two questions
+about the INS it is shown (an :class:`InsView`):
+
+* :meth:`Aid.predict`: the nonlinear measurement the INS implies, ``h(ins)``;
+* :meth:`Aid.design`: the design matrix ``H`` over the 15 INS errors;
+
+and :meth:`Aid.matrices` returns the innovation ``z = h(ins) - measured``,
+``H`` and the noise covariance ``R``, so that
+  ``z = H dx + v`` with ``dx`` the INS errors in the sense of
+  :mod:`leosop.ins.error_model` (computed minus true, misalignment ``phi`` with
+  ``C_n_b_computed = (I - [phi x]) C_n_b_true``, position ``[dlat, dlon, dalt]``,
+  residual gyro drift ``eps_b`` and accelerometer bias ``nabla_b``).
+
+Adding a sensor is one class; the filter never changes (the shape of
+Mayorov's pyins ``Measurement`` classes). Lever arms and velocities are in
+the body frame (Right-Forward-Up) of the INS, i.e. after the IMU mounting.
+Every ``H`` is checked against finite differences of :meth:`Aid.predict` in
+``tests/test_fuse_engine.py``.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..constants import OMEGA_E_RAD_PER_S
+from ..earth import earth_rate_enu
+from ..ins.error_model import DPOS, DV, EPS, PHI
+from ..rotations import skew
+from .common import N_INS, pos_jacobian
+
+__all__ = ["Aid", "GnssPosition", "GnssVelocity", "Height", "InsView", "NonHolonomic", "ZeroRate", "ZeroVelocity"]
+
+
+@dataclasses.dataclass(frozen=True)
+class InsView:
+    """What an aid may look at: the INS at the aid's time and the filter's sensor estimates.
+
+    Attributes
+    ----------
+    state : leosop.ins.strapdown.NavState
+    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (3,)
+        Bias estimates removed from the increments.
+    omega_ib_b_rad_per_s : ndarray, (3,)
+        Bias-corrected body rate over the last INS update.
+    """
+
+    state: object
+    gyro_bias_rad_per_s: np.ndarray
+    accel_bias_mps2: np.ndarray
+    omega_ib_b_rad_per_s: np.ndarray
+
+
+def _enu_offset_m(state, lat_rad, lon_rad, alt_m):
+    """ENU metres from a geodetic point to the state's position (small-offset map of :func:`pos_jacobian`)."""
+    d = np.array([state.lat_rad - lat_rad, state.lon_rad - lon_rad, state.alt_m - alt_m])
+    return pos_jacobian(state.lat_rad, state.alt_m) @ d
+
+
+class Aid:
+    """One aiding measurement at ``t_s``; subclasses set the attributes and implement :meth:`predict`, :meth:`design`.
+
+    Attributes
+    ----------
+    t_s : float
+        Time of the measurement [s], on the filter's clock.
+    measured : ndarray, (m,)
+        The measurement, in the units of :meth:`predict`.
+    R : ndarray, (m, m)
+        Its noise covariance.
+    name : str
+        Kind of aid, the key of the run's aid counts.
+    needs_heading : bool
+        The model assumes a known heading (not applied before the yaw is initialised).
+    gated : bool
+        Its innovations go through the filter's chi-square gate. Constraints
+        (ZUPT, NHC, ...) are: a skid or a wrongly detected stop must not pull
+        the INS. GNSS fixes are not: their quality flag and sigmas are the
+        receiver's own check, and rejecting fixes after a GNSS outage, when
+        the INS has drifted further than its covariance says, only lets it
+        drift on (measured on the rtklibexplorer drive and walk).
+    """
+
+    name = "aid"
+    needs_heading = False
+    gated = True
+
+    def __init__(self, t_s):
+        self.t_s = float(t_s)
+
+    def predict(self, ins):
+        """The measurement the INS implies, ``h(ins)``, shape (m,)."""
+        raise NotImplementedError
+
+    def design(self, ins):
+        """``H = dz / dx``, shape (m, 15)."""
+        raise NotImplementedError
+
+    def matrices(self, ins):
+        """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` (m, 15), ``R`` (m, m)."""
+        return self.predict(ins) - self.measured, self.design(ins), self.R
+
+
+class GnssPosition(Aid):
+    """A GNSS antenna position; ``h`` is the antenna's ENU offset [m] from the measured point.
+
+    Parameters
+    ----------
+    t_s : float
+    lat_rad, lon_rad, alt_m : float
+        Measured antenna position (WGS84).
+    cov_enu_m2 : array_like, (3, 3)
+        Its covariance in ENU.
+    lever_arm_b_m : array_like, (3,)
+        Antenna minus IMU in the body frame (Right-Forward-Up).
+    """
+
+    name = "gnss_position"
+    gated = False
+
+    def __init__(self, t_s, lat_rad, lon_rad, alt_m, cov_enu_m2, lever_arm_b_m):
+        super().__init__(t_s)
+        self.lat_rad, self.lon_rad, self.alt_m = float(lat_rad), float(lon_rad), float(alt_m)
+        self.measured = np.zeros(3)  # the offset of the measured point from itself
+        self.R = np.asarray(cov_enu_m2, dtype=float).reshape(3, 3)
+        self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
+
+    def predict(self, ins):
+        s = ins.state
+        return _enu_offset_m(s, self.lat_rad, self.lon_rad, self.alt_m) + s.C_n_b @ self.lever_arm_b_m
+
+    def design(self, ins):
+        s = ins.state
+        H = np.zeros((3, N_INS))
+        H[:, PHI] = skew(s.C_n_b @ self.lever_arm_b_m)
+        H[:, DPOS] = pos_jacobian(s.lat_rad, s.alt_m)
+        return H
+
+
+class GnssVelocity(Aid):
+    """A GNSS antenna velocity in ENU [m/s]: ``v + C_n_b (omega_ib_b x lever arm)`` (Earth rate neglected).
+
+    Parameters
+    ----------
+    t_s : float
+    vel_enu_mps : array_like, (3,)
+    cov_enu_m2ps2 : array_like, (3, 3)
+    lever_arm_b_m : array_like, (3,)
+    """
+
+    name = "gnss_velocity"
+    gated = False
+
+    def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m):
+        super().__init__(t_s)
+        self.vel_enu_mps = self.measured = np.asarray(vel_enu_mps, dtype=float).reshape(3)
+        self.R = np.asarray(cov_enu_m2ps2, dtype=float).reshape(3, 3)
+        self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
+
+    def predict(self, ins):
+        s = ins.state
+        return s.vel_enu_mps + s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
+
+    def design(self, ins):
+        C = ins.state.C_n_b
+        H = np.zeros((3, N_INS))
+        H[:, PHI] = skew(C @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m))
+        H[:, DV] = np.eye(3)
+        # omega_computed = omega_true + eps_b: the rate error moves the lever-arm velocity by -C [l x] eps_b.
+        H[:, EPS] = -C @ skew(self.lever_arm_b_m)
+        return H
+
+
+class ZeroVelocity(Aid):
+    """Zero-velocity update (ZUPT): the IMU is at rest, ``h = v_enu``."""
+
+    name = "zupt"
+
+    def __init__(self, t_s, sigma_mps):
+        super().__init__(t_s)
+        self.R = np.eye(3) * float(sigma_mps) ** 2
+        self.measured = np.zeros(3)
+
+    def predict(self, ins):
+        return ins.state.vel_enu_mps.copy()
+
+    def design(self, ins):
+        H = np.zeros((3, N_INS))
+        H[:, DV] = np.eye(3)
+        return H
+
+
+class ZeroRate(Aid):
+    """Zero angular rate (ZARU): at rest the bias-corrected mean body rate is the Earth rate.
+
+    ``h = omega_mean_b - eps_hat - C_n_b^T omega_ie_n`` with ``omega_mean_b`` the
+    raw mean gyro rate over the stationary window.
+
+    Parameters
+    ----------
+    t_s : float
+    omega_mean_b_rad_per_s : array_like, (3,)
+        Mean measured rate over the window (before bias removal).
+    sigma_rad_per_s : float
+        Noise of that mean per axis.
+    """
+
+    name = "zero_rate"
+
+    def __init__(self, t_s, omega_mean_b_rad_per_s, sigma_rad_per_s):
+        super().__init__(t_s)
+        self.omega_mean_b = np.asarray(omega_mean_b_rad_per_s, dtype=float).reshape(3)
+        self.R = np.eye(3) * float(sigma_rad_per_s) ** 2
+        self.measured = np.zeros(3)
+
+    def predict(self, ins):
+        s = ins.state
+        return self.omega_mean_b - ins.gyro_bias_rad_per_s - s.C_n_b.T @ earth_rate_enu(s.lat_rad)
+
+    def design(self, ins):
+        s = ins.state
+        H = np.zeros((3, N_INS))
+        H[:, PHI] = s.C_n_b.T @ skew(earth_rate_enu(s.lat_rad))
+        H[:, DPOS.start] = -s.C_n_b.T @ (OMEGA_E_RAD_PER_S * np.array([0.0, -math.sin(s.lat_rad), math.cos(s.lat_rad)]))
+        H[:, EPS] = np.eye(3)
+        return H
+
+
+class NonHolonomic(Aid):
+    """Non-holonomic constraint (NHC): a wheeled vehicle does not slip sideways nor leave the road.
+
+    ``h`` is the Right and Up components of the velocity in the vehicle
+    frame, ``C_v_b C_n_b^T v_enu``; ``C_v_b`` is a residual mounting of the
+    body in the vehicle (identity when the IMU mounting is already applied).
+
+    Parameters
+    ----------
+    t_s : float
+    sigma_mps : float
+        Allowed lateral and vertical speed (slip, bumps) per axis.
+    C_v_b : array_like, (3, 3)
+    """
+
+    name = "nhc"
+    needs_heading = True
+    _ROWS = [0, 2]
+
+    def __init__(self, t_s, sigma_mps, C_v_b=np.eye(3)):
+        super().__init__(t_s)
+        self.R = np.eye(2) * float(sigma_mps) ** 2
+        self.measured = np.zeros(2)
+        self.C_v_b = np.asarray(C_v_b, dtype=float).reshape(3, 3)
+
+    def predict(self, ins):
+        s = ins.state
+        return (self.C_v_b @ s.C_n_b.T @ s.vel_enu_mps)[self._ROWS]
+
+    def design(self, ins):
+        s = ins.state
+        A = self.C_v_b @ s.C_n_b.T
+        H = np.zeros((2, N_INS))
+        # C_computed^T = C^T (I + [phi x]): the body velocity moves by -C^T [v x] phi.
+        H[:, PHI] = -(A @ skew(s.vel_enu_mps))[self._ROWS]
+        H[:, DV] = A[self._ROWS]
+        return H
+
+
+class Height(Aid):
+    """An ellipsoidal height (barometer, known road or floor) [m]."""
+
+    name = "height"
+
+    def __init__(self, t_s, alt_m, sigma_m):
+        super().__init__(t_s)
+        self.alt_m = float(alt_m)
+        self.measured = np.array([self.alt_m])
+        self.R = np.eye(1) * float(sigma_m) ** 2
+
+    def predict(self, ins):
+        return np.array([ins.state.alt_m])
+
+    def design(self, ins):
+        H = np.zeros((1, N_INS))
+        H[0, DPOS.start + 2] = 1.0
+        return H
+

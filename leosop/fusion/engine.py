@@ -1,0 +1,280 @@
+"""One INS error-state filter that takes time-ordered aids.
+
+The strapdown INS (:func:`leosop.ins.strapdown.update`, two-sample, ENU)
+runs on every pair of IMU increments less the bias estimates; the 15 INS
+errors of :mod:`leosop.ins.error_model` are propagated with its ``model15``
+(second-order series, at most every ``settings.step_s`` and before every aid)
+plus random walks of both biases; each aid (:mod:`leosop.fusion.aids`) gives
+``(z, H, R)``, the update is the Joseph form of :mod:`leosop.fusion.kalman`
+and the estimated errors are fed back at once (closed loop, so the prior
+error estimate is always zero).
+
+An aid at ``t_s`` is applied after the INS update that ends at or just after
+``t_s``; it sees the INS moved back to ``t_s`` along its velocity (a pair of
+100 Hz samples is 20 ms, 0.2 m at 10 m/s, far above an RTK fix's 1 cm).
+
+Heading: a MEMS IMU cannot find North at rest, so a run may start with the
+yaw unknown (:class:`CourseAlignment`): the first GNSS velocity faster than
+``min_speed_mps`` sets the yaw to the course over ground (the body's Forward
+axis along the velocity, as a car drives) and the yaw's covariance row to
+``sigma_rad`` alone; aids with ``needs_heading`` wait until then.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.stats
+
+from .. import earth
+from ..ins import error_model, strapdown
+from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+from ..rotations import dcm_to_euler, euler_to_dcm
+from . import kalman
+from .aids import InsView
+from .common import GATE_PROBABILITY, N_INS, pos_jacobian
+
+__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "run"]
+
+
+@dataclasses.dataclass(frozen=True)
+class EngineSettings:
+    """Noise model and filter options, in the units the names carry.
+
+    ``gyro_arw_rad_per_rt_s`` and ``accel_vrw_mps_per_rt_s`` are the white
+    noise densities of the increments; ``*_bias_rw_*`` the random walks of the
+    biases (rad/s/sqrt(s), m/s^2/sqrt(s)). ``step_s`` is the longest interval
+    of one covariance propagation. Innovations of gated aids (``aid.gated``)
+    beyond the ``gate_probability`` chi-square quantile are rejected, unless
+    ``reopen_after`` aids of that kind in a row were (the INS, not the aids,
+    is then wrong).
+    """
+
+    gyro_arw_rad_per_rt_s: float
+    accel_vrw_mps_per_rt_s: float
+    gyro_bias_rw_rad_per_s_per_rt_s: float
+    accel_bias_rw_mps2_per_rt_s: float
+    step_s: float = 0.1
+    gate_probability: float = GATE_PROBABILITY
+    reopen_after: int = 8
+
+    def noise_psd(self):
+        """PSDs of ``[w_gyro_b, w_accel_b]`` (6,), the ``Qc`` of :func:`leosop.ins.error_model.discretize`."""
+        return np.r_[np.full(3, self.gyro_arw_rad_per_rt_s**2), np.full(3, self.accel_vrw_mps_per_rt_s**2)]
+
+
+@dataclasses.dataclass(frozen=True)
+class CourseAlignment:
+    """Set the yaw from the first GNSS velocity of at least ``min_speed_mps``; its sigma then ``sigma_rad``."""
+
+    min_speed_mps: float = 1.0
+    sigma_rad: float = math.radians(10.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class EngineResult:
+    """The filter's INS after every INS update (n epochs: the start and one per pair of samples).
+
+    Attributes
+    ----------
+    t_s : ndarray, (n,)
+        On the IMU's clock.
+    lat_rad, lon_rad, alt_m : ndarray, (n,)
+    vel_enu_mps : ndarray, (n, 3)
+    q_n_b : ndarray, (n, 4)
+        Attitude (scalar-first quaternion of ``C_n_b``).
+    sigma : ndarray, (n, 15)
+        Square roots of the diagonal of ``P`` (position errors in rad, rad, m).
+    cov_pos_enu_m2, cov_vel_enu_m2ps2 : ndarray, (n, 3, 3)
+        Position and velocity error covariances in ENU.
+    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
+    omega_ib_b_rad_per_s : ndarray, (n, 3)
+        Bias-corrected body rate of each update.
+    aids : dict of str to [int, int]
+        Per kind of aid: used, rejected by the gate.
+    yaw_aligned_s : float or None
+        When the yaw was set from the course (None: never, or not asked).
+    """
+
+    t_s: np.ndarray
+    lat_rad: np.ndarray
+    lon_rad: np.ndarray
+    alt_m: np.ndarray
+    vel_enu_mps: np.ndarray
+    q_n_b: np.ndarray
+    sigma: np.ndarray
+    cov_pos_enu_m2: np.ndarray
+    cov_vel_enu_m2ps2: np.ndarray
+    gyro_bias_rad_per_s: np.ndarray
+    accel_bias_mps2: np.ndarray
+    omega_ib_b_rad_per_s: np.ndarray
+    aids: dict
+    yaw_aligned_s: float | None
+
+
+class _Filter:
+    """The running filter: INS state, bias estimates, covariance and the pending propagation."""
+
+    def __init__(self, state0, P0, settings):
+        self.state = state0
+        self.P = np.array(P0, dtype=float)
+        self.settings = settings
+        self.Qc = settings.noise_psd()
+        self.bias_q = np.r_[np.full(3, settings.gyro_bias_rw_rad_per_s_per_rt_s**2),
+                            np.full(3, settings.accel_bias_rw_mps2_per_rt_s**2)]
+        self.bg = np.zeros(3)
+        self.ba = np.zeros(3)
+        self.omega = np.zeros(3)
+        self.pending_s = 0.0
+        self.pending_dv_b = np.zeros(3)
+        self.counts = {}
+        self.rejected_run = {}
+        self.gate = {}
+
+    def propagate(self):
+        """Move ``P`` over the INS updates made since the last propagation."""
+        dt = self.pending_s
+        if dt <= 0.0:
+            return
+        s = self.state
+        C = s.C_n_b
+        F, G = error_model.model15(C, C @ (self.pending_dv_b / dt), s.vel_enu_mps, s.lat_rad, s.alt_m)
+        Phi, Qd = error_model.discretize(F, G, self.Qc, dt, method="series")
+        Qd[EPS, EPS] += np.diag(self.bias_q[:3] * dt)
+        Qd[NABLA, NABLA] += np.diag(self.bias_q[3:] * dt)
+        P = Phi @ self.P @ Phi.T + Qd
+        self.P = 0.5 * (P + P.T)
+        self.pending_s = 0.0
+        self.pending_dv_b = np.zeros(3)
+
+    def view(self, t_aid_s, t_now_s):
+        """The INS moved back along its velocity from ``t_now_s`` to the aid's time."""
+        s, dt = self.state, t_aid_s - t_now_s
+        R_M, R_N = earth.radii_m(s.lat_rad)
+        v = s.vel_enu_mps
+        moved = strapdown.NavState(s.lat_rad + v[1] * dt / (R_M + s.alt_m),
+                                   s.lon_rad + v[0] * dt / ((R_N + s.alt_m) * math.cos(s.lat_rad)),
+                                   s.alt_m + v[2] * dt, v, s.q_n_b)
+        return InsView(moved, self.bg, self.ba, self.omega)
+
+    def apply(self, aid, ins):
+        """Gate and apply one aid; feed the estimated errors back into the INS."""
+        z, H, R = aid.matrices(ins)
+        count = self.counts.setdefault(aid.name, [0, 0])
+        S = H @ self.P @ H.T + R
+        nis = float(z @ np.linalg.solve(S, z))
+        run = self.rejected_run.get(aid.name, 0)
+        if z.size not in self.gate:
+            self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
+        if aid.gated and nis > self.gate[z.size] and run < self.settings.reopen_after:
+            count[1] += 1
+            self.rejected_run[aid.name] = run + 1
+            return
+        self.rejected_run[aid.name] = 0
+        count[0] += 1
+        dx, self.P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z, H, R)
+        self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
+        self.bg = self.bg + dx[EPS]
+        self.ba = self.ba + dx[NABLA]
+
+    def align_yaw(self, vel_enu_mps, sigma_rad):
+        """Set the yaw to the course of ``vel_enu_mps``, keeping pitch and roll; reset the yaw's covariance."""
+        s = self.state
+        pitch, roll, _ = dcm_to_euler(s.C_n_b)
+        yaw = math.atan2(-vel_enu_mps[0], vel_enu_mps[1])  # counter-clockwise from North, Forward along v
+        self.state = strapdown.NavState.from_dcm(s.lat_rad, s.lon_rad, s.alt_m, s.vel_enu_mps,
+                                                 euler_to_dcm(pitch, roll, yaw))
+        k = PHI.start + 2
+        self.P[k, :] = 0.0
+        self.P[:, k] = 0.0
+        self.P[k, k] = sigma_rad**2
+
+
+def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
+        progress=None):
+    """Run the filter over an IMU log with time-ordered aids.
+
+    Parameters
+    ----------
+    state0 : leosop.ins.strapdown.NavState
+        The INS at ``t_s[0] - dt_s[0]`` (the start of the first increment).
+    P0 : ndarray, (15, 15)
+        Initial covariance of the INS errors.
+    t_s, dt_s : ndarray, (n,)
+        End of each increment's interval and its length [s].
+    dtheta_b_rad, dvel_b_mps : ndarray, (n, 3)
+        Increments in the body frame (Right-Forward-Up).
+    aids : sequence of leosop.fusion.aids.Aid
+        Sorted by ``t_s``; those before the start or after the end are not used.
+    settings : EngineSettings
+    course_alignment : CourseAlignment, optional
+        The yaw of ``state0`` is unknown: set it from the first fast GNSS
+        velocity aid. None: the yaw is known.
+    progress : callable, optional
+        Wraps the iterator over INS updates (a progress bar).
+
+    Returns
+    -------
+    EngineResult
+    """
+    t_s, dt_s = np.asarray(t_s, dtype=float), np.asarray(dt_s, dtype=float)
+    m = t_s.size // 2
+    t_out = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
+    n = m + 1
+    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, N_INS)),
+           "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
+           "w": np.empty((n, 3))}
+    f = _Filter(state0, P0, settings)
+    aligned_s = None
+    heading_known = course_alignment is None
+    aids = [a for a in aids if t_out[0] <= a.t_s <= t_out[-1]]
+    if any(b.t_s < a.t_s for a, b in zip(aids, aids[1:])):
+        raise ValueError("aids must be sorted by time")
+    j = 0
+    _record(out, 0, f)
+    ks = range(m) if progress is None else progress(range(m))
+    for k in ks:
+        i = 2 * k
+        dt2 = dt_s[i:i + 2]
+        th = dtheta_b_rad[i:i + 2] - f.bg * dt2[:, None]
+        dv = dvel_b_mps[i:i + 2] - f.ba * dt2[:, None]
+        T = float(dt2[0] + dt2[1])
+        f.state = strapdown.update(f.state, th, dv, 0.5 * T)
+        f.omega = (th[0] + th[1]) / T
+        f.pending_s += T
+        f.pending_dv_b += dv[0] + dv[1]
+        t_now = t_out[k + 1]
+        while j < len(aids) and aids[j].t_s <= t_now:
+            aid = aids[j]
+            j += 1
+            if not heading_known:
+                v = getattr(aid, "vel_enu_mps", None)
+                if v is None or math.hypot(v[0], v[1]) < course_alignment.min_speed_mps:
+                    if aid.needs_heading:
+                        continue
+                else:
+                    f.align_yaw(v, course_alignment.sigma_rad)
+                    heading_known, aligned_s = True, aid.t_s
+            f.propagate()
+            f.apply(aid, f.view(aid.t_s, t_now))
+        if f.pending_s >= settings.step_s:
+            f.propagate()
+        _record(out, k + 1, f)
+    f.propagate()
+    pos, cp = out["pos"], out["cp"]
+    return EngineResult(t_out, pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp, out["cv"],
+                        out["bg"], out["ba"], out["w"], {k: tuple(v) for k, v in f.counts.items()}, aligned_s)
+
+
+def _record(out, k, f):
+    s, P = f.state, f.P
+    out["pos"][k] = (s.lat_rad, s.lon_rad, s.alt_m)
+    out["vel"][k] = s.vel_enu_mps
+    out["q"][k] = s.q_n_b
+    out["sigma"][k] = np.sqrt(np.diagonal(P))
+    J = pos_jacobian(s.lat_rad, s.alt_m)
+    out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
+    out["cv"][k] = P[DV, DV]
+    out["bg"][k] = f.bg
+    out["ba"][k] = f.ba
+    out["w"][k] = f.omega
