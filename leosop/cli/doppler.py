@@ -96,6 +96,11 @@ def _warn_straddling(captures, block_len, fs):
               file=sys.stderr)
 
 
+def _straddles(captures, start, block_len):
+    """True when samples [start, start + block_len) come from more than one capture."""
+    return any(start < c.sample_start < start + block_len for c in captures)
+
+
 def _reduce(power, rows, cols):
     """Sum a spectrogram down to at most rows x cols cells."""
     r = max(1, power.shape[0] // rows)
@@ -167,20 +172,22 @@ def run(args):
             "doppler_rate_hz_per_s": est["doppler_rate_hz_per_s"],
             "cn0_dbhz": est["cn0_dbhz"],
             "sigma_hz": est["sigma_hz"],
-            "status": "ok" if est["detected"] else "no pilot detected",
+            "status": "joins captures" if est["detected"] and _straddles(rec.captures, start, block_len)
+            else est["status"],
         }
         estimates.append(entry)
         starts.append(start)
     if args.method == "fast":
         _correct_rate_change(estimates, block_len, fs)
     for start, entry in zip(starts, estimates):
-        if start in truth and entry["status"] == "ok":
+        if start in truth and entry["doppler_hz"] is not None and np.isfinite(entry["doppler_hz"]):
             entry["truth_sat_id"], entry["truth_doppler_hz"] = min(
                 truth[start], key=lambda sd: abs(sd[1] - entry["doppler_hz"]))
     doc = {"method": args.method, "estimates": estimates, "recording": str(rec.data_path),
            "sample_rate_hz": fs, "block_s": block_len / fs, "n_blocks": len(estimates),
-           "n_detected": sum(e["status"] == "ok" for e in estimates)}
-    errs = [e["doppler_hz"] - e["truth_doppler_hz"] for e in estimates if "truth_doppler_hz" in e]
+           "n_detected": sum(e["status"] != "no pilot detected" for e in estimates),
+           "n_ok": sum(e["status"] == "ok" for e in estimates)}
+    errs = [e["doppler_hz"] - e["truth_doppler_hz"] for e in estimates if "truth_doppler_hz" in e and e["status"] == "ok"]
     if errs:
         doc["truth_rms_error_hz"] = float(np.sqrt(np.mean(np.square(errs))))
     if args.out:
@@ -237,15 +244,17 @@ def _num(value, spec, unit):
 
 
 def summary(doc):
-    lines = [f"{doc['n_detected']}/{doc['n_blocks']} blocks with a pilot ({doc['method']}, {doc['block_s']:g} s blocks)"]
+    lines = [f"{doc['n_detected']}/{doc['n_blocks']} blocks with a pilot, {doc['n_ok']} ok "
+             f"({doc['method']}, {doc['block_s']:g} s blocks)"]
     for e in doc["estimates"][:20]:
-        if e["status"] == "ok":
-            lines.append(f"  t={e['t_s']:.4f} s  Doppler {e['doppler_hz']:+.4f} Hz  rate "
-                         f"{_num(e['doppler_rate_hz_per_s'], '+.2f', 'Hz/s')}  C/N0 {_num(e['cn0_dbhz'], '.1f', 'dB-Hz')}")
-        else:
+        if e["status"] == "no pilot detected":
             lines.append(f"  t={e['t_s']:.4f} s  no pilot detected")
+            continue
+        lines.append(f"  t={e['t_s']:.4f} s  Doppler {e['doppler_hz']:+.4f} Hz  sigma {_num(e['sigma_hz'], '.2g', 'Hz')}  "
+                     f"rate {_num(e['doppler_rate_hz_per_s'], '+.0f', 'Hz/s')}  "
+                     f"C/N0 {_num(e['cn0_dbhz'], '.1f', 'dB-Hz')}  {e['status']}")
     if len(doc["estimates"]) > 20:
         lines.append(f"  ... {len(doc['estimates']) - 20} more blocks (use --json or --out)")
     if "truth_rms_error_hz" in doc:
-        lines.append(f"RMS error against the recording's truth: {doc['truth_rms_error_hz']:.4g} Hz")
+        lines.append(f"RMS error of the ok estimates against the recording's truth: {doc['truth_rms_error_hz']:.4g} Hz")
     return "\n".join(lines)
