@@ -20,7 +20,7 @@ from .fine import _start_step, fine_fast, fine_fmlef, fine_ml
 from .pilot import PilotComb
 from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
-__all__ = ["METHODS", "BlockEstimates", "estimate_block", "estimate_blocks"]
+__all__ = ["METHODS", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
 
 METHODS = ("fast", "fmlef", "ml")
 
@@ -50,6 +50,15 @@ def _check_finite(value):
     """A NaN or inf sample makes every FFT bin (and any sum) non-finite."""
     if not np.isfinite(value):
         raise InputError("IQ samples contain NaN or inf")
+
+
+def ml_grid_points(coarse_error_hz, resolution_hz):
+    """How many frequencies ``ml`` evaluates per block for a coarse estimate good to ``coarse_error_hz``.
+
+    Its grid spans +-10 start steps (:func:`~.fine.fine_ml`) at ``resolution_hz``;
+    each point costs a pass over the block's samples.
+    """
+    return 2 * int(round(10.0 * _start_step(coarse_error_hz) / resolution_hz)) + 1
 
 
 def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_hz=1e-3,
@@ -130,7 +139,9 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     sigma = np.hypot(inflate * constant_tone_sigma_hz(iq.shape[-1], sample_rate_hz, fit.doppler_rate_hz_per_s, cn0),
                      resolution_hz / np.sqrt(12.0))
     status = fit_status(fit, max_rate_hz_per_s)
-    if status == "ok" and not np.isfinite(sigma):
+    if status == "ok" and not np.isfinite(cn0):
+        status = "weak comb"  # no central tone in the fit
+    elif status == "ok" and not np.isfinite(sigma):
         status = "rate too high for a constant tone"
     elif status == "ok" and not abs(d - fit.doppler_hz) <= DISAGREE_SIGMA * np.hypot(sigma, fit.sigma_hz):
         status = "disagrees with the comb fit"

@@ -50,7 +50,7 @@ import numpy as np
 from .coarse import MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, _abs2, _parabola_vertex, _threshold
 from .crlb import crlb_frequency_hz2
 from .fft import fft
-from .quality import position_margin_sigma
+from .quality import position_margin_sigma, tone_spread
 
 __all__ = ["CombFit", "periodogram_grid", "fine_ml", "fine_fmlef", "fine_fast", "cubic_bias_hz"]
 
@@ -70,8 +70,8 @@ class CombFit:
     ``sigma_hz`` the larger of it and the sigma the fit's residual spectrum
     implies (:func:`_residual_sigma_hz`: other satellites' tones in the
     bands); ``snr`` the coherent comb power over its noise mean,
-    ``snr_threshold`` its detection threshold; ``position_margin_sigma`` as
-    :func:`.quality.position_margin_sigma`.
+    ``snr_threshold`` its detection threshold; ``position_margin_sigma`` and
+    ``tone_spread`` as :func:`.quality.position_margin_sigma` and :func:`.quality.tone_spread`.
     """
 
     doppler_hz: float
@@ -84,6 +84,7 @@ class CombFit:
     snr: float
     snr_threshold: float
     position_margin_sigma: float
+    tone_spread: float
 
 
 def periodogram_grid(iq, sample_rate_hz, f_start_hz, step_hz, n_freqs):
@@ -430,4 +431,5 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
                    sigma_hz=float(max(sigma_hz, resid_sigma_hz)), crlb_sigma_hz=float(sigma_hz),
                    tone_cn0_dbhz=tone_cn0_dbhz, tone_noise_ratio=noise_k / sigma2 if sigma2 > 0 else noise_k, snr=snr,
                    snr_threshold=comb.n_tones * _threshold(comb.n_tones, n_seg * n_rates, pfa),
-                   position_margin_sigma=margin)
+                   position_margin_sigma=margin,
+                   tone_spread=tone_spread(np.abs(np.sum(z, axis=0)), comb.tone_amplitudes, noise_sum, pfa))

@@ -14,6 +14,11 @@ status names the first check that fails (:data:`STATUSES`, in this order):
     of the tones only the shifted comb holds by :data:`AMBIGUITY_SIGMA`
     standard deviations (:func:`position_margin_sigma`). A one-spacing
     slip (43.9 kHz) fails here.
+``overlapping combs``
+    The tones' coherent amplitudes do not fit the comb's amplitude profile
+    (:func:`tone_spread`): another satellite's comb whose tones nearly
+    coincide with these, one or more spacings apart, adds to some tones and
+    not to others, and the "comb" fitted may be no satellite's.
 ``interference``
     The sigma implied by the fit's residual spectrum (another satellite's
     tones in the comb's bands, or a signal the chirp model does not fit) is
@@ -44,9 +49,10 @@ import numpy as np
 from ..constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S, WGS84_A_M
 
 __all__ = ["STATUSES", "AMBIGUITY_SIGMA", "DISAGREE_SIGMA", "INTERFERENCE_RATIO", "zenith_doppler_rate_hz_per_s",
-           "position_margin_sigma", "constant_tone_sigma_hz", "fit_status"]
+           "position_margin_sigma", "tone_spread", "constant_tone_sigma_hz", "fit_status"]
 
-STATUSES = ("ok", "no pilot detected", "joins captures", "weak comb", "tone ambiguity", "interference",
+STATUSES = ("ok", "no pilot detected", "joins captures", "weak comb", "tone ambiguity", "overlapping combs",
+            "interference",
             "implausible rate", "rate too high for a constant tone", "disagrees with the comb fit")
 #: Margin of the fitted comb position over a shifted one [sigma]. A slipped fit (the wrong position had the
 #: larger power) passes with probability ~Phi(-(m + 3)), m the expected margin (about 1 at the detection
@@ -109,6 +115,34 @@ def position_margin_sigma(power, n_tones, max_shift=2):
     return float(min(margins)) if margins else np.inf
 
 
+def tone_spread(tone_abs, amplitudes, noise_sum, pfa):
+    """Misfit of the tones' coherent amplitudes to the comb's profile, over its threshold (above 1: fails).
+
+    Parameters
+    ----------
+    tone_abs : ndarray, shape (n_tones,)
+        ``|Y_k|``, each tone's coherent sum over the block at the fit.
+    amplitudes : ndarray, shape (n_tones,)
+        The comb's relative tone amplitudes.
+    noise_sum : float
+        Noise mean of ``|Y_k|^2`` (``N sigma^2``).
+    pfa : float
+
+    Returns
+    -------
+    float
+        ``sum_k (|Y_k| - a c_k)^2 / (noise_sum / 2)`` (``a`` fitted by least
+        squares; chi-square with n_tones - 1 degrees of freedom for a strong
+        comb, smaller for a weak one) over its ``1 - pfa`` quantile.
+    """
+    from scipy.stats import chi2
+
+    c = np.asarray(amplitudes, dtype=float)
+    a = float(tone_abs @ c / (c @ c))
+    stat = float(np.sum((tone_abs - a * c) ** 2) / (0.5 * noise_sum))
+    return stat / float(chi2.isf(pfa, c.size - 1)) if c.size > 1 else 0.0
+
+
 def constant_tone_sigma_hz(n_samples, sample_rate_hz, rate_hz_per_s, cn0_dbhz, *, n_points=8192):
     """Standard deviation of the periodogram maximum (``ml``, ``fmlef``) for a tone chirping at ``rate``.
 
@@ -125,7 +159,7 @@ def constant_tone_sigma_hz(n_samples, sample_rate_hz, rate_hz_per_s, cn0_dbhz, *
     Returns
     -------
     float
-        ``inf`` when ``J'' >= 0``: the chirp has split the peak.
+        ``inf`` when ``J'' >= 0`` (the chirp has split the peak) or the C/N0 is zero.
     """
     m = int(min(n_samples, n_points))
     dur = n_samples / sample_rate_hz
@@ -137,7 +171,10 @@ def constant_tone_sigma_hz(n_samples, sample_rate_hz, rate_hz_per_s, cn0_dbhz, *
     j2 = 2.0 * (abs(s1) ** 2 + (np.conj(s0) * s2).real)
     if not j2 < 0.0:
         return np.inf
-    sigma2 = sample_rate_hz / 10.0 ** (cn0_dbhz / 10.0)  # noise per sample for a unit tone
+    cn0 = 10.0 ** (float(cn0_dbhz) / 10.0)
+    if not cn0 > 0.0:
+        return np.inf
+    sigma2 = sample_rate_hz / cn0  # noise per sample for a unit tone
     g2 = scale * np.sum(np.abs(np.conj(s1) + np.conj(s0) * w) ** 2)
     return float(np.sqrt(2.0 * sigma2 * g2) / abs(j2))
 
@@ -148,6 +185,8 @@ def fit_status(fit, max_rate_hz_per_s):
         return "weak comb"
     if not fit.position_margin_sigma >= AMBIGUITY_SIGMA:
         return "tone ambiguity"
+    if not fit.tone_spread <= 1.0:
+        return "overlapping combs"
     if not fit.sigma_hz <= INTERFERENCE_RATIO * fit.crlb_sigma_hz:
         return "interference"
     if not abs(fit.doppler_rate_hz_per_s) <= max_rate_hz_per_s:
