@@ -73,7 +73,7 @@ def zenith_doppler_rate_hz_per_s(carrier_hz, altitude_m):
     sight, the receiver's centripetal acceleration away), with ``v_rel`` at
     most the orbital speed plus the equatorial ground speed (a retrograde
     pass over the equator). Starlink at 550 km, 11.325 GHz: 4.14 kHz/s
-    (3.64 kHz/s without the Earth's rotation); at 470 km, 5.0 kHz/s.
+    (3.64 kHz/s without the Earth's rotation); at 465 km, 5.0 kHz/s.
     """
     r_m = WGS84_A_M + np.asarray(altitude_m, dtype=float)
     v_rel = np.sqrt(GM_M3_PER_S2 / r_m) + OMEGA_E_RAD_PER_S * WGS84_A_M
