@@ -150,6 +150,26 @@ def test_snapshot_recording_end_to_end(tmp_path, capsys):
         assert all(a["leosop:t_s"] == pytest.approx(k + 24_999.5 / fs) for a in truth)  # phases run on in gaps
         checked += _check_truth(iq, fs, truth, 0.02, cn0_tol_db=1.0)
     assert checked >= 3
+    # The docs' first example used 0.1 s blocks on these 20 ms captures: each joins five of them.
+    capsys.readouterr()
+    status, out, err = _run(capsys, ["doppler", str(meta), "--json"])
+    assert status == 0 and "join 10 captures" in err
+    assert {e["status"] for e in json.loads(out)["estimates"]} == {"joins captures"}
+    status, out, _ = _run(capsys, ["doppler", str(meta), "--block-s", "0.02", "--json"])
+    doc = json.loads(out)
+    # Ten satellites of one sky: some blocks are not ok (overlapping combs, a fit lost between two
+    # equal combs: weak comb); the ok ones are within 3 sigma (10 blocks: no miss expected).
+    assert doc["n_ok"] >= 6 and doc["truth_within_3_sigma"] == 1.0
+
+
+def test_ml_warns_of_its_run_time(recording, capsys):
+    from leosop.cli.doppler import _warn_ml_time
+    from leosop.signal.iq import open_sigmf
+
+    # 0.1 s blocks at 1 MS/s, STFT coarse error 244 Hz: +-1000 Hz at 1e-3 Hz, each point a pass over 1e5 samples.
+    _warn_ml_time(open_sigmf(recording), 100_000, 1e6 / 4096, 1e-3, 4)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--method ml evaluates 2,000,001 frequencies per block" in err
 
 
 def _check_truth(iq, fs, truth, block_s, cn0_tol_db):

@@ -3,10 +3,14 @@
 SigMF recordings carry their own parameters; raw files need ``--dtype``,
 ``--sample-rate-hz`` (and optionally ``--center-hz``, ``--start``). The
 recording is read one block at a time. ``ml`` and ``fmlef`` start from the
-STFT coarse track ([Shen 2024]); ``fast`` from the block's own FFT. A block
-without a detected comb gives null values and ``"status": "no pilot
-detected"``. When the recording holds ``leosop generate`` truth for the same
-blocks, each estimate also names the nearest true satellite and its Doppler.
+STFT coarse track ([Shen 2024]); ``fast`` from the block's own FFT. Each
+estimate has a ``status``: ``"ok"`` only when it can be vouched for, else the
+reason (:mod:`leosop.signal.quality`; ``"joins captures"`` for a block across
+a gap between snapshot captures). A block without a detected comb gives null
+values and ``"status": "no pilot detected"``. When the recording holds
+``leosop generate`` truth for the same blocks, each estimate also names the
+nearest true satellite and its Doppler, and the document the RMS error of the
+``ok`` estimates and the fraction of them within 3 sigma of the truth.
 
 One comb per block: the strongest. With several satellites of equal power
 the estimate may move from one to another between blocks, and their tones
@@ -15,6 +19,7 @@ sidelobes), which lowers the C/N0 estimate and can spoil a block.
 """
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +28,8 @@ from ..errors import InputError
 from ..fileio import atomic_outputs, write_csv, write_json
 from ..progress import progress
 from ..signal.coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, coarse_stft
-from ..signal.doppler import METHODS, estimate_block
-from ..signal.fine import cubic_bias_hz
+from ..signal.doppler import METHODS, estimate_block, ml_grid_points
+from ..signal.fine import cubic_bias_hz, periodogram_grid
 from ..signal.iq import open_raw, open_sigmf
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
@@ -96,6 +101,25 @@ def _warn_straddling(captures, block_len, fs):
               file=sys.stderr)
 
 
+def _warn_ml_time(rec, block_len, coarse_error_hz, resolution_hz, n_blocks):
+    """One stderr line with the expected run time of ``ml``, timed on 50 grid points of the first block."""
+    points = ml_grid_points(coarse_error_hz, resolution_hz)
+    x = rec.read(0, block_len)
+    t0 = time.perf_counter()
+    periodogram_grid(x, rec.sample_rate_hz, 0.0, resolution_hz, 50)
+    per_block_s = (time.perf_counter() - t0) / 50 * points
+    total_s = per_block_s * n_blocks
+    if total_s > 10.0:
+        print(f"leosop doppler: warning: --method ml evaluates {points:,} frequencies per block: about "
+              f"{per_block_s:.3g} s per block, {total_s / 60:.3g} min for {n_blocks} blocks (a coarser "
+              f"--resolution-hz or --method fast is quicker)", file=sys.stderr)
+
+
+def _straddles(captures, start, block_len):
+    """True when samples [start, start + block_len) come from more than one capture."""
+    return any(start < c.sample_start < start + block_len for c in captures)
+
+
 def _reduce(power, rows, cols):
     """Sum a spectrogram down to at most rows x cols cells."""
     r = max(1, power.shape[0] // rows)
@@ -131,13 +155,14 @@ def run(args):
     _warn_straddling(rec.captures, block_len, fs)
     if args.method != "fast":
         sweep_hz = args.max_rate_hz_per_s * block_len / fs
-        slow = "; ml is also slow (a fine grid search per block)" if args.method == "ml" else ""
         print(f"leosop doppler: warning: --method {args.method} assumes a constant tone within a block; at LEO "
               f"Doppler rates up to {args.max_rate_hz_per_s:g} Hz/s a {block_len / fs:g} s block sweeps up to "
-              f"{sweep_hz:.0f} Hz and the estimate can be off by half that (fast follows the rate){slow}",
+              f"{sweep_hz:.0f} Hz and the estimate can be off by half that (fast follows the rate)",
               file=sys.stderr)
     n_blocks = rec.n_samples // block_len
     nperseg = min(4096, block_len // 4)
+    if args.method == "ml":
+        _warn_ml_time(rec, block_len, fs / nperseg, args.resolution_hz, n_blocks)
     want_fig = args.out is not None
     estimates, starts, fig_cols, fig_t, coarse_t, coarse_f = [], [], [], [], [], []
     cols_per_block = max(1, _FIG_COLS // n_blocks)
@@ -167,22 +192,26 @@ def run(args):
             "doppler_rate_hz_per_s": est["doppler_rate_hz_per_s"],
             "cn0_dbhz": est["cn0_dbhz"],
             "sigma_hz": est["sigma_hz"],
-            "status": "ok" if est["detected"] else "no pilot detected",
+            "status": "joins captures" if est["detected"] and _straddles(rec.captures, start, block_len)
+            else est["status"],
         }
         estimates.append(entry)
         starts.append(start)
     if args.method == "fast":
         _correct_rate_change(estimates, block_len, fs)
     for start, entry in zip(starts, estimates):
-        if start in truth and entry["status"] == "ok":
+        if start in truth and entry["doppler_hz"] is not None and np.isfinite(entry["doppler_hz"]):
             entry["truth_sat_id"], entry["truth_doppler_hz"] = min(
                 truth[start], key=lambda sd: abs(sd[1] - entry["doppler_hz"]))
     doc = {"method": args.method, "estimates": estimates, "recording": str(rec.data_path),
            "sample_rate_hz": fs, "block_s": block_len / fs, "n_blocks": len(estimates),
-           "n_detected": sum(e["status"] == "ok" for e in estimates)}
-    errs = [e["doppler_hz"] - e["truth_doppler_hz"] for e in estimates if "truth_doppler_hz" in e]
+           "n_detected": sum(e["status"] != "no pilot detected" for e in estimates),
+           "n_ok": sum(e["status"] == "ok" for e in estimates)}
+    errs = [e["doppler_hz"] - e["truth_doppler_hz"] for e in estimates if "truth_doppler_hz" in e and e["status"] == "ok"]
     if errs:
         doc["truth_rms_error_hz"] = float(np.sqrt(np.mean(np.square(errs))))
+        doc["truth_within_3_sigma"] = float(np.mean([abs(e["doppler_hz"] - e["truth_doppler_hz"]) <= 3 * e["sigma_hz"]
+                                                     for e in estimates if "truth_doppler_hz" in e and e["status"] == "ok"]))
     if args.out:
         f_lim = min(0.5 * fs, args.max_doppler_hz + comb.offsets_hz.max() * 1.2)
         with atomic_outputs(args.out) as stage:
@@ -237,15 +266,18 @@ def _num(value, spec, unit):
 
 
 def summary(doc):
-    lines = [f"{doc['n_detected']}/{doc['n_blocks']} blocks with a pilot ({doc['method']}, {doc['block_s']:g} s blocks)"]
+    lines = [f"{doc['n_detected']}/{doc['n_blocks']} blocks with a pilot, {doc['n_ok']} ok "
+             f"({doc['method']}, {doc['block_s']:g} s blocks)"]
     for e in doc["estimates"][:20]:
-        if e["status"] == "ok":
-            lines.append(f"  t={e['t_s']:.4f} s  Doppler {e['doppler_hz']:+.4f} Hz  rate "
-                         f"{_num(e['doppler_rate_hz_per_s'], '+.2f', 'Hz/s')}  C/N0 {_num(e['cn0_dbhz'], '.1f', 'dB-Hz')}")
-        else:
+        if e["status"] == "no pilot detected":
             lines.append(f"  t={e['t_s']:.4f} s  no pilot detected")
+            continue
+        lines.append(f"  t={e['t_s']:.4f} s  Doppler {e['doppler_hz']:+.4f} Hz  sigma {_num(e['sigma_hz'], '.2g', 'Hz')}  "
+                     f"rate {_num(e['doppler_rate_hz_per_s'], '+.0f', 'Hz/s')}  "
+                     f"C/N0 {_num(e['cn0_dbhz'], '.1f', 'dB-Hz')}  {e['status']}")
     if len(doc["estimates"]) > 20:
         lines.append(f"  ... {len(doc['estimates']) - 20} more blocks (use --json or --out)")
     if "truth_rms_error_hz" in doc:
-        lines.append(f"RMS error against the recording's truth: {doc['truth_rms_error_hz']:.4g} Hz")
+        lines.append(f"ok estimates against the recording's truth: RMS error {doc['truth_rms_error_hz']:.4g} Hz, "
+                     f"{100 * doc['truth_within_3_sigma']:.0f} % within 3 sigma")
     return "\n".join(lines)

@@ -18,21 +18,23 @@ from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, coar
 from .fft import fft
 from .fine import _start_step, fine_fast, fine_fmlef, fine_ml
 from .pilot import PilotComb
+from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
-__all__ = ["METHODS", "BlockEstimates", "estimate_block", "estimate_blocks"]
+__all__ = ["METHODS", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
 
 METHODS = ("fast", "fmlef", "ml")
 
 
 @dataclass
 class BlockEstimates:
-    """Estimates for a batch of blocks, each field shape (n_blocks,); NaN where not detected."""
+    """Estimates for a batch of blocks, each field shape (n_blocks,); NaN where not detected; ``status`` strings."""
 
     doppler_hz: np.ndarray
     doppler_rate_hz_per_s: np.ndarray
     cn0_dbhz: np.ndarray
     sigma_hz: np.ndarray
     detected: np.ndarray
+    status: np.ndarray
 
 
 def _check_iq(iq, sample_rate_hz):
@@ -48,6 +50,15 @@ def _check_finite(value):
     """A NaN or inf sample makes every FFT bin (and any sum) non-finite."""
     if not np.isfinite(value):
         raise InputError("IQ samples contain NaN or inf")
+
+
+def ml_grid_points(coarse_error_hz, resolution_hz):
+    """How many frequencies ``ml`` evaluates per block for a coarse estimate good to ``coarse_error_hz``.
+
+    Its grid spans +-10 start steps (:func:`~.fine.fine_ml`) at ``resolution_hz``;
+    each point costs a pass over the block's samples.
+    """
+    return 2 * int(round(10.0 * _start_step(coarse_error_hz) / resolution_hz)) + 1
 
 
 def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_hz=1e-3,
@@ -74,8 +85,14 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     Returns
     -------
     dict with ``doppler_hz``, ``doppler_rate_hz_per_s`` (``fast`` only, else
-    NaN), ``cn0_dbhz``, ``sigma_hz`` (NaN for ml/fmlef: no per-block model),
-    ``detected``. Everything but ``detected`` is NaN when no pilot is found.
+    NaN), ``cn0_dbhz``, ``sigma_hz``, ``detected`` and ``status``
+    (:mod:`leosop.signal.quality`: ``"ok"`` only when every check passes).
+    Everything but ``detected`` and ``status`` is NaN when no pilot is found.
+    ``ml`` and ``fmlef`` are checked against the joint comb fit of the same
+    block, started from their estimate: it gives their C/N0 (central tone),
+    the chirp their sigma is taken under (:func:`~.quality.constant_tone_sigma_hz`,
+    inflated by the central tone's residual noise, plus the grid's
+    quantisation) and a second estimate to agree with.
     """
     if method not in METHODS:
         raise InputError(f"method={method!r} must be one of {', '.join(METHODS)}")
@@ -84,7 +101,8 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     comb = comb or PilotComb()
     iq = _check_iq(iq, sample_rate_hz)
     nan = float("nan")
-    out = dict(doppler_hz=nan, doppler_rate_hz_per_s=nan, cn0_dbhz=nan, sigma_hz=nan, detected=False)
+    out = dict(doppler_hz=nan, doppler_rate_hz_per_s=nan, cn0_dbhz=nan, sigma_hz=nan, detected=False,
+               status="no pilot detected")
     dur = iq.shape[-1] / sample_rate_hz
     if coarse_hz is None:
         smear = max_rate_hz_per_s * dur if method == "fast" else 0.0
@@ -101,18 +119,33 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
         err = coarse_error_hz if coarse_error_hz is not None else sample_rate_hz / iq.shape[-1]
         coarse = CoarseEstimate(float(coarse_hz), float(err), True, nan, nan)
     out["detected"] = True
+    fit_kw = dict(max_rate_hz_per_s=max_rate_hz_per_s, doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa)
     if method == "fast":
-        d, r, c, s = fine_fast(iq, sample_rate_hz, comb, coarse, max_rate_hz_per_s=max_rate_hz_per_s,
-                               doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa)
-        out.update(doppler_hz=d, doppler_rate_hz_per_s=r, cn0_dbhz=c, sigma_hz=s)
+        fit = fine_fast(iq, sample_rate_hz, comb, coarse, **fit_kw)
+        out.update(doppler_hz=fit.doppler_hz, doppler_rate_hz_per_s=fit.doppler_rate_hz_per_s,
+                   cn0_dbhz=fit.cn0_dbhz, sigma_hz=fit.sigma_hz, status=fit_status(fit, max_rate_hz_per_s))
         return out
     # The paper's estimators start from the strongest bin of the central tone,
     # good to half a bin when the tone is steady.
     start = _start_step(coarse.error_hz if coarse_hz is not None else 0.5 * sample_rate_hz / iq.shape[-1])
     if method == "fmlef":
-        out["doppler_hz"] = fine_fmlef(iq, sample_rate_hz, coarse.doppler_hz, resolution_hz, start)
+        d = fine_fmlef(iq, sample_rate_hz, coarse.doppler_hz, resolution_hz, start)
     else:
-        out["doppler_hz"] = fine_ml(iq, sample_rate_hz, coarse.doppler_hz, resolution_hz, 10.0 * start)
+        d = fine_ml(iq, sample_rate_hz, coarse.doppler_hz, resolution_hz, 10.0 * start)
+    fit = fine_fast(iq, sample_rate_hz, comb, CoarseEstimate(d, 2.0 / dur, True, nan, nan), **fit_kw)
+    cn0 = float(fit.tone_cn0_dbhz[comb.n_tones // 2])
+    # The central tone's residual (another satellite's tone near it) inflates the white-noise sigma.
+    inflate = np.sqrt(max(1.0, float(fit.tone_noise_ratio[comb.n_tones // 2])))
+    sigma = np.hypot(inflate * constant_tone_sigma_hz(iq.shape[-1], sample_rate_hz, fit.doppler_rate_hz_per_s, cn0),
+                     resolution_hz / np.sqrt(12.0))
+    status = fit_status(fit, max_rate_hz_per_s)
+    if status == "ok" and not np.isfinite(cn0):
+        status = "weak comb"  # no central tone in the fit
+    elif status == "ok" and not np.isfinite(sigma):
+        status = "rate too high for a constant tone"
+    elif status == "ok" and not abs(d - fit.doppler_hz) <= DISAGREE_SIGMA * np.hypot(sigma, fit.sigma_hz):
+        status = "disagrees with the comb fit"
+    out.update(doppler_hz=d, cn0_dbhz=cn0, sigma_hz=float(sigma), status=status)
     return out
 
 

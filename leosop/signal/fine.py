@@ -42,6 +42,7 @@ position is checked with the coherent tone powers, which keeps fast at the
 bound down to ~25 dB-Hz per tone for 0.12 s blocks.
 """
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -49,13 +50,41 @@ import numpy as np
 from .coarse import MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, _abs2, _parabola_vertex, _threshold
 from .crlb import crlb_frequency_hz2
 from .fft import fft
+from .quality import position_margin_sigma, tone_spread
 
-__all__ = ["periodogram_grid", "fine_ml", "fine_fmlef", "fine_fast", "cubic_bias_hz"]
+__all__ = ["CombFit", "periodogram_grid", "fine_ml", "fine_fmlef", "fine_fast", "cubic_bias_hz"]
 
 #: Tone positions decimated beyond each end of the comb to check the comb position.
 _EXTRA_TONES = 2
 #: Coarse margin (noise sigmas) above which the central tone is taken as sure.
 _SURE_SIGMA = 10.0
+
+
+@dataclass(frozen=True)
+class CombFit:
+    """A joint comb fit of one block (:func:`fine_fast`) and what its checks (:mod:`.quality`) need.
+
+    ``cn0_dbhz`` is the mean over tones, ``tone_cn0_dbhz`` (n_tones,) per
+    tone, ``tone_noise_ratio`` (n_tones,) each tone's residual noise as the
+    frequency sees it over the white-noise level; ``crlb_sigma_hz`` the Cramér-Rao bound at the fitted C/N0s and
+    ``sigma_hz`` the larger of it and the sigma the fit's residual spectrum
+    implies (:func:`_residual_sigma_hz`: other satellites' tones in the
+    bands); ``snr`` the coherent comb power over its noise mean,
+    ``snr_threshold`` its detection threshold; ``position_margin_sigma`` and
+    ``tone_spread`` as :func:`.quality.position_margin_sigma` and :func:`.quality.tone_spread`.
+    """
+
+    doppler_hz: float
+    doppler_rate_hz_per_s: float
+    cn0_dbhz: float
+    sigma_hz: float
+    crlb_sigma_hz: float
+    tone_cn0_dbhz: np.ndarray
+    tone_noise_ratio: np.ndarray
+    snr: float
+    snr_threshold: float
+    position_margin_sigma: float
+    tone_spread: float
 
 
 def periodogram_grid(iq, sample_rate_hz, f_start_hz, step_hz, n_freqs):
@@ -265,6 +294,40 @@ def _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur):
     return float(rates[j]), _wrap(i / (n_fft * dt2), 1.0 / dt2)
 
 
+def _residual_sigma_hz(white, tau, counts, weight):
+    """Frequency sigma from the fit's residual spectrum instead of white noise (a sandwich estimate).
+
+    To first order the frequency error is the projection of each tone's
+    perturbation on ``tau``; its variance is the perturbation's spectrum
+    weighted by ``|G(nu)|^2``, ``G`` the Fourier transform of ``tau``. With
+    the residual periodogram ``P_k`` for the spectrum, each tone's noise
+    variance becomes ``sum_b |G_b|^2 P_kb / (B sum_b |G_b|^2)``: white
+    noise gives the Cramér-Rao bound again, another satellite's tone near
+    the comb's frequency (where ``G`` is large) inflates it.
+
+    Parameters
+    ----------
+    white : ndarray of complex, shape (B, n_tones)
+        Residual per segment, scaled to the noise variance per sample.
+    tau, counts : ndarray, shape (B,)
+        Segment centres re the block centre [s] and samples per segment.
+    weight : ndarray, shape (n_tones,)
+        ``|A_k|^2 s_k^2``: tone power per sample times its Doppler scale squared.
+
+    Returns
+    -------
+    sigma_hz : float
+    noise_k : ndarray, shape (n_tones,)
+        Each tone's noise variance per sample as the frequency sees it.
+    """
+    g2 = _abs2(np.fft.fft(tau * counts))
+    p = _abs2(np.fft.fft(white, axis=0))  # (B, n_tones)
+    noise_k = (g2 @ p) / (white.shape[0] * np.sum(g2))
+    s2 = counts @ tau**2
+    den = 2.0 * (2.0 * np.pi) ** 2 * s2 * np.sum(weight) ** 2
+    return (float(np.sqrt(np.sum(weight * noise_k) / den)) if den > 0 else np.inf), noise_k
+
+
 def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ_PER_S,
               doppler_accel_hz_per_s2=0.0, pfa=PFA, resolve=True):
     """Joint comb ML of Doppler and Doppler rate on integrate-and-dump decimated tones.
@@ -286,12 +349,13 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     pfa : float
         False-alarm probability of the rate transform's peak (below it, a rate grid is searched).
     resolve : bool
-        Check the comb position (central tone) with the coherent tone powers
-        and re-estimate once if the coarse search was off by whole spacings.
+        Re-estimate once if the coherent tone powers put the comb whole
+        spacings from the coarse position (they are checked whenever the
+        coarse search is not sure of the central tone).
 
     Returns
     -------
-    doppler_hz, doppler_rate_hz_per_s, cn0_dbhz, sigma_hz : float
+    CombFit
     """
     n = iq.shape[-1]
     fs = float(sample_rate_hz)
@@ -309,8 +373,8 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     t_l, t_m, tau, tpow = _segments(n, fs, n_seg, seg)
     # When the coarse search is not sure of the central tone (weak comb), two
     # more tone positions either side decide it once the fit is coherent.
-    resolve = resolve and not coarse.margin_sigma >= _SURE_SIGMA
-    extra = _EXTRA_TONES if resolve else 0
+    check = not coarse.margin_sigma >= _SURE_SIGMA
+    extra = _EXTRA_TONES if check else 0
     wide = half + extra
     mix = _phasors(d_c * t_l, spacing * t_l, wide)
     # The one full-length pass: a real product on interleaved (re, im) samples
@@ -330,11 +394,11 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     if f_res is None:
         f_res = _dechirped_peak(yt, tau, rate, known, dt_dec)
     delta, rate, y_sum = _newton(y, tau, tpow, ratio, f_res, rate, known)
-    if resolve:
-        phase = delta * tau + 0.5 * rate * tau**2 + known
+    phase = delta * tau + 0.5 * rate * tau**2 + known
+    if check:
         power = _abs2(np.sum(y_wide * _phasors(phase, ratio * phase, wide), axis=0))
         shift = int(np.argmax(np.convolve(power, np.ones(comb.n_tones), mode="valid"))) - extra
-        if shift:
+        if shift and resolve:
             moved = CoarseEstimate(d_c + delta + shift * spacing, 2.0 / dur, True, np.nan, np.nan)
             return fine_fast(iq, fs, comb, moved, max_rate_hz_per_s=max_rate_hz_per_s,
                              doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa, resolve=False)
@@ -350,5 +414,22 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     w = np.sum(cn0_k * scale**2)
     sigma_hz = np.sqrt(crlb_frequency_hz2(10.0 * np.log10(w), n, fs)) if w > 0 else np.inf
     mean_cn0 = np.mean(cn0_k)
-    cn0_dbhz = 10.0 * np.log10(mean_cn0) if mean_cn0 > 0 else -np.inf
-    return d_c + delta, rate, cn0_dbhz, sigma_hz
+    with np.errstate(divide="ignore"):
+        tone_cn0_dbhz = 10.0 * np.log10(cn0_k)
+    # The checks of leosop.signal.quality: coherent comb power, comb position, whiteness of the residual.
+    counts = np.minimum(seg, n - np.arange(n_seg) * seg).astype(float)
+    z = y * _phasors(phase, ratio * phase, half)
+    amp = (counts @ z) / (counts @ counts)  # (n_tones,) least-squares amplitude per tone
+    white = (z - counts[:, None] * amp) / np.sqrt(counts)[:, None]
+    noise_sum = n * sigma2 if sigma2 > 0 else np.inf  # noise mean of a coherent sum over the block
+    resid_sigma_hz, noise_k = _residual_sigma_hz(white, tau, counts, a2 * scale**2)
+    snr = float(np.sum(_abs2(np.sum(z, axis=0))) / noise_sum)
+    n_rates = 1 + int(2.0 * max_rate_hz_per_s * dur**2)
+    margin = (position_margin_sigma(power / noise_sum, comb.n_tones) if check else float(coarse.margin_sigma))
+    return CombFit(doppler_hz=d_c + delta, doppler_rate_hz_per_s=rate,
+                   cn0_dbhz=10.0 * np.log10(mean_cn0) if mean_cn0 > 0 else -np.inf,
+                   sigma_hz=float(max(sigma_hz, resid_sigma_hz)), crlb_sigma_hz=float(sigma_hz),
+                   tone_cn0_dbhz=tone_cn0_dbhz, tone_noise_ratio=noise_k / sigma2 if sigma2 > 0 else noise_k, snr=snr,
+                   snr_threshold=comb.n_tones * _threshold(comb.n_tones, n_seg * n_rates, pfa),
+                   position_margin_sigma=margin,
+                   tone_spread=tone_spread(np.abs(np.sum(z, axis=0)), comb.tone_amplitudes, noise_sum, pfa))
