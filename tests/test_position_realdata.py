@@ -28,7 +28,7 @@ def test_doptrack_single_pass_static_fixes():
     results = [position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m) for p in passes]
     fixes = [r.fixes for r in results]
     # Every one passes the residual test (sigmas from its own residuals) and none is ok: one pass rests on
-    # one element set and a side chosen by the Earth's rotation (9 of these 20 land 35-3,100 km off).
+    # one element set and a side chosen by the Earth's rotation (9 of these 20 land 430-3,100 km off).
     assert {_status(r, p.meas) for r, p in zip(results, passes)} <= {"single_pass", "ambiguous"}
     truth = np.array([p.station_pos_ecef_m for p in passes])
     err = np.linalg.norm(np.array([f.pos_ecef_m for f in fixes]) - truth, axis=-1)
