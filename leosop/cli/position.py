@@ -17,7 +17,10 @@ optionally with a known height (``--alt-m``); when the table has a
 polynomials under ``passes`` (the solution's ``t_s``, ``clock_offset_hz``
 and drift are those of the pass nearest the middle). Besides the contract's
 ``solutions``, the JSON document lists the ``rejected`` rows and
-``unsolved`` epochs with their reasons; each solution carries a ``status``.
+``unsolved`` epochs with their reasons; each solution carries a ``status``,
+``ok`` only when the toolkit can vouch for the fix (else the reason:
+no_redundancy, inconsistent, implausible_height, ambiguous, single_pass, ...),
+its redundancy ``dof`` and its residual test's ``chi2_p``.
 
 Rows of several constellations may be mixed: a row's carrier is
 its ``carrier_hz``, else its satellite's family's (the ``--tle`` names, the
