@@ -22,22 +22,24 @@ F0_HZ = 11.325e9
 OK, NC, INC = int(FixStatus.OK), int(FixStatus.NOT_CONVERGED), int(FixStatus.INCONSISTENT)
 
 
-@pytest.mark.parametrize("solver, dof, chi2, alt, speed, ambiguous, single, expected", [
-    (OK, 3, 2.0, 400.0, 10.0, False, False, "ok"),
-    (NC, 3, 2.0, np.nan, np.nan, False, False, "not_converged"),
-    (OK, 0, 8e-11, 17229.0, 309.0, False, False, "no_redundancy"),  # the bundled recording's 7-for-7 fix
-    (OK, 2, 20.0, 400.0, 10.0, False, False, "inconsistent"),       # p = exp(-10) = 4.5e-5 < 1e-3
-    (INC, 5, 40.0, 400.0, 10.0, False, False, "inconsistent"),
-    (OK, 2, 1.0, -5215.7, 42.6, False, False, "implausible_height"),  # the bundled recording's underground fix
-    (OK, 2, 1.0, ALT_MIN_M - 1.0, 0.0, False, False, "implausible_height"),
-    (OK, 2, 1.0, ALT_MAX_M + 1.0, 0.0, False, False, "implausible_height"),
-    (OK, 2, 1.0, ALT_MAX_M, SPEED_MAX_MPS + 1.0, False, False, "implausible_velocity"),
-    (OK, 200, 190.0, 95.0, None, True, False, "ambiguous"),
-    (OK, 3000, 3100.0, 610.0, None, False, True, "single_pass"),  # FOX-1D's one pass
+@pytest.mark.parametrize("solver, dof, chi2, alt, speed, ambiguous, passes, expected", [
+    (OK, 3, 2.0, 400.0, 10.0, False, None, "ok"),
+    (NC, 3, 2.0, np.nan, np.nan, False, None, "not_converged"),
+    (OK, 0, 8e-11, 17229.0, 309.0, False, None, "no_redundancy"),  # the bundled recording's 7-for-7 fix
+    (OK, 2, 20.0, 400.0, 10.0, False, None, "inconsistent"),       # p = exp(-10) = 4.5e-5 < 1e-3
+    (INC, 5, 40.0, 400.0, 10.0, False, None, "inconsistent"),
+    (OK, 2, 1.0, -5215.7, 42.6, False, None, "implausible_height"),  # the bundled recording's underground fix
+    (OK, 2, 1.0, ALT_MIN_M - 1.0, 0.0, False, None, "implausible_height"),
+    (OK, 2, 1.0, ALT_MAX_M + 1.0, 0.0, False, None, "implausible_height"),
+    (OK, 2, 1.0, ALT_MAX_M, SPEED_MAX_MPS + 1.0, False, None, "implausible_velocity"),
+    (OK, 200, 190.0, 95.0, None, True, 1, "ambiguous"),
+    (OK, 3000, 3100.0, 610.0, None, False, 1, "single_pass"),  # FOX-1D's one pass
+    (OK, 1700, 1000.0, 95.0, None, False, 2, "few_passes"),  # a DopTrack day of two passes
+    (OK, 2200, 1300.0, 95.0, None, False, 3, "ok"),
 ])
-def test_each_status_from_its_condition(solver, dof, chi2, alt, speed, ambiguous, single, expected):
+def test_each_status_from_its_condition(solver, dof, chi2, alt, speed, ambiguous, passes, expected):
     (label,), (p,) = fix_status([solver], [dof], [chi2], [alt], None if speed is None else [speed],
-                                ambiguous=ambiguous, single_pass=single)
+                                ambiguous=ambiguous, n_passes=passes)
     assert label == expected
     if dof == 2:
         # Closed form of the chi-square survival function with 2 degrees of freedom: exp(-chi2 / 2).

@@ -85,25 +85,26 @@ def test_doptrack_passes_in_one_fix_resolve_the_side():
 
 
 def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma():
-    # A fix is ok only when the toolkit can vouch for it: here, that its sigma covers its error. The
-    # multi-pass fixes of the archive's first days (2-3 passes a day, light time at the first fix) are
-    # ok with the station at 0.9, 1.0, 1.2 and 1.2 times sqrt(trace) of the position covariance (per
-    # axis the worst is 1.5 sigma north); the 20-pass clock-only fix is ok at 2.77 (its north error,
-    # 811 m, is 4.3 of its north sigma: the covariance's shape, not its size, is the weaker part).
+    # A fix is ok only when the toolkit can vouch for it: here, that its sigma covers its error. The fixes
+    # of the archive's first four days (light time at each day's first fix): 3 passes on 04-01, 04-03 and
+    # 04-04 are ok with the station at 0.87, 1.17 and 1.23 sqrt(trace) of the position covariance (at most
+    # 1.53 sigma along an axis); 04-02's two passes are few_passes (over all 30 days, three of the five
+    # two-pass days are 3.8-7.5 sigma off along one axis, docs/positioning.md).
     passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))
     days = {}
     for p in passes:
         days.setdefault(str(p.meas.time_utc[0])[:10], []).append(p)
-    cases = [(ps, {}) for ps in list(days.values())[:4]] + [(passes[:20], {"time_bias": False})]
     truth = passes[0].station_pos_ecef_m
-    for ps, kw in cases:
-        first = _passes_fix(ps, **kw)
+    C = C_e_n(np.radians(passes[0].station_lat_deg), np.radians(passes[0].station_lon_deg))
+    for ps in list(days.values())[:4]:
+        first = _passes_fix(ps)
         meas = doptrack_table(ps, first.pos_ecef_m)
-        res = position_static_passes(meas, meas.pass_id, alt_m=ps[0].station_alt_m,
-                                     init_pos_ecef_m=first.pos_ecef_m, **kw)
-        assert _status(res, meas) == "ok"
-        err = np.linalg.norm(res.fixes.pos_ecef_m - truth)
-        assert err < 3.0 * np.sqrt(np.trace(res.fixes.cov[:3, :3]))
+        res = position_static_passes(meas, meas.pass_id, alt_m=ps[0].station_alt_m, init_pos_ecef_m=first.pos_ecef_m)
+        assert _status(res, meas) == ("ok" if len(ps) >= 3 else "few_passes")
+        if len(ps) >= 3:
+            d = res.fixes.pos_ecef_m - truth
+            assert np.linalg.norm(d) < 3.0 * np.sqrt(np.trace(res.fixes.cov[:3, :3]))
+            assert np.all(np.abs(C.T @ d) < 3.0 * np.sqrt(np.diag(C.T @ res.fixes.cov[:3, :3] @ C)))
 
 
 def test_doptrack_time_bias_per_pass_on_20_passes():

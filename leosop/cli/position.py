@@ -19,7 +19,7 @@ and drift are those of the pass nearest the middle). Besides the contract's
 ``solutions``, the JSON document lists the ``rejected`` rows and
 ``unsolved`` epochs with their reasons; each solution carries a ``status``,
 ``ok`` only when the toolkit can vouch for the fix (else the reason:
-no_redundancy, inconsistent, implausible_height, ambiguous, single_pass, ...),
+no_redundancy, inconsistent, implausible_height, single_pass, few_passes, ...),
 its redundancy ``dof`` and its residual test's ``chi2_p``.
 
 Rows of several constellations may be mixed: a row's carrier is
@@ -115,11 +115,11 @@ def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iteration
     }
 
 
-def _statuses(f, speed_mps=None, single_pass=False, alpha=None):
+def _statuses(f, speed_mps=None, n_passes=None, alpha=None):
     """``(label, dof, chi2_p)`` of each fix of ``f`` (:func:`fix_status`), a list."""
     _, _, alt = ecef_to_geodetic(np.asarray(f.pos_ecef_m))
     labels, chi2_p = fix_status(f.status, f.dof, f.chi2, alt, speed_mps, ambiguous=getattr(f, "ambiguous", False),
-                                single_pass=single_pass, alpha=alpha)
+                                n_passes=n_passes, alpha=alpha)
     return list(zip(labels, np.atleast_1d(f.dof), chi2_p))
 
 
@@ -147,7 +147,7 @@ def solutions_doc(res, meas, alpha=None):
     passes = None
     if isinstance(f, PassesFix):
         mid = int(np.argmin(np.abs(res.t_s - 0.5 * (res.t_s.min() + res.t_s.max()))))
-        (status,) = _statuses(f, single_pass=len(f.pass_ids) == 1, alpha=alpha)
+        (status,) = _statuses(f, n_passes=len(f.pass_ids), alpha=alpha)
         sol = _solution(res.t_s[mid], utc(mid), f.pos_ecef_m, np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop,
                         res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz, status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = float(f.clock_drift_hz_per_s[mid])
@@ -162,7 +162,7 @@ def solutions_doc(res, meas, alpha=None):
                    "sigma_hz": float(sg), "n_used": int(f.used[meas.pass_id == pid].sum())}
                   for pid, t, poly, sg in zip(f.pass_ids, f.t_ref_s, f.clock_poly_hz, sigma_pass)]
     elif isinstance(f, StaticFix):
-        (status,) = _statuses(f, single_pass=res.n_sats[0] == 1, alpha=alpha)
+        (status,) = _statuses(f, n_passes=res.n_sats[0], alpha=alpha)
         sol = _solution(res.t_s[0], utc(0), f.pos_ecef_m, np.zeros(3), f.clock_offset_hz, f.gdop, res.n_sats[0],
                         f.n_used, f.iterations, f.residual_rms_hz, status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = f.clock_drift_hz_per_s

@@ -26,14 +26,21 @@ first of these that applies, in this order:
     the ground track) that fits the data as well.
 ``single_pass``
     A static fix from one pass (one satellite's rows, or one ``pass_id``):
-    its position rests on that one element set, whose along-track error (km for a day
-    old element set) moves the fix by as much without showing in any
-    residual, and on a side of the ground track chosen by the Earth's
-    rotation alone. On the 98 DopTrack passes such fixes pass every
+    its position rests on that one element set, whose along-track error
+    (km for a day old element set) moves the fix by as much without showing
+    in any residual, and on a side of the ground track chosen by the
+    Earth's rotation alone. On the 98 DopTrack passes such fixes pass every
     residual test yet land tens to thousands of km off (their sigmas,
     even scaled for the residuals' correlation, cover few of them); the
-    FOX-1D pass lands 12 km off at sigma 2.2 / 0.9 km. Several passes or
-    satellites (``pass_id``) make a fix the toolkit can vouch for.
+    FOX-1D pass lands 12 km off at sigma 2.2 / 0.9 km.
+``few_passes``
+    A static fix from fewer than :data:`MIN_PASSES` passes (or satellites):
+    each pass's element-set error shifts the fix, and only the passes'
+    disagreement shows it (the multi-pass fix's variance factor and offsets,
+    :mod:`~leosop.positioning.static_passes`); two passes leave that test 4
+    degrees of freedom, too few to measure it. On DopTrack three of the
+    five two-pass days put the station 3.8-7.5 sigma off along one axis,
+    against one of 23 days of 3-6 passes (3.05 sigma).
 ``ok``
     None of the above.
 """
@@ -43,7 +50,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from .robust_ls import FixStatus
 
-__all__ = ["fix_status", "ALT_MIN_M", "ALT_MAX_M", "SPEED_MAX_MPS", "STATUS_ALPHA", "STATUSES"]
+__all__ = ["fix_status", "ALT_MIN_M", "ALT_MAX_M", "SPEED_MAX_MPS", "MIN_PASSES", "STATUS_ALPHA", "STATUSES"]
 
 #: Lowest plausible receiver height above the ellipsoid [m]: the Dead Sea shore is at -430 m
 #: above sea level and the geoid lies within about -106 .. +85 m of the ellipsoid.
@@ -54,14 +61,16 @@ ALT_MAX_M = 100e3
 #: Highest plausible receiver speed [m/s]: above the fastest aircraft in service (~1 km/s); a
 #: snapshot fix faster than this has converged to a wrong solution.
 SPEED_MAX_MPS = 1000.0
+#: Fewest passes (satellites) of a static fix that can be ok (module docstring, ``few_passes``).
+MIN_PASSES = 3
 #: Significance of the residual chi-square test of the status when the caller gives none.
 STATUS_ALPHA = 1e-3
 #: Every status, ``ok`` first.
 STATUSES = ("ok", "not_converged", "singular", "too_few", "no_redundancy", "inconsistent", "implausible_height",
-            "implausible_velocity", "ambiguous", "single_pass")
+            "implausible_velocity", "ambiguous", "single_pass", "few_passes")
 
 
-def fix_status(solver_status, dof, chi2, alt_m, speed_mps=None, *, ambiguous=False, single_pass=False,
+def fix_status(solver_status, dof, chi2, alt_m, speed_mps=None, *, ambiguous=False, n_passes=None,
                alpha=STATUS_ALPHA):
     """Status label of each fix (module docstring) and the p-value of its residual test.
 
@@ -77,8 +86,10 @@ def fix_status(solver_status, dof, chi2, alt_m, speed_mps=None, *, ambiguous=Fal
         Height above the ellipsoid [m] (NaN for an unsolved fix).
     speed_mps : array_like, (n,), optional
         Receiver speed of a snapshot fix [m/s]; None for a static fix.
-    ambiguous, single_pass : bool or array_like of bool, (n,)
-        Static fixes: a mirror solution fits as well; from one pass only.
+    ambiguous : bool or array_like of bool, (n,)
+        Static fixes: a mirror solution fits as well.
+    n_passes : int or array_like of int, (n,), optional
+        Static fixes: the passes (or satellites) of each; None for snapshot fixes.
     alpha : float or None
         Significance of the chi-square test; None or 0 take :data:`STATUS_ALPHA`.
 
@@ -95,6 +106,7 @@ def fix_status(solver_status, dof, chi2, alt_m, speed_mps=None, *, ambiguous=Fal
     chi2 = np.broadcast_to(np.asarray(chi2, dtype=float), (n,))
     alt = np.broadcast_to(np.asarray(alt_m, dtype=float), (n,))
     speed = np.zeros(n) if speed_mps is None else np.broadcast_to(np.asarray(speed_mps, dtype=float), (n,))
+    passes = np.full(n, MIN_PASSES) if n_passes is None else np.broadcast_to(np.asarray(n_passes), (n,))
     with np.errstate(invalid="ignore"):
         chi2_p = np.where(dof >= 1, chi2_dist.sf(chi2, np.maximum(dof, 1)), np.nan)
     alpha = alpha or STATUS_ALPHA
@@ -108,8 +120,9 @@ def fix_status(solver_status, dof, chi2, alt_m, speed_mps=None, *, ambiguous=Fal
         ~((alt >= ALT_MIN_M) & (alt <= ALT_MAX_M)),
         ~(speed <= SPEED_MAX_MPS),
         np.broadcast_to(ambiguous, (n,)),
-        np.broadcast_to(single_pass, (n,)),
+        passes == 1,
+        passes < MIN_PASSES,
     ]
     choices = ["not_converged", "singular", "too_few", "no_redundancy", "inconsistent", "implausible_height",
-               "implausible_velocity", "ambiguous", "single_pass"]
+               "implausible_velocity", "ambiguous", "single_pass", "few_passes"]
     return np.select(conditions, choices, default="ok"), chi2_p
