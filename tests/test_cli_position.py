@@ -137,7 +137,9 @@ def test_static_with_pass_id_column_solves_passes_jointly(capsys, tmp_path):
     status, doc, _ = _run(capsys, path, "--static", "--alt-m", 95.0, "--alt-sigma-m", 1.0)
     assert status == 0
     s = doc["solutions"][0]
-    assert s["status"] == "ok" and s["n_used"] == n
+    # Two passes: solved from every row, but too few for the toolkit to vouch for the fix (each pass's
+    # element-set error is seen only in the passes' disagreement; leosop.positioning.quality).
+    assert s["status"] == "few_passes" and s["n_used"] == n and s["chi2_p"] > 1e-3
     assert [p["pass_id"] for p in doc["passes"]] == ["a", "b"]
     # Each pass's offset near its truth: ~0.1 Hz sigma for ~100 rows of 1 Hz with the clock alone; the
     # per-pass time offsets (on by default) share the offset's information near closest approach (the

@@ -9,16 +9,27 @@ import csv
 import numpy as np
 
 from conftest import data_path
-from leosop.frames import geodetic_to_ecef
+from leosop.cli.position import solutions_doc
+from leosop.frames import C_e_n, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.positioning.datasets import doptrack_table, read_doptrack, read_fll, read_gsdc
 from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.solve import position_snapshots, position_static, position_static_passes
 
 
+def _status(res, meas):
+    """The fix's status label as the CLI reports it (leosop.positioning.quality)."""
+    (sol,), _, _ = solutions_doc(res, meas)
+    return sol["status"]
+
+
 def test_doptrack_single_pass_static_fixes():
     passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:20]
-    fixes = [position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m).fixes for p in passes]
+    results = [position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m) for p in passes]
+    fixes = [r.fixes for r in results]
+    # Every one passes the residual test (sigmas from its own residuals) and none is ok: one pass rests on
+    # one element set and a side chosen by the Earth's rotation (9 of these 20 land 430-3,100 km off).
+    assert {_status(r, p.meas) for r, p in zip(results, passes)} <= {"single_pass", "ambiguous"}
     truth = np.array([p.station_pos_ecef_m for p in passes])
     err = np.linalg.norm(np.array([f.pos_ecef_m for f in fixes]) - truth, axis=-1)
     mirror = np.linalg.norm(np.array([f.mirror_pos_ecef_m for f in fixes]) - truth, axis=-1)
@@ -71,6 +82,29 @@ def test_doptrack_passes_in_one_fix_resolve_the_side():
     # 2.77. Bounds: sigma 500-900 m, err/sigma 1-3.5 (the data are fixed).
     assert fix.pass_offset_chi2 > fix.pass_offset_dof + 3 * np.sqrt(2 * fix.pass_offset_dof)
     assert 500 < sigma < 900 and 1 < err / sigma < 3.5
+
+
+def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma():
+    # A fix is ok only when the toolkit can vouch for it: here, that its sigma covers its error. The fixes
+    # of the archive's first four days (light time at each day's first fix): 3 passes on 04-01, 04-03 and
+    # 04-04 are ok with the station at 0.87, 1.17 and 1.23 sqrt(trace) of the position covariance (at most
+    # 1.53 sigma along an axis); 04-02's two passes are few_passes (over all 30 days, three of the five
+    # two-pass days are 3.8-7.5 sigma off along one axis, docs/positioning.md).
+    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))
+    days = {}
+    for p in passes:
+        days.setdefault(str(p.meas.time_utc[0])[:10], []).append(p)
+    truth = passes[0].station_pos_ecef_m
+    C = C_e_n(np.radians(passes[0].station_lat_deg), np.radians(passes[0].station_lon_deg))
+    for ps in list(days.values())[:4]:
+        first = _passes_fix(ps)
+        meas = doptrack_table(ps, first.pos_ecef_m)
+        res = position_static_passes(meas, meas.pass_id, alt_m=ps[0].station_alt_m, init_pos_ecef_m=first.pos_ecef_m)
+        assert _status(res, meas) == ("ok" if len(ps) >= 3 else "few_passes")
+        if len(ps) >= 3:
+            d = res.fixes.pos_ecef_m - truth
+            assert np.linalg.norm(d) < 3.0 * np.sqrt(np.trace(res.fixes.cov[:3, :3]))
+            assert np.all(np.abs(C.T @ d) < 3.0 * np.sqrt(np.diag(C.T @ res.fixes.cov[:3, :3] @ C)))
 
 
 def test_doptrack_time_bias_per_pass_on_20_passes():
@@ -137,9 +171,16 @@ def test_fox1d_pass_with_its_catalogue_number(capsys):
     site = geodetic_to_ecef(np.radians(37.229976), np.radians(-80.439627), 610.0)
     fix = position_static(meas, constellation=read_tle(folder / "pslv40_st.tle"), alt_m=610.0).fixes
     # Achieved 12.3 km with 2018-004AC (TLEs of the first days after launch, 21 Hz residual rms);
-    # bound 20 km.
+    # bound 20 km. The solver converges and the residuals pass their test ...
     assert fix.status == FixStatus.OK
     assert np.linalg.norm(fix.pos_ecef_m - site) < 20e3
+    # ... but the sigmas (2.2 km east, 0.9 km north, from 21 Hz residuals correlated over ~12 rows) put the
+    # error at 3.6 and 10 sigma: one pass's fix rests on its element set, which no residual tests, and its
+    # mirror 2,470 km away fits as well, so it is not ok: "ambiguous" (without the mirror it would be
+    # "single_pass"). The log without trimming lands on the wrong side, 1,800 km off, ambiguous too.
+    C = C_e_n(np.radians(37.229976), np.radians(-80.439627))
+    z = (C.T @ (fix.pos_ecef_m - site)) / np.sqrt(np.diag(C.T @ fix.cov[:3, :3] @ C))
+    assert np.abs(z).max() > 3.0
     # The CLI reads the log itself (--format fll) and solves the same fix.
     import json
 
@@ -150,6 +191,12 @@ def test_fox1d_pass_with_its_catalogue_number(capsys):
     assert main(argv) == 0
     (sol,) = json.loads(capsys.readouterr().out)["solutions"]
     assert np.linalg.norm(np.array([sol["x_m"], sol["y_m"], sol["z_m"]]) - fix.pos_ecef_m) < 1e-3
+    assert sol["status"] == "ambiguous"
+    argv[1] = str(folder / "DOPPLER_FOX-1D_20180113_161106.862011_UTC_10sps.csv")
+    assert main(argv) == 0
+    (sol,) = json.loads(capsys.readouterr().out)["solutions"]
+    far = np.linalg.norm(np.array([sol["x_m"], sol["y_m"], sol["z_m"]]) - site)
+    assert far > 1000e3 and sol["status"] == "ambiguous"
 
 
 def _gsdc(sub):

@@ -17,7 +17,10 @@ optionally with a known height (``--alt-m``); when the table has a
 polynomials under ``passes`` (the solution's ``t_s``, ``clock_offset_hz``
 and drift are those of the pass nearest the middle). Besides the contract's
 ``solutions``, the JSON document lists the ``rejected`` rows and
-``unsolved`` epochs with their reasons; each solution carries a ``status``.
+``unsolved`` epochs with their reasons; each solution carries a ``status``,
+``ok`` only when the toolkit can vouch for the fix (else the reason:
+no_redundancy, inconsistent, implausible_height, single_pass, few_passes, ...),
+its redundancy ``dof`` and its residual test's ``chi2_p``.
 
 Rows of several constellations may be mixed: a row's carrier is
 its ``carrier_hz``, else its satellite's family's (the ``--tle`` names, the
@@ -30,21 +33,25 @@ clock; ``clock_offset_hz`` is then that of the first one present.
 """
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from ..fileio import atomic_outputs, write_csv, write_json
+from ..fileio import atomic_files, check_output_file, write_csv, write_json
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from ..geometry.doppler import N_DOPPLER_STATES
 from ..orbits import load_constellation
-from ..positioning.robust_ls import FixStatus
 from ..positioning.datasets import doptrack_table, read_doptrack, read_fll
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
+from ..positioning.quality import STATUSES, fix_status
 from ..positioning.solve import position_snapshots, position_static, position_static_passes
 from ..timebase import format_utc
 from . import add_command
 from .options import parse_site
+
+#: The files of ``--out``, written all or none.
+OUT_FILES = ("position.json", "fixes.csv", "residuals.csv")
 
 _DESCRIPTION = " ".join(__doc__.split("\n\n")[1:3]).replace("\n", " ")
 
@@ -93,26 +100,40 @@ def _check(args):
 
 
 def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iterations, rms, status, cov_pos):
+    """One solution's JSON keys; ``status`` is ``(label, dof, chi2_p)`` (:func:`fix_status`)."""
     lat, lon, alt = ecef_to_geodetic(pos)
     C = C_e_n(lat, lon)
     sig_enu = np.sqrt(np.diagonal(C.T @ cov_pos @ C)) if np.isfinite(cov_pos).all() else [np.nan] * 3
+    label, dof, chi2_p = status
     return {
         "t_s": float(t_s), "time_utc": None if time_utc is None else format_utc(time_utc),
         "lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)), "alt_m": float(alt),
         "x_m": pos[0], "y_m": pos[1], "z_m": pos[2], "vx_mps": vel[0], "vy_mps": vel[1], "vz_mps": vel[2],
         "clock_offset_hz": clock_hz, "gdop": gdop, "n_sats": int(n_sats), "n_used": int(n_used),
-        "iterations": int(iterations), "residual_rms_hz": rms, "status": FixStatus(int(status)).name.lower(),
-        "sigma_enu_m": list(sig_enu),
+        "iterations": int(iterations), "residual_rms_hz": rms, "status": str(label), "dof": int(dof),
+        "chi2_p": float(chi2_p) if np.isfinite(chi2_p) else None, "sigma_enu_m": list(sig_enu),
     }
 
 
-def solutions_doc(res, meas):
+def _statuses(f, speed_mps=None, n_passes=None, alpha=None):
+    """``(label, dof, chi2_p)`` of each fix of ``f`` (:func:`fix_status`), a list."""
+    _, _, alt = ecef_to_geodetic(np.asarray(f.pos_ecef_m))
+    labels, chi2_p = fix_status(f.status, f.dof, f.chi2, alt, speed_mps, ambiguous=getattr(f, "ambiguous", False),
+                                n_passes=n_passes, alpha=alpha)
+    return list(zip(labels, np.atleast_1d(f.dof), chi2_p))
+
+
+def solutions_doc(res, meas, alpha=None):
     """The JSON solutions of a PositionResult, its passes (several passes) and its residual rows.
+
+    ``alpha`` is the significance of the residual test of each solution's
+    status (:func:`~leosop.positioning.quality.fix_status`).
 
     Returns
     -------
     solutions : list of dict
-        The contract's keys (DESIGN 4.1) plus ``status`` and ``sigma_enu_m``.
+        The contract's keys (DESIGN 4.1) plus ``status`` (see
+        :mod:`leosop.positioning.quality`), ``dof``, ``chi2_p`` and ``sigma_enu_m``.
     passes : list of dict or None
         Each pass's frequency polynomial, for fixes from several passes.
     residuals : list of tuple
@@ -126,8 +147,9 @@ def solutions_doc(res, meas):
     passes = None
     if isinstance(f, PassesFix):
         mid = int(np.argmin(np.abs(res.t_s - 0.5 * (res.t_s.min() + res.t_s.max()))))
+        (status,) = _statuses(f, n_passes=len(f.pass_ids), alpha=alpha)
         sol = _solution(res.t_s[mid], utc(mid), f.pos_ecef_m, np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop,
-                        res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz, f.status, f.cov[:3, :3])
+                        res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz, status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = float(f.clock_drift_hz_per_s[mid])
         if len(res.clock_labels) > 1 and f.rx_clock_polys_hz is not None:
             names = [res.clock_labels[j] for j in f.clock_labels]
@@ -140,8 +162,9 @@ def solutions_doc(res, meas):
                    "sigma_hz": float(sg), "n_used": int(f.used[meas.pass_id == pid].sum())}
                   for pid, t, poly, sg in zip(f.pass_ids, f.t_ref_s, f.clock_poly_hz, sigma_pass)]
     elif isinstance(f, StaticFix):
+        (status,) = _statuses(f, n_passes=res.n_sats[0], alpha=alpha)
         sol = _solution(res.t_s[0], utc(0), f.pos_ecef_m, np.zeros(3), f.clock_offset_hz, f.gdop, res.n_sats[0],
-                        f.n_used, f.iterations, f.residual_rms_hz, f.status, f.cov[:3, :3])
+                        f.n_used, f.iterations, f.residual_rms_hz, status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = f.clock_drift_hz_per_s
         if len(res.clock_labels) > 1 and f.clock_polys_hz is not None:
             names = [res.clock_labels[j] for j in f.clock_labels]
@@ -151,9 +174,10 @@ def solutions_doc(res, meas):
         solutions = [sol]
     else:
         rms = f.residual_rms_hz
+        status = _statuses(f, np.linalg.norm(f.vel_ecef_mps, axis=-1), alpha=alpha)
         solutions = [
             _solution(res.t_s[k], utc(k), f.pos_ecef_m[k], f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k],
-                      res.n_sats[k], f.n_used[k], f.iterations[k], rms[k], f.status[k], f.cov[k, :3, :3])
+                      res.n_sats[k], f.n_used[k], f.iterations[k], rms[k], status[k], f.cov[k, :3, :3])
             for k in np.flatnonzero(res.n_sats >= (N_DOPPLER_STATES if res.n_need is None else res.n_need))
         ]
         if len(res.clock_labels) > 1:
@@ -193,6 +217,8 @@ def fixes_csv_rows(solutions):
 
 def run(args):
     _check(args)
+    for name in OUT_FILES if args.out else ():
+        check_output_file(Path(args.out) / name, "--out")
     # Element sets give the rows' families (carrier, receiver clock) and, without state columns, the states.
     init = None
     if args.init:
@@ -223,7 +249,7 @@ def run(args):
     else:
         res = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=init, sigma_hz=args.sigma_hz,
                                  alpha=alpha)
-    solutions, passes, residuals = solutions_doc(res, meas)
+    solutions, passes, residuals = solutions_doc(res, meas, alpha)
     if solutions and not any(np.isfinite([s["x_m"], s["y_m"], s["z_m"]]).all() for s in solutions):
         raise InputError(f"{args.meas}: no finite fix from {len(solutions)} solve(s); check the doppler_hz "
                          "values (Hz, sign of DESIGN 4.3), the satellite states and --init")
@@ -241,21 +267,23 @@ def run(args):
     if passes is not None:
         doc["passes"] = passes
     if args.out:
-        with atomic_outputs(args.out) as stage:
-            write_json(stage / "position.json", doc)
-            write_csv(stage / "fixes.csv", *fixes_csv_rows(solutions))
-            write_csv(stage / "residuals.csv", ["line", "t_s", "sat_id", "residual_hz", "used"], residuals)
+        # All three or none: a file that cannot be written (e.g. a directory in its place) leaves no other.
+        with atomic_files([Path(args.out) / name for name in OUT_FILES]) as (doc_path, fixes_path, res_path):
+            write_json(doc_path, doc)
+            write_csv(fixes_path, *fixes_csv_rows(solutions))
+            write_csv(res_path, ["line", "t_s", "sat_id", "residual_hz", "used"], residuals)
     return doc
 
 
-def _fmt(value, spec):
+def format_or_na(value, spec):
+    """``value`` formatted with ``spec``, ``n/a`` for None (a JSON null)."""
     return "n/a" if value is None else format(value, spec)
 
 
 def summary(doc):
     lines = []
     for s in doc["solutions"]:
-        f = {k: _fmt(s[k], spec) for k, spec in (
+        f = {k: format_or_na(s[k], spec) for k, spec in (
             ("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f"), ("vx_mps", ".3f"), ("vy_mps", ".3f"),
             ("vz_mps", ".3f"), ("clock_offset_hz", ".3f"), ("gdop", ".3g"), ("residual_rms_hz", ".3g"))}
         when = s["time_utc"] or f"t={s['t_s']:.3f} s"
@@ -265,6 +293,14 @@ def summary(doc):
         lines.append(f"{when}  {f['lat_deg']} {f['lon_deg']} {f['alt_m']} m  "
                      f"v=({f['vx_mps']}, {f['vy_mps']}, {f['vz_mps']}) m/s  clock {f['clock_offset_hz']} Hz  "
                      f"gdop {f['gdop']}  {used}  rms {f['residual_rms_hz']} Hz  {s['status']}")
-    lines.append(f"{len(doc['solutions'])} fix(es), {len(doc['unsolved'])} epoch(s) unsolved, "
+    lines.append(f"{status_line(doc['solutions'])}, {len(doc['unsolved'])} epoch(s) unsolved, "
                  f"{len(doc['rejected'])} row(s) rejected")
     return "\n".join(lines)
+
+
+def status_line(solutions):
+    """How many of the solutions are ``ok`` and why the others are not, e.g. ``3 of 5 fix(es) ok (2 inconsistent)``."""
+    labels = [s["status"] for s in solutions]
+    others = {lab: labels.count(lab) for lab in STATUSES if lab != "ok" and lab in labels}
+    why = f" ({', '.join(f'{n} {lab}' for lab, n in others.items())})" if others else ""
+    return f"{labels.count('ok')} of {len(labels)} fix(es) ok{why}"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fileio import atomic_outputs, write_csv, write_json
+from ..fileio import atomic_files, check_output_file, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.measurements import write_measurements
@@ -23,6 +23,9 @@ from ..signal.iq import open_sigmf
 from ..timebase import format_utc
 from . import add_command
 from .options import mask_deg, parse_site, positive
+
+#: The files ``--out`` may hold, written all or none (measurements, fixes and the spectrogram when there are any).
+OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png")
 
 _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 
@@ -60,6 +63,8 @@ def run(args):
     if args.init:
         lat, lon, alt = parse_site(args.init, "--init")
         init = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
+    for name in OUT_FILES if args.out else ():
+        check_output_file(Path(args.out) / name, "--out")  # before the work, not after
     path = Path(args.recording)
     rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
     const = load_constellation(args.tle)
@@ -89,18 +94,22 @@ def _write_outputs(out, doc, res, name, start_utc):
     from ..plots.spectra import plot_spectrogram
     from .position import fixes_csv_rows
 
-    with atomic_outputs(out) as stage:
-        write_json(stage / "replay.json", doc)
+    # The files this run makes, all or none (a directory in the place of one leaves no other behind).
+    names = [n for n, made in zip(OUT_FILES, (True, True, res.measurements is not None, bool(doc["solutions"]),
+                                              res.spectrum.shape[1] > 0)) if made]
+    with atomic_files([out / n for n in names]) as tmps:
+        path = dict(zip(names, tmps))
+        write_json(path["replay.json"], doc)
         keys = ["sat_id", "n_blocks", "start_utc", "end_utc", "cn0_dbhz", "match_rms_hz",
                 "doppler_hz_start", "doppler_hz_end"]
-        write_csv(stage / "tracks.csv", keys, [["" if t[k] is None else t[k] for k in keys] for t in doc["tracks"]])
-        if res.measurements is not None:
-            write_measurements(stage / "measurements.csv", res.measurements)
-        if doc["solutions"]:
-            write_csv(stage / "fixes.csv", *fixes_csv_rows(doc["solutions"]))
-        if res.spectrum.shape[1]:
+        write_csv(path["tracks.csv"], keys, [["" if t[k] is None else t[k] for k in keys] for t in doc["tracks"]])
+        if "measurements.csv" in path:
+            write_measurements(path["measurements.csv"], res.measurements)
+        if "fixes.csv" in path:
+            write_csv(path["fixes.csv"], *fixes_csv_rows(doc["solutions"]))
+        if "spectrogram.png" in path:
             labelled = [(tr.t_s, tr.doppler_hz, tr.sat_id or "unidentified") for tr in res.tracks]
-            plot_spectrogram(stage / "spectrogram.png", res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,
+            plot_spectrogram(path["spectrogram.png"], res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,
                              labelled_tracks=labelled,
                              x_label=f"time since the first sample, {format_utc(start_utc)[:19]}Z [s]",
                              title=f"{name}: {doc['n_identified']} of {len(res.tracks)} tracks identified, "
@@ -108,6 +117,8 @@ def _write_outputs(out, doc, res, name, start_utc):
 
 
 def summary(doc):
+    from .position import format_or_na, status_line
+
     lines = [f"{len(doc['tracks'])} track(s) in {doc['n_blocks']} block(s), {doc['n_identified']} identified"]
     for t in doc["tracks"]:
         rms = "n/a" if t["match_rms_hz"] is None else f"{t['match_rms_hz']:.2f} Hz"
@@ -117,7 +128,8 @@ def summary(doc):
     for s in doc["solutions"][:10]:
         sig = s.get("sigma_enu_m") or [None] * 3
         sig_txt = "n/a" if None in sig else "/".join(f"{v:.1f}" for v in sig)
-        lines.append(f"fix {s['time_utc']}: {s['lat_deg']:.6f} {s['lon_deg']:.6f} {s['alt_m']:.1f} m  "
+        lat, lon, alt = (format_or_na(s[k], spec) for k, spec in (("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f")))
+        lines.append(f"fix {s['time_utc']}: {lat} {lon} {alt} m  "
                      f"sigma E/N/U {sig_txt} m  {s['n_used']} measurements used  {s['status']}")
     if "pss" in doc:
         p = doc["pss"]
@@ -126,4 +138,6 @@ def summary(doc):
                      f"OFDM centre offset {p['doppler_hz']:+.0f} Hz")
     if len(doc["solutions"]) > 10:
         lines.append(f"... {len(doc['solutions']) - 10} more fixes (use --json or --out)")
+    if doc["solutions"]:
+        lines.append(status_line(doc["solutions"]))
     return "\n".join(lines)

@@ -11,7 +11,10 @@ Outliers: when the weighted residual sum fails the chi-square test at
 significance ``alpha``, the measurement with the largest standardised
 residual (Baarda's w-test statistic) is excluded and the problem re-solved,
 one measurement at a time, while at least two redundant measurements remain.
-Failures come back as data in ``status`` (:class:`FixStatus`).
+Failures come back as data in ``status`` (:class:`FixStatus`); a fix that
+still fails the test (``INCONSISTENT``) has its covariance scaled by the
+a-posteriori variance factor ``chi2 / dof``, so that its sigma reflects the
+residuals rather than the sigmas given.
 """
 
 from dataclasses import dataclass
@@ -72,6 +75,9 @@ class BatchFit:
     n_used, iterations : int
     chi2 : float
         Sum of the used rows' squared normalised residuals.
+    dof : int
+        Its degrees of freedom: used rows (with pseudo-rows of priors and a
+        known height) minus states.
     status : FixStatus
     ambiguous : bool
         A mirror solution fits about as well (``mirror_pos_ecef_m``, ``mirror_chi2``).
@@ -86,6 +92,7 @@ class BatchFit:
     n_used: int
     iterations: int
     chi2: float
+    dof: int
     status: FixStatus
     ambiguous: bool = False
     mirror_pos_ecef_m: np.ndarray = None
@@ -188,8 +195,8 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
                   groups=None, step_sigma_tol=None):
     """LM, then chi-square test and w-test exclusions one at a time.
 
-    Returns ``x, residuals, J, Q (weighted cofactor), used, iterations, chi2,
-    status``; rows in ``fixed`` (bool, (m,)) are never excluded. Problems
+    Returns ``x, residuals, J, Q (weighted cofactor; times ``chi2 / dof`` for an
+    INCONSISTENT problem), used, iterations, chi2, status``; rows in ``fixed`` (bool, (m,)) are never excluded. Problems
     that do not converge or fail the test from ``x0`` are retried once from
     ``x_alt`` (P, n) and keep the better solution. With ``groups`` (int,
     (m,), e.g. the pass of each row) each round excludes the largest
@@ -271,5 +278,8 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
         dof = used.sum(-1) - n_states
         with np.errstate(invalid="ignore"):
             bad = (dof >= 1) & (chi2 > chi2_dist.isf(alpha, np.maximum(dof, 1)))
-        status[(status == FixStatus.OK) & bad] = FixStatus.INCONSISTENT
+        bad &= status == FixStatus.OK
+        status[bad] = FixStatus.INCONSISTENT
+        # The sigmas do not explain the residuals: scale the covariance by the a-posteriori variance factor.
+        Q[bad] *= (chi2[bad] / dof[bad])[:, None, None]
     return x, residuals, J, Q, used, iterations, chi2, status

@@ -34,8 +34,8 @@ class SnapshotFixes:
         clock present at the epoch, in the order of ``clock_labels``).
     cov : ndarray, (n_ep, 6 + k, 6 + k)
         Posterior covariance of ``[pos, vel, T_u...]`` from the given sigmas
-        (k = 1 without clock groups); NaN rows and columns for a clock absent
-        at the epoch.
+        (k = 1 without clock groups), times ``chi2 / dof`` for an INCONSISTENT
+        fix; NaN rows and columns for a clock absent at the epoch.
     gdop, pos_dop, vel_dop : ndarray, (n_ep,)
         Eq. 10 ``sqrt(trace((H^T H)^-1))`` over the used satellites, and the
         square roots of the position and velocity blocks of that trace. The
@@ -50,6 +50,9 @@ class SnapshotFixes:
     n_used, iterations : ndarray of int, (n_ep,)
     chi2 : ndarray, (n_ep,)
         Weighted residual sum of squares.
+    dof : ndarray of int, (n_ep,)
+        Degrees of freedom of ``chi2``: used measurements minus the ``6 + k_e``
+        states of the epoch.
     status : ndarray of int, (n_ep,)
         :class:`~leosop.positioning.robust_ls.FixStatus` values; states are NaN unless OK or INCONSISTENT.
     clock_offsets_hz : ndarray, (n_ep, k)
@@ -70,6 +73,7 @@ class SnapshotFixes:
     n_used: np.ndarray
     iterations: np.ndarray
     chi2: np.ndarray
+    dof: np.ndarray
     status: np.ndarray
     clock_offsets_hz: np.ndarray = None
     clock_labels: tuple = ()
@@ -204,7 +208,8 @@ def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrie
     return SnapshotFixes(
         pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6], clock_offset_hz=clocks[np.arange(n_ep), first], cov=Q,
         gdop=gdop, pos_dop=pos_dop, vel_dop=vel_dop, residuals_hz=res, used=used,
-        n_used=used.sum(-1), iterations=iterations, chi2=chi2, status=status, clock_offsets_hz=clocks,
+        n_used=used.sum(-1), iterations=iterations, chi2=chi2, dof=used.sum(-1) - 6 - present.sum(-1), status=status,
+        clock_offsets_hz=clocks,
         clock_labels=tuple(clock_labels.tolist()) if clock_group is not None else (),
     )
 

@@ -40,7 +40,8 @@ class StaticFix(BatchFit):
     t_ref_s : float
     cov : ndarray, (4 + d, 4 + d)
         Posterior covariance of ``[pos, clock polynomial]`` (d the clock
-        degree; 5 x 5 for offset and drift).
+        degree; 5 x 5 for offset and drift), times ``chi2 / dof`` when
+        INCONSISTENT.
     gdop : float
         ``sqrt(trace((H^T H)^-1))`` of the states over the used Doppler rows
         (the height constraint enters with its weight relative to the median
@@ -49,6 +50,8 @@ class StaticFix(BatchFit):
     used : ndarray of bool, (m,)
     n_used, iterations : int
     chi2 : float
+    dof : int
+        Used rows (and the height pseudo-row) minus states.
     status : FixStatus
     ambiguous : bool
         Another start reached a different solution (beyond ``ambiguity_m``)
@@ -263,7 +266,8 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
         pos_ecef_m=xb[:3], clock_offset_hz=float(xb[3]), clock_drift_hz_per_s=float(xb[4]) if deg >= 1 else 0.0,
         t_ref_s=float(t_ref), cov=Q[best] if solved[best] else np.full((n_states, n_states), np.nan), gdop=gdop,
         residuals_hz=res[best, :n_rows], used=used[best, :n_rows], n_used=int(used[best, :n_rows].sum()),
-        iterations=int(iterations[best]), chi2=float(chi2[best]), status=FixStatus(int(status[best])),
+        iterations=int(iterations[best]), chi2=float(chi2[best]), dof=int(used[best].sum()) - n_states,
+        status=FixStatus(int(status[best])),
         ambiguous=ambiguous, clock_poly_hz=polys[0].copy(), mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
         clock_polys_hz=polys.copy(), clock_labels=tuple(clock_labels.tolist()) if clock_group is not None else (),
     )

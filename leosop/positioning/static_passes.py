@@ -120,6 +120,8 @@ class PassesFix(BatchFit):
     n_used, iterations : int
     chi2 : float
         Weighted residual sum of the Doppler rows and the priors' pseudo-rows.
+    dof : int
+        Used rows and pseudo-rows minus states.
     status : FixStatus
     ambiguous : bool
         Another start reached a solution beyond ``ambiguity_m`` that fits as
@@ -693,7 +695,8 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     return PassesFix(
         pos_ecef_m=nan_unless(x[0]), pass_ids=labels, t_ref_s=t_ref, clock_poly_hz=nan_unless(poly),
         cov=cov, gdop=gdop, residuals_hz=res[0, :n][back], used=used[0, :n][back], n_used=int(used[0, :n].sum()),
-        iterations=int(iterations[0]), chi2=float(chi2[0]), status=FixStatus(int(status[0])),
+        iterations=int(iterations[0]), chi2=float(chi2[0]), dof=int(used[0].sum()) - n_states,
+        status=FixStatus(int(status[0])),
         ambiguous=ambiguous, mirror_pos_ecef_m=mirror_pos, mirror_chi2=mirror_chi2,
         time_bias_s=nan_unless(c_loc[:, -1].copy()) if tb else None, clock=clock,
         rx_clock_poly_hz=nan_unless(rx_poly) if common else None, rx_t_ref_s=float(t_rx) if common else np.nan,
