@@ -21,7 +21,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from leosop.constants import C_MPS  # noqa: E402
-from leosop.gnss.ppp import SIGNALS, PppOptions, prepare, run_ppp  # noqa: E402
+from leosop.gnss.ppp import PppOptions, prepare, run_ppp  # noqa: E402
+from leosop.gnss.ppp_obs import SIGNALS  # noqa: E402
 from leosop.gnss.products import read_clk, read_sp3, read_wl_biases  # noqa: E402
 from leosop.gnss.rinex import read_obs  # noqa: E402
 
