@@ -60,6 +60,7 @@ Time: GPS time inside (``t_s`` seconds since the first epoch's day in GPS
 time); UTC at the output (GPS - UTC = 18 s from 2017).
 """
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,7 +176,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     t_orb = seconds_gps(orbits.ref_gps + (orbits.t_s * 1e9).astype("timedelta64[ns]"), ref)
     t_clk = seconds_gps(clocks.ref_gps + (clocks.t_s * 1e9).astype("timedelta64[ns]"), ref)
     orbits = Orbits(orbits.path, ref, t_orb, orbits.sv, orbits.pos_ecef_m)
-    clocks = Clocks(clocks.path, ref, t_clk, clocks.sv, clocks.bias_s)
+    clocks = dataclasses.replace(clocks, ref_gps=ref, t_s=t_clk)
     for prod, tp in ((orbits, t_orb), (clocks, t_clk)):
         if tp[-1] < t_s[0] or tp[0] > t_s[-1]:
             raise InputError(f"{prod.path}: line 1: product covers {str(ref + np.timedelta64(int(tp[0]), 's'))[:19]}"
@@ -224,9 +225,9 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / 86400.0)[:, None])
     zhd = models.saastamoinen_zhd_m(lat0, alt0)
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
-    missing = []
+    missing, rx_cal = [], False
     if antex is not None:
-        RS, d_ant, missing = antenna_corrections_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev,
+        RS, d_ant, missing, rx_cal = antenna_corrections_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev,
                                                      {k: v[4:6] for k, v in SIGNALS.items()})
         corr = -d_ant  # NaN for the satellites without a block: left out below
     else:
@@ -238,22 +239,21 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     ok &= elev > np.radians(opt.mask_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
-    return dict(Pc=Pc, Lc=Lc, RS=RS, elev=elev, m_wet=m_wet, ok=ok, new_arc=new_arc, tide=tide, arp_ecef=arp_ecef,
-                no_antenna=missing,
-                x0=x0, t_s=t_s, lat0=lat0, lon0=lon0, MW=meas["MW"])
+    return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "ok": ok, "new_arc": new_arc, "tide": tide,
+            "arp_ecef": arp_ecef, "no_antenna": missing, "rx_calibrated": rx_cal, "x0": x0, "t_s": t_s,
+            "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
 
 
 def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None, *,
-            ar=None, wl_biases_cyc=None, no_ar=None):
+            ar=None, no_ar=None):
     """PPP over every epoch of ``obs``: float, and with ``ar`` ambiguity-fixed (:mod:`leosop.gnss.ar`).
 
     Parameters
     ----------
     ar : leosop.gnss.ar.ArOptions, optional
-        Fix ambiguities (needs integer-recovery clocks and ``wl_biases_cyc``).
-    wl_biases_cyc : dict of str -> float, optional
-        Satellite wide-lane biases of the clock file (``read_wl_biases``);
-        satellites without one are not fixed.
+        Fix ambiguities: needs integer-recovery clocks with their satellite
+        wide-lane biases (``clocks.wl_bias_cyc``); satellites without one
+        are not fixed.
     no_ar : dict of str -> str, optional
         Satellites not to fix, with the reason (e.g. an antenna offset of
         another frame than the clocks').
@@ -289,14 +289,14 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     n_used = np.zeros(n_ep, int)
     n_slips = n_outl = 0
     C_en0 = C_e_n(lat0, lon0)
-    floor2 = np.square(opt.floor_enu_m if antex is not None else opt.floor_no_antex_enu_m)
+    floor2 = np.square(opt.floor_enu_m if d["rx_calibrated"] else opt.floor_no_antex_enu_m)
     last_t = None
     fix_pos, fix_sig = out_pos.copy(), out_sig.copy()
     n_fixed, ratio = np.zeros(n_ep, int), np.full(n_ep, np.nan)
-    skip_ar = _no_ar(sv, d["no_antenna"], wl_biases_cyc or {}, no_ar) if ar is not None else {}
+    skip_ar = _no_ar(sv, d["no_antenna"], clocks.wl_bias_cyc, no_ar) if ar is not None else {}
     if ar is not None:
         mw_mean, mw_var, mw_n = mw_arc_stats(d["MW"], ok, new_arc)
-        wsb = np.array([(wl_biases_cyc or {}).get(s, np.nan) for s in sv])
+        wsb = np.array([clocks.wl_bias_cyc.get(s, np.nan) for s in sv])
         wl_cyc = mw_mean + wsb
         wl_se = ar.wl_se_inflation * np.sqrt(mw_var / np.maximum(mw_n, 1))
         ar_ok = ok & (elev >= np.radians(ar.mask_deg)) & (mw_n >= ar.wl_min_epochs) & np.isfinite(wl_se)
