@@ -193,7 +193,7 @@ def read_antex(path):
             elif ant is None:
                 continue
             elif label == "TYPE / SERIAL NO":
-                name, prn, start = antenna_key(text[:20]), text[20:40].strip(), lineno
+                name, prn = antenna_key(text[:20]), text[20:40].strip()
             elif label == "SINEX CODE":
                 ant.sinex_code = text[:10].strip()
             elif label == "ZEN1 / ZEN2 / DZEN":

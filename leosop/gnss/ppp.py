@@ -1,4 +1,8 @@
-"""Float precise point positioning (PPP), static or kinematic, GPS + Galileo.
+"""Precise point positioning (PPP), static or kinematic, GPS + Galileo; float, and fixed with ``ar``.
+
+Ambiguity fixing (:mod:`leosop.gnss.ar`) runs on each epoch of this float
+filter and conditions a copy of it; the float filter itself is never
+changed by a fix.
 
 Observations: dual-frequency ionosphere-free (IF) code and phase, GPS
 C1W/C2W (C1C when C1W is missing) with L1C/L2W, Galileo C1C/C5Q with
