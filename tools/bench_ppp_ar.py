@@ -1,88 +1,134 @@
-"""Can the GRG products at hand fix ambiguities on real data? Wide-lane and narrow-lane fractional parts, ESBC00DNK.
+"""Ambiguity-fixed PPP of ESBC00DNK (2020-06-25, 24 h) against the station's ITRF2014 coordinate: the issue-22 goals.
 
-Wide-lane: per satellite arc (>= 30 min, cycle slips split arcs), the mean Melbourne-Wuebbena
-combination plus the satellite wide-lane bias of the GRG clock header; with correct biases every arc
-has the same fractional part (the receiver's), so their circular spread measures fixability (< 0.1-0.15
-cycle: WL fixing works). Baseline in the same run: the same spread without the biases (a uniform spread
-is ~0.29 cycle).
-Narrow-lane: per arc, the mean of the phase residual of the 24 h static float PPP (position, clocks
-and ZWD fixed at the solution) less beta times the rounded wide-lane, in narrow-lane cycles; same
-spread statistic. It needs the satellite antenna offsets the products were computed with
-(igs14_2108.atx per the clock header), which are not in the data folder.
+Same files as ``tools/bench_ppp.py`` (GRG orbits and integer-recovery clocks, the day's ANTEX subset, which
+leaves G04 / G18 out of ambiguity fixing: IGS20 offsets against the clocks' igs14). Reference: the header
+ETRF2000 coordinate mapped to ITRF2014 (``leosop.gnss.etrf``; PROVENANCE.md gives the same numbers).
 
-Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ar.py``
+Printed:
+- static: the fixed final 3-D error (goal 1 cm), and at 1, 3, 6, 12 h;
+- kinematic: time to first fix (goal <= 15 min), share of epochs fixed after it (>= 90 %), 3-D RMS after it
+  (<= 3 cm), wrong fixes (fixed epochs more than 5 cm from the reference, and fixed epochs whose position
+  jumps by more than 5 cm from the previous fixed epoch), the share of epoch-axis errors within 3 sigma
+  (>= 95 %) for the fixed epochs and for the float solution after 2 h;
+- re-convergence: the kinematic run with the data cut for 5 min (10 epochs) at each of ``--cuts`` hours,
+  the time from the first epoch after the cut to the first fixed one (goal <= 2 min);
+- run times (goal <= 30 s for the day on one core).
+
+Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ar.py [--hours 24] [--cuts 6 12 18]``
 """
 
+import argparse
+import dataclasses
 import os
+import time
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from leosop.constants import C_MPS  # noqa: E402
-from leosop.gnss.ppp import SIGNALS, PppOptions, prepare, run_ppp  # noqa: E402
-from leosop.gnss.products import read_clk, read_sp3, read_wl_biases  # noqa: E402
+from leosop.frames import C_e_n, ecef_to_geodetic  # noqa: E402
+from leosop.gnss.antex import check_antex, read_antex  # noqa: E402
+from leosop.gnss.ar import ArOptions  # noqa: E402
+from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014  # noqa: E402
+from leosop.gnss.ppp import PppOptions, run_ppp  # noqa: E402
+from leosop.gnss.products import read_clk, read_sp3  # noqa: E402
 from leosop.gnss.rinex import read_obs  # noqa: E402
 
 DAY = Path(__file__).resolve().parents[2] / "shared" / "data" / "rinex" / "esbc_2020-177"
 OBS = DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
 SP3 = DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
 CLK = DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
+ATX = DAY / "esbc_2020-177.atx"
 CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
-MIN_ARC = 60  # epochs of 30 s
+WRONG_FIX_M = 0.05
+CUT_EPOCHS = 10  # 5 min of 30 s epochs
 
 
-def spread(values):
-    """Circular mean and standard deviation of fractional parts [cycles]."""
-    ph = np.exp(2j * np.pi * np.asarray(values))
-    mean = np.angle(ph.mean()) / (2 * np.pi)
-    dev = (np.asarray(values) - mean + 0.5) % 1.0 - 0.5
-    return mean, dev.std()
-
-
-def arcs(d, j):
-    idx = np.flatnonzero(d["ok"][:, j])
-    starts = [i for i in idx if d["new_arc"][i, j]]
-    for a, b in zip(starts, starts[1:] + [d["ok"].shape[0]]):
-        sel = idx[(idx >= a) & (idx < b)]
-        if len(sel) >= MIN_ARC:
-            yield sel
+def select(obs, keep):
+    """The observation file restricted to the epochs ``keep`` (bool or index array)."""
+    return dataclasses.replace(obs, time_gps=obs.time_gps[keep], obs={k: v[keep] for k, v in obs.obs.items()},
+                               lli={k: v[keep] for k, v in obs.lli.items()})
 
 
 def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--cuts", type=float, nargs="*", default=[6.0, 12.0, 18.0], help="hours of the 5-min data cuts")
+    ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
+                    help="an ArOptions field (repeatable)")
+    a = ap.parse_args()
+    aro = ArOptions(**{k: type(getattr(ArOptions(), k))(v) for k, v in (o.split("=") for o in a.option)})
+    t0 = time.perf_counter()
     obs = read_obs(OBS, codes=CODES)
-    orb, clk = read_sp3(SP3), read_clk(CLK)
-    wsb = read_wl_biases(CLK)
-    opt = PppOptions(static=True)
-    res = run_ppp(obs, orb, clk, opt)
-    d = prepare(obs, orb, clk, opt)
-    rr = res.pos_ecef_m[-1] + d["arp_ecef"] + d["tide"]
-    rho = np.linalg.norm(d["RS"] - rr[:, None, :], axis=-1)
-    sysof = np.array([s[0] for s in obs.sv])
-    clock = np.where(sysof == "E", res.clock_m[:, 1:2], res.clock_m[:, 0:1])
-    resid = d["Lc"] - rho - clock - d["m_wet"] * res.zwd_m[:, None]
-    print(f"wide-lane biases in the GRG clock header: {sum(k[0] == 'G' for k in wsb)} GPS, "
-          f"{sum(k[0] == 'E' for k in wsb)} Galileo")
-    for s in "GE":
-        f1, f2 = SIGNALS[s][4], SIGNALS[s][5]
-        lam_nl, beta = C_MPS / (f1 + f2), C_MPS * f2 / (f1**2 - f2**2)
-        mw_raw, mw, nl = [], [], []
-        cols = [j for j, v in enumerate(obs.sv) if v[0] == s and v in wsb]
-        for j in cols:
-            for sel in arcs(d, j):
-                m = np.mean(d["MW"][sel, j])
-                mw_raw.append(m)
-                mw.append(m + wsb[obs.sv[j]])
-        rx_wl, sd_wl = spread(mw)
-        for j in cols:
-            for sel in arcs(d, j):
-                n_wl = np.round(np.mean(d["MW"][sel, j]) + wsb[obs.sv[j]] - rx_wl)
-                nl.append((np.mean(resid[sel, j]) - beta * n_wl) / lam_nl)
-        _, sd_raw = spread(mw_raw)
-        _, sd_nl = spread(nl)
-        print(f"{s}: {len(mw)} arcs; WL fractional spread {sd_wl:.3f} cycle with the GRG biases "
-              f"(without: {sd_raw:.3f}); NL fractional spread {sd_nl:.3f} cycle (uniform: 0.289)")
+    orb, clk, atx = read_sp3(SP3), read_clk(CLK), read_antex(ATX)
+    t_read = time.perf_counter() - t0
+    obs = select(obs, slice(0, int(round(a.hours * 120))))
+    notes, no_ar = check_antex(atx, obs.antenna_type, obs.sv, obs.time_gps[0].astype("datetime64[D]"),
+                               clk.pcvs_applied)
+    ref = etrf2000_to_itrf2014(obs.approx_pos_ecef_m, decimal_year(obs.time_gps[len(obs.time_gps) // 2]))
+    C = C_e_n(*ecef_to_geodetic(ref)[:2])
+    print(f"read {t_read:.1f} s; reference ITRF2014 {np.round(ref, 4).tolist()}; not fixed: {', '.join(no_ar)}")
+
+    def run(o, static):
+        t = time.perf_counter()
+        res = run_ppp(o, orb, clk, PppOptions(static=static), atx, ar=aro, no_ar=no_ar)
+        t_s = (res.time_gps - res.time_gps[0]).astype("timedelta64[s]").astype(float)
+        return res, t_s, time.perf_counter() - t
+
+    res, t_s, dt = run(obs, True)
+    ok = np.isfinite(res.pos_ecef_m).all(axis=1)
+    e = res.pos_ecef_m - ref
+    k = np.flatnonzero(ok)[-1]
+    print(f"static: final ({'fixed' if res.fixed[k] else 'float'}) 3-D error {100 * np.linalg.norm(e[k]):.2f} cm, "
+          f"ENU {np.round(100 * C.T @ e[k], 2).tolist()} cm, sigma {np.round(100 * res.sigma_enu_m[k], 2).tolist()}"
+          f" cm; float {100 * np.linalg.norm(res.pos_float_ecef_m[k] - ref):.2f} cm; run {dt:.1f} s")
+    for h in (1, 3, 6, 12):
+        i = np.flatnonzero(ok & (t_s < 3600 * h))
+        if i.size and t_s[i[-1]] >= 3600 * h - 600:
+            i = i[-1]
+            print(f"        at {h:2d} h: 3-D {100 * np.linalg.norm(e[i]):.2f} cm ({'fixed' if res.fixed[i] else 'float'})"
+                  f", ENU {np.round(100 * C.T @ e[i], 2).tolist()} cm")
+
+    res, t_s, dt = run(obs, False)
+    ok = np.isfinite(res.pos_ecef_m).all(axis=1)
+    enu = (res.pos_ecef_m - ref) @ C
+    first = np.flatnonzero(res.fixed)[0]
+    after = ok & (t_s >= t_s[first])
+    fx = after & res.fixed
+    e3 = np.linalg.norm(enu, axis=1)
+    jumps = np.linalg.norm(np.diff(res.pos_ecef_m[fx], axis=0), axis=1)
+    print(f"kinematic: first fix after {t_s[first] / 60:.1f} min; fixed {100 * res.fixed[after].mean():.1f} % of "
+          f"the epochs after it; 3-D RMS after it {100 * np.sqrt(np.mean(e3[after] ** 2)):.2f} cm (ENU "
+          f"{np.round(100 * np.sqrt(np.mean(enu[after] ** 2, axis=0)), 2).tolist()}, mean "
+          f"{np.round(100 * enu[after].mean(axis=0), 2).tolist()} cm); run {dt:.1f} s")
+    print(f"           fixed epochs more than 5 cm off: {int(np.sum(e3[fx] > WRONG_FIX_M))} of {int(fx.sum())} "
+          f"(largest {100 * e3[fx].max():.1f} cm); jumps > 5 cm between fixed epochs: "
+          f"{int(np.sum(jumps > WRONG_FIX_M))} (largest {100 * jumps.max():.1f} cm)")
+    float_enu = (res.pos_float_ecef_m - ref) @ C
+    fl = ok & (t_s >= 7200.0)
+    r_fix = np.abs(enu[fx]) / res.sigma_enu_m[fx]
+    r_flt = np.abs(float_enu[fl]) / res.sigma_float_enu_m[fl]
+    print(f"           within 3 sigma: fixed {100 * np.mean(r_fix <= 3):.1f} % (ENU "
+          f"{np.round(100 * np.mean(r_fix <= 3, axis=0), 1).tolist()}), float after 2 h "
+          f"{100 * np.mean(r_flt <= 3):.1f} % (ENU {np.round(100 * np.mean(r_flt <= 3, axis=0), 1).tolist()}); "
+          f"median fixed sigma ENU {np.round(100 * np.median(res.sigma_enu_m[fx], axis=0), 2).tolist()} cm")
+
+    for h in a.cuts:
+        c0 = int(round(h * 120))
+        if c0 + CUT_EPOCHS >= len(obs.time_gps):
+            continue
+        keep = np.ones(len(obs.time_gps), bool)
+        keep[c0:c0 + CUT_EPOCHS] = False
+        res, t_s, _ = run(select(obs, keep), False)
+        was_fixed = bool(res.fixed[c0 - 1])
+        after = np.flatnonzero(res.fixed[c0:])
+        e3 = np.linalg.norm(res.pos_ecef_m[c0:] - ref, axis=1)
+        gap_s = t_s[c0] - t_s[c0 - 1]
+        print(f"cut at {h:g} h ({gap_s:.0f} s between epochs; fixed before: {was_fixed}): fixed again "
+              + (f"{t_s[c0 + after[0]] - t_s[c0]:.0f} s after the first epoch back, 3-D error then "
+                 f"{100 * e3[after[0]]:.1f} cm, largest fixed error in the next hour "
+                 f"{100 * np.nanmax(e3[after[after < 120]]):.1f} cm" if after.size else "never"))
 
 
 if __name__ == "__main__":

@@ -11,6 +11,15 @@ or nadir (satellite) angle; azimuth-dependent rows are not read. A
 frequency missing from a receiver block takes the GPS L1 / L2 values, the
 IGS convention (``E01`` from ``G01``, ``E05`` from ``G02``).
 
+Strict, not silent (:func:`check_antex`): a receiver antenna without a
+calibration is a warning with what it does to the height (the receiver
+correction is then zero); a block from another frame than the clock
+product's ``SYS / PCVS APPLIED`` (``SINEX CODE`` ``IGS20_2417`` against
+``igs14_2108.atx``) is named, and such satellites are left out of
+ambiguity fixing; satellites without a block valid on the day are named and
+left out of the solution (:func:`antenna_corrections_if`). Antenna names are
+matched on antenna and radome (``NONE`` when absent), whatever the spacing.
+
 Use in the ionosphere-free range (``leosop.gnss.ppp``): ``rho`` from the
 satellite's antenna phase centre (centre of mass plus the body-frame
 offset) to the receiver's (reference point plus the offset), plus the
@@ -18,6 +27,7 @@ receiver's ``PCV(zenith)``; both combined over the two frequencies as the
 observations are.
 """
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,7 +36,7 @@ from ..errors import InputError
 from .models import satellite_axes
 from .rinex import read_text
 
-__all__ = ["Antenna", "Antex", "antenna_corrections_if", "read_antex"]
+__all__ = ["Antenna", "Antex", "antenna_corrections_if", "antenna_key", "check_antex", "read_antex"]
 
 #: Receiver frequencies standing in for a missing one (the IGS convention).
 _FALLBACK = {"E01": "G01", "E05": "G02", "E07": "G02", "E08": "G02", "E06": "G02"}
@@ -47,6 +57,8 @@ class Antenna:
         ``NOAZI`` variations per frequency (zeros when the block has none).
     valid_from, valid_until : numpy.datetime64
         Validity (satellites; open ends are the extreme dates).
+    sinex_code : str
+        ``SINEX CODE`` (``IGS14_2247``: frame and model week), empty when absent.
     """
 
     pco_m: dict = field(default_factory=dict)
@@ -54,6 +66,7 @@ class Antenna:
     pcv_m: dict = field(default_factory=dict)
     valid_from: np.datetime64 = field(default_factory=lambda: np.datetime64("1900-01-01"))
     valid_until: np.datetime64 = field(default_factory=lambda: np.datetime64("2200-01-01"))
+    sinex_code: str = ""
 
     def pco_pcv(self, freq, *, receiver):
         """Offset (3,) and variation row (n_zen,) of ``freq``; a receiver may fall back to GPS L1/L2."""
@@ -79,12 +92,69 @@ class Antex:
         return None
 
     def receiver(self, antenna_type):
-        """The block of ``antenna_type`` (``"ASH701945E_M    SCIS"``); InputError naming the file if absent."""
-        key = antenna_type.strip()
-        if key not in self.receivers:
-            raise InputError(f"{self.path}: no block for the receiver antenna {key!r} (RINEX ANT # / TYPE); "
-                             f"types in the file: {', '.join(sorted(self.receivers)) or 'none'}")
-        return self.receivers[key]
+        """The block of ``antenna_type`` (``"ASH701945E_M    SCIS"``, any spacing), or None."""
+        return self.receivers.get(antenna_key(antenna_type))
+
+
+def antenna_key(name):
+    """``"ANTENNA RADOME"`` from a 20-character type field or a loosely spaced one (radome ``NONE`` if absent)."""
+    words = name.split()
+    if not words:
+        return ""
+    return f"{words[0]} {words[1] if len(words) > 1 else 'NONE'}"
+
+
+def _frame(code):
+    """Frame of a SINEX code or ANTEX file name (``IGS14_2247``, ``igs14_2108.atx`` -> ``IGS14``), or ''."""
+    m = re.match(r"([A-Za-z]+\d\d)_\d{4}", code.strip())
+    return m.group(1).upper() if m else ""
+
+
+def check_antex(antex, antenna_type, sv, day, pcvs_applied):
+    """What the ANTEX file leaves unmodelled or inconsistent for one run: warnings and satellites not to fix.
+
+    Parameters
+    ----------
+    antex : Antex
+    antenna_type : str
+        RINEX ``ANT # / TYPE``.
+    sv : list of str
+        Observed satellites.
+    day : numpy.datetime64
+    pcvs_applied : str
+        ANTEX file named by the clock product's ``SYS / PCVS APPLIED`` ('' if none).
+
+    Returns
+    -------
+    messages : list of str
+        One line each (the caller shows them as warnings).
+    no_ar : dict of str -> str
+        Satellites whose block is of another frame than the clocks', with the reason.
+    """
+    messages, no_ar = [], {}
+    rx = antex.receiver(antenna_type)
+    clk_frame = _frame(pcvs_applied)
+    if rx is None:
+        messages.append(f"{antex.path}: no calibration for the receiver antenna {antenna_type.strip()!r} (RINEX "
+                        f"ANT # / TYPE; the file has {', '.join(sorted(antex.receivers)) or 'none'}): the heights "
+                        "are of its ionosphere-free phase centre, off by that offset (several centimetres for "
+                        "geodetic antennas, 4.3 cm for the ASH701945E_M) and by its variations")
+    elif clk_frame and _frame(rx.sinex_code) != clk_frame:
+        messages.append(f"{antex.path}: receiver antenna {antenna_key(antenna_type)!r} is a "
+                        f"{rx.sinex_code or 'frame-less'} calibration, the clocks were made with {pcvs_applied}: "
+                        "millimetres to a centimetre of height may differ")
+    if not clk_frame:
+        messages.append(f"{antex.path}: the clock file names no SYS / PCVS APPLIED: the frame of the satellite "
+                        "antenna offsets cannot be checked against the clocks'")
+        return messages, no_ar
+    for s in sv:
+        sat = antex.satellite(s, day)
+        if sat is not None and _frame(sat.sinex_code) != clk_frame:
+            no_ar[s] = f"antenna offsets {sat.sinex_code or 'of no frame'}, clocks {pcvs_applied}"
+    if no_ar:
+        messages.append(f"{antex.path}: {', '.join(no_ar)}: satellite antenna offsets of another frame than the "
+                        f"clocks' ({pcvs_applied}): left out of ambiguity fixing")
+    return messages, no_ar
 
 
 def _date(text, path, lineno):
@@ -111,16 +181,21 @@ def read_antex(path):
     if not lines or "ANTEX VERSION / SYST" not in lines[0][60:]:
         raise InputError(f"{path}: line 1: not an ANTEX file (no ANTEX VERSION / SYST)")
     receivers, satellites = {}, {}
-    ant, freq, name, prn = None, None, "", ""
+    ant, freq, name, prn, start = None, None, "", "", 0
     for lineno, line in enumerate(lines, 1):
         label, text = line[60:].strip(), line[:60]
         try:
             if label == "START OF ANTENNA":
-                ant, freq = Antenna(), None
+                if ant is not None:
+                    raise InputError(f"{path}: line {lineno}: START OF ANTENNA inside the block of line {start} "
+                                     "(no END OF ANTENNA)")
+                ant, freq, start = Antenna(), None, lineno
             elif ant is None:
                 continue
             elif label == "TYPE / SERIAL NO":
-                name, prn = text[:20].strip(), text[20:40].strip()
+                name, prn = antenna_key(text[:20]), text[20:40].strip()
+            elif label == "SINEX CODE":
+                ant.sinex_code = text[:10].strip()
             elif label == "ZEN1 / ZEN2 / DZEN":
                 z1, z2, dz = (float(v) for v in text.split()[:3])
                 ant.zen_deg = np.arange(z1, z2 + 0.5 * dz, dz)
@@ -149,6 +224,9 @@ def read_antex(path):
             raise
         except (ValueError, IndexError):
             raise InputError(f"{path}: line {lineno}: cannot read {label or 'the record'}") from None
+    if ant is not None:
+        raise InputError(f"{path}: line {len(lines)}: the antenna block of line {start} has no END OF ANTENNA "
+                         "(truncated file?)")
     return Antex(str(path), receivers, satellites)
 
 
@@ -183,9 +261,11 @@ def antenna_corrections_if(antex, obs, RS, pos_rx_ecef_m, sun, C_en, elev, freqs
         receiver antenna (its reference point is what the filter estimates).
     missing : list of str
         Satellites with no block valid on the day (left out).
+    rx_calibrated : bool
+        False when the receiver antenna has no block (its correction is then zero: :func:`check_antex`).
     """
     day = obs.time_gps[0].astype("datetime64[D]")
-    rx = antex.receiver(obs.antenna_type)
+    rx = antex.receiver(obs.antenna_type) or Antenna(pco_m={"G01": np.zeros(3), "G02": np.zeros(3)})
     bx, by, bz = satellite_axes(RS, sun)
     RS = RS.copy()
     d_rx = np.full(elev.shape, np.nan)
@@ -211,4 +291,4 @@ def antenna_corrections_if(antex, obs, RS, pos_rx_ecef_m, sun, C_en, elev, freqs
         e = los / np.linalg.norm(los, axis=-1, keepdims=True)
         zen = 90.0 - np.degrees(elev[:, j])
         d_rx[:, j] = -e @ pco_ecef + np.interp(zen, rx.zen_deg, pcv)
-    return RS, d_rx, missing
+    return RS, d_rx, missing, antex.receiver(obs.antenna_type) is not None

@@ -1,4 +1,8 @@
-"""Float precise point positioning (PPP), static or kinematic, GPS + Galileo.
+"""Precise point positioning (PPP), static or kinematic, GPS + Galileo; float, and fixed with ``ar``.
+
+Ambiguity fixing (:mod:`leosop.gnss.ar`) runs on each epoch of this float
+filter and conditions a copy of it; the float filter itself is never
+changed by a fix.
 
 Observations: dual-frequency ionosphere-free (IF) code and phase, GPS
 C1W/C2W (C1C when C1W is missing) with L1C/L2W, Galileo C1C/C5Q with
@@ -60,6 +64,7 @@ Time: GPS time inside (``t_s`` seconds since the first epoch's day in GPS
 time); UTC at the output (GPS - UTC = 18 s from 2017).
 """
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,18 +74,13 @@ from ..errors import InputError
 from ..frames import C_e_n, ecef_to_geodetic
 from . import models
 from .antex import antenna_corrections_if
+from .ar import fix_epoch, mw_arc_stats, nl_constants
+from .ppp_obs import SIGNALS, detect_slips, if_observations, spp_position
 from .products import Clocks, Orbits, seconds_gps
 from .rinex import ObsData
 
-__all__ = ["SIGNALS", "PppOptions", "PppResult", "run_ppp", "gps_to_utc", "spp_position", "detect_slips"]
+__all__ = ["PppOptions", "PppResult", "gps_to_utc", "prepare", "run_ppp"]
 
-F_L1_HZ, F_L2_HZ, F_L5_HZ = 1575.42e6, 1227.60e6, 1176.45e6
-
-#: Per system: (first codes in order of preference, second code, first phase, second phase, f1, f2).
-SIGNALS = {
-    "G": (("C1W", "C1C"), "C2W", "L1C", "L2W", F_L1_HZ, F_L2_HZ),
-    "E": (("C1C",), "C5Q", "L1C", "L5Q", F_L1_HZ, F_L5_HZ),
-}
 _LEAPS = [(np.datetime64("2006-01-01"), 14), (np.datetime64("2009-01-01"), 15), (np.datetime64("2012-07-01"), 16),
           (np.datetime64("2015-07-01"), 17), (np.datetime64("2017-01-01"), 18)]
 
@@ -117,12 +117,21 @@ class PppOptions:
     k_outlier: float = 5.0
     gf_slip_m: float = 0.05
     mw_slip_cycles: float = 4.0
-    max_gap_s: float = 300.0
+    gf_rate_window_s: float = 300.0
+    max_gap_s: float = 600.0
 
 
 @dataclass
 class PppResult:
-    """Per-epoch solutions, shapes (n_epochs, ...)."""
+    """Per-epoch solutions, shapes (n_epochs, ...).
+
+    ``pos_ecef_m`` / ``sigma_enu_m`` are the fixed solution where ``fixed``,
+    the float one elsewhere (``pos_float_ecef_m`` / ``sigma_float_enu_m``
+    always float). ``n_fixed`` counts the narrow-lane SD ambiguities fixed,
+    ``ratio`` is the ratio test of the fixed subset (NaN where none).
+    ``no_antenna``: satellites without an ANTEX block (out of the
+    solution); ``no_ar``: satellites left out of ambiguity fixing, with why.
+    """
 
     time_gps: np.ndarray
     pos_ecef_m: np.ndarray
@@ -134,120 +143,12 @@ class PppResult:
     n_slips: int
     n_outliers: int
     no_antenna: list
-
-
-def _pick(obs, s, codes):
-    for c in codes:
-        key = f"{s}:{c}"
-        if key in obs.obs and np.isfinite(obs.obs[key]).any():
-            return key
-    return None
-
-
-def _if_observations(obs, systems):
-    """IF code/phase [m], MW [cycles of the wide lane], GF [m] and slip flags per (epoch, sat)."""
-    n_ep, n_sv = len(obs.time_gps), len(obs.sv)
-    out = {k: np.full((n_ep, n_sv), np.nan) for k in ("P", "L", "MW", "GF", "lam_nl", "lam_wl")}
-    out["lli"] = np.zeros((n_ep, n_sv), bool)
-    sysof = np.array([s[0] for s in obs.sv])
-    found = False
-    for s in systems:
-        cols = sysof == s
-        if not cols.any():
-            continue
-        c1s, c2, l1, l2, f1, f2 = SIGNALS[s]
-        keys = [_pick(obs, s, c1s), _pick(obs, s, (c2,)), _pick(obs, s, (l1,)), _pick(obs, s, (l2,))]
-        if None in keys:
-            missing = [n for n, k in zip((f"{'/'.join(c1s)}", c2, l1, l2), keys) if k is None]
-            raise InputError(f"{obs.path}: system {s} lacks {', '.join(missing)} for the ionosphere-free "
-                             "combination (SYS / # / OBS TYPES)")
-        found = True
-        P1, P2 = obs.obs[keys[0]][:, cols], obs.obs[keys[1]][:, cols]
-        lam1, lam2 = C_MPS / f1, C_MPS / f2
-        L1, L2 = obs.obs[keys[2]][:, cols] * lam1, obs.obs[keys[3]][:, cols] * lam2
-        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
-        out["P"][:, cols] = g1 * P1 - g2 * P2
-        out["L"][:, cols] = g1 * L1 - g2 * L2
-        lam_wl = C_MPS / (f1 - f2)
-        out["MW"][:, cols] = ((f1 * L1 - f2 * L2) / (f1 - f2) - (f1 * P1 + f2 * P2) / (f1 + f2)) / lam_wl
-        out["GF"][:, cols] = L1 - L2
-        out["lam_nl"][:, cols] = C_MPS / (f1 + f2)
-        out["lam_wl"][:, cols] = lam_wl
-        out["lli"][:, cols] = ((obs.lli[keys[2]][:, cols] & 1) | (obs.lli[keys[3]][:, cols] & 1)).astype(bool)
-    if not found:
-        raise InputError(f"{obs.path}: no satellites of systems {systems!r}")
-    return out
-
-
-def detect_slips(t_s, MW, GF, lli, ok, opt):
-    """New-arc flags: a gap, the loss-of-lock flag, a Melbourne-Wuebbena or a geometry-free jump.
-
-    The MW combination (wide-lane phase minus narrow-lane code, in wide-lane
-    cycles) is compared with its running arc mean: a slip changing ``N1 -
-    N2`` moves it by whole cycles, beyond ``opt.mw_slip_cycles`` standard
-    deviations of the arc (at least 1 cycle). The geometry-free phase ``L1 -
-    L2`` [m] catches the slips MW cannot see (``dN1 = dN2``, 5.4 cm per
-    cycle on GPS L1/L2): a jump beyond ``opt.gf_slip_m`` between successive
-    epochs.
-
-    Parameters
-    ----------
-    t_s : ndarray, shape (n_epochs,)
-    MW, GF : ndarray, shape (n_epochs, n_sats)
-    lli, ok : ndarray of bool, shape (n_epochs, n_sats)
-    opt : PppOptions
-        ``max_gap_s``, ``mw_slip_cycles``, ``gf_slip_m``.
-
-    Returns
-    -------
-    ndarray of bool, shape (n_epochs, n_sats)
-        True at the first epoch of every arc.
-    """
-    n_ep, n_sv = MW.shape
-    new_arc = np.zeros((n_ep, n_sv), bool)
-    for j in range(n_sv):
-        idx = np.flatnonzero(ok[:, j])
-        last_t, mean, var, n, last_gf = -np.inf, 0.0, 0.0, 0, np.nan
-        for i in idx:
-            mw, gf = MW[i, j], GF[i, j]
-            slip = (t_s[i] - last_t > opt.max_gap_s) or lli[i, j]
-            if not slip and n >= 1:
-                sd = max(np.sqrt(var / n) if n > 1 else 0.0, 1.0)
-                slip = abs(mw - mean) > opt.mw_slip_cycles * sd or abs(gf - last_gf) > opt.gf_slip_m
-            if slip:
-                new_arc[i, j] = True
-                mean, var, n = mw, 0.0, 1
-            else:
-                n += 1
-                d = mw - mean
-                mean += d / n
-                var += d * (mw - mean)
-            last_t, last_gf = t_s[i], gf
-    return new_arc
-
-
-def spp_position(pos_sv_ecef_m, p_corr_m, *, iterations=8):
-    """Code-only least-squares position of one epoch (a priori for the models).
-
-    Parameters
-    ----------
-    pos_sv_ecef_m : ndarray, shape (m, 3)
-        Satellite positions (Sagnac applied or not: the metre level is enough).
-    p_corr_m : ndarray, shape (m,)
-        IF code plus satellite clock ``c dt_sv``.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-    """
-    x = np.zeros(4)
-    for _ in range(iterations):
-        rs = models.sagnac_rotate(pos_sv_ecef_m, np.linalg.norm(pos_sv_ecef_m - x[:3], axis=1) / C_MPS)
-        rho = np.linalg.norm(rs - x[:3], axis=1)
-        H = np.hstack([(x[:3] - rs) / rho[:, None], np.ones((len(rho), 1))])
-        dx = np.linalg.lstsq(H, p_corr_m - rho - x[3], rcond=None)[0]
-        x += dx
-    return x[:3]
+    pos_float_ecef_m: np.ndarray
+    sigma_float_enu_m: np.ndarray
+    fixed: np.ndarray
+    n_fixed: np.ndarray
+    ratio: np.ndarray
+    no_ar: dict
 
 
 def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
@@ -269,7 +170,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     t_s = seconds_gps(obs.time_gps, ref)
     sv = obs.sv
     n_ep, n_sv = len(t_s), len(sv)
-    meas = _if_observations(obs, opt.systems)
+    meas = if_observations(obs, opt.systems)
     # Products for the observation's satellites.
     orb_idx = np.array([orbits.sv.index(s) if s in orbits.sv else -1 for s in sv])
     clk_idx = np.array([clocks.sv.index(s) if s in clocks.sv else -1 for s in sv])
@@ -279,7 +180,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     t_orb = seconds_gps(orbits.ref_gps + (orbits.t_s * 1e9).astype("timedelta64[ns]"), ref)
     t_clk = seconds_gps(clocks.ref_gps + (clocks.t_s * 1e9).astype("timedelta64[ns]"), ref)
     orbits = Orbits(orbits.path, ref, t_orb, orbits.sv, orbits.pos_ecef_m)
-    clocks = Clocks(clocks.path, ref, t_clk, clocks.sv, clocks.bias_s)
+    clocks = dataclasses.replace(clocks, ref_gps=ref, t_s=t_clk)
     for prod, tp in ((orbits, t_orb), (clocks, t_clk)):
         if tp[-1] < t_s[0] or tp[0] > t_s[-1]:
             raise InputError(f"{prod.path}: line 1: product covers {str(ref + np.timedelta64(int(tp[0]), 's'))[:19]}"
@@ -328,9 +229,9 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / 86400.0)[:, None])
     zhd = models.saastamoinen_zhd_m(lat0, alt0)
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
-    missing = []
+    missing, rx_cal = [], False
     if antex is not None:
-        RS, d_ant, missing = antenna_corrections_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev,
+        RS, d_ant, missing, rx_cal = antenna_corrections_if(antex, obs, RS, x0, sun, C_e_n(lat0, lon0), elev,
                                                      {k: v[4:6] for k, v in SIGNALS.items()})
         corr = -d_ant  # NaN for the satellites without a block: left out below
     else:
@@ -342,13 +243,24 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     ok &= elev > np.radians(opt.mask_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
-    return dict(Pc=Pc, Lc=Lc, RS=RS, elev=elev, m_wet=m_wet, ok=ok, new_arc=new_arc, tide=tide, arp_ecef=arp_ecef,
-                no_antenna=missing,
-                x0=x0, t_s=t_s, lat0=lat0, lon0=lon0, MW=meas["MW"])
+    return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "ok": ok, "new_arc": new_arc, "tide": tide,
+            "arp_ecef": arp_ecef, "no_antenna": missing, "rx_calibrated": rx_cal, "x0": x0, "t_s": t_s,
+            "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
 
 
-def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
-    """Float PPP over every epoch of ``obs``.
+def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None, *,
+            ar=None, no_ar=None):
+    """PPP over every epoch of ``obs``: float, and with ``ar`` ambiguity-fixed (:mod:`leosop.gnss.ar`).
+
+    Parameters
+    ----------
+    ar : leosop.gnss.ar.ArOptions, optional
+        Fix ambiguities: needs integer-recovery clocks with their satellite
+        wide-lane biases (``clocks.wl_bias_cyc``); satellites without one
+        are not fixed.
+    no_ar : dict of str -> str, optional
+        Satellites not to fix, with the reason (e.g. an antenna offset of
+        another frame than the clocks').
 
     Returns
     -------
@@ -381,8 +293,19 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     n_used = np.zeros(n_ep, int)
     n_slips = n_outl = 0
     C_en0 = C_e_n(lat0, lon0)
-    floor2 = np.square(opt.floor_enu_m if antex is not None else opt.floor_no_antex_enu_m)
+    floor2 = np.square(opt.floor_enu_m if d["rx_calibrated"] else opt.floor_no_antex_enu_m)
     last_t = None
+    fix_pos, fix_sig = out_pos.copy(), out_sig.copy()
+    n_fixed, ratio = np.zeros(n_ep, int), np.full(n_ep, np.nan)
+    skip_ar = _no_ar(sv, d["no_antenna"], clocks.wl_bias_cyc, no_ar) if ar is not None else {}
+    if ar is not None:
+        mw_mean, mw_var, mw_n = mw_arc_stats(d["MW"], ok, new_arc)
+        wsb = np.array([clocks.wl_bias_cyc.get(s, np.nan) for s in sv])
+        wl_cyc = mw_mean + wsb
+        wl_se = ar.wl_se_inflation * np.sqrt(mw_var / np.maximum(mw_n, 1))
+        ar_ok = ok & (elev >= np.radians(ar.mask_deg)) & (mw_n >= ar.wl_min_epochs) & np.isfinite(wl_se)
+        ar_ok[:, [sv.index(s) for s in skip_ar]] = False
+        lam_nl, beta = nl_constants(sv)
     for i in range(n_ep):
         js_i = np.flatnonzero(ok[i])
         if len(js_i) < 5:
@@ -481,5 +404,29 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         out_zwd[i] = x[5]
         out_clk[i] = x[3:5]
         n_used[i] = len(js_i)
-    return PppResult(time_gps=obs.time_gps, pos_ecef_m=out_pos, sigma_enu_m=out_sig, zwd_m=out_zwd, clock_m=out_clk,
-                     n_used=n_used, sv=sv, n_slips=n_slips, n_outliers=n_outl, no_antenna=d["no_antenna"])
+        if ar is not None:
+            jf = js_i[ar_ok[i, js_i] & amb_on[js_i]]
+            f = fix_epoch(x, P, 6, jf, wl_cyc[i], wl_se[i], sysof, elev[i], lam_nl, beta, ar) if jf.size else None
+            if f is not None:
+                fix_pos[i] = x[:3] + f.dx[:3]
+                fix_sig[i] = np.sqrt(np.clip(np.diag(C_en0.T @ f.P[:3, :3] @ C_en0), 0, None) + floor2)
+                n_fixed[i], ratio[i] = f.n_fixed, f.ratio
+    fixed = n_fixed > 0
+    return PppResult(time_gps=obs.time_gps, pos_ecef_m=np.where(fixed[:, None], fix_pos, out_pos),
+                     sigma_enu_m=np.where(fixed[:, None], fix_sig, out_sig), zwd_m=out_zwd, clock_m=out_clk,
+                     n_used=n_used, sv=sv, n_slips=n_slips, n_outliers=n_outl, no_antenna=d["no_antenna"],
+                     pos_float_ecef_m=out_pos, sigma_float_enu_m=out_sig, fixed=fixed, n_fixed=n_fixed, ratio=ratio,
+                     no_ar=skip_ar)
+
+
+def _no_ar(sv, no_antenna, wl_biases_cyc, no_ar):
+    """Satellites left out of ambiguity fixing, with the reason, in the order of ``sv``."""
+    out = {}
+    for s in sv:
+        if s in no_antenna:
+            out[s] = "no ANTEX block (out of the solution)"
+        elif no_ar and s in no_ar:
+            out[s] = no_ar[s]
+        elif s not in wl_biases_cyc:
+            out[s] = "no wide-lane bias in the clock file"
+    return out

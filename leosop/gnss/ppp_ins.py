@@ -71,10 +71,11 @@ from ..ins.error_model import DPOS, DV
 from . import models
 from .geometry import range_and_rate, satellite_clock
 from .lambda_ import partial_fix
-from .ppp import PppOptions, detect_slips
+from .ppp import PppOptions
+from .ppp_obs import detect_slips
 from .simulate import F1_HZ, F2_HZ
 
-__all__ = ["PppInsOptions", "PppInsResult", "run", "if_combinations"]
+__all__ = ["PppInsOptions", "PppInsResult", "if_combinations", "run"]
 
 _ZWD = N_INS  # state index of the zenith wet delay; the SD ambiguities follow, one slot per satellite
 _A0 = N_INS + 1

@@ -10,14 +10,14 @@ outside the records (a clock query more than one), or next to a missing
 record, returns NaN.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import InputError
 from .rinex import epochs_gps, read_text
 
-__all__ = ["Orbits", "Clocks", "read_sp3", "read_clk", "seconds_gps", "read_wl_biases"]
+__all__ = ["Clocks", "Orbits", "read_clk", "read_sp3", "read_wl_biases", "seconds_gps"]
 
 #: Lagrange interpolation points for SP3 orbits.
 N_LAGRANGE = 11
@@ -106,6 +106,10 @@ class Clocks:
     sv : list of str
     bias_s : ndarray, shape (n_records, n_sats)
         Satellite clock offsets [s], NaN where missing.
+    wl_bias_cyc : dict of str -> float
+        Satellite wide-lane biases of the header (:func:`read_wl_biases`).
+    pcvs_applied : str
+        The ANTEX file named by ``SYS / PCVS APPLIED`` ('' when absent).
     """
 
     path: str
@@ -113,6 +117,8 @@ class Clocks:
     t_s: np.ndarray
     sv: list
     bias_s: np.ndarray
+    wl_bias_cyc: dict = field(default_factory=dict)
+    pcvs_applied: str = ""
 
     def bias(self, sv_idx, t_s):
         """Clock offsets [s] at given times, linear between records, shape (n,)."""
@@ -173,7 +179,7 @@ def _grid(times, line_numbers, path, what):
     off = np.abs(u - index) > 1e-3
     if np.any(off):
         raise InputError(f"{path}: line {lines[off][0]}: {what} epoch off the {step:g} s record grid")
-    return t, np.timedelta64(int(round(step * 1e9)), "ns"), index, order
+    return t, np.timedelta64(round(step * 1e9), "ns"), index, order
 
 
 def read_sp3(path, *, systems="GE", ref_gps=None):
@@ -273,7 +279,9 @@ def read_clk(path, *, systems="GE", ref_gps=None):
     e = idx[rank[np.fromiter((k for k, _ in svs), int, len(svs))]]
     bias[e, np.fromiter((col[s] for _, s in svs), int, len(svs))] = vals
     ref = grid[0] if ref_gps is None else np.datetime64(ref_gps, "ns")
-    return Clocks(path=path, ref_gps=ref, t_s=seconds_gps(grid, ref), sv=sv, bias_s=bias)
+    wsb, pcvs = _clk_header(lines[:end], path)
+    return Clocks(path=path, ref_gps=ref, t_s=seconds_gps(grid, ref), sv=sv, bias_s=bias, wl_bias_cyc=wsb,
+                  pcvs_applied=pcvs)
 
 
 
@@ -295,16 +303,22 @@ def read_wl_biases(path):
     dict of str -> float
         Empty when the file has none.
     """
-    lines = read_text(path)
-    out = {}
+    return _clk_header(read_text(path), path)[0]
+
+
+def _clk_header(lines, path):
+    """Wide-lane biases (dict) and the ``SYS / PCVS APPLIED`` ANTEX name of a clock header."""
+    out, pcvs = {}, ""
     for i, line in enumerate(lines):
         label = line[60:].strip()
         if label == "END OF HEADER":
             break
+        if label == "SYS / PCVS APPLIED" and not pcvs:
+            pcvs = line[20:60].strip()
         if label == "COMMENT" and line.startswith("WL "):
             f = line[:60].split()
             try:
                 out[f[1]] = float(f[9])
             except (IndexError, ValueError):
                 raise InputError(f"{path}: line {i + 1}: unreadable wide-lane bias comment") from None
-    return out
+    return out, pcvs

@@ -7,8 +7,8 @@ from .core import pyplot, save_png
 __all__ = ["ppp_figure", "ppp_ins_figure"]
 
 
-def ppp_figure(time_gps, d_enu_m, sigma_enu_m, n_sats, path, *, title):
-    """ENU offsets from a reference in centimetres with the filter's +-3 sigma, and the satellites used.
+def ppp_figure(time_gps, d_enu_m, sigma_enu_m, n_sats, path, *, title, n_fixed=None):
+    """ENU offsets from a reference in centimetres with the filter's +-3 sigma, the satellites used and fixed.
 
     The band is drawn with its edges, and each panel prints its median 3 sigma, so a band far thinner than
     the offsets still shows (and says so) instead of vanishing under the line.
@@ -22,6 +22,10 @@ def ppp_figure(time_gps, d_enu_m, sigma_enu_m, n_sats, path, *, title):
     n_sats : ndarray of int, shape (n,)
     path : str or Path
     title : str
+    n_fixed : ndarray of int, shape (n,), optional
+        Narrow-lane ambiguities fixed per epoch (ambiguity resolution): fixed
+        epochs are drawn in green, float ones in blue, and the count joins
+        the satellites' panel.
     """
     from matplotlib.ticker import MaxNLocator
 
@@ -36,19 +40,27 @@ def ppp_figure(time_gps, d_enu_m, sigma_enu_m, n_sats, path, *, title):
                            label="filter +-3 sigma")
         for sign in (-1, 1):
             ax[i].plot(t_h, sign * band_cm[:, i], color="C1", lw=0.7)
-        ax[i].plot(t_h, d_cm[:, i], color="C0", lw=0.8, label="offset")
+        if n_fixed is None:
+            ax[i].plot(t_h, d_cm[:, i], color="C0", lw=0.8, label="offset")
+        else:
+            fixed = np.asarray(n_fixed) > 0
+            ax[i].plot(t_h, np.where(fixed, np.nan, d_cm[:, i]), color="C0", lw=0.8, label="offset, float")
+            ax[i].plot(t_h, np.where(fixed, d_cm[:, i], np.nan), color="C2", lw=0.8, label="offset, fixed")
         ax[i].set_ylabel(f"{name} [cm]")
         # The bulk of the run: neither the first epochs' metres nor a lone outlier set the scale.
         lim = 1.2 * np.nanpercentile(np.abs(np.concatenate([d_cm[:, i], band_cm[:, i]])), 99)
         if np.isfinite(lim) and lim > 0:
             ax[i].set_ylim(-lim, lim)
         ax[i].text(0.99, 0.04, f"median 3 sigma {np.nanmedian(band_cm[:, i]):.2f} cm", transform=ax[i].transAxes,
-                   ha="right", va="bottom", fontsize="small", bbox=dict(fc="white", alpha=0.8, lw=0))
+                   ha="right", va="bottom", fontsize="small", bbox={"fc": "white", "alpha": 0.8, "lw": 0})
         ax[i].grid(alpha=0.3)
-    ax[0].legend(loc="upper right", fontsize=8, ncol=2)
-    ax[3].step(t_h, n_sats, where="post", lw=0.8)
+    ax[0].legend(loc="upper right", fontsize=8, ncol=3)
+    ax[3].step(t_h, n_sats, where="post", lw=0.8, label="used")
+    if n_fixed is not None:
+        ax[3].step(t_h, n_fixed, where="post", lw=0.8, color="C2", label="narrow-lane fixed (SD)")
+        ax[3].legend(loc="upper right", fontsize=8, ncol=2)
     ax[3].yaxis.set_major_locator(MaxNLocator(integer=True))
-    ax[3].set_ylabel("satellites used")
+    ax[3].set_ylabel("satellites")
     ax[3].grid(alpha=0.3)
     ax[3].set_xlabel(f"hours since {str(time_gps[0].astype('datetime64[s]')).replace('T', ' ')} GPS time")
     ax[0].set_title(title)
