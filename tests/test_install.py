@@ -25,6 +25,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 pytest.importorskip("wheel", reason="building a wheel needs the 'wheel' package (test extra)")
+pytest.importorskip("setuptools", minversion="77",
+                    reason="building without isolation needs the test extra's setuptools >= 77 (SPDX licence field)")
 
 
 def _run(cmd, cwd, **kw):
