@@ -54,7 +54,10 @@ def register(subparsers):
                         "(default 0,0,0: the IMU axes are forward-right-down)")
     p.add_argument("--lever-arm-m", default="0,0,0", metavar="F,R,D",
                    help="GNSS antenna minus IMU in the body frame, forward-right-down [m]")
-    p.add_argument("--imu-time-offset-s", type=float, default=0.0, metavar="T", help="added to the IMU time tags")
+    p.add_argument("--imu-time-offset-s", type=float, default=0.0, metavar="T",
+                   help="added to the IMU time tags (the prior of the estimated offset)")
+    p.add_argument("--imu-time-offset-sigma-s", type=float, default=0.1, metavar="S",
+                   help="prior sigma of the IMU time offset, estimated by the filter (default 0.1; 0: take T as known)")
     p.add_argument("--imu-spec", default="consumer", metavar="FILE|GRADE",
                    help=f"IMU noise: a grade ({', '.join(real.GRADES)}; default consumer) or a JSON file with "
                         "the fields of leosop.fusion.real.ImuSpec")
@@ -82,6 +85,12 @@ def _outages(texts):
             raise InputError(f"--outage {text!r}: START_S must be >= 0 and DURATION_S > 0")
         out.append((start, duration))
     return tuple(out)
+
+
+def _offset_sigma(sigma_s):
+    if not (np.isfinite(sigma_s) and sigma_s >= 0):
+        raise InputError(f"--imu-time-offset-sigma-s {sigma_s!r}: must be a number >= 0")
+    return sigma_s or None
 
 
 def _columns(text):
@@ -118,7 +127,8 @@ def run(args):
     mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
     f, r, d = _triple(args.lever_arm_m, "--lever-arm-m")
     options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=_outages(args.outage),
-                               lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc)
+                               lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
+                               time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s))
     check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
     sol = rtklib_pos.read_pos(args.gnss)
     log = _read_imu(args, imu_io.mount_C_b_s(*mount))
@@ -150,7 +160,9 @@ def _document(fused, sol, log, outages, reference, runtime, args):
         "inside_3sigma_fraction": sum(o["n_inside_3sigma"] for o in scored) / n_ref if n_ref else None,
         "yaw_aligned_s": res.yaw_aligned_s,
         "imu": {"source": log.source, "format": log.metadata["format"], "rate_hz": log.rate_hz,
-                "n_samples": int(log.t_s.size), "time_offset_s": args.imu_time_offset_s},
+                "n_samples": int(log.t_s.size), "time_offset_s": args.imu_time_offset_s,
+                "time_offset_estimated_s": args.imu_time_offset_s - float(res.time_offset_s[-1]),
+                "time_offset_sigma_s": float(res.sigma[-1, -1]) if args.imu_time_offset_sigma_s else None},
         "gnss": {"source": sol.source, "n_epochs": int(sol.t_gpst_s.size), "n_fix": int((sol.q == 1).sum()),
                  "n_withheld": int(fused.withheld.sum())},
         "runtime_s": runtime,

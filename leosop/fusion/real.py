@@ -125,6 +125,10 @@ class FuseOptions:
     ``gnss_vel_sigma_floor_mps`` is added (in quadrature) to the stated GNSS
     velocity sigmas: RTKLIB's Doppler velocity sigmas (0.06 m/s on the drive)
     left a quarter of the velocity innovations beyond their 99 % quantile.
+    ``time_offset_sigma_s``: the IMU time offset is a filter state with this
+    prior sigma around the given offset (None: taken as known);
+    ``scale_sigma``: gyro and accelerometer scale-factor states with these
+    prior sigmas (None: none).
     """
 
     spec: ImuSpec
@@ -137,6 +141,8 @@ class FuseOptions:
     nhc_sigma_mps: float = 0.1
     nhc_rate_hz: float = 10.0
     gnss_vel_sigma_floor_mps: float = 0.1
+    time_offset_sigma_s: float | None = 0.1
+    scale_sigma: tuple | None = None
 
 
 def stationary_windows(t_s, accel_mps2, gyro_rad_per_s, *, window_s=1.0, max_accel_std_mps2=0.2,
@@ -298,14 +304,32 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
     n_aids = {}
     for a in aid_list:
         n_aids[a.name] = n_aids.get(a.name, 0) + 1
-    res = engine.run(state0, P0, t_imu, dt, dth, dvl, aid_list, options.spec.settings(),
-                     course_alignment=course, progress=progress)
+    settings = dataclasses.replace(options.spec.settings(), time_offset_sigma_s=options.time_offset_sigma_s,
+                                   scale_sigma=options.scale_sigma)
+    res = engine.run(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, course_alignment=course,
+                     progress=progress)
+    res = _on_gnss_clock(res)
     lat, lon, alt = _antenna(res, lever)
     used = np.flatnonzero(~withheld)
     last = np.searchsorted(t_g[used], res.t_s, side="right") - 1
     age = res.t_s - t_g[used][np.maximum(last, 0)]
     q = np.where((last >= 0) & (age <= _DR_AFTER_S), sol.q[used][np.maximum(last, 0)], Q_DR)
     return FuseRun(res, t0, lat, lon, alt, q.astype(int), withheld, t_g, n_aids)
+
+
+def _on_gnss_clock(res):
+    """The result with its times moved to the GNSS clock by the running offset estimate.
+
+    An epoch whose moved time is not half an INS update after all earlier
+    ones (the estimate jumped, early in a run) is dropped: the outputs keep
+    strictly increasing times at the 1 ms of an RTKLIB solution file.
+    """
+    t = res.t_s - res.time_offset_s
+    keep = np.r_[True, t[1:] > np.maximum.accumulate(t)[:-1] + 0.5 * np.median(np.diff(res.t_s))]
+    n = t.size
+    cut = {f.name: getattr(res, f.name)[keep] for f in dataclasses.fields(res)
+           if isinstance(getattr(res, f.name), np.ndarray) and getattr(res, f.name).shape[:1] == (n,)}
+    return dataclasses.replace(res, **{**cut, "t_s": t[keep]})
 
 
 def _antenna(res, lever):
