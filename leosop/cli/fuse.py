@@ -6,7 +6,8 @@ JSON (all present): ``n_epochs``, ``duration_s``, ``aids`` (used per kind),
 ``aids_rejected``, ``reference`` (``"Q=1"`` or ``"all withheld"``), ``mean_max_horiz_err_m``,
 ``worst_max_horiz_err_m``, ``inside_3sigma_fraction``, ``yaw_aligned_s``, ``imu``, ``gnss``.
 ``--out``: ``solution.pos`` (RTKLIB, the antenna at every INS update: half the
-IMU rate), ``solution.csv``, ``fuse.json``, ``track.png``, ``outage_errors.png``
+IMU rate), ``solution.csv``, ``solution.geojson`` (the track at 10 Hz at most,
+its dead-reckoning stretches, the withheld fixes), ``fuse.json``, ``track.png``, ``outage_errors.png``
 (with outages), ``biases.png``; all or none.
 """
 
@@ -17,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
 from ..fusion import real
 from ..gnss import rtklib_pos
@@ -26,6 +28,8 @@ from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command
 
 IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv")
+#: The GeoJSON track keeps at most this many epochs per second (the INS updates are at half the IMU rate).
+GEOJSON_RATE_HZ = 10.0
 
 
 def register(subparsers):
@@ -176,6 +180,21 @@ def _solution(fused):
                                   res.cov_vel_enu_m2ps2, "leosop fuse")
 
 
+def _geojson(fused, sol):
+    """Layers: the fused antenna track (at most GEOJSON_RATE_HZ), its dead-reckoning stretches, the withheld fixes."""
+    t = fused.result.t_s
+    keep = np.r_[True, np.diff(np.floor(t * GEOJSON_RATE_HZ)) > 0]
+    dr = np.where(fused.q[keep] == rtklib_pos.Q_DR, 1.0, np.nan)
+    lat, lon, alt = fused.lat_deg[keep], fused.lon_deg[keep], fused.alt_m[keep]
+    w = fused.withheld
+    return to_geojson([
+        Layer("fused", "track", lat, lon, alt, properties={"source": "leosop fuse"}),
+        Layer("dead reckoning (GNSS withheld)", "track", lat * dr, lon * dr, alt * dr),
+        Layer("withheld GNSS fixes (reference)", "points", sol.lat_deg[w], sol.lon_deg[w], sol.alt_m[w],
+              point_properties=[{"q": int(q)} for q in sol.q[w]]),
+    ])
+
+
 def _write(out_dir, fused, sol, outages, doc):
     from ..plots import fuse as plots
 
@@ -196,6 +215,7 @@ def _write(out_dir, fused, sol, outages, doc):
             "leosop fuse: the GNSS antenna from the INS at every INS update; Q 7 = dead reckoning",
             f"imu {doc['imu']['source']}, gnss {doc['gnss']['source']}"))
         write_csv(stage / "solution.csv", header, rows)
+        write_json(stage / "solution.geojson", _geojson(fused, sol), compact=True)
         write_json(stage / "fuse.json", doc)
         plots.track(stage / "track.png", fused, sol, title)
         if any(o["n_ref"] for o in outages):
