@@ -22,12 +22,12 @@ from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
 from ..fusion import real
 from ..gnss import rtklib_pos
-from ..ins import imu_io
+from ..ins import flight_mat, imu_io
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command
 
-IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv")
+IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv", "psins", "flight-mat")
 #: The GeoJSON track keeps at most this many epochs per second (the INS updates are at half the IMU rate).
 GEOJSON_RATE_HZ = 10.0
 
@@ -37,8 +37,10 @@ def register(subparsers):
                     help="fuse a real IMU log with GNSS fixes (RTKLIB .pos); score simulated outages")
     p.add_argument("--imu", required=True, metavar="FILE", help="IMU log")
     p.add_argument("--imu-format", choices=IMU_FORMATS,
-                   help="rtklib-csv (raw CSV with FILE.tag), rtklib-sf-csv (its converted _sf.csv), or csv with "
-                        "--imu-columns (default: rtklib-csv when FILE.tag exists, else rtklib-sf-csv)")
+                   help="rtklib-csv (raw CSV with FILE.tag), rtklib-sf-csv (its converted _sf.csv), csv with "
+                        "--imu-columns, psins (PSINS .imu text; no absolute time, so --gnss cannot meet it), or "
+                        "flight-mat (the Gebre-Egziabher flight_data.mat, whose GPS is the aid without --gnss) "
+                        "(default: rtklib-csv when FILE.tag exists, else rtklib-sf-csv)")
     p.add_argument("--imu-columns", metavar="MAP",
                    help="for --imu-format csv: NAME=COLUMN,... (0-based), names with units, e.g. "
                         "t_gpst_s=0,ax_g=1,ay_g=2,az_g=3,gx_deg_per_s=4,gy_deg_per_s=5,gz_deg_per_s=6")
@@ -109,23 +111,33 @@ def _columns(text):
     return cols
 
 
-def _read_imu(args, C_b_s):
-    path = Path(args.imu)
+def read_imu(path, fmt, columns, C_b_s):
+    """The IMU log of ``--imu`` in ``--imu-format`` (shared with ``leosop imu``); the flight's GPS too, else None."""
+    path = Path(path)
     check_input_file(path, "IMU log (--imu)")
-    fmt = args.imu_format or ("rtklib-csv" if Path(f"{path}.tag").exists() else "rtklib-sf-csv")
+    fmt = fmt or ("rtklib-csv" if Path(f"{path}.tag").exists() else "rtklib-sf-csv")
+    if fmt == "flight-mat":
+        log, gps, _ = flight_mat.read_flight_mat(path, C_b_s=C_b_s)
+        return log, gps
+    if fmt == "psins":
+        return imu_io.read_psins(path), None
+    return _read_text_imu(path, fmt, columns, C_b_s), None
+
+
+def _read_text_imu(path, fmt, columns, C_b_s):
     if fmt == "rtklib-csv":
         return imu_io.read_rtklib_csv(path, C_b_s=C_b_s)
     if fmt == "rtklib-sf-csv":
         return imu_io.read_rtklib_sf_csv(path, C_b_s=C_b_s)
-    return imu_io.read_csv_columns(path, _columns(args.imu_columns), C_b_s=C_b_s)
+    return imu_io.read_csv_columns(path, _columns(columns), C_b_s=C_b_s)
 
 
 def run(args):
     if args.leo or args.leo_sim or args.coupling or args.tle or args.constellation:
         raise InputError("--leo, --leo-sim, --tle, --constellation and --coupling are not yet supported "
                          "(issue 21 stage 2); fuse GNSS with --gnss")
-    if not args.gnss:
-        raise InputError("--gnss FILE.pos is required (the only aid source so far)")
+    if not args.gnss and args.imu_format != "flight-mat":
+        raise InputError("--gnss FILE.pos is required (the only aid source so far; flight-mat carries its GPS)")
     if args.imu_columns and args.imu_format != "csv":
         raise InputError("--imu-columns goes with --imu-format csv")
     mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
@@ -133,9 +145,11 @@ def run(args):
     options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=_outages(args.outage),
                                lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
                                time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s))
-    check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
-    sol = rtklib_pos.read_pos(args.gnss)
-    log = _read_imu(args, imu_io.mount_C_b_s(*mount))
+    if args.gnss:
+        check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
+    sol = rtklib_pos.read_pos(args.gnss) if args.gnss else None
+    log, gps = read_imu(args.imu, args.imu_format, args.imu_columns, imu_io.mount_C_b_s(*mount))
+    sol = sol or gps
     t_start = time.perf_counter()
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))

@@ -53,6 +53,8 @@ INSIDE_3SIGMA_CHI2 = float(scipy.stats.chi2.ppf(scipy.stats.chi2.cdf(9.0, 1), 2)
 #: Measurement noise of float and single GNSS epochs relative to their stated sigmas (RTKLIB's sigmas of
 #: unfixed solutions are optimistic; the factors of rtklibexplorer/GNSS_IMU's configurations).
 _Q_GAIN = {Q_FIX: 1.0, Q_FLOAT: 2.0, Q_SINGLE: 5.0}
+#: The yaw bank's motion starts where the GNSS speed stays over 1 m/s this long [s].
+_SUSTAINED_S = 3.0
 #: An output epoch is dead reckoning (Q = 7) when the last GNSS epoch used is older than this [s].
 _DR_AFTER_S = 1.0
 
@@ -134,7 +136,7 @@ class FuseOptions:
     this many filters with yaws spread over the circle, each with the yaw
     sigma of half their spacing, and keeps the one whose GNSS innovations
     fit best (least negative log-likelihood) at the decision time:
-    ``yaw_bank_s`` after the first GNSS speed over 1 m/s, or the first
+    ``yaw_bank_s`` after the GNSS speed first stays over 1 m/s for 3 s, or the first
     outage start after it when earlier (:func:`_yaw_bank`). 0: the yaw from
     the course over ground, as for a car.
     """
@@ -275,11 +277,15 @@ def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withhel
     """
     if sol.vel_enu_mps is None:
         return None
-    fast = np.flatnonzero(~withheld & (np.hypot(sol.vel_enu_mps[:, 0], sol.vel_enu_mps[:, 1])
-                                       >= engine.CourseAlignment().min_speed_mps) & (t_g > t_imu[0]))
-    if fast.size == 0:
+    fast = (np.hypot(sol.vel_enu_mps[:, 0], sol.vel_enu_mps[:, 1]) >= engine.CourseAlignment().min_speed_mps)
+    # Motion begins at the first GNSS epoch after which the speed stays up for _SUSTAINED_S (not a noisy fix).
+    slow_t = t_g[~fast]
+    nxt = np.searchsorted(slow_t, t_g, side="right")
+    next_slow = np.where(nxt < slow_t.size, slow_t[np.minimum(nxt, slow_t.size - 1)], np.inf)
+    start = np.flatnonzero(fast & ~withheld & (t_g > t_imu[0]) & (next_slow - t_g >= _SUSTAINED_S))
+    if start.size == 0:
         return None
-    t_move = t_g[fast[0]]
+    t_move = t_g[start[0]]
     t_decide = min([t_move + options.yaw_bank_s] + [s for s, _ in options.outages if s > t_move])
     n = int(np.searchsorted(t_imu, t_decide))
     if n < 4 or t_decide - t_move < 2.0:
