@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-__all__ = ["AllanResult", "SLOPE_TOL", "allan", "BIAS_INSTABILITY_FACTOR"]
+__all__ = ["BIAS_INSTABILITY_FACTOR", "SLOPE_TOL", "AllanResult", "allan"]
 
 #: Local log-log slopes within this of -1/2 count as white noise.
 SLOPE_TOL = 0.1
