@@ -32,9 +32,20 @@ def test_walk_outputs_and_errors_recomputed_from_solution_pos(tmp_path, capsys):
     assert main(["fuse", *_walk(), "--zupt", "--outage", "70,15", "--json", "--out", str(out)]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert CONTRACT <= set(doc) and all(OUTAGE_KEYS <= set(o) for o in doc["outages"])
-    assert {p.name for p in out.iterdir()} == {"solution.pos", "solution.csv", "fuse.json", "track.png",
-                                               "outage_errors.png", "biases.png"}
+    assert {p.name for p in out.iterdir()} == {"solution.pos", "solution.csv", "solution.geojson", "fuse.json",
+                                               "track.png", "outage_errors.png", "biases.png"}
     sol = read_pos(out / "solution.pos")
+    layers = json.loads((out / "solution.geojson").read_text())["features"]
+    track, dead, withheld = layers[0], layers[1], layers[2:]
+    # The GeoJSON track is the .pos track thinned to 10 Hz: its points are rows of solution.pos (to 1e-9 deg).
+    lon_lat = np.array(track["geometry"]["coordinates"])[:, :2]
+    assert 10 * doc["duration_s"] - 2 <= lon_lat.shape[0] <= 10 * doc["duration_s"] + 2
+    assert np.abs(lon_lat[0] - [sol.lon_deg[0], sol.lat_deg[0]]).max() < 1e-8
+    # Dead reckoning: the outage (15 s less the 1 s grace, at 10 Hz) and the IMU's last seconds after the
+    # GNSS file ends; one point per withheld GNSS epoch.
+    parts = dead["geometry"]["coordinates"]
+    assert dead["geometry"]["type"] == "MultiLineString" and 135 <= max(len(c) for c in parts) <= 145
+    assert len(withheld) == doc["gnss"]["n_withheld"]
     assert sol.t_gpst_s.size == doc["n_epochs"]
     gnss = read_pos(_walk()[3])
     t = gnss.t_gpst_s - gnss.t_gpst_s[0]

@@ -6,7 +6,8 @@ JSON (all present): ``n_epochs``, ``duration_s``, ``aids`` (used per kind),
 ``aids_rejected``, ``reference`` (``"Q=1"`` or ``"all withheld"``), ``mean_max_horiz_err_m``,
 ``worst_max_horiz_err_m``, ``inside_3sigma_fraction``, ``yaw_aligned_s``, ``imu``, ``gnss``.
 ``--out``: ``solution.pos`` (RTKLIB, the antenna at every INS update: half the
-IMU rate), ``solution.csv``, ``fuse.json``, ``track.png``, ``outage_errors.png``
+IMU rate), ``solution.csv``, ``solution.geojson`` (the track at 10 Hz at most,
+its dead-reckoning stretches, the withheld fixes), ``fuse.json``, ``track.png``, ``outage_errors.png``
 (with outages), ``biases.png``; all or none.
 """
 
@@ -17,15 +18,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
 from ..fusion import real
 from ..gnss import rtklib_pos
-from ..ins import imu_io
+from ..ins import flight_mat, imu_io
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command
 
-IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv")
+IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv", "psins", "flight-mat")
+#: The GeoJSON track keeps at most this many epochs per second (the INS updates are at half the IMU rate).
+GEOJSON_RATE_HZ = 10.0
 
 
 def register(subparsers):
@@ -33,8 +37,10 @@ def register(subparsers):
                     help="fuse a real IMU log with GNSS fixes (RTKLIB .pos); score simulated outages")
     p.add_argument("--imu", required=True, metavar="FILE", help="IMU log")
     p.add_argument("--imu-format", choices=IMU_FORMATS,
-                   help="rtklib-csv (raw CSV with FILE.tag), rtklib-sf-csv (its converted _sf.csv), or csv with "
-                        "--imu-columns (default: rtklib-csv when FILE.tag exists, else rtklib-sf-csv)")
+                   help="rtklib-csv (raw CSV with FILE.tag), rtklib-sf-csv (its converted _sf.csv), csv with "
+                        "--imu-columns, psins (PSINS .imu text; no absolute time, so --gnss cannot meet it), or "
+                        "flight-mat (the Gebre-Egziabher flight_data.mat, whose GPS is the aid without --gnss) "
+                        "(default: rtklib-csv when FILE.tag exists, else rtklib-sf-csv)")
     p.add_argument("--imu-columns", metavar="MAP",
                    help="for --imu-format csv: NAME=COLUMN,... (0-based), names with units, e.g. "
                         "t_gpst_s=0,ax_g=1,ay_g=2,az_g=3,gx_deg_per_s=4,gy_deg_per_s=5,gz_deg_per_s=6")
@@ -54,7 +60,10 @@ def register(subparsers):
                         "(default 0,0,0: the IMU axes are forward-right-down)")
     p.add_argument("--lever-arm-m", default="0,0,0", metavar="F,R,D",
                    help="GNSS antenna minus IMU in the body frame, forward-right-down [m]")
-    p.add_argument("--imu-time-offset-s", type=float, default=0.0, metavar="T", help="added to the IMU time tags")
+    p.add_argument("--imu-time-offset-s", type=float, default=0.0, metavar="T",
+                   help="added to the IMU time tags (the prior of the estimated offset)")
+    p.add_argument("--imu-time-offset-sigma-s", type=float, default=0.1, metavar="S",
+                   help="prior sigma of the IMU time offset, estimated by the filter (default 0.1; 0: take T as known)")
     p.add_argument("--imu-spec", default="consumer", metavar="FILE|GRADE",
                    help=f"IMU noise: a grade ({', '.join(real.GRADES)}; default consumer) or a JSON file with "
                         "the fields of leosop.fusion.real.ImuSpec")
@@ -84,6 +93,12 @@ def _outages(texts):
     return tuple(out)
 
 
+def _offset_sigma(sigma_s):
+    if not (np.isfinite(sigma_s) and sigma_s >= 0):
+        raise InputError(f"--imu-time-offset-sigma-s {sigma_s!r}: must be a number >= 0")
+    return sigma_s or None
+
+
 def _columns(text):
     if not text:
         raise InputError("--imu-format csv needs --imu-columns NAME=COLUMN,...")
@@ -96,32 +111,45 @@ def _columns(text):
     return cols
 
 
-def _read_imu(args, C_b_s):
-    path = Path(args.imu)
+def read_imu(path, fmt, columns, C_b_s):
+    """The IMU log of ``--imu`` in ``--imu-format`` (shared with ``leosop imu``); the flight's GPS too, else None."""
+    path = Path(path)
     check_input_file(path, "IMU log (--imu)")
-    fmt = args.imu_format or ("rtklib-csv" if Path(f"{path}.tag").exists() else "rtklib-sf-csv")
+    fmt = fmt or ("rtklib-csv" if Path(f"{path}.tag").exists() else "rtklib-sf-csv")
+    if fmt == "flight-mat":
+        log, gps, _ = flight_mat.read_flight_mat(path, C_b_s=C_b_s)
+        return log, gps
+    if fmt == "psins":
+        return imu_io.read_psins(path), None
+    return _read_text_imu(path, fmt, columns, C_b_s), None
+
+
+def _read_text_imu(path, fmt, columns, C_b_s):
     if fmt == "rtklib-csv":
         return imu_io.read_rtklib_csv(path, C_b_s=C_b_s)
     if fmt == "rtklib-sf-csv":
         return imu_io.read_rtklib_sf_csv(path, C_b_s=C_b_s)
-    return imu_io.read_csv_columns(path, _columns(args.imu_columns), C_b_s=C_b_s)
+    return imu_io.read_csv_columns(path, _columns(columns), C_b_s=C_b_s)
 
 
 def run(args):
     if args.leo or args.leo_sim or args.coupling or args.tle or args.constellation:
         raise InputError("--leo, --leo-sim, --tle, --constellation and --coupling are not yet supported "
                          "(issue 21 stage 2); fuse GNSS with --gnss")
-    if not args.gnss:
-        raise InputError("--gnss FILE.pos is required (the only aid source so far)")
+    if not args.gnss and args.imu_format != "flight-mat":
+        raise InputError("--gnss FILE.pos is required (the only aid source so far; flight-mat carries its GPS)")
     if args.imu_columns and args.imu_format != "csv":
         raise InputError("--imu-columns goes with --imu-format csv")
     mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
     f, r, d = _triple(args.lever_arm_m, "--lever-arm-m")
     options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=_outages(args.outage),
-                               lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc)
-    check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
-    sol = rtklib_pos.read_pos(args.gnss)
-    log = _read_imu(args, imu_io.mount_C_b_s(*mount))
+                               lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
+                               time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s))
+    if args.gnss:
+        check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
+    sol = rtklib_pos.read_pos(args.gnss) if args.gnss else None
+    log, gps = read_imu(args.imu, args.imu_format, args.imu_columns, imu_io.mount_C_b_s(*mount))
+    sol = sol or gps
     t_start = time.perf_counter()
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))
@@ -150,7 +178,9 @@ def _document(fused, sol, log, outages, reference, runtime, args):
         "inside_3sigma_fraction": sum(o["n_inside_3sigma"] for o in scored) / n_ref if n_ref else None,
         "yaw_aligned_s": res.yaw_aligned_s,
         "imu": {"source": log.source, "format": log.metadata["format"], "rate_hz": log.rate_hz,
-                "n_samples": int(log.t_s.size), "time_offset_s": args.imu_time_offset_s},
+                "n_samples": int(log.t_s.size), "time_offset_s": args.imu_time_offset_s,
+                "time_offset_estimated_s": args.imu_time_offset_s - float(res.time_offset_s[-1]),
+                "time_offset_sigma_s": float(res.sigma[-1, -1]) if args.imu_time_offset_sigma_s else None},
         "gnss": {"source": sol.source, "n_epochs": int(sol.t_gpst_s.size), "n_fix": int((sol.q == 1).sum()),
                  "n_withheld": int(fused.withheld.sum())},
         "runtime_s": runtime,
@@ -162,6 +192,21 @@ def _solution(fused):
     return rtklib_pos.PosSolution(fused.t0_gpst_s + res.t_s, fused.lat_deg, fused.lon_deg, fused.alt_m, fused.q,
                                   np.zeros(res.t_s.size, dtype=int), res.cov_pos_enu_m2, res.vel_enu_mps,
                                   res.cov_vel_enu_m2ps2, "leosop fuse")
+
+
+def _geojson(fused, sol):
+    """Layers: the fused antenna track (at most GEOJSON_RATE_HZ), its dead-reckoning stretches, the withheld fixes."""
+    t = fused.result.t_s
+    keep = np.r_[True, np.diff(np.floor(t * GEOJSON_RATE_HZ)) > 0]
+    dr = np.where(fused.q[keep] == rtklib_pos.Q_DR, 1.0, np.nan)
+    lat, lon, alt = fused.lat_deg[keep], fused.lon_deg[keep], fused.alt_m[keep]
+    w = fused.withheld
+    return to_geojson([
+        Layer("fused", "track", lat, lon, alt, properties={"source": "leosop fuse"}),
+        Layer("dead reckoning (GNSS withheld)", "track", lat * dr, lon * dr, alt * dr),
+        Layer("withheld GNSS fixes (reference)", "points", sol.lat_deg[w], sol.lon_deg[w], sol.alt_m[w],
+              point_properties=[{"q": int(q)} for q in sol.q[w]]),
+    ])
 
 
 def _write(out_dir, fused, sol, outages, doc):
@@ -184,6 +229,7 @@ def _write(out_dir, fused, sol, outages, doc):
             "leosop fuse: the GNSS antenna from the INS at every INS update; Q 7 = dead reckoning",
             f"imu {doc['imu']['source']}, gnss {doc['gnss']['source']}"))
         write_csv(stage / "solution.csv", header, rows)
+        write_json(stage / "solution.geojson", _geojson(fused, sol), compact=True)
         write_json(stage / "fuse.json", doc)
         plots.track(stage / "track.png", fused, sol, title)
         if any(o["n_ref"] for o in outages):

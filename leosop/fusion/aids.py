@@ -45,12 +45,15 @@ class InsView:
         Bias estimates removed from the increments.
     omega_ib_b_rad_per_s : ndarray, (3,)
         Bias-corrected body rate over the last INS update.
+    accel_enu_mps2 : ndarray, (3,)
+        Mean acceleration over the last INS update (the rate of the velocity).
     """
 
     state: object
     gyro_bias_rad_per_s: np.ndarray
     accel_bias_mps2: np.ndarray
     omega_ib_b_rad_per_s: np.ndarray
+    accel_enu_mps2: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
 
 
 def _enu_offset_m(state, lat_rad, lon_rad, alt_m):
@@ -81,11 +84,16 @@ class Aid:
         receiver's own check, and rejecting fixes after a GNSS outage, when
         the INS has drifted further than its covariance says, only lets it
         drift on (measured on the rtklibexplorer drive and walk).
+    external_clock : bool
+        Time-tagged by another clock than the IMU's (GNSS): the filter's IMU
+        time offset state applies to it through :meth:`rate`. Aids derived
+        from the IMU log itself (ZUPT, NHC) are not.
     """
 
     name = "aid"
     needs_heading = False
     gated = True
+    external_clock = False
 
     def __init__(self, t_s):
         self.t_s = float(t_s)
@@ -96,6 +104,10 @@ class Aid:
 
     def design(self, ins):
         """``H = dz / dx``, shape (m, 15)."""
+        raise NotImplementedError
+
+    def rate(self, ins):
+        """``dh/dt`` along the INS's motion, shape (m,): the design column of the IMU time offset."""
         raise NotImplementedError
 
     def matrices(self, ins):
@@ -119,6 +131,7 @@ class GnssPosition(Aid):
 
     name = "gnss_position"
     gated = False
+    external_clock = True
 
     def __init__(self, t_s, lat_rad, lon_rad, alt_m, cov_enu_m2, lever_arm_b_m):
         super().__init__(t_s)
@@ -130,6 +143,10 @@ class GnssPosition(Aid):
     def predict(self, ins):
         s = ins.state
         return _enu_offset_m(s, self.lat_rad, self.lon_rad, self.alt_m) + s.C_n_b @ self.lever_arm_b_m
+
+    def rate(self, ins):
+        s = ins.state
+        return s.vel_enu_mps + s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
 
     def design(self, ins):
         s = ins.state
@@ -152,6 +169,7 @@ class GnssVelocity(Aid):
 
     name = "gnss_velocity"
     gated = False
+    external_clock = True
 
     def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m):
         super().__init__(t_s)
@@ -162,6 +180,9 @@ class GnssVelocity(Aid):
     def predict(self, ins):
         s = ins.state
         return s.vel_enu_mps + s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
+
+    def rate(self, ins):
+        return np.asarray(ins.accel_enu_mps2, dtype=float)
 
     def design(self, ins):
         C = ins.state.C_n_b

@@ -13,6 +13,16 @@ An aid at ``t_s`` is applied after the INS update that ends at or just after
 ``t_s``; it sees the INS moved back to ``t_s`` along its velocity (a pair of
 100 Hz samples is 20 ms, 0.2 m at 10 m/s, far above an RTK fix's 1 cm).
 
+Optional states after the 15 INS errors (:class:`EngineSettings`): the
+gyro and accelerometer scale-factor errors (3 + 3, ``s`` in ``measured =
+(1 + s) true + bias``; they enter the error model as the bias columns times
+the body rate or specific force) and the IMU time offset ``td`` (IMU clock
+minus the aids' clock). Aids on the aids' clock (``aid.external_clock``,
+GNSS) are applied at ``t_s + td_hat`` on the IMU clock, and their design
+matrix gets the column ``dh/dt`` (:meth:`leosop.fusion.aids.Aid.rate`): an
+offset ``td_hat - td`` moves ``h`` by ``dh/dt (td_hat - td)``. Aids derived
+from the IMU itself (ZUPT, NHC) are on its clock and see no offset.
+
 Heading: a MEMS IMU cannot find North at rest, so a run may start with the
 yaw unknown (:class:`CourseAlignment`): the first GNSS velocity faster than
 ``min_speed_mps`` sets the yaw to the course over ground (the body's Forward
@@ -34,7 +44,7 @@ from . import kalman
 from .aids import InsView
 from .common import GATE_PROBABILITY, N_INS, pos_jacobian
 
-__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "run"]
+__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,7 +57,11 @@ class EngineSettings:
     of one covariance propagation. Innovations of gated aids (``aid.gated``)
     beyond the ``gate_probability`` chi-square quantile are rejected, unless
     ``reopen_after`` aids of that kind in a row were (the INS, not the aids,
-    is then wrong).
+    is then wrong). ``scale_sigma``: initial sigmas of the gyro and
+    accelerometer scale-factor errors (dimensionless; None: no such states);
+    ``time_offset_sigma_s`` the initial sigma of the IMU time offset (None: no
+    such state, the offset is taken as known) and
+    ``time_offset_rw_s_per_rt_s`` its random walk.
     """
 
     gyro_arw_rad_per_rt_s: float
@@ -57,6 +71,9 @@ class EngineSettings:
     step_s: float = 0.1
     gate_probability: float = GATE_PROBABILITY
     reopen_after: int = 8
+    scale_sigma: tuple | None = None
+    time_offset_sigma_s: float | None = None
+    time_offset_rw_s_per_rt_s: float = 1e-4
 
     def noise_psd(self):
         """PSDs of ``[w_gyro_b, w_accel_b]`` (6,), the ``Qc`` of :func:`leosop.ins.error_model.discretize`."""
@@ -83,17 +100,26 @@ class EngineResult:
     vel_enu_mps : ndarray, (n, 3)
     q_n_b : ndarray, (n, 4)
         Attitude (scalar-first quaternion of ``C_n_b``).
-    sigma : ndarray, (n, 15)
-        Square roots of the diagonal of ``P`` (position errors in rad, rad, m).
+    sigma : ndarray, (n, n_x)
+        Square roots of the diagonal of ``P``: the 15 INS errors (position in
+        rad, rad, m), then the optional states of :class:`EngineSettings` in
+        their order (scale factors, time offset).
     cov_pos_enu_m2, cov_vel_enu_m2ps2 : ndarray, (n, 3, 3)
         Position and velocity error covariances in ENU.
     gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
+    gyro_scale, accel_scale : ndarray, (n, 3)
+        Scale-factor estimates (zero without those states).
+    time_offset_s : ndarray, (n,)
+        IMU time offset estimate (the initial value without that state).
     omega_ib_b_rad_per_s : ndarray, (n, 3)
         Bias-corrected body rate of each update.
     aids : dict of str to [int, int]
         Per kind of aid: used, rejected by the gate.
     yaw_aligned_s : float or None
         When the yaw was set from the course (None: never, or not asked).
+    nll : dict of str to float
+        Per kind of aid: the negative log-likelihood of its used innovations,
+        ``sum 0.5 (z^T S^-1 z + ln det(2 pi S))`` (compares runs on the same aids).
     """
 
     t_s: np.ndarray
@@ -107,29 +133,70 @@ class EngineResult:
     cov_vel_enu_m2ps2: np.ndarray
     gyro_bias_rad_per_s: np.ndarray
     accel_bias_mps2: np.ndarray
+    gyro_scale: np.ndarray
+    accel_scale: np.ndarray
+    time_offset_s: np.ndarray
     omega_ib_b_rad_per_s: np.ndarray
     aids: dict
     yaw_aligned_s: float | None
+    nll: dict
+
+
+def state_slices(settings):
+    """Slices of the optional states in the filter state: ``(SG, SA, TD)``, None for those not estimated."""
+    n = N_INS
+    SG = SA = TD = None
+    if settings.scale_sigma is not None:
+        SG, SA, n = slice(n, n + 3), slice(n + 3, n + 6), n + 6
+    if settings.time_offset_sigma_s is not None:
+        TD = slice(n, n + 1)
+    return SG, SA, TD
+
+
+def initial_covariance(P0_ins, settings):
+    """The full ``P`` from the 15 INS errors' (15, 15) and the sigmas of the optional states of ``settings``."""
+    SG, SA, TD = state_slices(settings)
+    n = max([N_INS] + [x.stop for x in (SG, SA, TD) if x is not None])
+    P = np.zeros((n, n))
+    P[:N_INS, :N_INS] = P0_ins
+    if SG is not None:
+        P[SG, SG] = np.eye(3) * settings.scale_sigma[0] ** 2
+        P[SA, SA] = np.eye(3) * settings.scale_sigma[1] ** 2
+    if TD is not None:
+        P[TD, TD] = settings.time_offset_sigma_s**2
+    return P
 
 
 class _Filter:
-    """The running filter: INS state, bias estimates, covariance and the pending propagation."""
+    """The running filter: INS state, sensor error estimates, covariance and the pending propagation."""
 
-    def __init__(self, state0, P0, settings):
+    def __init__(self, state0, P0, settings, time_offset_s):
         self.state = state0
-        self.P = np.array(P0, dtype=float)
         self.settings = settings
+        self.SG, self.SA, self.TD = state_slices(settings)
+        self.P = initial_covariance(P0, settings) if np.shape(P0) == (N_INS, N_INS) else np.array(P0, dtype=float)
         self.Qc = settings.noise_psd()
         self.bias_q = np.r_[np.full(3, settings.gyro_bias_rw_rad_per_s_per_rt_s**2),
                             np.full(3, settings.accel_bias_rw_mps2_per_rt_s**2)]
         self.bg = np.zeros(3)
         self.ba = np.zeros(3)
+        self.sg = np.zeros(3)
+        self.sa = np.zeros(3)
+        self.td = float(time_offset_s)
         self.omega = np.zeros(3)
+        self.accel_enu = np.zeros(3)
         self.pending_s = 0.0
         self.pending_dv_b = np.zeros(3)
+        self.pending_dth_b = np.zeros(3)
         self.counts = {}
+        self.nll = {}
         self.rejected_run = {}
         self.gate = {}
+
+    def correct_increments(self, dth, dv, dt2):
+        """Raw increments (2, 3) less the bias and scale-factor estimates."""
+        th = dth * (1.0 - self.sg) - self.bg * dt2[:, None]
+        return th, dv * (1.0 - self.sa) - self.ba * dt2[:, None]
 
     def propagate(self):
         """Move ``P`` over the INS updates made since the last propagation."""
@@ -138,28 +205,57 @@ class _Filter:
             return
         s = self.state
         C = s.C_n_b
-        F, G = error_model.model15(C, C @ (self.pending_dv_b / dt), s.vel_enu_mps, s.lat_rad, s.alt_m)
+        f_b = self.pending_dv_b / dt
+        F15, G15 = error_model.model15(C, C @ f_b, s.vel_enu_mps, s.lat_rad, s.alt_m)
+        n = self.P.shape[0]
+        F, G = np.zeros((n, n)), np.zeros((n, 6))
+        F[:N_INS, :N_INS], G[:N_INS] = F15, G15
+        if self.SG is not None:
+            F[:N_INS, self.SG] = F15[:, EPS] * (self.pending_dth_b / dt)
+            F[:N_INS, self.SA] = F15[:, NABLA] * f_b
         Phi, Qd = error_model.discretize(F, G, self.Qc, dt, method="series")
         Qd[EPS, EPS] += np.diag(self.bias_q[:3] * dt)
         Qd[NABLA, NABLA] += np.diag(self.bias_q[3:] * dt)
+        if self.TD is not None:
+            Qd[self.TD, self.TD] += self.settings.time_offset_rw_s_per_rt_s**2 * dt
         P = Phi @ self.P @ Phi.T + Qd
         self.P = 0.5 * (P + P.T)
         self.pending_s = 0.0
         self.pending_dv_b = np.zeros(3)
+        self.pending_dth_b = np.zeros(3)
+
+    def due_s(self, aid):
+        """When ``aid`` is due on the IMU clock."""
+        return aid.t_s + self.td if aid.external_clock else aid.t_s
 
     def view(self, t_aid_s, t_now_s):
-        """The INS moved back along its velocity from ``t_now_s`` to the aid's time."""
+        """The INS moved back along its velocity and acceleration from ``t_now_s`` to the aid's time."""
         s, dt = self.state, t_aid_s - t_now_s
         R_M, R_N = earth.radii_m(s.lat_rad)
         v = s.vel_enu_mps
         moved = strapdown.NavState(s.lat_rad + v[1] * dt / (R_M + s.alt_m),
                                    s.lon_rad + v[0] * dt / ((R_N + s.alt_m) * math.cos(s.lat_rad)),
-                                   s.alt_m + v[2] * dt, v, s.q_n_b)
-        return InsView(moved, self.bg, self.ba, self.omega)
+                                   s.alt_m + v[2] * dt, v + self.accel_enu * dt, s.q_n_b)
+        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu)
+
+    def innovation(self, aid, ins):
+        """``(z, H, R)`` of ``aid`` over the full state (the time-offset column for aids on the aids' clock)."""
+        z, H15, R = aid.matrices(ins)
+        H = np.zeros((z.size, self.P.shape[0]))
+        H[:, :N_INS] = H15
+        if self.TD is not None and aid.external_clock:
+            H[:, self.TD.start] = aid.rate(ins)
+        return z, H, R
 
     def apply(self, aid, ins):
-        """Gate and apply one aid; feed the estimated errors back into the INS."""
-        z, H, R = aid.matrices(ins)
+        """Gate and apply one aid; feed the estimated errors back into the INS.
+
+        Returns
+        -------
+        float or None
+            The aid's negative log-likelihood, None when it was rejected.
+        """
+        z, H, R = self.innovation(aid, ins)
         count = self.counts.setdefault(aid.name, [0, 0])
         S = H @ self.P @ H.T + R
         nis = float(z @ np.linalg.solve(S, z))
@@ -169,13 +265,21 @@ class _Filter:
         if aid.gated and nis > self.gate[z.size] and run < self.settings.reopen_after:
             count[1] += 1
             self.rejected_run[aid.name] = run + 1
-            return
+            return None
         self.rejected_run[aid.name] = 0
         count[0] += 1
+        nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
+        self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
         dx, self.P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z, H, R)
         self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
         self.bg = self.bg + dx[EPS]
         self.ba = self.ba + dx[NABLA]
+        if self.SG is not None:
+            self.sg = self.sg + dx[self.SG]
+            self.sa = self.sa + dx[self.SA]
+        if self.TD is not None:
+            self.td -= float(dx[self.TD.start])  # dx is td_hat minus the true offset
+        return nll
 
     def align_yaw(self, vel_enu_mps, sigma_rad):
         """Set the yaw to the course of ``vel_enu_mps``, keeping pitch and roll; reset the yaw's covariance."""
@@ -189,19 +293,32 @@ class _Filter:
         self.P[:, k] = 0.0
         self.P[k, k] = sigma_rad**2
 
+    def step(self, dth, dv, dt2):
+        """One INS update over a pair of raw increments (2, 3)."""
+        th, dvc = self.correct_increments(dth, dv, dt2)
+        T = float(dt2[0] + dt2[1])
+        v0 = self.state.vel_enu_mps
+        self.state = strapdown.update(self.state, th, dvc, 0.5 * T)
+        self.omega = (th[0] + th[1]) / T
+        self.accel_enu = (self.state.vel_enu_mps - v0) / T
+        self.pending_s += T
+        self.pending_dv_b += dvc[0] + dvc[1]
+        self.pending_dth_b += th[0] + th[1]
+
 
 def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
-        progress=None):
+        time_offset_s=0.0, progress=None):
     """Run the filter over an IMU log with time-ordered aids.
 
     Parameters
     ----------
     state0 : leosop.ins.strapdown.NavState
         The INS at ``t_s[0] - dt_s[0]`` (the start of the first increment).
-    P0 : ndarray, (15, 15)
-        Initial covariance of the INS errors.
+    P0 : ndarray, (15, 15) or (n_x, n_x)
+        Initial covariance of the INS errors (the optional states then get
+        the sigmas of ``settings``), or of the full state.
     t_s, dt_s : ndarray, (n,)
-        End of each increment's interval and its length [s].
+        End of each increment's interval and its length [s], IMU clock.
     dtheta_b_rad, dvel_b_mps : ndarray, (n, 3)
         Increments in the body frame (Right-Forward-Up).
     aids : sequence of leosop.fusion.aids.Aid
@@ -210,6 +327,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     course_alignment : CourseAlignment, optional
         The yaw of ``state0`` is unknown: set it from the first fast GNSS
         velocity aid. None: the yaw is known.
+    time_offset_s : float
+        IMU clock minus the aids' clock (the initial estimate when it is a state).
     progress : callable, optional
         Wraps the iterator over INS updates (a progress bar).
 
@@ -220,33 +339,36 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     t_s, dt_s = np.asarray(t_s, dtype=float), np.asarray(dt_s, dtype=float)
     m = t_s.size // 2
     t_out = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
+    f = _Filter(state0, P0, settings, time_offset_s)
+    n_x = f.P.shape[0]
     n = m + 1
-    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, N_INS)),
+    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, n_x)),
            "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
-           "w": np.empty((n, 3))}
-    f = _Filter(state0, P0, settings)
+           "sg": np.empty((n, 3)), "sa": np.empty((n, 3)), "td": np.empty(n), "w": np.empty((n, 3))}
     aligned_s = None
     heading_known = course_alignment is None
-    aids = [a for a in aids if t_out[0] <= a.t_s <= t_out[-1]]
+    aids = list(aids)
     if any(b.t_s < a.t_s for a, b in zip(aids, aids[1:])):
         raise ValueError("aids must be sorted by time")
-    j = 0
+    queues = [[a for a in aids if a.external_clock], [a for a in aids if not a.external_clock]]
+    heads = [0, 0]
+    for q, i in zip(queues, (0, 1)):
+        while heads[i] < len(q) and f.due_s(q[heads[i]]) < t_out[0]:
+            heads[i] += 1
     _record(out, 0, f)
     ks = range(m) if progress is None else progress(range(m))
     for k in ks:
         i = 2 * k
-        dt2 = dt_s[i:i + 2]
-        th = dtheta_b_rad[i:i + 2] - f.bg * dt2[:, None]
-        dv = dvel_b_mps[i:i + 2] - f.ba * dt2[:, None]
-        T = float(dt2[0] + dt2[1])
-        f.state = strapdown.update(f.state, th, dv, 0.5 * T)
-        f.omega = (th[0] + th[1]) / T
-        f.pending_s += T
-        f.pending_dv_b += dv[0] + dv[1]
+        f.step(dtheta_b_rad[i:i + 2], dvel_b_mps[i:i + 2], dt_s[i:i + 2])
         t_now = t_out[k + 1]
-        while j < len(aids) and aids[j].t_s <= t_now:
-            aid = aids[j]
-            j += 1
+        while True:
+            due = [(f.due_s(q[h]), c) for c, (q, h) in enumerate(zip(queues, heads)) if h < len(q)]
+            due = [d for d in due if d[0] <= t_now]
+            if not due:
+                break
+            t_aid, c = min(due)
+            aid = queues[c][heads[c]]
+            heads[c] += 1
             if not heading_known:
                 v = getattr(aid, "vel_enu_mps", None)
                 if v is None or math.hypot(v[0], v[1]) < course_alignment.min_speed_mps:
@@ -256,14 +378,15 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
                     f.align_yaw(v, course_alignment.sigma_rad)
                     heading_known, aligned_s = True, aid.t_s
             f.propagate()
-            f.apply(aid, f.view(aid.t_s, t_now))
+            f.apply(aid, f.view(t_aid, t_now))
         if f.pending_s >= settings.step_s:
             f.propagate()
         _record(out, k + 1, f)
     f.propagate()
     pos, cp = out["pos"], out["cp"]
     return EngineResult(t_out, pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp, out["cv"],
-                        out["bg"], out["ba"], out["w"], {k: tuple(v) for k, v in f.counts.items()}, aligned_s)
+                        out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
+                        {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll))
 
 
 def _record(out, k, f):
@@ -277,4 +400,7 @@ def _record(out, k, f):
     out["cv"][k] = P[DV, DV]
     out["bg"][k] = f.bg
     out["ba"][k] = f.ba
+    out["sg"][k] = f.sg
+    out["sa"][k] = f.sa
+    out["td"][k] = f.td
     out["w"][k] = f.omega

@@ -30,7 +30,7 @@ from ..errors import InputError
 from ..gnss.rtklib_pos import Q_DR, Q_FIX, Q_FLOAT, Q_SINGLE
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..ins.strapdown import NavState
-from ..rotations import euler_to_dcm, quat_to_dcm
+from ..rotations import dcm_to_euler, euler_to_dcm, quat_to_dcm
 from . import aids as aid_models
 from . import engine
 from .common import N_INS, pos_jacobian
@@ -53,6 +53,8 @@ INSIDE_3SIGMA_CHI2 = float(scipy.stats.chi2.ppf(scipy.stats.chi2.cdf(9.0, 1), 2)
 #: Measurement noise of float and single GNSS epochs relative to their stated sigmas (RTKLIB's sigmas of
 #: unfixed solutions are optimistic; the factors of rtklibexplorer/GNSS_IMU's configurations).
 _Q_GAIN = {Q_FIX: 1.0, Q_FLOAT: 2.0, Q_SINGLE: 5.0}
+#: The yaw bank's motion starts where the GNSS speed stays over 1 m/s this long [s].
+_SUSTAINED_S = 3.0
 #: An output epoch is dead reckoning (Q = 7) when the last GNSS epoch used is older than this [s].
 _DR_AFTER_S = 1.0
 
@@ -125,6 +127,18 @@ class FuseOptions:
     ``gnss_vel_sigma_floor_mps`` is added (in quadrature) to the stated GNSS
     velocity sigmas: RTKLIB's Doppler velocity sigmas (0.06 m/s on the drive)
     left a quarter of the velocity innovations beyond their 99 % quantile.
+    ``time_offset_sigma_s``: the IMU time offset is a filter state with this
+    prior sigma around the given offset (None: taken as known);
+    ``scale_sigma``: gyro and accelerometer scale-factor states with these
+    prior sigmas (None: none).
+    ``yaw_hypotheses``, ``yaw_bank_s``: a start at rest without NHC (a
+    hand-held IMU, whose Forward axis need not point along the motion) runs
+    this many filters with yaws spread over the circle, each with the yaw
+    sigma of half their spacing, and keeps the one whose GNSS innovations
+    fit best (least negative log-likelihood) at the decision time:
+    ``yaw_bank_s`` after the GNSS speed first stays over 1 m/s for 3 s, or the first
+    outage start after it when earlier (:func:`_yaw_bank`). 0: the yaw from
+    the course over ground, as for a car.
     """
 
     spec: ImuSpec
@@ -137,6 +151,10 @@ class FuseOptions:
     nhc_sigma_mps: float = 0.1
     nhc_rate_hz: float = 10.0
     gnss_vel_sigma_floor_mps: float = 0.1
+    time_offset_sigma_s: float | None = 0.1
+    scale_sigma: tuple | None = None
+    yaw_hypotheses: int = 12
+    yaw_bank_s: float = 20.0
 
 
 def stationary_windows(t_s, accel_mps2, gyro_rad_per_s, *, window_s=1.0, max_accel_std_mps2=0.2,
@@ -247,6 +265,46 @@ def _initial(sol, k, t_g, t_start, f_b_mps2, spec):
     return state, P, None if moving else engine.CourseAlignment()
 
 
+def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withheld, options):
+    """The best of ``options.yaw_hypotheses`` starting yaws, and its yaw sigma; None when undecidable.
+
+    Each hypothesis runs the engine from the start to the decision time on
+    the aids offered; the one with the least negative log-likelihood of its
+    GNSS innovations wins. It is the member a bank of filters keeps at the
+    decision time, so the outages after it are scored on a causal filter;
+    the output before it is that member's (a fixed-lag choice over the
+    first seconds).
+    """
+    if sol.vel_enu_mps is None:
+        return None
+    fast = (np.hypot(sol.vel_enu_mps[:, 0], sol.vel_enu_mps[:, 1]) >= engine.CourseAlignment().min_speed_mps)
+    # Motion begins at the first GNSS epoch after which the speed stays up for _SUSTAINED_S (not a noisy fix).
+    slow_t = t_g[~fast]
+    nxt = np.searchsorted(slow_t, t_g, side="right")
+    next_slow = np.where(nxt < slow_t.size, slow_t[np.minimum(nxt, slow_t.size - 1)], np.inf)
+    start = np.flatnonzero(fast & ~withheld & (t_g > t_imu[0]) & (next_slow - t_g >= _SUSTAINED_S))
+    if start.size == 0:
+        return None
+    t_move = t_g[start[0]]
+    t_decide = min([t_move + options.yaw_bank_s] + [s for s, _ in options.outages if s > t_move])
+    n = int(np.searchsorted(t_imu, t_decide))
+    if n < 4 or t_decide - t_move < 2.0:
+        return None
+    pitch, roll, _ = dcm_to_euler(state0.C_n_b)
+    sigma = math.pi / options.yaw_hypotheses
+    P = P0.copy()
+    P[PHI.start + 2, PHI.start + 2] = sigma**2
+    best = None
+    for yaw in 2.0 * math.pi * np.arange(options.yaw_hypotheses) / options.yaw_hypotheses:
+        state = NavState.from_dcm(state0.lat_rad, state0.lon_rad, state0.alt_m, state0.vel_enu_mps,
+                                  euler_to_dcm(pitch, roll, yaw))
+        res = engine.run(state, P, t_imu[:n], dt[:n], dth[:n], dvl[:n], aids, settings)
+        nll = res.nll.get("gnss_position", 0.0) + res.nll.get("gnss_velocity", 0.0)
+        if best is None or nll < best[0]:
+            best = (nll, state)
+    return best[1], P
+
+
 def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
     """Fuse an IMU log with an RTKLIB solution.
 
@@ -298,14 +356,36 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
     n_aids = {}
     for a in aid_list:
         n_aids[a.name] = n_aids.get(a.name, 0) + 1
-    res = engine.run(state0, P0, t_imu, dt, dth, dvl, aid_list, options.spec.settings(),
-                     course_alignment=course, progress=progress)
+    settings = dataclasses.replace(options.spec.settings(), time_offset_sigma_s=options.time_offset_sigma_s,
+                                   scale_sigma=options.scale_sigma)
+    if course is not None and options.yaw_hypotheses and not options.nhc:
+        chosen = _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, t_g, sol, withheld, options)
+        if chosen is not None:
+            (state0, P0), course = chosen, None
+    res = engine.run(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, course_alignment=course,
+                     progress=progress)
+    res = _on_gnss_clock(res)
     lat, lon, alt = _antenna(res, lever)
     used = np.flatnonzero(~withheld)
     last = np.searchsorted(t_g[used], res.t_s, side="right") - 1
     age = res.t_s - t_g[used][np.maximum(last, 0)]
     q = np.where((last >= 0) & (age <= _DR_AFTER_S), sol.q[used][np.maximum(last, 0)], Q_DR)
     return FuseRun(res, t0, lat, lon, alt, q.astype(int), withheld, t_g, n_aids)
+
+
+def _on_gnss_clock(res):
+    """The result with its times moved to the GNSS clock by the running offset estimate.
+
+    An epoch whose moved time is not half an INS update after all earlier
+    ones (the estimate jumped, early in a run) is dropped: the outputs keep
+    strictly increasing times at the 1 ms of an RTKLIB solution file.
+    """
+    t = res.t_s - res.time_offset_s
+    keep = np.r_[True, t[1:] > np.maximum.accumulate(t)[:-1] + 0.5 * np.median(np.diff(res.t_s))]
+    n = t.size
+    cut = {f.name: getattr(res, f.name)[keep] for f in dataclasses.fields(res)
+           if isinstance(getattr(res, f.name), np.ndarray) and getattr(res, f.name).shape[:1] == (n,)}
+    return dataclasses.replace(res, **{**cut, "t_s": t[keep]})
 
 
 def _antenna(res, lever):

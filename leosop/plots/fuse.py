@@ -54,9 +54,9 @@ def outage_errors(path, outages, title):
 
 
 def biases(path, res):
-    """Estimated gyro [deg/s] and accelerometer [m/s^2] biases (body Right, Forward, Up) with 1 sigma."""
+    """Estimated gyro [deg/s] and accelerometer [m/s^2] biases (body Right, Forward, Up) with 1 sigma; IMU time offset."""
     plt = pyplot()
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, height_ratios=(3, 3, 2))
     for ax, est, sig, scale, unit in ((axes[0], res.gyro_bias_rad_per_s, res.sigma[:, 9:12], np.degrees(1.0), "deg/s"),
                                       (axes[1], res.accel_bias_mps2, res.sigma[:, 12:15], 1.0, "m/s^2")):
         for k, name in enumerate("RFU"):
@@ -66,6 +66,9 @@ def biases(path, res):
         ax.set_ylabel(f"bias [{unit}]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    axes[1].set_xlabel("time since the first GNSS epoch [s]")
+    axes[2].plot(res.t_s, -1e3 * res.time_offset_s, "k-", lw=1)
+    axes[2].set_ylabel("IMU time offset\nestimate change [ms]")
+    axes[2].grid(alpha=0.3)
+    axes[2].set_xlabel("time since the first GNSS epoch [s]")
     axes[0].set_title("estimated IMU biases (shaded: 1 sigma)")
     save_png(fig, path)
