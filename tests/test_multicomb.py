@@ -45,7 +45,10 @@ def test_single_comb_equals_estimate_block():
     assert abs(got.doppler_hz[0] - ref["doppler_hz"]) < tol
     assert abs(got.doppler_rate_hz_per_s[0] - ref["doppler_rate_hz_per_s"]) < 1.0
     assert got.cn0_dbhz[0] == pytest.approx(ref["cn0_dbhz"], abs=0.2)
-    assert got.sigma_hz[0] == pytest.approx(ref["sigma_hz"], rel=0.03)
+    # find_combs fits every comb jointly, so its sigma is the Cramer-Rao bound;
+    # the single-comb estimator's sigma may grow with unmodelled tones in its
+    # residual, so the like-for-like number is its bound.
+    assert got.sigma_hz[0] == pytest.approx(ref["crlb_sigma_hz"], rel=0.03)
 
 
 def test_frequency_domain_decimation_is_integrate_and_dump():

@@ -36,7 +36,7 @@ def _noise_free_mixed_fixes():
     times = XIAN_BAOJI.start_utc + (truth.t_s * 1e9).astype("timedelta64[ns]")
     C_e_n = frames.C_e_n(truth.lat_rad, truth.lon_rad)
     vel_rx = np.einsum("kij,kj->ki", C_e_n, truth.vel_enu_mps)
-    constellation, family_sat = simulate._constellation(("starlink", "orbcomm", "oneweb"), None)
+    constellation, family_sat = simulate._constellation(("starlink", "orbcomm", "oneweb"), None, times[[0, -1]])
     vis = compute_visibility(constellation, times, truth.pos_ecef_m, 35.0, vel_rx_ecef_mps=vel_rx,
                              show_progress=False)
     fam = family_sat[vis.sat_index]

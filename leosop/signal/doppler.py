@@ -86,7 +86,9 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     -------
     dict with ``doppler_hz``, ``doppler_rate_hz_per_s`` (``fast`` only, else
     NaN), ``cn0_dbhz``, ``sigma_hz``, ``detected`` and ``status``
-    (:mod:`leosop.signal.quality`: ``"ok"`` only when every check passes).
+    (:mod:`leosop.signal.quality`: ``"ok"`` only when every check passes;
+    ``fast`` also gives ``crlb_sigma_hz``, the Cramér-Rao bound that
+    ``sigma_hz`` is at least).
     Everything but ``detected`` and ``status`` is NaN when no pilot is found.
     ``ml`` and ``fmlef`` are checked against the joint comb fit of the same
     block, started from their estimate: it gives their C/N0 (central tone),
@@ -123,7 +125,8 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     if method == "fast":
         fit = fine_fast(iq, sample_rate_hz, comb, coarse, **fit_kw)
         out.update(doppler_hz=fit.doppler_hz, doppler_rate_hz_per_s=fit.doppler_rate_hz_per_s,
-                   cn0_dbhz=fit.cn0_dbhz, sigma_hz=fit.sigma_hz, status=fit_status(fit, max_rate_hz_per_s))
+                   cn0_dbhz=fit.cn0_dbhz, sigma_hz=fit.sigma_hz, crlb_sigma_hz=fit.crlb_sigma_hz,
+                   status=fit_status(fit, max_rate_hz_per_s))
         return out
     # The paper's estimators start from the strongest bin of the central tone,
     # good to half a bin when the tone is steady.
