@@ -10,7 +10,9 @@ sample (:mod:`leosop.signal.channel`, DESIGN 4.2), with
   silent below the horizon), or ``--cn0-model constant`` (one value for all,
   or one per ``--sat``);
 - a clock offset drawn uniformly in [0, --sat-offset-max-hz] ([Shen 2024]
-  Table 1: 0-5 Hz) plus the receiver's offset;
+  Table 1: 0-5 Hz) plus the receiver's offset ``--rx-offset-hz`` and its
+  drift ``--rx-drift-hz-per-s`` (an LNB's LO, common to all satellites:
+  truth in ``leosop:rx_offset_hz`` and ``leosop:rx_drift_hz_per_s``);
 - optionally an orbit error (truth differs from the TLE the receiver will
   use): along-track, radial and cross-track errors drawn per satellite.
 
@@ -80,7 +82,11 @@ def register(subparsers):
     p.add_argument("--sat-offset-max-hz", type=float, default=5.0,
                    help="per-satellite clock offsets drawn in [0, this] (default 5, [Shen 2024] Table 1)")
     p.add_argument("--rx-offset-hz", type=float, default=5.0,
-                   help="receiver frequency offset (default 5, [Shen 2024] Table 1)")
+                   help="receiver frequency offset at the first sample, common to all satellites (an LNB's LO "
+                        "error enters here; default 5, [Shen 2024] Table 1)")
+    p.add_argument("--rx-drift-hz-per-s", type=float, default=0.0,
+                   help="receiver LO frequency ramp common to all satellites [Hz/s]: the offset at t is "
+                        "--rx-offset-hz plus this times t (default 0)")
     for axis in ("along", "radial", "cross"):
         p.add_argument(f"--orbit-error-{axis}-m", type=float, default=0.0, metavar="SIGMA",
                        help=f"standard deviation of the {axis}-track orbit error drawn per satellite [m] (default 0)"
@@ -185,6 +191,10 @@ def run(args):
     if abs(args.rx_offset_hz) > fs / 2:
         raise InputError(f"--rx-offset-hz {args.rx_offset_hz:g}: must be within +-{fs / 2:g} Hz (half the sample "
                          "rate)")
+    if not np.isfinite(args.rx_drift_hz_per_s) or abs(args.rx_offset_hz + args.rx_drift_hz_per_s * duration) > fs / 2:
+        raise InputError(f"--rx-drift-hz-per-s {args.rx_drift_hz_per_s:g}: the receiver offset at the end, "
+                         f"{args.rx_offset_hz + args.rx_drift_hz_per_s * duration:g} Hz, must be within +-{fs / 2:g} "
+                         "Hz (half the sample rate)")
     sigma_orbit_m = {}
     for axis in ("along", "radial", "cross"):
         value = getattr(args, f"orbit_error_{axis}_m")
@@ -222,7 +232,7 @@ def run(args):
         raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
                          f"during the recording from {format_utc(start)}")
     channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb,
-                          phase_rad=phase, waveform=args.waveform)
+                          phase_rad=phase, waveform=args.waveform, rx_drift_hz_per_s=args.rx_drift_hz_per_s)
 
     blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
     t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
@@ -255,7 +265,9 @@ def run(args):
                                  f"satellite(s) "
                                  f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
              "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
-             "leosop:vel_enu_mps": [float(v) for v in vel_enu]}
+             "leosop:vel_enu_mps": [float(v) for v in vel_enu],
+             "leosop:rx_offset_hz": float(args.rx_offset_hz),
+             "leosop:rx_drift_hz_per_s": float(args.rx_drift_hz_per_s)}
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
@@ -270,6 +282,8 @@ def run(args):
         "cn0_model": args.cn0_model,
         "waveform": args.waveform,
         "vel_enu_mps": [float(v) for v in vel_enu],
+        "rx_offset_hz": float(args.rx_offset_hz),
+        "rx_drift_hz_per_s": float(args.rx_drift_hz_per_s),
         "satellites": satellites,
     }
     # All outputs or none: the data file, then its metadata, then generate.json.
