@@ -76,7 +76,8 @@ def register(subparsers):
     p.add_argument("--mask-deg", type=float, default=40.0, help="elevation mask for the default choice (default 40)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of noise, phases, clock offsets and orbit errors (default 0)")
-    p.add_argument("--datatype", choices=("cf32_le", "ci16_le"), default="cf32_le", help="sample format")
+    p.add_argument("--datatype", choices=("cf32_le", "ci16_le", "ci8", "cu8"), default="cf32_le",
+                   help="sample format (ci8: HackRF, cu8: RTL-SDR; default cf32_le)")
     p.add_argument("--truth-step-s", type=float, default=0.1,
                    help="block length of the truth annotations (default 0.1, as leosop doppler --block-s)")
     p.add_argument("--sat-offset-max-hz", type=float, default=5.0,
@@ -292,7 +293,7 @@ def run(args):
         write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng), sample_rate_hz=fs,
                           center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
                           datatype=args.datatype, annotations=annotations, global_extra=extra,
-                          ci16_full_scale=full_scale)
+                          full_scale=full_scale)
         if args.out:
             tmps[2].write_text(json_text(doc) + "\n")
     return doc

@@ -1,13 +1,22 @@
-"""IQ recordings: SigMF (cf32_le, ci16_le) and raw files, read in blocks.
+"""IQ recordings: SigMF (cf32_le, ci16_le, ci8, cu8) and raw files, read in blocks.
 
 Metadata go through the ``sigmf`` package (DESIGN 4.2); samples are
 memory-mapped with numpy, so a recording far larger than memory is only ever
-touched one block at a time. ci16 samples are scaled by 1/32768 (SigMF's
-convention); the estimators do not depend on the scale.
+touched one block at a time. Integer samples are scaled to [-1, 1): ci16 by
+1/32768 (SigMF's convention), ci8 (HackRF, bladeRF) by 1/128, cu8 (RTL-SDR,
+unsigned, zero at 127.5) as (x - 127.5) / 128; the estimators do not depend on
+the scale. An 8-bit file declared with the wrong sign convention (a cu8 file
+as ci8 or the reverse) is refused when opened, by the spread of its first
+samples read both ways (:func:`check_8bit_sign`).
+
+Raw files take their parameters from options; a gqrx file name
+(``gqrx_YYYYMMDD_HHMMSS_FREQ_RATE_fc.raw``) supplies the start, the centre
+frequency and the sample rate (:func:`name_metadata`).
 """
 
 import hashlib
 import json
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,11 +28,22 @@ from ..errors import InputError
 from ..fileio import atomic_files, check_input_file
 from ..timebase import format_utc, parse_utc
 
-__all__ = ["DATATYPES", "Capture", "Recording", "open_sigmf", "open_raw", "write_sigmf", "write_sigmf_files"]
+__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "check_8bit_sign", "name_metadata", "open_sigmf",
+           "open_raw", "quantise", "write_sigmf", "write_sigmf_files"]
 
-#: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float).
-DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0)}
-_RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le"}
+#: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float, zero level in file units).
+DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0, 0.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0, 0.0),
+             "ci8": (np.dtype("i1"), 1.0 / 128.0, 0.0), "cu8": (np.dtype("u1"), 1.0 / 128.0, 127.5)}
+#: Largest component magnitude of each integer format after scaling (clipping sits there); cf32 has none.
+FULL_SCALE = {"ci16_le": 32767.0 / 32768.0, "ci8": 127.0 / 128.0, "cu8": 127.5 / 128.0}
+_RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le", "ci8": "ci8", "cu8": "cu8"}
+#: Fraction of clipped I/Q values in one read above which :meth:`Recording.read` warns (1e-4: a Gaussian
+#: front end with 4 sigmas of headroom clips 6e-5 of its values).
+CLIP_WARN_FRACTION = 1e-4
+#: Samples read at the start of an 8-bit file to check its sign convention.
+_SIGN_CHECK_SAMPLES = 1 << 16
+#: gqrx's raw file name: gqrx_YYYYMMDD_HHMMSS_<centre Hz>_<rate Hz>_fc.raw (cf32, UTC time).
+_GQRX_NAME = re.compile(r"gqrx_(\d{8})_(\d{6})_(\d+)_(\d+)_fc\.raw$")
 #: Slack of the capture overlap check: writers may round core:datetime to the microsecond.
 _OVERLAP_TOL_S = 1e-6
 #: Version of the ``leosop:`` SigMF extension (``core:extensions``): the comb's
@@ -58,7 +78,7 @@ class Recording:
     ----------
     data_path : Path
     datatype : str
-        ``cf32_le`` or ``ci16_le``.
+        ``cf32_le``, ``ci16_le``, ``ci8`` or ``cu8``.
     sample_rate_hz : float
     center_hz : float or None
         Nominal RF frequency of the pilot comb's central tone (baseband 0 Hz).
@@ -74,6 +94,8 @@ class Recording:
     captures : list of Capture
         Contiguous stretches in sample order (snapshot recordings have one per
         snapshot); default one capture of the whole recording at ``start_utc``.
+    hw : str or None
+        The recorder's hardware as its metadata say (SigMF ``core:hw``).
     """
 
     data_path: Path
@@ -87,8 +109,10 @@ class Recording:
     annotations: list = field(default_factory=list)
     offset_bytes: int = 0
     captures: list = field(default_factory=list)
+    hw: str | None = None
 
     def __post_init__(self):
+        self._clip_warned = False
         if not self.captures:
             self.captures = [Capture(0, int(self.n_samples), self.start_utc)]
 
@@ -103,20 +127,47 @@ class Recording:
         ``check_finite``, for a caller that does not detect them itself)
         holds NaN/inf.
         """
-        if start < 0 or count < 0 or start + count > self.n_samples:
-            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
-                             f"{self.n_samples} samples of the recording")
-        comp, scale = DATATYPES[self.datatype]
-        mm = np.memmap(self.data_path, dtype=comp, mode="r", offset=self.offset_bytes + 2 * start * comp.itemsize,
-                       shape=(2 * count,))
-        raw = np.asarray(mm, dtype=np.float32)
-        del mm
+        raw = self.read_raw(start, count)
+        _, scale, zero = DATATYPES[self.datatype]
+        raw = np.asarray(raw, dtype=np.float32)
+        if zero:
+            raw -= np.float32(zero)
         if scale != 1.0:
-            raw *= scale
+            raw *= np.float32(scale)
+            self._check_clipping(raw, start)
         elif check_finite and not np.all(np.isfinite(raw)):
             bad = start + int(np.flatnonzero(~np.isfinite(raw))[0]) // 2
             raise InputError(f"{self.data_path}: sample {bad} is NaN or inf")
         return raw.view(np.complex64)
+
+    def _check_clipping(self, comps, start):
+        """Warn once per recording when more than :data:`CLIP_WARN_FRACTION` of a read's components sit
+        at the format's extremes (two reductions; the count only when an extreme is reached)."""
+        fs = np.float32(FULL_SCALE[self.datatype])
+        if self._clip_warned or comps.size == 0 or (comps.max() < fs and comps.min() > -fs - np.float32(1e-3)):
+            return
+        frac = np.count_nonzero(np.abs(comps) >= fs) / comps.size
+        if frac > CLIP_WARN_FRACTION:
+            self._clip_warned = True
+            warnings.warn(f"{self.data_path}: {100 * frac:.2g} % of the I/Q values of samples {start}.."
+                          f"{start + comps.size // 2 - 1} are clipped at the {self.datatype} full scale: lower "
+                          "the receiver's gain (clipping spreads every strong line into spurs and biases C/N0)",
+                          stacklevel=3)
+
+    def read_raw(self, start, count):
+        """Components of samples ``start .. start+count-1`` as stored (I, Q interleaved), shape (2 count,).
+
+        A read-only memory map: the file's own integers (or floats), for
+        checks that need them (clipping at the format's extremes).
+        """
+        if start < 0 or count < 0 or start + count > self.n_samples:
+            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
+                             f"{self.n_samples} samples of the recording")
+        comp = DATATYPES[self.datatype][0]
+        if count == 0:
+            return np.zeros(0, dtype=comp)
+        return np.memmap(self.data_path, dtype=comp, mode="r", offset=self.offset_bytes + 2 * start * comp.itemsize,
+                         shape=(2 * count,))
 
     def blocks(self, block_len):
         """Iterate ``(start, samples)`` over whole consecutive blocks of ``block_len`` samples."""
@@ -135,6 +186,59 @@ def _check_rate(sample_rate_hz, where):
     if not np.isfinite(fs) or fs <= 0:
         raise InputError(f"{where}: sample rate {sample_rate_hz!r} must be a finite number > 0 Hz")
     return fs
+
+
+def check_8bit_sign(rec, where):
+    """Refuse an 8-bit recording read with the wrong sign convention (cu8 declared ci8 or the reverse).
+
+    The first :data:`_SIGN_CHECK_SAMPLES` samples' bytes are read as signed
+    and as unsigned-minus-127.5. A receiver's samples spread around their
+    zero; read the wrong way, every value near zero lands near +-128 (a DC of
+    127.5 that no signal has, or values piled at both ends), and the spread
+    grows to ~127 full-scale units. Declared and other reading are compared:
+    the other one four times tighter (in variance) is taken as the truth.
+    (A recording driven hard to full scale looks alike both ways and passes.)
+
+    Parameters
+    ----------
+    rec : Recording
+    where : str
+        Names the file and field in the message.
+    """
+    if rec.datatype not in ("ci8", "cu8"):
+        return
+    raw = np.asarray(rec.read_raw(0, min(rec.n_samples, _SIGN_CHECK_SAMPLES)))
+    if raw.size < 64:
+        return
+    signed = raw.view(np.int8).astype(np.float32)
+    unsigned = raw.view(np.uint8).astype(np.float32) - np.float32(127.5)
+    declared, other = (signed, unsigned) if rec.datatype == "ci8" else (unsigned, signed)
+    var_declared = float(np.mean(declared**2))  # about the format's zero: a DC offset counts
+    var_other = float(np.mean(other**2))
+    if var_other < 0.25 * var_declared:
+        right = "cu8" if rec.datatype == "ci8" else "ci8"
+        what = ("sit around 127.5 (unsigned 8-bit, as RTL-SDR writes)" if right == "cu8"
+                else "sit around 0 (signed 8-bit, as HackRF writes)")
+        raise InputError(f"{where} {rec.datatype}: the samples {what}, an RMS of {np.sqrt(var_declared):.0f} "
+                         f"read as {rec.datatype} against {np.sqrt(var_other):.1f} as {right}: the file is {right}")
+
+
+def name_metadata(path):
+    """What a recorder's file name says: ``{"dtype", "sample_rate_hz", "center_hz", "start_utc"}`` or {}.
+
+    Only gqrx's raw recordings are recognised (``gqrx_20250101_194000_11325000000_2500000_fc.raw``:
+    UTC date and time, centre frequency and sample rate in Hz, complex float32).
+    """
+    m = _GQRX_NAME.search(Path(path).name)
+    if not m:
+        return {}
+    day, hms, centre, rate = m.groups()
+    iso = f"{day[:4]}-{day[4:6]}-{day[6:]}T{hms[:2]}:{hms[2:4]}:{hms[4:]}Z"
+    try:
+        start = parse_utc(iso, name="file name")
+    except ValueError:
+        return {}
+    return {"dtype": "cf32", "sample_rate_hz": float(rate), "center_hz": float(centre), "start_utc": start}
 
 
 def _count_samples(data_path, datatype, offset_bytes, where):
@@ -202,7 +306,7 @@ def open_sigmf(meta_path, *, verify=True):
     end = max((a.get("core:sample_start", 0) + a.get("core:sample_count", 0) for a in annotations), default=0)
     if end > n:
         raise InputError(f"{meta_path}: annotations reach sample {end} but {data_path.name} holds {n} (truncated?)")
-    return Recording(
+    rec = Recording(
         data_path=data_path,
         datatype=datatype,
         sample_rate_hz=fs,
@@ -214,7 +318,10 @@ def open_sigmf(meta_path, *, verify=True):
         annotations=annotations,
         offset_bytes=offset,
         captures=captures,
+        hw=info.get("core:hw"),
     )
+    check_8bit_sign(rec, f"{meta_path}: core:datatype")
+    return rec
 
 
 def _format_utc_ns(time_utc):
@@ -227,6 +334,7 @@ def _format_utc_ns(time_utc):
 _NUMBER = ((int, float), "a number")
 _GLOBAL_TYPES = {"core:datatype": ((str,), "a string"), "core:sample_rate": _NUMBER,
                  "core:num_channels": ((int,), "an integer"), "core:sha512": ((str,), "a hex string"),
+                 "core:hw": ((str,), "a string"),
                  "leosop:n_tones": ((int,), "an odd integer >= 1"), "leosop:tone_spacing_hz": _NUMBER}
 #: Types of the annotation keys read here (``leosop generate``'s truth).
 _ANNOTATION_TYPES = {"core:sample_start": ((int,), "an integer >= 0"), "core:sample_count": ((int,), "an integer >= 0"),
@@ -324,14 +432,17 @@ def _captures(raw_caps, n_samples, sample_rate_hz, meta_path):
     return out, (None if freqs[0] is None else float(freqs[0]))
 
 
-def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_bytes=0):
+def open_raw(path, *, dtype=None, sample_rate_hz=None, center_hz=None, start=None, offset_bytes=0):
     """Open a headerless interleaved I/Q file with explicit parameters.
+
+    Parameters not given are taken from the file name when a recorder's
+    naming is recognised (:func:`name_metadata`); given ones win.
 
     Parameters
     ----------
     path : str or Path
-    dtype : {"cf32", "ci16", "cf32_le", "ci16_le"}
-    sample_rate_hz : float
+    dtype : {"cf32", "ci16", "ci8", "cu8"} (or the SigMF names), optional
+    sample_rate_hz : float, optional
     center_hz : float, optional
     start : str or datetime64, optional
         UTC time of the first sample.
@@ -339,9 +450,16 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
         Bytes to skip before the first sample.
     """
     path = Path(path)
+    named = name_metadata(path)
+    dtype = dtype if dtype is not None else named.get("dtype")
+    sample_rate_hz = sample_rate_hz if sample_rate_hz is not None else named.get("sample_rate_hz")
+    center_hz = center_hz if center_hz is not None else named.get("center_hz")
+    start = start if start is not None else named.get("start_utc")
+    if dtype is None or sample_rate_hz is None:
+        raise InputError(f"{path}: a raw file needs --dtype and --sample-rate-hz (its name says neither)")
     datatype = _RAW_NAMES.get(dtype, dtype)
     if datatype not in DATATYPES:
-        raise InputError(f"--dtype {dtype!r}: expected cf32 or ci16")
+        raise InputError(f"--dtype {dtype!r}: expected one of {', '.join(_RAW_NAMES)}")
     fs = _check_rate(sample_rate_hz, "--sample-rate-hz")
     check_input_file(path, "raw IQ file")
     try:
@@ -349,7 +467,25 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
     except ValueError as exc:
         raise InputError(str(exc)) from None
     n = _count_samples(path, datatype, offset_bytes, str(path))
-    return Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
+    rec = Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
+    check_8bit_sign(rec, f"{path}: --dtype")
+    return rec
+
+
+def quantise(iq, datatype, full_scale=1.0):
+    """Complex samples as the interleaved integers of ``datatype`` (clipped, rounded), shape (2 n,).
+
+    Amplitude ``full_scale`` maps to the format's :data:`FULL_SCALE` after
+    reading back, so ``read(quantise(x, d, a)) = x / a * FULL_SCALE[d]`` to
+    within half a level where not clipped.
+    """
+    comp, scale, zero = DATATYPES[datatype]
+    info = np.iinfo(comp)
+    c = np.asarray(iq)
+    inter = np.empty(2 * c.size)
+    inter[0::2], inter[1::2] = c.real, c.imag
+    levels = FULL_SCALE[datatype] / scale / full_scale
+    return np.clip(np.round(inter * levels + zero), info.min, info.max).astype(comp)
 
 
 def write_sigmf(meta_path, chunks, **options):
@@ -377,7 +513,7 @@ def write_sigmf(meta_path, chunks, **options):
 
 
 def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz, start_utc=None, datatype="cf32_le",
-                annotations=(), global_extra=None, ci16_full_scale=1.0, captures=None):
+                      annotations=(), global_extra=None, full_scale=1.0, captures=None):
     """Write the data and metadata of a SigMF recording to the files given (not atomic).
 
     For staged outputs (:func:`leosop.fileio.atomic_files`); most callers
@@ -393,12 +529,14 @@ def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz
     start_utc : datetime64 or str, optional
         UTC time of the first sample (``core:datetime``) of a single-capture
         recording; give either this or ``captures``.
-    datatype : {"cf32_le", "ci16_le"}
+    datatype : {"cf32_le", "ci16_le", "ci8", "cu8"}
     annotations : iterable of (sample_start, sample_count, dict)
     global_extra : dict, optional
         Extra global keys (``leosop:n_tones``, ``core:description``, ...).
-    ci16_full_scale : float
-        Amplitude mapped to 32767 for ci16 (values beyond are clipped).
+    full_scale : float
+        Amplitude mapped to the integer formats' largest value (32767 for
+        ci16, 127 for ci8, 255 for cu8); values beyond are clipped, values
+        are rounded to the nearest level (the reader's scaling inverted).
     captures : sequence of (int, datetime64 or str), optional
         ``(sample_start, UTC of that sample)`` of each capture, the first at
         sample 0, starts increasing (snapshot recordings: one per snapshot,
@@ -427,10 +565,7 @@ def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz
             if datatype == "cf32_le":
                 fh.write(c.astype("<c8").tobytes())
             else:
-                inter = np.empty(2 * c.size)
-                inter[0::2], inter[1::2] = c.real, c.imag
-                q = np.clip(np.round(inter * (32767.0 / ci16_full_scale)), -32768, 32767)
-                fh.write(q.astype("<i2").tobytes())
+                fh.write(quantise(c, datatype, full_scale).tobytes())
             n += c.size
     info = {sigmf.DATATYPE_KEY: datatype, sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
             sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(data_file)}
