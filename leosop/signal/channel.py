@@ -372,6 +372,11 @@ class SiteChannel:
         with np.errstate(divide="ignore"):
             return self._cn0_ref + 20.0 * np.log10(self.amplitude(t_s))
 
+    @property
+    def cn0_ref_dbhz(self):
+        """C/N0 of a unit-amplitude tone: the strongest node's, the scale of :meth:`samples`."""
+        return self._cn0_ref
+
     def noise_sigma(self):
         """Complex noise standard deviation per sample (the strongest node has unit tones)."""
         return noise_sigma(self._cn0_ref, self.sample_rate_hz)
