@@ -227,3 +227,200 @@ def _ar1(a, drive, x0):
         out[i:j], _ = lfilter([1.0], [1.0, -a[i]], drive[i:j], zi=[a[i] * x])
         x = out[j - 1]
     return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# What a recording's front end did, seen in its samples (leosop doctor; the comb search's cleaning).
+
+#: False-alarm probability of the line detector per block (a noise bin passes its threshold this often).
+LINE_PFA = 1e-3
+#: A line grows from its peak while the power smoothed over this many bins exceeds twice the noise mean,
+#: so what is left of a strong line after excision (sidelobes) lies below that level.
+_LINE_SMOOTH_BINS = 8
+#: A line with at least this many others at whole tone spacings from it (within the tolerance) is a comb tone.
+_COMB_PARTNERS = 2
+
+
+@dataclass(frozen=True)
+class Line:
+    """A narrowband line found in a block's spectrum.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Peak, baseband.
+    power_dbhz : float
+        Its power in the unit of a tone's C/N0 (power over the noise density).
+    lo_bin, hi_bin : int
+        Bins (FFT order, may be negative) excised for it, inclusive.
+    """
+
+    frequency_hz: float
+    power_dbhz: float
+    lo_bin: int
+    hi_bin: int
+
+
+@dataclass(frozen=True)
+class Cleaning:
+    """What :func:`clean_block` found and removed in one block.
+
+    Attributes
+    ----------
+    dc : complex
+        Block mean removed (sample units).
+    dc_dbhz : float
+        Its power over the noise density (the unit of a tone's C/N0).
+    iq_gain_db, iq_phase_deg : float
+        IQ imbalance estimated (Q over I; the model of :class:`FrontEnd`).
+    iq_corrected : bool
+        True when the imbalance was significant and undone.
+    lines : tuple of Line
+        CW / narrowband interferers excised (lines not part of a comb).
+    noise_density : float
+        Noise power per Hz in sample units (N0), from the spectrum's median.
+    """
+
+    dc: complex
+    dc_dbhz: float
+    iq_gain_db: float
+    iq_phase_deg: float
+    iq_corrected: bool
+    lines: tuple
+    noise_density: float
+
+
+def iq_imbalance(iq):
+    """Q-over-I gain [dB] and phase error [deg] of a block (DC removed first), and their 1-sigma [dB, deg].
+
+    For a circular received signal (noise, tones off 0 Hz) ``E[I^2] = E[Q^2]``
+    and ``E[I Q] = 0``; the model ``Q' = g (Q cos phi - I sin phi)`` gives
+    ``g^2 = E[Q'^2] / E[I^2]`` and ``sin phi = -E[I Q'] / sqrt(E[I^2] E[Q'^2])``.
+    Each moment ratio has a spread of ~1/sqrt(n).
+    """
+    x = np.asarray(iq)
+    i = x.real - x.real.mean()
+    q = x.imag - x.imag.mean()
+    pi, pq, piq = float(np.dot(i, i)), float(np.dot(q, q)), float(np.dot(i, q))
+    if pi <= 0 or pq <= 0:
+        return 0.0, 0.0, np.inf, np.inf
+    gain_db = 10.0 * np.log10(pq / pi)
+    phase_deg = float(np.degrees(np.arcsin(np.clip(-piq / np.sqrt(pi * pq), -1.0, 1.0))))
+    n = x.size
+    return gain_db, phase_deg, float(20.0 / np.log(10.0) / np.sqrt(n)), float(np.degrees(1.0 / np.sqrt(n)))
+
+
+def correct_iq(iq, gain_db, phase_deg):
+    """Undo the IQ imbalance of :class:`FrontEnd` (``Q = (Q'/g + I sin phi) / cos phi``), complex64 (n,)."""
+    x = np.asarray(iq)
+    g = 10.0 ** (gain_db / 20.0)
+    phi = np.radians(phase_deg)
+    q = (x.imag / g + x.real * np.sin(phi)) / np.cos(phi)
+    return (x.real + 1j * q).astype(np.complex64)
+
+
+def find_lines(power, fs, comb, *, pfa=LINE_PFA):
+    """Strong narrow lines of a block's power spectrum that belong to no comb; the noise mean per bin.
+
+    A bin beyond ``-ln(pfa / n)`` noise means (exponential power) starts a
+    line; the line spans the bins around its peak whose power, smoothed over
+    ``_LINE_SMOOTH_BINS``, exceeds twice the noise mean. A line with at least
+    ``_COMB_PARTNERS`` other strong bins at whole tone spacings (m = +-1..+-(n_tones-1),
+    within the line's half-width plus 2 bins) is a comb's tone and kept.
+
+    Parameters
+    ----------
+    power : ndarray, (n,)
+        |FFT|^2 of the block, FFT order.
+    fs : float
+    comb : PilotComb
+
+    Returns
+    -------
+    lines : list of Line
+        Strongest first.
+    noise_bin : float
+        Noise mean per bin (median / ln 2 over a subsample).
+    """
+    n = power.size
+    sub = power[::max(1, n // 16384)]
+    noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
+    if noise <= 0:
+        return [], noise
+    strong = power > -np.log(pfa / n) * noise
+    if not strong.any():
+        return [], noise
+    kernel = np.ones(_LINE_SMOOTH_BINS) / _LINE_SMOOTH_BINS
+    smooth = np.convolve(np.concatenate([power[-_LINE_SMOOTH_BINS:], power, power[:_LINE_SMOOTH_BINS]]), kernel,
+                         mode="same")[_LINE_SMOOTH_BINS:-_LINE_SMOOTH_BINS]
+    above = smooth > 2.0 * noise
+    df = fs / n
+    spacing_bins = comb.tone_spacing_hz / df
+    lines, done = [], np.zeros(n, dtype=bool)
+    for b in np.flatnonzero(strong)[np.argsort(-power[strong])]:
+        if done[b]:
+            continue
+        lo, hi = b, b
+        while hi - lo < n - 1 and above[(hi + 1) % n]:
+            hi += 1
+        while hi - lo < n - 1 and above[(lo - 1) % n]:
+            lo -= 1
+        idx = np.arange(lo, hi + 1) % n
+        done[idx] = True
+        half = (hi - lo) // 2 + 2
+        m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
+        partners = 0
+        for c in np.round(b + m * spacing_bins).astype(np.int64):
+            partners += bool(strong[np.arange(c - half, c + half + 1) % n].any())
+        if partners >= _COMB_PARTNERS:
+            continue
+        shift = 0 if b < n // 2 else -n  # bins as signed frequencies
+        # A tone of amplitude A puts A^2 n^2 into its bins; the noise n N0 fs into each.
+        power_dbhz = 10.0 * np.log10(float(np.sum(power[idx])) * fs / (n * noise))
+        lines.append(Line((b + shift) * df, power_dbhz, int(lo + shift), int(hi + shift)))
+    return lines, noise
+
+
+def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
+    """A block with its DC, IQ imbalance and CW / narrowband interferers removed, and what was removed.
+
+    1. The block mean (DC offset) is subtracted.
+    2. The IQ imbalance is estimated (:func:`iq_imbalance`) and undone when
+       beyond 5 sigma of its estimate (a comb's image, ``image_rejection_db``
+       below it, would otherwise look like a satellite at minus its Doppler).
+    3. Lines that no comb explains (:func:`find_lines`) are zeroed in the
+       block's spectrum (excision) and the block transformed back.
+
+    A clean block comes back as it was, less its mean (one FFT spent).
+
+    Parameters
+    ----------
+    iq : ndarray of complex, (n,)
+    fs : float
+    comb : PilotComb
+
+    Returns
+    -------
+    iq : ndarray of complex64, (n,)
+    cleaning : Cleaning
+    """
+    from .fft import fft
+
+    x = np.asarray(iq, dtype=np.complex64)
+    n = x.size
+    dc = complex(x.mean())
+    x = x - np.complex64(dc)
+    gain_db, phase_deg, s_gain, s_phase = iq_imbalance(x)
+    corrected = abs(gain_db) > 5.0 * s_gain or abs(phase_deg) > 5.0 * s_phase
+    if corrected:
+        x = correct_iq(x, gain_db, phase_deg)
+    spectrum = fft(x)
+    power = np.abs(spectrum) ** 2
+    lines, noise_bin = find_lines(power, fs, comb, pfa=pfa)
+    n0 = noise_bin / (n * fs) if noise_bin > 0 else np.nan  # |X|^2 of white noise: n * sigma^2 = n * N0 * fs
+    dc_dbhz = 10.0 * np.log10(abs(dc) ** 2 / n0) if abs(dc) > 0 and n0 > 0 else -np.inf
+    if lines:
+        for ln in lines:
+            spectrum[np.arange(ln.lo_bin, ln.hi_bin + 1) % n] = 0.0
+        x = np.fft.ifft(spectrum).astype(np.complex64)
+    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0)
