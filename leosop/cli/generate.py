@@ -219,8 +219,11 @@ def _num(x):
     return float(x) if np.isfinite(x) else None
 
 
-def _chunks(channel, signal_starts, lengths, rng, fe, full_scale):
-    """Received samples of every capture through the front end, chunk by chunk (bounded memory)."""
+def _chunks(channel, signal_starts, lengths, rng, fe, full_scale, fe_meta):
+    """Received samples of every capture through the front end, chunk by chunk (bounded memory).
+
+    The AGC gains drawn go into ``fe_meta`` (the ``leosop:front_end`` dict, written after the data).
+    """
     pieces = [(s + i, min(_CHUNK, m - i)) for s, m in zip(signal_starts, lengths) for i in range(0, m, _CHUNK)]
     fs = channel.sample_rate_hz
     for start, count in progress(pieces, desc="generate", unit="chunk"):
@@ -232,6 +235,8 @@ def _chunks(channel, signal_starts, lengths, rng, fe, full_scale):
             x = (np.clip(np.round(x.real * levels), -2048, 2047) + 1j * np.clip(np.round(x.imag * levels), -2048, 2047)
                  ) / levels
         yield x
+    if fe.agc_step_db:
+        fe_meta["agc_steps"] = fe.agc_steps()
 
 
 def run(args):
@@ -360,7 +365,8 @@ def run(args):
     # All outputs or none: the data file, then its metadata, then generate.json.
     paths = [out.with_suffix(".sigmf-data"), out] + ([Path(args.out) / "generate.json"] if args.out else [])
     with atomic_files(paths) as tmps:
-        write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng, fe, full_scale),
+        write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng, fe, full_scale,
+                                                       extra.get("leosop:front_end", {})),
                           sample_rate_hz=fs,
                           center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
                           datatype=datatype, annotations=annotations, global_extra=extra,

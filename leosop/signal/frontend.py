@@ -144,6 +144,10 @@ class FrontEnd:
                 gains[int(s)] = float(rng.uniform(-self.agc_step_db, self.agc_step_db)) if self.agc_step_db else 0.0
         return np.array([gains[int(s)] for s in segments])
 
+    def agc_steps(self):
+        """The AGC gains drawn so far: ``[{"start_s", "gain_db"}...]`` by segment start on the signal's timeline."""
+        return [{"start_s": k * self.agc_period_s, "gain_db": g} for k, g in sorted(self._state.get("agc", {}).items())]
+
     def _phase_noise(self, t_s, fs, rng):
         """LO phase at ``t_s`` (increasing, continuing earlier calls) [rad], (n,)."""
         st = self._state
