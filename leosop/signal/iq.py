@@ -11,12 +11,11 @@ samples read both ways (:func:`check_8bit_sign`).
 
 Raw files take their parameters from options; a gqrx file name
 (``gqrx_YYYYMMDD_HHMMSS_FREQ_RATE_fc.raw``) supplies the start, the centre
-frequency and the sample rate (:func:`name_metadata`).
+frequency and the sample rate (:func:`~.recorders.name_metadata`).
 """
 
 import hashlib
 import json
-import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,9 +26,10 @@ from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
 from ..fileio import atomic_files, check_input_file
 from ..timebase import format_utc, parse_utc
+from .recorders import check_8bit_sign, name_metadata
 
-__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "check_8bit_sign", "name_metadata", "open_sigmf",
-           "open_raw", "quantise", "write_sigmf", "write_sigmf_files"]
+__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "open_sigmf", "open_raw", "quantise", "write_sigmf",
+           "write_sigmf_files"]
 
 #: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float, zero level in file units).
 DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0, 0.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0, 0.0),
@@ -40,10 +40,6 @@ _RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le", "ci8": "ci8", "cu8": "cu8"}
 #: Fraction of clipped I/Q values in one read above which :meth:`Recording.read` warns (1e-4: a Gaussian
 #: front end with 4 sigmas of headroom clips 6e-5 of its values).
 CLIP_WARN_FRACTION = 1e-4
-#: Samples read at the start of an 8-bit file to check its sign convention.
-_SIGN_CHECK_SAMPLES = 1 << 16
-#: gqrx's raw file name: gqrx_YYYYMMDD_HHMMSS_<centre Hz>_<rate Hz>_fc.raw (cf32, UTC time).
-_GQRX_NAME = re.compile(r"gqrx_(\d{8})_(\d{6})_(\d+)_(\d+)_fc\.raw$")
 #: Slack of the capture overlap check: writers may round core:datetime to the microsecond.
 _OVERLAP_TOL_S = 1e-6
 #: Version of the ``leosop:`` SigMF extension (``core:extensions``): the comb's
@@ -185,59 +181,6 @@ def _check_rate(sample_rate_hz, where):
     if not np.isfinite(fs) or fs <= 0:
         raise InputError(f"{where}: sample rate {sample_rate_hz!r} must be a finite number > 0 Hz")
     return fs
-
-
-def check_8bit_sign(rec, where):
-    """Refuse an 8-bit recording read with the wrong sign convention (cu8 declared ci8 or the reverse).
-
-    The first :data:`_SIGN_CHECK_SAMPLES` samples' bytes are read as signed
-    and as unsigned-minus-127.5. A receiver's samples spread around their
-    zero; read the wrong way, every value near zero lands near +-128 (a DC of
-    127.5 that no signal has, or values piled at both ends), and the spread
-    grows to ~127 full-scale units. Declared and other reading are compared:
-    the other one four times tighter (in variance) is taken as the truth.
-    (A recording driven hard to full scale looks alike both ways and passes.)
-
-    Parameters
-    ----------
-    rec : Recording
-    where : str
-        Names the file and field in the message.
-    """
-    if rec.datatype not in ("ci8", "cu8"):
-        return
-    raw = np.asarray(rec.read_raw(0, min(rec.n_samples, _SIGN_CHECK_SAMPLES)))
-    if raw.size < 64:
-        return
-    signed = raw.view(np.int8).astype(np.float32)
-    unsigned = raw.view(np.uint8).astype(np.float32) - np.float32(127.5)
-    declared, other = (signed, unsigned) if rec.datatype == "ci8" else (unsigned, signed)
-    var_declared = float(np.mean(declared**2))  # about the format's zero: a DC offset counts
-    var_other = float(np.mean(other**2))
-    if var_other < 0.25 * var_declared:
-        right = "cu8" if rec.datatype == "ci8" else "ci8"
-        what = ("sit around 127.5 (unsigned 8-bit, as RTL-SDR writes)" if right == "cu8"
-                else "sit around 0 (signed 8-bit, as HackRF writes)")
-        raise InputError(f"{where} {rec.datatype}: the samples {what}, an RMS of {np.sqrt(var_declared):.0f} "
-                         f"read as {rec.datatype} against {np.sqrt(var_other):.1f} as {right}: the file is {right}")
-
-
-def name_metadata(path):
-    """What a recorder's file name says: ``{"dtype", "sample_rate_hz", "center_hz", "start_utc"}`` or {}.
-
-    Only gqrx's raw recordings are recognised (``gqrx_20250101_194000_11325000000_2500000_fc.raw``:
-    UTC date and time, centre frequency and sample rate in Hz, complex float32).
-    """
-    m = _GQRX_NAME.search(Path(path).name)
-    if not m:
-        return {}
-    day, hms, centre, rate = m.groups()
-    iso = f"{day[:4]}-{day[4:6]}-{day[6:]}T{hms[:2]}:{hms[2:4]}:{hms[4:]}Z"
-    try:
-        start = parse_utc(iso, name="file name")
-    except ValueError:
-        return {}
-    return {"dtype": "cf32", "sample_rate_hz": float(rate), "center_hz": float(centre), "start_utc": start}
 
 
 def _count_samples(data_path, datatype, offset_bytes, where):
@@ -435,7 +378,7 @@ def open_raw(path, *, dtype=None, sample_rate_hz=None, center_hz=None, start=Non
     """Open a headerless interleaved I/Q file with explicit parameters.
 
     Parameters not given are taken from the file name when a recorder's
-    naming is recognised (:func:`name_metadata`); given ones win.
+    naming is recognised (:func:`~.recorders.name_metadata`); given ones win.
 
     Parameters
     ----------
