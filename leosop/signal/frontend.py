@@ -327,7 +327,7 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     """Strong narrow lines of a block's power spectrum that belong to no comb; the noise mean per bin.
 
     A bin beyond ``-ln(pfa / n)`` noise means (exponential power) starts a
-    line; the line spans the bins around its peak whose power, smoothed over
+    line; the line spans the run of bins around it whose power, smoothed over
     ``_LINE_SMOOTH_BINS``, exceeds twice the noise mean. A line with at least
     ``_COMB_PARTNERS`` other strong bins at whole tone spacings (m = +-1..+-(n_tones-1),
     within the line's half-width plus 2 bins) is a comb's tone and kept.
@@ -351,37 +351,32 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
     if noise <= 0:
         return [], noise
-    strong = power > -np.log(pfa / n) * noise
+    # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges).
+    p = np.fft.fftshift(power)
+    strong = p > -np.log(pfa / n) * noise
     if not strong.any():
         return [], noise
-    kernel = np.ones(_LINE_SMOOTH_BINS) / _LINE_SMOOTH_BINS
-    smooth = np.convolve(np.concatenate([power[-_LINE_SMOOTH_BINS:], power, power[:_LINE_SMOOTH_BINS]]), kernel,
-                         mode="same")[_LINE_SMOOTH_BINS:-_LINE_SMOOTH_BINS]
-    above = smooth > 2.0 * noise
-    df = fs / n
-    spacing_bins = comb.tone_spacing_hz / df
-    lines, done = [], np.zeros(n, dtype=bool)
-    for b in np.flatnonzero(strong)[np.argsort(-power[strong])]:
-        if done[b]:
-            continue
-        lo, hi = b, b
-        while hi - lo < n - 1 and above[(hi + 1) % n]:
-            hi += 1
-        while hi - lo < n - 1 and above[(lo - 1) % n]:
-            lo -= 1
-        idx = np.arange(lo, hi + 1) % n
-        done[idx] = True
-        half = (hi - lo) // 2 + 2
-        m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
-        partners = 0
-        for c in np.round(b + m * spacing_bins).astype(np.int64):
-            partners += bool(strong[np.arange(c - half, c + half + 1) % n].any())
-        if partners >= _COMB_PARTNERS:
-            continue
-        shift = 0 if b < n // 2 else -n  # bins as signed frequencies
+    smooth = np.convolve(p, np.full(_LINE_SMOOTH_BINS, 1.0 / _LINE_SMOOTH_BINS), mode="same")
+    above = (smooth > 2.0 * noise) | strong
+    edges = np.diff(np.concatenate([[0], above.view(np.int8), [0]]))
+    lo, hi = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1  # runs of ``above``, inclusive
+    cs = np.concatenate([[0], np.cumsum(strong)])
+    runs = cs[hi + 1] - cs[lo] > 0  # runs holding a strong bin
+    lo, hi = lo[runs], hi[runs]
+    peak = lo + np.array([int(np.argmax(p[a:b + 1])) for a, b in zip(lo, hi)], dtype=np.int64)
+    half = (hi - lo) // 2 + 2
+    m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
+    centre = np.round(peak[:, None] + m * (comb.tone_spacing_hz * n / fs)).astype(np.int64)  # (runs, 2 K - 2)
+    a_idx = np.clip(centre - half[:, None], 0, n)
+    b_idx = np.clip(centre + half[:, None] + 1, 0, n)
+    partners = np.sum(cs[b_idx] - cs[a_idx] > 0, axis=1)
+    lines = []
+    for i in np.flatnonzero(partners < _COMB_PARTNERS):
         # A tone of amplitude A puts A^2 n^2 into its bins; the noise n N0 fs into each.
-        power_dbhz = 10.0 * np.log10(float(np.sum(power[idx])) * fs / (n * noise))
-        lines.append(Line((b + shift) * df, power_dbhz, int(lo + shift), int(hi + shift)))
+        power_dbhz = 10.0 * np.log10(float(np.sum(p[lo[i]:hi[i] + 1])) * fs / (n * noise))
+        k0 = -(n // 2)  # signed frequency bin of shifted index 0
+        lines.append(Line((peak[i] + k0) * fs / n, power_dbhz, int(lo[i] + k0), int(hi[i] + k0)))
+    lines.sort(key=lambda ln: -ln.power_dbhz)
     return lines, noise
 
 
