@@ -48,7 +48,7 @@ def test_cf32_round_trip(tmp_path):
 
 def test_ci16_round_trip(tmp_path):
     x = _samples(3_000)
-    meta = _write(tmp_path, x, datatype="ci16_le", ci16_full_scale=2.0)
+    meta = _write(tmp_path, x, datatype="ci16_le", full_scale=2.0)
     got = open_sigmf(meta).read(0, 3_000)
     # Read back in units of full scale (SigMF: ci16 / 32768); quantisation is half
     # an LSB, 0.5/32767, plus the 32767-vs-32768 scale (3e-5 relative) and float32 rounding.
@@ -87,7 +87,7 @@ def test_bad_files(tmp_path):
     with pytest.raises(InputError, match="sha512"):
         open_sigmf(meta)
 
-    for key, value, match in [("core:datatype", "ri16_le", "datatype"), ("core:datatype", "cu8", "datatype"),
+    for key, value, match in [("core:datatype", "ri16_le", "datatype"), ("core:datatype", "ci32_le", "datatype"),
                               ("core:sample_rate", 0, "sample rate"), ("core:sample_rate", -5.0, "sample rate")]:
         bad = dict(doc, **{"global": dict(doc["global"], **{key: value})})
         meta.write_text(json.dumps(bad))

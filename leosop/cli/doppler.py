@@ -30,11 +30,10 @@ from ..progress import progress
 from ..signal.coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, coarse_stft
 from ..signal.doppler import METHODS, estimate_block, ml_grid_points
 from ..signal.fine import cubic_bias_hz, periodogram_grid
-from ..signal.iq import open_raw, open_sigmf
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
 from . import add_command
-from .options import positive
+from .options import add_raw_options, open_recording, positive
 
 _FIG_COLS = 1000  # time columns kept for the spectrogram figure
 _FIG_ROWS = 1024  # frequency rows kept
@@ -47,7 +46,7 @@ _MAX_RATE_LIMIT_HZ_PER_S = 1e6
 def register(subparsers):
     p = add_command(subparsers, "doppler", sys.modules[__name__],
                     help="estimate the pilot comb's Doppler per block of an IQ recording")
-    p.add_argument("recording", metavar="FILE", help="FILE.sigmf-meta, or a raw cf32/ci16 file with --dtype")
+    p.add_argument("recording", metavar="FILE", help="FILE.sigmf-meta, or a raw cf32/ci16/ci8/cu8 file with --dtype")
     p.add_argument("--block-s", type=float, default=0.1, help="block length in seconds (default 0.1)")
     p.add_argument("--method", choices=METHODS, default="fast", help="fine estimator (default fast)")
     p.add_argument("--resolution-hz", type=float, default=1e-3,
@@ -56,23 +55,7 @@ def register(subparsers):
                    help=f"search half-width for the central tone (default {MAX_DOPPLER_HZ:g})")
     p.add_argument("--max-rate-hz-per-s", type=float, default=MAX_RATE_HZ_PER_S,
                    help=f"largest |Doppler rate| searched by fast (default {MAX_RATE_HZ_PER_S:g})")
-    raw = p.add_argument_group("raw files")
-    raw.add_argument("--dtype", choices=("cf32", "ci16"), help="sample format of a raw file")
-    raw.add_argument("--sample-rate-hz", type=float, help="sample rate of a raw file")
-    raw.add_argument("--center-hz", type=float, help="RF frequency of the comb's central tone (raw file)")
-    raw.add_argument("--start", metavar="ISO", help="UTC of the first sample (raw file)")
-
-
-def _open(args):
-    path = Path(args.recording)
-    if path.suffix in (".sigmf-meta", ".sigmf-data"):
-        return open_sigmf(path)
-    if args.dtype is None or args.sample_rate_hz is None:
-        raise InputError(f"{path}: not a .sigmf-meta file; a raw file needs --dtype and --sample-rate-hz")
-    if args.center_hz is not None:
-        positive(args.center_hz, "--center-hz")
-    return open_raw(path, dtype=args.dtype, sample_rate_hz=args.sample_rate_hz, center_hz=args.center_hz,
-                    start=args.start)
+    add_raw_options(p)
 
 
 def _truth(rec, block_len):
@@ -129,7 +112,7 @@ def _reduce(power, rows, cols):
 
 
 def run(args):
-    rec = _open(args)
+    rec = open_recording(args, args.recording)
     fs = rec.sample_rate_hz
     block_s = positive(args.block_s, "--block-s")
     if not _RESOLUTION_RANGE_HZ[0] <= args.resolution_hz <= _RESOLUTION_RANGE_HZ[1]:

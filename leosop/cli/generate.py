@@ -10,7 +10,9 @@ sample (:mod:`leosop.signal.channel`, DESIGN 4.2), with
   silent below the horizon), or ``--cn0-model constant`` (one value for all,
   or one per ``--sat``);
 - a clock offset drawn uniformly in [0, --sat-offset-max-hz] ([Shen 2024]
-  Table 1: 0-5 Hz) plus the receiver's offset;
+  Table 1: 0-5 Hz) plus the receiver's offset ``--rx-offset-hz`` and its
+  drift ``--rx-drift-hz-per-s`` (an LNB's LO, common to all satellites:
+  truth in ``leosop:rx_offset_hz`` and ``leosop:rx_drift_hz_per_s``);
 - optionally an orbit error (truth differs from the TLE the receiver will
   use): along-track, radial and cross-track errors drawn per satellite.
 
@@ -33,6 +35,7 @@ from ..orbits import load_constellation
 from ..progress import progress
 from ..scenarios import XIAN_BAOJI
 from ..signal.channel import WAVEFORMS, OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
+from ..signal.frontend import BITS_DATATYPE, PRESETS, FrontEnd
 from ..signal.iq import write_sigmf_files
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
@@ -74,13 +77,19 @@ def register(subparsers):
     p.add_argument("--mask-deg", type=float, default=40.0, help="elevation mask for the default choice (default 40)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of noise, phases, clock offsets and orbit errors (default 0)")
-    p.add_argument("--datatype", choices=("cf32_le", "ci16_le"), default="cf32_le", help="sample format")
+    p.add_argument("--datatype", choices=("cf32_le", "ci16_le", "ci8", "cu8"), default="cf32_le",
+                   help="sample format (ci8: HackRF, cu8: RTL-SDR; default cf32_le)")
     p.add_argument("--truth-step-s", type=float, default=0.1,
                    help="block length of the truth annotations (default 0.1, as leosop doppler --block-s)")
     p.add_argument("--sat-offset-max-hz", type=float, default=5.0,
                    help="per-satellite clock offsets drawn in [0, this] (default 5, [Shen 2024] Table 1)")
-    p.add_argument("--rx-offset-hz", type=float, default=5.0,
-                   help="receiver frequency offset (default 5, [Shen 2024] Table 1)")
+    p.add_argument("--rx-offset-hz", type=float,
+                   help="receiver frequency offset at the first sample, common to all satellites (an LNB's LO "
+                        "error enters here; default 5, [Shen 2024] Table 1, or the --front-end preset's)")
+    p.add_argument("--rx-drift-hz-per-s", type=float,
+                   help="receiver LO frequency ramp common to all satellites [Hz/s]: the offset at t is "
+                        "--rx-offset-hz plus this times t (default 0, or the --front-end preset's)")
+    _front_end_options(p)
     for axis in ("along", "radial", "cross"):
         p.add_argument(f"--orbit-error-{axis}-m", type=float, default=0.0, metavar="SIGMA",
                        help=f"standard deviation of the {axis}-track orbit error drawn per satellite [m] (default 0)"
@@ -92,6 +101,57 @@ def register(subparsers):
     p.add_argument("--snapshot-s", type=float, metavar="S",
                    help="record only S seconds every --period-s (one SigMF capture each)")
     p.add_argument("--period-s", type=float, metavar="P", help="snapshot period (with --snapshot-s)")
+
+
+def _front_end_options(p):
+    fe = p.add_argument_group("front end (leosop.signal.frontend; each option overrides the preset's value)")
+    fe.add_argument("--front-end", choices=("none", *PRESETS), default="none",
+                    help="consumer: LNB 620 kHz off drifting 25 Hz/s, phase noise, IQ imbalance, DC, a CW line "
+                         "at +700 kHz, 8 bits (docs/replay.md); none: an ideal receiver (default)")
+    fe.add_argument("--phase-noise-linewidth-hz", type=float, metavar="HZ",
+                    help="Wiener (random-walk) LO phase of this Lorentzian linewidth")
+    fe.add_argument("--phase-noise-dbc-hz", type=float, metavar="DBC",
+                    help="bounded LO phase noise: flat at this level up to --phase-noise-corner-hz")
+    fe.add_argument("--phase-noise-corner-hz", type=float, metavar="HZ", help="corner of that floor (default 30e3)")
+    fe.add_argument("--iq-gain-db", type=float, metavar="DB", help="Q branch gain over I")
+    fe.add_argument("--iq-phase-deg", type=float, metavar="DEG", help="Q branch phase error from quadrature")
+    fe.add_argument("--dc-dbhz", type=float, metavar="DBHZ", help="DC offset power (a line at 0 Hz) [dB-Hz]")
+    fe.add_argument("--cw", nargs=2, type=float, action="append", metavar=("HZ", "DBHZ"),
+                    help="a CW interferer at baseband frequency HZ of power DBHZ (repeatable; replaces the preset's)")
+    fe.add_argument("--agc-step-db", type=float, metavar="DB",
+                    help="gain drawn uniformly in +-DB every --agc-period-s (default: the snapshot period, else 1 s)")
+    fe.add_argument("--agc-period-s", type=float, metavar="S")
+    fe.add_argument("--bits", type=int, choices=(8, 12, 16),
+                    help="quantise: 8 (ci8, or cu8 with --datatype cu8), 12 or 16 (ci16)")
+    fe.add_argument("--headroom-db", type=float, metavar="DB",
+                    help="quantiser full scale over the RMS of a component at nominal gain (default 12)")
+
+
+_FE_FIELDS = ("phase_noise_linewidth_hz", "phase_noise_dbc_hz", "phase_noise_corner_hz", "iq_gain_db",
+              "iq_phase_deg", "dc_dbhz", "cw", "agc_step_db", "agc_period_s", "bits", "headroom_db")
+
+
+def _front_end(args):
+    """The receiver's LO offset, drift and :class:`FrontEnd` from the preset and the options; the datatype."""
+    preset = dict(PRESETS.get(args.front_end, {}))
+    if args.agc_period_s is None and args.period_s is not None:
+        args.agc_period_s = args.period_s
+    values = {k: getattr(args, k) if getattr(args, k) is not None else preset[k]
+              for k in _FE_FIELDS if getattr(args, k) is not None or k in preset}
+    fe = FrontEnd(**values)
+    offset = args.rx_offset_hz if args.rx_offset_hz is not None else preset.get("rx_offset_hz", 5.0)
+    drift = args.rx_drift_hz_per_s if args.rx_drift_hz_per_s is not None else preset.get("rx_drift_hz_per_s", 0.0)
+    datatype = args.datatype
+    if fe.bits is not None:
+        want = BITS_DATATYPE[fe.bits]
+        if datatype == "cu8" and fe.bits == 8:
+            want = "cu8"
+        if datatype not in ("cf32_le", want):
+            raise InputError(f"--datatype {datatype} does not hold {fe.bits}-bit samples (use {want})")
+        datatype = want
+    elif datatype != "cf32_le":
+        fe.bits = {"ci16_le": 16, "ci8": 8, "cu8": 8}[datatype]
+    return offset, drift, fe, datatype
 
 
 def _select(const, pos_rx, start, duration_s, ids, mask):
@@ -159,11 +219,24 @@ def _num(x):
     return float(x) if np.isfinite(x) else None
 
 
-def _chunks(channel, signal_starts, lengths, rng):
-    """Received samples of every capture, chunk by chunk (bounded memory)."""
+def _chunks(channel, signal_starts, lengths, rng, fe, full_scale, fe_meta):
+    """Received samples of every capture through the front end, chunk by chunk (bounded memory).
+
+    The AGC gains drawn go into ``fe_meta`` (the ``leosop:front_end`` dict, written after the data).
+    """
     pieces = [(s + i, min(_CHUNK, m - i)) for s, m in zip(signal_starts, lengths) for i in range(0, m, _CHUNK)]
+    fs = channel.sample_rate_hz
     for start, count in progress(pieces, desc="generate", unit="chunk"):
-        yield channel.samples(start, count, rng)
+        x = channel.samples(start, count, rng)
+        if fe.active:
+            x = fe.apply(x, (start + np.arange(count)) / fs, fs, channel.cn0_ref_dbhz, rng)
+        if fe.bits == 12:  # a 12-bit ADC's levels, stored in ci16
+            levels = 2047.0 / full_scale
+            x = (np.clip(np.round(x.real * levels), -2048, 2047) + 1j * np.clip(np.round(x.imag * levels), -2048, 2047)
+                 ) / levels
+        yield x
+    if fe.agc_step_db:
+        fe_meta["agc_steps"] = fe.agc_steps()
 
 
 def run(args):
@@ -182,9 +255,16 @@ def run(args):
     if not 0 <= args.sat_offset_max_hz <= fs / 2:
         raise InputError(f"--sat-offset-max-hz {args.sat_offset_max_hz:g}: must be in [0, {fs / 2:g}] "
                          "(half the sample rate)")
-    if abs(args.rx_offset_hz) > fs / 2:
-        raise InputError(f"--rx-offset-hz {args.rx_offset_hz:g}: must be within +-{fs / 2:g} Hz (half the sample "
+    rx_offset, rx_drift, fe, datatype = _front_end(args)
+    if abs(rx_offset) > fs / 2:
+        raise InputError(f"--rx-offset-hz {rx_offset:g}: must be within +-{fs / 2:g} Hz (half the sample rate)")
+    if abs(rx_offset + rx_drift * duration) > fs / 2:
+        raise InputError(f"--rx-drift-hz-per-s {rx_drift:g}: the receiver offset at the end, "
+                         f"{rx_offset + rx_drift * duration:g} Hz, must be within +-{fs / 2:g} Hz (half the sample "
                          "rate)")
+    for f_hz, _ in fe.cw:
+        if abs(f_hz) > fs / 2:
+            raise InputError(f"--cw {f_hz:g}: the interferer must be within +-{fs / 2:g} Hz (half the sample rate)")
     sigma_orbit_m = {}
     for axis in ("along", "radial", "cross"):
         value = getattr(args, f"orbit_error_{axis}_m")
@@ -210,7 +290,7 @@ def run(args):
     const = load_constellation(args.tle)
     warn_stale(const, start)
     const = _select(const, pos_rx, start, n / fs, args.sat, mask)
-    clock = rng.uniform(0.0, args.sat_offset_max_hz, len(const)) + args.rx_offset_hz
+    clock = rng.uniform(0.0, args.sat_offset_max_hz, len(const)) + rx_offset
     phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
     speed = inertial_speed_mps(const, start)
     orbit_error = OrbitError.draw(rng, speed, **sigma_orbit_m)
@@ -222,7 +302,7 @@ def run(args):
         raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
                          f"during the recording from {format_utc(start)}")
     channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb,
-                          phase_rad=phase, waveform=args.waveform)
+                          phase_rad=phase, waveform=args.waveform, rx_drift_hz_per_s=rx_drift)
 
     blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
     t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
@@ -248,6 +328,9 @@ def run(args):
     # peak keeps clipping ~1e-7.
     spread = np.hypot(channel.noise_sigma(), np.sqrt(channel.n_subcarriers * len(const))) / np.sqrt(2.0)
     full_scale = comb.n_tones * len(const) + 4.0 * spread
+    if fe.active:  # a receiver's quantiser: full scale at --headroom-db over the RMS (clipping possible)
+        full_scale = fe.full_scale(fe.rms_component(comb.n_tones * len(const) + channel.n_subcarriers * len(const),
+                                                    channel.cn0_ref_dbhz, fs))
     cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
     extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
              "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites, "leosop:waveform": args.waveform,
@@ -255,11 +338,15 @@ def run(args):
                                  f"satellite(s) "
                                  f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
              "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
-             "leosop:vel_enu_mps": [float(v) for v in vel_enu]}
+             "leosop:vel_enu_mps": [float(v) for v in vel_enu],
+             "leosop:rx_offset_hz": float(rx_offset),
+             "leosop:rx_drift_hz_per_s": float(rx_drift)}
+    if fe.active:
+        extra["leosop:front_end"] = dict(fe.metadata(), preset=args.front_end, full_scale=full_scale)
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
-        "datatype": args.datatype,
+        "datatype": datatype,
         "n_samples": int(lengths.sum()),
         "sample_rate_hz": fs,
         "start_utc": format_utc(start),
@@ -270,15 +357,20 @@ def run(args):
         "cn0_model": args.cn0_model,
         "waveform": args.waveform,
         "vel_enu_mps": [float(v) for v in vel_enu],
+        "rx_offset_hz": float(rx_offset),
+        "rx_drift_hz_per_s": float(rx_drift),
+        "front_end": extra.get("leosop:front_end"),
         "satellites": satellites,
     }
     # All outputs or none: the data file, then its metadata, then generate.json.
     paths = [out.with_suffix(".sigmf-data"), out] + ([Path(args.out) / "generate.json"] if args.out else [])
     with atomic_files(paths) as tmps:
-        write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng), sample_rate_hz=fs,
+        write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng, fe, full_scale,
+                                                       extra.get("leosop:front_end", {})),
+                          sample_rate_hz=fs,
                           center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
-                          datatype=args.datatype, annotations=annotations, global_extra=extra,
-                          ci16_full_scale=full_scale)
+                          datatype=datatype, annotations=annotations, global_extra=extra,
+                          full_scale=full_scale)
         if args.out:
             tmps[2].write_text(json_text(doc) + "\n")
     return doc

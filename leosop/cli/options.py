@@ -13,7 +13,8 @@ from ..timebase import format_utc, parse_utc, seconds_since
 #: SGP4 errors grow by kilometres per day from the epoch.
 STALE_DAYS = 14.0
 
-__all__ = ["STALE_DAYS", "finite_float", "parse_site", "parse_velocity", "parse_time", "positive", "mask_deg", "warn_stale"]
+__all__ = ["STALE_DAYS", "finite_float", "parse_site", "parse_velocity", "parse_time", "positive", "add_raw_options",
+           "open_recording", "mask_deg", "warn_stale"]
 
 
 def finite_float(text):
@@ -72,6 +73,31 @@ def positive(value, option):
     if not (math.isfinite(value) and value > 0):
         raise InputError(f"{option} {value:g}: must be a positive number")
     return value
+
+
+def add_raw_options(parser):
+    """The raw-file options of every command that reads IQ recordings (:func:`open_recording`)."""
+    raw = parser.add_argument_group("raw files (a gqrx file name supplies them)")
+    raw.add_argument("--dtype", choices=("cf32", "ci16", "ci8", "cu8"),
+                     help="sample format of a raw file (ci8: HackRF, cu8: RTL-SDR)")
+    raw.add_argument("--sample-rate-hz", type=float, help="sample rate of a raw file")
+    raw.add_argument("--center-hz", type=float, help="RF frequency of the comb's central tone (raw file)")
+    raw.add_argument("--start", metavar="ISO", help="UTC of the first sample (raw file)")
+
+
+def open_recording(args, path):
+    """``path`` as a SigMF recording, or as a raw file with :func:`add_raw_options`' values."""
+    from pathlib import Path
+
+    from ..signal.iq import open_raw, open_sigmf
+
+    path = Path(path)
+    if path.suffix in (".sigmf-meta", ".sigmf-data"):
+        return open_sigmf(path)
+    if args.center_hz is not None:
+        positive(args.center_hz, "--center-hz")
+    return open_raw(path, dtype=args.dtype, sample_rate_hz=args.sample_rate_hz, center_hz=args.center_hz,
+                    start=args.start)
 
 
 def mask_deg(value, option="--mask-deg"):

@@ -5,7 +5,7 @@ from scipy.optimize import isotonic_regression
 
 from .core import pyplot, save_png
 
-__all__ = ["plot_spectrogram"]
+__all__ = ["plot_spectrogram", "plot_survey"]
 
 
 #: Smallest vertical gap between two track labels, as a fraction of the frequency axis.
@@ -87,3 +87,48 @@ def _label_track_ends(ax, tracks, extent):
                     arrowprops=dict(arrowstyle="-", color=color, lw=0.6, shrinkA=0, shrinkB=0))
     ax.set_xlim(extent[0], extent[1] + 0.16 * span)
 
+
+
+def plot_survey(path, doc, *, title=""):
+    """Write a PNG: one block's spectrum (dB over the noise per bin) with ``leosop doctor``'s findings.
+
+    Marked: the DC offset, each interferer (red), the tones of the strongest
+    combs (green ticks on top), the rough or stated LO offset (dashed), the
+    noise (0 dB) and the findings as text.
+    """
+    spec = doc["spectrum"]
+    f_khz = spec["frequency_hz"] / 1e3
+    db = np.asarray(spec["power_db"])
+    # Peak-hold over groups of bins: a 0.1 s block has far more bins than a figure has pixels.
+    group = max(1, db.size // 4000)
+    m = db.size // group * group
+    f_plot = f_khz[:m].reshape(-1, group).mean(axis=1)
+    db_plot = db[:m].reshape(-1, group).max(axis=1)
+    fig, ax = pyplot().subplots(figsize=(9, 4.8), constrained_layout=True)
+    ax.plot(f_plot, db_plot, lw=0.5, color="0.3")
+    ax.axhline(0.0, color="0.5", lw=0.8, ls=":", label="noise")
+    top = float(np.max(db_plot)) + 3.0
+    comb = spec["comb"]
+    for k, c in enumerate(doc["strongest_combs"][:8]):
+        tones = (c["doppler_hz"] + comb.offsets_hz * (1.0 + c["doppler_hz"] / comb.carrier_hz)) / 1e3
+        ax.plot(tones, np.full(tones.size, top), "v", color="tab:green", ms=4,
+                label="tones of the strongest combs" if k == 0 else None)
+    for k, ln in enumerate(doc["interferers"]):
+        ax.axvline(ln["frequency_hz"] / 1e3, color="tab:red", lw=0.8, alpha=0.7,
+                   label="interferers (excised)" if k == 0 else None)
+    if doc["dc_dbhz"] is not None:
+        ax.axvline(0.0, color="tab:orange", lw=0.8, alpha=0.7, label=f"DC ({doc['dc_dbhz']:.0f} dB-Hz)")
+    lo = doc["lo_offset_hz_stated"] if doc["lo_offset_hz_stated"] is not None else doc["lo_offset_hz_rough"]
+    if lo is not None:
+        ax.axvline(lo / 1e3, color="tab:blue", ls="--", lw=1.0,
+                   label=f"LO offset, {'stated' if doc['lo_offset_hz_stated'] is not None else 'rough'}")
+    ax.set_xlabel("baseband frequency [kHz]")
+    ax.set_ylabel(f"power over the noise per bin [dB] (peak of {group})" if group > 1
+                  else "power over the noise per bin [dB]")
+    ax.set_ylim(-10.0, top + 5.0)
+    ax.legend(loc="upper left", fontsize=7)
+    text = "\n".join(doc["findings"][:6]) or "no front-end problem found"
+    ax.text(0.99, 0.02, text, transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+            bbox={"facecolor": "white", "alpha": 0.8, "lw": 0})
+    ax.set_title(title, fontsize=9)
+    save_png(fig, path)

@@ -285,7 +285,8 @@ class SiteChannel:
         C/N0 per tone of each satellite, constant or at every node (-inf: silent).
         Stored as (n_sats, n_nodes); linear in amplitude between nodes.
     clock_offset_hz : ndarray, (n_sats,)
-        Clock-induced frequency offset of each satellite plus the receiver's.
+        Clock-induced frequency offset of each satellite plus the receiver's
+        at t = 0.
     comb : PilotComb
     phase_rad : ndarray, (n_sats,)
         Carrier phase of each satellite at t = 0.
@@ -296,6 +297,11 @@ class SiteChannel:
         seeded by its index; frames aligned at transmission). In a narrow
         recording only the subcarriers that stay inside the band under
         +-300 kHz of Doppler are synthesised.
+    rx_drift_hz_per_s : float
+        Receiver LO frequency ramp, common to every satellite and tone: the
+        receiver's offset at t is its offset at 0 plus this times t (a
+        temperature drift of an LNB oscillator). It is part of every
+        satellite's Doppler and Doppler rate (DESIGN 4.2: clocks included).
     """
 
     t_nodes_s: np.ndarray
@@ -306,6 +312,7 @@ class SiteChannel:
     comb: PilotComb = field(default_factory=PilotComb)
     phase_rad: np.ndarray | None = None
     waveform: str = "tones"
+    rx_drift_hz_per_s: float = 0.0
 
     def __post_init__(self):
         if not np.all(np.isfinite(self.range_m)):
@@ -345,12 +352,13 @@ class SiteChannel:
 
     def doppler_hz(self, t_s):
         """Central-tone Doppler of each satellite, clocks included, (n_sats, n)."""
-        rr = self._range(np.asarray(t_s, dtype=float), 1)
-        return -rr * self.comb.carrier_hz / C_MPS + self.clock_offset_hz[:, None]
+        t = np.asarray(t_s, dtype=float)
+        rr = self._range(t, 1)
+        return -rr * self.comb.carrier_hz / C_MPS + self.clock_offset_hz[:, None] + self.rx_drift_hz_per_s * t
 
     def doppler_rate_hz_per_s(self, t_s):
         """Rate of the central-tone Doppler, (n_sats, n)."""
-        return -self._range(np.asarray(t_s, dtype=float), 2) * self.comb.carrier_hz / C_MPS
+        return -self._range(np.asarray(t_s, dtype=float), 2) * self.comb.carrier_hz / C_MPS + self.rx_drift_hz_per_s
 
     def amplitude(self, t_s):
         """Tone amplitude of each satellite (1 at the strongest node of all), (n_sats, n)."""
@@ -363,6 +371,11 @@ class SiteChannel:
         """C/N0 per tone of each satellite [dB-Hz], -inf when silent, (n_sats, n)."""
         with np.errstate(divide="ignore"):
             return self._cn0_ref + 20.0 * np.log10(self.amplitude(t_s))
+
+    @property
+    def cn0_ref_dbhz(self):
+        """C/N0 of a unit-amplitude tone: the strongest node's, the scale of :meth:`samples`."""
+        return self._cn0_ref
 
     def noise_sigma(self):
         """Complex noise standard deviation per sample (the strongest node has unit tones)."""
@@ -378,14 +391,14 @@ class SiteChannel:
         t = (start + np.arange(int(count))) / self.sample_rate_hz
         geom = -(self._range(t) - self._range0[:, None]) * self.comb.carrier_hz / C_MPS
         amp = self.amplitude(t)
+        drift_cycles = 0.5 * self.rx_drift_hz_per_s * t**2
         iq = np.zeros(t.size, dtype=complex)
         for i in np.flatnonzero(np.any(amp > 0, axis=1)):
+            clock_cycles = self.clock_offset_hz[i] * t + drift_cycles
             if self._ofdm is None:
-                iq += amp[i] * comb_baseband(self.comb, t, geom[i], self.clock_offset_hz[i] * t,
-                                             phase_rad=self.phase_rad[i])
+                iq += amp[i] * comb_baseband(self.comb, t, geom[i], clock_cycles, phase_rad=self.phase_rad[i])
             else:
-                iq += amp[i] * self._ofdm[i].samples(t, geom[i], self.clock_offset_hz[i] * t,
-                                                     phase_rad=self.phase_rad[i])
+                iq += amp[i] * self._ofdm[i].samples(t, geom[i], clock_cycles, phase_rad=self.phase_rad[i])
         if rng is not None:
             iq = add_noise(iq, self._cn0_ref, self.sample_rate_hz, rng)
         return iq

@@ -70,7 +70,7 @@ def _parabola_vertex(y_minus, y0, y_plus):
 
 
 def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
-               smear_hz=0.0, pfa=PFA):
+               smear_hz=0.0, pfa=PFA, centre_hz=0.0):
     """Find the comb's central tone in one spectrum.
 
     Parameters
@@ -81,6 +81,8 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     comb : PilotComb
     max_doppler_hz : float
         Search half-width for the central tone.
+    centre_hz : float
+        Centre of the search (a receiver LO offset, common to all satellites).
     smear_hz : float
         Expected spread of each tone over the block (|rate| * duration); the
         tone powers are summed over a window this wide.
@@ -105,14 +107,16 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     half_groups = int(np.ceil(spread_bins / g)) + (1 if g > 1 else 0)
     k_max = min(int(max_doppler_hz / df), n // 2 - 1)
     n_groups = int(np.ceil((2 * k_max + 1) / g)) + 2 * half_groups
-    c_lo = -k_max - half_groups * g  # first bin of the first candidate group of the central tone
+    c_lo = int(round(centre_hz / df)) - k_max - half_groups * g  # first bin of the first candidate group
     og_k = np.round(offsets_hz / df / g).astype(int)
     lo = c_lo + og_k.min() * g
     hi = lo + (n_groups + og_k.max() - og_k.min()) * g - 1
     if hi - lo + 1 >= n:
         raise InputError(f"the comb (+-{offsets_hz.max():.0f} Hz) with +-{max_doppler_hz:.0f} Hz of Doppler "
                          f"does not fit in the {sample_rate_hz:.0f} Hz sample rate")
-    if lo < 0:  # the band wraps around bin 0: |X| of both ends in place, then squared
+    if hi >= n or hi < 0:  # a search centred far off 0 Hz (an LO offset): wrapped indices
+        power = _abs2(spectrum[np.arange(lo, hi + 1) % n])
+    elif lo < 0:  # the band wraps around bin 0: |X| of both ends in place, then squared
         power = np.empty(hi - lo + 1, dtype=spectrum.real.dtype)
         np.abs(spectrum[lo:], out=power[:-lo])
         np.abs(spectrum[:hi + 1], out=power[-lo:])

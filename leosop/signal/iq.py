@@ -1,9 +1,17 @@
-"""IQ recordings: SigMF (cf32_le, ci16_le) and raw files, read in blocks.
+"""IQ recordings: SigMF (cf32_le, ci16_le, ci8, cu8) and raw files, read in blocks.
 
 Metadata go through the ``sigmf`` package (DESIGN 4.2); samples are
-memory-mapped with numpy, so a recording far larger than memory is only ever
-touched one block at a time. ci16 samples are scaled by 1/32768 (SigMF's
-convention); the estimators do not depend on the scale.
+read block by block, so a recording far larger than memory is only ever
+touched one block at a time. Integer samples are scaled to [-1, 1): ci16 by
+1/32768 (SigMF's convention), ci8 (HackRF, bladeRF) by 1/128, cu8 (RTL-SDR,
+unsigned, zero at 127.5) as (x - 127.5) / 128; the estimators do not depend on
+the scale. An 8-bit file declared with the wrong sign convention (a cu8 file
+as ci8 or the reverse) is refused when opened, by the spread of its first
+samples read both ways (:func:`check_8bit_sign`).
+
+Raw files take their parameters from options; a gqrx file name
+(``gqrx_YYYYMMDD_HHMMSS_FREQ_RATE_fc.raw``) supplies the start, the centre
+frequency and the sample rate (:func:`~.recorders.name_metadata`).
 """
 
 import hashlib
@@ -18,12 +26,20 @@ from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
 from ..fileio import atomic_files, check_input_file
 from ..timebase import format_utc, parse_utc
+from .recorders import check_8bit_sign, name_metadata
 
-__all__ = ["DATATYPES", "Capture", "Recording", "open_sigmf", "open_raw", "write_sigmf", "write_sigmf_files"]
+__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "open_sigmf", "open_raw", "quantise", "write_sigmf",
+           "write_sigmf_files"]
 
-#: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float).
-DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0)}
-_RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le"}
+#: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float, zero level in file units).
+DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0, 0.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0, 0.0),
+             "ci8": (np.dtype("i1"), 1.0 / 128.0, 0.0), "cu8": (np.dtype("u1"), 1.0 / 128.0, 127.5)}
+#: Largest component magnitude of each integer format after scaling (clipping sits there); cf32 has none.
+FULL_SCALE = {"ci16_le": 32767.0 / 32768.0, "ci8": 127.0 / 128.0, "cu8": 127.5 / 128.0}
+_RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le", "ci8": "ci8", "cu8": "cu8"}
+#: Fraction of clipped I/Q values in one read above which :meth:`Recording.read` warns (1e-4: a Gaussian
+#: front end with 4 sigmas of headroom clips 6e-5 of its values).
+CLIP_WARN_FRACTION = 1e-4
 #: Slack of the capture overlap check: writers may round core:datetime to the microsecond.
 _OVERLAP_TOL_S = 1e-6
 #: Version of the ``leosop:`` SigMF extension (``core:extensions``): the comb's
@@ -58,7 +74,7 @@ class Recording:
     ----------
     data_path : Path
     datatype : str
-        ``cf32_le`` or ``ci16_le``.
+        ``cf32_le``, ``ci16_le``, ``ci8`` or ``cu8``.
     sample_rate_hz : float
     center_hz : float or None
         Nominal RF frequency of the pilot comb's central tone (baseband 0 Hz).
@@ -74,6 +90,8 @@ class Recording:
     captures : list of Capture
         Contiguous stretches in sample order (snapshot recordings have one per
         snapshot); default one capture of the whole recording at ``start_utc``.
+    hw : str or None
+        The recorder's hardware as its metadata say (SigMF ``core:hw``).
     """
 
     data_path: Path
@@ -87,8 +105,10 @@ class Recording:
     annotations: list = field(default_factory=list)
     offset_bytes: int = 0
     captures: list = field(default_factory=list)
+    hw: str | None = None
 
     def __post_init__(self):
+        self._clip_warned = False
         if not self.captures:
             self.captures = [Capture(0, int(self.n_samples), self.start_utc)]
 
@@ -103,20 +123,46 @@ class Recording:
         ``check_finite``, for a caller that does not detect them itself)
         holds NaN/inf.
         """
-        if start < 0 or count < 0 or start + count > self.n_samples:
-            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
-                             f"{self.n_samples} samples of the recording")
-        comp, scale = DATATYPES[self.datatype]
-        mm = np.memmap(self.data_path, dtype=comp, mode="r", offset=self.offset_bytes + 2 * start * comp.itemsize,
-                       shape=(2 * count,))
-        raw = np.asarray(mm, dtype=np.float32)
-        del mm
+        raw = self.read_raw(start, count)
+        _, scale, zero = DATATYPES[self.datatype]
+        raw = np.asarray(raw, dtype=np.float32)
+        if zero:
+            raw -= np.float32(zero)
         if scale != 1.0:
-            raw *= scale
+            raw *= np.float32(scale)
+            self._check_clipping(raw, start)
         elif check_finite and not np.all(np.isfinite(raw)):
             bad = start + int(np.flatnonzero(~np.isfinite(raw))[0]) // 2
             raise InputError(f"{self.data_path}: sample {bad} is NaN or inf")
         return raw.view(np.complex64)
+
+    def _check_clipping(self, comps, start):
+        """Warn once per recording when more than :data:`CLIP_WARN_FRACTION` of a read's components sit
+        at the format's extremes (two reductions; the count only when an extreme is reached)."""
+        fs = np.float32(FULL_SCALE[self.datatype])
+        if self._clip_warned or comps.size == 0 or (comps.max() < fs and comps.min() > -fs - np.float32(1e-3)):
+            return
+        frac = np.count_nonzero(np.abs(comps) >= fs) / comps.size
+        if frac > CLIP_WARN_FRACTION:
+            self._clip_warned = True
+            warnings.warn(f"{self.data_path}: {100 * frac:.2g} % of the I/Q values of samples {start}.."
+                          f"{start + comps.size // 2 - 1} are clipped at the {self.datatype} full scale: lower "
+                          "the receiver's gain (clipping spreads every strong line into spurs and biases C/N0)",
+                          stacklevel=3)
+
+    def read_raw(self, start, count):
+        """Components of samples ``start .. start+count-1`` as stored (I, Q interleaved), shape (2 count,).
+
+        The file's own integers (or floats), for checks that need them. Read
+        with one system call (faster than a memory map, whose page faults
+        cost more than the copy; 8-bit files move half of ci16's bytes).
+        """
+        if start < 0 or count < 0 or start + count > self.n_samples:
+            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
+                             f"{self.n_samples} samples of the recording")
+        comp = DATATYPES[self.datatype][0]
+        return np.fromfile(self.data_path, dtype=comp, count=2 * count,
+                           offset=self.offset_bytes + 2 * start * comp.itemsize)
 
     def blocks(self, block_len):
         """Iterate ``(start, samples)`` over whole consecutive blocks of ``block_len`` samples."""
@@ -202,7 +248,7 @@ def open_sigmf(meta_path, *, verify=True):
     end = max((a.get("core:sample_start", 0) + a.get("core:sample_count", 0) for a in annotations), default=0)
     if end > n:
         raise InputError(f"{meta_path}: annotations reach sample {end} but {data_path.name} holds {n} (truncated?)")
-    return Recording(
+    rec = Recording(
         data_path=data_path,
         datatype=datatype,
         sample_rate_hz=fs,
@@ -214,7 +260,10 @@ def open_sigmf(meta_path, *, verify=True):
         annotations=annotations,
         offset_bytes=offset,
         captures=captures,
+        hw=info.get("core:hw"),
     )
+    check_8bit_sign(rec, f"{meta_path}: core:datatype")
+    return rec
 
 
 def _format_utc_ns(time_utc):
@@ -227,6 +276,7 @@ def _format_utc_ns(time_utc):
 _NUMBER = ((int, float), "a number")
 _GLOBAL_TYPES = {"core:datatype": ((str,), "a string"), "core:sample_rate": _NUMBER,
                  "core:num_channels": ((int,), "an integer"), "core:sha512": ((str,), "a hex string"),
+                 "core:hw": ((str,), "a string"),
                  "leosop:n_tones": ((int,), "an odd integer >= 1"), "leosop:tone_spacing_hz": _NUMBER}
 #: Types of the annotation keys read here (``leosop generate``'s truth).
 _ANNOTATION_TYPES = {"core:sample_start": ((int,), "an integer >= 0"), "core:sample_count": ((int,), "an integer >= 0"),
@@ -324,14 +374,17 @@ def _captures(raw_caps, n_samples, sample_rate_hz, meta_path):
     return out, (None if freqs[0] is None else float(freqs[0]))
 
 
-def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_bytes=0):
+def open_raw(path, *, dtype=None, sample_rate_hz=None, center_hz=None, start=None, offset_bytes=0):
     """Open a headerless interleaved I/Q file with explicit parameters.
+
+    Parameters not given are taken from the file name when a recorder's
+    naming is recognised (:func:`~.recorders.name_metadata`); given ones win.
 
     Parameters
     ----------
     path : str or Path
-    dtype : {"cf32", "ci16", "cf32_le", "ci16_le"}
-    sample_rate_hz : float
+    dtype : {"cf32", "ci16", "ci8", "cu8"} (or the SigMF names), optional
+    sample_rate_hz : float, optional
     center_hz : float, optional
     start : str or datetime64, optional
         UTC time of the first sample.
@@ -339,9 +392,16 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
         Bytes to skip before the first sample.
     """
     path = Path(path)
+    named = name_metadata(path)
+    dtype = dtype if dtype is not None else named.get("dtype")
+    sample_rate_hz = sample_rate_hz if sample_rate_hz is not None else named.get("sample_rate_hz")
+    center_hz = center_hz if center_hz is not None else named.get("center_hz")
+    start = start if start is not None else named.get("start_utc")
+    if dtype is None or sample_rate_hz is None:
+        raise InputError(f"{path}: a raw file needs --dtype and --sample-rate-hz (its name says neither)")
     datatype = _RAW_NAMES.get(dtype, dtype)
     if datatype not in DATATYPES:
-        raise InputError(f"--dtype {dtype!r}: expected cf32 or ci16")
+        raise InputError(f"--dtype {dtype!r}: expected one of {', '.join(_RAW_NAMES)}")
     fs = _check_rate(sample_rate_hz, "--sample-rate-hz")
     check_input_file(path, "raw IQ file")
     try:
@@ -349,7 +409,25 @@ def open_raw(path, *, dtype, sample_rate_hz, center_hz=None, start=None, offset_
     except ValueError as exc:
         raise InputError(str(exc)) from None
     n = _count_samples(path, datatype, offset_bytes, str(path))
-    return Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
+    rec = Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
+    check_8bit_sign(rec, f"{path}: --dtype")
+    return rec
+
+
+def quantise(iq, datatype, full_scale=1.0):
+    """Complex samples as the interleaved integers of ``datatype`` (clipped, rounded), shape (2 n,).
+
+    Amplitude ``full_scale`` maps to the format's :data:`FULL_SCALE` after
+    reading back, so ``read(quantise(x, d, a)) = x / a * FULL_SCALE[d]`` to
+    within half a level where not clipped.
+    """
+    comp, scale, zero = DATATYPES[datatype]
+    info = np.iinfo(comp)
+    c = np.asarray(iq)
+    inter = np.empty(2 * c.size)
+    inter[0::2], inter[1::2] = c.real, c.imag
+    levels = FULL_SCALE[datatype] / scale / full_scale
+    return np.clip(np.round(inter * levels + zero), info.min, info.max).astype(comp)
 
 
 def write_sigmf(meta_path, chunks, **options):
@@ -377,7 +455,7 @@ def write_sigmf(meta_path, chunks, **options):
 
 
 def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz, start_utc=None, datatype="cf32_le",
-                annotations=(), global_extra=None, ci16_full_scale=1.0, captures=None):
+                      annotations=(), global_extra=None, full_scale=1.0, captures=None):
     """Write the data and metadata of a SigMF recording to the files given (not atomic).
 
     For staged outputs (:func:`leosop.fileio.atomic_files`); most callers
@@ -393,12 +471,14 @@ def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz
     start_utc : datetime64 or str, optional
         UTC time of the first sample (``core:datetime``) of a single-capture
         recording; give either this or ``captures``.
-    datatype : {"cf32_le", "ci16_le"}
+    datatype : {"cf32_le", "ci16_le", "ci8", "cu8"}
     annotations : iterable of (sample_start, sample_count, dict)
     global_extra : dict, optional
         Extra global keys (``leosop:n_tones``, ``core:description``, ...).
-    ci16_full_scale : float
-        Amplitude mapped to 32767 for ci16 (values beyond are clipped).
+    full_scale : float
+        Amplitude mapped to the integer formats' largest value (32767 for
+        ci16, 127 for ci8, 255 for cu8); values beyond are clipped, values
+        are rounded to the nearest level (the reader's scaling inverted).
     captures : sequence of (int, datetime64 or str), optional
         ``(sample_start, UTC of that sample)`` of each capture, the first at
         sample 0, starts increasing (snapshot recordings: one per snapshot,
@@ -427,10 +507,7 @@ def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz
             if datatype == "cf32_le":
                 fh.write(c.astype("<c8").tobytes())
             else:
-                inter = np.empty(2 * c.size)
-                inter[0::2], inter[1::2] = c.real, c.imag
-                q = np.clip(np.round(inter * (32767.0 / ci16_full_scale)), -32768, 32767)
-                fh.write(q.astype("<i2").tobytes())
+                fh.write(quantise(c, datatype, full_scale).tobytes())
             n += c.size
     info = {sigmf.DATATYPE_KEY: datatype, sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
             sigmf.VERSION_KEY: sigmf.__specification__, sigmf.SHA512_KEY: _sha512(data_file)}

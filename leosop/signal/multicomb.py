@@ -84,6 +84,7 @@ from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, _abs2, _threshold, c
 from .fine import (_decimation, _dechirped_peak, _newton, _phasors, _rate_dpt, _rate_grid, _segments, _trimmed_sum,
                    _wrap)
 from .fft import fft
+from .frontend import clean_block
 from .pilot import PilotComb
 
 __all__ = ["Combs", "NonFiniteSamples", "find_combs"]
@@ -555,7 +556,7 @@ def _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s):
     np.subtract.at(spectrum, b % n, (weight * dft[np.arange(comb.n_tones)[:, None], b % n_seg_s]).astype(spectrum.dtype))
 
 
-def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa):
+def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz):
     """True when the block's spectrum, the combs ``found`` (Combs) removed, holds another comb.
 
     A detection within the coarse error (modulo the spacing) of a found comb
@@ -570,7 +571,8 @@ def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa):
     n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * n / fs)))
     for d, r, a in zip(found.doppler_hz, found.doppler_rate_hz_per_s, found.amplitudes):
         _subtract_spectrum(spectrum, comb, _Comb(d, None, doppler_hz=d, rate=r, amp=a), n, fs, n_seg_s)
-    coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa)
+    coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa,
+                        centre_hz=centre_hz)
     if not coarse.detected:
         return False
     dd = coarse.doppler_hz - found.doppler_hz
@@ -609,7 +611,7 @@ def _check(iq, fs, predicted_hz, predicted_rate):
 
 def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_doppler_hz=MAX_DOPPLER_HZ,
                max_rate_hz_per_s=MAX_RATE_HZ_PER_S, predicted_hz=None, predicted_rate_hz_per_s=None,
-               gate_hz=None, search=True, n_refine=2, batch=True):
+               gate_hz=None, search=True, n_refine=2, batch=True, lo_offset_hz=0.0, clean=True):
     """Doppler, rate and C/N0 of every pilot comb in one block.
 
     Parameters
@@ -642,6 +644,14 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     batch : bool
         Tracking with predicted rates: fit all predictions at once (default)
         rather than one at a time (see module docstring).
+    lo_offset_hz : float
+        The receiver's LO offset, common to all satellites (as well as it is
+        known): the search is centred there (``max_doppler_hz`` either side)
+        and the tone model scales only the Doppler beyond it
+        (:meth:`~.pilot.PilotComb.through_lo`). Reported Dopplers include it.
+    clean : bool
+        Remove the block's DC offset, IQ imbalance and CW / narrowband
+        interferers first (:func:`~.frontend.clean_block`; one FFT more).
 
     Returns
     -------
@@ -653,6 +663,13 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     iq, pred, pred_rate = _check(iq, fs, predicted_hz, predicted_rate_hz_per_s)
     if not np.all(np.isfinite(pred)):
         raise InputError("predicted_hz contains NaN or inf")
+    if clean:
+        if not np.isfinite(iq.sum()):
+            raise NonFiniteSamples("IQ samples contain NaN or inf")
+        iq, _ = clean_block(iq, fs, comb)
+    lo = float(lo_offset_hz)
+    if lo:
+        comb = comb.through_lo(lo)
     n = iq.shape[-1]
     dur = n / fs
     df = fs / n
@@ -665,9 +682,9 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         # another comb, which is rare: a search block then costs little more
         # than a tracking one.
         kw = dict(comb=comb, max_combs=max_combs, pfa=pfa, max_doppler_hz=max_doppler_hz,
-                  max_rate_hz_per_s=max_rate_hz_per_s, gate_hz=gate_hz, n_refine=n_refine)
+                  max_rate_hz_per_s=max_rate_hz_per_s, gate_hz=gate_hz, n_refine=n_refine, clean=False)
         tracked = find_combs(iq, fs, predicted_hz=pred, predicted_rate_hz_per_s=pred_rate, search=False, **kw)
-        if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa):
+        if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa, lo):
             return tracked
     tracking = pred_rate is not None and pred.size > 0 and not search
     if tracking:
@@ -722,7 +739,8 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
             _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s)
         residues = 0
         while len(combs) < max_combs:
-            coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa)
+            coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa,
+                                centre_hz=lo)
             if not coarse.detected:
                 break
             c = fit_new(coarse.doppler_hz, None, -1)

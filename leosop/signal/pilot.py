@@ -49,6 +49,21 @@ class PilotComb:
             if value is not None and len(value) != self.n_tones:
                 raise InputError(f"{name} has {len(value)} values, expected n_tones={self.n_tones}")
 
+    def through_lo(self, lo_offset_hz):
+        """The comb as a receiver whose LO is ``lo_offset_hz`` off sees it, for the estimators' tone model.
+
+        An LO offset moves every tone alike while Doppler scales with each
+        tone's RF frequency; with ``doppler_hz`` including the offset (DESIGN
+        4.2) tone k sits at ``k sp (1 - lo / f_c) + s_k doppler_hz``: the tones
+        of a comb of carrier ``f_c - lo`` and spacing ``sp (1 - lo / f_c)``
+        (same ``sp / f_c``). Ignoring a 620 kHz offset misplaces the edge
+        tones of the Starlink comb by 9.6 Hz, a bin of a 0.1 s block.
+        """
+        factor = 1.0 - float(lo_offset_hz) / float(self.carrier_hz)
+        return PilotComb(carrier_hz=self.carrier_hz * factor, n_tones=self.n_tones,
+                         tone_spacing_hz=self.tone_spacing_hz * factor, amplitudes=self.amplitudes,
+                         phases_rad=self.phases_rad)
+
     @property
     def tone_index(self):
         """Tone numbers k, shape (n_tones,), central tone 0."""

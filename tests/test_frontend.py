@@ -1,0 +1,196 @@
+"""Front-end impairments: each generated (leosop generate / FrontEnd), then detected and measured against the
+generated truth; the comb search through them; leosop doctor end to end."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from leosop.cli import main
+from leosop.signal.frontend import FrontEnd, clean_block, image_rejection_db, wiener_doppler_sigma_hz
+from leosop.signal.iq import open_sigmf
+from leosop.signal.multicomb import find_combs
+from leosop.signal.pilot import PilotComb, add_noise
+from leosop.signal.channel import doppler_blocks
+from leosop.signal.survey import survey
+
+FS = 2.5e6
+SAT = "71585"  # above 40 deg from Xi'an at the default start
+
+
+def _generate(path, *options, duration_s=0.3, sats=(SAT,)):
+    assert main(["generate", "-o", str(path), "--sat", *sats, "--duration-s", str(duration_s),
+                 "--sample-rate-hz", str(FS), "--cn0-model", "constant", "--cn0-dbhz", "45", "--seed", "5",
+                 *options]) == 0
+    return open_sigmf(path)
+
+
+@pytest.fixture(scope="module")
+def consumer(tmp_path_factory):
+    """Three satellites through the consumer preset (ci8, LO 620 kHz off drifting 25 Hz/s, ...)."""
+    path = tmp_path_factory.mktemp("fe") / "consumer.sigmf-meta"
+    return _generate(path, "--front-end", "consumer", sats=(SAT, "70524", "71563"))
+
+
+def test_consumer_preset_truth(consumer, capsys):
+    capsys.readouterr()
+    meta = json.loads(consumer.data_path.with_suffix(".sigmf-meta").read_text())["global"]
+    fe = meta["leosop:front_end"]
+    assert consumer.datatype == "ci8" and fe["preset"] == "consumer" and fe["bits"] == 8
+    assert meta["leosop:rx_offset_hz"] == 620e3 and meta["leosop:rx_drift_hz_per_s"] == 25.0
+    # Closed form of the image rejection of 0.5 dB / 2 deg: |K1|^2/|K2|^2 with K = (1 +- g e^-+j phi)/2.
+    g, phi = 10 ** (0.5 / 20), np.radians(2.0)
+    irr = 10 * np.log10(abs(1 + g * np.exp(-1j * phi)) ** 2 / abs(1 - g * np.exp(1j * phi)) ** 2)
+    assert fe["image_rejection_db"] == pytest.approx(irr, abs=1e-9)
+
+
+def test_each_impairment_measured(consumer):
+    """DC, IQ imbalance and the CW line of the preset, measured in every block against the truth."""
+    n = int(0.1 * FS)
+    for start in (0, n, 2 * n):
+        _, c = clean_block(consumer.read(start, n), FS, PilotComb())
+        # DC and the CW line: 60 and 70 dB-Hz lines over 0.1 s are 50-60 dB above the noise of a bin:
+        # their powers come out within 0.5 dB (the noise density from the spectrum's median: ~0.05 dB).
+        assert c.dc_dbhz == pytest.approx(60.0, abs=0.5)
+        assert len(c.lines) == 1
+        assert c.lines[0].frequency_hz == pytest.approx(700e3, abs=FS / n)  # within a bin
+        assert c.lines[0].power_dbhz == pytest.approx(70.0, abs=0.5)
+        # IQ moments over 2.5e5 samples: sigma 0.017 dB and 0.11 deg (1/sqrt(n)); 5 sigma.
+        assert c.iq_corrected and c.iq_gain_db == pytest.approx(0.5, abs=0.09)
+        assert c.iq_phase_deg == pytest.approx(2.0, abs=0.6)
+
+
+def test_combs_found_through_the_consumer_front_end(consumer):
+    """Every satellite found at its truth once the LO offset is stated; nothing else (no image, no CW)."""
+    n = int(0.1 * FS)
+    for start in (0, n, 2 * n):
+        truth = np.array([a["leosop:doppler_hz"] for a in consumer.annotations if a["core:sample_start"] == start])
+        found = find_combs(consumer.read(start, n), FS, lo_offset_hz=620e3)
+        assert found.n_found == truth.size
+        err = np.sort(found.doppler_hz) - np.sort(truth)
+        # The 0.01 Hz random-walk LO moves every comb alike by ~0.14 Hz rms per 0.1 s block
+        # (wiener_doppler_sigma_hz); the thermal sigma is ~0.03 Hz. The common part is 5 sigma within 0.7 Hz,
+        # the differences between combs at the thermal level (5 sigma of a difference: 0.25 Hz).
+        assert abs(np.mean(err)) < 5 * float(wiener_doppler_sigma_hz(0.01, 0.1))
+        assert np.ptp(err) < 0.25
+
+
+def test_without_cleaning_the_front_end_breaks_the_search(consumer):
+    """The reason for cleaning: the raw block's DC, CW line and images give spurious or missed combs."""
+    n = int(0.1 * FS)
+    truth = np.array([a["leosop:doppler_hz"] for a in consumer.annotations if a["core:sample_start"] == 0])
+    raw = find_combs(consumer.read(0, n), FS, lo_offset_hz=620e3, clean=False)
+    matched = [np.min(np.abs(raw.doppler_hz - d)) < 1.0 for d in truth] if raw.n_found else [False]
+    assert raw.n_found != truth.size or not all(matched)
+
+
+def test_image_of_a_strong_comb_is_not_a_satellite():
+    """A 60 dB-Hz comb through a 2 dB / 10 deg imbalance (image rejection 17 dB): its image, a 43 dB-Hz comb
+    at minus its Doppler, is found without cleaning and not with it."""
+    rng = np.random.default_rng(3)
+    n = int(0.1 * FS)
+    x = add_noise(doppler_blocks(FS, n, 123_456.0, -2000.0, None, rng=rng, dtype=np.complex128)[0], 60.0, FS, rng)
+    fe = FrontEnd(iq_gain_db=2.0, iq_phase_deg=10.0)
+    y = fe.apply(x, np.arange(n) / FS, FS, 60.0, rng).astype(np.complex64)
+    assert float(image_rejection_db(2.0, 10.0)) == pytest.approx(17.0, abs=0.5)
+    raw = find_combs(y, FS, clean=False)
+    assert np.any(np.abs(raw.doppler_hz + 123_456.0) < 5.0)  # the image, at minus the Doppler
+    cleaned = find_combs(y, FS)
+    assert cleaned.n_found == 1 and cleaned.doppler_hz[0] == pytest.approx(123_456.0, abs=0.05)
+
+
+def test_wiener_phase_noise_sigma_closed_form():
+    """The LS frequency of blocks of a tone under a Wiener LO phase spreads as sqrt(3 B / (5 pi T))."""
+    fs, block_s, linewidth = 2000.0, 0.1, 1.0
+    n_blocks = 400
+    n = int(fs * block_s)
+    fe = FrontEnd(phase_noise_linewidth_hz=linewidth)
+    t = np.arange(n * n_blocks) / fs
+    phase = np.unwrap(np.angle(fe.apply(np.ones(t.size), t, fs, 100.0, np.random.default_rng(7))))
+    tau = t[:n] - t[:n].mean()
+    slopes = (phase.reshape(n_blocks, n) @ tau) / (tau @ tau) / (2 * np.pi)
+    # 400 blocks: the sample sigma is good to ~3.5 % (1/sqrt(2 n)); 12 % is 3.4 of those.
+    assert np.std(slopes) == pytest.approx(float(wiener_doppler_sigma_hz(linewidth, block_s)), rel=0.12)
+
+
+def test_pll_floor_phase_variance():
+    """The bounded part: phase variance pi * corner * 10^(dBc/10) (a first-order low-pass of flat level)."""
+    fs = 1e6
+    fe = FrontEnd(phase_noise_dbc_hz=-60.0, phase_noise_corner_hz=10e3)
+    t = np.arange(400_000) / fs
+    phase = np.angle(fe.apply(np.ones(t.size), t, fs, 100.0, np.random.default_rng(8)))
+    # 400k samples, correlation time 16 us: ~25 000 independent values, the variance good to ~1 %; 5 %.
+    assert np.var(phase) == pytest.approx(np.pi * 10e3 * 1e-6, rel=0.05)
+
+
+def test_agc_steps_leave_cn0_alone(tmp_path):
+    """Gains stepping by up to +-10 dB between snapshots: each block is estimated on its own scale.
+    (24 dB of headroom keeps a +10 dB step from clipping; at -10 dB the 8-bit step is 0.4 of the RMS, its
+    quantisation noise 19 dB below the thermal noise.)"""
+    rec = _generate(tmp_path / "agc.sigmf-meta", "--snapshot-s", "0.1", "--period-s", "0.5", "--agc-step-db", "10",
+                    "--bits", "8", "--headroom-db", "24", duration_s=2.0)
+    steps = json.loads(rec.data_path.with_suffix(".sigmf-meta").read_text())["global"]["leosop:front_end"]["agc_steps"]
+    gains = np.array([s["gain_db"] for s in steps])
+    assert gains.size == 4 and np.ptp(gains) > 3.0  # the draws really step
+    levels = []
+    for cap, gain in zip(rec.captures, gains):
+        x = rec.read(cap.sample_start, cap.n_samples)
+        found = find_combs(x, FS)
+        truth = [a for a in rec.annotations if a["core:sample_start"] == cap.sample_start][0]
+        assert found.n_found == 1
+        # C/N0 of a 45 dB-Hz comb over 0.1 s: spread ~0.1 dB; the quantisation noise at most ~0.05 dB.
+        assert found.cn0_dbhz[0] == pytest.approx(truth["leosop:cn0_dbhz"], abs=0.5)
+        levels.append(10 * np.log10(np.mean(np.abs(x) ** 2)))
+    # The recorded level follows the drawn gains (the noise dominates the power): within 0.2 dB
+    # (8-bit rounding, and the noise power of 2.5e5 samples is good to 0.01 dB).
+    assert np.allclose(np.diff(levels), np.diff(gains), atol=0.2)
+
+
+@pytest.mark.parametrize("headroom_db, clip_expected", [(3.0, 0.1585), (12.0, 6.3e-5)])
+def test_clipping_fraction(tmp_path, headroom_db, clip_expected):
+    """Full scale at the headroom over the RMS: Gaussian components clip at 2 Q(10^(h/20)) (the noise dominates)."""
+    rec = _generate(tmp_path / "c.sigmf-meta", "--bits", "8", "--headroom-db", str(headroom_db), duration_s=0.2)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        doc = survey(rec, lo_offset_hz=0.0, n_blocks=2)
+    # The reader warns once when a read clips (a Gaussian at 12 dB clips 6e-5: below its 1e-4 threshold).
+    assert len([w for w in caught if "clipped" in str(w.message)]) == (1 if headroom_db < 6 else 0)
+    # 2e5 samples x 2 components per block: binomial spread 1e-3 at 16 %, 1.3e-5 at 6e-5.
+    assert doc["clipped_fraction"] == pytest.approx(clip_expected, abs=max(0.01, 5 * np.sqrt(clip_expected / 4e5)))
+    assert (any("clipped" in f for f in doc["findings"])) == (headroom_db < 6)
+
+
+def test_quantisation_bits_cost(tmp_path):
+    """8, 12 and 16 bits at 12 dB headroom: the comb's C/N0 as measured in cf32, within 0.3 dB."""
+    ref = None
+    for bits in (None, 16, 12, 8):
+        rec = _generate(tmp_path / f"b{bits}.sigmf-meta", *(["--bits", str(bits)] if bits else []), duration_s=0.1)
+        found = find_combs(rec.read(0, rec.n_samples), FS)
+        assert found.n_found == 1
+        ref = found.cn0_dbhz[0] if ref is None else ref
+        # 8 bits at 12 dB headroom: quantisation noise step^2/12 is ~-29 dB below the thermal noise.
+        assert found.cn0_dbhz[0] == pytest.approx(ref, abs=0.3)
+
+
+def test_doctor_on_the_consumer_preset(consumer, tmp_path, capsys):
+    capsys.readouterr()
+    status = main(["doctor", str(consumer.data_path.with_suffix(".sigmf-meta")), "--json", "--blocks", "3",
+                   "--out", str(tmp_path / "doc")])
+    out = capsys.readouterr().out
+    assert status == 0
+    doc = json.loads(out)
+    assert doc["datatype"] == "ci8" and doc["status"] == "warnings"
+    assert doc["dc_dbhz"] == pytest.approx(60.0, abs=0.5)
+    assert doc["iq_gain_db"] == pytest.approx(0.5, abs=0.09) and doc["iq_phase_deg"] == pytest.approx(2.0, abs=0.6)
+    assert [round(ln["frequency_hz"]) for ln in doc["interferers"]] == [700_000]
+    assert doc["usable_satellites"] == 3 and doc["clipped_fraction"] == 0.0
+    # Three satellites' geometric Dopplers spread over ~+-200 kHz: their median is within 250 kHz of the LO.
+    assert abs(doc["lo_offset_hz_rough"] - 620e3) < 250e3
+    assert {p.name for p in (tmp_path / "doc").iterdir()} == {"doctor.json", "spectrum.png"}
+
+
+def test_band_cannot_hold_the_combs_at_the_stated_offset(consumer, capsys):
+    status = main(["doctor", str(consumer.data_path.with_suffix(".sigmf-meta")), "--lo-offset-hz", "1.0e6"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "beyond the recording's band" in err
