@@ -74,11 +74,11 @@ def test_track_of_a_satellite_missing_from_the_snapshot_and_a_spurious_track_are
 
 def test_interpolated_apparent_states_match_sgp4_with_light_time(walker):
     from leosop.positioning.measurements import sv_states_from_tle
-    from leosop.replay.identify import _Ephemeris
+    from leosop.replay.ephemeris import Ephemeris
 
     rx = geodetic_to_ecef(0.6, 1.9, 300.0)
     t0 = walker.epochs_utc[0] + np.timedelta64(3, "h")
-    eph = _Ephemeris(walker, t0, 100.0)
+    eph = Ephemeris(walker, t0, 100.0)
     sats = np.arange(0, len(walker), 397)
     t_s = np.linspace(3.0, 97.0, len(sats))  # off the 10 s nodes
     want_p, want_v, _ = sv_states_from_tle(walker, walker.sat_ids[sats], t0 + (t_s * 1e9).astype("timedelta64[ns]"),
