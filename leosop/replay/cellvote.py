@@ -142,9 +142,9 @@ class CellSearch:
         dt_max = o["along_track_max_m"] / SPEED_SV_MPS + _LIGHT_TIME_MAX_S
         s_loc = self.local[s]
         dm, gm = doppler_model(self.ref_pos[k, s_loc, 0, 1], self.ref_vel[k, s_loc, 0, 1], cells[c], self.k)
-        near = np.abs(f_ref[:, 1] - dm) <= (o["clock_search_hz"] + reach * np.linalg.norm(gm, axis=1)
+        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.linalg.norm(gm, axis=1)
                                             + dt_max * _RATE_MAX_HZ_PER_S + o["sat_offset_max_hz"]
-                                            + o["clock_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
+                                            + o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
         c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
         pos_rx = cells[c][:, None, :]
         p, v = self.ref_pos[k, s_loc[near]], self.ref_vel[k, s_loc[near]]  # (m, 3 offsets, 3 ref times, 3)
@@ -156,7 +156,7 @@ class CellSearch:
         feat_grad = np.linalg.norm(feat_jac, axis=-1)
         feat_rate = np.abs(rate @ FEATURES.T) * scale
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
-        drift = o["clock_drift_max_hz_per_s"]
+        drift = o["lo_drift_max_hz_per_s"]
         t_mid = t_ref[:, 1]
         extra = np.stack([o["sat_offset_max_hz"] + drift * np.abs(t_mid - self.t_c), np.full_like(span, drift),
                           np.zeros_like(span)], axis=1)
@@ -169,7 +169,7 @@ class CellSearch:
         # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
         # and the curvature of the Doppler across the cell (~ radius^2 / range, range >= 550 km, over 2 sigma).
         sig_fit = 0.5 * tol_other + ((radius_m / 3e5) * radius_m + 0.5 * o["cross_track_max_m"]) * feat_grad
-        b_max = o["clock_search_hz"]
+        b_max = o["lo_offset_max_hz"]
         ok = (np.abs(feat[:, 1]) <= tol[:, 1]) & (np.abs(feat[:, 2]) <= tol[:, 2]) & \
              (np.abs(feat[:, 0]) <= b_max + tol[:, 0])
         c, k, s, feat, tol = c[ok], k[ok], s[ok], feat[ok], tol[ok]
@@ -217,8 +217,8 @@ class CellSearch:
         A[:, 0, 4] = t_mid - self.t_c
         A[:, 1, 4] = 1.0
         w = 1.0 / sig**2
-        prior = np.array([radius_m, radius_m, o["alt_tol_m"], o["clock_search_hz"],
-                          o["clock_drift_max_hz_per_s"]]) ** -2.0
+        prior = np.array([radius_m, radius_m, o["alt_tol_m"], o["lo_offset_max_hz"],
+                          o["lo_drift_max_hz_per_s"]]) ** -2.0
         zero = np.zeros(n_cells)
         x0 = np.stack([zero, zero, zero, clock, zero], axis=1)
         key = c * n_tr + k

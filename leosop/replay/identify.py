@@ -1,10 +1,15 @@
 """Which satellite is this comb? Doppler tracks identified against a TLE snapshot.
 
 The unknowns are the receiver position (a prior within ~100 km, or none),
-the receiver clock offset and drift (common to all tracks), each
-satellite's own small frequency offset and each element set's along-track
-error (a time offset of its predicted Doppler curve). The search runs in
-three stages:
+the receiver's common frequency offset and its drift (the LNB's local
+oscillator error, kHz to MHz, and the SDR's clock: common to all tracks),
+each satellite's own small frequency offset and each element set's
+along-track error (a time offset of its predicted Doppler curve). The
+common offset and drift are nuisance parameters searched over
+``+-lo_offset_max_hz`` and ``+-lo_drift_max_hz_per_s``: the differences
+between tracks' Doppler curves do not depend on the offset, nor (to first
+order) on the drift, so the search costs about as much at 3 MHz as at
+25 kHz. The search runs in three stages:
 
 1. **Cell vote.** The receiver position is searched on cells (a local grid
    round the prior, or a Fibonacci grid of the whole Earth without one).
@@ -28,7 +33,10 @@ three stages:
    best is accepted only when its chi-square is consistent with the
    track's sigma (inflated for model and position errors) and clearly below
    the runner-up's; else ``sat_id`` is None. A satellite claimed by two
-   tracks goes to the better one.
+   tracks goes to the better one. Each track gets a status (``ok`` only
+   when the identity is vouched for, :data:`~leosop.replay.match.ID_STATUSES`):
+   a track that another solution (another cell, another offset) identifies
+   differently under the same tests is ``conflicting_solution``.
 
 Satellite states come from one SGP4 propagation of every satellite on a
 coarse time grid, interpolated by cubic Hermite polynomials (position and
@@ -52,9 +60,16 @@ from .cellvote import CellSearch, fibonacci_cells, grid_around
 from .ephemeris import Ephemeris
 from .features import prepare_track
 from .jointfit import solve
-from .match import accept, match
+from .match import ID_STATUSES, accept, match
 
-__all__ = ["Identification", "identify_tracks"]
+__all__ = ["ID_STATUSES", "LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "Identification", "identify_tracks"]
+
+#: Default bound of the receiver's common offset searched [Hz]: PLL LNBs are within ~+-25 ppm of
+#: 10.6-10.75 GHz at the worst (+-270 kHz); typical ones within a few ppm (tens of kHz). Free-running
+#: (DRO) LNBs reach +-1-3 MHz: search them with ``lo_offset_max_hz=3e6``.
+LO_OFFSET_MAX_HZ = 100e3
+#: Default bound of the common offset's drift [Hz/s]: an LNB warming up drifts tens of Hz/s.
+LO_DRIFT_MAX_HZ_PER_S = 50.0
 
 
 @dataclass
@@ -64,7 +79,9 @@ class Identification:
     Attributes
     ----------
     sat_id : list of (str or None), (n_tracks,)
-        NORAD number per track (None: no satellite explains it clearly).
+        NORAD number per track (None unless ``status`` is ``ok``).
+    status : list of str, (n_tracks,)
+        ``ok`` when the identity is vouched for, else why not (:data:`ID_STATUSES`).
     match_rms_hz : ndarray, (n_tracks,)
         RMS Doppler residual of the identified satellite (NaN for None).
     margin : ndarray, (n_tracks,)
@@ -74,26 +91,36 @@ class Identification:
     pos_ecef_m : ndarray, (3,)
         Receiver position of the search (a start for the fix); NaN if none.
     pos_cov_m2 : ndarray, (3, 3)
-    clock_offset_hz, clock_drift_hz_per_s : float
-        Receiver clock (Doppler of the central tone) at ``t_ref_utc``.
+    lo_offset_hz, lo_drift_hz_per_s : float
+        The receiver's common frequency offset (Doppler of the central tone;
+        with the satellites' mean offset, which nothing separates from it)
+        at ``t_ref_utc``, and its drift; NaN without a solution.
+    lo_offset_sigma_hz, lo_drift_sigma_hz_per_s : float
+        Their 1-sigma from the joint least squares.
     t_ref_utc : numpy.datetime64
+    lo_offset_max_hz, lo_drift_max_hz_per_s : float
+        The bounds searched.
     n_candidates : int
         Satellites considered.
     elapsed_s : float
     """
 
     sat_id: list
+    status: list
     match_rms_hz: np.ndarray
     margin: np.ndarray
     runner_up_id: list
     pos_ecef_m: np.ndarray
     pos_cov_m2: np.ndarray
-    clock_offset_hz: float
-    clock_drift_hz_per_s: float
+    lo_offset_hz: float
+    lo_offset_sigma_hz: float
+    lo_drift_hz_per_s: float
+    lo_drift_sigma_hz_per_s: float
     t_ref_utc: np.datetime64
-    n_candidates: int
-    elapsed_s: float
-
+    lo_offset_max_hz: float
+    lo_drift_max_hz_per_s: float
+    n_candidates: int = 0
+    elapsed_s: float = 0.0
 
 
 #: Options of :func:`identify_tracks` (``**options``) and their defaults:
@@ -101,27 +128,26 @@ class Identification:
 #: (the position is not known yet); ``cross_track_max_m``, ``along_track_max_m`` bound the element
 #: errors, ``along_track_sigma_m`` is the prior of the fitted time offsets; ``alt_tol_m`` the
 #: height error of the cells, ``alt_sigma_m`` its prior in the least squares; ``sat_offset_max_hz``
-#: / ``sat_offset_sigma_hz`` bound and weigh the satellites' own offsets;
-#: ``clock_drift_max_hz_per_s`` bounds the receiver drift; ``model_sigma_hz`` is added to every
-#: track's sigma; ``track_gate`` (normalised RMS) drops a track from the least squares;
-#: ``false_alarm`` sets the chi-square acceptance, ``min_margin`` the chi-square lead over the
-#: runner-up; ``pos_sigma_cap_hz`` caps the fix-uncertainty inflation; ``min_identified`` is the
+#: / ``sat_offset_sigma_hz`` bound and weigh the satellites' own offsets; ``model_sigma_hz`` is
+#: added to every track's sigma; ``track_gate`` (normalised RMS) drops a track from the least
+#: squares; ``false_alarm`` sets the chi-square acceptance, ``min_margin`` the chi-square lead over
+#: the runner-up; ``pos_sigma_cap_hz`` caps the fix-uncertainty inflation; ``min_identified`` is the
 #: fewest identities a solution must give; ``final_spacing_m`` ends the cell refinement and
 #: ``n_final`` cells go on to the least squares; ``rx_speed_sigma_mps`` > 0 makes the receiver
 #: move at a constant velocity estimated in the least squares (horizontal prior sigma; vertical
 #: ``rx_climb_sigma_mps``), 0 holds it static.
-_DEFAULTS = dict(
-    mask_slack_deg=5.0, id_mask_slack_deg=2.0, cross_track_max_m=300.0, alt_tol_m=1000.0,
-    along_track_max_m=1500.0, along_track_sigma_m=600.0, sat_offset_max_hz=30.0, sat_offset_sigma_hz=8.0,
-    clock_drift_max_hz_per_s=5.0, model_sigma_hz=1.0, alt_sigma_m=300.0, track_gate=4.0, false_alarm=1e-4,
-    min_margin=25.0, final_spacing_m=1500.0, n_final=3, pos_sigma_cap_hz=3.0, min_identified=3,
-    rx_speed_sigma_mps=0.0, rx_climb_sigma_mps=2.0,
-)
+_DEFAULTS = {
+    "mask_slack_deg": 5.0, "id_mask_slack_deg": 2.0, "cross_track_max_m": 300.0, "alt_tol_m": 1000.0,
+    "along_track_max_m": 1500.0, "along_track_sigma_m": 600.0, "sat_offset_max_hz": 30.0,
+    "sat_offset_sigma_hz": 8.0, "model_sigma_hz": 1.0, "alt_sigma_m": 300.0, "track_gate": 4.0,
+    "false_alarm": 1e-4, "min_margin": 25.0, "final_spacing_m": 1500.0, "n_final": 3, "pos_sigma_cap_hz": 3.0,
+    "min_identified": 3, "rx_speed_sigma_mps": 0.0, "rx_climb_sigma_mps": 2.0,
+}
 
 
 def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ,
-                    clock_search_hz=25e3, prior_radius_m=150e3, alt_m=None, global_spacing_m=150e3,
-                    keep_cells=None, **options):
+                    lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
+                    prior_radius_m=150e3, alt_m=None, global_spacing_m=150e3, keep_cells=None, **options):
     """Identify Doppler tracks against element sets; sets ``track.sat_id`` and ``track.match_rms_hz`` in place.
 
     Parameters
@@ -136,8 +162,10 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
         Elevation mask of the candidates.
     carrier_hz : float
         Carrier of ``doppler_hz``.
-    clock_search_hz : float
-        Largest receiver clock offset searched, +-.
+    lo_offset_max_hz : float
+        Largest common receiver offset searched, +- (:data:`LO_OFFSET_MAX_HZ`).
+    lo_drift_max_hz_per_s : float
+        Largest drift of that offset, +- (:data:`LO_DRIFT_MAX_HZ_PER_S`).
     prior_radius_m : float
         Horizontal radius searched round the prior.
     alt_m : float, optional
@@ -152,92 +180,119 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
     Returns
     -------
     Identification
-        Also written into the tracks: ``sat_id`` (None when unidentified) and
-        ``match_rms_hz`` (None when unidentified).
+        Also written into the tracks: ``sat_id`` (None unless vouched for),
+        ``match_rms_hz`` (None when unidentified) and ``id_status``.
 
     Notes
     -----
     With a prior: ~1 s for 5-8 tracks against 10,138 satellites. Without:
     the whole Earth on ~23,000 cells of 150 km first, ~1 min (see
-    ``tools/bench_identify.py``).
+    ``tools/bench_identify.py``); the same at a 3 MHz offset bound
+    (``tools/bench_lo_offset.py``).
     """
     start = time.perf_counter()
-    unknown = set(options) - set(_DEFAULTS)
-    if unknown:
-        raise InputError(f"identify_tracks: unknown option(s) {', '.join(sorted(unknown))}")
-    if not clock_search_hz > 0:
-        raise InputError(f"clock_search_hz={clock_search_hz!r}: expected a positive number")
-    opts = {**_DEFAULTS, **options, "mask_deg": float(mask_deg), "clock_search_hz": float(clock_search_hz)}
+    opts = _options(options, mask_deg, lo_offset_max_hz, lo_drift_max_hz_per_s)
     n_tr = len(tracks)
-    nan3 = np.full(3, np.nan)
     t_all = np.concatenate([np.asarray(tr.time_utc, "datetime64[ns]") for tr in tracks]) if tracks else None
     t0 = t_all.min() if tracks else np.datetime64("NaT", "ns")
     prepared = [prepare_track(tr, t0) for tr in tracks]
     live = [k for k, p in enumerate(prepared) if p is not None]
-    result = Identification([None] * n_tr, np.full(n_tr, np.nan), np.full(n_tr, np.nan), [None] * n_tr, nan3,
-                            np.full((3, 3), np.nan), np.nan, np.nan, t0, 0, 0.0)
-    if not live:
-        result.elapsed_s = time.perf_counter() - start
-        return _apply(tracks, result)
-    eph = Ephemeris(constellation, t0, float((t_all.max() - t0) / np.timedelta64(1, "s")))
-    if init_pos_ecef_m is not None:
-        prior = np.asarray(init_pos_ecef_m, float).reshape(3)
-        opts["alt_m"] = float(ecef_to_geodetic(prior)[2]) if alt_m is None else float(alt_m)
-    else:
-        opts["alt_m"] = 0.0 if alt_m is None else float(alt_m)
-    region = None if init_pos_ecef_m is None else (prior, 1.5 * prior_radius_m)
-    search = CellSearch([prepared[k] for k in live], eph, float(carrier_hz) / C_MPS, opts, region)
-    if init_pos_ecef_m is not None:
-        spacing = prior_radius_m / 5
-        n = int(np.ceil(prior_radius_m / spacing))
-        grid = spacing * np.array([(e, m) for e in range(-n, n + 1) for m in range(-n, n + 1)], float)
-        grid = grid[np.hypot(grid[:, 0], grid[:, 1]) <= prior_radius_m + spacing / 2]
-        cells = grid_around(prior[None, :], grid, opts["alt_m"])
-        finals = search.search_cells(cells, spacing, keep_cells or 40)
-        prior_sigma = prior_radius_m
-    else:
-        cells = fibonacci_cells(global_spacing_m, opts["alt_m"])
-        finals = search.search_cells(cells, global_spacing_m * 1.1, keep_cells or 300)
-        prior_sigma = 20e3
-    best = None
+    result = Identification([None] * n_tr, ["too_short"] * n_tr, np.full(n_tr, np.nan), np.full(n_tr, np.nan),
+                            [None] * n_tr, np.full(3, np.nan), np.full((3, 3), np.nan), np.nan, np.nan, np.nan,
+                            np.nan, t0, opts["lo_offset_max_hz"], opts["lo_drift_max_hz_per_s"])
+    if live:
+        eph = Ephemeris(constellation, t0, float((t_all.max() - t0) / np.timedelta64(1, "s")))
+        prior = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float).reshape(3)
+        opts["alt_m"] = (0.0 if prior is None else float(ecef_to_geodetic(prior)[2])) if alt_m is None else float(alt_m)
+        region = None if prior is None else (prior, 1.5 * prior_radius_m)
+        search = CellSearch([prepared[k] for k in live], eph, float(carrier_hz) / C_MPS, opts, region)
+        if prior is not None:
+            finals = search.search_cells(_prior_cells(prior, prior_radius_m, opts["alt_m"]), prior_radius_m / 5,
+                                         keep_cells or 40)
+        else:
+            finals = search.search_cells(fibonacci_cells(global_spacing_m, opts["alt_m"]), global_spacing_m * 1.1,
+                                         keep_cells or 300)
+        solutions = _solutions(search, finals, prior_radius_m if prior is not None else 20e3)
+        result.n_candidates = int(eph.ok.sum())
+        _fill(result, live, search, solutions, constellation, t0)
+    result.elapsed_s = time.perf_counter() - start
+    for tr, sid, rms, status in zip(tracks, result.sat_id, result.match_rms_hz, result.status):
+        tr.sat_id = sid
+        tr.match_rms_hz = None if sid is None else float(rms)
+        tr.id_status = status
+    return result
+
+
+def _options(options, mask_deg, lo_offset_max_hz, lo_drift_max_hz_per_s):
+    """The search's options: ``_DEFAULTS`` updated by ``options``, the bounds checked."""
+    unknown = set(options) - set(_DEFAULTS)
+    if unknown:
+        raise InputError(f"identify_tracks: unknown option(s) {', '.join(sorted(unknown))}")
+    if not (np.isfinite(lo_offset_max_hz) and lo_offset_max_hz > 0):
+        raise InputError(f"lo_offset_max_hz={lo_offset_max_hz!r}: expected a positive number")
+    if not (np.isfinite(lo_drift_max_hz_per_s) and lo_drift_max_hz_per_s >= 0):
+        raise InputError(f"lo_drift_max_hz_per_s={lo_drift_max_hz_per_s!r}: expected a number >= 0")
+    return {**_DEFAULTS, **options, "mask_deg": float(mask_deg), "lo_offset_max_hz": float(lo_offset_max_hz),
+            "lo_drift_max_hz_per_s": float(lo_drift_max_hz_per_s)}
+
+
+def _prior_cells(prior, radius_m, alt_m):
+    """A square grid of spacing ``radius_m / 5`` within ``radius_m`` of the prior, (n, 3)."""
+    spacing = radius_m / 5
+    n = int(np.ceil(radius_m / spacing))
+    grid = spacing * np.array([(e, m) for e in range(-n, n + 1) for m in range(-n, n + 1)], float)
+    grid = grid[np.hypot(grid[:, 0], grid[:, 1]) <= radius_m + spacing / 2]
+    return grid_around(prior[None, :], grid, alt_m)
+
+
+def _solutions(search, finals, prior_sigma_m):
+    """Joint fit and identification at each final cell, best first.
+
+    Returns
+    -------
+    list of (sol, ids, sat, status), ordered by identified tracks, then chi-square.
+    """
+    out = []
     for cell, assign, clock in finals:
-        sol = solve(search, cell, assign, clock, prior_sigma)
+        sol = solve(search, cell, assign, clock, prior_sigma_m)
         if sol is None:
             continue
         for _ in range(2):  # identify, re-solve on the accepted identities, identify again
             ids = match(search, sol)
-            sat = accept(search, ids)
+            sat, status = accept(search, ids)
             if (sat >= 0).sum() < 2:
                 break
-            again = solve(search, sol["pos"], sat, sol["clock"], prior_sigma)
+            again = solve(search, sol["pos"], sat, sol["clock"], prior_sigma_m)
             if again is None:
                 break
             sol = again
-        score = ((sat >= 0).sum(), -sum(ids[k]["chi2"] for k in np.flatnonzero(sat >= 0)))
-        if best is None or score > best[0]:
-            best = (score, sol, ids, sat)
-    result.n_candidates = int(eph.ok.sum())
-    if best is not None:
-        _, sol, ids, sat = best
-        result.pos_ecef_m, result.pos_cov_m2 = sol["pos"], sol["cov"]
-        t_c = search.t_c
-        result.clock_offset_hz, result.clock_drift_hz_per_s = float(sol["clock"]), float(sol["drift"])
-        result.t_ref_utc = t0 + np.timedelta64(int(round(t_c * 1e9)), "ns")
-        for j, k in enumerate(live):
-            d = ids[j]
-            if d is None:
-                continue
-            result.margin[k] = d["margin"]
-            result.runner_up_id[k] = str(constellation.sat_ids[d["runner_up"]]) if d["runner_up"] >= 0 else None
-            if sat[j] >= 0:
-                result.sat_id[k] = str(constellation.sat_ids[sat[j]])
-                result.match_rms_hz[k] = d["rms_hz"]
-    result.elapsed_s = time.perf_counter() - start
-    return _apply(tracks, result)
+        out.append((sol, ids, sat, status))
+    score = lambda o: ((o[2] >= 0).sum(), -sum(o[1][k]["chi2"] for k in np.flatnonzero(o[2] >= 0)))  # noqa: E731
+    return sorted(out, key=score, reverse=True)
 
 
-def _apply(tracks, result):
-    for tr, sid, rms in zip(tracks, result.sat_id, result.match_rms_hz):
-        tr.sat_id = sid
-        tr.match_rms_hz = None if sid is None else float(rms)
-    return result
+def _fill(result, live, search, solutions, constellation, t0):
+    """Write the best solution into ``result``; tracks another accepted solution names otherwise conflict."""
+    if not solutions:
+        for k in live:
+            result.status[k] = "no_solution"
+        return
+    sol, ids, sat, status = solutions[0]
+    sat = sat.copy()
+    for _, _, other, _ in solutions[1:]:
+        clash = (sat >= 0) & (other >= 0) & (other != sat)
+        status[clash], sat[clash] = "conflicting_solution", -1
+    result.pos_ecef_m, result.pos_cov_m2 = sol["pos"], sol["cov"]
+    result.lo_offset_hz, result.lo_drift_hz_per_s = float(sol["clock"]), float(sol["drift"])
+    result.lo_offset_sigma_hz, result.lo_drift_sigma_hz_per_s = sol["clock_sigma"], sol["drift_sigma"]
+    result.t_ref_utc = t0 + np.timedelta64(int(round(search.t_c * 1e9)), "ns")
+    for j, k in enumerate(live):
+        d = ids[j]
+        result.status[k] = str(status[j])
+        if d is None:
+            continue
+        result.margin[k] = d["margin"]
+        result.runner_up_id[k] = str(constellation.sat_ids[d["runner_up"]]) if d["runner_up"] >= 0 else None
+        if sat[j] >= 0:
+            result.sat_id[k] = str(constellation.sat_ids[sat[j]])
+            result.match_rms_hz[k] = d["rms_hz"]

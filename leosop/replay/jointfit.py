@@ -26,7 +26,9 @@ def solve(search, pos0, assign, clock0, prior_sigma_m):
 
     Returns
     -------
-    dict with pos, cov, clock, drift, nrms per track (NaN when dropped), used tracks.
+    dict with pos, cov (3, 3), clock, drift (the receiver's common offset [Hz] at the search's
+    centre time and its drift [Hz/s]) and their sigmas clock_sigma, drift_sigma, vel,
+    nrms_used per used track, used tracks, chi2.
     """
     used = [k for k in range(len(search.tracks)) if assign[k] >= 0]
     lat0, lon0, _ = ecef_to_geodetic(pos0)
@@ -99,6 +101,7 @@ def _gauss_newton(search, pos0, assign, used, clock0, prior_sigma_m, C, up):
     cov = np.linalg.inv(A.T @ A)
     nrms = np.sqrt(np.bincount(which, res**2, m) / np.bincount(which, minlength=m))
     return {"pos": pos0 + x[:3], "cov": cov[:3, :3], "clock": x[3], "drift": x[4], "used": used,
+            "clock_sigma": float(np.sqrt(cov[3, 3])), "drift_sigma": float(np.sqrt(cov[4, 4])),
             "vel": x[5 + 2 * m:] if n_vel else np.zeros(3), "nrms_used": nrms, "chi2": float(res @ res)}
 
 # Identification ------------------------------------------------------

@@ -10,7 +10,19 @@ from scipy.stats import chi2 as chi2_dist
 
 from .ephemeris import SPEED_SV_MPS, doppler_model
 
-__all__ = ["match", "accept"]
+__all__ = ["ID_STATUSES", "accept", "match"]
+
+#: Every identification status of a track, ``ok`` first: ``ok`` (identified, vouched for);
+#: ``too_short`` (under 3 usable blocks); ``no_solution`` (no receiver position and offset explains
+#: the tracks); ``no_candidate`` (no satellite above the mask near its Doppler); ``poor_fit`` (the
+#: best candidate's chi-square fails the track's sigma: no satellite of the snapshot explains it);
+#: ``ambiguous`` (the runner-up fits within the margin); ``duplicate`` (its satellite went to a
+#: track that fits it better); ``too_few_identified`` (the solution gives fewer identities than
+#: the minimum, which do not prove the solution they rest on); ``conflicting_solution`` (another
+#: solution, at another position or receiver offset, identifies this track as another satellite
+#: and passes the same tests).
+ID_STATUSES = ("ok", "too_short", "no_solution", "no_candidate", "poor_fit", "ambiguous", "duplicate",
+               "too_few_identified", "conflicting_solution")
 
 #: Candidates per track fitted in the identification (nearest in Doppler at the track's middle).
 _ID_CANDIDATES = 24
@@ -87,20 +99,34 @@ def match(search, sol):
     return out
 
 def accept(search, ids):
-    """Sat index per track (-1 when not accepted) from :meth:`identify`'s output."""
+    """Satellite index and status per track from :func:`match`'s output.
+
+    Returns
+    -------
+    sat : ndarray of int, (n_tracks,)
+        Accepted satellite index, -1 when not accepted.
+    status : ndarray of str, (n_tracks,)
+        ``ok`` for an accepted track, else why not (:data:`ID_STATUSES`).
+    """
     o = search.o
     sat = np.full(len(ids), -1)
+    status = np.full(len(ids), "no_candidate", dtype=object)
     for k, d in enumerate(ids):
         if d is None:
             continue
-        limit = chi2_dist.ppf(1 - o["false_alarm"], d["n"])
-        if d["chi2"] <= limit and d["margin"] >= o["min_margin"]:
-            sat[k] = d["sat"]
+        if d["chi2"] > chi2_dist.ppf(1 - o["false_alarm"], d["n"]):
+            status[k] = "poor_fit"
+        elif d["margin"] < o["min_margin"]:
+            status[k] = "ambiguous"
+        else:
+            sat[k], status[k] = d["sat"], "ok"
     for s in np.unique(sat[sat >= 0]):  # one comb per satellite: the better fit keeps it
         ks = np.flatnonzero(sat == s)
         if len(ks) > 1:
             keep = ks[np.argmin([ids[k]["chi2"] / ids[k]["n"] for k in ks])]
-            sat[ks[ks != keep]] = -1
+            lose = ks[ks != keep]
+            sat[lose], status[lose] = -1, "duplicate"
     if (sat >= 0).sum() < o["min_identified"]:  # one or two matches do not prove the fix they rest on
+        status[sat >= 0] = "too_few_identified"
         sat[:] = -1
-    return sat
+    return sat, status

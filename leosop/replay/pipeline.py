@@ -27,10 +27,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..positioning.measurements import MAX_TLE_AGE_DAYS, Measurements
+from ..signal.coarse import MAX_DOPPLER_HZ
 from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
-from .identify import identify_tracks
+from .identify import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, identify_tracks
 from .tracks import Detections, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -272,7 +273,8 @@ def track_measurements(tracks, carrier_hz, model_sigma_hz=0.0):
 
 
 def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True, mask_deg=10.0,
-           max_gap_s=None, show_progress=False):
+           max_gap_s=None, lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
+           show_progress=False):
     """Find, track and identify the combs of a recording, then fix the receiver.
 
     Parameters
@@ -302,6 +304,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
 
     factor = max(1, int(rec.sample_rate_hz // WORK_RATE_HZ))
     fs = rec.sample_rate_hz / factor
+    max_doppler = MAX_DOPPLER_HZ + lo_offset_max_hz
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     blocks = block_plan(rec, block_s)
@@ -326,13 +329,13 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         pred = tracker.predictions(b.t_s) if contiguous else None
         try:
             if pred is None:
-                found = find_combs(iq, fs, comb=comb)
+                found = find_combs(iq, fs, comb=comb, max_doppler_hz=max_doppler)
             else:
                 # Every SEARCH_EVERY-th block also searches the spectrum for new
                 # combs, with the tracked ones fitted first and removed.
                 search = k % SEARCH_EVERY == 0
                 found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                                   search=search, gate_hz=TRACK_GATE_HZ, n_refine=2 if search else TRACK_REFINE)
+                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=max_doppler, n_refine=2 if search else TRACK_REFINE)
         except NonFiniteSamples:
             raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
                              "inf") from None
@@ -350,7 +353,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     for tr in tracks:
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,
-                            carrier_hz=comb.carrier_hz,
+                            carrier_hz=comb.carrier_hz, lo_offset_max_hz=lo_offset_max_hz,
+                            lo_drift_max_hz_per_s=lo_drift_max_hz_per_s,
                             rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
