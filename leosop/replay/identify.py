@@ -60,16 +60,10 @@ from .cellvote import CellSearch, fibonacci_cells, grid_around
 from .ephemeris import Ephemeris
 from .features import prepare_track
 from .jointfit import solve
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ
 from .match import ID_STATUSES, accept, match
 
 __all__ = ["ID_STATUSES", "LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "Identification", "identify_tracks"]
-
-#: Default bound of the receiver's common offset searched [Hz]: PLL LNBs are within ~+-25 ppm of
-#: 10.6-10.75 GHz at the worst (+-270 kHz); typical ones within a few ppm (tens of kHz). Free-running
-#: (DRO) LNBs reach +-1-3 MHz: search them with ``lo_offset_max_hz=3e6``.
-LO_OFFSET_MAX_HZ = 100e3
-#: Default bound of the common offset's drift [Hz/s]: an LNB warming up drifts tens of Hz/s.
-LO_DRIFT_MAX_HZ_PER_S = 50.0
 
 
 @dataclass

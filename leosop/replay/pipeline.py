@@ -31,7 +31,8 @@ from ..signal.coarse import MAX_DOPPLER_HZ
 from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
-from .identify import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, identify_tracks
+from .identify import identify_tracks
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate
 from .tracks import Detections, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -39,6 +40,8 @@ __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"
 #: Sample rate the comb search works at [Hz]: the comb (+-176 kHz) under
 #: +-300 kHz of Doppler fits with margin; wider recordings are narrowed to it.
 WORK_RATE_HZ = 2.5e6
+#: Fraction of the sample rate kept clear of each band edge in the comb search.
+BAND_MARGIN = 0.05
 #: In a continuous recording, blocks between full spectrum searches: the
 #: others only fit the combs the tracks predict (tracking mode, a fifth of
 #: the cost), so a rising satellite is picked up within this many blocks.
@@ -100,6 +103,26 @@ def block_plan(rec, block_s):
             blocks.append(Block(cap.sample_start + k * n, n, cap_t0_s + offset_s,
                                 cap.start_utc + np.timedelta64(int(round(offset_s * 1e9)), "ns")))
     return blocks
+
+
+def search_band(sample_rate_hz, comb, lo_offset_max_hz):
+    """Narrowing factor and Doppler search half-width for combs within ``lo_offset_max_hz`` of the band centre.
+
+    The search spans the satellites' Doppler (:data:`MAX_DOPPLER_HZ`) plus
+    the receiver's offset, clipped to what the band holds (the comb's
+    half-width and :data:`BAND_MARGIN` of the rate off its edges); a
+    recording is narrowed only as far as that span allows.
+
+    Returns
+    -------
+    factor : int
+    max_doppler_hz : float
+    """
+    half_comb = float(np.max(np.abs(comb.offsets_hz)))
+    need_hz = 2.0 * (MAX_DOPPLER_HZ + lo_offset_max_hz + half_comb) / (1.0 - 2.0 * BAND_MARGIN)
+    factor = max(1, int(sample_rate_hz // max(WORK_RATE_HZ, need_hz)))
+    fs = sample_rate_hz / factor
+    return factor, min(MAX_DOPPLER_HZ + lo_offset_max_hz, (0.5 - BAND_MARGIN) * fs - half_comb)
 
 
 def narrow(iq, factor):
@@ -216,6 +239,8 @@ class ReplayResult:
     cpu_s : dict
         Processor time of each stage [s]: ``blocks`` (reading, comb search
         and tracking), ``identify``, ``fix``.
+    lo : LoEstimate or None
+        The receiver's common offset and drift (:mod:`leosop.replay.lo`).
     """
 
     tracks: list
@@ -228,6 +253,7 @@ class ReplayResult:
     spectrum: np.ndarray
     pss: object = None
     cpu_s: dict = None
+    lo: LoEstimate | None = None
 
 
 #: Sigma of a satellite's own frequency offset about the constellation's
@@ -293,6 +319,11 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         Elevation mask for the identification's candidates.
     max_gap_s : float, optional
         Longest gap a track survives (default: 5 blocks or 5 capture periods).
+    lo_offset_max_hz, lo_drift_max_hz_per_s : float
+        Bounds of the receiver's common offset (the LNB's local oscillator
+        error) and of its drift searched: the comb search widens by the
+        offset (up to the band's edges, :func:`search_band`) and the
+        identification searches both (:func:`~leosop.replay.identify.identify_tracks`).
     show_progress : bool
 
     Returns
@@ -302,11 +333,10 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     from ..positioning.solve import position_snapshots, position_static_passes
     from ..progress import progress
 
-    factor = max(1, int(rec.sample_rate_hz // WORK_RATE_HZ))
-    fs = rec.sample_rate_hz / factor
-    max_doppler = MAX_DOPPLER_HZ + lo_offset_max_hz
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
+    factor, max_doppler = search_band(rec.sample_rate_hz, comb, lo_offset_max_hz)
+    fs = rec.sample_rate_hz / factor
     blocks = block_plan(rec, block_s)
     check_snapshot_age(rec, constellation)
     if not blocks:
@@ -372,4 +402,5 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     cpu_s["fix"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
-                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s)
+                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s,
+                        lo_estimate(ident, position if static else None, meas))
