@@ -50,7 +50,7 @@ def walker():
 def test_walker_snapshot_tracks_identified_with_a_prior_100_km_off(walker):
     times = _snapshot_times(walker.epochs_utc[0] + np.timedelta64(3, "h"), 40)
     tracks, truth, rx, init, _ = _scenario(walker, 1, times, 6)
-    res = identify_tracks(tracks, walker, init_pos_ecef_m=init, mask_deg=10.0, clock_search_hz=20e3)
+    res = identify_tracks(tracks, walker, init_pos_ecef_m=init, mask_deg=10.0, lo_offset_max_hz=20e3)
     assert [tr.sat_id for tr in tracks] == truth == res.sat_id
     # The match RMS is the noise (0.05-1 Hz) plus the model error left after the fit: a few Hz at most.
     assert all(0 < tr.match_rms_hz < 3.0 for tr in tracks)
@@ -58,7 +58,7 @@ def test_walker_snapshot_tracks_identified_with_a_prior_100_km_off(walker):
     # per-satellite offsets of 0-5 Hz are not separable from it); the prior was 100 km off.
     assert np.linalg.norm(res.pos_ecef_m - rx) < 2e3
     clock_mid = CLOCK_HZ + 0.3 * (res.t_ref_utc - times[0]) / np.timedelta64(1, "s")
-    assert abs(res.clock_offset_hz - clock_mid) < 15.0
+    assert abs(res.lo_offset_hz - clock_mid) < 15.0
 
 
 def test_track_of_a_satellite_missing_from_the_snapshot_and_a_spurious_track_are_none(walker):
@@ -67,18 +67,18 @@ def test_track_of_a_satellite_missing_from_the_snapshot_and_a_spurious_track_are
     missing = truth[0]
     snapshot = walker.subset(walker.sat_ids != missing)
     tracks.append(spurious_track(times, rng))
-    res = identify_tracks(tracks, snapshot, init_pos_ecef_m=init, mask_deg=10.0, clock_search_hz=20e3)
+    res = identify_tracks(tracks, snapshot, init_pos_ecef_m=init, mask_deg=10.0, lo_offset_max_hz=20e3)
     assert res.sat_id == [None] + truth[1:] + [None]
     assert tracks[0].match_rms_hz is None and tracks[-1].sat_id is None
 
 
 def test_interpolated_apparent_states_match_sgp4_with_light_time(walker):
     from leosop.positioning.measurements import sv_states_from_tle
-    from leosop.replay.identify import _Ephemeris
+    from leosop.replay.ephemeris import Ephemeris
 
     rx = geodetic_to_ecef(0.6, 1.9, 300.0)
     t0 = walker.epochs_utc[0] + np.timedelta64(3, "h")
-    eph = _Ephemeris(walker, t0, 100.0)
+    eph = Ephemeris(walker, t0, 100.0)
     sats = np.arange(0, len(walker), 397)
     t_s = np.linspace(3.0, 97.0, len(sats))  # off the 10 s nodes
     want_p, want_v, _ = sv_states_from_tle(walker, walker.sat_ids[sats], t0 + (t_s * 1e9).astype("timedelta64[ns]"),

@@ -15,15 +15,21 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..fileio import atomic_files, check_output_file, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.measurements import write_measurements
+from ..replay.lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ
 from ..signal.iq import open_sigmf
 from ..timebase import format_utc
 from . import add_command
 from .options import mask_deg, parse_site, positive
 
+#: Bounds of the LO options: beyond them a value is a typo (free-running LNBs are within a few MHz;
+#: the band of any SDR recording is below 100 MHz; an LNB drifting 1 kHz/s is broken).
+_LO_OFFSET_LIMIT_HZ = 50e6
+_LO_DRIFT_LIMIT_HZ_PER_S = 1e3
 #: The files ``--out`` may hold, written all or none (measurements, fixes and the spectrogram when there are any).
 OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png")
 
@@ -44,13 +50,28 @@ def register(subparsers):
                    help="elevation mask for identification candidates (default %(default)g)")
     p.add_argument("--block-s", type=float, default=0.1,
                    help="block length; shorter captures are one block each (default %(default)g)")
+    p.add_argument("--lo-offset-max-hz", type=float, default=LO_OFFSET_MAX_HZ, metavar="HZ",
+                   help="largest receiver (LNB local oscillator) offset searched, +- (default %(default)g: PLL "
+                        "LNBs; free-running ones need up to 3e6)")
+    p.add_argument("--lo-drift-max-hz-per-s", type=float, default=LO_DRIFT_MAX_HZ_PER_S, metavar="HZ_PER_S",
+                   help="largest drift of that offset searched, +- (default %(default)g)")
 
 
 def _track_doc(tr):
-    return {"sat_id": tr.sat_id, "n_blocks": len(tr), "start_utc": format_utc(tr.time_utc[0]),
+    return {"sat_id": tr.sat_id, "id_status": tr.id_status, "n_blocks": len(tr), "start_utc": format_utc(tr.time_utc[0]),
             "end_utc": format_utc(tr.time_utc[-1]), "cn0_dbhz": float(np.nanmedian(tr.cn0_dbhz)),
             "match_rms_hz": tr.match_rms_hz,
             "doppler_hz_start": float(tr.doppler_hz[0]), "doppler_hz_end": float(tr.doppler_hz[-1])}
+
+
+def _lo_doc(lo, lo_max, drift_max):
+    """The receiver's common offset and drift keys (null without an estimate)."""
+    num = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731
+    return {"lo_offset_hz": num(lo and lo.offset_hz), "lo_offset_sigma_hz": num(lo and lo.offset_sigma_hz),
+            "lo_drift_hz_per_s": num(lo and lo.drift_hz_per_s),
+            "lo_drift_sigma_hz_per_s": num(lo and lo.drift_sigma_hz_per_s),
+            "lo_ref_utc": format_utc(lo.t_ref_utc) if lo else None, "lo_source": lo.source if lo else None,
+            "lo_offset_max_hz": float(lo_max), "lo_drift_max_hz_per_s": float(drift_max)}
 
 
 def run(args):
@@ -58,6 +79,12 @@ def run(args):
     from .position import solutions_doc
 
     block_s = positive(args.block_s, "--block-s")
+    lo_max = positive(args.lo_offset_max_hz, "--lo-offset-max-hz")
+    if lo_max > _LO_OFFSET_LIMIT_HZ:
+        raise InputError(f"--lo-offset-max-hz {lo_max:g}: beyond {_LO_OFFSET_LIMIT_HZ:g} Hz no LNB is that far off")
+    drift_max = args.lo_drift_max_hz_per_s
+    if not (np.isfinite(drift_max) and 0 <= drift_max <= _LO_DRIFT_LIMIT_HZ_PER_S):
+        raise InputError(f"--lo-drift-max-hz-per-s {drift_max:g}: expected 0 to {_LO_DRIFT_LIMIT_HZ_PER_S:g}")
     mask = mask_deg(args.mask_deg)
     init = None
     if args.init:
@@ -69,14 +96,14 @@ def run(args):
     rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
-                 show_progress=True)
+                 lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True)
     solutions, passes, _ = ([], None, None) if res.position is None else solutions_doc(res.position,
                                                                                         res.measurements)
     extra = {} if passes is None else {"passes": passes}
     doc = {"tracks": [_track_doc(tr) for tr in res.tracks], "solutions": solutions,
            "recording": str(path), "n_blocks": len(res.blocks),
            "n_identified": sum(tr.sat_id is not None for tr in res.tracks),
-           "mode": "static" if args.static else "snapshot", **extra}
+           "mode": "static" if args.static else "snapshot", **_lo_doc(res.lo, lo_max, drift_max), **extra}
     if res.pss is not None:
         acq, cap_utc = res.pss
         doc["pss"] = {"detected": bool(acq.detected), "metric": float(acq.metric),
@@ -100,7 +127,7 @@ def _write_outputs(out, doc, res, name, start_utc):
     with atomic_files([out / n for n in names]) as tmps:
         path = dict(zip(names, tmps))
         write_json(path["replay.json"], doc)
-        keys = ["sat_id", "n_blocks", "start_utc", "end_utc", "cn0_dbhz", "match_rms_hz",
+        keys = ["sat_id", "id_status", "n_blocks", "start_utc", "end_utc", "cn0_dbhz", "match_rms_hz",
                 "doppler_hz_start", "doppler_hz_end"]
         write_csv(path["tracks.csv"], keys, [["" if t[k] is None else t[k] for k in keys] for t in doc["tracks"]])
         if "measurements.csv" in path:
@@ -123,7 +150,8 @@ def summary(doc):
     for t in doc["tracks"]:
         rms = "n/a" if t["match_rms_hz"] is None else f"{t['match_rms_hz']:.2f} Hz"
         cn0 = "n/a" if t["cn0_dbhz"] is None else f"{t['cn0_dbhz']:.1f} dB-Hz"
-        lines.append(f"  {t['sat_id'] or 'unidentified':>12}  {t['n_blocks']:4d} blocks  {t['start_utc']} .. "
+        name = t["sat_id"] or f"unidentified ({t['id_status']})"
+        lines.append(f"  {name:>12}  {t['n_blocks']:4d} blocks  {t['start_utc']} .. "
                      f"{t['end_utc']}  C/N0 {cn0}  match rms {rms}")
     for s in doc["solutions"][:10]:
         sig = s.get("sigma_enu_m") or [None] * 3
@@ -131,6 +159,11 @@ def summary(doc):
         lat, lon, alt = (format_or_na(s[k], spec) for k, spec in (("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f")))
         lines.append(f"fix {s['time_utc']}: {lat} {lon} {alt} m  "
                      f"sigma E/N/U {sig_txt} m  {s['n_used']} measurements used  {s['status']}")
+    if doc["lo_offset_hz"] is not None:
+        lines.append(f"receiver offset {doc['lo_offset_hz']:+.2f} +- {doc['lo_offset_sigma_hz']:.2f} Hz at "
+                     f"{doc['lo_ref_utc']}, drift {doc['lo_drift_hz_per_s']:+.3f} +- "
+                     f"{doc['lo_drift_sigma_hz_per_s']:.3f} Hz/s ({doc['lo_source']}; searched +-"
+                     f"{doc['lo_offset_max_hz']:g} Hz, +-{doc['lo_drift_max_hz_per_s']:g} Hz/s)")
     if "pss" in doc:
         p = doc["pss"]
         lines.append(f"PSS: {'detected' if p['detected'] else 'not detected'} (metric {p['metric']:.2f}), "

@@ -27,10 +27,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..positioning.measurements import MAX_TLE_AGE_DAYS, Measurements
+from ..signal.coarse import MAX_DOPPLER_HZ
 from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate
 from .tracks import Detections, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -38,6 +40,8 @@ __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"
 #: Sample rate the comb search works at [Hz]: the comb (+-176 kHz) under
 #: +-300 kHz of Doppler fits with margin; wider recordings are narrowed to it.
 WORK_RATE_HZ = 2.5e6
+#: Fraction of the sample rate kept clear of each band edge in the comb search.
+BAND_MARGIN = 0.05
 #: In a continuous recording, blocks between full spectrum searches: the
 #: others only fit the combs the tracks predict (tracking mode, a fifth of
 #: the cost), so a rising satellite is picked up within this many blocks.
@@ -99,6 +103,26 @@ def block_plan(rec, block_s):
             blocks.append(Block(cap.sample_start + k * n, n, cap_t0_s + offset_s,
                                 cap.start_utc + np.timedelta64(int(round(offset_s * 1e9)), "ns")))
     return blocks
+
+
+def search_band(sample_rate_hz, comb, lo_offset_max_hz):
+    """Narrowing factor and Doppler search half-width for combs within ``lo_offset_max_hz`` of the band centre.
+
+    The search spans the satellites' Doppler (:data:`MAX_DOPPLER_HZ`) plus
+    the receiver's offset, clipped to what the band holds (the comb's
+    half-width and :data:`BAND_MARGIN` of the rate off its edges); a
+    recording is narrowed only as far as that span allows.
+
+    Returns
+    -------
+    factor : int
+    max_doppler_hz : float
+    """
+    half_comb = float(np.max(np.abs(comb.offsets_hz)))
+    need_hz = 2.0 * (MAX_DOPPLER_HZ + lo_offset_max_hz + half_comb) / (1.0 - 2.0 * BAND_MARGIN)
+    factor = max(1, int(sample_rate_hz // max(WORK_RATE_HZ, need_hz)))
+    fs = sample_rate_hz / factor
+    return factor, min(MAX_DOPPLER_HZ + lo_offset_max_hz, (0.5 - BAND_MARGIN) * fs - half_comb)
 
 
 def narrow(iq, factor):
@@ -215,6 +239,8 @@ class ReplayResult:
     cpu_s : dict
         Processor time of each stage [s]: ``blocks`` (reading, comb search
         and tracking), ``identify``, ``fix``.
+    lo : LoEstimate or None
+        The receiver's common offset and drift (:mod:`leosop.replay.lo`).
     """
 
     tracks: list
@@ -227,6 +253,7 @@ class ReplayResult:
     spectrum: np.ndarray
     pss: object = None
     cpu_s: dict = None
+    lo: LoEstimate | None = None
 
 
 #: Sigma of a satellite's own frequency offset about the constellation's
@@ -272,7 +299,8 @@ def track_measurements(tracks, carrier_hz, model_sigma_hz=0.0):
 
 
 def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True, mask_deg=10.0,
-           max_gap_s=None, show_progress=False):
+           max_gap_s=None, lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
+           show_progress=False):
     """Find, track and identify the combs of a recording, then fix the receiver.
 
     Parameters
@@ -291,6 +319,11 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         Elevation mask for the identification's candidates.
     max_gap_s : float, optional
         Longest gap a track survives (default: 5 blocks or 5 capture periods).
+    lo_offset_max_hz, lo_drift_max_hz_per_s : float
+        Bounds of the receiver's common offset (the LNB's local oscillator
+        error) and of its drift searched: the comb search widens by the
+        offset (up to the band's edges, :func:`search_band`) and the
+        identification searches both (:func:`~leosop.replay.identify.identify_tracks`).
     show_progress : bool
 
     Returns
@@ -300,10 +333,10 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     from ..positioning.solve import position_snapshots, position_static_passes
     from ..progress import progress
 
-    factor = max(1, int(rec.sample_rate_hz // WORK_RATE_HZ))
-    fs = rec.sample_rate_hz / factor
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
+    factor, max_doppler = search_band(rec.sample_rate_hz, comb, lo_offset_max_hz)
+    fs = rec.sample_rate_hz / factor
     blocks = block_plan(rec, block_s)
     check_snapshot_age(rec, constellation)
     if not blocks:
@@ -326,13 +359,13 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         pred = tracker.predictions(b.t_s) if contiguous else None
         try:
             if pred is None:
-                found = find_combs(iq, fs, comb=comb)
+                found = find_combs(iq, fs, comb=comb, max_doppler_hz=max_doppler)
             else:
                 # Every SEARCH_EVERY-th block also searches the spectrum for new
                 # combs, with the tracked ones fitted first and removed.
                 search = k % SEARCH_EVERY == 0
                 found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                                   search=search, gate_hz=TRACK_GATE_HZ, n_refine=2 if search else TRACK_REFINE)
+                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=max_doppler, n_refine=2 if search else TRACK_REFINE)
         except NonFiniteSamples:
             raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
                              "inf") from None
@@ -350,7 +383,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     for tr in tracks:
         _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
     ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init_pos_ecef_m, mask_deg=mask_deg,
-                            carrier_hz=comb.carrier_hz,
+                            carrier_hz=comb.carrier_hz, lo_offset_max_hz=lo_offset_max_hz,
+                            lo_drift_max_hz_per_s=lo_drift_max_hz_per_s,
                             rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
@@ -368,4 +402,5 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     cpu_s["fix"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
-                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s)
+                        np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s,
+                        lo_estimate(ident, position if static else None, meas))

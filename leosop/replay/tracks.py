@@ -25,6 +25,9 @@ class Track:
         satellite explains the track.
     match_rms_hz : float or None
         RMS of the identified satellite's Doppler residuals.
+    id_status : str or None
+        The identification's status (``ok`` when ``sat_id`` is vouched for;
+        :data:`~leosop.replay.match.ID_STATUSES`); None before identification.
     """
 
     t_s: np.ndarray
@@ -35,6 +38,7 @@ class Track:
     sigma_hz: np.ndarray
     sat_id: str | None = None
     match_rms_hz: float | None = None
+    id_status: str | None = None
 
     def __len__(self):
         return len(self.t_s)

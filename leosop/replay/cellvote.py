@@ -1,0 +1,276 @@
+"""Stage 1 of the identification: the cell vote (see :mod:`leosop.replay.identify`).
+
+The receiver position is searched on cells; every (cell, track, candidate)
+triple whose residual slope and curvature fit within first-order
+tolerances votes for the common receiver offsets it admits; a cell's score
+is the number of tracks agreeing on one offset, refined by a linearised fit
+of position offset, receiver offset and drift. The best cells are split
+3 x 3 and voted again.
+"""
+
+import numpy as np
+
+from ..constants import WGS84_A_M
+from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
+from .ephemeris import SPEED_SV_MPS, doppler_model
+from .features import FEATURES
+
+__all__ = ["CellSearch", "fibonacci_cells", "grid_around", "TRACK_CHI2_GATE"]
+
+#: Growth of the first-order tolerances for the neglected curvature of the
+#: Doppler in position across a cell (cells << range).
+_LINEAR_MARGIN = 1.3
+#: Largest light time, bounding its effect in the cell vote [s].
+_LIGHT_TIME_MAX_S = 0.012
+#: Largest Doppler rate of a LEO satellite at Ku band, a bound for the screen [Hz/s].
+_RATE_MAX_HZ_PER_S = 5e3
+#: Largest angular rate of a line of sight to a LEO satellite [rad/s] (7.6 km/s at 550 km overhead).
+_SAT_RATE_MAX_RAD_PER_S = 0.014
+#: Chi-square (3 features) above which a cell's linearised fit does not count a track.
+TRACK_CHI2_GATE = 25.0
+#: Cells voted at once, and at most this many (cell, track, satellite) triples (memory bound:
+#: ~1 kB of intermediate arrays per triple that passes the first screen).
+_CHUNK_CELLS = 400
+_MAX_PAIRS = 300_000
+
+
+def fibonacci_cells(spacing_m, alt_m):
+    """Nearly uniform points on the ellipsoid, ~``spacing_m`` apart, (n, 3)."""
+    n = int(np.ceil(4 * np.pi * WGS84_A_M**2 / spacing_m**2))
+    k = np.arange(n) + 0.5
+    lat = np.arcsin(1 - 2 * k / n)
+    lon = np.mod(np.pi * (1 + 5**0.5) * k, 2 * np.pi)
+    return geodetic_to_ecef(lat, lon, alt_m)
+
+
+def grid_around(centre_ecef_m, offsets_m, alt_m):
+    """Points at horizontal offsets (n, 2) [east, north] of each centre (c, 3), at ``alt_m``: (c * n, 3)."""
+    lat, lon, _ = ecef_to_geodetic(centre_ecef_m)
+    enu = np.concatenate([offsets_m, np.zeros((len(offsets_m), 1))], axis=1)
+    pts = centre_ecef_m[:, None, :] + np.einsum("cij,nj->cni", C_e_n(lat, lon), enu)
+    lat2, lon2, _ = ecef_to_geodetic(pts.reshape(-1, 3))
+    return geodetic_to_ecef(lat2, lon2, alt_m)
+
+
+
+class CellSearch:
+    """The tracks, the ephemeris and the options of one identification, and its cell vote."""
+
+    def __init__(self, tracks, eph, hz_per_mps, opts, region=None):
+        self.tracks, self.eph, self.k, self.o = tracks, eph, hz_per_mps, opts
+        self.moving = opts["rx_speed_sigma_mps"] > 0
+        self.t_c = float(np.mean([tr.t_mid_s for tr in tracks]))
+        sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
+        cos_m = np.sqrt(1 - sin_m**2)
+        n_sats = len(eph.ok)
+        t_ref = np.array([tr.t_ref_s for tr in tracks])
+        # Unit vectors of the satellites at each track's middle time and their footprint half-angles.
+        p, _ = eph.state(np.arange(n_sats)[None, :], t_ref[:, None, 1])  # (n_tracks, n_sats, 3)
+        r = np.linalg.norm(p, axis=-1)
+        self.unit = p / np.where(r > 0, r, 1.0)[..., None]
+        lam = np.arccos(np.clip(WGS84_A_M * cos_m / np.where(eph.ok, r, 1e12), -1, 1)) - np.arcsin(sin_m)
+        self.half_angle = np.where(eph.ok, lam, -1.0)
+        if region is not None:  # (centre ECEF, radius): satellites that no point of it sees are dropped
+            centre, radius_m = region
+            cos_sep = self.unit @ (centre / np.linalg.norm(centre))
+            self.half_angle[np.arccos(np.clip(cos_sep, -1, 1)) > self.half_angle + radius_m / WGS84_A_M] = -1.0
+        # States of the satellites some track may pair with (all but those no point of the region
+        # sees) at each track's reference times and 0.5 s either side, (n_tracks, n_cand, 3 offsets,
+        # 3 ref times, 3), indexed through ``local``: memory grows with tracks x candidates, ~50 of a
+        # 10,000-satellite snapshot with a prior.
+        cand = np.flatnonzero((self.half_angle > 0).any(axis=0))
+        self.local = np.full(n_sats, -1)
+        self.local[cand] = np.arange(len(cand))
+        t_eval = t_ref[:, None, :] + np.array([0.0, -0.5, 0.5])[:, None]  # (n_tracks, 3, 3)
+        self.ref_pos, self.ref_vel = eph.state(cand[None, :, None, None], t_eval[:, None])
+
+    def _pairs(self, cells, radius_m):
+        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3)."""
+        cu = cells / np.linalg.norm(cells, axis=1)[:, None]
+        out = []
+        for k in range(len(self.tracks)):
+            ok = self.half_angle[k] > 0
+            sats = np.flatnonzero(ok)
+            cos_reach = np.cos(self.half_angle[k][sats] + radius_m / WGS84_A_M)
+            c, j = np.nonzero(cu @ self.unit[k][sats].T >= cos_reach)
+            out.append(np.stack([c, np.full(len(c), k), sats[j]], axis=1))
+        return np.concatenate(out)
+
+    def vote(self, cells, radius_m):
+        """Score cells.
+
+        Returns
+        -------
+        count : ndarray of int, (n_cells,)
+            Tracks agreeing on one clock offset and explained by the cell's linearised fit.
+        cost : ndarray, (n_cells,)
+            Chi-square of a linearised fit of position offset, clock and drift to the
+            agreeing tracks' features.
+        assign : ndarray of int, (n_cells, n_tracks)
+            Best satellite per track (-1 for none).
+        clock_hz : ndarray, (n_cells,)
+        moved_ecef_m : ndarray, (n_cells, 3)
+            Cell centres moved by the fitted position offset (at most 1.5 radii).
+        """
+        n_cells, n_tr = len(cells), len(self.tracks)
+        count = np.zeros(n_cells, int)
+        cost = np.full(n_cells, np.inf)
+        assign = np.full((n_cells, n_tr), -1)
+        clock = np.zeros(n_cells)
+        moved = cells.copy()
+        a = 0
+        while a < n_cells:
+            size = min(_CHUNK_CELLS, n_cells - a)
+            pairs = self._pairs(cells[a:a + size], radius_m)
+            while len(pairs) > _MAX_PAIRS and size > 1:
+                size = max(1, size * _MAX_PAIRS // len(pairs))
+                pairs = self._pairs(cells[a:a + size], radius_m)
+            sl = slice(a, a + size)
+            count[sl], cost[sl], assign[sl], clock[sl], moved[sl] = self._vote_chunk(cells[sl], radius_m, pairs)
+            a += size
+        return count, cost, assign, clock, moved
+
+    def _vote_chunk(self, cells, radius_m, pairs):
+        o = self.o
+        n_cells, n_tr = len(cells), len(self.tracks)
+        c, k, s = pairs.T
+        t_ref = np.array([tr.t_ref_s for tr in self.tracks])[k]  # (m, 3)
+        f_ref = np.array([tr.f_ref_hz for tr in self.tracks])[k]
+        span = np.maximum(t_ref[:, 2] - t_ref[:, 0], 1e-3)
+        # Cheap screen at the middle time: the offset must fit the clock range.
+        reach = _LINEAR_MARGIN * (radius_m + o["cross_track_max_m"] + o["alt_tol_m"])
+        dt_max = o["along_track_max_m"] / SPEED_SV_MPS + _LIGHT_TIME_MAX_S
+        s_loc = self.local[s]
+        dm, gm = doppler_model(self.ref_pos[k, s_loc, 0, 1], self.ref_vel[k, s_loc, 0, 1], cells[c], self.k)
+        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.linalg.norm(gm, axis=1)
+                                            + dt_max * _RATE_MAX_HZ_PER_S + o["sat_offset_max_hz"]
+                                            + o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
+        c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
+        pos_rx = cells[c][:, None, :]
+        p, v = self.ref_pos[k, s_loc[near]], self.ref_vel[k, s_loc[near]]  # (m, 3 offsets, 3 ref times, 3)
+        dop, grad = doppler_model(p[:, 0], v[:, 0], pos_rx, self.k)
+        rate = doppler_model(p[:, 2], v[:, 2], pos_rx, self.k)[0] - doppler_model(p[:, 1], v[:, 1], pos_rx, self.k)[0]
+        scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
+        feat = ((f_ref - dop) @ FEATURES.T) * scale
+        feat_jac = np.einsum("fr,mrx->mfx", FEATURES, grad) * scale[..., None]  # d feature / d pos, negated
+        feat_grad = np.linalg.norm(feat_jac, axis=-1)
+        feat_rate = np.abs(rate @ FEATURES.T) * scale
+        feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
+        drift = o["lo_drift_max_hz_per_s"]
+        t_mid = t_ref[:, 1]
+        extra = np.stack([o["sat_offset_max_hz"] + drift * np.abs(t_mid - self.t_c), np.full_like(span, drift),
+                          np.zeros_like(span)], axis=1)
+        if self.moving:  # the receiver's own velocity (3 sigma) moves each feature by up to k v x the LOS change
+            v3 = 3 * self.k * o["rx_speed_sigma_mps"]
+            turn = np.minimum(2.0, _SAT_RATE_MAX_RAD_PER_S * span)
+            extra = extra + v3 * np.stack([np.ones_like(span), turn / span, turn], axis=1)
+        tol_other = dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
+        tol = reach * feat_grad + tol_other
+        # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
+        # and the curvature of the Doppler across the cell (~ radius^2 / range, range >= 550 km, over 2 sigma).
+        sig_fit = 0.5 * tol_other + ((radius_m / 3e5) * radius_m + 0.5 * o["cross_track_max_m"]) * feat_grad
+        b_max = o["lo_offset_max_hz"]
+        ok = (np.abs(feat[:, 1]) <= tol[:, 1]) & (np.abs(feat[:, 2]) <= tol[:, 2]) & \
+             (np.abs(feat[:, 0]) <= b_max + tol[:, 0])
+        c, k, s, feat, tol = c[ok], k[ok], s[ok], feat[ok], tol[ok]
+        feat_jac, sig_fit, t_mid = feat_jac[ok], sig_fit[ok], t_mid[ok]
+        # Clock vote on bins: each pair covers [offset - tol, offset + tol].
+        width = max(50.0, 2 * b_max / 400)
+        n_bins = int(np.ceil(2 * b_max / width)) + 1
+        lo = np.clip(np.floor((feat[:, 0] - tol[:, 0] + b_max) / width).astype(int), 0, n_bins)
+        hi = np.clip(np.floor((feat[:, 0] + tol[:, 0] + b_max) / width).astype(int) + 1, 0, n_bins)
+        diff = np.zeros((n_cells, n_tr, n_bins + 1), np.int32)
+        np.add.at(diff, (c, k, lo), 1)
+        np.add.at(diff, (c, k, hi), -1)
+        votes = (np.cumsum(diff, axis=2)[..., :n_bins] > 0).sum(axis=1)  # (cells, bins)
+        best = votes.max(axis=1)
+        start = np.argmax(votes == best[:, None], axis=1)
+        idx = np.arange(n_bins)
+        end = np.where((idx >= start[:, None]) & (votes < best[:, None]), idx, n_bins).min(axis=1)
+        clock = -b_max + width * 0.5 * (start + end)
+        # Cost of each pair at its cell's clock; best pair per (cell, track).
+        d_off = (feat[:, 0] - clock[c]) / (tol[:, 0] + 0.5 * width * (end - start)[c])
+        cost2 = d_off**2 + (feat[:, 1] / tol[:, 1]) ** 2 + (feat[:, 2] / tol[:, 2]) ** 2
+        agree = np.abs(d_off) <= 1.0
+        sel = np.flatnonzero(agree)
+        return self._linear_fit(cells, radius_m, c[sel], k[sel], s[sel], feat[sel], feat_jac[sel], sig_fit[sel],
+                                t_mid[sel], clock, cost2[sel])
+
+    def _linear_fit(self, cells, radius_m, c, k, s, feat, feat_jac, sig, t_mid, clock, cost0):
+        """Each cell's position offset (east, north, up), clock and drift fitted to its pairs' features (linearised).
+
+        Every track starts with its pair of least ``cost0``; after each fit, each track takes the pair
+        its cell's fit explains best, and tracks no pair of which is explained are left out.
+
+        Returns
+        -------
+        count, chi2, assign, clock, moved
+            As :meth:`vote`.
+        """
+        o = self.o
+        n_cells, n_tr = len(cells), len(self.tracks)
+        lat, lon, _ = ecef_to_geodetic(cells)
+        enu = C_e_n(lat, lon)  # (n_cells, 3, 3)
+        A = np.zeros((len(c), 3, 5))
+        A[:, :, :3] = np.einsum("mfx,mxy->mfy", feat_jac, enu[c])
+        A[:, 0, 3] = 1.0
+        A[:, 0, 4] = t_mid - self.t_c
+        A[:, 1, 4] = 1.0
+        w = 1.0 / sig**2
+        prior = np.array([radius_m, radius_m, o["alt_tol_m"], o["lo_offset_max_hz"],
+                          o["lo_drift_max_hz_per_s"]]) ** -2.0
+        zero = np.zeros(n_cells)
+        x0 = np.stack([zero, zero, zero, clock, zero], axis=1)
+        key = c * n_tr + k
+        pair_cost = cost0
+        inlier_pair = np.ones(len(c), bool)
+        for _ in range(3):
+            order = np.lexsort((pair_cost, key))
+            chosen = order[np.unique(key[order], return_index=True)[1]]
+            chosen = chosen[inlier_pair[chosen]]
+            N = np.tile(np.diag(prior), (n_cells, 1, 1))
+            np.add.at(N, c[chosen], np.einsum("mfi,mf,mfj->mij", A[chosen], w[chosen], A[chosen]))
+            rhs = prior * x0
+            np.add.at(rhs, c[chosen], np.einsum("mfi,mf,mf->mi", A[chosen], w[chosen], feat[chosen]))
+            x = np.linalg.solve(N, rhs[..., None])[..., 0]
+            res = feat - np.einsum("mfi,mi->mf", A, x[c])
+            pair_cost = np.sum(w * res**2, axis=1)
+            inlier_pair = pair_cost <= TRACK_CHI2_GATE
+        order = np.lexsort((pair_cost, key))
+        chosen = order[np.unique(key[order], return_index=True)[1]]
+        chosen = chosen[inlier_pair[chosen]]
+        assign = np.full(n_cells * n_tr, -1)
+        assign[key[chosen]] = s[chosen]
+        chi2 = np.bincount(c[chosen], pair_cost[chosen], n_cells) + np.sum(prior * (x - x0) ** 2, axis=1)
+        d_en = x[:, :2]
+        norm = np.linalg.norm(d_en, axis=1, keepdims=True)
+        d_en = d_en * np.minimum(1.0, 1.5 * radius_m / np.maximum(norm, 1e-9))
+        moved = cells + np.einsum("cxy,cy->cx", enu[:, :, :2], d_en)
+        lat2, lon2, _ = ecef_to_geodetic(moved)
+        assign = assign.reshape(n_cells, n_tr)
+        return (assign >= 0).sum(axis=1), chi2, assign, x[:, 3], geodetic_to_ecef(lat2, lon2, o["alt_m"])
+
+    def search_cells(self, cells, spacing_m, keep):
+        """Vote, keep the best cells, split them 3 x 3, until the spacing is ~1 km.
+
+        Returns
+        -------
+        list of (cell_ecef_m, assign, clock_hz), best first.
+        """
+        alt = self.o["alt_m"]
+        radius = spacing_m / np.sqrt(2)
+        while True:
+            count, cost, assign, clock, moved = self.vote(cells, radius)
+            # A track the cell does not explain costs as much as the worst one it explains: junk
+            # tracks (spurious, or from satellites missing in the snapshot) then cannot pull the
+            # search to cells where they find chance partners.
+            order = np.argsort(cost + TRACK_CHI2_GATE * (len(self.tracks) - count), kind="stable")
+            top = order[:keep]
+            if spacing_m <= self.o["final_spacing_m"]:
+                return [(moved[i], assign[i], clock[i]) for i in top[: self.o["n_final"]]]
+            spacing_m /= 3
+            radius = spacing_m / np.sqrt(2)
+            offsets = spacing_m * np.array([(e, n) for e in (-1, 0, 1) for n in (-1, 0, 1)], float)
+            cells = grid_around(moved[top], offsets, alt)
+
+    # Joint least squares -------------------------------------------------

@@ -1,0 +1,132 @@
+"""Stage 3 of the identification: every candidate fitted to every track at the solution, the best accepted.
+
+A candidate is accepted only when its chi-square is consistent with the
+track's sigma and clearly below the runner-up's; a satellite claimed by two
+tracks goes to the better one.
+"""
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+
+from .ephemeris import SPEED_SV_MPS, doppler_model
+
+__all__ = ["ID_STATUSES", "accept", "match"]
+
+#: Every identification status of a track, ``ok`` first: ``ok`` (identified, vouched for);
+#: ``too_short`` (under 3 usable blocks); ``no_solution`` (no receiver position and offset explains
+#: the tracks); ``no_candidate`` (no satellite above the mask near its Doppler); ``poor_fit`` (the
+#: best candidate's chi-square fails the track's sigma: no satellite of the snapshot explains it);
+#: ``ambiguous`` (the runner-up fits within the margin); ``duplicate`` (its satellite went to a
+#: track that fits it better); ``too_few_identified`` (the solution gives fewer identities than
+#: the minimum, which do not prove the solution they rest on); ``conflicting_solution`` (another
+#: solution, at another position or receiver offset, identifies this track as another satellite
+#: and passes the same tests).
+ID_STATUSES = ("ok", "too_short", "no_solution", "no_candidate", "poor_fit", "ambiguous", "duplicate",
+               "too_few_identified", "conflicting_solution")
+
+#: Candidates per track fitted in the identification (nearest in Doppler at the track's middle).
+_ID_CANDIDATES = 24
+
+
+def match(search, sol):
+    """Best and runner-up candidate per track at a solution.
+
+    Returns
+    -------
+    list of dict per track: sat, chi2, rms_hz, margin, runner_up (sat or -1).
+    """
+    o = search.o
+    pos, cov, vel_rx = sol["pos"], sol["cov"], sol["vel"]
+    up = pos / np.linalg.norm(pos)
+    sin_mask = np.sin(np.radians(o["mask_deg"] - o["id_mask_slack_deg"]))
+    out = []
+    for tr in search.tracks:
+        p_mid, _ = search.eph.state(np.arange(len(search.eph.ok)), tr.t_mid_s)
+        los = p_mid - pos
+        el_ok = (los @ up) / np.linalg.norm(los, axis=1) >= sin_mask
+        cand = np.flatnonzero(el_ok & search.eph.ok)
+        # Only the candidates nearest in Doppler at the middle (rate-scaled) can fit; the rest
+        # are kHz away and would only add to the cost.
+        pos_mid = pos + (tr.t_mid_s - search.t_c) * vel_rx
+        pm, vm = search.eph.state(cand, tr.t_mid_s)
+        dm = doppler_model(pm, vm - vel_rx, pos_mid, search.k)[0]
+        pm2, vm2 = search.eph.state(cand, tr.t_mid_s + 1.0)
+        slope = np.abs(doppler_model(pm2, vm2 - vel_rx, pos_mid + vel_rx, search.k)[0] - dm)
+        off = np.abs(tr.f_ref_hz[1] - sol["clock"] - sol["drift"] * (tr.t_mid_s - search.t_c) - dm)
+        cand = cand[np.argsort(off / (10.0 + slope * o["along_track_sigma_m"] / SPEED_SV_MPS))[:_ID_CANDIDATES]]
+        idx = tr.sample
+        t, f = tr.t_s[idx], tr.doppler_hz[idx]
+        sig2 = tr.sigma_hz[idx] ** 2 + o["model_sigma_hz"] ** 2
+        base = f - sol["clock"] - sol["drift"] * (t - search.t_c)
+        if cand.size == 0:
+            out.append(None)
+            continue
+        sat = cand[:, None]
+        tau = np.zeros((len(cand), 1))
+        sig_c, sig_tau = o["sat_offset_sigma_hz"], o["along_track_sigma_m"] / SPEED_SV_MPS
+        pos_t = pos + (t - search.t_c)[:, None] * vel_rx
+        for _ in range(2):  # the time offset enters non-linearly: re-linearise once
+            p, v = search.eph.state_received(sat, t[None, :] + tau, pos_t)
+            dop, grad = doppler_model(p, v - vel_rx, pos_t, search.k)
+            pa, va = search.eph.state(sat, t[None, :] + tau + 0.5)
+            pb, vb = search.eph.state(sat, t[None, :] + tau - 0.5)
+            rate = doppler_model(pa, va, pos_t, search.k)[0] - doppler_model(pb, vb, pos_t, search.k)[0]
+            # The fix's own uncertainty inflates the sigma, but only up to a cap: a fix too poor
+            # to test a candidate must not make every candidate pass.
+            var = sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
+                                             o["pos_sigma_cap_hz"] ** 2)
+            r = base[None, :] - dop
+            w = 1 / var
+            # Weighted least squares for (c, dtau) with priors c ~ N(0, sig_c), tau ~ N(0, sig_tau).
+            a11 = w.sum(1) + 1 / sig_c**2
+            a12 = (w * rate).sum(1)
+            a22 = (w * rate**2).sum(1) + 1 / sig_tau**2
+            b1 = (w * r).sum(1)
+            b2 = (w * rate * r).sum(1) - tau[:, 0] / sig_tau**2
+            det = a11 * a22 - a12**2
+            c_hz = (a22 * b1 - a12 * b2) / det
+            dtau = (a11 * b2 - a12 * b1) / det
+            tau = tau + dtau[:, None]
+        resid = r - c_hz[:, None] - dtau[:, None] * rate
+        chi2 = (w * resid**2).sum(1) + (c_hz / sig_c) ** 2 + (tau[:, 0] / sig_tau) ** 2
+        chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
+        order = np.argsort(chi2)
+        best = order[0]
+        second = chi2[order[1]] if len(order) > 1 else np.inf
+        out.append({"sat": int(cand[best]), "chi2": float(chi2[best]), "n": len(t),
+                    "rms_hz": float(np.sqrt(np.mean(resid[best] ** 2))), "margin": float(second - chi2[best]),
+                    "runner_up": int(cand[order[1]]) if len(order) > 1 else -1})
+    return out
+
+def accept(search, ids):
+    """Satellite index and status per track from :func:`match`'s output.
+
+    Returns
+    -------
+    sat : ndarray of int, (n_tracks,)
+        Accepted satellite index, -1 when not accepted.
+    status : ndarray of str, (n_tracks,)
+        ``ok`` for an accepted track, else why not (:data:`ID_STATUSES`).
+    """
+    o = search.o
+    sat = np.full(len(ids), -1)
+    status = np.full(len(ids), "no_candidate", dtype=object)
+    for k, d in enumerate(ids):
+        if d is None:
+            continue
+        if d["chi2"] > chi2_dist.ppf(1 - o["false_alarm"], d["n"]):
+            status[k] = "poor_fit"
+        elif d["margin"] < o["min_margin"]:
+            status[k] = "ambiguous"
+        else:
+            sat[k], status[k] = d["sat"], "ok"
+    for s in np.unique(sat[sat >= 0]):  # one comb per satellite: the better fit keeps it
+        ks = np.flatnonzero(sat == s)
+        if len(ks) > 1:
+            keep = ks[np.argmin([ids[k]["chi2"] / ids[k]["n"] for k in ks])]
+            lose = ks[ks != keep]
+            sat[lose], status[lose] = -1, "duplicate"
+    if (sat >= 0).sum() < o["min_identified"]:  # one or two matches do not prove the fix they rest on
+        status[sat >= 0] = "too_few_identified"
+        sat[:] = -1
+    return sat, status

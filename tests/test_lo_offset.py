@@ -1,0 +1,163 @@
+"""A common receiver (LNB local oscillator) offset and drift: identification and fix do not care about it.
+
+Track level: tracks simulated from SGP4 (``sv_states_from_tle``, an
+implementation independent of the identification's interpolated grid)
+with offsets from 0 to 2 MHz and drifts up to 50 Hz/s. Signal level: one
+recording generated at a 5 Hz and at a 50 kHz receiver offset (same seed:
+same satellites, satellite offsets and noise samples), whose fixes must
+both hold the site and whose offset estimates must differ by the offset.
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from leosop.cli import main
+from leosop.frames import C_e_n, geodetic_to_ecef
+from leosop.orbits import load_constellation
+from leosop.replay.identify import identify_tracks
+from leosop.replay.pipeline import BAND_MARGIN, WORK_RATE_HZ, search_band
+from leosop.replay.simtracks import simulate_track, visible_indices
+from leosop.signal.coarse import MAX_DOPPLER_HZ
+from leosop.signal.pilot import PilotComb
+
+#: The satellites' own offsets are drawn in [0, 5] Hz with a zero-mean prior of 8 Hz in the fit: their
+#: mean sits in the estimated common offset, so the truth compared is receiver + mean satellite offset.
+SAT_OFFSET_MAX_HZ = 5.0
+
+
+@pytest.fixture(scope="module")
+def walker():
+    return load_constellation()
+
+
+def _tracks(const, seed, offset_hz, drift_hz_per_s, n_tracks=7, n_s=40):
+    """Snapshot tracks (one a second) of satellites above 20 deg, the truth ids, common offset truth, site."""
+    rng = np.random.default_rng(seed)
+    lat, lon = np.radians(rng.uniform(-50, 50)), np.radians(rng.uniform(-180, 180))
+    rx = geodetic_to_ecef(lat, lon, 300.0)
+    t0 = const.epochs_utc[0] + np.timedelta64(int(rng.uniform(3600, 80000)), "s")
+    times = t0 + (np.arange(n_s) * 1e9).astype("timedelta64[ns]")
+    pick = rng.choice(visible_indices(const, rx, times[[0, -1]], 20.0), n_tracks, replace=False)
+    sat_off = rng.uniform(0, SAT_OFFSET_MAX_HZ, n_tracks)
+    tracks = [simulate_track(const, s, rx, times, rng, clock_hz=offset_hz, clock_drift_hz_per_s=drift_hz_per_s,
+                             sat_offset_hz=c, along_track_m=rng.uniform(-1000, 1000), sigma_hz=rng.uniform(0.05, 1.0))
+              for s, c in zip(pick, sat_off)]
+    init = rx + C_e_n(lat, lon) @ np.array([70e3, -70e3, 0.0])  # 99 km off
+    return tracks, [str(const.sat_ids[s]) for s in pick], offset_hz + sat_off.mean(), times[0], rx, init
+
+
+@pytest.mark.parametrize("seed,offset_hz,drift_hz_per_s,lo_max_hz", [
+    (1, 50e3, 0.0, 100e3), (2, -40e3, 30.0, 100e3), (3, 1e6, 50.0, 3e6), (4, -2e6, -50.0, 3e6)])
+def test_offset_and_drift_searched_and_estimated(walker, seed, offset_hz, drift_hz_per_s, lo_max_hz):
+    tracks, truth, offset_true, t0, rx, init = _tracks(walker, seed, offset_hz, drift_hz_per_s)
+    res = identify_tracks(tracks, walker, init_pos_ecef_m=init, lo_offset_max_hz=lo_max_hz)
+    assert res.sat_id == truth and res.status == ["ok"] * len(truth)
+    assert [tr.id_status for tr in tracks] == ["ok"] * len(truth)
+    want = offset_true + drift_hz_per_s * (res.t_ref_utc - t0) / np.timedelta64(1, "s")
+    # The joint fit's sigmas cover its errors (4 sigma: one test of two numbers per case); the offset's
+    # sigma is the satellite offsets' prior (8 Hz) over 7 satellites, 3 Hz, grown by its correlation with
+    # the position and the time offsets; the drift's some 30-60 mHz/s over 40 s.
+    assert abs(res.lo_offset_hz - want) < 4 * res.lo_offset_sigma_hz < 4 * 5.0
+    assert abs(res.lo_drift_hz_per_s - drift_hz_per_s) < 4 * res.lo_drift_sigma_hz_per_s < 4 * 0.1
+    assert np.linalg.norm(res.pos_ecef_m - rx) < 2e3
+
+
+def test_offset_beyond_the_bound_searched_identifies_nothing(walker):
+    tracks, _, _, _, _, init = _tracks(walker, 7, 150e3, 0.0)
+    res = identify_tracks(tracks, walker, init_pos_ecef_m=init, lo_offset_max_hz=100e3)
+    assert res.sat_id == [None] * len(tracks)
+    assert all(s != "ok" for s in res.status) and np.isnan(res.lo_offset_hz)
+
+
+def test_bad_bounds_are_input_errors(walker):
+    from leosop.errors import InputError
+
+    with pytest.raises(InputError, match="lo_offset_max_hz"):
+        identify_tracks([], walker, lo_offset_max_hz=0.0)
+    with pytest.raises(InputError, match="lo_drift_max_hz_per_s"):
+        identify_tracks([], walker, lo_drift_max_hz_per_s=float("nan"))
+
+
+def test_search_band_narrows_only_as_far_as_the_offset_allows():
+    comb = PilotComb()
+    half = np.max(np.abs(comb.offsets_hz))
+    # 10 MS/s with the default bound: narrowed to 2.5 MS/s, the search 300 kHz + 100 kHz.
+    assert search_band(10e6, comb, 100e3) == (4, MAX_DOPPLER_HZ + 100e3)
+    # A 1 MHz bound needs 2 * (1.3 MHz + half comb) / 0.9 = 3.3 MS/s: 10 MS/s narrowed by 3.
+    factor, width = search_band(10e6, comb, 1e6)
+    assert factor == 3 and width == MAX_DOPPLER_HZ + 1e6
+    # The wide mode at 2.5 MS/s: the whole band less the comb's half-width and the margin.
+    assert search_band(WORK_RATE_HZ, comb, 3e6) == (1, (0.5 - BAND_MARGIN) * WORK_RATE_HZ - half)
+
+
+SITE = (34.342, 108.940, 400.0)
+START = "2025-01-01T19:40:00Z"
+
+
+@pytest.fixture(scope="module")
+def replays(tmp_path_factory):
+    """The same 40 s of snapshots replayed at 5 Hz and 50 kHz of receiver offset (JSON documents)."""
+    docs = {}
+    for offset in (5.0, 50e3):
+        path = tmp_path_factory.mktemp("lo") / "snap.sigmf-meta"
+        assert main(["generate", "-o", str(path), "--site", ",".join(map(str, SITE)), "--start", START,
+                     "--sample-rate-hz", "2.5e6", "--seed", "7", "--duration-s", "40", "--snapshot-s", "0.02",
+                     "--period-s", "1", "--mask-deg", "40", "--rx-offset-hz", str(offset)]) == 0
+        meta = json.loads(path.read_text())
+        truth = {a["leosop:sat_id"] for a in meta["annotations"]}
+        docs[offset] = (path, truth)
+    return docs
+
+
+def _replay(capsys, *argv):
+    capsys.readouterr()
+    code = main(["replay", *argv, "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    return json.loads(out.out)
+
+
+def test_fix_and_identities_do_not_care_about_a_50_khz_offset(replays, capsys):
+    docs = {}
+    for offset, (path, truth) in replays.items():
+        doc = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static")
+        assert {t["sat_id"] for t in doc["tracks"]} == truth and len(doc["tracks"]) == len(truth)
+        assert {t["id_status"] for t in doc["tracks"]} == {"ok"} and doc["lo_source"] == "static fix"
+        docs[offset] = doc
+    a, b = docs[5.0], docs[50e3]
+    site = geodetic_to_ecef(np.radians(SITE[0]), np.radians(SITE[1]), SITE[2])
+    errs = []
+    for doc in (a, b):
+        (sol,) = doc["solutions"]
+        assert sol["status"] == "ok"
+        enu = C_e_n(np.radians(SITE[0]), np.radians(SITE[1])).T @ (np.array([sol[k] for k in ("x_m", "y_m", "z_m")])
+                                                                   - site)
+        # Each fix within 4 sigma of the site on every axis (~10 m sigmas: 40 s of 20 ms snapshots).
+        assert np.all(np.abs(enu) < 4 * np.array(sol["sigma_enu_m"]))
+        errs.append(np.linalg.norm(enu))
+    print(f"fix errors at 5 Hz / 50 kHz: {errs[0]:.1f} / {errs[1]:.1f} m")
+    # The offsets differ by the 49,995 Hz put in within the goal's 1 Hz: the satellites' own offsets (the
+    # same draws in both recordings) cancel in the difference, the Doppler noise (independent: the combs
+    # sit on other frequencies of the noise) does not.
+    assert abs(b["lo_offset_hz"] - a["lo_offset_hz"] - (50e3 - 5.0)) < 1.0
+    assert abs(b["lo_drift_hz_per_s"] - a["lo_drift_hz_per_s"]) < 0.05
+
+
+def test_a_bound_below_the_offset_identifies_nothing_and_says_why(replays, capsys):
+    path, _ = replays[50e3]
+    doc = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static", "--lo-offset-max-hz", "20000")
+    assert doc["n_identified"] == 0 and doc["solutions"] == [] and doc["lo_offset_hz"] is None
+    assert all(t["id_status"] != "ok" and t["sat_id"] is None for t in doc["tracks"])
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--lo-offset-max-hz", "-5"], "--lo-offset-max-hz"), (["--lo-offset-max-hz", "1e9"], "--lo-offset-max-hz"),
+    (["--lo-drift-max-hz-per-s", "-1"], "--lo-drift-max-hz-per-s")])
+def test_bad_lo_options_exit_2_with_one_line(replays, capsys, argv, message):
+    path, _ = replays[5.0]
+    capsys.readouterr()
+    assert main(["replay", str(path), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err

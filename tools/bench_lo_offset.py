@@ -1,0 +1,152 @@
+"""Identification and fix against the receiver's LO offset (issue 26 part B).
+
+For each LO offset (and drift, when ``leosop generate`` has
+``--rx-drift-hz-per-s``) and each recording kind (snapshot: 20 ms every
+second; continuous), one recording is generated at one site (same seed, so
+the satellites, noise and orbit errors are the same across offsets) and
+replayed with ``--init`` 100 km off and without it (global search), with
+``--lo-offset-max-hz`` 100 kHz (PLL LNBs) up to 50 kHz and 3 MHz (the wide
+mode) beyond. Reported per run:
+
+- tracks, how many are true (a satellite's truth Doppler from the SigMF
+  annotations within 20 Hz of the track, median over its blocks), how many
+  identified, and how many identified wrongly (the named satellite's truth
+  is not within 20 Hz);
+- the static fix's horizontal and 3-D error and its ratio to the same
+  kind's zero-offset recording with the same search;
+- the estimated offset and drift minus the truth. The truth offset is the
+  receiver's plus the mean of the identified satellites' own offsets (drawn
+  in [0, 5] Hz): nothing separates that mean from the receiver's offset
+  (:mod:`leosop.replay.lo`).
+
+Usage: python tools/bench_lo_offset.py [--kinds snapshot continuous] [--offsets 0 5e3 ...]
+       [--drifts 0 25 50] [--no-global] [--workdir DIR]
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from leosop.cli.position import solutions_doc
+from leosop.frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
+from leosop.orbits import load_constellation
+from leosop.replay.pipeline import replay
+from leosop.signal.iq import open_sigmf
+
+SITE = (48.137, 11.575, 520.0)
+START = "2025-01-01T19:40:00Z"
+#: 4 MS/s: a comb at 1 MHz offset with 300 kHz of Doppler (+-176 kHz of tones) stays in the band.
+SAMPLE_RATE_HZ = 4e6
+KINDS = {
+    "snapshot": ["--duration-s", "60", "--snapshot-s", "0.02", "--period-s", "1"],
+    "continuous": ["--duration-s", "12"],
+}
+#: A track is a satellite's when its truth Doppler is this close (median over the blocks) [Hz].
+MATCH_HZ = 20.0
+
+
+def generate(path, kind, offset_hz, drift_hz_per_s, has_drift):
+    cmd = [sys.executable, "-m", "leosop", "generate", "-o", str(path), "--site", ",".join(map(str, SITE)),
+           "--start", START, "--sample-rate-hz", str(SAMPLE_RATE_HZ), "--mask-deg", "25", "--seed", "7",
+           "--orbit-error-along-m", "300", "--rx-offset-hz", str(offset_hz), *KINDS[kind]]
+    if has_drift:
+        cmd += ["--rx-drift-hz-per-s", str(drift_hz_per_s)]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+
+
+def truth(meta_path):
+    """Per satellite: annotation times and Doppler, and its own offset (clock offset minus the receiver's)."""
+    meta = json.loads(Path(meta_path).read_text())
+    sats = meta["global"]["leosop:satellites"]
+    sats = json.loads(sats.replace("'", '"')) if isinstance(sats, str) else sats
+    curves = {}
+    for a in meta["annotations"]:
+        curves.setdefault(a["leosop:sat_id"], []).append((a["leosop:t_s"], a["leosop:doppler_hz"]))
+    curves = {k: np.array(sorted(v)) for k, v in curves.items()}
+    clock = {s["sat_id"]: s["clock_offset_hz"] for s in sats}
+    return curves, clock
+
+
+def score(res, curves):
+    """(true tracks, identified true tracks, wrong identities) of a replay."""
+    n_true = n_ok = n_wrong = 0
+    for tr in res.tracks:
+        err = {sid: np.median(np.abs(np.interp(tr.t_s, c[:, 0], c[:, 1]) - tr.doppler_hz)) for sid, c in curves.items()}
+        real = min(err.values()) < MATCH_HZ
+        n_true += real
+        if tr.sat_id is not None:
+            right = err.get(tr.sat_id, np.inf) < MATCH_HZ
+            n_ok += right
+            n_wrong += not right
+    return n_true, n_ok, n_wrong
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
+    ap.add_argument("--offsets", nargs="+", type=float, default=[0.0, 5e3, 50e3, 500e3, 1e6])
+    ap.add_argument("--drifts", nargs="+", type=float, default=[0.0])
+    ap.add_argument("--no-global", action="store_true", help="only with --init 100 km off")
+    ap.add_argument("--workdir", help="keep the recordings here (default a temporary directory)")
+    args = ap.parse_args(argv)
+    help_text = subprocess.run([sys.executable, "-m", "leosop", "generate", "--help"], capture_output=True,
+                               text=True).stdout
+    has_drift = "--rx-drift-hz-per-s" in help_text
+    drifts = args.drifts if has_drift else [0.0]
+    if not has_drift and any(d != 0 for d in args.drifts):
+        print("leosop generate has no --rx-drift-hz-per-s yet: offsets only", file=sys.stderr)
+    const = load_constellation()
+    lat, lon = np.radians(SITE[0]), np.radians(SITE[1])
+    site = geodetic_to_ecef(lat, lon, SITE[2])
+    prior = site + C_e_n(lat, lon) @ np.array([70.7e3, 70.7e3, 0.0])  # 100 km north-east
+    searches = [("init", prior)] + ([] if args.no_global else [("global", None)])
+    work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_lo_"))
+    work.mkdir(parents=True, exist_ok=True)
+    print(f"{'kind':10} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} {'id':>3} "
+          f"{'wrong':>5} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'d_drift':>8} "
+          f"{'sig':>6} {'status':8} {'t_s':>5}")
+    base = {}
+    for kind in args.kinds:
+        for drift in drifts:
+            for offset in args.offsets:
+                path = work / f"{kind}_{offset:g}_{drift:g}.sigmf-meta"
+                if not path.exists():
+                    generate(path, kind, offset, drift, has_drift)
+                curves, clock = truth(path)
+                lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
+                for name, init in searches:
+                    t0 = time.perf_counter()
+                    res = replay(open_sigmf(path), const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
+                    elapsed = time.perf_counter() - t0
+                    n_true, n_ok, n_wrong = score(res, curves)
+                    fix = None if res.position is None else res.position.fixes
+                    err = np.full(3, np.nan) if fix is None else fix.pos_ecef_m - site
+                    enu = C_e_n(*ecef_to_geodetic(site)[:2]).T @ err
+                    err3d, horiz = float(np.linalg.norm(err)), float(np.hypot(enu[0], enu[1]))
+                    base.setdefault((kind, name, drift), err3d) if offset == 0 else None
+                    ratio = err3d / base.get((kind, name, drift), np.nan)
+                    ids = [tr.sat_id for tr in res.tracks if tr.sat_id is not None]
+                    true_off = offset + np.mean([clock[s] - offset for s in ids]) if ids else np.nan
+                    lo = res.lo
+                    d_off = lo.offset_hz - (true_off + drift * _since_start(lo.t_ref_utc)) if lo else np.nan
+                    d_drift = lo.drift_hz_per_s - drift if lo else np.nan
+                    status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
+                    print(f"{kind:10} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
+                          f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {horiz:8.1f} {err3d:8.1f} {ratio:6.2f} {d_off:8.2f} "
+                          f"{(lo.offset_sigma_hz if lo else np.nan):6.2f} {d_drift:8.4f} "
+                          f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f}", flush=True)
+
+
+def _since_start(t_utc):
+    """Seconds from the recordings' start to ``t_utc``."""
+    return float((t_utc - np.datetime64(START.rstrip("Z"), "ns")) / np.timedelta64(1, "s"))
+
+
+if __name__ == "__main__":
+    main()
