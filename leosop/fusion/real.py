@@ -305,7 +305,7 @@ def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withhel
     return best[1], P
 
 
-def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
+def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=None):
     """Fuse an IMU log with an RTKLIB solution.
 
     Parameters
@@ -316,6 +316,9 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
     options : FuseOptions
     imu_time_offset_s : float
         Added to the IMU time tags.
+    extra_aids : sequence of leosop.fusion.aids.Aid
+        More aids on the run's clock, e.g. LEO Doppler (:mod:`leosop.fusion.leo_input`);
+        not withheld in the outages.
     progress : callable, optional
         Wraps the iterator over INS updates.
 
@@ -344,6 +347,7 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
                                   options.spec)
     lever = np.asarray(options.lever_arm_b_m, dtype=float)
     aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps)
+    aid_list += [a for a in extra_aids if a.t_s > t_imu[0] - dt[0]]
     if options.zupt:
         ends, w = stationary_windows(t_imu, dvl / dt[:, None], dth / dt[:, None])
         zr_sigma = math.radians(options.zero_rate_sigma_deg_per_s)
