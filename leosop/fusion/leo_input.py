@@ -11,7 +11,9 @@ epochs of the GNSS file, linearly interpolated to the scenario's fix rate
 velocity is the difference of the interpolated positions 0.5 s either side
 (RTK positions are cm-level, so this velocity is good to ~0.02 m/s, 0.7 Hz
 of Doppler at 11.3 GHz; the .pos velocities are RTKLIB's Doppler velocities,
-several times noisier). The Doppler then comes from ``simulate``'s own
+several times noisier). That velocity is not the vehicle's to better than
+:data:`REF_VEL_SIGMA_MPS` (RTK noise, jerk within the 1 s chord), which the
+rows' ``sigma_hz`` carry beside the estimator's noise. The Doppler then comes from ``simulate``'s own
 measurement level (``leosop.simulate._leo_fixes``, called, not copied) with
 the satellite offsets, orbit errors, receiver offsets, masks and C/N0 of
 the bundled ``xian-baoji`` scenario and the families asked for.
@@ -22,6 +24,7 @@ import dataclasses
 import numpy as np
 
 from .. import frames
+from ..constants import C_MPS
 from ..errors import InputError
 from ..gnss.ppp import gps_to_utc
 from ..gnss.rtklib_pos import Q_FIX
@@ -29,10 +32,14 @@ from ..positioning import measurements as pm
 from ..scenarios import XIAN_BAOJI
 from .aids_leo import LeoOptions, leo_aids
 
-__all__ = ["MAX_GAP_S", "gpst_to_utc", "read", "reference_track", "simulate", "to_aids"]
+__all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "gpst_to_utc", "read", "reference_track", "simulate", "to_aids"]
 
 #: A reference epoch needs a Q = 1 fix at most this far before and after it [s].
 MAX_GAP_S = 1.0
+#: Uncertainty of the reference velocity per axis [m/s], in the simulated rows' sigma: set where the LEO
+#: Doppler innovations' RMS over their predicted sigma is 1 while the GNSS aids are on (the drive: 1.43
+#: without it, 1.02 with 0.025 m/s; tools/bench_fuse.py --leo-sim), not on the outage errors.
+REF_VEL_SIGMA_MPS = 0.025
 
 
 def gpst_to_utc(t_gpst_s):
@@ -115,7 +122,8 @@ def simulate(sol, *, tle=None, constellations=("starlink",), seed=0):
     ep, sat = ep[keep], sat[keep]
     return pm.Measurements(
         t_s=t_s[ep], time_utc=times_utc[ep], sat_id=np.asarray(constellation.sat_ids)[sat],
-        doppler_hz=pairs["doppler_hz"][keep], sigma_hz=pairs["sigma_hz"][keep], carrier_hz=pairs["carrier_hz"][keep],
+        doppler_hz=pairs["doppler_hz"][keep], carrier_hz=pairs["carrier_hz"][keep],
+        sigma_hz=np.hypot(pairs["sigma_hz"][keep], REF_VEL_SIGMA_MPS * pairs["carrier_hz"][keep] / C_MPS),
         pos_sv_ecef_m=pairs["pos_sv_ecef_m"][keep], vel_sv_ecef_mps=pairs["vel_sv_ecef_mps"][keep],
         line=np.arange(ep.size) + 2, source="leo-sim",
         family=np.asarray(leo.constellations)[pairs["clock_index"][keep]])
