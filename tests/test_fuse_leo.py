@@ -46,7 +46,7 @@ def _with_blocks(view, d_clock=(0.0, 0.0), d_sat=(0.0,)):
 def test_design_matrix_matches_finite_differences():
     aid = _aid()
     computed = _with_blocks(_true_view(np.zeros(N_INS)))
-    z, H, R = aid.matrices(computed)
+    _, H, R = aid.matrices(computed)
     assert H.shape == (1, N_INS + 3) and R.shape == (1, 1)
     # 100x the other aids' steps: a Doppler of ~3e4 Hz from ECEF coordinates of 6e6 m rounds at ~1e-9 m
     # (3e-10 Hz), which 1e-10 rad steps would divide into errors of 1e-5; at 100x the second-order terms are
@@ -70,7 +70,7 @@ def test_design_matrix_matches_finite_differences():
 
 def test_prediction_is_the_design_doppler_with_the_clock_states():
     """The DESIGN 4.3 Doppler written out, at the antenna moved by the lever arm (closed-form lever geometry)."""
-    state, bg, ba, omega = _computed()
+    state = _computed()[0]
     aid = _aid(lever=(0.0, 0.0, 0.0))
     view = _with_blocks(_true_view(np.zeros(N_INS)))
     r_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)

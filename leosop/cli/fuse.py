@@ -25,9 +25,9 @@ from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
 from ..fusion import leo_input, real
 from ..gnss import rtklib_pos
+from ..ins import flight_mat, imu_io
 from ..orbits import CARRIERS
 from ..positioning.measurements import write_measurements
-from ..ins import flight_mat, imu_io
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command

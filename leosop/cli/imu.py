@@ -12,8 +12,6 @@ import math
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from ..earth import normal_gravity_mps2
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_json
@@ -88,10 +86,10 @@ def _terms(res, scale, white_scale, unit, white_unit):
 
 def summary(doc):
     g, a = doc["gyro"], doc["accel"]
-    fmt = lambda v: " / ".join(f"{x:.3g}" for x in v)  # noqa: E731
+    fmt = lambda v: " / ".join(f"{x:.3g}" for x in v)
     return "\n".join([
         f"{doc['source']}: {doc['segment_s'][1]:.0f} s at {doc['rate_hz']:.0f} Hz (axes R / F / U)",
-        f"  gyro: ARW {fmt(g['white_density_deg_per_rt_h'])} deg/sqrt(h), bias instability "
-        f"{fmt(g['bias_instability_deg_per_h'])} deg/h at {fmt(g['tau_min_s'])} s",
-        f"  accel: VRW {fmt(a['white_density_ug_per_rt_hz'])} ug/sqrt(Hz), bias instability "
-        f"{fmt(a['bias_instability_ug'])} ug at {fmt(a['tau_min_s'])} s"])
+        (f"  gyro: ARW {fmt(g['white_density_deg_per_rt_h'])} deg/sqrt(h), bias instability "
+        f"{fmt(g['bias_instability_deg_per_h'])} deg/h at {fmt(g['tau_min_s'])} s"),
+        (f"  accel: VRW {fmt(a['white_density_ug_per_rt_hz'])} ug/sqrt(Hz), bias instability "
+        f"{fmt(a['bias_instability_ug'])} ug at {fmt(a['tau_min_s'])} s")])

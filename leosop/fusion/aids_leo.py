@@ -28,7 +28,7 @@ from ..rotations import skew
 from .aids import Aid, StateBlock
 from .common import DROP_AFTER_S, N_INS, pos_jacobian
 
-__all__ = ["LeoDoppler", "LeoOptions", "SAT_DROP_AFTER_S", "leo_aids"]
+__all__ = ["SAT_DROP_AFTER_S", "LeoDoppler", "LeoOptions", "leo_aids"]
 
 #: A satellite's offset state is dropped this long after its last Doppler [s] (as the tight filter's).
 SAT_DROP_AFTER_S = DROP_AFTER_S
@@ -135,7 +135,7 @@ class LeoDoppler(Aid):
 
 
 def leo_aids(t_s, sat_id, clock_label, doppler_hz, sigma_hz, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps,
-             lever_arm_b_m, options=LeoOptions()):
+             lever_arm_b_m, options=None):
     """One :class:`LeoDoppler` per measurement, sharing the state blocks of each clock and each satellite.
 
     Parameters
@@ -148,14 +148,14 @@ def leo_aids(t_s, sat_id, clock_label, doppler_hz, sigma_hz, carrier_hz, pos_sv_
         ``sigma_hz`` NaN: ``options.default_sigma_hz``.
     pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (m, 3)
     lever_arm_b_m : array_like, (3,)
-    options : LeoOptions
+    options : LeoOptions, optional
 
     Returns
     -------
     list of LeoDoppler
         Rows with a non-finite Doppler or satellite state are left out.
     """
-    o = options
+    o = options or LeoOptions()
     clocks, sats, out = {}, {}, []
     sigma = np.where(np.isfinite(sigma_hz), sigma_hz, o.default_sigma_hz)
     ok = np.isfinite(doppler_hz) & np.isfinite(pos_sv_ecef_m).all(-1) & np.isfinite(vel_sv_ecef_mps).all(-1)

@@ -156,14 +156,24 @@ def read(path, sol, *, tle=None):
     return dataclasses.replace(meas.take(np.flatnonzero(ok)), pos_sv_ecef_m=pos[ok], vel_sv_ecef_mps=vel[ok])
 
 
-def to_aids(meas, sol, lever_arm_b_m, options=LeoOptions()):
+def to_aids(meas, sol, lever_arm_b_m, options=None):
     """The table's rows as LEO Doppler aids on the run's clock, one receiver clock per constellation.
+
+    Parameters
+    ----------
+    meas : Measurements
+        With satellite states.
+    sol : leosop.gnss.rtklib_pos.PosSolution
+        Its first epoch is the run's time origin.
+    lever_arm_b_m : array_like, (3,)
+    options : LeoOptions, optional
 
     Returns
     -------
     aids : list of leosop.fusion.aids_leo.LeoDoppler
     clock_labels : tuple of str
     """
+    options = options or LeoOptions()
     index, labels = pm.clock_groups(meas)
     t = meas.t_s if meas.time_utc is None else _run_seconds(meas.time_utc, sol)
     aids = leo_aids(t, meas.sat_id, np.asarray(labels)[index], meas.doppler_hz, meas.sigma_hz, meas.carrier_hz,
