@@ -46,3 +46,35 @@ def test_bias_instability_of_a_random_walk_free_flat_floor():
     res = allan.allan(x, RATE_HZ)
     assert np.all(res.tau_min_s == res.tau_s[-1])
     assert np.allclose(res.bias_instability * allan.BIAS_INSTABILITY_FACTOR, res.adev[-1])
+
+
+def test_cli_reads_white_noise_density_and_its_spec_round_trips_into_fuse(tmp_path, capsys):
+    """``leosop imu allan`` on a synthetic static log of known densities; its imu_spec.json read by fuse's reader."""
+    import json
+
+    from leosop.cli import main
+    from leosop.fusion import real
+
+    rng = np.random.default_rng(11)
+    n, rate = 60_000, 100.0
+    arw_deg_per_rt_h, vrw_ug_per_rt_hz = 0.5, 200.0
+    # Per-sample sigma of a white rate of density N at rate f: N sqrt(f).
+    gyro_deg_s = rng.normal(0.0, arw_deg_per_rt_h / 60.0 * math.sqrt(rate), (n, 3))
+    acc_g = rng.normal(0.0, vrw_ug_per_rt_hz * 1e-6 * math.sqrt(rate), (n, 3)) + [0.0, 0.0, 1.0]
+    t = 1.7e9 + np.arange(n) / rate
+    path = tmp_path / "static.csv"
+    np.savetxt(path, np.column_stack([t, acc_g, gyro_deg_s]), delimiter=",", fmt="%.9f")
+    out = tmp_path / "out"
+    cols = "t_gpst_s=0,ax_g=1,ay_g=2,az_g=3,gx_deg_per_s=4,gy_deg_per_s=5,gz_deg_per_s=6"
+    assert main(["imu", "allan", str(path), "--imu-format", "csv", "--imu-columns", cols, "--json",
+                 "--out", str(out)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert {p.name for p in out.iterdir()} == {"imu_spec.json", "allan.json", "allan.png"}
+    # 600 s of white noise: the read-off densities within 5 % (the estimate's scatter over the slope -1/2
+    # region is ~1-2 %, test_white_noise_matches_direct_estimate_and_closed_form).
+    np.testing.assert_allclose(doc["gyro"]["white_density_deg_per_rt_h"], arw_deg_per_rt_h, rtol=0.05)
+    # (ug of the reader's g and of the equator's normal gravity differ by 0.3 %, inside the 5 %.)
+    np.testing.assert_allclose(doc["accel"]["white_density_ug_per_rt_hz"], vrw_ug_per_rt_hz, rtol=0.05)
+    spec = real.imu_spec(str(out / "imu_spec.json"))  # what `leosop fuse --imu-spec FILE` calls
+    assert spec == real.ImuSpec(**doc["imu_spec"])
+    assert spec.gyro_arw_deg_per_rt_h == pytest.approx(max(doc["gyro"]["white_density_deg_per_rt_h"]), rel=1e-12)

@@ -15,9 +15,14 @@ Our filter reads the raw IMU CSV with its ``.tag``, the mounting, lever arm
 and IMU time offset of the peer's configuration files, the ``consumer``
 grade, ``--nhc --zupt`` on the drive and ``--zupt`` on the walk.
 
-Usage: ``python tools/bench_fuse.py [--data DIR] [--anchor DIR] [--logs drive walk] [--json]``.
+Usage: ``python tools/bench_fuse.py [--data DIR] [--anchor DIR] [--logs drive walk] [--leo-sim] [--json]``.
 Goals (issue 21): mean <= 0.5 x the peer's, worst no worse, >= 95 % of the
 withheld-fix errors inside our 3 sigma, run time <= 0.1 x the log.
+
+``--leo-sim``: instead of the peer, our filter GNSS-only beside our filter
+with LEO Doppler simulated along the RTK path (``leosop fuse --leo-sim``,
+seed 0, bundled Starlink-like sky, tight), same outages; goal: the LEO
+run's outage errors <= 0.5 x the GNSS-only run's, >= 95 % inside 3 sigma.
 """
 
 import argparse
@@ -33,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from leosop import frames
-from leosop.fusion import real
+from leosop.fusion import leo_input, real
 from leosop.gnss.rtklib_pos import read_pos
 from leosop.ins import imu_io
 
@@ -71,14 +76,15 @@ def _horiz_errors(t_s, lat_deg, lon_deg, alt_m, sol, t0, outages):
     return out
 
 
-def ours(data, name, length_s):
+def ours(data, name, length_s, leo_sim=False):
     folder, _, _, imu, mount, (f, r, d), offset, aids, start, end = LOGS[name]
     sol = read_pos(data / folder / f"gnss_{LOGS[name][2]}.pos")
     log = imu_io.read_rtklib_csv(data / folder / imu, C_b_s=imu_io.mount_C_b_s(*mount))
     outages = schedule(sol.t_gpst_s[-1] - sol.t_gpst_s[0], start, end, length_s)
     opts = real.FuseOptions(spec=real.GRADES["consumer"], outages=outages, lever_arm_b_m=(r, f, -d), **aids)
     t = time.perf_counter()
-    run = real.fuse(log, sol, opts, imu_time_offset_s=offset)
+    extra = leo_input.to_aids(leo_input.simulate(sol, seed=0), sol, opts.lever_arm_b_m)[0] if leo_sim else ()
+    run = real.fuse(log, sol, opts, imu_time_offset_s=offset, extra_aids=extra)
     errs, _ = real.outage_errors(run, sol, opts)
     runtime = time.perf_counter() - t
     scored = [o for o in errs if o["n_ref"]]
@@ -136,8 +142,11 @@ def main(argv=None):
     ap.add_argument("--data", type=Path, default=ROOT / "shared" / "data" / "gnss-ins")
     ap.add_argument("--anchor", type=Path, default=ROOT / "shared" / "anchors" / "gnss_imu")
     ap.add_argument("--logs", nargs="+", choices=tuple(LOGS), default=tuple(LOGS))
+    ap.add_argument("--leo-sim", action="store_true", help="GNSS-only against GNSS + simulated LEO Doppler")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
+    if args.leo_sim:
+        return leo_rows(args)
     rows = []
     for name in args.logs:
         for length in OUTAGE_LENGTHS_S:
@@ -158,6 +167,29 @@ def main(argv=None):
                       f"{100 * row['inside_3sigma']:.0f} % | run {row['ours_runtime_s']:.1f} s "
                       f"({row['ours_runtime_s'] / row['log_s']:.3f} x log), peer {row['peer_runtime_s']:.1f} s",
                       flush=True)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+
+
+def leo_rows(args):
+    rows = []
+    for name in args.logs:
+        for length in OUTAGE_LENGTHS_S:
+            a, _ = ours(args.data, name, length)
+            b, _ = ours(args.data, name, length, leo_sim=True)
+            row = {"log": name, "outage_s": length, "n_outages": len(a["max_horiz_err_m"]),
+                   "gnss_mean_m": float(np.mean(a["max_horiz_err_m"])), "gnss_worst_m": max(a["max_horiz_err_m"]),
+                   "leo_mean_m": float(np.mean(b["max_horiz_err_m"])), "leo_worst_m": max(b["max_horiz_err_m"]),
+                   "gnss_inside_3sigma": a["inside_3sigma"], "leo_inside_3sigma": b["inside_3sigma"],
+                   "leo_runtime_s": b["runtime_s"], "log_s": b["log_s"], "leo_max_m": b["max_horiz_err_m"]}
+            row["mean_ratio"] = row["leo_mean_m"] / row["gnss_mean_m"]
+            rows.append(row)
+            if not args.json:
+                print(f"{name:5s} {length:4.0f} s x{row['n_outages']:2d}: GNSS-only mean {row['gnss_mean_m']:6.2f} m worst "
+                      f"{row['gnss_worst_m']:6.2f} m | +LEO sim mean {row['leo_mean_m']:6.2f} m worst "
+                      f"{row['leo_worst_m']:6.2f} m | ratio {row['mean_ratio']:.3f} | inside 3 sigma "
+                      f"{100 * row['gnss_inside_3sigma']:.0f} % / {100 * row['leo_inside_3sigma']:.0f} % | LEO run "
+                      f"{row['leo_runtime_s']:.1f} s ({row['leo_runtime_s'] / row['log_s']:.3f} x log)", flush=True)
     if args.json:
         print(json.dumps(rows, indent=2))
 

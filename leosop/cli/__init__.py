@@ -41,7 +41,7 @@ from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "doctor", "replay",
-            "study", "ppp", "export", "fuse")
+            "study", "ppp", "export", "fuse", "imu")
 
 
 class _Parser(argparse.ArgumentParser):

@@ -1,14 +1,17 @@
-"""``leosop fuse``: a real IMU log fused with GNSS fixes (DESIGN 4.1, 4.5), simulated outages scored.
+"""``leosop fuse``: a real IMU log fused with GNSS fixes and LEO Doppler (DESIGN 4.1, 4.5), simulated outages scored.
 
 JSON (all present): ``n_epochs``, ``duration_s``, ``aids`` (used per kind),
 ``outages`` (``start_s``, ``duration_s``, ``max_horiz_err_m``,
 ``end_horiz_err_m``, ``n_ref``, ``n_inside_3sigma``), ``runtime_s``; and
 ``aids_rejected``, ``reference`` (``"Q=1"`` or ``"all withheld"``), ``mean_max_horiz_err_m``,
-``worst_max_horiz_err_m``, ``inside_3sigma_fraction``, ``yaw_aligned_s``, ``imu``, ``gnss``.
+``worst_max_horiz_err_m``, ``inside_3sigma_fraction``, ``yaw_aligned_s``, ``imu``, ``gnss``, and with
+``--leo``/``--leo-sim`` ``leo`` (``source``, ``n_rows``, ``n_sats``, ``coupling``, per receiver clock the final
+``offset_hz``, ``drift_hz_per_s``, ``offset_sigma_hz``).
 ``--out``: ``solution.pos`` (RTKLIB, the antenna at every INS update: half the
 IMU rate), ``solution.csv``, ``solution.geojson`` (the track at 10 Hz at most,
 its dead-reckoning stretches, the withheld fixes), ``fuse.json``, ``track.png``, ``outage_errors.png``
-(with outages), ``biases.png``; all or none.
+(with outages), ``biases.png``, and with ``--leo-sim`` ``leo_measurements.csv`` (DESIGN 4.3, with the
+satellite states: ``--leo`` reads it back); all or none.
 """
 
 import sys
@@ -20,9 +23,11 @@ import numpy as np
 from ..errors import InputError
 from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
-from ..fusion import real
+from ..fusion import leo_input, real
 from ..gnss import rtklib_pos
 from ..ins import flight_mat, imu_io
+from ..orbits import CARRIERS
+from ..positioning.measurements import write_measurements
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command
@@ -34,7 +39,7 @@ GEOJSON_RATE_HZ = 10.0
 
 def register(subparsers):
     p = add_command(subparsers, "fuse", sys.modules[__name__],
-                    help="fuse a real IMU log with GNSS fixes (RTKLIB .pos); score simulated outages")
+                    help="fuse a real IMU log with GNSS fixes (RTKLIB .pos) and LEO Doppler; score simulated outages")
     p.add_argument("--imu", required=True, metavar="FILE", help="IMU log")
     p.add_argument("--imu-format", choices=IMU_FORMATS,
                    help="rtklib-csv (raw CSV with FILE.tag), rtklib-sf-csv (its converted _sf.csv), csv with "
@@ -45,11 +50,19 @@ def register(subparsers):
                    help="for --imu-format csv: NAME=COLUMN,... (0-based), names with units, e.g. "
                         "t_gpst_s=0,ax_g=1,ay_g=2,az_g=3,gx_deg_per_s=4,gy_deg_per_s=5,gz_deg_per_s=6")
     p.add_argument("--gnss", metavar="FILE.pos", help="RTKLIB solution file (GPST, lat/lon form)")
-    p.add_argument("--leo", metavar="MEAS.csv", help="LEO Doppler aids (not yet: stage 2)")
-    p.add_argument("--leo-sim", action="store_true", help="simulated LEO Doppler aids (not yet: stage 2)")
-    p.add_argument("--tle", metavar="FILE", help="with --leo/--leo-sim (stage 2)")
-    p.add_argument("--constellation", nargs="+", metavar="NAME", help="with --leo-sim (stage 2)")
-    p.add_argument("--coupling", choices=("loose", "tight"), help="LEO coupling (stage 2)")
+    p.add_argument("--leo", metavar="MEAS.csv",
+                   help="LEO Doppler aids (DESIGN 4.3, e.g. leosop replay's measurements.csv); a table with t_s only "
+                        "is on the clock of --outage")
+    p.add_argument("--leo-sim", action="store_true",
+                   help="LEO Doppler simulated along the Q=1 epochs of --gnss (simulate's measurement level), "
+                        "continuing through the outages")
+    p.add_argument("--tle", metavar="FILE",
+                   help="element sets: the satellite states of a --leo table without state columns, or the sky of "
+                        "--leo-sim (default the bundled one)")
+    p.add_argument("--constellation", nargs="+", metavar="NAME", choices=tuple(CARRIERS),
+                   help="transmitting families of --leo-sim (default starlink)")
+    p.add_argument("--coupling", choices=("loose", "tight"), default="tight",
+                   help="LEO coupling: tight (each Doppler an aid, default); loose is not yet supported")
     p.add_argument("--outage", action="append", default=[], metavar="START_S,DURATION_S",
                    help="withhold the GNSS aids from START_S for DURATION_S (seconds after the first GNSS epoch); "
                         "repeatable")
@@ -67,7 +80,7 @@ def register(subparsers):
     p.add_argument("--imu-spec", default="consumer", metavar="FILE|GRADE",
                    help=f"IMU noise: a grade ({', '.join(real.GRADES)}; default consumer) or a JSON file with "
                         "the fields of leosop.fusion.real.ImuSpec")
-    p.add_argument("--seed", type=int, default=0, help="seed of the simulated LEO aids (--leo-sim, stage 2)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated LEO aids (--leo-sim)")
 
 
 def _triple(text, option):
@@ -133,9 +146,14 @@ def _read_text_imu(path, fmt, columns, C_b_s):
 
 
 def run(args):
-    if args.leo or args.leo_sim or args.coupling or args.tle or args.constellation:
-        raise InputError("--leo, --leo-sim, --tle, --constellation and --coupling are not yet supported "
-                         "(issue 21 stage 2); fuse GNSS with --gnss")
+    if args.leo and args.leo_sim:
+        raise InputError("--leo and --leo-sim exclude each other")
+    if args.tle and not (args.leo or args.leo_sim):
+        raise InputError("--tle goes with --leo or --leo-sim")
+    if args.constellation and not args.leo_sim:
+        raise InputError("--constellation goes with --leo-sim")
+    if args.coupling == "loose" and (args.leo or args.leo_sim):
+        raise InputError("--coupling loose (LEO snapshot fixes as aids) is not yet supported; use tight")
     if not args.gnss and args.imu_format != "flight-mat":
         raise InputError("--gnss FILE.pos is required (the only aid source so far; flight-mat carries its GPS)")
     if args.imu_columns and args.imu_format != "csv":
@@ -151,14 +169,31 @@ def run(args):
     log, gps = read_imu(args.imu, args.imu_format, args.imu_columns, imu_io.mount_C_b_s(*mount))
     sol = sol or gps
     t_start = time.perf_counter()
-    fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s,
+    leo = None
+    if args.leo:
+        leo = leo_input.read(args.leo, sol, tle=args.tle)
+    elif args.leo_sim:
+        leo = leo_input.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
+                                 seed=args.seed)
+    leo_aids = leo_input.to_aids(leo, sol, options.lever_arm_b_m)[0] if leo is not None else []
+    fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s, extra_aids=leo_aids,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))
     outages, reference = real.outage_errors(fused, sol, options)
     runtime = time.perf_counter() - t_start
     doc = _document(fused, sol, log, outages, reference, runtime, args)
+    if leo is not None:
+        doc["leo"] = _leo_summary(leo, fused.result, args)
     if args.out:
-        _write(args.out, fused, sol, outages, doc)
+        _write(args.out, fused, sol, outages, doc, leo if args.leo_sim else None)
     return doc
+
+
+def _leo_summary(leo, res, args):
+    clocks = {k.partition(":")[2]: {"offset_hz": float(x[0]), "drift_hz_per_s": float(x[1]),
+                                    "offset_sigma_hz": float(sd[0])}
+              for k, (x, sd) in res.states.items() if k.startswith("leo_clock:")}
+    return {"source": leo.source, "n_rows": len(leo), "n_sats": int(np.unique(leo.sat_id).size),
+            "coupling": args.coupling, "clocks": clocks}
 
 
 def _document(fused, sol, log, outages, reference, runtime, args):
@@ -209,7 +244,7 @@ def _geojson(fused, sol):
     ])
 
 
-def _write(out_dir, fused, sol, outages, doc):
+def _write(out_dir, fused, sol, outages, doc, leo_sim):
     from ..plots import fuse as plots
 
     res = fused.result
@@ -235,6 +270,8 @@ def _write(out_dir, fused, sol, outages, doc):
         if any(o["n_ref"] for o in outages):
             plots.outage_errors(stage / "outage_errors.png", outages, title)
         plots.biases(stage / "biases.png", res)
+        if leo_sim is not None:
+            write_measurements(stage / "leo_measurements.csv", leo_sim)
 
 
 def summary(doc):

@@ -31,7 +31,51 @@ from ..ins.error_model import DPOS, DV, EPS, PHI
 from ..rotations import skew
 from .common import N_INS, pos_jacobian
 
-__all__ = ["Aid", "GnssPosition", "GnssVelocity", "Height", "InsView", "NonHolonomic", "ZeroRate", "ZeroVelocity"]
+__all__ = ["Aid", "GnssPosition", "GnssVelocity", "Height", "InsView", "NonHolonomic", "StateBlock", "ZeroRate",
+           "ZeroVelocity"]
+
+
+@dataclasses.dataclass(frozen=True)
+class StateBlock:
+    """States an aid needs beside the INS errors (a receiver clock, a satellite's offset), shared by key.
+
+    The engine adds a block with its prior when the first aid naming its
+    ``key`` comes, keeps its estimate (in :attr:`InsView.states`), propagates
+    it with :meth:`transition` and drops it ``drop_after_s`` after the last
+    aid that named it (None: never). Its error state is estimate minus truth.
+
+    Attributes
+    ----------
+    key : str
+    mean0, sigma0 : tuple of float, (k,)
+        Prior estimate and its standard deviation, per state.
+    psd : tuple of float, (k,)
+        Random-walk power spectral density of each state (unit^2/s).
+    integrated : bool
+        State 0 is the integral of state 1 (a frequency offset and its drift; k = 2).
+    drop_after_s : float or None
+    """
+
+    key: str
+    mean0: tuple
+    sigma0: tuple
+    psd: tuple
+    integrated: bool = False
+    drop_after_s: float | None = None
+
+    @property
+    def size(self):
+        return len(self.mean0)
+
+    def transition(self, dt_s):
+        """``(Phi, Qd)`` over ``dt_s``, each (k, k): random walks, and the drift integrated into the offset."""
+        q = np.asarray(self.psd, dtype=float)
+        if not self.integrated:
+            return np.eye(self.size), np.diag(q * dt_s)
+        Phi = np.array([[1.0, dt_s], [0.0, 1.0]])
+        Qd = np.array([[q[0] * dt_s + q[1] * dt_s**3 / 3.0, q[1] * dt_s**2 / 2.0],
+                       [q[1] * dt_s**2 / 2.0, q[1] * dt_s]])
+        return Phi, Qd
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,6 +91,8 @@ class InsView:
         Bias-corrected body rate over the last INS update.
     accel_enu_mps2 : ndarray, (3,)
         Mean acceleration over the last INS update (the rate of the velocity).
+    states : dict of str to ndarray
+        Estimates of the engine's :class:`StateBlock` states, by key.
     """
 
     state: object
@@ -54,6 +100,7 @@ class InsView:
     accel_bias_mps2: np.ndarray
     omega_ib_b_rad_per_s: np.ndarray
     accel_enu_mps2: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    states: dict = dataclasses.field(default_factory=dict)
 
 
 def _enu_offset_m(state, lat_rad, lon_rad, alt_m):
@@ -88,12 +135,16 @@ class Aid:
         Time-tagged by another clock than the IMU's (GNSS): the filter's IMU
         time offset state applies to it through :meth:`rate`. Aids derived
         from the IMU log itself (ZUPT, NHC) are not.
+    states : tuple of StateBlock
+        Blocks of states beside the INS errors the aid depends on; the
+        columns of :meth:`design` after the 15 INS errors are theirs, in order.
     """
 
     name = "aid"
     needs_heading = False
     gated = True
     external_clock = False
+    states = ()
 
     def __init__(self, t_s):
         self.t_s = float(t_s)
@@ -103,7 +154,7 @@ class Aid:
         raise NotImplementedError
 
     def design(self, ins):
-        """``H = dz / dx``, shape (m, 15)."""
+        """``H = dz / dx``, shape (m, 15 + the sizes of :attr:`states`)."""
         raise NotImplementedError
 
     def rate(self, ins):
@@ -111,7 +162,7 @@ class Aid:
         raise NotImplementedError
 
     def matrices(self, ins):
-        """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` (m, 15), ``R`` (m, m)."""
+        """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` as :meth:`design`, ``R`` (m, m)."""
         return self.predict(ins) - self.measured, self.design(ins), self.R
 
 

@@ -23,6 +23,13 @@ matrix gets the column ``dh/dt`` (:meth:`leosop.fusion.aids.Aid.rate`): an
 offset ``td_hat - td`` moves ``h`` by ``dh/dt (td_hat - td)``. Aids derived
 from the IMU itself (ZUPT, NHC) are on its clock and see no offset.
 
+States of the aids (:class:`leosop.fusion.aids.StateBlock`, e.g. a LEO
+receiver's clock per constellation and each satellite's offset) come after
+those: a block is added with its prior when the first aid naming it is due,
+propagated by its own transition (no coupling to the INS errors) and
+dropped (marginalised) once stale; its estimate is kept beside ``P`` and
+corrected by every update (error = estimate minus truth, as the time offset).
+
 Heading: a MEMS IMU cannot find North at rest, so a run may start with the
 yaw unknown (:class:`CourseAlignment`): the first GNSS velocity faster than
 ``min_speed_mps`` sets the yaw to the course over ground (the body's Forward
@@ -120,6 +127,8 @@ class EngineResult:
     nll : dict of str to float
         Per kind of aid: the negative log-likelihood of its used innovations,
         ``sum 0.5 (z^T S^-1 z + ln det(2 pi S))`` (compares runs on the same aids).
+    states : dict of str to (ndarray, ndarray)
+        The aids' state blocks alive at the end: estimate and sigma, by key.
     """
 
     t_s: np.ndarray
@@ -140,6 +149,7 @@ class EngineResult:
     aids: dict
     yaw_aligned_s: float | None
     nll: dict
+    states: dict = dataclasses.field(default_factory=dict)
 
 
 def state_slices(settings):
@@ -175,6 +185,8 @@ class _Filter:
         self.settings = settings
         self.SG, self.SA, self.TD = state_slices(settings)
         self.P = initial_covariance(P0, settings) if np.shape(P0) == (N_INS, N_INS) else np.array(P0, dtype=float)
+        self.n_core = self.P.shape[0]
+        self.blocks = {}  # key -> [StateBlock, first index, estimate, time last named]
         self.Qc = settings.noise_psd()
         self.bias_q = np.r_[np.full(3, settings.gyro_bias_rw_rad_per_s_per_rt_s**2),
                             np.full(3, settings.accel_bias_rw_mps2_per_rt_s**2)]
@@ -207,7 +219,7 @@ class _Filter:
         C = s.C_n_b
         f_b = self.pending_dv_b / dt
         F15, G15 = error_model.model15(C, C @ f_b, s.vel_enu_mps, s.lat_rad, s.alt_m)
-        n = self.P.shape[0]
+        n_all, n = self.P.shape[0], self.n_core
         F, G = np.zeros((n, n)), np.zeros((n, 6))
         F[:N_INS, :N_INS], G[:N_INS] = F15, G15
         if self.SG is not None:
@@ -218,6 +230,14 @@ class _Filter:
         Qd[NABLA, NABLA] += np.diag(self.bias_q[3:] * dt)
         if self.TD is not None:
             Qd[self.TD, self.TD] += self.settings.time_offset_rw_s_per_rt_s**2 * dt
+        if n_all > n:
+            Phi_all, Qd_all = np.eye(n_all), np.zeros((n_all, n_all))
+            Phi_all[:n, :n], Qd_all[:n, :n] = Phi, Qd
+            for block, i, x, _ in self.blocks.values():
+                sl = slice(i, i + block.size)
+                Phi_all[sl, sl], Qd_all[sl, sl] = block.transition(dt)
+                x[:] = Phi_all[sl, sl] @ x
+            Phi, Qd = Phi_all, Qd_all
         P = Phi @ self.P @ Phi.T + Qd
         self.P = 0.5 * (P + P.T)
         self.pending_s = 0.0
@@ -236,13 +256,42 @@ class _Filter:
         moved = strapdown.NavState(s.lat_rad + v[1] * dt / (R_M + s.alt_m),
                                    s.lon_rad + v[0] * dt / ((R_N + s.alt_m) * math.cos(s.lat_rad)),
                                    s.alt_m + v[2] * dt, v + self.accel_enu * dt, s.q_n_b)
-        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu)
+        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu,
+                       {k: b[2] for k, b in self.blocks.items()})
+
+    def admit(self, aid):
+        """Drop the stale state blocks, add those ``aid`` names for the first time, mark its blocks named now."""
+        stale = [k for k, (b, _, _, last) in self.blocks.items()
+                 if b.drop_after_s is not None and aid.t_s - last > b.drop_after_s]
+        if stale:
+            keep = np.ones(self.P.shape[0], dtype=bool)
+            for k in stale:
+                b, i = self.blocks.pop(k)[:2]
+                keep[i:i + b.size] = False
+            self.P = self.P[np.ix_(keep, keep)]
+            first = np.cumsum(keep) - 1
+            for entry in self.blocks.values():
+                entry[1] = int(first[entry[1]])
+        for b in aid.states:
+            if b.key not in self.blocks:
+                n = self.P.shape[0]
+                P = np.zeros((n + b.size, n + b.size))
+                P[:n, :n] = self.P
+                P[n:, n:] = np.diag(np.square(b.sigma0))
+                self.P = P
+                self.blocks[b.key] = [b, n, np.array(b.mean0, dtype=float), aid.t_s]
+            self.blocks[b.key][3] = aid.t_s
 
     def innovation(self, aid, ins):
         """``(z, H, R)`` of ``aid`` over the full state (the time-offset column for aids on the aids' clock)."""
-        z, H15, R = aid.matrices(ins)
+        z, Ha, R = aid.matrices(ins)
         H = np.zeros((z.size, self.P.shape[0]))
-        H[:, :N_INS] = H15
+        H[:, :N_INS] = Ha[:, :N_INS]
+        c = N_INS
+        for b in aid.states:
+            i = self.blocks[b.key][1]
+            H[:, i:i + b.size] = Ha[:, c:c + b.size]
+            c += b.size
         if self.TD is not None and aid.external_clock:
             H[:, self.TD.start] = aid.rate(ins)
         return z, H, R
@@ -279,6 +328,8 @@ class _Filter:
             self.sa = self.sa + dx[self.SA]
         if self.TD is not None:
             self.td -= float(dx[self.TD.start])  # dx is td_hat minus the true offset
+        for b, i, x, _ in self.blocks.values():
+            x -= dx[i:i + b.size]
         return nll
 
     def align_yaw(self, vel_enu_mps, sigma_rad):
@@ -340,7 +391,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     m = t_s.size // 2
     t_out = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
     f = _Filter(state0, P0, settings, time_offset_s)
-    n_x = f.P.shape[0]
+    n_x = f.n_core
     n = m + 1
     out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, n_x)),
            "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
@@ -378,6 +429,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
                     f.align_yaw(v, course_alignment.sigma_rad)
                     heading_known, aligned_s = True, aid.t_s
             f.propagate()
+            f.admit(aid)
             f.apply(aid, f.view(t_aid, t_now))
         if f.pending_s >= settings.step_s:
             f.propagate()
@@ -386,7 +438,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     pos, cp = out["pos"], out["cp"]
     return EngineResult(t_out, pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp, out["cv"],
                         out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
-                        {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll))
+                        {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll),
+                        {k: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for k, (b, i, x, _) in f.blocks.items()})
 
 
 def _record(out, k, f):
@@ -394,7 +447,7 @@ def _record(out, k, f):
     out["pos"][k] = (s.lat_rad, s.lon_rad, s.alt_m)
     out["vel"][k] = s.vel_enu_mps
     out["q"][k] = s.q_n_b
-    out["sigma"][k] = np.sqrt(np.diagonal(P))
+    out["sigma"][k] = np.sqrt(np.diagonal(P)[:f.n_core])
     J = pos_jacobian(s.lat_rad, s.alt_m)
     out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
     out["cv"][k] = P[DV, DV]

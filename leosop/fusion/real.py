@@ -75,6 +75,25 @@ class ImuSpec:
     gyro_bias_rw_deg_per_s_per_rt_s: float
     accel_bias_rw_mps2_per_rt_s: float
 
+    @classmethod
+    def from_allan(cls, gyro, accel):
+        """The spec read off Allan deviations (:func:`leosop.ins.allan.allan`) of a static log, worst axis.
+
+        Gyro ``gyro`` in rad/s, accelerometer ``accel`` in m/s^2. White
+        densities as they are; each bias instability ``B`` (least Allan
+        deviation at ``tau_min``) becomes the initial bias sigma and a random
+        walk reaching ``B`` over ``tau_min`` (``B / sqrt(tau_min)``). A static
+        log cannot show the turn-on bias, so the initial sigma is a floor.
+        """
+        g = earth.normal_gravity_mps2(0.0, 0.0)
+        return cls(gyro_arw_deg_per_rt_h=math.degrees(float(gyro.white_density.max())) * 60.0,
+                   accel_vrw_ug_per_rt_hz=float(accel.white_density.max()) / g * 1e6,
+                   gyro_bias_sigma_deg_per_s=math.degrees(float(gyro.bias_instability.max())),
+                   accel_bias_sigma_mps2=float(accel.bias_instability.max()),
+                   gyro_bias_rw_deg_per_s_per_rt_s=math.degrees(float(
+                       np.max(gyro.bias_instability / np.sqrt(gyro.tau_min_s)))),
+                   accel_bias_rw_mps2_per_rt_s=float(np.max(accel.bias_instability / np.sqrt(accel.tau_min_s))))
+
     def settings(self):
         """The :class:`leosop.fusion.engine.EngineSettings` of this IMU."""
         return engine.EngineSettings(
@@ -305,7 +324,7 @@ def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withhel
     return best[1], P
 
 
-def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
+def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=None):
     """Fuse an IMU log with an RTKLIB solution.
 
     Parameters
@@ -316,6 +335,9 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
     options : FuseOptions
     imu_time_offset_s : float
         Added to the IMU time tags.
+    extra_aids : sequence of leosop.fusion.aids.Aid
+        More aids on the run's clock, e.g. LEO Doppler (:mod:`leosop.fusion.leo_input`);
+        not withheld in the outages.
     progress : callable, optional
         Wraps the iterator over INS updates.
 
@@ -344,6 +366,7 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, progress=None):
                                   options.spec)
     lever = np.asarray(options.lever_arm_b_m, dtype=float)
     aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps)
+    aid_list += [a for a in extra_aids if a.t_s > t_imu[0] - dt[0]]
     if options.zupt:
         ends, w = stationary_windows(t_imu, dvl / dt[:, None], dth / dt[:, None])
         zr_sigma = math.radians(options.zero_rate_sigma_deg_per_s)

@@ -1,0 +1,172 @@
+"""LEO Doppler aids (tight coupling) for the engine: one aid per satellite measurement.
+
+Measurement of satellite j, constellation g (the toolkit's Doppler sign)::
+
+    doppler_j = -(f0_j / c) (v_s - v_a) . (r_s - r_a) / |r_s - r_a| + T_u[g] + o_j + noise,
+
+with the antenna ``r_a = r + C_e_n C_n_b l`` and ``v_a = C_e_n (v + C_n_b
+(omega x l))`` (lever arm ``l`` in the body frame, as the GNSS aids), the
+satellite state as given (CSV columns, or propagated from element sets),
+``T_u[g]`` the receiver's frequency offset of constellation g (a state
+block with its drift, each family received by its own chain) and ``o_j``
+the satellite's clock-induced offset (a block per satellite, a slow random
+walk that also takes the slowly varying Doppler of an orbit error; dropped
+:data:`SAT_DROP_AFTER_S` after the satellite was last seen). The rows are
+those of :func:`leosop.geometry.doppler.doppler_jacobian` chained to the INS
+errors; ``tests/test_fuse_leo.py`` checks them against finite differences.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .. import frames
+from ..constants import C_MPS
+from ..geometry.doppler import doppler_jacobian
+from ..ins.error_model import DPOS, DV, EPS, PHI
+from ..rotations import skew
+from .aids import Aid, StateBlock
+from .common import DROP_AFTER_S, N_INS, pos_jacobian
+
+__all__ = ["SAT_DROP_AFTER_S", "LeoDoppler", "LeoOptions", "leo_aids"]
+
+#: A satellite's offset state is dropped this long after its last Doppler [s] (as the tight filter's).
+SAT_DROP_AFTER_S = DROP_AFTER_S
+
+
+@dataclasses.dataclass(frozen=True)
+class LeoOptions:
+    """Priors and noise of the LEO Doppler aids.
+
+    ``rx_offset_sigma_hz``: prior of each receiver frequency offset (a real
+    receiver's oscillator may be kHz off at 11 GHz; the first Doppler of a
+    constellation settles it); ``rx_drift_sigma_hz_per_s`` its drift's prior;
+    ``rx_offset_psd_hz2_per_s`` and ``rx_drift_psd_hz2_per_s3`` their random
+    walks; ``sat_offset_sigma_hz`` each satellite's offset about the
+    receiver's (simulate's offsets, uniform in [0, 5 Hz]: 5 / sqrt(12)) and
+    ``sat_offset_psd_hz2_per_s`` its random walk (an orbit error of 1 m moves
+    a Doppler by ~0.4 Hz over a pass of minutes); ``default_sigma_hz`` the
+    noise of a row without ``sigma_hz``.
+    """
+
+    rx_offset_sigma_hz: float = 1000.0
+    rx_drift_sigma_hz_per_s: float = 1.0
+    rx_offset_psd_hz2_per_s: float = 1e-6
+    rx_drift_psd_hz2_per_s3: float = 1e-6
+    sat_offset_sigma_hz: float = 5.0 / np.sqrt(12.0)
+    sat_offset_psd_hz2_per_s: float = 2e-3
+    default_sigma_hz: float = 1.0
+
+
+class LeoDoppler(Aid):
+    """One satellite's Doppler [Hz] at the GNSS antenna (the module's model).
+
+    Parameters
+    ----------
+    t_s : float
+        On the aids' clock.
+    doppler_hz, sigma_hz, carrier_hz : float
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (3,)
+        Satellite state at ``t_s`` (ECEF).
+    lever_arm_b_m : array_like, (3,)
+        Antenna minus IMU in the body frame (Right-Forward-Up).
+    clock : StateBlock
+        The receiver's offset and drift of the satellite's constellation (2 states).
+    sat : StateBlock
+        The satellite's offset (1 state).
+    """
+
+    name = "leo_doppler"
+    external_clock = True
+
+    def __init__(self, t_s, doppler_hz, sigma_hz, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps, lever_arm_b_m, clock,
+                 sat):
+        super().__init__(t_s)
+        self.measured = np.array([float(doppler_hz)])
+        self.R = np.eye(1) * float(sigma_hz) ** 2
+        self.carrier_hz = float(carrier_hz)
+        self.pos_sv_ecef_m = np.asarray(pos_sv_ecef_m, dtype=float).reshape(3)
+        self.vel_sv_ecef_mps = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(3)
+        self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
+        self.states = (clock, sat)
+
+    def _antenna(self, ins):
+        """``C_e_n``, the lever arm and its rotation velocity in ENU, antenna position and velocity (ECEF)."""
+        s = ins.state
+        C = frames.C_e_n(s.lat_rad, s.lon_rad)
+        l_n = s.C_n_b @ self.lever_arm_b_m
+        w_n = s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
+        r = frames.geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m) + C @ l_n
+        return C, l_n, w_n, r, C @ (s.vel_enu_mps + w_n)
+
+    def _clock_hz(self, ins):
+        return ins.states[self.states[0].key][0] + ins.states[self.states[1].key][0]
+
+    def predict(self, ins):
+        _, _, _, r, v = self._antenna(ins)
+        rate = frames.range_rate(self.pos_sv_ecef_m, self.vel_sv_ecef_mps, r, v)
+        return np.array([-float(rate) * self.carrier_hz / C_MPS + self._clock_hz(ins)])
+
+    def _jacobian(self, ins):
+        C, l_n, w_n, r, v = self._antenna(ins)
+        J = doppler_jacobian(self.pos_sv_ecef_m[None], self.vel_sv_ecef_mps[None], r, v, self.carrier_hz)[0]
+        return J[:3], J[3:6], C, l_n, w_n, v
+
+    def rate(self, ins):
+        J_r, J_v, C, _, _, v = self._jacobian(ins)
+        return np.array([J_r @ v + J_v @ C @ ins.accel_enu_mps2])
+
+    def design(self, ins):
+        s = ins.state
+        J_r, J_v, C, l_n, w_n, _ = self._jacobian(ins)
+        # A position change [dlat, dlon, dalt] turns the ENU frame by (-dlat, dlon cos lat, dlon sin lat):
+        # C_e_n x moves by -C_e_n [x x] M dpos for any ENU vector x (the velocity, the lever arm).
+        M = np.zeros((3, 3))
+        M[0, 0], M[1, 1], M[2, 1] = -1.0, np.cos(s.lat_rad), np.sin(s.lat_rad)
+        H = np.zeros((1, N_INS + 3))
+        H[0, PHI] = J_r @ C @ skew(l_n) + J_v @ C @ skew(w_n)
+        H[0, DV] = J_v @ C
+        H[0, DPOS] = (J_r @ C @ pos_jacobian(s.lat_rad, s.alt_m) - J_r @ C @ skew(l_n) @ M
+                      - J_v @ C @ skew(s.vel_enu_mps + w_n) @ M)
+        H[0, EPS] = -J_v @ C @ s.C_n_b @ skew(self.lever_arm_b_m)
+        H[0, N_INS] = 1.0  # receiver offset (its drift enters through the block's transition)
+        H[0, N_INS + 2] = 1.0  # satellite offset
+        return H
+
+
+def leo_aids(t_s, sat_id, clock_label, doppler_hz, sigma_hz, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps,
+             lever_arm_b_m, options=None):
+    """One :class:`LeoDoppler` per measurement, sharing the state blocks of each clock and each satellite.
+
+    Parameters
+    ----------
+    t_s : ndarray, (m,)
+        On the aids' clock.
+    sat_id, clock_label : array_like of str, (m,)
+        Satellite and receiver clock (constellation) of each row.
+    doppler_hz, sigma_hz, carrier_hz : ndarray, (m,)
+        ``sigma_hz`` NaN: ``options.default_sigma_hz``.
+    pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (m, 3)
+    lever_arm_b_m : array_like, (3,)
+    options : LeoOptions, optional
+
+    Returns
+    -------
+    list of LeoDoppler
+        Rows with a non-finite Doppler or satellite state are left out.
+    """
+    o = options or LeoOptions()
+    clocks, sats, out = {}, {}, []
+    sigma = np.where(np.isfinite(sigma_hz), sigma_hz, o.default_sigma_hz)
+    ok = np.isfinite(doppler_hz) & np.isfinite(pos_sv_ecef_m).all(-1) & np.isfinite(vel_sv_ecef_mps).all(-1)
+    for k in np.flatnonzero(ok):
+        g, j = str(clock_label[k]), str(sat_id[k])
+        if g not in clocks:
+            clocks[g] = StateBlock(f"leo_clock:{g}", (0.0, 0.0), (o.rx_offset_sigma_hz, o.rx_drift_sigma_hz_per_s),
+                                   (o.rx_offset_psd_hz2_per_s, o.rx_drift_psd_hz2_per_s3), integrated=True)
+        if j not in sats:
+            sats[j] = StateBlock(f"leo_sat:{j}", (0.0,), (o.sat_offset_sigma_hz,), (o.sat_offset_psd_hz2_per_s,),
+                                 drop_after_s=SAT_DROP_AFTER_S)
+        out.append(LeoDoppler(t_s[k], doppler_hz[k], sigma[k], carrier_hz[k], pos_sv_ecef_m[k], vel_sv_ecef_mps[k],
+                              lever_arm_b_m, clocks[g], sats[j]))
+    return out

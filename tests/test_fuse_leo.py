@@ -1,0 +1,99 @@
+"""LEO Doppler aids of the engine: H against finite differences, the model against a second formula, state blocks.
+
+References: central differences of the aid's own nonlinear model (as for the
+other aids in test_fuse_engine.py); the Doppler closed form written out here
+from the DESIGN 4.3 definition (range rate = -doppler c / f0); the clock
+block's transition against the integral of white noise.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from test_fuse_engine import STEP, _computed, _true_view
+
+from leosop import frames
+from leosop.constants import C_MPS
+from leosop.fusion import aids_leo
+from leosop.fusion.aids import StateBlock
+from leosop.fusion.common import N_INS
+
+CARRIER_HZ = 11.325e9
+CLOCK = StateBlock("leo_clock:starlink", (0.0, 0.0), (100.0, 1.0), (1e-6, 1e-6), integrated=True)
+SAT = StateBlock("leo_sat:44713", (0.0,), (1.5,), (1e-3,), drop_after_s=30.0)
+X_BLOCKS = {CLOCK.key: np.array([123.4, 0.05]), SAT.key: np.array([-1.7])}
+
+
+def _aid(lever=(0.3, -0.8, 1.2)):
+    """A satellite 550 km up and ~900 km away, moving at 7.6 km/s, as seen from the test's INS."""
+    state = _computed()[0]
+    r_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
+    up = r_rx / np.linalg.norm(r_rx)
+    east = np.cross([0.0, 0.0, 1.0], up)
+    east /= np.linalg.norm(east)
+    r_sv = r_rx + 550e3 * up + 700e3 * east
+    v_sv = 7.6e3 * np.cross(up, east) + 100.0 * up
+    return aids_leo.LeoDoppler(0.0, -25e3, 3.0, CARRIER_HZ, r_sv, v_sv, lever, CLOCK, SAT)
+
+
+def _with_blocks(view, d_clock=(0.0, 0.0), d_sat=(0.0,)):
+    """``view`` with the block estimates less the errors ``d_*`` (error = estimate minus truth)."""
+    return dataclasses.replace(view, states={CLOCK.key: X_BLOCKS[CLOCK.key] - d_clock,
+                                             SAT.key: X_BLOCKS[SAT.key] - d_sat})
+
+
+def test_design_matrix_matches_finite_differences():
+    aid = _aid()
+    computed = _with_blocks(_true_view(np.zeros(N_INS)))
+    _, H, R = aid.matrices(computed)
+    assert H.shape == (1, N_INS + 3) and R.shape == (1, 1)
+    # 100x the other aids' steps: a Doppler of ~3e4 Hz from ECEF coordinates of 6e6 m rounds at ~1e-9 m
+    # (3e-10 Hz), which 1e-10 rad steps would divide into errors of 1e-5; at 100x the second-order terms are
+    # still below 1e-6 relative (checked: 1e-7 at 1000x).
+    step = np.r_[100 * STEP, 1e-3, 1e-4, 1e-3]
+    H_fd = np.empty_like(H)
+    for i in range(H.shape[1]):
+        e = np.zeros(H.shape[1])
+        e[i] = step[i]
+        plus = _with_blocks(_true_view(e[:N_INS]), e[N_INS:N_INS + 2], e[N_INS + 2:])
+        minus = _with_blocks(_true_view(-e[:N_INS]), -e[N_INS:N_INS + 2], -e[N_INS + 2:])
+        H_fd[:, i] = (aid.predict(minus) - aid.predict(plus)) / (2 * step[i])
+    # z(dx) = h(computed) - h(truth(dx)): its derivative at 0 is H. The drift column is zero in H (the drift
+    # reaches the measurement through the block's transition), and so in the model.
+    assert H[0, N_INS + 1] == 0.0 == H_fd[0, N_INS + 1]
+    # Column by column to 1e-6 of its size: central differences are exact to O(step^2); the
+    # position columns are ~1e6 Hz/rad, the frame-rotation terms of the velocity ~1e2 of them.
+    scale = np.maximum(np.abs(H_fd), 1e-3)
+    np.testing.assert_array_less(np.abs(H - H_fd), 1e-6 * scale + 1e-9 * np.abs(H).max())
+
+
+def test_prediction_is_the_design_doppler_with_the_clock_states():
+    """The DESIGN 4.3 Doppler written out, at the antenna moved by the lever arm (closed-form lever geometry)."""
+    state = _computed()[0]
+    aid = _aid(lever=(0.0, 0.0, 0.0))
+    view = _with_blocks(_true_view(np.zeros(N_INS)))
+    r_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
+    v_rx = frames.C_e_n(state.lat_rad, state.lon_rad) @ state.vel_enu_mps
+    los = (aid.pos_sv_ecef_m - r_rx) / np.linalg.norm(aid.pos_sv_ecef_m - r_rx)
+    range_rate = los @ (aid.vel_sv_ecef_mps - v_rx)
+    expected = -range_rate * CARRIER_HZ / C_MPS + 123.4 - 1.7
+    assert aid.predict(view)[0] == pytest.approx(expected, abs=1e-6)  # 1 uHz: rounding of ~3e4 Hz terms
+    assert abs(expected) > 1e3  # a real LEO Doppler, not a degenerate geometry
+
+
+def test_clock_block_transition_is_the_integrated_random_walk():
+    """Offset = integral of the drift plus white noise: Q over dt from the closed form, checked by Monte Carlo."""
+    b = StateBlock("c", (0.0, 0.0), (1.0, 1.0), (0.3, 0.7), integrated=True)
+    Phi, Qd = b.transition(2.0)
+    np.testing.assert_allclose(Phi, [[1.0, 2.0], [0.0, 1.0]])
+    rng = np.random.default_rng(3)
+    n, dt = 200, 0.01  # 200 fine steps of 10 ms make the 2 s
+    w_d = rng.normal(0.0, math.sqrt(0.7 * dt), (20_000, n))
+    w_o = rng.normal(0.0, math.sqrt(0.3 * dt), (20_000, n))
+    drift = np.cumsum(w_d, axis=1)
+    offset = np.sum(drift * dt, axis=1) + w_o.sum(axis=1)
+    emp = np.cov(np.stack([offset, drift[:, -1]]))
+    # 20 000 samples: the variances' relative scatter is sqrt(2 / 20 000) = 1 %; 5 % is 5 sigma
+    # (plus the fine grid's 1/n bias on the dt^3 term).
+    np.testing.assert_allclose(emp, Qd, rtol=0.05)
