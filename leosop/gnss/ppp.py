@@ -58,7 +58,9 @@ Cycle slips: Melbourne-Wuebbena jump against its
 running arc mean and geometry-free phase jump between epochs, plus the
 receiver's loss-of-lock flag. Outliers: normalised
 innovations above ``k_outlier`` are removed one at a time (a phase outlier
-resets that satellite's ambiguity, a code outlier drops the code).
+resets that satellite's ambiguity, a code outlier drops the code); the
+clock's 100 m prior is in every row's variance, so only gross errors reach
+the threshold (docs/ppp.md, "One system alone").
 
 Time: GPS time inside (``t_s`` seconds since the first epoch's day in GPS
 time); UTC at the output (GPS - UTC = 18 s from 2017).
