@@ -58,7 +58,9 @@ Cycle slips: Melbourne-Wuebbena jump against its
 running arc mean and geometry-free phase jump between epochs, plus the
 receiver's loss-of-lock flag. Outliers: normalised
 innovations above ``k_outlier`` are removed one at a time (a phase outlier
-resets that satellite's ambiguity, a code outlier drops the code).
+resets that satellite's ambiguity, a code outlier drops the code); the
+clock's 100 m prior is in every row's variance, so only gross errors reach
+the threshold (docs/ppp.md, "One system alone").
 
 Time: GPS time inside (``t_s`` seconds since the first epoch's day in GPS
 time); UTC at the output (GPS - UTC = 18 s from 2017).
@@ -285,7 +287,10 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     P[:3, :3] = np.eye(3) * opt.init_pos_sigma_m**2
     x[5] = 0.1
     P[5, 5] = 0.3**2
-    amb_on = np.zeros(n_sv, bool)
+    # Arc of each satellite at each epoch; an ambiguity state belongs to one arc (-1: none yet). An arc that
+    # starts at an epoch the filter skips (fewer than 5 satellites) must still restart the ambiguity.
+    arc_id = np.cumsum(new_arc, axis=0)
+    amb_arc = np.full(n_sv, -1)
     out_pos = np.full((n_ep, 3), np.nan)
     out_sig = np.full((n_ep, 3), np.nan)
     out_zwd = np.full(n_ep, np.nan)
@@ -342,8 +347,8 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
             P[s_col, s_col] = opt.clk_sigma_m**2
             if sel.any():
                 x[s_col] = np.median(Pc[i, js_i[sel]] - rho[sel] - m_wet[i, js_i[sel]] * x[5])
-        reset = js_i[new_arc[i, js_i] | ~amb_on[js_i]]
-        n_slips += int(np.sum(amb_on[reset]))
+        reset = js_i[arc_id[i, js_i] != amb_arc[js_i]]
+        n_slips += int(np.sum(amb_arc[reset] >= 0))
         for j in reset:
             for a, var in ((6 + j, opt.init_amb_sigma_m**2), (gm0 + j, gm_var[j])):
                 P[a, :] = 0.0
@@ -351,7 +356,7 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
                 P[a, a] = var
                 x[a] = 0.0
             x[6 + j] = Lc[i, j] - Pc[i, j]
-            amb_on[j] = True
+            amb_arc[j] = arc_id[i, j]
         use_code = np.ones(len(js_i), bool)
         use_phase = np.ones(len(js_i), bool)
         sin_el = np.sin(elev[i, js_i])
@@ -405,7 +410,7 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         out_clk[i] = x[3:5]
         n_used[i] = len(js_i)
         if ar is not None:
-            jf = js_i[ar_ok[i, js_i] & amb_on[js_i]]
+            jf = js_i[ar_ok[i, js_i]]
             f = fix_epoch(x, P, 6, jf, wl_cyc[i], wl_se[i], sysof, elev[i], lam_nl, beta, ar) if jf.size else None
             if f is not None:
                 fix_pos[i] = x[:3] + f.dx[:3]
