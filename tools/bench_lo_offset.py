@@ -11,7 +11,9 @@ mode) beyond. Reported per run:
 - tracks, how many are true (a satellite's truth Doppler from the SigMF
   annotations within 20 Hz of the track, median over its blocks), how many
   identified, and how many identified wrongly (the named satellite's truth
-  is not within 20 Hz);
+  is not within 20 Hz); satellites with a true track (``sats``) and those
+  identified (``s_id``: a fragment of a satellite's track is ``duplicate``
+  when a longer track of it is identified);
 - the static fix's horizontal and 3-D error and its ratio to the same
   kind's zero-offset recording with the same search;
 - the estimated offset and drift minus the truth. The truth offset is the
@@ -74,17 +76,27 @@ def truth(meta_path):
 
 
 def score(res, curves):
-    """(true tracks, identified true tracks, wrong identities) of a replay."""
+    """(true tracks, identified true tracks, wrong identities, satellites tracked, satellites identified) of a replay.
+
+    A satellite is tracked when one of its tracks is true, identified when one of its tracks is
+    identified rightly (a fragment of a satellite's track is ``duplicate`` when the longer one has it).
+    """
     n_true = n_ok = n_wrong = 0
+    tracked, named = set(), set()
     for tr in res.tracks:
         err = {sid: np.median(np.abs(np.interp(tr.t_s, c[:, 0], c[:, 1]) - tr.doppler_hz)) for sid, c in curves.items()}
-        real = min(err.values()) < MATCH_HZ
+        best = min(err, key=err.get)
+        real = err[best] < MATCH_HZ
         n_true += real
+        if real:
+            tracked.add(best)
         if tr.sat_id is not None:
             right = err.get(tr.sat_id, np.inf) < MATCH_HZ
             n_ok += right
             n_wrong += not right
-    return n_true, n_ok, n_wrong
+            if right:
+                named.add(tr.sat_id)
+    return n_true, n_ok, n_wrong, len(tracked), len(named)
 
 
 def main(argv=None):
@@ -109,7 +121,7 @@ def main(argv=None):
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_lo_"))
     work.mkdir(parents=True, exist_ok=True)
     print(f"{'kind':10} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} {'id':>3} "
-          f"{'wrong':>5} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'d_drift':>8} "
+          f"{'wrong':>5} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'d_drift':>8} "
           f"{'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
@@ -124,7 +136,7 @@ def main(argv=None):
                     t0 = time.perf_counter()
                     res = replay(open_sigmf(path), const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
                     elapsed = time.perf_counter() - t0
-                    n_true, n_ok, n_wrong = score(res, curves)
+                    n_true, n_ok, n_wrong, n_sats, n_sats_id = score(res, curves)
                     fix = None if res.position is None else res.position.fixes
                     err = np.full(3, np.nan) if fix is None else fix.pos_ecef_m - site
                     enu = C_e_n(*ecef_to_geodetic(site)[:2]).T @ err
@@ -138,7 +150,7 @@ def main(argv=None):
                     d_drift = lo.drift_hz_per_s - drift if lo else np.nan
                     status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
                     print(f"{kind:10} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
-                          f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {horiz:8.1f} {err3d:8.1f} {ratio:6.2f} {d_off:8.2f} "
+                          f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} {err3d:8.1f} {ratio:6.2f} {d_off:8.2f} "
                           f"{(lo.offset_sigma_hz if lo else np.nan):6.2f} {d_drift:8.4f} "
                           f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f}", flush=True)
 

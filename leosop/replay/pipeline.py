@@ -59,6 +59,9 @@ TRACK_REFINE = 1
 #: more than this many cycles over a block: a tone then loses at most
 #: (pi x)^2 / 3 of its power, 0.03 % at 0.01 (5 kHz in 20 ms blocks is below).
 LO_REFIT_CYCLES = 0.01
+#: Radius searched round the first identification's position when the
+#: refitted tracks are identified again [m]: that position is good to ~1-2 km.
+REFIT_PRIOR_RADIUS_M = 20e3
 #: Longest gap between two tracks of one comb that are joined [s].
 JOIN_GAP_S = 10.0
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
@@ -449,11 +452,11 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     cpu_s = {"blocks": time.process_time() - t0}
     raw = [remove_outliers(tr) for tr in join_fragments(tracker.finish(), max(JOIN_GAP_S, 2.0 * max_gap_s))]
 
-    def identify(raw, init):
+    def identify(raw, init, radius_m=150e3):
         tracks = [replace(tr) for tr in raw]  # _correct_rate_change assigns a new doppler_hz
         for tr in tracks:
             _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
-        ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init, mask_deg=mask_deg,
+        ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init, prior_radius_m=radius_m, mask_deg=mask_deg,
                                 carrier_hz=comb.carrier_hz, lo_offset_max_hz=lo_offset_max_hz,
                                 lo_drift_max_hz_per_s=lo_drift_max_hz_per_s,
                                 rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
@@ -467,7 +470,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
               * max(block_len.values()) / fs)
     if misfit > LO_REFIT_CYCLES:
         raw = [remove_outliers(tr) for tr in refit_through_lo(rec, raw, blocks, factor, comb, lo)]
-        tracks, ident = identify(raw, ident.pos_ecef_m)
+        tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
     cpu_s["refit"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     position = None
