@@ -184,7 +184,7 @@ def test_blocks_refitted_through_a_1_mhz_offset_measure_as_well_as_at_zero(tmp_p
     identification has the offset, the tracked blocks are fitted again with the exact model. The
     detections' errors against the generator's truth Doppler then match those of the same recording at
     zero offset (same seed: same satellites and noise draws), which the first pass's do not."""
-    import leosop.replay.pipeline as pipeline
+    from leosop.replay import pipeline
     from leosop.signal.iq import open_sigmf
 
     lat, lon = np.radians(SITE[0]), np.radians(SITE[1])
