@@ -161,3 +161,58 @@ def test_bad_lo_options_exit_2_with_one_line(replays, capsys, argv, message):
     assert main(["replay", str(path), *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err
+
+
+def _doppler_errors(res, meta_path):
+    """Each true track detection's Doppler minus the generator's truth [Hz], by (satellite, time); identities."""
+    meta = json.loads(meta_path.read_text())
+    curves = {}
+    for a in meta["annotations"]:
+        curves.setdefault(a["leosop:sat_id"], []).append((a["leosop:t_s"], a["leosop:doppler_hz"]))
+    curves = {k: np.array(sorted(v)) for k, v in curves.items()}
+    errors, named = {}, []
+    for tr in res.tracks:
+        err = {sid: tr.doppler_hz - np.interp(tr.t_s, c[:, 0], c[:, 1]) for sid, c in curves.items()}
+        sid = min(err, key=lambda s: np.median(np.abs(err[s])))
+        errors.update({(sid, round(float(t), 3)): e for t, e in zip(tr.t_s, err[sid])})
+        named.append((tr.sat_id, sid))
+    return errors, named
+
+
+def test_blocks_refitted_through_a_1_mhz_offset_measure_as_well_as_at_zero(tmp_path, walker, monkeypatch):
+    """Through a 1 MHz LO offset the Doppler-only tone model puts the comb's edge tones 15 Hz off; once
+    identification has the offset, the tracked blocks are fitted again with the exact model. The
+    detections' errors against the generator's truth Doppler then match those of the same recording at
+    zero offset (same seed: same satellites and noise draws), which the first pass's do not."""
+    from leosop.replay import pipeline
+    from leosop.signal.iq import open_sigmf
+
+    lat, lon = np.radians(SITE[0]), np.radians(SITE[1])
+    init = geodetic_to_ecef(lat, lon, SITE[2]) + C_e_n(lat, lon) @ np.array([70e3, 70e3, 0.0])
+    errors, named, cycles = {}, {}, pipeline.LO_REFIT_CYCLES
+    for offset, refit in ((0.0, True), (1e6, False), (1e6, True)):
+        path = tmp_path / f"snap_{offset:g}.sigmf-meta"
+        if not path.exists():
+            # 4 MS/s: a comb 1 MHz off with 300 kHz of Doppler stays inside the band.
+            assert main(["generate", "-o", str(path), "--site", ",".join(map(str, SITE)), "--start", START,
+                         "--sample-rate-hz", "4e6", "--seed", "7", "--duration-s", "30", "--snapshot-s", "0.02",
+                         "--period-s", "1", "--mask-deg", "40", "--rx-offset-hz", str(offset)]) == 0
+        monkeypatch.setattr(pipeline, "LO_REFIT_CYCLES", cycles if refit else np.inf)
+        res = pipeline.replay(open_sigmf(path), walker, init_pos_ecef_m=init, static=True,
+                              lo_offset_max_hz=3e6 if offset else 100e3)
+        errors[offset, refit], named[offset, refit] = _doppler_errors(res, path)
+    # Every track identified is its true satellite, and the refit loses none of the identities.
+    for key, pairs in named.items():
+        assert all(sid == truth for sid, truth in pairs if sid is not None), key
+    assert sum(s is not None for s, _ in named[1e6, True]) >= sum(s is not None for s, _ in named[1e6, False])
+    # Median absolute error over the detections all three runs share (measured: 0.28 Hz at zero offset,
+    # 0.39 Hz in the first pass at 1 MHz, 0.25 Hz refitted).
+    common = set.intersection(*(set(e) for e in errors.values()))
+    assert len(common) > 100
+    med = {key: np.median(np.abs([e[k] for k in common])) for key, e in errors.items()}
+    print(f"median |Doppler error| over {len(common)} detections [Hz]:",
+          {f"{k[0]:g}{' refit' if k[1] else ''}": round(float(v), 3) for k, v in med.items()})
+    # The refit within 15 % of zero offset (the two recordings' noise differs: the combs sit on other
+    # frequencies); the first pass more than 15 % above the refit.
+    assert med[1e6, True] < 1.15 * med[0.0, True]
+    assert med[1e6, False] > 1.15 * med[1e6, True]

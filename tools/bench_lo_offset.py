@@ -1,26 +1,30 @@
-"""Identification and fix against the receiver's LO offset (issue 26 part B).
+"""Identification and fix against the receiver's LO offset and drift (issue 26).
 
-For each LO offset (and drift, when ``leosop generate`` has
-``--rx-drift-hz-per-s``) and each recording kind (snapshot: 20 ms every
+For each LO offset and drift and each recording kind (snapshot: 20 ms every
 second; continuous), one recording is generated at one site (same seed, so
-the satellites, noise and orbit errors are the same across offsets) and
-replayed with ``--init`` 100 km off and without it (global search), with
-``--lo-offset-max-hz`` 100 kHz (PLL LNBs) up to 50 kHz and 3 MHz (the wide
-mode) beyond. Reported per run:
+the satellites, noise and orbit errors are the same across offsets), with
+``--front-end`` the generator's preset (``consumer``: 8 bits, phase noise,
+IQ imbalance, DC, a CW line; its own offset and drift replaced by the
+sweep's), and replayed with ``--init`` 100 km off and without it (global
+search), with ``--lo-offset-max-hz`` 100 kHz (PLL LNBs) up to 50 kHz and
+3 MHz (the wide mode) beyond. The clean recording (no offset, drift or
+front end) is always replayed first. Reported per run:
 
 - tracks, how many are true (a satellite's truth Doppler from the SigMF
   annotations within 20 Hz of the track, median over its blocks), how many
   identified, and how many identified wrongly (the named satellite's truth
-  is not within 20 Hz);
+  is not within 20 Hz); satellites with a true track (``sats``) and those
+  identified (``s_id``: a fragment of a satellite's track is ``duplicate``
+  when a longer track of it is identified);
 - the static fix's horizontal and 3-D error and its ratio to the same
-  kind's zero-offset recording with the same search;
+  kind's clean recording with the same search (``x_zero``);
 - the estimated offset and drift minus the truth. The truth offset is the
   receiver's plus the mean of the identified satellites' own offsets (drawn
   in [0, 5] Hz): nothing separates that mean from the receiver's offset
   (:mod:`leosop.replay.lo`).
 
 Usage: python tools/bench_lo_offset.py [--kinds snapshot continuous] [--offsets 0 5e3 ...]
-       [--drifts 0 25 50] [--no-global] [--workdir DIR]
+       [--drifts 0 25 50] [--front-end consumer] [--no-global] [--workdir DIR]
 """
 
 import argparse
@@ -37,6 +41,7 @@ from leosop.cli.position import solutions_doc
 from leosop.frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.replay.pipeline import replay
+from leosop.signal.frontend import PRESETS
 from leosop.signal.iq import open_sigmf
 
 SITE = (48.137, 11.575, 520.0)
@@ -51,12 +56,11 @@ KINDS = {
 MATCH_HZ = 20.0
 
 
-def generate(path, kind, offset_hz, drift_hz_per_s, has_drift):
+def generate(path, kind, offset_hz, drift_hz_per_s, front_end):
     cmd = [sys.executable, "-m", "leosop", "generate", "-o", str(path), "--site", ",".join(map(str, SITE)),
            "--start", START, "--sample-rate-hz", str(SAMPLE_RATE_HZ), "--mask-deg", "25", "--seed", "7",
-           "--orbit-error-along-m", "300", "--rx-offset-hz", str(offset_hz), *KINDS[kind]]
-    if has_drift:
-        cmd += ["--rx-drift-hz-per-s", str(drift_hz_per_s)]
+           "--orbit-error-along-m", "300", "--rx-offset-hz", str(offset_hz), "--rx-drift-hz-per-s",
+           str(drift_hz_per_s), "--front-end", front_end, *KINDS[kind]]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
@@ -74,17 +78,27 @@ def truth(meta_path):
 
 
 def score(res, curves):
-    """(true tracks, identified true tracks, wrong identities) of a replay."""
+    """(true tracks, identified true tracks, wrong identities, satellites tracked, satellites identified) of a replay.
+
+    A satellite is tracked when one of its tracks is true, identified when one of its tracks is
+    identified rightly (a fragment of a satellite's track is ``duplicate`` when the longer one has it).
+    """
     n_true = n_ok = n_wrong = 0
+    tracked, named = set(), set()
     for tr in res.tracks:
         err = {sid: np.median(np.abs(np.interp(tr.t_s, c[:, 0], c[:, 1]) - tr.doppler_hz)) for sid, c in curves.items()}
-        real = min(err.values()) < MATCH_HZ
+        best = min(err, key=err.get)
+        real = err[best] < MATCH_HZ
         n_true += real
+        if real:
+            tracked.add(best)
         if tr.sat_id is not None:
             right = err.get(tr.sat_id, np.inf) < MATCH_HZ
             n_ok += right
             n_wrong += not right
-    return n_true, n_ok, n_wrong
+            if right:
+                named.add(tr.sat_id)
+    return n_true, n_ok, n_wrong, len(tracked), len(named)
 
 
 def main(argv=None):
@@ -92,15 +106,11 @@ def main(argv=None):
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
     ap.add_argument("--offsets", nargs="+", type=float, default=[0.0, 5e3, 50e3, 500e3, 1e6])
     ap.add_argument("--drifts", nargs="+", type=float, default=[0.0])
+    ap.add_argument("--front-end", default="none", choices=("none", *PRESETS),
+                    help="the generator's front-end preset (its offset and drift replaced by the sweep's)")
     ap.add_argument("--no-global", action="store_true", help="only with --init 100 km off")
     ap.add_argument("--workdir", help="keep the recordings here (default a temporary directory)")
     args = ap.parse_args(argv)
-    help_text = subprocess.run([sys.executable, "-m", "leosop", "generate", "--help"], capture_output=True,
-                               text=True).stdout
-    has_drift = "--rx-drift-hz-per-s" in help_text
-    drifts = args.drifts if has_drift else [0.0]
-    if not has_drift and any(d != 0 for d in args.drifts):
-        print("leosop generate has no --rx-drift-hz-per-s yet: offsets only", file=sys.stderr)
     const = load_constellation()
     lat, lon = np.radians(SITE[0]), np.radians(SITE[1])
     site = geodetic_to_ecef(lat, lon, SITE[2])
@@ -108,39 +118,40 @@ def main(argv=None):
     searches = [("init", prior)] + ([] if args.no_global else [("global", None)])
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_lo_"))
     work.mkdir(parents=True, exist_ok=True)
-    print(f"{'kind':10} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} {'id':>3} "
-          f"{'wrong':>5} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'d_drift':>8} "
-          f"{'sig':>6} {'status':8} {'t_s':>5}")
+    # The clean recording (no offset, drift or front end) first: every fix error is compared with its.
+    runs = [(0.0, 0.0, "none")] + [(o, d, args.front_end) for d in args.drifts for o in args.offsets
+                                   if (o, d, args.front_end) != (0.0, 0.0, "none")]
+    print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
+          f"{'id':>3} {'wrong':>5} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} "
+          f"{'sig_hz':>6} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
-        for drift in drifts:
-            for offset in args.offsets:
-                path = work / f"{kind}_{offset:g}_{drift:g}.sigmf-meta"
-                if not path.exists():
-                    generate(path, kind, offset, drift, has_drift)
-                curves, clock = truth(path)
-                lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
-                for name, init in searches:
-                    t0 = time.perf_counter()
-                    res = replay(open_sigmf(path), const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
-                    elapsed = time.perf_counter() - t0
-                    n_true, n_ok, n_wrong = score(res, curves)
-                    fix = None if res.position is None else res.position.fixes
-                    err = np.full(3, np.nan) if fix is None else fix.pos_ecef_m - site
-                    enu = C_e_n(*ecef_to_geodetic(site)[:2]).T @ err
-                    err3d, horiz = float(np.linalg.norm(err)), float(np.hypot(enu[0], enu[1]))
-                    base.setdefault((kind, name, drift), err3d) if offset == 0 else None
-                    ratio = err3d / base.get((kind, name, drift), np.nan)
-                    ids = [tr.sat_id for tr in res.tracks if tr.sat_id is not None]
-                    true_off = offset + np.mean([clock[s] - offset for s in ids]) if ids else np.nan
-                    lo = res.lo
-                    d_off = lo.offset_hz - (true_off + drift * _since_start(lo.t_ref_utc)) if lo else np.nan
-                    d_drift = lo.drift_hz_per_s - drift if lo else np.nan
-                    status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
-                    print(f"{kind:10} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
-                          f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {horiz:8.1f} {err3d:8.1f} {ratio:6.2f} {d_off:8.2f} "
-                          f"{(lo.offset_sigma_hz if lo else np.nan):6.2f} {d_drift:8.4f} "
-                          f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f}", flush=True)
+        for offset, drift, fe in runs:
+            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}.sigmf-meta"
+            if not path.exists():
+                generate(path, kind, offset, drift, fe)
+            curves, clock = truth(path)
+            lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
+            for name, init in searches:
+                t0 = time.perf_counter()
+                res = replay(open_sigmf(path), const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
+                elapsed = time.perf_counter() - t0
+                n_true, n_ok, n_wrong, n_sats, n_sats_id = score(res, curves)
+                fix = None if res.position is None else res.position.fixes
+                err = np.full(3, np.nan) if fix is None else fix.pos_ecef_m - site
+                enu = C_e_n(*ecef_to_geodetic(site)[:2]).T @ err
+                err3d, horiz = float(np.linalg.norm(err)), float(np.hypot(enu[0], enu[1]))
+                ratio = err3d / base.setdefault((kind, name), err3d)
+                ids = [tr.sat_id for tr in res.tracks if tr.sat_id is not None]
+                true_off = np.mean([clock[s] for s in ids]) if ids else np.nan
+                lo = res.lo
+                d_off = lo.offset_hz - (true_off + drift * _since_start(lo.t_ref_utc)) if lo else np.nan
+                d_drift = lo.drift_hz_per_s - drift if lo else np.nan
+                status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
+                print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
+                      f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} {err3d:8.1f} "
+                      f"{ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} {d_drift:8.4f} "
+                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f}", flush=True)
 
 
 def _since_start(t_utc):
