@@ -102,7 +102,8 @@ def test_summaries_print_a_fix_without_a_solution_and_count_the_statuses():
     # stop with "unsupported format string passed to NoneType".
     ok = {**_null_fix("ok"), "lat_deg": 34.3, "lon_deg": 108.9, "alt_m": 400.0, "sigma_enu_m": [1.0, 2.0, 3.0]}
     solutions = [_null_fix("not_converged"), ok, _null_fix("no_redundancy")]
-    text = replay_summary({"tracks": [], "n_blocks": 30, "n_identified": 0, "solutions": solutions})
+    text = replay_summary({"tracks": [], "n_blocks": 30, "n_identified": 0, "solutions": solutions,
+                           "lo_offset_hz": None})
     assert "n/a n/a n/a m" in text and "not_converged" in text
     assert text.splitlines()[-1] == "1 of 3 fix(es) ok (1 not_converged, 1 no_redundancy)"
     text = position_summary({"solutions": solutions, "unsolved": [], "rejected": [], "mode": "snapshot"})
