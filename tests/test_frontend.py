@@ -194,3 +194,29 @@ def test_band_cannot_hold_the_combs_at_the_stated_offset(consumer, capsys):
     status = main(["doctor", str(consumer.data_path.with_suffix(".sigmf-meta")), "--lo-offset-hz", "1.0e6"])
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and "beyond the recording's band" in err
+
+
+@pytest.mark.parametrize("cw_hz, off_hz, rate_hz_per_s", [(700e3, 50.0, 0.0), (700e3, 200.0, 0.0),
+                                                          (700e3, 50.0, -3000.0), (700e3, -30.0, -3000.0),
+                                                          (700_025.0, 2000.0, -3000.0)])
+def test_cw_line_among_combs_is_excised(cw_hz, off_hz, rate_hz_per_s):
+    """A 70 dB-Hz CW line whose whole tone spacings hold 45 dB-Hz comb tones is a line, not a comb tone.
+
+    Issue 26: the consumer preset's line at +700 kHz, inside the span of dozens of combs, was kept. Here a
+    comb sits ``off_hz`` from the line's multiples of the spacing (m = -2..-8), a second one 3 bins the
+    other way (m = +1..+8); a 20 ms block has 50 Hz bins, so both are within the line's window of partners
+    (its half-width, 4 bins, plus 3). Half a bin off (700 025 Hz) the line's sinc sidelobes stay above twice
+    the noise for ~100 bins, and so does its window: a comb 2 kHz off is inside it. The combs must stay: their
+    tones are each other's partners, chirped (-3 kHz/s smears a tone over 1.2 bins) or not."""
+    fs, n = 4e6, 80_000
+    sp = PilotComb().tone_spacing_hz
+    rng = np.random.default_rng(11)
+    dopplers = (cw_hz - 6 * sp + off_hz, cw_hz + 5 * sp - 150.0)
+    x = sum(doppler_blocks(fs, n, d, rate_hz_per_s, None, rng=rng, dtype=np.complex128)[0] for d in dopplers)
+    x = add_noise(x, 45.0, fs, rng)
+    x = FrontEnd(cw=((cw_hz, 70.0),)).apply(x, np.arange(n) / fs, fs, 45.0, rng)
+    _, c = clean_block(x, fs, PilotComb())
+    # The line alone, 53 dB above a bin's noise: its power within 0.5 dB, its frequency within a bin.
+    assert len(c.lines) == 1
+    assert c.lines[0].frequency_hz == pytest.approx(cw_hz, abs=fs / n)
+    assert c.lines[0].power_dbhz == pytest.approx(70.0, abs=0.5)

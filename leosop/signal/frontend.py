@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..constants import C_MPS
 from ..errors import InputError
 from .pilot import noise_sigma
 
@@ -241,8 +242,19 @@ LINE_PFA = 1e-3
 #: A line grows from its peak while the power smoothed over this many bins exceeds twice the noise mean,
 #: so what is left of a strong line after excision (sidelobes) lies below that level.
 _LINE_SMOOTH_BINS = 8
-#: A line with at least this many others at whole tone spacings from it (within the tolerance) is a comb tone.
+#: A line with at least this many partners (strong bins at whole tone spacings from it, of comparable power)
+#: is a comb tone.
 _COMB_PARTNERS = 2
+#: Partners are looked for within the line's half-width plus this many bins of the exact multiple of the spacing,
+#: plus the spread of the received spacing: a comb arrives scaled by its Doppler, ``sp (1 + doppler / f_c)`` with
+#: the LO offset taken out (:meth:`~.pilot.PilotComb.through_lo`), and ``|doppler| / f_c`` stays below a range rate
+#: of 8 km/s over c (0.9 bins of a 0.1 s block at the edge tones). The half-width covers a chirped tone's smear.
+_PARTNER_BINS = 2
+_PARTNER_SPACING_SPREAD = 8e3 / C_MPS
+#: A partner's strongest bin is within this of the line's peak [dB]: a comb's tones have one C/N0 and one smear,
+#: their peak bins differ by scalloping (3.9 dB at most) and noise. A 70 dB-Hz CW line is 25 dB above a
+#: 45 dB-Hz comb's tones (issue 26: counted without power, they made it a comb tone).
+_PARTNER_DB = 10.0
 
 
 @dataclass(frozen=True)
@@ -329,8 +341,12 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     A bin beyond ``-ln(pfa / n)`` noise means (exponential power) starts a
     line; the line spans the run of bins around it whose power, smoothed over
     ``_LINE_SMOOTH_BINS``, exceeds twice the noise mean. A line with at least
-    ``_COMB_PARTNERS`` other strong bins at whole tone spacings (m = +-1..+-(n_tones-1),
-    within the line's half-width plus 2 bins) is a comb's tone and kept.
+    ``_COMB_PARTNERS`` partners is a comb's tone and kept: whole tone
+    spacings m = +-1..+-(n_tones-1) from its peak (within the line's
+    half-width plus ``_PARTNER_BINS`` and the spacing's Doppler spread)
+    where a strong bin lies within ``_PARTNER_DB`` of the peak's power. A
+    strong CW line among combs has strong bins at its spacings (other combs'
+    tones) but none of its power.
 
     Parameters
     ----------
@@ -353,7 +369,8 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
         return [], noise
     # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges).
     p = np.fft.fftshift(power)
-    strong = p > -np.log(pfa / n) * noise
+    threshold = -np.log(pfa / n) * noise
+    strong = p > threshold
     if not strong.any():
         return [], noise
     smooth = np.convolve(p, np.full(_LINE_SMOOTH_BINS, 1.0 / _LINE_SMOOTH_BINS), mode="same")
@@ -364,12 +381,13 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     runs = cs[hi + 1] - cs[lo] > 0  # runs holding a strong bin
     lo, hi = lo[runs], hi[runs]
     peak = lo + np.array([int(np.argmax(p[a:b + 1])) for a, b in zip(lo, hi)], dtype=np.int64)
-    half = (hi - lo) // 2 + 2
     m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
-    centre = np.round(peak[:, None] + m * (comb.tone_spacing_hz * n / fs)).astype(np.int64)  # (runs, 2 K - 2)
-    a_idx = np.clip(centre - half[:, None], 0, n)
-    b_idx = np.clip(centre + half[:, None] + 1, 0, n)
-    partners = np.sum(cs[b_idx] - cs[a_idx] > 0, axis=1)
+    spacing_bins = comb.tone_spacing_hz * n / fs
+    half = (hi - lo) // 2 + _PARTNER_BINS + int(np.ceil((comb.n_tones - 1) * spacing_bins * _PARTNER_SPACING_SPREAD))
+    centre = np.round(peak[:, None] + m * spacing_bins).astype(np.int64)  # (runs, 2 K - 2)
+    window_max = _window_max(p, centre - half[:, None], centre + half[:, None])
+    floor = np.maximum(threshold, p[peak] * 10.0 ** (-_PARTNER_DB / 10.0))  # (runs,)
+    partners = np.sum(window_max > floor[:, None], axis=1)
     lines = []
     for i in np.flatnonzero(partners < _COMB_PARTNERS):
         # A tone of amplitude A puts A^2 n^2 into its bins; the noise n N0 fs into each.
@@ -378,6 +396,15 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
         lines.append(Line((peak[i] + k0) * fs / n, power_dbhz, int(lo[i] + k0), int(hi[i] + k0)))
     lines.sort(key=lambda ln: -ln.power_dbhz)
     return lines, noise
+
+
+def _window_max(p, a, b):
+    """Largest ``p[a:b + 1]`` per window (0 where a window lies outside ``p``), shape of ``a``."""
+    n = p.size
+    a, b = np.clip(a, 0, n), np.clip(b + 1, 0, n)  # half-open, within [0, n]
+    bounds = np.stack([a.ravel(), b.ravel()], axis=1).ravel()  # a0, b0, a1, b1, ...
+    out = np.maximum.reduceat(np.append(p, 0.0), bounds)[::2]  # max over [a_k, b_k) when a_k < b_k
+    return np.where(b > a, out.reshape(a.shape), 0.0)
 
 
 def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
