@@ -36,7 +36,7 @@ def test_corpus_covers_known_targets():
     assert all((CORPUS / key).is_file() for key in OPEN)
 
 
-@pytest.mark.parametrize("target, path", _cases())
+@pytest.mark.parametrize("target, path", list(_cases()))
 def test_crashing_input_is_now_handled(tmp_path, target, path):
     failure = fuzz_readers.check_one(target, path.read_bytes(), tmp_path)
     assert failure is None, failure
