@@ -31,6 +31,7 @@ from ..positioning.measurements import write_measurements
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command
+from .options import parse_span
 
 IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv", "psins", "flight-mat")
 #: The GeoJSON track keeps at most this many epochs per second (the INS updates are at half the IMU rate).
@@ -93,19 +94,6 @@ def _triple(text, option):
     return values
 
 
-def _outages(texts):
-    out = []
-    for text in texts:
-        try:
-            start, duration = (float(x) for x in text.split(","))
-        except ValueError:
-            raise InputError(f"--outage {text!r}: expected START_S,DURATION_S") from None
-        if not (np.isfinite(start) and np.isfinite(duration) and start >= 0 and duration > 0):
-            raise InputError(f"--outage {text!r}: START_S must be >= 0 and DURATION_S > 0")
-        out.append((start, duration))
-    return tuple(out)
-
-
 def _offset_sigma(sigma_s):
     if not (np.isfinite(sigma_s) and sigma_s >= 0):
         raise InputError(f"--imu-time-offset-sigma-s {sigma_s!r}: must be a number >= 0")
@@ -160,7 +148,8 @@ def run(args):
         raise InputError("--imu-columns goes with --imu-format csv")
     mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
     f, r, d = _triple(args.lever_arm_m, "--lever-arm-m")
-    options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=_outages(args.outage),
+    outages = tuple(parse_span(t, "--outage") for t in args.outage)
+    options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=outages,
                                lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
                                time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s))
     if args.gnss:

@@ -19,6 +19,7 @@ from ..fusion.real import ImuSpec
 from ..ins import allan, imu_io
 from . import add_action, add_command
 from .fuse import IMU_FORMATS, read_imu
+from .options import parse_span
 
 #: rad/s -> deg/h, and rad/sqrt(s) -> deg/sqrt(h).
 _DEG_PER_H = math.degrees(1.0) * 3600.0
@@ -37,23 +38,12 @@ def register(subparsers):
     a.add_argument("--out", metavar="DIR", help="directory for imu_spec.json, allan.json and allan.png")
 
 
-def _segment(text, t_s):
-    if text is None:
-        return 0.0, float(t_s[-1] - t_s[0])
-    try:
-        start, duration = (float(x) for x in text.split(","))
-    except ValueError:
-        raise InputError(f"--segment-s {text!r}: expected START_S,DURATION_S") from None
-    if not (math.isfinite(start) and math.isfinite(duration) and start >= 0 and duration > 0):
-        raise InputError(f"--segment-s {text!r}: START_S must be >= 0 and DURATION_S > 0")
-    return start, duration
-
-
 def run(args):
     if args.imu_columns and args.imu_format != "csv":
         raise InputError("--imu-columns goes with --imu-format csv")
     log, _ = read_imu(args.file, args.imu_format, args.imu_columns, imu_io.mount_C_b_s(0.0, 0.0, 0.0))
-    start, duration = _segment(args.segment_s, log.t_s)
+    start, duration = ((0.0, float(log.t_s[-1] - log.t_s[0])) if args.segment_s is None
+                       else parse_span(args.segment_s, "--segment-s"))
     t = log.t_s - log.t_s[0]
     sel = (t >= start) & (t <= start + duration)
     if sel.sum() < 1000:

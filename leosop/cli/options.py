@@ -63,6 +63,17 @@ def parse_velocity(text, option="--velocity-enu-mps", max_mps=1000.0):
     return vel
 
 
+def parse_span(text, option):
+    """``START_S,DURATION_S`` -> (start_s, duration_s), start >= 0 and duration > 0."""
+    try:
+        start, duration = (float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"{option} {text!r}: expected START_S,DURATION_S") from None
+    if not (math.isfinite(start) and math.isfinite(duration) and start >= 0 and duration > 0):
+        raise InputError(f"{option} {text!r}: START_S must be >= 0 and DURATION_S > 0")
+    return start, duration
+
+
 def parse_time(text, option="--start"):
     """ISO 8601 UTC text -> datetime64[ns]."""
     return np.datetime64(parse_utc(text, name=option), "ns")
