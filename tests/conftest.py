@@ -18,3 +18,14 @@ def data_path(*parts):
     if not path.exists():
         pytest.skip(f"real data not available: {path}")
     return path
+
+
+#: The IGS station ESBC00DNK on 2020-06-25 (``rinex/esbc_2020-177``, see its PROVENANCE.md): observations,
+#: navigation, GRG orbits and integer clocks, the ANTEX subset, and the signals the PPP uses per system.
+ESBC_DAY = DATA_DIR / "rinex" / "esbc_2020-177"
+ESBC_OBS = ESBC_DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
+ESBC_NAV = ESBC_DAY / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+ESBC_SP3 = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
+ESBC_CLK = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
+ESBC_ATX = ESBC_DAY / "esbc_2020-177.atx"
+ESBC_CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}

@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import DATA_DIR
+from conftest import ESBC_ATX, ESBC_CLK, ESBC_CODES, ESBC_DAY, ESBC_NAV, ESBC_OBS, ESBC_SP3
 
 from leosop.cli import main
 from leosop.errors import InputError
@@ -16,13 +16,7 @@ from leosop.gnss.ppp import PppOptions, run_ppp
 from leosop.gnss.products import read_clk, read_sp3
 from leosop.gnss.rinex import read_obs, read_text
 
-D = DATA_DIR / "rinex" / "esbc_2020-177"
-OBS = D / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
-NAV = D / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
-SP3 = D / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
-CLK = D / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
-ATX = D / "esbc_2020-177.atx"
-CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
+D, OBS, NAV, SP3, CLK, ATX, CODES = ESBC_DAY, ESBC_OBS, ESBC_NAV, ESBC_SP3, ESBC_CLK, ESBC_ATX, ESBC_CODES
 #: The header's ETRF2000 coordinate in ITRF2014 at the day's epoch (PROVENANCE.md gives the same).
 REF_ITRF_ECEF_M = etrf2000_to_itrf2014(np.array([3582105.2910, 532589.7313, 5232754.8054]),
                                        decimal_year(np.datetime64("2020-06-25T12:00")))

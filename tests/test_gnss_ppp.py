@@ -2,11 +2,11 @@
 
 import dataclasses
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import ESBC_ATX, ESBC_CLK, ESBC_CODES, ESBC_DAY, ESBC_NAV, ESBC_OBS, ESBC_SP3
 from leosop.cli import main
 from leosop.cli import ppp as ppp_cli
 from leosop.errors import InputError
@@ -17,13 +17,8 @@ from leosop.gnss.ppp import PppOptions, gps_to_utc, prepare, run_ppp
 from leosop.gnss.products import read_clk, read_sp3
 from leosop.gnss.rinex import check_nav, read_obs, read_text
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rinex"
-DAY = DATA / "esbc_2020-177"
-OBS = DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
-NAV = DAY / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
-SP3 = DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
-CLK = DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
-CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
+DAY, OBS, NAV, SP3, CLK, CODES = ESBC_DAY, ESBC_OBS, ESBC_NAV, ESBC_SP3, ESBC_CLK, ESBC_CODES
+DATA = DAY.parent
 HEADER_ECEF_M = np.array([3582105.2910, 532589.7313, 5232754.8054])
 #: The header position is the station's ETRF2000 (ETRS89) coordinate; in ITRF2014 (the frame of the GRG
 #: products) at the day's epoch it is this (leosop.gnss.etrf, [Altamimi 2018]); the 0.76 m between the two
@@ -207,7 +202,7 @@ def test_cli_json_contract(tmp_path, capsys, monkeypatch):
     assert "RMS against the header" in ppp_cli.summary(doc) and "after_1h" not in doc["summary"]["kinematic_rms"]
 
 
-ATX = DAY / "esbc_2020-177.atx"
+ATX = ESBC_ATX
 #: The header coordinate's own uncertainty is not in the filter's sigma; the provenance calls it cm-level.
 COVERAGE_GOAL = 0.95  # issue 20: >= 95 % of epoch-axis errors within 3 sigma after convergence
 

@@ -1,10 +1,9 @@
 """Simulated GPS on real orbits, SD ambiguity bookkeeping, the tight PPP/INS filter, real GRG wide-lane biases."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from conftest import ESBC_CLK, ESBC_DAY, ESBC_OBS, ESBC_SP3
 from leosop.constants import C_MPS
 from leosop.datadir import ENV_VAR
 from leosop.errors import InputError
@@ -15,10 +14,7 @@ from leosop.gnss.products import read_clk, read_sp3, read_wl_biases
 from leosop.gnss.rinex import read_obs
 from leosop.gnss.simulate import SimSettings, simulate
 
-DAY = Path(__file__).resolve().parents[2] / "shared" / "data" / "rinex" / "esbc_2020-177"
-SP3 = DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
-CLK = DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
-OBS = DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
+DAY, SP3, CLK, OBS = ESBC_DAY, ESBC_SP3, ESBC_CLK, ESBC_OBS
 needs_data = pytest.mark.skipif(not (SP3.exists() and CLK.exists()), reason="ESBC data absent")
 QUIET = SimSettings(code_sigma_m=0.0, phase_sigma_cyc=0.0, rate_sigma_mps=0.0, code_mp_sigma_m=0.0,
                     phase_mp_sigma_cyc=0.0, slips_per_hour=0.0)
