@@ -73,7 +73,7 @@ import numpy as np
 
 from ..constants import C_MPS
 from ..errors import InputError
-from ..frames import C_e_n, ecef_to_geodetic
+from ..frames import C_e_n, ecef_to_geodetic, rotate_to_later_ecef
 from . import models
 from .antex import antenna_corrections_if
 from .ar import fix_epoch, mw_arc_stats, nl_constants
@@ -223,7 +223,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     sun, moon = models.sun_moon_ecef_m(jd_tt)
     tide = models.solid_tide_ecef_m(x0, sun, moon)  # (n_ep, 3)
     tau = np.linalg.norm(RS - x0, axis=-1) / C_MPS
-    RS = models.sagnac_rotate(RS, tau)
+    RS = rotate_to_later_ecef(RS, tau)
     los = RS - x0
     rng = np.linalg.norm(los, axis=-1)
     elev = np.arcsin(np.clip(los @ up0 / rng, -1, 1))
