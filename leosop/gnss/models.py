@@ -10,7 +10,7 @@ satellite attitude of the wind-up model.
 
 import numpy as np
 
-from ..constants import C_MPS, GM_M3_PER_S2, JD_J2000, WGS84_A_M
+from ..constants import C_MPS, DAY_S, GM_M3_PER_S2, JD_J2000, WGS84_A_M
 from ..frames import gmst1982
 
 __all__ = [
@@ -138,7 +138,7 @@ def sun_moon_ecef_m(jd_tt):
               - 570 * np.cos(2 * l) + 246 * np.cos(2 * l - 2 * D) - 205 * np.cos(lp - 2 * D)
               - 171 * np.cos(l + 2 * D) - 152 * np.cos(l + lp - 2 * D)) * 1e3
     moon = _rot_ecl_to_eq(lam_m, beta, r_moon, eps)
-    jd_ut1 = jd_tt - 69.184 / 86400.0
+    jd_ut1 = jd_tt - 69.184 / DAY_S
     theta = gmst1982(np.floor(jd_ut1), jd_ut1 - np.floor(jd_ut1))[0]
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
 
