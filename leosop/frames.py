@@ -1,4 +1,4 @@
-"""Reference frames: WGS84 geodetic, ECEF, local ENU/NED, TEME.
+"""Reference frames: WGS84 geodetic, ECEF, local ENU/NED, TEME, Earth rotation.
 
 Every function is vectorised over any leading shape; vectors keep their
 three components in the last axis. Angles are radians. Rotation matrices are
@@ -8,7 +8,7 @@ is East-North-Up (see :mod:`leosop`).
 
 import numpy as np
 
-from .constants import WGS84_A_M, WGS84_B_M, WGS84_E2
+from .constants import DAY_S, OMEGA_E_RAD_PER_S, WGS84_A_M, WGS84_B_M, WGS84_E2
 from .shapes import as_vec3
 
 __all__ = [
@@ -21,6 +21,7 @@ __all__ = [
     "ned_to_enu",
     "azimuth_elevation_range",
     "range_rate",
+    "rotate_to_later_ecef",
     "gmst1982",
     "teme_to_ecef",
 ]
@@ -182,6 +183,33 @@ def range_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_mps=0.
     return np.sum(los * dv, axis=-1) / np.linalg.norm(los, axis=-1)
 
 
+def rotate_to_later_ecef(vec_ecef, dt_s):
+    """Express ECEF vectors in the ECEF frame ``dt_s`` later.
+
+    The Earth turns by ``theta = OMEGA_E * dt_s`` about z in ``dt_s``, so a
+    vector fixed in inertial space has components ``R3(theta) @ vec`` in the
+    later frame, with ``R3(theta) = [[cos, sin, 0], [-sin, cos, 0], [0, 0, 1]]``.
+    With ``dt_s`` the signal's flight time this is the Sagnac (Earth-rotation)
+    correction: the satellite state at transmission in the frame of reception.
+
+    Parameters
+    ----------
+    vec_ecef : array_like, shape (..., 3)
+        Positions [m] or velocities [m/s] in the earlier ECEF frame.
+    dt_s : array_like, shape (...), broadcastable
+        Time from the earlier frame to the later one [s]; negative goes back.
+
+    Returns
+    -------
+    vec_ecef : ndarray, shape (..., 3)
+        The same vectors in the later ECEF frame.
+    """
+    v = np.asarray(vec_ecef, dtype=float)
+    theta = OMEGA_E_RAD_PER_S * np.asarray(dt_s, dtype=float)
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], v[..., 2]], axis=-1)
+
+
 def gmst1982(jd_ut1, fr_ut1):
     """Greenwich mean sidereal angle of the IAU 1982 model and its rate.
 
@@ -205,10 +233,10 @@ def gmst1982(jd_ut1, fr_ut1):
     t = days / 36_525.0
     # Whole days contribute whole turns: keep only the fraction for precision.
     day_frac = np.mod(np.mod(jd - 2_451_545.0, 1.0) + fr, 1.0)
-    gmst_s = 67_310.54841 + 86_400.0 * day_frac + (8_640_184.812866 + (0.093104 - 6.2e-6 * t) * t) * t
-    theta = np.mod(gmst_s / 86_400.0, 1.0) * 2.0 * np.pi
-    rate_s_per_s = 1.0 + (8_640_184.812866 + (2 * 0.093104 - 3 * 6.2e-6 * t) * t) / (36_525.0 * 86_400.0)
-    return theta, rate_s_per_s * 2.0 * np.pi / 86_400.0
+    gmst_s = 67_310.54841 + DAY_S * day_frac + (8_640_184.812866 + (0.093104 - 6.2e-6 * t) * t) * t
+    theta = np.mod(gmst_s / DAY_S, 1.0) * 2.0 * np.pi
+    rate_s_per_s = 1.0 + (8_640_184.812866 + (2 * 0.093104 - 3 * 6.2e-6 * t) * t) / (36_525.0 * DAY_S)
+    return theta, rate_s_per_s * 2.0 * np.pi / DAY_S
 
 
 def teme_to_ecef(pos_teme_m, vel_teme_mps, jd_ut1, fr_ut1):

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .constants import DAY_S
 from .datadir import is_data_ref, resolve_data_ref
 from .errors import InputError
 from .orbits import CARRIERS
@@ -229,8 +230,8 @@ def _outage(value, where):
         return None
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise InputError(f"{where}: expected [start_s, end_s] or null, got {value!r}")
-    start = _number(value[0], f"{where}[0]", low=0.0, high=86_400.0)
-    end = _number(value[1], f"{where}[1]", low=start, high=86_400.0, low_open=True)
+    start = _number(value[0], f"{where}[0]", low=0.0, high=DAY_S)
+    end = _number(value[1], f"{where}[1]", low=start, high=DAY_S, low_open=True)
     return (start, end)
 
 
@@ -316,7 +317,7 @@ def scenario_from_dict(doc, *, source="scenario", base=XIAN_BAOJI):
         values["mask_deg"] = _number(doc["mask_deg"], f"{source}.mask_deg", low=0.0, high=89.0)
     if "duration_s" in doc:
         values["duration_s"] = None if doc["duration_s"] is None else _number(
-            doc["duration_s"], f"{source}.duration_s", low=0.0, high=86_400.0, low_open=True)
+            doc["duration_s"], f"{source}.duration_s", low=0.0, high=DAY_S, low_open=True)
     elif "waypoints" in doc or "speed_mps" in doc:
         values["duration_s"] = None  # the base flight's length no longer applies
     if "tle" in doc:

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from . import earth, frames
-from .constants import C_MPS
+from .constants import C_MPS, DAY_S
 from .errors import InputError
 from .fusion import common, kalman, loose, tight
 from .geometry.doppler import doppler_jacobian, doppler_rate
@@ -597,7 +597,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     t_s = truth1.t_s
     times_utc = scenario.start_utc + (t_s * 1e9).round().astype("timedelta64[ns]")
     constellation, family_sat = _constellation(scenario.leo.constellations, tle, times_utc[[0, -1]])
-    tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / 86_400.0)
+    tle_age_days = float(np.abs(seconds_since(constellation.epochs_utc, scenario.start_utc)).min() / DAY_S)
     if tle_age_days > STALE_TLE_DAYS:
         warnings.warn(f"scenario start {format_utc(scenario.start_utc)} is {tle_age_days:.0f} days from the "
                       "nearest element-set epoch; satellite positions will be off by many kilometres",

@@ -11,13 +11,14 @@ from functools import lru_cache
 
 import numpy as np
 
+from .constants import DAY_S
 from .errors import InputError
 
 __all__ = ["parse_utc", "round_utc", "format_utc", "seconds_since", "utc_from_seconds", "jd_utc", "jd_ut1",
            "ut1_minus_utc_s"]
 
 _UNIX_EPOCH_JD = 2_440_587.5
-_NS_PER_DAY = 86_400 * 1_000_000_000
+_NS_PER_DAY = int(DAY_S) * 1_000_000_000
 
 
 #: First and last instants a datetime64[ns] holds (whole days inside its range).
@@ -168,6 +169,6 @@ def ut1_minus_utc_s(times):
 def jd_ut1(times):
     """Split UT1 Julian date ``(jd, fr)`` at UTC instants, for Earth rotation."""
     jd, fr = jd_utc(times)
-    fr = fr + ut1_minus_utc_s(times) / 86_400.0
+    fr = fr + ut1_minus_utc_s(times) / DAY_S
     whole = np.floor(fr)
     return jd + whole, fr - whole

@@ -7,7 +7,7 @@ import pytest
 
 from conftest import data_path
 from leosop import frames
-from leosop.constants import WGS84_A_M, WGS84_B_M
+from leosop.constants import OMEGA_E_RAD_PER_S, WGS84_A_M, WGS84_B_M
 from leosop.orbits import read_tle
 from leosop.orbits.propagate import state_ecef
 
@@ -63,6 +63,31 @@ def test_range_rate_is_derivative_of_range():
           - np.linalg.norm(r_s - h * v_s - r_r + h * v_r, axis=-1)) / (2 * h)
     # Central difference error ~ h^2 * a / 6 with a ~ v^2/range: well below 1e-6 m/s.
     np.testing.assert_allclose(frames.range_rate(r_s, v_s, r_r, v_r), fd, atol=1e-6)
+
+
+def test_rotate_to_later_ecef_is_the_z_rotation_matrix():
+    # The three former private copies and gnss.models.sagnac_rotate all computed
+    # R3(OMEGA_E dt) v with R3(t) = [[cos t, sin t, 0], [-sin t, cos t, 0], [0, 0, 1]]:
+    # check against that matrix built element by element, over broadcast shapes.
+    rng = np.random.default_rng(7)
+    vec = rng.normal(scale=7e6, size=(4, 5, 3))
+    dt_s = rng.uniform(-0.1, 0.1, size=(4, 5))  # light times of both signs, as the callers pass
+    th = OMEGA_E_RAD_PER_S * dt_s
+    c, s, z, o = np.cos(th), np.sin(th), np.zeros_like(th), np.ones_like(th)
+    R3 = np.stack([np.stack([c, s, z], -1), np.stack([-s, c, z], -1), np.stack([z, z, o], -1)], -2)
+    expected = np.einsum("...ij,...j->...i", R3, vec)
+    np.testing.assert_allclose(frames.rotate_to_later_ecef(vec, dt_s), expected, rtol=0, atol=1e-8)  # 1e-15 rel
+    one = frames.rotate_to_later_ecef(vec[0, 0], dt_s[0, 0])
+    np.testing.assert_allclose(one, expected[0, 0], rtol=0, atol=1e-8)
+    back = frames.rotate_to_later_ecef(frames.rotate_to_later_ecef(vec, dt_s), -dt_s)
+    np.testing.assert_allclose(back, vec, rtol=0, atol=1e-8)
+
+
+def test_rotate_to_later_ecef_moves_an_inertial_point_west():
+    # A point fixed in inertial space appears OMEGA_E dt further west in the ECEF frame dt later.
+    lat, lon, alt, dt_s = np.radians(40.0), np.radians([-170.0, 10.0, 120.0]), 550e3, np.array([0.07, 3.0, -20.0])
+    moved = frames.rotate_to_later_ecef(frames.geodetic_to_ecef(lat, lon, alt), dt_s)
+    np.testing.assert_allclose(moved, frames.geodetic_to_ecef(lat, lon - OMEGA_E_RAD_PER_S * dt_s, alt), atol=ONE_MM)
 
 
 def test_teme_to_ecef_matches_skyfield_itrs_for_real_starlink_over_a_day():

@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 
+from ..constants import DAY_S
 from ..errors import InputError
 from ..timebase import format_utc, parse_utc, seconds_since
 
@@ -120,7 +121,7 @@ def mask_deg(value, option="--mask-deg"):
 
 def warn_stale(const, start, what="start"):
     """Warn when ``start`` is more than :data:`STALE_DAYS` from every element-set epoch of ``const``."""
-    age_days = np.abs(seconds_since(const.epochs_utc, start)).min() / 86_400.0
+    age_days = np.abs(seconds_since(const.epochs_utc, start)).min() / DAY_S
     if age_days > STALE_DAYS:
         warnings.warn(f"{what} {format_utc(start)} is {age_days:.0f} days from the nearest element-set epoch; "
                       "positions will be off by many kilometres", stacklevel=3)

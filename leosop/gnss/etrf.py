@@ -17,6 +17,8 @@ lands within 1 cm of it.
 
 import numpy as np
 
+from ..constants import DAY_S
+
 __all__ = ["itrf2014_to_etrf2000", "etrf2000_to_itrf2014", "decimal_year"]
 
 _MAS_RAD = np.pi / (180.0 * 3600.0e3)
@@ -31,7 +33,7 @@ def decimal_year(time_gps):
     """``datetime64`` -> decimal year (days / days in that year), shape kept."""
     t = np.asarray(time_gps, "datetime64[s]")
     y0 = t.astype("datetime64[Y]")
-    days = (t - y0.astype("datetime64[s]")).astype(float) / 86400.0
+    days = (t - y0.astype("datetime64[s]")).astype(float) / DAY_S
     n_days = ((y0 + 1).astype("datetime64[D]") - y0.astype("datetime64[D]")).astype(float)
     return y0.astype(int) + 1970 + days / n_days
 

@@ -2,7 +2,7 @@
 
 The satellite is taken at transmission time ``t - tau`` (``tau`` by fixed
 point: two iterations reach 1e-9 s from 0.07 s) and expressed in the ECEF
-frame of the reception time (:func:`leosop.gnss.models.sagnac_rotate`).
+frame of the reception time (:func:`leosop.frames.rotate_to_later_ecef`).
 The range rate is the time derivative of that same range for a receiver
 moving at constant velocity, by a central difference over ``2 h_s`` (the
 range is a smooth function of time: with ``h_s = 0.05 s`` the truncation
@@ -13,7 +13,8 @@ predictions use one definition.
 import numpy as np
 
 from ..constants import C_MPS
-from .models import relativistic_clock_s, sagnac_rotate
+from ..frames import rotate_to_later_ecef
+from .models import relativistic_clock_s
 
 __all__ = ["satellite_at_reception", "range_and_rate", "satellite_clock"]
 
@@ -38,9 +39,9 @@ def satellite_at_reception(orbits, sv_idx, t_s, pos_rx_ecef_m, *, iterations=2):
     t = np.broadcast_to(np.asarray(t_s, float), sv_idx.shape)
     tau = np.full(sv_idx.shape, 0.075)
     for _ in range(iterations + 1):
-        rs = sagnac_rotate(orbits.position(sv_idx, t - tau), tau)
+        rs = rotate_to_later_ecef(orbits.position(sv_idx, t - tau), tau)
         tau = np.linalg.norm(rs - pos_rx_ecef_m, axis=-1) / C_MPS
-    return sagnac_rotate(orbits.position(sv_idx, t - tau), tau), tau
+    return rotate_to_later_ecef(orbits.position(sv_idx, t - tau), tau), tau
 
 
 def range_and_rate(orbits, sv_idx, t_s, pos_rx_ecef_m, vel_rx_ecef_mps, *, h_s=0.05):

@@ -10,13 +10,13 @@ satellite attitude of the wind-up model.
 
 import numpy as np
 
-from ..constants import C_MPS, GM_M3_PER_S2, JD_J2000, OMEGA_E_RAD_PER_S, WGS84_A_M
+from ..constants import C_MPS, DAY_S, GM_M3_PER_S2, JD_J2000, WGS84_A_M
 from ..frames import gmst1982
 
 __all__ = [
     "saastamoinen_zhd_m", "niell_mapping", "sun_moon_ecef_m", "solid_tide_ecef_m", "satellite_axes",
     "windup_cycles",
-    "relativistic_clock_s", "sagnac_rotate", "shapiro_m", "TT_MINUS_GPST_S",
+    "relativistic_clock_s", "shapiro_m", "TT_MINUS_GPST_S",
 ]
 
 #: TT - GPST [s] (TAI - GPST = 19 s, TT - TAI = 32.184 s).
@@ -138,7 +138,7 @@ def sun_moon_ecef_m(jd_tt):
               - 570 * np.cos(2 * l) + 246 * np.cos(2 * l - 2 * D) - 205 * np.cos(lp - 2 * D)
               - 171 * np.cos(l + 2 * D) - 152 * np.cos(l + lp - 2 * D)) * 1e3
     moon = _rot_ecl_to_eq(lam_m, beta, r_moon, eps)
-    jd_ut1 = jd_tt - 69.184 / 86400.0
+    jd_ut1 = jd_tt - 69.184 / DAY_S
     theta = gmst1982(np.floor(jd_ut1), jd_ut1 - np.floor(jd_ut1))[0]
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
 
@@ -256,19 +256,6 @@ def relativistic_clock_s(pos_sv_ecef_m, vel_sv_ecef_mps):
     clock offset. Shapes (..., 3) -> (...).
     """
     return -2.0 * np.sum(np.asarray(pos_sv_ecef_m) * np.asarray(vel_sv_ecef_mps), axis=-1) / C_MPS**2
-
-
-def sagnac_rotate(pos_sv_ecef_m, tau_s):
-    """Satellite position at transmission expressed in the ECEF frame at reception.
-
-    The Earth turns by ``OMEGA_E tau`` during the flight time ``tau``; the
-    position is rotated by that angle about z (the Sagnac correction).
-    Shapes (..., 3), (...) -> (..., 3).
-    """
-    p = np.asarray(pos_sv_ecef_m, float)
-    th = OMEGA_E_RAD_PER_S * np.asarray(tau_s, float)
-    c, s = np.cos(th), np.sin(th)
-    return np.stack([c * p[..., 0] + s * p[..., 1], -s * p[..., 0] + c * p[..., 1], p[..., 2]], axis=-1)
 
 
 def shapiro_m(pos_sv_ecef_m, pos_rx_ecef_m):

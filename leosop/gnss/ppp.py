@@ -71,9 +71,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import C_MPS
+from ..constants import C_MPS, DAY_S
 from ..errors import InputError
-from ..frames import C_e_n, ecef_to_geodetic
+from ..frames import C_e_n, ecef_to_geodetic, rotate_to_later_ecef
 from . import models
 from .antex import antenna_corrections_if
 from .ar import fix_epoch, mw_arc_stats, nl_constants
@@ -219,16 +219,16 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     arp_ecef = obs.antenna_delta_hen_m[0] * up0  # ARP above the marker (E/N eccentricities are zero here)
     arp_ecef = arp_ecef + C_e_n(lat0, lon0)[:, :2] @ obs.antenna_delta_hen_m[[1, 2]]
     # Geometry-dependent models at the a priori position.
-    jd_tt = 2440587.5 + (seconds_gps(obs.time_gps, np.datetime64("1970-01-01")) + models.TT_MINUS_GPST_S) / 86400.0
+    jd_tt = 2440587.5 + (seconds_gps(obs.time_gps, np.datetime64("1970-01-01")) + models.TT_MINUS_GPST_S) / DAY_S
     sun, moon = models.sun_moon_ecef_m(jd_tt)
     tide = models.solid_tide_ecef_m(x0, sun, moon)  # (n_ep, 3)
     tau = np.linalg.norm(RS - x0, axis=-1) / C_MPS
-    RS = models.sagnac_rotate(RS, tau)
+    RS = rotate_to_later_ecef(RS, tau)
     los = RS - x0
     rng = np.linalg.norm(los, axis=-1)
     elev = np.arcsin(np.clip(los @ up0 / rng, -1, 1))
     doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
-    m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / 86400.0)[:, None])
+    m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
     zhd = models.saastamoinen_zhd_m(lat0, alt0)
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
     missing, rx_cal = [], False

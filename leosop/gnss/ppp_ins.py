@@ -63,7 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import C_MPS
+from ..constants import C_MPS, DAY_S
 from ..frames import C_e_n, geodetic_to_ecef
 from ..fusion import kalman
 from ..fusion.common import N_INS, FeedbackIns, initial_covariance, pos_jacobian
@@ -455,7 +455,7 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
             continue
         clk_m, drift_mps = satellite_clock(orbits, clocks, gnss.orb_idx[js], gnss.clk_idx[js],
                                            t[k] - gnss.P1_m[k, js] / C_MPS)
-        m_dry, m_wet = models.niell_mapping(elev, s.lat_rad, s.alt_m, doy + t[k] / 86400.0)
+        m_dry, m_wet = models.niell_mapping(elev, s.lat_rad, s.alt_m, doy + t[k] / DAY_S)
         zhd = models.saastamoinen_zhd_m(s.lat_rad, s.alt_m) * m_dry
         pc = Pc[k, js] + clk_m - zhd
         lc = Lc[k, js] + clk_m - zhd

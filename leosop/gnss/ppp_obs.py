@@ -8,7 +8,7 @@ import numpy as np
 
 from ..constants import C_MPS
 from ..errors import InputError
-from . import models
+from ..frames import rotate_to_later_ecef
 
 __all__ = ["F_L1_HZ", "F_L2_HZ", "F_L5_HZ", "SIGNALS", "detect_slips", "if_observations", "spp_position"]
 
@@ -152,7 +152,7 @@ def spp_position(pos_sv_ecef_m, p_corr_m, *, iterations=8):
     """
     x = np.zeros(4)
     for _ in range(iterations):
-        rs = models.sagnac_rotate(pos_sv_ecef_m, np.linalg.norm(pos_sv_ecef_m - x[:3], axis=1) / C_MPS)
+        rs = rotate_to_later_ecef(pos_sv_ecef_m, np.linalg.norm(pos_sv_ecef_m - x[:3], axis=1) / C_MPS)
         rho = np.linalg.norm(rs - x[:3], axis=1)
         H = np.hstack([(x[:3] - rs) / rho[:, None], np.ones((len(rho), 1))])
         dx = np.linalg.lstsq(H, p_corr_m - rho - x[3], rcond=None)[0]

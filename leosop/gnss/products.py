@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constants import DAY_S
 from ..errors import InputError
 from .rinex import epochs_gps, read_text
 
@@ -146,7 +147,7 @@ def _epoch_fields(line, a, path, lineno):
 #: Shortest record interval accepted [s] (RINEX clock products are 1 s to 5 min).
 MIN_STEP_S = 1.0
 #: Longest product span accepted [s]: a week of records and a day either side.
-MAX_SPAN_S = 9 * 86400.0
+MAX_SPAN_S = 9 * DAY_S
 
 
 def _grid(times, line_numbers, path, what):

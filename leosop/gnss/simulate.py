@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import C_MPS
+from ..constants import C_MPS, DAY_S
 from ..frames import C_e_n, ecef_to_geodetic
 from . import models
 from .geometry import range_and_rate, satellite_clock
@@ -160,7 +160,7 @@ def simulate(trajectory, t0_s, orbits, clocks, rng, settings=SimSettings(), *, s
     # Troposphere, ionosphere, receiver clock.
     lat, _, alt = ecef_to_geodetic(pos)
     day = np.datetime64(orbits.ref_gps, "D")
-    doy = float((day - day.astype("datetime64[Y]")).astype(int) + 1) + t[:, None] / 86400.0
+    doy = float((day - day.astype("datetime64[Y]")).astype(int) + 1) + t[:, None] / DAY_S
     m_dry, m_wet = models.niell_mapping(np.where(seen, elev, np.pi / 2), lat[:, None], alt[:, None], doy)
     zwd = s.zwd0_m + np.cumsum(np.r_[0.0, rng.normal(size=n_ep - 1)]) * s.zwd_rw_m_per_rt_s * np.sqrt(step_s)
     trop = models.saastamoinen_zhd_m(lat, alt)[:, None] * m_dry + zwd[:, None] * m_wet

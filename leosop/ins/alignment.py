@@ -40,7 +40,7 @@ import warnings
 
 import numpy as np
 
-from ..constants import OMEGA_E_RAD_PER_S
+from ..constants import G0_MPS2, OMEGA_E_RAD_PER_S
 from ..earth import normal_gravity_mps2
 from ..errors import InputError
 from ..rotations import dcm_to_euler, rotvec_to_dcm, skew
@@ -82,7 +82,7 @@ P_RFU_FUR = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 #: Default error levels weighting the Wahba solution ([Qu 2024] simulation:
 #: accelerometer 1 mg, gyro 0.1 deg/h); only their ratio matters.
-ACCEL_SIGMA_MPS2 = 1e-3 * 9.80665
+ACCEL_SIGMA_MPS2 = 1e-3 * G0_MPS2
 GYRO_SIGMA_RAD_PER_S = np.radians(0.1) / 3600.0
 
 #: Warn above this standard deviation of the 1 s means of the specific force

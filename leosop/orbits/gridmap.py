@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import WGS84_B_M
+from ..constants import C_MPS, WGS84_B_M
 from ..errors import ExternalError, InputError
 from ..frames import geodetic_to_ecef
 from ..geometry.dop import gdop as gdop_of_h
@@ -273,7 +273,7 @@ def _jacobian_static(los_ecef_m, rng_m, vel_sv_ecef_mps, carrier_hz):
     receiver velocity, from the satellite-minus-receiver vector ``los``.
     """
     u = -los_ecef_m / rng_m[:, None]
-    k = -carrier_hz / 2.99792458e8
+    k = -carrier_hz / C_MPS
     udv = np.einsum("mi,mi->m", u, vel_sv_ecef_mps)
     H = np.empty((N_DOPPLER_STATES, len(rng_m)))
     H[0:3] = (k / rng_m) * (u * udv[:, None] - vel_sv_ecef_mps).T

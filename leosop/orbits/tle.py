@@ -17,13 +17,14 @@ from pathlib import Path
 import numpy as np
 from sgp4.api import Satrec
 
+from ..constants import DAY_S
 from ..errors import InputError
 from ..fileio import check_input_file
 from .constellation import Constellation
 
 __all__ = ["read_tle", "parse_tle_lines", "tle_checksum", "satrec_epoch_utc", "check_elements"]
 
-_NS_PER_DAY = 86_400 * 1_000_000_000
+_NS_PER_DAY = int(DAY_S) * 1_000_000_000
 _JD_UNIX_EPOCH = 2_440_587.5
 #: Element-set epochs outside these years cannot be right: two-digit TLE years
 #: cover 1957-2056, and datetime64[ns] ends in 2262.

@@ -12,7 +12,7 @@ import numpy as np
 from sgp4.api import WGS72, Satrec
 from sgp4.exporter import export_tle
 
-from ..constants import WGS84_A_M
+from ..constants import DAY_S, WGS84_A_M
 from .constellation import Constellation
 from .tle import satrec_epoch_utc
 
@@ -81,7 +81,7 @@ def walker_delta(shells, epoch_utc, *, first_id=70001, name_prefix="STARLINK-W",
     Constellation
     """
     epoch = np.datetime64(epoch_utc, "us").item()
-    epoch_days = (epoch - datetime(1949, 12, 31)).total_seconds() / 86_400.0
+    epoch_days = (epoch - datetime(1949, 12, 31)).total_seconds() / DAY_S
     names, satrecs = [], []
     for shell in shells:
         a_m = WGS84_A_M + shell.alt_m

@@ -31,9 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import C_MPS, DAY_S, OMEGA_E_RAD_PER_S, STARLINK_PILOT_HZ
+from ..constants import C_MPS, DAY_S, STARLINK_PILOT_HZ
 from ..errors import InputError
 from ..fileio import check_input_file, write_csv
+from ..frames import rotate_to_later_ecef
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import format_utc, seconds_since
 
@@ -325,13 +326,6 @@ def write_measurements(path, meas):
     write_csv(path, header, zip(*cols))
 
 
-def _rotate_z(vec, angle_rad):
-    """Components of ``vec`` in a frame turned by ``angle_rad`` about z, (n, 3)."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    x, y = vec[..., 0], vec[..., 1]
-    return np.stack([c * x + s * y, -s * x + c * y, vec[..., 2]], axis=-1)
-
-
 #: Step of the central difference that gives the apparent satellite velocity [s].
 APPARENT_STEP_S = 0.5
 
@@ -347,7 +341,7 @@ def _apparent_states(constellation, index, t_rx, rx):
     for _ in range(4 if rx is not None else 1):
         t_tx = t_rx - np.round(tau * 1e9).astype("timedelta64[ns]")
         p, v, status = state_ecef_pairs(constellation, index, t_tx)
-        p, v = _rotate_z(p, OMEGA_E_RAD_PER_S * tau), _rotate_z(v, OMEGA_E_RAD_PER_S * tau)
+        p, v = rotate_to_later_ecef(p, tau), rotate_to_later_ecef(v, tau)
         if rx is not None:
             tau = np.linalg.norm(p - rx, axis=-1) / C_MPS
     return p, v, status

@@ -10,6 +10,7 @@ the transmit time, rotated into the ECEF frame of the reception time).
 import numpy as np
 
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
+from ..frames import rotate_to_later_ecef
 from ..orbits.propagate import state_ecef
 
 __all__ = ["Ephemeris", "doppler_model", "NODE_STEP_S", "SPEED_SV_MPS"]
@@ -19,12 +20,6 @@ __all__ = ["Ephemeris", "doppler_model", "NODE_STEP_S", "SPEED_SV_MPS"]
 NODE_STEP_S = 10.0
 #: Satellite speed converting along-track errors to time offsets [m/s] (LEO at ~550 km).
 SPEED_SV_MPS = 7600.0
-
-
-def _rotate_z(vec, angle_rad):
-    """``vec`` (..., 3) in a frame turned by ``angle_rad`` (...) about z."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    return np.stack([c * vec[..., 0] + s * vec[..., 1], -s * vec[..., 0] + c * vec[..., 1], vec[..., 2]], axis=-1)
 
 
 class Ephemeris:
@@ -59,7 +54,7 @@ class Ephemeris:
         for _ in range(2):  # each pass gains |range rate| / c ~ 3e-5
             tau = np.linalg.norm(pos - pos_rx_ecef_m, axis=-1) / C_MPS
             pos, vel = self.state(sat, t_s - tau)
-        pos, vel = _rotate_z(pos, OMEGA_E_RAD_PER_S * tau), _rotate_z(vel, OMEGA_E_RAD_PER_S * tau)
+        pos, vel = rotate_to_later_ecef(pos, tau), rotate_to_later_ecef(vel, tau)
         # d/dt_rx of R(omega tau) r(t_rx - tau): the light time's rate tau_dot = range rate / c
         # scales the velocity (up to ~6 Hz at Ku band) and turns the frame (< 0.5 Hz).
         los = pos - pos_rx_ecef_m

@@ -37,6 +37,7 @@ from scipy.interpolate import CubicSpline
 
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
+from ..frames import rotate_to_later_ecef
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
 __all__ = ["doppler_blocks", "OrbitError", "light_time_positions", "site_geometry",
@@ -90,13 +91,6 @@ def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=
             raise InputError("doppler_blocks: noise (cn0_dbhz) needs an rng")
         iq = add_noise(iq, np.broadcast_to(np.asarray(cn0_dbhz, dtype=float), d.shape), sample_rate_hz, rng)
     return iq.astype(dtype)
-
-
-def _rotate_z(vec, angle_rad):
-    """Components of ``vec`` (..., 3) in a frame turned by ``angle_rad`` (...,) about z."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    x, y = vec[..., 0], vec[..., 1]
-    return np.stack([c * x + s * y, -s * x + c * y, vec[..., 2]], axis=-1)
 
 
 def _inertial_velocity(pos_ecef_m, vel_ecef_mps):
@@ -201,7 +195,7 @@ def light_time_positions(constellation, pos_rx_ecef_m, times_utc, *, orbit_error
             h = np.cross(p, _inertial_velocity(p, v))
             p = (p + radial_m[:, None] * p / np.linalg.norm(p, axis=-1, keepdims=True)
                  + cross_m[:, None] * h / np.linalg.norm(h, axis=-1, keepdims=True))
-        p = _rotate_z(p, -OMEGA_E_RAD_PER_S * delta_s)
+        p = rotate_to_later_ecef(p, -delta_s)
         tau = np.linalg.norm(p - rx, axis=-1) / C_MPS
     return p.reshape(n_sats, n, 3), tau.reshape(n_sats, n)
 
