@@ -26,8 +26,20 @@ combination. Elevation mask 10 deg in both. cssrlib is an optional tool dependen
 one: ``python -m pip install --target /tmp/cssr_site --no-deps cssrlib==1.2.1`` (its own imports need
 numpy, scipy and bitstruct, which are here) and ``--cssrlib-path /tmp/cssr_site``.
 
-Run: ``OPENBLAS_NUM_THREADS=1 python tools/compare_cssrlib_ppp.py [--hours 24] [--mode static|kinematic]
-[--cssrlib-path DIR] [--save FILE.npz]``
+With ``--ar`` both get the day's ANTEX subset (satellite and receiver antennas; the satellites without a
+block are left out by both) and fix ambiguities: leosop its wide-lane/narrow-lane fixing with the GRG
+integer clocks and the clock file's wide-lane biases (``leosop.gnss.ar``); cssrlib its own
+(``armode = 1``, partial fixing, LAMBDA on the between-satellite single differences of the *uncombined*
+L1 and L2 ambiguities), which needs per-signal phase biases (Bias-SINEX or SSR) that the GRG set does not
+publish, and its clock reader keeps only the ``AS`` records (the ``WL`` bias lines are skipped). The
+phase biases it is given are derived here from the clock file's wide-lane biases ``wsb`` [cycles]: per
+satellite, ``d1 = wsb c f2 / (f1 (f1 - f2))`` on L1 and ``d2 = (f1 / f2)^2 d1`` on L2 [m], the pair whose
+ionosphere-free combination is zero (the clock holds it) and whose wide-lane is ``-wsb`` (so that
+Melbourne-Wuebbena + wsb is integer, as in [Laurichesse 2009]); code biases stay zero. Printed in
+addition: time to first fix and the share of epochs fixed after it.
+
+Run: ``OPENBLAS_NUM_THREADS=1 python tools/compare_cssrlib_ppp.py [--hours 24] [--start-h 0]
+[--mode static|kinematic] [--ar] [--cssrlib-path DIR] [--save FILE.npz]``
 """
 
 import argparse
@@ -44,7 +56,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from leosop.constants import C_MPS  # noqa: E402
 from leosop.frames import C_e_n, ecef_to_geodetic  # noqa: E402
+from leosop.gnss.antex import check_antex, read_antex  # noqa: E402
+from leosop.gnss.ar import ArOptions  # noqa: E402
 from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014  # noqa: E402
 from leosop.gnss.ppp import PppOptions, run_ppp  # noqa: E402
 from leosop.gnss.products import read_clk, read_sp3  # noqa: E402
@@ -55,23 +70,37 @@ OBS = DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
 NAV = DAY / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
 SP3 = DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
 CLK = DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
+ATX = DAY / "esbc_2020-177.atx"
 CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
 CSSR_SIGNALS = ("GC1W", "GC2W", "GL1C", "GL2W", "GS1C", "GS2W", "EC1C", "EC5Q", "EL1C", "EL5Q", "ES1C", "ES5Q")
 MASK_DEG = 10.0
 EPOCH_S = 30.0
+CSSR_FIXED = 4  # its nav.smode of an epoch with fixed ambiguities
 
 
-def ours(n_epochs, static):
-    """leosop float PPP: (read s, run s, positions (n, 3), header position (3,), header H/E/N (3,))."""
+def ours(n0, n_epochs, static, ar):
+    """leosop PPP of epochs ``n0 : n0 + n_epochs`` (fixed with ``ar``).
+
+    Returns (read s, run s, positions (n, 3), fixed (n,) bool, header position (3,), header H/E/N (3,),
+    wide-lane biases {sv: cycles}).
+    """
     t0 = time.perf_counter()
     obs = read_obs(OBS, codes=CODES)
     orb, clk = read_sp3(SP3), read_clk(CLK)
+    atx = read_antex(ATX) if ar else None
     t1 = time.perf_counter()
-    obs = dataclasses.replace(obs, time_gps=obs.time_gps[:n_epochs],
-                              obs={k: v[:n_epochs] for k, v in obs.obs.items()},
-                              lli={k: v[:n_epochs] for k, v in obs.lli.items()})
-    res = run_ppp(obs, orb, clk, PppOptions(static=static, systems="GE", mask_deg=MASK_DEG))
-    return t1 - t0, time.perf_counter() - t1, res.pos_ecef_m, obs.approx_pos_ecef_m, obs.antenna_delta_hen_m
+    span = slice(n0, n0 + n_epochs)
+    obs = dataclasses.replace(obs, time_gps=obs.time_gps[span], obs={k: v[span] for k, v in obs.obs.items()},
+                              lli={k: v[span] for k, v in obs.lli.items()})
+    opt = PppOptions(static=static, systems="GE", mask_deg=MASK_DEG)
+    if ar:
+        _, no_ar = check_antex(atx, obs.antenna_type, obs.sv, obs.time_gps[0].astype("datetime64[D]"),
+                               clk.pcvs_applied)
+        res = run_ppp(obs, orb, clk, opt, atx, ar=ArOptions(), no_ar=no_ar)
+    else:
+        res = run_ppp(obs, orb, clk, opt)
+    return (t1 - t0, time.perf_counter() - t1, res.pos_ecef_m, res.fixed, obs.approx_pos_ecef_m,
+            obs.antenna_delta_hen_m, clk.wl_bias_cyc)
 
 
 class _ZeroBiases:
@@ -81,11 +110,40 @@ class _ZeroBiases:
         return 0.0
 
 
-def theirs(n_epochs, static, tmp):
-    """cssrlib float PPP on plain-text copies of the same files: (read s, run s, positions (n, 3))."""
+class _WideLaneBiases:
+    """Bias-SINEX stand-in for cssrlib's AR: phase biases [ns] from the GRG wide-lane biases (module notes).
+
+    Parameters
+    ----------
+    wl_bias_cyc : dict of str -> float
+        Satellite wide-lane biases [cycles] by "G01"-style name (``leosop.gnss.products.Clocks``).
+    """
+
+    def __init__(self, wl_bias_cyc):
+        self.wl_bias_cyc = wl_bias_cyc
+
+    def getosb(self, sat, t, sig):
+        from cssrlib.gnss import rSigRnx, sat2id, uTYP
+
+        wsb = self.wl_bias_cyc.get(sat2id(sat))
+        if sig.typ != uTYP.L or wsb is None:
+            return 0.0
+        sys = sat2id(sat)[0]
+        f1, f2 = (rSigRnx(s).frequency() for s in (("GL1C", "GL2W") if sys == "G" else ("EL1C", "EL5Q")))
+        d1_m = wsb * C_MPS * f2 / (f1 * (f1 - f2))
+        d_m = d1_m if abs(sig.frequency() - f1) < 1.0 else d1_m * (f1 / f2) ** 2
+        return d_m / (C_MPS * 1e-9)  # cssrlib adds -osb * c * 1e-9 to its phase model
+
+
+def theirs(n0, n_epochs, static, tmp, wl_bias_cyc=None):
+    """cssrlib PPP on plain-text copies of the same files, epochs ``n0 : n0 + n_epochs``.
+
+    With ``wl_bias_cyc`` (a dict as ``_WideLaneBiases`` takes) it gets the ANTEX and fixes ambiguities.
+    Returns (read s, run s, positions (n, 3), fixed (n,) bool).
+    """
     import cssrlib.pppssr as pppssr
     from cssrlib.gnss import Nav, rSigRnx
-    from cssrlib.peph import peph
+    from cssrlib.peph import atxdec, peph, searchpcv
     from cssrlib.rinex import rnxdec
 
     t0 = time.perf_counter()
@@ -106,31 +164,39 @@ def theirs(n_epochs, static, tmp):
     nav = rnx.decode_clk(str(files["clk.clk"]), nav)
     if rnx.decode_obsh(str(files["obs.rnx"])) < 0:
         raise SystemExit("cssrlib could not read the observation header")
+    ar = wl_bias_cyc is not None
+    if ar:
+        atx = atxdec()
+        atx.readpcv(str(ATX))
+    obs = rnx.decode_obs()
+    for _ in range(n0):
+        obs = rnx.decode_obs()
     t1 = time.perf_counter()
-    # No ANTEX: zero satellite antenna correction (as leosop), none for the receiver.
-    pppssr.antModelTx = lambda nav_, e, sigs, *args, **kw: np.zeros(len(sigs))
+    if not ar:  # No ANTEX: zero satellite antenna correction (as leosop), none for the receiver.
+        pppssr.antModelTx = lambda nav_, e, sigs, *args, **kw: np.zeros(len(sigs))
     ppp = pppssr.pppos(nav, rnx.pos, None)
-    nav.ephopt, nav.armode = 4, 0
+    nav.ephopt, nav.armode = 4, int(ar)
     nav.elmin = np.radians(MASK_DEG)
     nav.cnr_min = nav.cnr_min_gpy = 0.0
-    nav.sat_ant, nav.rcv_ant = [], None
+    nav.sat_ant, nav.rcv_ant = ([], None) if not ar else (atx.pcvs, searchpcv(atx.pcvr, rnx.ant, obs.t))
     if static:  # its pmode 0 re-estimates the position every epoch (100 m/sqrt(s)); its samples zero that for a station
         nav.q[0:3] = 0.0
     pos = np.full((n_epochs, 3), np.nan)
-    obs = rnx.decode_obs()
+    fixed = np.zeros(n_epochs, dtype=bool)
     nav.t = deepcopy(obs.t)
-    bsx = _ZeroBiases()
+    bsx = _WideLaneBiases(wl_bias_cyc) if ar else _ZeroBiases()
     for k in range(n_epochs):
         ppp.process(obs, orb=orb, bsx=bsx)
-        pos[k] = nav.x[0:3]
+        fixed[k] = nav.smode == CSSR_FIXED
+        pos[k] = nav.xa[0:3] if fixed[k] else nav.x[0:3]
         obs = rnx.decode_obs()
         if obs.t.time == 0:
             break
     rnx.fobs.close()
-    return t1 - t0, time.perf_counter() - t1, pos
+    return t1 - t0, time.perf_counter() - t1, pos, fixed
 
 
-def report(name, t_read, t_run, pos, ref, static, converge_min):
+def report(name, t_read, t_run, pos, ref, static, converge_min, fixed=None):
     lat, lon, _ = ecef_to_geodetic(ref)
     C = C_e_n(lat, lon)
     err = pos - ref
@@ -150,6 +216,10 @@ def report(name, t_read, t_run, pos, ref, static, converge_min):
     else:
         sel = ok & (t_h >= converge_min / 60.0)
         acc = f"3-D RMS after {converge_min:g} min {100 * np.sqrt(np.mean(norm[sel] ** 2)):.1f} cm"
+    if fixed is not None:
+        first = np.flatnonzero(fixed)
+        acc += (f"; first fix after {t_h[first[0]] * 60:.1f} min, fixed {100 * fixed[first[0]:].mean():.1f} % of the "
+                f"epochs after it, {'fixed' if fixed[-1] else 'float'} at the end" if first.size else "; never fixed")
     print(f"{name:8s} {'static' if static else 'kinematic'}: {acc}; read {t_read:.1f} s, run {t_run:.1f} s "
           f"({1e3 * t_run / len(pos):.1f} ms/epoch), epochs without a solution {np.sum(~ok)}", flush=True)
 
@@ -157,6 +227,8 @@ def report(name, t_read, t_run, pos, ref, static, converge_min):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--start-h", type=float, default=0.0, help="hours into the day of the first epoch")
+    ap.add_argument("--ar", action="store_true", help="ANTEX and ambiguity fixing in both (module notes)")
     ap.add_argument("--mode", choices=("static", "kinematic"), default="static")
     ap.add_argument("--converge-min", type=float, default=60.0)
     ap.add_argument("--cssrlib-path", help="folder cssrlib was installed into (pip install --target)")
@@ -164,19 +236,21 @@ def main():
     a = ap.parse_args()
     if a.cssrlib_path:
         sys.path.insert(0, a.cssrlib_path)
-    n = int(round(a.hours * 3600 / EPOCH_S))
+    n0, n = (int(round(h * 3600 / EPOCH_S)) for h in (a.start_h, a.hours))
     static = a.mode == "static"
-    t_read, t_run, pos, header_ecef_m, delta_hen_m = ours(n, static)
+    t_read, t_run, pos, fixed, header_ecef_m, delta_hen_m, wl_bias_cyc = ours(n0, n, static, a.ar)
     # The header position is the station's ETRF2000 coordinate; the products' frame is ITRF2014.
     ref = etrf2000_to_itrf2014(header_ecef_m, decimal_year(np.datetime64("2020-06-25T12:00")))
-    report("leosop", t_read, t_run, pos, ref, static, a.converge_min)
+    report("leosop", t_read, t_run, pos, ref, static, a.converge_min, fixed if a.ar else None)
     with tempfile.TemporaryDirectory() as tmp:
-        c_read, c_run, c_arp = theirs(n, static, tmp)
+        c_read, c_run, c_arp, c_fixed = theirs(n0, n, static, tmp, wl_bias_cyc if a.ar else None)
     lat, lon, _ = ecef_to_geodetic(ref)
     c_pos = c_arp - C_e_n(lat, lon) @ delta_hen_m[[1, 2, 0]]  # antenna reference point -> marker
-    report("cssrlib", c_read, c_run, c_pos, ref, static, a.converge_min)
+    report("cssrlib", c_read, c_run, c_pos, ref, static, a.converge_min, c_fixed if a.ar else None)
+    print(f"run time cssrlib / leosop: {c_run / t_run:.0f}")
     if a.save:
-        np.savez(a.save, leosop_ecef_m=pos, cssrlib_ecef_m=c_pos, ref_ecef_m=ref)
+        np.savez(a.save, leosop_ecef_m=pos, cssrlib_ecef_m=c_pos, ref_ecef_m=ref, leosop_fixed=fixed,
+                 cssrlib_fixed=c_fixed)
 
 
 if __name__ == "__main__":
