@@ -199,6 +199,11 @@ def theirs(n0, n_epochs, static, tmp, wl_bias_cyc=None):
     return t1 - t0, time.perf_counter() - t1, pos, fixed
 
 
+def good_last(ok):
+    """Index of the last epoch with a solution (ok: (n,) bool)."""
+    return np.flatnonzero(ok)[-1]
+
+
 def report(name, t_read, t_run, pos, ref, static, converge_min, fixed=None):
     lat, lon, _ = ecef_to_geodetic(ref)
     C = C_e_n(lat, lon)
@@ -221,8 +226,11 @@ def report(name, t_read, t_run, pos, ref, static, converge_min, fixed=None):
         acc = f"3-D RMS after {converge_min:g} min {100 * np.sqrt(np.mean(norm[sel] ** 2)):.1f} cm"
     if fixed is not None:
         first = np.flatnonzero(fixed)
+        fx = np.flatnonzero(fixed & ok)
         acc += (f"; first fix after {t_h[first[0]] * 60:.1f} min, fixed {100 * fixed[first[0]:].mean():.1f} % of the "
-                f"epochs after it, {'fixed' if fixed[-1] else 'float'} at the end" if first.size else "; never fixed")
+                f"epochs after it, 3-D RMS after it {100 * np.sqrt(np.mean(norm[fx] ** 2)):.1f} cm, fixed epochs more "
+                f"than 5 cm off {np.sum(norm[fx] > 0.05)}; final 3-D error {100 * norm[good_last(ok)]:.1f} cm "
+                f"({'fixed' if fixed[good_last(ok)] else 'float'})" if first.size else "; never fixed")
     print(f"{name:8s} {'static' if static else 'kinematic'}: {acc}; read {t_read:.1f} s, run {t_run:.1f} s "
           f"({1e3 * t_run / len(pos):.1f} ms/epoch), epochs without a solution {np.sum(~ok)}", flush=True)
 
