@@ -33,6 +33,8 @@ G0_MPS2 = 9.80665
 # Time.
 #: Julian date of the J2000.0 epoch (TT).
 JD_J2000 = 2_451_545.0
+#: Julian date of the Unix epoch, 1970-01-01T00:00 UTC.
+JD_UNIX_EPOCH = 2_440_587.5
 #: Seconds per day.
 DAY_S = 86_400.0
 

@@ -11,13 +11,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from .constants import DAY_S
+from .constants import DAY_S, JD_UNIX_EPOCH
 from .errors import InputError
 
 __all__ = ["parse_utc", "round_utc", "format_utc", "seconds_since", "utc_from_seconds", "jd_utc", "jd_ut1",
-           "ut1_minus_utc_s"]
+           "utc_from_jd", "ut1_minus_utc_s"]
 
-_UNIX_EPOCH_JD = 2_440_587.5
 _NS_PER_DAY = int(DAY_S) * 1_000_000_000
 
 
@@ -130,7 +129,18 @@ def jd_utc(times):
     """
     ns = np.asarray(times, dtype="datetime64[ns]").astype(np.int64)
     days, rem = np.divmod(ns, _NS_PER_DAY)
-    return days + _UNIX_EPOCH_JD, rem / _NS_PER_DAY
+    return days + JD_UNIX_EPOCH, rem / _NS_PER_DAY
+
+
+def utc_from_jd(jd, fr):
+    """datetime64[ns] UTC of a split Julian date ``(jd, fr)``, the inverse of :func:`jd_utc` (to the nanosecond).
+
+    ``jd`` need not be at midnight: its fraction is carried into ``fr``.
+    """
+    whole = np.floor(np.asarray(jd, dtype=float) - JD_UNIX_EPOCH)
+    carried = np.asarray(jd, dtype=float) - JD_UNIX_EPOCH - whole + np.asarray(fr, dtype=float)
+    ns = whole.astype(np.int64) * _NS_PER_DAY + np.round(carried * _NS_PER_DAY).astype(np.int64)
+    return ns.astype("datetime64[ns]")[()]
 
 
 @lru_cache(maxsize=1)

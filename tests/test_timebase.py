@@ -74,3 +74,15 @@ def test_time_grids_from_float_steps_land_on_whole_nanoseconds():
     exact = np.datetime64("2025-01-01T00:00:00", "ns") + (k * 300_000_000).astype("timedelta64[ns]")
     np.testing.assert_array_equal(times, exact)
     assert timebase.seconds_since(times, "2025-01-01T00:00:00") == pytest.approx(k * 0.3, abs=1e-9)
+
+
+def test_utc_from_jd_inverts_sgp4_jday_and_jd_utc():
+    # sgp4's own calendar-to-Julian-date conversion is the independent reference.
+    from sgp4.api import jday
+
+    jd, fr = jday(2020, 6, 25, 13, 47, 10.25)
+    assert timebase.utc_from_jd(jd, fr) == np.datetime64("2020-06-25T13:47:10.250", "ns")
+    # A jd that is not at midnight (TLE epochs as Satrec splits them) carries its fraction.
+    assert timebase.utc_from_jd(jd + 0.25, fr - 0.25) == np.datetime64("2020-06-25T13:47:10.250", "ns")
+    t = np.array(["1957-10-04T19:28:34.123456789", "2056-12-31T23:59:59.999999999"], dtype="datetime64[ns]")
+    assert np.array_equal(timebase.utc_from_jd(*timebase.jd_utc(t)), t)

@@ -17,15 +17,14 @@ from pathlib import Path
 import numpy as np
 from sgp4.api import Satrec
 
-from ..constants import DAY_S
+from ..constants import JD_UNIX_EPOCH
 from ..errors import InputError
 from ..fileio import check_input_file
+from ..timebase import utc_from_jd
 from .constellation import Constellation
 
 __all__ = ["read_tle", "parse_tle_lines", "tle_checksum", "satrec_epoch_utc", "check_elements"]
 
-_NS_PER_DAY = int(DAY_S) * 1_000_000_000
-_JD_UNIX_EPOCH = 2_440_587.5
 #: Element-set epochs outside these years cannot be right: two-digit TLE years
 #: cover 1957-2056, and datetime64[ns] ends in 2262.
 _EPOCH_YEARS = (1957, 2200)
@@ -42,8 +41,7 @@ def tle_checksum(line):
 
 def satrec_epoch_utc(satrec):
     """Element-set epoch of a Satrec as datetime64[ns]."""
-    days = int(round(satrec.jdsatepoch - 2_440_587.5))
-    return np.datetime64(days * _NS_PER_DAY + int(round(satrec.jdsatepochF * _NS_PER_DAY)), "ns")
+    return utc_from_jd(satrec.jdsatepoch, satrec.jdsatepochF)
 
 
 def check_elements(sat, where):
@@ -56,7 +54,7 @@ def check_elements(sat, where):
     ------
     InputError
     """
-    year = 1970.0 + (sat.jdsatepoch + sat.jdsatepochF - _JD_UNIX_EPOCH) / 365.25
+    year = 1970.0 + (sat.jdsatepoch + sat.jdsatepochF - JD_UNIX_EPOCH) / 365.25
     rev_per_day = sat.no_kozai * 1440.0 / (2.0 * math.pi)
     angles = (("inclination", sat.inclo, 180.0), ("right ascension of the node", sat.nodeo, 360.0),
               ("argument of perigee", sat.argpo, 360.0), ("mean anomaly", sat.mo, 360.0))
