@@ -6,6 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from leosop.errors import InputError
 from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
@@ -60,15 +61,13 @@ def test_satellite_terms_cancel(scene):
 
 def test_interpolated_base(scene):
     """A base sampled half a second off the rover: interpolation carries the drifts (no noise, no orbit error)."""
-    const, base, rover, t, _ = scene
+    _, base, rover, t, _ = scene
     r, b = pair(scene, 2, sigma_hz=1e-6, t_base=t - np.timedelta64(500, "ms"), orbit_sigma_rtn_m=(0, 0, 0),
                 offset_max_hz=500.0, drift_sigma_hz_per_s=1.0)
     fix = solve_differential(r, b, base, orbit_sigma_rtn_m=None)
     # The rover's first epoch has a base row on one side only (base span ends 0.5 s before the rover's).
     assert fix.n_unmatched_rows == 7
-    # Linear interpolation of a Doppler curve: the base correction is smooth (clock, satellite terms) but the
-    # geometry's model error is not interpolated, so the noise-free fix is exact up to the curvature of the
-    # satellite terms (linear here): ONE_MM.
+    # The interpolated correction holds the base clock and satellite terms, linear in time: exact, ONE_MM.
     assert np.linalg.norm(fix.pos_ecef_m[0] - rover) < ONE_MM
 
 
@@ -97,7 +96,7 @@ def test_no_common_satellite(scene):
 def test_different_bands_rejected(scene):
     _, base, _, _, _ = scene
     r, b = pair(scene, 5, sigma_hz=0.3)
-    with pytest.raises(Exception, match="different bands"):
+    with pytest.raises(InputError, match="different bands"):
         solve_differential(r, replace(b, carrier_hz=b.carrier_hz * 1.1), base)
 
 
