@@ -1,0 +1,344 @@
+"""Differential Doppler fix: a base at a known site removes what it shares with the rover.
+
+A base receiver at a known position and a rover measure the Doppler of the
+same satellites (matched by ``sat_id``). The satellite's oscillator offset
+and drift are in both measurements alike, and an element-set error moves
+both receivers' predicted Doppler almost alike (the difference falls with
+the baseline over the range, ~1/100 at 5-10 km). The base's correction of
+each row, its measurement minus the Doppler its known position predicts
+(:func:`~leosop.geometry.doppler.doppler_jacobian`'s model), holds those
+satellite terms and the base clock; interpolated linearly in time to the
+rover's epochs and subtracted from the rover's measurement it leaves the
+single difference between receivers (rover minus base)::
+
+    z = y_rover - (y_base - D(base)) = D(rover) + (T_rover - T_base) + noise
+
+which is what is fitted: the rover's position (one for all rows, or one per
+block of ``block_s`` seconds, the rover at rest within a block) and the
+rover-minus-base frequency offset, a polynomial in time (offset and drift by
+default). With identical epochs the correction is the base's own row and
+``z`` is the plain single difference; between base epochs the linear
+interpolation carries a satellite drift exactly (a satellite offset or drift
+cancels to round-off) and its variance is that of the weighted base rows.
+
+Rows of a satellite that only one receiver saw, and rover rows outside the
+time span of their satellite's base rows (or in a gap wider than
+``max_gap_s``), are left out and counted. The solve is
+:func:`~leosop.positioning.robust_ls.solve_robust` (batched over blocks, the
+w-test outlier exclusion) and each block's status is
+:func:`~leosop.positioning.quality.fix_status` with its satellites as passes.
+
+The element-set error's residual (the differential term above) is not
+modelled: it grows with the baseline, and the covariance does not include
+it (tools/bench_differential.py measures how the error and its NEES grow).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..frames import ecef_to_geodetic
+from ..geometry.dop import cofactor
+from ..geometry.doppler import doppler_jacobian
+from ..timebase import seconds_since
+from .quality import fix_status
+from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
+
+__all__ = ["MAX_GAP_S", "DifferentialFix", "base_corrections", "solve_differential"]
+
+#: Default prior standard deviation of an element-set offset, radial / along-track / cross-track [m]:
+#: along-track as tools/bench_static_time_offset.py (300 m); radial and cross-track smaller, as for any
+#: SGP4 fit (assumed, not measured on Starlink).
+ORBIT_SIGMA_RTN_M = (30.0, 300.0, 100.0)
+#: Widest gap between two base rows of a satellite that is interpolated across [s]: a few snapshot periods
+#: (1 s); the satellite's frequency terms are smooth over it, the base's noise is what interpolation adds.
+MAX_GAP_S = 5.0
+#: Convergence thresholds of the clock terms: 10 uHz and 0.1 uHz/s (higher terms divided by powers of the
+#: half span).
+_XTOL_CLOCK = (1e-5, 1e-7)
+#: A step shorter than this fraction of the posterior sigma along it ends the iteration (as the static fixes).
+_STEP_SIGMA_TOL = 1e-3
+#: Tolerance on a rover time outside its satellite's base span [s] (rounding of time tags).
+_TIME_TOL_S = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class DifferentialFix:
+    """Differential fixes of the rover, one per block (one block for a static fix).
+
+    Attributes
+    ----------
+    pos_ecef_m : ndarray, (n_b, 3)
+        Rover position of each block; NaN where not solved.
+    clock_poly_hz : ndarray, (n_b, d + 1)
+        Rover-minus-base frequency offset polynomial in ``t - t_ref_s`` [Hz/s^k], lowest first.
+    t_ref_s : ndarray, (n_b,)
+        Mid-time of each block's rows (the time base of the inputs).
+    cov : ndarray, (n_b, 4 + d, 4 + d)
+        Covariance of ``[pos, clock terms]`` (times ``chi2 / dof`` when the
+        residuals fail their test, see :mod:`~leosop.positioning.robust_ls`).
+    gdop : ndarray, (n_b,)
+        ``sqrt(trace((H^T W H)^-1))`` over the used rows, weights relative
+        to the median.
+    solver_status : ndarray of int, (n_b,)
+        :class:`~leosop.positioning.robust_ls.FixStatus`.
+    status : ndarray of str, (n_b,)
+        :func:`~leosop.positioning.quality.fix_status`: ``ok`` when the
+        toolkit vouches for the fix.
+    chi2, chi2_p : ndarray, (n_b,)
+    dof, n_used, n_sats, iterations : ndarray of int, (n_b,)
+        ``n_sats``: satellites with a used row.
+    block : ndarray of int, (m,)
+        Block of each rover row; -1 where the row had no base correction.
+    z_hz, sigma_hz, residuals_hz : ndarray, (m,)
+        Per rover row: single difference, its sigma (rover and interpolated
+        base), residual (NaN where not used).
+    used : ndarray of bool, (m,)
+    rover_only_sats, base_only_sats : tuple of str
+        Satellites seen by one receiver only (left out).
+    n_unmatched_rows : int
+        Rover rows of common satellites outside their base span or in a gap.
+    """
+
+    pos_ecef_m: np.ndarray
+    clock_poly_hz: np.ndarray
+    t_ref_s: np.ndarray
+    cov: np.ndarray
+    gdop: np.ndarray
+    solver_status: np.ndarray
+    status: np.ndarray
+    chi2: np.ndarray
+    chi2_p: np.ndarray
+    dof: np.ndarray
+    n_used: np.ndarray
+    n_sats: np.ndarray
+    iterations: np.ndarray
+    block: np.ndarray
+    z_hz: np.ndarray
+    sigma_hz: np.ndarray
+    residuals_hz: np.ndarray
+    used: np.ndarray
+    rover_only_sats: tuple
+    base_only_sats: tuple
+    n_unmatched_rows: int
+
+
+def _states(meas, name):
+    """Satellite states and sigmas of a receiver's rows, checked."""
+    if meas.pos_sv_ecef_m is None:
+        raise InputError(f"{meas.source or name}: no satellite states (give them as columns or from element sets)")
+    return np.asarray(meas.pos_sv_ecef_m, float), np.asarray(meas.vel_sv_ecef_mps, float)
+
+
+def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
+    """Radial / along-track / cross-track axes (columns of C, (..., 3, 3)) and their velocity map W = [w]x C.
+
+    ``w = r x v / |r|^2`` is the satellite's orbital angular velocity: an
+    offset ``C d`` fixed in that frame moves with velocity ``W d``.
+    """
+    r, v = np.asarray(pos_sv_ecef_m, float), np.asarray(vel_sv_ecef_mps, float)
+    radial = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    h = np.cross(r, v)
+    normal = h / np.linalg.norm(h, axis=-1, keepdims=True)
+    C = np.stack([radial, np.cross(normal, radial), normal], axis=-1)
+    w = h / np.sum(r * r, axis=-1, keepdims=True)
+    return C, np.cross(w[..., None, :], np.swapaxes(C, -1, -2)).swapaxes(-1, -2)
+
+
+def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz):
+    """Doppler of satellites (..., m, 3) seen from receivers at rest (..., 3): predictions (..., m), Jacobians (..., m, 7)."""
+    H = doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, np.zeros_like(pos_rx_ecef_m), carrier_hz)
+    return np.einsum("...mi,...mi->...m", H[..., 3:6], -vel_sv_ecef_mps), H
+
+
+def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_gap_s=MAX_GAP_S):
+    """The base's correction (measurement minus predicted Doppler) interpolated to rover rows.
+
+    Parameters
+    ----------
+    base : Measurements
+        Base rows with satellite states and ``sigma_hz``.
+    base_pos_ecef_m : array_like, (3,)
+    sat_id : array_like of str, (m,)
+        Satellite of each rover row.
+    t_s : array_like, (m,)
+        Rover row times, on the time base of ``t_base_s``.
+    t_base_s : array_like, (n,), optional
+        Base row times; default ``base.t_s``.
+    max_gap_s : float
+
+    Returns
+    -------
+    corr_hz, var_hz2 : ndarray, (m,)
+        Interpolated correction and its variance; NaN where the row has none.
+    """
+    pos_sv, vel_sv = _states(base, "base")
+    tb = np.asarray(base.t_s if t_base_s is None else t_base_s, dtype=float)
+    pred, _ = _model_hz(pos_sv, vel_sv, np.asarray(base_pos_ecef_m, float), base.carrier_hz)
+    c_b = base.doppler_hz - pred
+    var_b = np.asarray(base.sigma_hz, float) ** 2
+    ids = np.asarray(sat_id, dtype=str)
+    t = np.asarray(t_s, dtype=float)
+    corr, var = np.full(len(ids), np.nan), np.full(len(ids), np.nan)
+    for sid in np.intersect1d(ids, base.sat_id):
+        rows = np.flatnonzero(base.sat_id == sid)
+        rows = rows[np.argsort(tb[rows], kind="stable")]
+        tr, want = tb[rows], np.flatnonzero(ids == sid)
+        j = np.clip(np.searchsorted(tr, t[want] - _TIME_TOL_S), 1, max(len(tr) - 1, 1))
+        lo, hi = np.maximum(j - 1, 0), np.minimum(j, len(tr) - 1)
+        span = tr[hi] - tr[lo]
+        a = np.clip(np.divide(t[want] - tr[lo], span, out=np.zeros(len(want)), where=span > 0), 0.0, 1.0)
+        inside = (t[want] >= tr[0] - _TIME_TOL_S) & (t[want] <= tr[-1] + _TIME_TOL_S) & (span <= max_gap_s)
+        # A single base row (or a rover time on a base row) takes that row's correction alone.
+        near = np.abs(t[want] - tr[lo]) <= _TIME_TOL_S
+        a = np.where(near, 0.0, a)
+        c = (1.0 - a) * c_b[rows[lo]] + a * c_b[rows[hi]]
+        v = (1.0 - a) ** 2 * var_b[rows[lo]] + a**2 * var_b[rows[hi]]
+        corr[want] = np.where(inside | near, c, np.nan)
+        var[want] = np.where(inside | near, v, np.nan)
+    return corr, var
+
+
+def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, clock_degree=1,
+                       orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, max_gap_s=MAX_GAP_S, max_iter=200, alpha=1e-3):
+    """Differential Doppler fix of a rover at rest (per block) against a base at a known site.
+
+    Parameters
+    ----------
+    rover, base : Measurements
+        Each with satellite states (light time for its own position) and
+        ``sigma_hz``. Times: both with ``time_utc``, or ``t_s`` on one time
+        base. A satellite's carrier must be the same in both.
+    base_pos_ecef_m : array_like, (3,)
+    pos0_ecef_m : array_like, (3,), optional
+        Start of the rover's position; default the base's.
+    block_s : float, optional
+        Length of the blocks, each with its own rover position and clock
+        terms (from the first rover row); None: one static fix.
+    clock_degree : int
+        Degree of the rover-minus-base frequency-offset polynomial of each block.
+    orbit_sigma_rtn_m : array_like, (3,), or None
+        Prior standard deviation of each common satellite's element-set
+        offset, radial / along-track / cross-track [m]: the offsets are
+        states of each block (zero-mean prior rows, never excluded), so the
+        covariance carries what the baseline leaves of them. None: no
+        offset states (the covariance then ignores them).
+    max_gap_s : float
+        Widest gap between base rows interpolated across.
+    max_iter : int
+    alpha : float or None
+        Significance of the chi-square and w-tests (outlier exclusion and status).
+
+    Returns
+    -------
+    DifferentialFix
+    """
+    if clock_degree < 0:
+        raise ValueError(f"{clock_degree=} must be >= 0")
+    if block_s is not None and not block_s > 0:
+        raise ValueError(f"{block_s=} must be > 0")
+    base_pos = np.asarray(base_pos_ecef_m, dtype=float).reshape(3)
+    r_s, v_s = _states(rover, "rover")
+    if rover.time_utc is not None and base.time_utc is not None:
+        epoch = min(rover.time_utc.min(), base.time_utc.min())
+        t, tb = seconds_since(rover.time_utc, epoch), seconds_since(base.time_utc, epoch)
+    else:
+        t, tb = np.asarray(rover.t_s, float), np.asarray(base.t_s, float)
+    common = np.intersect1d(rover.sat_id, base.sat_id)
+    for sid in common:
+        fr, fb = np.unique(rover.carrier_hz[rover.sat_id == sid]), np.unique(base.carrier_hz[base.sat_id == sid])
+        if fr.size != 1 or fb.size != 1 or fr[0] != fb[0]:
+            raise InputError(f"satellite {sid}: carrier {fr[0]:.10g} Hz at the rover, {fb[0]:.10g} Hz at the base "
+                             "(different bands cannot be differenced)")
+    corr, var_b = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb, max_gap_s=max_gap_s)
+    z = rover.doppler_hz - corr
+    sigma = np.sqrt(np.asarray(rover.sigma_hz, float) ** 2 + var_b)
+    usable = np.isfinite(z) & (sigma > 0) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1)
+    n_unmatched = int((np.isin(rover.sat_id, common) & ~usable).sum())
+
+    block = np.full(len(z), -1)
+    if usable.any():
+        t0 = t[usable].min()
+        block[usable] = 0 if block_s is None else np.floor((t[usable] - t0) / block_s + _TIME_TOL_S).astype(int)
+        _, block[usable] = np.unique(block[usable], return_inverse=True)
+    n_b = max(int(block.max()) + 1, 1)
+    counts = np.bincount(block[usable], minlength=n_b)
+    width = max(int(counts.max()), 1)
+    slots = np.full((n_b, width), -1)
+    rows_sorted = np.flatnonzero(usable)[np.argsort(block[usable], kind="stable")]
+    slot = np.arange(rows_sorted.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    slots[block[rows_sorted], slot] = rows_sorted
+    pad = slots < 0
+    take = np.where(pad, 0, slots)
+    y_b, s_b = np.where(pad, 0.0, z[take]), np.where(pad, 1.0, sigma[take])
+    f_b = np.where(pad, 1.0, rover.carrier_hz[take])
+    rs_b = np.where(pad[..., None], [2e7, 0.0, 0.0], r_s[take])
+    vs_b = np.where(pad[..., None], [0.0, 7e3, 0.0], v_s[take])
+    t_b = t[take]
+    empty = pad.all(-1)
+    lo, hi = np.where(pad, np.inf, t_b).min(-1), np.where(pad, -np.inf, t_b).max(-1)
+    t_ref = np.where(empty, 0.0, 0.5 * (np.where(empty, 0.0, lo) + np.where(empty, 0.0, hi)))
+    dt = np.where(pad, 0.0, t_b - t_ref[:, None])
+    half_span = np.maximum(np.max(np.abs(dt), axis=-1).max(), 1.0)
+    powers = dt[..., None] ** np.arange(clock_degree + 1)
+    n_lin = 4 + clock_degree
+    # Element-set offsets: one radial / along / cross-track offset per common satellite, with a prior.
+    sats = np.unique(np.where(pad, "", rover.sat_id[take])[~pad]) if orbit_sigma_rtn_m is not None else []
+    n_orb = 3 * len(sats)
+    onehot = (np.where(pad, "", rover.sat_id[take])[..., None] == np.asarray(sats, dtype=str)).astype(float)
+    C_rtn, W_rtn = _rtn_frames(rs_b, vs_b)
+    _, H_base = _model_hz(rs_b, vs_b, base_pos, f_b)
+    n_states = n_lin + n_orb
+    prior_sigma = np.tile(np.asarray(orbit_sigma_rtn_m if n_orb else [], dtype=float), len(sats))
+
+    def model(x, idx, w):
+        pred, H = _model_hz(rs_b[idx], vs_b[idx], x[:, :3], f_b[idx])
+        pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3:n_lin])
+        J = np.concatenate([H[..., :3], powers[idx]], axis=-1)
+        if not n_orb:
+            return pred, J
+        # d(z)/d(offset): the satellite moved by C r and its velocity by W r, seen from rover minus base.
+        dH = H - H_base[idx]
+        g = -(np.einsum("pmi,pmij->pmj", dH[..., :3], C_rtn[idx]) + np.einsum("pmi,pmij->pmj", dH[..., 3:6], W_rtn[idx]))
+        G = (onehot[idx][..., :, None] * g[..., None, :]).reshape(g.shape[:2] + (n_orb,))
+        pred = np.concatenate([pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), x[:, n_lin:]], axis=-1)
+        J = np.concatenate([np.concatenate([J, G], axis=-1),
+                            np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_orb, n_states))], axis=1)
+        return pred, J
+
+    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree),
+                           np.full(n_orb, XTOL_POS_M)])
+    x0 = np.zeros((n_b, n_states))
+    x0[:, :3] = base_pos if pos0_ecef_m is None else np.asarray(pos0_ecef_m, float).reshape(3)
+    y_all = np.concatenate([y_b, np.zeros((n_b, n_orb))], axis=-1)
+    s_all = np.concatenate([s_b, np.broadcast_to(prior_sigma, (n_b, n_orb))], axis=-1)
+    m_all = np.concatenate([~pad, np.ones((n_b, n_orb), bool)], axis=-1)
+    fixed = np.arange(width + n_orb) >= width
+    x, res, J, Q, used_all, iterations, chi2, solver_status = solve_robust(
+        model, x0, y_all, s_all, m_all, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha, fixed=fixed,
+        step_sigma_tol=_STEP_SIGMA_TOL)
+    used_b, res = used_all[:, :width], res[:, :width]
+    solved = np.isin(solver_status, (FixStatus.OK, FixStatus.INCONSISTENT))
+    x = np.where(solved[:, None], x, np.nan)
+    Q = np.where(solved[:, None, None], Q, np.nan)
+    med = np.array([np.median(s_b[k][~pad[k]]) if (~pad[k]).any() else 1.0 for k in range(n_b)])
+    w_rel = np.where(used_b, (med[:, None] / s_b) ** 2, 0.0)
+    gdop = np.sqrt(np.trace(cofactor(J[:, :width, :n_lin], w_rel), axis1=-2, axis2=-1))
+    n_used = used_b.sum(-1)
+    dof = n_used - n_lin
+    sat_b = np.where(pad, "", rover.sat_id[take])
+    n_sats = np.array([np.unique(sat_b[k][used_b[k]]).size for k in range(n_b)])
+    _, _, alt = ecef_to_geodetic(np.nan_to_num(x[:, :3]))
+    status, chi2_p = fix_status(solver_status, dof, chi2, np.where(solved, alt, np.nan), n_passes=n_sats, alpha=alpha)
+
+    used = np.zeros(len(z), bool)
+    residuals = np.full(len(z), np.nan)
+    used[slots[~pad]] = used_b[~pad]
+    residuals[slots[~pad]] = res[~pad]
+    return DifferentialFix(
+        pos_ecef_m=x[:, :3], clock_poly_hz=x[:, 3:n_lin], t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
+        status=status, chi2=chi2, chi2_p=chi2_p, dof=dof, n_used=n_used, n_sats=n_sats, iterations=iterations,
+        block=block, z_hz=z, sigma_hz=sigma, residuals_hz=residuals, used=used,
+        rover_only_sats=tuple(np.setdiff1d(rover.sat_id, base.sat_id).tolist()),
+        base_only_sats=tuple(np.setdiff1d(base.sat_id, rover.sat_id).tolist()), n_unmatched_rows=n_unmatched)

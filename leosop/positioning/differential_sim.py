@@ -1,0 +1,166 @@
+"""Measurement-level simulation of receivers that see the same satellites with the same satellite errors.
+
+What a base/rover pair (or any set of receivers) measures, for tests and
+benchmarks of the differential fix (:mod:`~leosop.positioning.differential`).
+Each satellite's errors are drawn once (:func:`draw_satellite_errors`) and
+shared by every receiver (:func:`simulate_receiver`):
+
+- an element-set error, a constant offset in the satellite's radial /
+  along-track / cross-track frame (built from its SGP4 position and velocity
+  in ECEF); the true velocity is the time derivative of the offset
+  position, so the rotating frame's velocity (~1 mm/s per metre of offset at
+  the orbital rate) is in the truth too;
+- the satellite's oscillator: a frequency offset and drift.
+
+Each receiver has its own position (at rest in ECEF), epochs, clock offset and
+drift, white noise and elevation mask. The model states handed out with the
+measurements are the element sets' (SGP4 with light time,
+:func:`~leosop.positioning.measurements.sv_states_from_tle`), as a receiver
+would compute them; the truth is those states plus the offset.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import C_MPS, STARLINK_PILOT_HZ
+from ..frames import azimuth_elevation_range, range_rate
+from ..orbits.propagate import state_ecef_pairs
+from ..timebase import seconds_since
+from .differential import ORBIT_SIGMA_RTN_M
+from .measurements import Measurements, sv_states_from_tle
+
+__all__ = [
+    "SAT_DRIFT_SIGMA_HZ_PER_S",
+    "SAT_OFFSET_MAX_HZ",
+    "SatelliteErrors",
+    "draw_satellite_errors",
+    "simulate_receiver",
+]
+
+#: Satellite frequency offsets are uniform in +-this [Hz] ([Shen 2024] Table 1: 0-5 Hz).
+SAT_OFFSET_MAX_HZ = 5.0
+#: Default standard deviation of a satellite's frequency drift [Hz/s] (assumed: 1.5 Hz over a 150 s pass).
+SAT_DRIFT_SIGMA_HZ_PER_S = 0.01
+#: Step of the central difference that gives the offset's velocity [s].
+_STEP_S = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class SatelliteErrors:
+    """Errors of each satellite, the same for every receiver.
+
+    Attributes
+    ----------
+    sat_ids : ndarray of str, (k,)
+    orbit_rtn_m : ndarray, (k, 3)
+        True minus element-set position, radial / along-track / cross-track [m].
+    offset_hz : ndarray, (k,)
+        Satellite frequency offset at ``t0_utc`` [Hz].
+    drift_hz_per_s : ndarray, (k,)
+    t0_utc : datetime64[ns]
+        Reference time of the offsets (and of the receivers' clocks).
+    """
+
+    sat_ids: np.ndarray
+    orbit_rtn_m: np.ndarray
+    offset_hz: np.ndarray
+    drift_hz_per_s: np.ndarray
+    t0_utc: np.datetime64
+
+
+def draw_satellite_errors(sat_ids, t0_utc, rng, *, orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M,
+                          offset_max_hz=SAT_OFFSET_MAX_HZ, drift_sigma_hz_per_s=SAT_DRIFT_SIGMA_HZ_PER_S):
+    """Draw each satellite's errors: Gaussian orbit offsets and drifts, uniform frequency offsets.
+
+    Parameters
+    ----------
+    sat_ids : array_like of str, (k,)
+    t0_utc : datetime64
+    rng : numpy.random.Generator
+    orbit_sigma_rtn_m : array_like, (3,)
+    offset_max_hz, drift_sigma_hz_per_s : float
+
+    Returns
+    -------
+    SatelliteErrors
+    """
+    ids = np.asarray(sat_ids, dtype=str)
+    k = len(ids)
+    return SatelliteErrors(
+        sat_ids=ids, orbit_rtn_m=rng.standard_normal((k, 3)) * np.asarray(orbit_sigma_rtn_m, dtype=float),
+        offset_hz=rng.uniform(-offset_max_hz, offset_max_hz, k),
+        drift_hz_per_s=rng.normal(0.0, drift_sigma_hz_per_s, k), t0_utc=np.datetime64(t0_utc, "ns"))
+
+
+def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
+    """Offset ``orbit_rtn_m`` (m, 3) in ECEF at ``time_utc`` (m,): position (m, 3)."""
+    pos, vel, _ = state_ecef_pairs(constellation, index, time_utc)
+    radial = pos / np.linalg.norm(pos, axis=-1, keepdims=True)
+    normal = np.cross(pos, vel)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    along = np.cross(normal, radial)
+    return (orbit_rtn_m[:, :1] * radial + orbit_rtn_m[:, 1:2] * along + orbit_rtn_m[:, 2:] * normal)
+
+
+def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, clock_offset_hz=0.0,
+                      clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ, source="simulated"):
+    """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver at rest measures them.
+
+    Parameters
+    ----------
+    constellation : Constellation
+        Element sets of (at least) the satellites of ``errors``.
+    errors : SatelliteErrors
+        Shared satellite errors; their ``t0_utc`` is also the reference
+        time of the receiver clock.
+    pos_rx_ecef_m : array_like, (3,)
+    time_utc : array_like of datetime64, (n,)
+        The receiver's epochs.
+    rng : numpy.random.Generator
+        The receiver's noise.
+    sigma_hz : float
+        Standard deviation of the white measurement noise.
+    clock_offset_hz, clock_drift_hz_per_s : float
+        Receiver frequency offset at ``errors.t0_utc`` and its drift.
+    mask_deg : float
+        Elevation mask of this receiver (from the element-set states).
+    carrier_hz : float
+    source : str
+        Name carried by the returned measurements.
+
+    Returns
+    -------
+    Measurements
+        One row per visible satellite and epoch (epoch-major), ``time_utc``
+        and ``t_s`` (seconds after ``errors.t0_utc``), the element-set
+        states (light time included) and ``sigma_hz``.
+    """
+    rx = np.asarray(pos_rx_ecef_m, dtype=float)
+    t_ep = np.asarray(time_utc, dtype="datetime64[ns]")
+    lookup = {s: i for i, s in enumerate(constellation.sat_ids.tolist())}
+    missing = [s for s in errors.sat_ids.tolist() if s not in lookup]
+    if missing:
+        raise ValueError(f"no element set for satellite {missing[0]}")
+    index = np.array([lookup[s] for s in errors.sat_ids.tolist()], dtype=int)
+    k = len(index)
+    t_rows = np.repeat(t_ep, k)
+    sat_rows = np.tile(np.arange(k), len(t_ep))
+    ids = errors.sat_ids[sat_rows]
+    pos_sv, vel_sv, reason = sv_states_from_tle(constellation, ids, t_rows, rx)
+    _, elev, _ = azimuth_elevation_range(pos_sv, rx)
+    keep = (reason == "") & (np.nan_to_num(elev, nan=-1.0) >= np.radians(mask_deg))
+    t_rows, sat_rows, ids, pos_sv, vel_sv = t_rows[keep], sat_rows[keep], ids[keep], pos_sv[keep], vel_sv[keep]
+    rtn = errors.orbit_rtn_m[sat_rows]
+    h = np.timedelta64(int(_STEP_S * 1e9), "ns")
+    off = _rtn_offset(constellation, index[sat_rows], t_rows, rtn)
+    off_vel = (_rtn_offset(constellation, index[sat_rows], t_rows + h, rtn)
+               - _rtn_offset(constellation, index[sat_rows], t_rows - h, rtn)) / (2.0 * _STEP_S)
+    t_s = seconds_since(t_rows, errors.t0_utc)
+    doppler = (-range_rate(pos_sv + off, vel_sv + off_vel, rx) * carrier_hz / C_MPS
+               + errors.offset_hz[sat_rows] + errors.drift_hz_per_s[sat_rows] * t_s
+               + clock_offset_hz + clock_drift_hz_per_s * t_s + sigma_hz * rng.standard_normal(len(t_s)))
+    n = len(t_s)
+    return Measurements(t_s=t_s, time_utc=t_rows, sat_id=ids, doppler_hz=doppler, sigma_hz=np.full(n, float(sigma_hz)),
+                        carrier_hz=np.full(n, float(carrier_hz)), pos_sv_ecef_m=pos_sv, vel_sv_ecef_mps=vel_sv,
+                        line=np.arange(2, n + 2), source=source)
