@@ -77,6 +77,8 @@ def test_walk_outputs_and_errors_recomputed_from_solution_pos(tmp_path, capsys):
     (["--mount-rpy-deg", "1,2"], "--mount-rpy-deg '1,2': expected three numbers"),
     (["--imu-spec", "gold"], "neither a grade"),
     (["--imu-format", "csv"], "needs --imu-columns"),
+    (["--course-yaw", "5"], "--course-yaw '5': expected MIN_SPEED_MPS,SIGMA_DEG"),
+    (["--course-yaw", "5,0"], "SIGMA_DEG in (0, 180]"),
 ])
 def test_bad_options_are_one_line_exit_2(extra, message, capsys):
     assert main(["fuse", *_walk(), *extra]) == 2

@@ -46,6 +46,21 @@ def test_bias_instability_of_a_random_walk_free_flat_floor():
     res = allan.allan(x, RATE_HZ)
     assert np.all(res.tau_min_s == res.tau_s[-1])
     assert np.allclose(res.bias_instability * allan.BIAS_INSTABILITY_FACTOR, res.adev[-1])
+    # No floor inside the log: the bias instability is flagged as an upper bound.
+    assert not res.floor_reached.any()
+
+
+def test_floor_of_a_rate_random_walk_is_reached_inside_the_log():
+    # White noise plus a rate random walk K: sigma^2 = N^2 / tau + K^2 tau / 3 (IEEE Std 952, C.1), least at
+    # tau* = sqrt(3) N / K = 1.7 s here, well inside the 50 s longest averaging time of 500 s at 100 Hz.
+    rng = np.random.default_rng(7)
+    n = 50_000
+    N, K = SIGMA / math.sqrt(RATE_HZ), 1e-3
+    x = rng.normal(0.0, SIGMA, (n, 3)) + np.cumsum(rng.normal(0.0, K / math.sqrt(RATE_HZ), (n, 3)), axis=0)
+    res = allan.allan(x, RATE_HZ)
+    assert res.floor_reached.all()
+    # The least deviation within a factor 2 of tau* (octave grid, half-octave steps, estimate scatter).
+    assert np.all(np.abs(np.log2(res.tau_min_s / (math.sqrt(3.0) * N / K))) <= 1.0)
 
 
 def test_cli_reads_white_noise_density_and_its_spec_round_trips_into_fuse(tmp_path, capsys):
@@ -75,6 +90,8 @@ def test_cli_reads_white_noise_density_and_its_spec_round_trips_into_fuse(tmp_pa
     np.testing.assert_allclose(doc["gyro"]["white_density_deg_per_rt_h"], arw_deg_per_rt_h, rtol=0.05)
     # (ug of the reader's g and of the equator's normal gravity differ by 0.3 %, inside the 5 %.)
     np.testing.assert_allclose(doc["accel"]["white_density_ug_per_rt_hz"], vrw_ug_per_rt_hz, rtol=0.05)
+    # 600 s of white noise: the deviation still falls at 60 s, so no floor and B an upper bound.
+    assert doc["gyro"]["floor_reached"] == [False] * 3
     spec = real.imu_spec(str(out / "imu_spec.json"))  # what `leosop fuse --imu-spec FILE` calls
     assert spec == real.ImuSpec(**doc["imu_spec"])
     assert spec.gyro_arw_deg_per_rt_h == pytest.approx(max(doc["gyro"]["white_density_deg_per_rt_h"]), rel=1e-12)

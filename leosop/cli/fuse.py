@@ -69,6 +69,10 @@ def register(subparsers):
                         "repeatable")
     p.add_argument("--zupt", action="store_true", help="zero-velocity and zero-rate updates when the IMU is at rest")
     p.add_argument("--nhc", action="store_true", help="non-holonomic constraint (a wheeled vehicle)")
+    p.add_argument("--course-yaw", metavar="MIN_SPEED_MPS,SIGMA_DEG",
+                   help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, sigma "
+                        "SIGMA_DEG (sideslip, crab), never the yaw bank: e.g. 5,10 for an aircraft handled on the "
+                        "ground before launch (default: 1 m/s and 10 deg with --nhc, else a bank of yaws at rest)")
     p.add_argument("--mount-rpy-deg", default="0,0,0", metavar="R,P,Y",
                    help="IMU mounting in the forward-right-down vehicle body, as GNSS_IMU's imu_misalign "
                         "(default 0,0,0: the IMU axes are forward-right-down)")
@@ -98,6 +102,18 @@ def _offset_sigma(sigma_s):
     if not (np.isfinite(sigma_s) and sigma_s >= 0):
         raise InputError(f"--imu-time-offset-sigma-s {sigma_s!r}: must be a number >= 0")
     return sigma_s or None
+
+
+def _course_yaw(text):
+    if text is None:
+        return None
+    try:
+        speed, sigma = (float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"--course-yaw {text!r}: expected MIN_SPEED_MPS,SIGMA_DEG") from None
+    if not (np.isfinite(speed) and np.isfinite(sigma) and speed > 0 and 0 < sigma <= 180):
+        raise InputError(f"--course-yaw {text!r}: MIN_SPEED_MPS must be > 0 and SIGMA_DEG in (0, 180]")
+    return speed, sigma
 
 
 def _columns(text):
@@ -151,7 +167,8 @@ def run(args):
     outages = tuple(parse_span(t, "--outage") for t in args.outage)
     options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=outages,
                                lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
-                               time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s))
+                               time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s),
+                               course_yaw=_course_yaw(args.course_yaw))
     if args.gnss:
         check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
     sol = rtklib_pos.read_pos(args.gnss) if args.gnss else None

@@ -1,7 +1,8 @@
 """``leosop imu allan``: Allan deviation of a static IMU log, its noise terms, and a spec for ``fuse --imu-spec``.
 
 JSON: ``source``, ``format``, ``rate_hz``, ``segment_s`` (start, duration), ``gyro`` and ``accel`` (per
-axis R, F, U: ``tau_s``, ``adev``, ``white_density``, ``bias_instability``, ``tau_min_s``; gyro in deg/h
+axis R, F, U: ``tau_s``, ``adev``, ``white_density``, ``bias_instability``, ``tau_min_s``, ``floor_reached``
+(False: the least deviation is at the longest averaging time, the bias instability an upper bound); gyro in deg/h
 and deg/sqrt(h), accelerometer in ug and ug/sqrt(Hz)), ``imu_spec`` (the fields of
 :class:`leosop.fusion.real.ImuSpec`). ``--out``: ``imu_spec.json`` (accepted by ``leosop fuse --imu-spec``),
 ``allan.json`` (this document) and ``allan.png`` (log-log, the read-off slopes marked); all or none.
@@ -71,15 +72,18 @@ def run(args):
 def _terms(res, scale, white_scale, unit, white_unit):
     return {"tau_s": res.tau_s.tolist(), f"adev_{unit}": (res.adev * scale).tolist(),
             f"white_density_{white_unit}": (res.white_density * white_scale).tolist(),
-            f"bias_instability_{unit}": (res.bias_instability * scale).tolist(), "tau_min_s": res.tau_min_s.tolist()}
+            f"bias_instability_{unit}": (res.bias_instability * scale).tolist(), "tau_min_s": res.tau_min_s.tolist(),
+            "floor_reached": res.floor_reached.tolist()}
 
 
 def summary(doc):
     g, a = doc["gyro"], doc["accel"]
     fmt = lambda v: " / ".join(f"{x:.3g}" for x in v)
+    bound = lambda d, key: " / ".join(f"{'' if r else '<= '}{x:.3g}" for x, r in zip(d[key], d["floor_reached"]))
     return "\n".join([
         f"{doc['source']}: {doc['segment_s'][1]:.0f} s at {doc['rate_hz']:.0f} Hz (axes R / F / U)",
         (f"  gyro: ARW {fmt(g['white_density_deg_per_rt_h'])} deg/sqrt(h), bias instability "
-        f"{fmt(g['bias_instability_deg_per_h'])} deg/h at {fmt(g['tau_min_s'])} s"),
+        f"{bound(g, 'bias_instability_deg_per_h')} deg/h at {fmt(g['tau_min_s'])} s"),
         (f"  accel: VRW {fmt(a['white_density_ug_per_rt_hz'])} ug/sqrt(Hz), bias instability "
-        f"{fmt(a['bias_instability_ug'])} ug at {fmt(a['tau_min_s'])} s")])
+        f"{bound(a, 'bias_instability_ug')} ug at {fmt(a['tau_min_s'])} s"),
+        "  (<= : no floor within the log, the least deviation is at its longest averaging time)"])

@@ -158,6 +158,12 @@ class FuseOptions:
     ``yaw_bank_s`` after the GNSS speed first stays over 1 m/s for 3 s, or the first
     outage start after it when earlier (:func:`_yaw_bank`). 0: the yaw from
     the course over ground, as for a car.
+    ``course_yaw``: ``(min_speed_mps, sigma_deg)``: the yaw from the course
+    over ground at the first GNSS velocity of at least ``min_speed_mps``,
+    with that sigma, whatever the other options (no yaw bank): a vehicle
+    whose nose points along its motion once fast, up to a sideslip or wind
+    crab, e.g. an aircraft handled on the ground before its launch. None:
+    1 m/s and 10 deg (a car; the yaw bank without NHC).
     """
 
     spec: ImuSpec
@@ -174,6 +180,14 @@ class FuseOptions:
     scale_sigma: tuple | None = None
     yaw_hypotheses: int = 12
     yaw_bank_s: float = 20.0
+    course_yaw: tuple | None = None
+
+    def course_alignment(self):
+        """The :class:`leosop.fusion.engine.CourseAlignment` of a start whose yaw is not known."""
+        if self.course_yaw is None:
+            return engine.CourseAlignment()
+        speed, sigma_deg = self.course_yaw
+        return engine.CourseAlignment(min_speed_mps=speed, sigma_rad=math.radians(sigma_deg))
 
 
 def stationary_windows(t_s, accel_mps2, gyro_rad_per_s, *, window_s=1.0, max_accel_std_mps2=0.2,
@@ -262,8 +276,12 @@ def _gnss_aids(sol, t_g, use, lever, vel_floor_mps):
     return out
 
 
-def _initial(sol, k, t_g, t_start, f_b_mps2, spec):
-    """State and covariance at ``t_start`` from GNSS epoch k (moved along its velocity) and levelling."""
+def _initial(sol, k, t_g, t_start, f_b_mps2, spec, course):
+    """State and covariance at ``t_start`` from GNSS epoch k (moved along its velocity) and levelling.
+
+    The yaw is that of the course when epoch k is at least ``course.min_speed_mps`` fast; else
+    unknown, and ``course`` is returned for the engine to set it later.
+    """
     lat, lon, alt = math.radians(sol.lat_deg[k]), math.radians(sol.lon_deg[k]), float(sol.alt_m[k])
     v = np.zeros(3) if sol.vel_enu_mps is None else sol.vel_enu_mps[k]
     R_M, R_N = earth.radii_m(lat)
@@ -271,17 +289,17 @@ def _initial(sol, k, t_g, t_start, f_b_mps2, spec):
     lat, lon, alt = lat + v[1] * dt / (R_M + alt), lon + v[0] * dt / ((R_N + alt) * math.cos(lat)), alt + v[2] * dt
     f = f_b_mps2 / np.linalg.norm(f_b_mps2)
     pitch, roll = math.asin(f[1]), math.atan2(-f[0], f[2])  # f_b = C_n_b^T [0, 0, g]
-    moving = math.hypot(v[0], v[1]) >= engine.CourseAlignment().min_speed_mps
+    moving = math.hypot(v[0], v[1]) >= course.min_speed_mps
     yaw = math.atan2(-v[0], v[1]) if moving else 0.0
     state = NavState.from_dcm(lat, lon, alt, v, euler_to_dcm(pitch, roll, yaw))
     P = np.zeros((N_INS, N_INS))
-    P[PHI, PHI] = np.diag(np.radians([2.0, 2.0, 10.0 if moving else 30.0]) ** 2)
+    P[PHI, PHI] = np.diag([math.radians(2.0), math.radians(2.0), course.sigma_rad if moving else math.radians(30.0)]) ** 2
     P[DV, DV] = (np.eye(3) * 0.1**2 if sol.cov_vel_enu_m2ps2 is None else sol.cov_vel_enu_m2ps2[k]) + np.eye(3) * 1e-4
     J_inv = np.linalg.inv(pos_jacobian(lat, alt))
     P[DPOS, DPOS] = J_inv @ (sol.cov_enu_m2[k] + np.eye(3) * 0.01) @ J_inv.T
     P[EPS, EPS] = np.eye(3) * math.radians(spec.gyro_bias_sigma_deg_per_s) ** 2
     P[NABLA, NABLA] = np.eye(3) * spec.accel_bias_sigma_mps2**2
-    return state, P, None if moving else engine.CourseAlignment()
+    return state, P, None if moving else course
 
 
 def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withheld, options):
@@ -363,7 +381,7 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     dth, dvl = log.dtheta_b_rad[i0:], log.dvel_b_mps[i0:]
     n_level = max(2, int(np.searchsorted(t_imu, t_imu[0] + 1.0)))
     state0, P0, course = _initial(sol, k0, t_g, t_imu[0] - dt[0], dvl[:n_level].sum(0) / dt[:n_level].sum(),
-                                  options.spec)
+                                  options.spec, options.course_alignment())
     lever = np.asarray(options.lever_arm_b_m, dtype=float)
     aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps)
     aid_list += [a for a in extra_aids if a.t_s > t_imu[0] - dt[0]]
@@ -381,7 +399,7 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
         n_aids[a.name] = n_aids.get(a.name, 0) + 1
     settings = dataclasses.replace(options.spec.settings(), time_offset_sigma_s=options.time_offset_sigma_s,
                                    scale_sigma=options.scale_sigma)
-    if course is not None and options.yaw_hypotheses and not options.nhc:
+    if course is not None and options.yaw_hypotheses and not options.nhc and options.course_yaw is None:
         chosen = _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, t_g, sol, withheld, options)
         if chosen is not None:
             (state0, P0), course = chosen, None

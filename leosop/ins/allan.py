@@ -9,7 +9,10 @@ averaging times. On a log-log plot each noise has its slope:
   averaged (weights 1 / tau) over the averaging times whose local slope is
   within :data:`SLOPE_TOL` of -1/2 (the shortest averaging time when none is);
 * bias instability ``B``: the flat floor, ``B = min sigma / 0.664``
-  (the flicker-noise constant ``sqrt(2 ln 2 / pi)``).
+  (the flicker-noise constant ``sqrt(2 ln 2 / pi)``). When the least
+  deviation is at the longest averaging time the floor is not reached (a
+  short log, white noise still falling): ``B`` is then an upper bound
+  (``floor_reached`` False).
 
 A log of a still IMU also holds the Earth rate and gravity; they are
 constant and do not enter an Allan deviation.
@@ -43,6 +46,8 @@ class AllanResult:
         ``B``, in the unit of the samples.
     tau_min_s : ndarray, (3,)
         Where the Allan deviation is least.
+    floor_reached : ndarray of bool, (3,)
+        False when that is the longest averaging time: ``bias_instability`` is an upper bound.
     """
 
     tau_s: np.ndarray
@@ -50,6 +55,7 @@ class AllanResult:
     white_density: np.ndarray
     bias_instability: np.ndarray
     tau_min_s: np.ndarray
+    floor_reached: np.ndarray
 
 
 def allan(samples, rate_hz, *, points_per_octave=2):
@@ -90,4 +96,5 @@ def allan(samples, rate_hz, *, points_per_octave=2):
         white[k] = (np.average((adev[:, k] * np.sqrt(tau))[sel], weights=1.0 / tau[sel]) if sel.any()
                     else adev[0, k] * math.sqrt(tau[0]))
     i_min = np.argmin(adev, axis=0)
-    return AllanResult(tau, adev, white, adev[i_min, np.arange(3)] / BIAS_INSTABILITY_FACTOR, tau[i_min])
+    return AllanResult(tau, adev, white, adev[i_min, np.arange(3)] / BIAS_INSTABILITY_FACTOR, tau[i_min],
+                       i_min < tau.size - 1)
