@@ -74,7 +74,7 @@ def up_budget(obs, orb, clk, atx, aro, no_ar, ref, C):
               ("hydrostatic delay of 10 hPa more", {}, atx, heavier)]
     up = {}
     for label, kw, antex, patches in cases:
-        with mock.patch.multiple(models, **patches):
+        with mock.patch.dict(vars(models), patches):
             res = run_ppp(obs, orb, clk, PppOptions(static=True, **kw), antex, ar=aro, no_ar=no_ar)
         k = np.flatnonzero(np.isfinite(res.pos_ecef_m).all(axis=1))[-1]
         enu = 100 * C.T @ (res.pos_ecef_m[k] - ref)
