@@ -228,6 +228,44 @@ def test_antex_receiver_offset_if():
     assert atx.receiver("ASH701945E_M SCIS") is rx  # spacing does not matter, antenna and radome do
 
 
+@needs_data
+def test_antex_receiver_correction_sign_and_fallback():
+    """The receiver's ionosphere-free correction against the ANTEX rows combined by hand.
+
+    ANTEX convention (as RTKLIB's ``antmodel``): the range to the reference point is the measured one plus
+    ``e . PCO - PCV``, so the correction subtracted from the observations is ``-e . PCO + PCV``. On ESBC00DNK
+    its variations move the static height by 2.8 / 4.3 / 6.1 cm at 10 / 15 / 20 deg mask (docs/ppp.md), so
+    a sign or fallback error would be centimetres. Satellites due north at 90, 45 and 10 deg elevation.
+    """
+    from types import SimpleNamespace
+
+    from leosop.gnss.antex import antenna_corrections_if
+    from leosop.gnss.ppp_obs import F_L1_HZ, F_L2_HZ, F_L5_HZ
+
+    atx = read_antex(ATX)
+    lat, lon, _ = ecef_to_geodetic(REF_ITRF_ECEF_M)
+    C_en = C_e_n(lat, lon)
+    el = np.radians([90.0, 45.0, 10.0])
+    los_enu = np.stack([0 * el, np.cos(el), np.sin(el)], axis=-1)
+    sv = ["G01", "E01"]
+    RS = np.repeat((REF_ITRF_ECEF_M + 2.0e7 * los_enu @ C_en.T)[:, None, :], len(sv), axis=1)
+    obs = SimpleNamespace(sv=sv, time_gps=np.array(["2020-06-25T12:00"], "datetime64[ns]"),
+                          antenna_type="ASH701945E_M    SCIS")
+    _, d_rx, missing, calibrated = antenna_corrections_if(
+        atx, obs, RS, REF_ITRF_ECEF_M, np.tile([1.5e11, 0.0, 0.0], (len(el), 1)), C_en,
+        np.repeat(el[:, None], len(sv), axis=1), {"G": (F_L1_HZ, F_L2_HZ), "E": (F_L1_HZ, F_L5_HZ)})
+    assert calibrated and not missing
+    # The file's G01 / G02 rows [mm]: north and up offsets, NOAZI at zenith 0, 45, 80 deg.
+    pco_n = np.array([0.50, -0.60]) * 1e-3
+    pco_u = np.array([89.04, 118.96]) * 1e-3
+    pcv = np.array([[0.00, -9.90, 3.69], [0.00, -6.23, 2.56]]) * 1e-3
+    for j, f2 in enumerate((F_L2_HZ, F_L5_HZ)):  # Galileo E1 / E5a take G01 / G02 (IGS convention)
+        g = np.array([F_L1_HZ**2, -f2**2]) / (F_L1_HZ**2 - f2**2)
+        expected = -(np.sin(el) * (g @ pco_u) + np.cos(el) * (g @ pco_n)) + g @ pcv
+        np.testing.assert_allclose(d_rx[:, j], expected, atol=1e-6)  # 1 um: the angle error of a 1 m PCO shift
+    assert d_rx[0, 0] == pytest.approx(-0.0428, abs=1e-4)  # the 4.3 cm IF up offset quoted in the docs
+
+
 def test_antex_bad_file(tmp_path):
     p = tmp_path / "bad.atx"
     p.write_text("not antex\n")

@@ -14,20 +14,28 @@ Printed:
   the time from the first epoch after the cut to the first fixed one (goal <= 2 min);
 - run times (goal <= 30 s for the day on one core).
 
-Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ar.py [--hours 24] [--cuts 6 12 18]``
+With ``--up-budget`` it prints instead the static fixed final error with each candidate source of the shared
+up bias changed (elevation mask, receiver antenna variations set to zero, GPS alone, phase wind-up off, a
+hydrostatic delay 10 hPa heavier), and the factor on the receiver's ionosphere-free variations that would
+cancel the up error at each mask (docs/ppp.md, "Ambiguity resolution"): about 4 min on one core.
+
+Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ar.py [--hours 24] [--cuts 6 12 18] [--up-budget]``
 """
 
 import argparse
+import copy
 import dataclasses
 import os
 import time
 from pathlib import Path
+from unittest import mock
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
 from leosop.frames import C_e_n, ecef_to_geodetic  # noqa: E402
+from leosop.gnss import models  # noqa: E402
 from leosop.gnss.antex import check_antex, read_antex  # noqa: E402
 from leosop.gnss.ar import ArOptions  # noqa: E402
 from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014  # noqa: E402
@@ -51,12 +59,41 @@ def select(obs, keep):
                                lli={k: v[keep] for k, v in obs.lli.items()})
 
 
+def up_budget(obs, orb, clk, atx, aro, no_ar, ref, C):
+    """Static fixed final ENU error [cm] with each candidate source of the up bias changed, one run each."""
+    no_pcv = copy.deepcopy(atx)
+    rx = no_pcv.receiver(obs.antenna_type)
+    rx.pcv_m = {k: np.zeros_like(v) for k, v in rx.pcv_m.items()}
+    zhd = models.saastamoinen_zhd_m
+    heavier = {"saastamoinen_zhd_m": lambda lat, alt: zhd(lat, alt, 1013.25 * (1.0 - 2.2557e-5 * alt) ** 5.2568
+                                                              + 10.0)}
+    no_windup = {"windup_cycles": lambda RS, *args: np.zeros(RS.shape[:2])}
+    cases = [(f"mask {m} deg", {"mask_deg": m}, atx, {}) for m in (10.0, 15.0, 20.0)]
+    cases += [(f"mask {m} deg, receiver PCV zero", {"mask_deg": m}, no_pcv, {}) for m in (10.0, 15.0, 20.0)]
+    cases += [("GPS alone", {"systems": "G"}, atx, {}), ("phase wind-up off", {}, atx, no_windup),
+              ("hydrostatic delay of 10 hPa more", {}, atx, heavier)]
+    up = {}
+    for label, kw, antex, patches in cases:
+        with mock.patch.dict(vars(models), patches):
+            res = run_ppp(obs, orb, clk, PppOptions(static=True, **kw), antex, ar=aro, no_ar=no_ar)
+        k = np.flatnonzero(np.isfinite(res.pos_ecef_m).all(axis=1))[-1]
+        enu = 100 * C.T @ (res.pos_ecef_m[k] - ref)
+        up[label] = enu[2]
+        print(f"{label:36s} final ({'fixed' if res.fixed[k] else 'float'}) ENU {np.round(enu, 2).tolist()} cm, "
+              f"3-D {np.linalg.norm(enu):.2f} cm", flush=True)
+    for m in (10.0, 15.0, 20.0):
+        base, zero = up[f"mask {m} deg"], up[f"mask {m} deg, receiver PCV zero"]
+        print(f"mask {m:g} deg: the receiver PCV moves the up by {base - zero:+.2f} cm; {zero / (zero - base):.2f} "
+              "times it would cancel the up error")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--hours", type=float, default=24.0)
     ap.add_argument("--cuts", type=float, nargs="*", default=[6.0, 12.0, 18.0], help="hours of the 5-min data cuts")
     ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
                     help="an ArOptions field (repeatable)")
+    ap.add_argument("--up-budget", action="store_true", help="the static up error's candidate sources instead")
     a = ap.parse_args()
     aro = ArOptions(**{k: type(getattr(ArOptions(), k))(v) for k, v in (o.split("=") for o in a.option)})
     t0 = time.perf_counter()
@@ -69,6 +106,9 @@ def main():
     ref = etrf2000_to_itrf2014(obs.approx_pos_ecef_m, decimal_year(obs.time_gps[len(obs.time_gps) // 2]))
     C = C_e_n(*ecef_to_geodetic(ref)[:2])
     print(f"read {t_read:.1f} s; reference ITRF2014 {np.round(ref, 4).tolist()}; not fixed: {', '.join(no_ar)}")
+    if a.up_budget:
+        up_budget(obs, orb, clk, atx, aro, no_ar, ref, C)
+        return
 
     def run(o, static):
         t = time.perf_counter()
