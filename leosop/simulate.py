@@ -59,7 +59,7 @@ import numpy as np
 from . import earth, frames
 from .constants import C_MPS, DAY_S
 from .errors import InputError
-from .fusion import aids_fix, common, engine, kalman, tight
+from .fusion import aids_fix, common, kalman, tight
 from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
@@ -74,7 +74,7 @@ from .signal.pilot import PilotComb, add_noise, comb_baseband
 from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz
 from .timebase import format_utc, seconds_since
 
-__all__ = ["SimulationResult", "run_scenario", "metrics", "aided", "LEVELS", "COUPLINGS"]
+__all__ = ["COUPLINGS", "LEVELS", "SimulationResult", "aided", "metrics", "run_scenario"]
 
 LEVELS = ("signal", "measurement")
 COUPLINGS = ("loose", "tight")
@@ -631,8 +631,9 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         fix_errors = aids_fix.FixErrorModel(**per_pair, fix_clock_hz=per_epoch["fix_clock_hz"],
                                             offset_sigma_hz=offset_max_sat / np.sqrt(12.0),
                                             orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
-        fused = _loose(state0, measured, dt_s, t_s, np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch,
-                       fix_errors, settings, progress)
+        fused = aids_fix.fuse(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s,
+                              (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["fix_cov"][:, :6, :6]),
+                              settings, fix_errors=fix_errors, progress=progress)
     else:
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,
                                      sat_offset_sigma_hz=offset_max_sat / np.sqrt(12), orbit_sigma_m=orbit_error_m,
@@ -649,34 +650,6 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         fix_pos_ecef_m=fix_pos, fix_vel_enu_mps=fix_vel_enu, fix_cov=per_epoch["fix_cov"], fused=fused,
         n_visible=per_epoch["n_visible"], gdop=per_epoch["gdop"], tle_age_days=tle_age_days,
         runtime_s=time.perf_counter() - tic, n_visible_by_family=per_epoch["n_visible_by_family"])
-
-
-def _loose(state0, measured, dt_s, t_s, fix_pos, fix_vel, per_epoch, fix_errors, settings, progress):
-    """Loose coupling: the fix aids (:func:`leosop.fusion.aids_fix.fix_aids`) through the engine, at the fix epochs.
-
-    Parameters
-    ----------
-    measured : leosop.ins.imu.MeasuredIncrements
-    t_s : ndarray, (n,)
-        Fix epochs; NaN rows of ``fix_pos`` (n, 3) are fixes the filter does not take.
-    fix_errors : leosop.fusion.aids_fix.FixErrorModel
-
-    Returns
-    -------
-    leosop.fusion.common.FusionResult
-    """
-    dth, dvl = measured.dtheta_b_rad, measured.dvel_b_mps
-    t_imu = (np.arange(dth.shape[0]) + 1) * dt_s
-    every = int(round(settings.step_s / dt_s)) // 2
-    n = min(t_s.size, dth.shape[0] // (2 * every) + 1)
-    t_fix = np.r_[0.0, t_imu[2 * every * np.arange(1, n) - 1]]  # exactly the engine's output times
-    aids = aids_fix.fix_aids(t_fix, fix_pos[:n], fix_vel[:n], per_epoch["fix_cov"][:n, :6, :6],
-                             settings.correction_period_s, fix_errors)
-    log = aids_fix.FixLog(n)
-    P0 = common.initial_covariance(settings, state0.lat_rad, state0.alt_m)
-    res = engine.run(state0, P0, t_imu, np.full(t_imu.size, dt_s), dth, dvl, aids, aids_fix.engine_settings(settings),
-                     progress=progress, on_aid=log)
-    return log.result(res, every)
 
 
 def aided(result):

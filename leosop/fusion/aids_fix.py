@@ -63,9 +63,10 @@ from .common import (
     RX_OFFSET_PSD_HZ2_PER_S,
     RX_OFFSET_SIGMA_HZ,
     FusionResult,
+    initial_covariance,
     pos_jacobian,
 )
-from .engine import EngineSettings
+from .engine import EngineSettings, run
 
 __all__ = [
     "MAX_GDOP_UNCHECKED",
@@ -457,3 +458,43 @@ class FixLog:
                             res.vel_enu_mps[sl], quat_to_dcm(res.q_n_b[sl]), P, self.updated, self.rejected,
                             self.nis, self.nis_dof, res.gyro_bias_rad_per_s[sl], res.accel_bias_mps2[sl],
                             innovation=self.innovation, innovation_cov=self.innovation_cov, reopened=self.reopened)
+
+
+def fuse(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=None, reopen_after=REOPEN_AFTER,
+         progress=None):
+    """Loose coupling: the INS corrected by the fixes' aids (:func:`fix_aids`) in the engine, at the fix epochs.
+
+    Parameters
+    ----------
+    state0 : leosop.ins.strapdown.NavState
+        Initial INS state (with its errors).
+    dtheta_b_rad, dvel_b_mps : ndarray, (n_imu, 3)
+        Measured IMU increments at interval ``dt_s``.
+    dt_s : float
+    fixes : tuple (pos_ecef_m, vel_ecef_mps, cov_pv)
+        LEO fixes at every step epoch ``k * settings.step_s`` (k = 0 .. n-1):
+        shapes (n, 3), (n, 3), (n, 6, 6); NaN rows where there is no fix.
+    settings : leosop.fusion.common.FilterSettings
+    fix_errors : FixErrorModel, optional
+    reopen_after : int or None
+        See :func:`engine_settings`.
+    progress : callable, optional
+        Wraps the iterator over INS updates.
+
+    Returns
+    -------
+    leosop.fusion.common.FusionResult
+        At the fix epochs that the IMU covers.
+    """
+    pos_fix, vel_fix, cov_fix = fixes
+    every = round(settings.step_s / dt_s) // 2
+    if every < 1 or abs(2 * every * dt_s - settings.step_s) > 1e-9:
+        raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
+    t_imu = (np.arange(dtheta_b_rad.shape[0]) + 1) * dt_s
+    n = min(len(pos_fix), dtheta_b_rad.shape[0] // (2 * every) + 1)
+    t_fix = np.r_[0.0, t_imu[2 * every * np.arange(1, n) - 1]]  # exactly the engine's output times
+    aids = fix_aids(t_fix, pos_fix[:n], vel_fix[:n], cov_fix[:n], settings.correction_period_s, fix_errors)
+    log = FixLog(n)
+    res = run(state0, initial_covariance(settings, state0.lat_rad, state0.alt_m), t_imu, np.full(t_imu.size, dt_s),
+              dtheta_b_rad, dvel_b_mps, aids, engine_settings(settings, reopen_after), progress=progress, on_aid=log)
+    return log.result(res, every)
