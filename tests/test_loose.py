@@ -241,3 +241,20 @@ def test_gate_reopens_after_a_run_of_rejected_fixes():
     sig = np.sqrt(np.diagonal(res.pos_vel_cov_enu()[first:], axis1=1, axis2=2))
     assert np.all(np.abs(err) < 4 * sig)
     assert np.all(np.linalg.norm(err[:, 3:], axis=1) < 3 * np.linalg.norm(FIX_SIGMA_M))
+
+
+def test_engine_port_keeps_the_results_of_the_former_loose_filter():
+    # Issue 21: simulate's loose coupling moved from its own loop (fusion/loose.run, deleted) to the fix
+    # aids in the engine. Reference: that loop's output on this run (commit 78d7b43): mean 3D position
+    # and velocity errors, the last epoch's error, the updates and the sum of the NIS. The engine
+    # propagates the covariance with the INS at the end of each 1 s step (the loop: at its start) and
+    # integrates the INS pair by pair, which moved these by 1e-8 relative here (3e-7 at most over the
+    # bundled scenarios): rel 1e-5 leaves room for rounding, while any change of the model or the
+    # cadence moves them by percents.
+    r = run_scenario(dataclasses.replace(XIAN_BAOJI, duration_s=40.0), level="measurement", seed=1)
+    fused = r.errors()["fused"]
+    nis, dof = r.nis()
+    assert r.fused.updated[1:].all() and int(dof.sum()) == 378
+    np.testing.assert_allclose([fused[0][1:].mean(), fused[1][1:].mean(), fused[0][-1], nis.sum()],
+                               [4.236632682155679, 0.0861247800758571, 2.447788001233838, 368.08942367312557],
+                               rtol=1e-5)
