@@ -22,9 +22,10 @@ table reproductions call it. For a scenario it
    (one receiver clock per constellation seen), with
    satellite positions carrying a constant orbit error (one per satellite,
    or one shift of all: ``leo.orbit_error_model``);
-5. runs the INS alone and the EKF: loose (:mod:`leosop.fusion.loose`, the
-   fixes, with each fix's least-squares gain so that the filter can model
-   the satellites' constant errors behind them) or tight
+5. runs the INS alone and the EKF: loose (the fix aids of
+   :mod:`leosop.fusion.aids_fix` in :mod:`leosop.fusion.engine`, each fix
+   with its least-squares gain so that the filter can model the
+   satellites' constant errors behind them) or tight
    (:mod:`leosop.fusion.tight`, the Doppler measurements); both model the
    orbit errors as the scenario draws them (independent or common).
 
@@ -58,7 +59,7 @@ import numpy as np
 from . import earth, frames
 from .constants import C_MPS, DAY_S
 from .errors import InputError
-from .fusion import common, kalman, loose, tight
+from .fusion import aids_fix, common, kalman, tight
 from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
@@ -73,7 +74,7 @@ from .signal.pilot import PilotComb, add_noise, comb_baseband
 from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz
 from .timebase import format_utc, seconds_since
 
-__all__ = ["SimulationResult", "run_scenario", "metrics", "aided", "LEVELS", "COUPLINGS"]
+__all__ = ["COUPLINGS", "LEVELS", "SimulationResult", "aided", "metrics", "run_scenario"]
 
 LEVELS = ("signal", "measurement")
 COUPLINGS = ("loose", "tight")
@@ -282,7 +283,7 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
 
     Returns
     -------
-    leosop.fusion.loose.FixErrorModel
+    leosop.fusion.aids_fix.FixErrorModel
         Rows of the pairs used in the fixes ``good``.
     """
     H = doppler_jacobian(vis.padded(pos_sv_known), vis.padded(vis.vel_sv_ecef_mps), fixes.pos_ecef_m,
@@ -299,7 +300,7 @@ def _fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, car
     ep = vis.epoch_index
     pair_used = used[ep, slot]
     sel = (ep[pair_used], slot[pair_used])
-    return loose.FixErrorModel(
+    return aids_fix.FixErrorModel(
         epoch_index=sel[0], sat_index=vis.sat_index[pair_used], gain_ecef=np.swapaxes(G, 1, 2)[sel],
         jacobian_pv=H[..., :6][sel], clock_index=clock[pair_used], weight_sqrt=1.0 / sigma_hz[pair_used],
         residual_hz=fixes.residuals_hz[sel],
@@ -478,8 +479,8 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
         flight; loose coupling: ``fix_clock_hz`` (n_b, k), the fixes'
         receiver offsets.
     per_pair : dict of ndarray, (m_b, ...)
-        Loose coupling: the :class:`leosop.fusion.loose.FixErrorModel` rows
-        (:data:`leosop.fusion.loose.PAIR_FIELDS`); tight: the
+        Loose coupling: the :class:`leosop.fusion.aids_fix.FixErrorModel` rows
+        (:data:`leosop.fusion.aids_fix.PAIR_FIELDS`); tight: the
         :class:`leosop.fusion.tight.DopplerMeasurements` fields.
     """
     pos_rx, vel_rx = vis.pos_rx_ecef_m, vis.vel_rx_ecef_mps
@@ -522,8 +523,8 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
                             vis.padded(vis.vel_sv_ecef_mps), vis.padded(carrier), x0=x0, clock_group=clock_group,
                             clock_labels=clock_labels)
     good = fixes.status == FixStatus.OK
-    # The loose filter takes only redundant or well-conditioned fixes (loose.checkable_fixes); all are reported.
-    checked = good & loose.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
+    # The loose filter takes only redundant or well-conditioned fixes (aids_fix.checkable_fixes); all are reported.
+    checked = good & aids_fix.checkable_fixes(fixes.n_used, fixes.cov, fixes.gdop)
     per_epoch = {"fix_pos_ecef_m": np.where(good[:, None], fixes.pos_ecef_m, np.nan),
                  "fix_vel_ecef_mps": np.where(good[:, None], fixes.vel_ecef_mps, np.nan),
                  "fix_cov": np.where(good[:, None, None], fixes.cov, np.nan), "checked": checked,
@@ -536,7 +537,7 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
     fix_errors = _fix_error_model(vis, fixes, checked, sigma_hz, sigma_est, pos_sv_known, carrier, fam,
                                   offset_max_sat_hz, orbit_error_m, orbit_error_model)
     per_epoch["fix_clock_hz"] = fix_errors.fix_clock_hz
-    per_pair = {f: getattr(fix_errors, f) for f in loose.PAIR_FIELDS}
+    per_pair = {f: getattr(fix_errors, f) for f in aids_fix.PAIR_FIELDS}
     per_pair["epoch_index"] = per_pair["epoch_index"] + epoch0
     return per_epoch, per_pair
 
@@ -627,12 +628,12 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
     # 5. EKF.
     settings = _filter_settings(scenario, errors, correction_period_s)
     if coupling == "loose":
-        fix_errors = loose.FixErrorModel(**per_pair, fix_clock_hz=per_epoch["fix_clock_hz"],
-                                         offset_sigma_hz=offset_max_sat / np.sqrt(12.0), orbit_sigma_m=orbit_error_m,
-                                         orbit_model=orbit_error_model)
-        fused = loose.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s,
-                          (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["fix_cov"][:, :6, :6]),
-                          settings, fix_errors=fix_errors, progress=progress)
+        fix_errors = aids_fix.FixErrorModel(**per_pair, fix_clock_hz=per_epoch["fix_clock_hz"],
+                                            offset_sigma_hz=offset_max_sat / np.sqrt(12.0),
+                                            orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model)
+        fused = aids_fix.fuse(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s,
+                              (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["fix_cov"][:, :6, :6]),
+                              settings, fix_errors=fix_errors, progress=progress)
     else:
         priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,
                                      sat_offset_sigma_hz=offset_max_sat / np.sqrt(12), orbit_sigma_m=orbit_error_m,

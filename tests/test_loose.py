@@ -1,4 +1,4 @@
-"""Loose INS/fix EKF: measurement model round trip, consistency, bias recovery, gaps, correction period.
+"""Loose coupling (the fix aids of fusion/aids_fix.py in the engine): measurement model round trip, consistency, bias recovery, gaps, correction period.
 
 The truth is a short straight flight of the [Shen 2024] kind; fixes are the
 truth plus white Gaussian errors drawn from the covariance handed to the
@@ -16,7 +16,8 @@ import pytest
 from consistency import assert_filter_consistent
 from leosop import earth, frames
 from leosop.constants import G0_MPS2
-from leosop.fusion import common, kalman, loose
+from leosop.fusion import aids_fix, common, kalman
+from leosop.fusion.aids import InsView
 from leosop.ins import imu, strapdown, trajectory
 from leosop.ins.error_model import DPOS, DV, NABLA
 from leosop.scenarios import XIAN_BAOJI
@@ -86,7 +87,8 @@ def test_measurement_is_the_enu_difference_and_h_maps_the_error_state():
     pos_fix = frames.geodetic_to_ecef(lat, lon, alt) + frames.enu_to_ecef(d_enu, lat, lon)
     vel_fix = frames.enu_to_ecef(state.vel_enu_mps - [0.5, 0.0, 0.0], lat, lon)
     cov = np.diag([4.0, 9.0, 16.0, 0.01, 0.04, 0.09])
-    z, H, R = loose.measurement(state, pos_fix, vel_fix, cov)
+    zeros = np.zeros(3)
+    z, H, R = aids_fix.LeoFix(1.0, 1, pos_fix, vel_fix, cov).matrices(InsView(state, zeros, zeros, zeros))
     np.testing.assert_allclose(z[:3], [0.5, 0.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(z[3:], -d_enu, atol=1e-3)
     R_M, R_N = earth.radii_m(lat)
@@ -102,7 +104,7 @@ def test_filter_is_consistent_with_white_fixes_over_20_seeds():
     nees, nis, white = [], [], []
     for seed in range(20):
         state0, dth, dvl, dt, fixes, t1, _ = _case(seed)
-        res = loose.run(state0, dth, dvl, dt, fixes, _settings())
+        res = aids_fix.fuse(state0, dth, dvl, dt, fixes, _settings())
         nees.append(kalman.nees(_error_enu(res, t1)[1:], res.pos_vel_cov_enu()[1:]))
         u = res.updated
         nis.append(res.nis[u])
@@ -119,7 +121,7 @@ def test_vertical_accelerometer_bias_is_recovered():
     # the estimate must lie within 3 sigma of the truth and sigma must be
     # far below the bias itself.
     state0, dth, dvl, dt, fixes, t1, errors = _case(7, duration_s=300.0, accel_bias_g=1e-3)
-    res = loose.run(state0, dth, dvl, dt, fixes, _settings(accel_bias_sigma_mps2=1e-3 * G0_MPS2))
+    res = aids_fix.fuse(state0, dth, dvl, dt, fixes, _settings(accel_bias_sigma_mps2=1e-3 * G0_MPS2))
     # Level flight: body Up is navigation Up to within the pitch/roll of a straight leg.
     truth_up = errors.accel_bias_mps2[2]
     sigma = np.sqrt(res.P[-1][NABLA, NABLA][2, 2])
@@ -132,7 +134,7 @@ def test_gap_in_fixes_is_bridged_and_the_filter_resumes():
     pos, vel, cov = pos.copy(), vel.copy(), cov.copy()
     pos[40:70] = vel[40:70] = np.nan
     cov[40:70] = np.nan
-    res = loose.run(state0, dth, dvl, dt, (pos, vel, cov), _settings())
+    res = aids_fix.fuse(state0, dth, dvl, dt, (pos, vel, cov), _settings())
     assert np.all(np.isfinite(res.lat_rad)) and np.all(np.isfinite(res.vel_enu_mps))
     assert not res.updated[40:70].any() and res.updated[70:].all()
     # Without fixes the covariance grows, and the errors stay within it (4 sigma).
@@ -143,7 +145,7 @@ def test_gap_in_fixes_is_bridged_and_the_filter_resumes():
 
 def test_correction_period_spaces_the_updates():
     state0, dth, dvl, dt, fixes, _, _ = _case(4)
-    res = loose.run(state0, dth, dvl, dt, fixes, _settings(correction_period_s=30.0))
+    res = aids_fix.fuse(state0, dth, dvl, dt, fixes, _settings(correction_period_s=30.0))
     assert np.flatnonzero(res.updated).tolist() == [30, 60, 90, 120]
 
 
@@ -208,7 +210,7 @@ def test_checkable_fixes_need_redundancy_or_a_good_geometry():
     one_of_two = np.eye(8)
     one_of_two[7, 7] = np.nan  # second family not in the sky: 7 states
     failed = np.full((8, 8), np.nan)
-    lim = loose.MAX_GDOP_UNCHECKED
+    lim = aids_fix.MAX_GDOP_UNCHECKED
     cases = [  # (cov, n_used, gdop, usable)
         (two_clocks, 9, 5.0 * lim, True),  # one spare Doppler: checked by its residuals, any geometry
         (two_clocks, 8, 0.5 * lim, True),  # no spare Doppler, good geometry
@@ -218,7 +220,7 @@ def test_checkable_fixes_need_redundancy_or_a_good_geometry():
         (failed, 0, np.nan, False),
     ]
     cov, n_used, gdop, usable = (np.array(c) for c in zip(*cases))
-    assert loose.checkable_fixes(n_used, cov, gdop).tolist() == usable.tolist()
+    assert aids_fix.checkable_fixes(n_used, cov, gdop).tolist() == usable.tolist()
 
 
 def test_gate_reopens_after_a_run_of_rejected_fixes():
@@ -229,13 +231,30 @@ def test_gate_reopens_after_a_run_of_rejected_fixes():
     state0, dth, dvl, dt, fixes, t1, _ = _case(5)
     state0 = dataclasses.replace(state0, alt_m=state0.alt_m + 2000.0)
     settings = _settings(pos_sigma_m=(1.0,) * 3)
-    locked = loose.run(state0, dth, dvl, dt, fixes, settings, reopen_after=None)
+    locked = aids_fix.fuse(state0, dth, dvl, dt, fixes, settings, reopen_after=None)
     assert locked.rejected[1:].all() and not locked.updated.any()
-    res = loose.run(state0, dth, dvl, dt, fixes, settings)
-    first = loose.REOPEN_AFTER + 1
+    res = aids_fix.fuse(state0, dth, dvl, dt, fixes, settings)
+    first = aids_fix.REOPEN_AFTER + 1
     assert np.flatnonzero(res.reopened).tolist() == [first]
     assert res.rejected[1:first].all() and res.updated[first:].all()
     err = _error_enu(res, t1)[first:]
     sig = np.sqrt(np.diagonal(res.pos_vel_cov_enu()[first:], axis1=1, axis2=2))
     assert np.all(np.abs(err) < 4 * sig)
     assert np.all(np.linalg.norm(err[:, 3:], axis=1) < 3 * np.linalg.norm(FIX_SIGMA_M))
+
+
+def test_engine_port_keeps_the_results_of_the_former_loose_filter():
+    # Issue 21: simulate's loose coupling moved from its own loop (fusion/loose.run, deleted) to the fix
+    # aids in the engine. Reference: that loop's output on this run (commit 78d7b43): mean 3D position
+    # and velocity errors, the last epoch's error, the updates and the sum of the NIS. The engine
+    # propagates the covariance with the INS at the end of each 1 s step (the loop: at its start) and
+    # integrates the INS pair by pair, which moved these by 1e-8 relative here (3e-7 at most over the
+    # bundled scenarios): rel 1e-5 leaves room for rounding, while any change of the model or the
+    # cadence moves them by percents.
+    r = run_scenario(dataclasses.replace(XIAN_BAOJI, duration_s=40.0), level="measurement", seed=1)
+    fused = r.errors()["fused"]
+    nis, dof = r.nis()
+    assert r.fused.updated[1:].all() and int(dof.sum()) == 378
+    np.testing.assert_allclose([fused[0][1:].mean(), fused[1][1:].mean(), fused[0][-1], nis.sum()],
+                               [4.236632682155679, 0.0861247800758571, 2.447788001233838, 368.08942367312557],
+                               rtol=1e-5)

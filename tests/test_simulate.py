@@ -5,7 +5,9 @@ import pytest
 
 from leosop import frames, simulate
 from leosop.constants import C_MPS
-from leosop.fusion import common, loose
+from leosop.fusion import aids_fix
+from leosop.fusion.aids import InsView
+from leosop.fusion.common import N_INS
 from leosop.ins import strapdown
 from leosop.ins import trajectory
 from leosop.montecarlo.parameters import apply
@@ -93,39 +95,36 @@ def test_fix_error_is_the_gain_times_the_satellite_errors():
 
 
 def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
-    # What the loose filter takes of a fix (loose._fix_measurement): the 6 fix
-    # values, its receiver offsets and its residuals in the space orthogonal to
-    # its states. Independent references: (1) the residual rows hold the fix's
+    # What the loose filter takes of a fix (aids_fix.LeoFix): the 6 fix values,
+    # its receiver offsets and its residuals in the space orthogonal to its
+    # states. Independent references: (1) the residual rows hold the fix's
     # whole weighted residual sum, the solver's own chi-square; (2) with the INS
-    # at the truth and the filter's states at the true receiver offsets and
-    # satellite errors, the measurement is H x to first order (noise-free
-    # Doppler), which checks every sign of H on the clock and satellite columns.
+    # at the truth and the block estimates zero, the innovation is the true
+    # receiver offsets' and satellite errors' share, -H x_true over the blocks
+    # (error = estimate - truth) to first order (noise-free Doppler), which
+    # checks every sign of H on the clock and satellite columns.
     truth, _, fixes, good, model, offset_hz, orbit_m = _noise_free_mixed_fixes()
-    n_states = loose.N_INS + 2
-    sats = common.SatelliteStates(n_states, "independent", 0.0, 1.0, 30.0)
+    blocks = aids_fix._blocks(model)
     bounds = np.searchsorted(model.epoch_index, np.arange(good.size + 1))
     checked = 0
     for k in np.flatnonzero(good):
         rows = np.arange(bounds[k], bounds[k + 1])
-        x_true, P = sats.see(np.zeros(n_states), np.eye(n_states), model.sat_index[rows], float(k))
-        n_states = x_true.size
-        x_true[loose.N_INS:loose.N_INS + 2] = RX_HZ[[0, 2]]
-        for j in sats.ids:
-            c_off, c_orbit = sats.columns(j)
-            x_true[c_off], x_true[c_orbit] = offset_hz[j], orbit_m[j]
+        aid = aids_fix.LeoFix(float(k), k, fixes.pos_ecef_m[k], fixes.vel_ecef_mps[k], terms=(model, k, rows) + blocks)
+        sats = model.sat_index[rows]
+        x_true = np.concatenate([RX_HZ[[0, 2]], np.column_stack([offset_hz[sats], orbit_m[sats]]).ravel()])
         state = strapdown.NavState.from_dcm(truth.lat_rad[k], truth.lon_rad[k], truth.alt_m[k],
                                             truth.vel_enu_mps[k], np.eye(3))
-        z, H, R = loose._fix_measurement(state, fixes.pos_ecef_m[k], fixes.vel_ecef_mps[k], k, sats, model, rows,
-                                         n_states)
+        zeros = np.zeros(3)
+        z, H, R = aid.matrices(InsView(state, zeros, zeros, zeros, states={b.key: np.zeros(b.size) for b in aid.states}))
         n_res = rows.size - 8
-        assert z.shape == (6 + 2 + n_res,) and H.shape == (z.size, n_states) and R.shape == (z.size, z.size)
+        assert z.shape == (6 + 2 + n_res,) and H.shape == (z.size, N_INS + x_true.size) and R.shape == (z.size, z.size)
         np.testing.assert_allclose(np.sum(z[8:] ** 2), fixes.chi2[k], rtol=1e-6)
         # First-order leftovers as in test_fix_error_is_the_gain_times_the_satellite_errors: 1 % of the
         # largest value of each kind of row plus 0.1 m, 1 mm/s, 0.01 Hz and 0.01 for the whitened residuals.
         scale = np.r_[np.full(3, np.abs(z[:3]).max()), np.full(3, np.abs(z[3:6]).max()), np.abs(z[6:8]),
                       np.full(n_res, np.abs(z[8:]).max())]
         floor = np.r_[np.full(3, 1e-3), np.full(3, 0.1), np.full(2, 0.01), np.full(n_res, 0.01)]
-        assert np.all(np.abs(z - H @ x_true) <= 0.01 * scale + floor), k
+        assert np.all(np.abs(z + H[:, N_INS:] @ x_true) <= 0.01 * scale + floor), k
         checked += 1
     assert checked >= 35
 
@@ -199,7 +198,7 @@ def test_loose_filter_leaves_out_near_singular_fixes_of_the_cn0_imu_outlier():
     status, n_used, cov, gdop = (np.concatenate([getattr(f, k) for f in captured])
                                  for k in ("status", "n_used", "cov", "gdop"))
     ok = status == FixStatus.OK
-    usable = ok & loose.checkable_fixes(n_used, cov, gdop)
+    usable = ok & aids_fix.checkable_fixes(n_used, cov, gdop)
     assert np.all(~usable[684:690] & ok[684:690])  # the six bad fixes exist and are left out
     assert np.array_equal(res.fused.updated, usable & (np.arange(usable.size) > 0))
     assert not res.fused.rejected.any()

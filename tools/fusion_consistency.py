@@ -9,7 +9,7 @@ interval, and the lag-1 correlation of the whitened innovations (loose: the
 consecutive epochs) with its null 3-sigma bound.
 
 The loose filter models the satellites' constant Doppler offsets and orbit
-errors behind each fix (leosop.fusion.loose), the tight one behind each
+errors behind each fix (leosop.fusion.aids_fix), the tight one behind each
 Doppler, both under the run's orbit-error model (per satellite, or one shift
 of all); ``--orbit-error-m``/``--orbit-error-model`` run Table 6's cases.
 

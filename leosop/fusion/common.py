@@ -93,7 +93,7 @@ class FusionResult(NavTrack):
         in ``S``); None for loose coupling.
     reopened : ndarray of bool, (n,), or None
         Loose coupling: the innovation gate was re-opened at this epoch after
-        a run of rejected fixes (:func:`leosop.fusion.loose.run`); None for tight coupling.
+        a run of rejected fixes (:class:`leosop.fusion.aids_fix.FixLog`); None for tight coupling.
     """
 
     P: np.ndarray

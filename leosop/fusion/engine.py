@@ -64,7 +64,11 @@ class EngineSettings:
     of one covariance propagation. Innovations of gated aids (``aid.gated``)
     beyond the ``gate_probability`` chi-square quantile are rejected, unless
     ``reopen_after`` aids of that kind in a row were (the INS, not the aids,
-    is then wrong). ``scale_sigma``: initial sigmas of the gyro and
+    is then wrong); with ``reopen_inflates`` the re-opening aid first raises
+    the covariance of the INS errors it measures by its innovation squared,
+    ``P += H+ diag(z^2) H+^T`` (``H+`` the pseudo-inverse of its INS columns),
+    so that it can pull a confidently wrong INS back (the LEO fix's rule).
+    ``scale_sigma``: initial sigmas of the gyro and
     accelerometer scale-factor errors (dimensionless; None: no such states);
     ``time_offset_sigma_s`` the initial sigma of the IMU time offset (None: no
     such state, the offset is taken as known) and
@@ -78,6 +82,7 @@ class EngineSettings:
     step_s: float = 0.1
     gate_probability: float = GATE_PROBABILITY
     reopen_after: int = 8
+    reopen_inflates: bool = False
     scale_sigma: tuple | None = None
     time_offset_sigma_s: float | None = None
     time_offset_rw_s_per_rt_s: float = 1e-4
@@ -129,6 +134,8 @@ class EngineResult:
         ``sum 0.5 (z^T S^-1 z + ln det(2 pi S))`` (compares runs on the same aids).
     states : dict of str to (ndarray, ndarray)
         The aids' state blocks alive at the end: estimate and sigma, by key.
+    cov_vel_pos_enu : ndarray, (n, 3, 3)
+        Cross-covariance of the velocity and position errors in ENU [m^2/s].
     """
 
     t_s: np.ndarray
@@ -150,6 +157,7 @@ class EngineResult:
     yaw_aligned_s: float | None
     nll: dict
     states: dict = dataclasses.field(default_factory=dict)
+    cov_vel_pos_enu: np.ndarray | None = None
 
 
 def state_slices(settings):
@@ -180,7 +188,8 @@ def initial_covariance(P0_ins, settings):
 class _Filter:
     """The running filter: INS state, sensor error estimates, covariance and the pending propagation."""
 
-    def __init__(self, state0, P0, settings, time_offset_s):
+    def __init__(self, state0, P0, settings, time_offset_s, on_aid=None):
+        self.on_aid = on_aid
         self.state = state0
         self.settings = settings
         self.SG, self.SA, self.TD = state_slices(settings)
@@ -311,10 +320,20 @@ class _Filter:
         run = self.rejected_run.get(aid.name, 0)
         if z.size not in self.gate:
             self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
-        if aid.gated and nis > self.gate[z.size] and run < self.settings.reopen_after:
+        failed = aid.gated and nis > self.gate[z.size]
+        if failed and run < self.settings.reopen_after:
             count[1] += 1
             self.rejected_run[aid.name] = run + 1
+            if self.on_aid is not None:
+                self.on_aid(aid, z, S, False, False)
             return None
+        if failed and self.settings.reopen_inflates:
+            H_plus = np.linalg.pinv(H[:, :N_INS])
+            self.P[:N_INS, :N_INS] += H_plus @ np.diag(z**2) @ H_plus.T
+            S = H @ self.P @ H.T + R
+            nis = float(z @ np.linalg.solve(S, z))
+        if self.on_aid is not None:
+            self.on_aid(aid, z, S, True, failed)
         self.rejected_run[aid.name] = 0
         count[0] += 1
         nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
@@ -358,7 +377,7 @@ class _Filter:
 
 
 def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
-        time_offset_s=0.0, progress=None):
+        time_offset_s=0.0, progress=None, on_aid=None):
     """Run the filter over an IMU log with time-ordered aids.
 
     Parameters
@@ -382,6 +401,10 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
         IMU clock minus the aids' clock (the initial estimate when it is a state).
     progress : callable, optional
         Wraps the iterator over INS updates (a progress bar).
+    on_aid : callable, optional
+        Called after each aid's gate test as ``on_aid(aid, z, S, used, reopened)``:
+        innovation (m,), its covariance (m, m) as used, whether the aid was
+        used, and whether it failed the gate and was used all the same.
 
     Returns
     -------
@@ -390,12 +413,13 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     t_s, dt_s = np.asarray(t_s, dtype=float), np.asarray(dt_s, dtype=float)
     m = t_s.size // 2
     t_out = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
-    f = _Filter(state0, P0, settings, time_offset_s)
+    f = _Filter(state0, P0, settings, time_offset_s, on_aid)
     n_x = f.n_core
     n = m + 1
     out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, n_x)),
            "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
-           "sg": np.empty((n, 3)), "sa": np.empty((n, 3)), "td": np.empty(n), "w": np.empty((n, 3))}
+           "sg": np.empty((n, 3)), "sa": np.empty((n, 3)), "td": np.empty(n), "w": np.empty((n, 3)),
+           "cvp": np.empty((n, 3, 3))}
     aligned_s = None
     heading_known = course_alignment is None
     aids = list(aids)
@@ -439,7 +463,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     return EngineResult(t_out, pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp, out["cv"],
                         out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
                         {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll),
-                        {k: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for k, (b, i, x, _) in f.blocks.items()})
+                        {k: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for k, (b, i, x, _) in f.blocks.items()},
+                        out["cvp"])
 
 
 def _record(out, k, f):
@@ -451,6 +476,7 @@ def _record(out, k, f):
     J = pos_jacobian(s.lat_rad, s.alt_m)
     out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
     out["cv"][k] = P[DV, DV]
+    out["cvp"][k] = P[DV, DPOS] @ J.T
     out["bg"][k] = f.bg
     out["ba"][k] = f.ba
     out["sg"][k] = f.sg
