@@ -79,6 +79,7 @@ def match(search, sol):
         sig_c, sig_tau = o["sat_offset_sigma_hz"], o["along_track_sigma_m"] / SPEED_SV_MPS
         pos_t = pos + (t - search.t_c)[:, None] * vel_rx
         keep = np.ones((len(cand), len(t)))  # 0 for a candidate's outlier blocks
+        c_hz = np.zeros(len(cand))
         n_out = int(MAX_OUTLIER_FRACTION * len(t))
         # The time offset enters non-linearly: re-linearise; a third pass with the outliers out.
         for it in range(3 if n_out else 2):
