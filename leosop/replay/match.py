@@ -3,6 +3,14 @@
 A candidate is accepted only when its chi-square is consistent with the
 track's sigma and clearly below the runner-up's; a satellite claimed by two
 tracks goes to the better one.
+
+A few blocks of a long track may be false detections (a weak block's
+strongest peak tens of hertz off, often at the track's start). Each
+candidate's fit leaves out its blocks beyond :data:`OUTLIER_Z` sigmas, at
+most :data:`MAX_OUTLIER_FRACTION` of them, before its chi-square is tested:
+otherwise two such blocks make a 50-block track of a satellite ``poor_fit``.
+A wrong satellite misses most blocks by far more, which no such trimming
+hides; its chi-square is tested on the blocks kept, as the right one's.
 """
 
 import numpy as np
@@ -26,6 +34,11 @@ ID_STATUSES = ("ok", "too_short", "no_solution", "no_candidate", "poor_fit", "am
 
 #: Candidates per track fitted in the identification (nearest in Doppler at the track's middle).
 _ID_CANDIDATES = 24
+#: A block this many sigmas off a candidate's fit is left out of its chi-square (Gaussian
+#: noise reaches it once in ~2 million blocks).
+OUTLIER_Z = 5.0
+#: At most this fraction of a track's blocks (rounded down) is left out.
+MAX_OUTLIER_FRACTION = 0.1
 
 
 def match(search, sol):
@@ -65,7 +78,11 @@ def match(search, sol):
         tau = np.zeros((len(cand), 1))
         sig_c, sig_tau = o["sat_offset_sigma_hz"], o["along_track_sigma_m"] / SPEED_SV_MPS
         pos_t = pos + (t - search.t_c)[:, None] * vel_rx
-        for _ in range(2):  # the time offset enters non-linearly: re-linearise once
+        keep = np.ones((len(cand), len(t)))  # 0 for a candidate's outlier blocks
+        c_hz = np.zeros(len(cand))
+        n_out = int(MAX_OUTLIER_FRACTION * len(t))
+        # The time offset enters non-linearly: re-linearise; a third pass with the outliers out.
+        for it in range(3 if n_out else 2):
             p, v = search.eph.state_received(sat, t[None, :] + tau, pos_t)
             dop, grad = doppler_model(p, v - vel_rx, pos_t, search.k)
             pa, va = search.eph.state(sat, t[None, :] + tau + 0.5)
@@ -76,7 +93,12 @@ def match(search, sol):
             var = sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
                                              o["pos_sigma_cap_hz"] ** 2)
             r = base[None, :] - dop
-            w = 1 / var
+            if it > 0 and n_out:
+                z = np.abs(r - c_hz[:, None]) / np.sqrt(var)  # tau already moved by dtau
+                worst = np.argsort(-z, axis=1)[:, :n_out]
+                keep = np.ones_like(z)
+                np.put_along_axis(keep, worst, np.take_along_axis(z, worst, 1) <= OUTLIER_Z, 1)
+            w = keep / var
             # Weighted least squares for (c, dtau) with priors c ~ N(0, sig_c), tau ~ N(0, sig_tau).
             a11 = w.sum(1) + 1 / sig_c**2
             a12 = (w * rate).sum(1)
@@ -93,8 +115,9 @@ def match(search, sol):
         order = np.argsort(chi2)
         best = order[0]
         second = chi2[order[1]] if len(order) > 1 else np.inf
-        out.append({"sat": int(cand[best]), "chi2": float(chi2[best]), "n": len(t),
-                    "rms_hz": float(np.sqrt(np.mean(resid[best] ** 2))), "margin": float(second - chi2[best]),
+        used = keep[best] > 0
+        out.append({"sat": int(cand[best]), "chi2": float(chi2[best]), "n": int(used.sum()),
+                    "rms_hz": float(np.sqrt(np.mean(resid[best, used] ** 2))), "margin": float(second - chi2[best]),
                     "runner_up": int(cand[order[1]]) if len(order) > 1 else -1})
     return out
 
