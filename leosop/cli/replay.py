@@ -139,10 +139,11 @@ def run(args):
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
     diff = None
     if base_rec is not None:
-        from ..replay.differential import differential_fix
+        from ..replay.differential import BASE_PRIOR_RADIUS_M, differential_fix
 
         base_res = replay(base_rec, const, block_s=block_s, init_pos_ecef_m=base_pos, static=True, mask_deg=mask,
-                          lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True)
+                          lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True,
+                          prior_radius_m=BASE_PRIOR_RADIUS_M)
         diff = differential_fix(res, base_res, const, base_pos, carrier_hz=rec.center_hz or STARLINK_PILOT_HZ,
                                 static=args.static, block_s=block_s)
         doc["solutions_alone"] = doc["solutions"]

@@ -26,8 +26,11 @@ from ..positioning.measurements import Measurements, sv_states_from_tle
 from ..timebase import format_utc, seconds_since
 from .pipeline import track_measurements
 
-__all__ = ["DifferentialReplay", "block_times", "check_pair", "differential_fix"]
+__all__ = ["BASE_PRIOR_RADIUS_M", "DifferentialReplay", "block_times", "check_pair", "differential_fix"]
 
+#: Radius of the base's identification search around its known site [m]: the site is exact, the search's
+#: first cells are a fifth of this, so a few km is one round of votes (150 km, a rover's ``--init``, is four).
+BASE_PRIOR_RADIUS_M = 5e3
 #: Two recordings' nominal frequencies closer than this are the same band [Hz] (a float written as text).
 _SAME_BAND_HZ = 1.0
 
