@@ -20,9 +20,21 @@ sample (:mod:`leosop.signal.channel`, DESIGN 4.2), with
 SigMF capture per snapshot; the signal's phase runs on through the gaps.
 The truth (Doppler at each block centre, its rate, C/N0, satellite id) goes
 into the SigMF annotations, the per-satellite draws into ``leosop:satellites``.
+
+``--base-site`` writes a second recording (``--base-output``) at a base
+station, static at that site, for differential replay (issue 23): the same
+satellites with the same satellite errors (orbit error, oscillator offset
+and ``--sat-drift-sigma-hz-per-s`` drift), its own receiver clock, noise,
+carrier phases, geometric C/N0 (``--base-cn0-dbhz``) and capture times
+(``--base-offset-s`` after the rover's). A site option beside ``--site``
+fits the command's one-receiver options best: every other setting (band,
+snapshots, front end, sample format) is the pair's. The base's draws come
+from their own stream of the seed, so the rover's recording is the one the
+command writes without ``--base-site``.
 """
 
 import sys
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +62,13 @@ _CN0_RANGE_DBHZ = (-20.0, 100.0)
 _MAX_ORBIT_ERROR_M = 1e5  # 100 km: beyond it the truth is not the element set's satellite
 _WAVEFORM_TEXT = {"tones": "pilot combs", "ofdm": "OFDM downlink frames with pilot combs"}
 _CHUNK = 1 << 18
+#: A satellite oscillator drifting faster than this is not a clock [Hz/s].
+_MAX_SAT_DRIFT_HZ_PER_S = 100.0
+#: The base's default receiver offset is the rover's plus a draw uniform in +-this [Hz] (a different
+#: receiver's clock, of the size of [Shen 2024] Table 1's offsets).
+_BASE_OFFSET_SPREAD_HZ = 5.0
+#: Largest shift of the base's captures against the rover's [s]: beyond it the pair shares little time.
+_MAX_BASE_OFFSET_S = 60.0
 
 
 def register(subparsers):
@@ -101,6 +120,23 @@ def register(subparsers):
     p.add_argument("--snapshot-s", type=float, metavar="S",
                    help="record only S seconds every --period-s (one SigMF capture each)")
     p.add_argument("--period-s", type=float, metavar="P", help="snapshot period (with --snapshot-s)")
+    p.add_argument("--sat-drift-sigma-hz-per-s", type=float, default=0.0, metavar="SIGMA",
+                   help="standard deviation of each satellite oscillator's frequency drift [Hz/s] (default 0)")
+    _base_options(p)
+
+
+def _base_options(p):
+    b = p.add_argument_group("base station (a second recording of the same satellites and satellite errors)")
+    b.add_argument("--base-site", metavar="LAT_DEG,LON_DEG,ALT_M", help="also write a static base's recording here")
+    b.add_argument("--base-output", metavar="FILE.sigmf-meta",
+                   help="the base's recording (default: -o's name with -base before .sigmf-meta)")
+    b.add_argument("--base-offset-s", type=float, default=0.0, metavar="S",
+                   help="the base's captures start S seconds after the rover's, |S| <= 60 (default 0: aligned)")
+    b.add_argument("--base-rx-offset-hz", type=float, metavar="HZ",
+                   help="base receiver offset (default: the rover's plus a draw uniform in +-5 Hz)")
+    b.add_argument("--base-rx-drift-hz-per-s", type=float, metavar="HZ_PER_S",
+                   help="base receiver drift (default: the rover's)")
+    b.add_argument("--base-cn0-dbhz", type=float, metavar="C", help="the base's --cn0-dbhz (default: the rover's)")
 
 
 def _front_end_options(p):
@@ -154,6 +190,38 @@ def _front_end(args):
     return offset, drift, fe, datatype
 
 
+def _check_rx(offset_hz, drift_hz_per_s, duration_s, fs, offset_option, drift_option):
+    """A receiver's offset, and its offset at the end, within half the sample rate."""
+    if abs(offset_hz) > fs / 2:
+        raise InputError(f"{offset_option} {offset_hz:g}: must be within +-{fs / 2:g} Hz (half the sample rate)")
+    end = offset_hz + drift_hz_per_s * duration_s
+    if abs(end) > fs / 2:
+        raise InputError(f"{drift_option} {drift_hz_per_s:g}: the receiver offset at the end, {end:g} Hz, must be "
+                         f"within +-{fs / 2:g} Hz (half the sample rate)")
+
+
+def _base(args, out):
+    """The base's site, output and capture offset from the options: (None, None, 0.0) without ``--base-site``."""
+    others = [f"--{k.replace('_', '-')}" for k in ("base_output", "base_rx_offset_hz", "base_rx_drift_hz_per_s",
+                                                    "base_cn0_dbhz") if getattr(args, k) is not None]
+    if args.base_offset_s != 0.0:
+        others.append("--base-offset-s")
+    if args.base_site is None:
+        if others:
+            raise InputError(f"{others[0]} describes a base station: give --base-site too")
+        return None, None, 0.0
+    site = parse_site(args.base_site, "--base-site")
+    base_out = Path(args.base_output) if args.base_output else out.with_name(out.stem + "-base.sigmf-meta")
+    if base_out.suffix != ".sigmf-meta":
+        raise InputError(f"--base-output {base_out}: the output must end in .sigmf-meta")
+    if base_out.resolve() == out.resolve():
+        raise InputError(f"--base-output {base_out}: the same file as -o")
+    offset_s = args.base_offset_s
+    if not (np.isfinite(offset_s) and abs(offset_s) <= _MAX_BASE_OFFSET_S):
+        raise InputError(f"--base-offset-s {offset_s:g}: must be within +-{_MAX_BASE_OFFSET_S:g} s")
+    return site, base_out, float(offset_s)
+
+
 def _select(const, pos_rx, start, duration_s, ids, mask):
     """The ``--sat`` satellites, else those above ``mask`` at the start; those SGP4 cannot propagate left out."""
     from ..orbits.propagate import drop_failing, state_ecef
@@ -190,16 +258,16 @@ def _captures(args, n, fs):
     return starts, np.full(starts.size, n_snap)
 
 
-def _cn0(args, const, t_nodes, range_m, elev_rad):
+def _cn0(cn0_dbhz, cn0_model, const, range_m, elev_rad, option="--cn0-dbhz"):
     """C/N0 per satellite at every node, (n_sats, n_nodes)."""
-    values = np.asarray(args.cn0_dbhz, dtype=float)
+    values = np.asarray(cn0_dbhz, dtype=float)
     if not np.all((values >= _CN0_RANGE_DBHZ[0]) & (values <= _CN0_RANGE_DBHZ[1])):
-        raise InputError(f"--cn0-dbhz {' '.join(f'{v:g}' for v in values)}: must be in "
+        raise InputError(f"{option} {' '.join(f'{v:g}' for v in values)}: must be in "
                          f"[{_CN0_RANGE_DBHZ[0]:g}, {_CN0_RANGE_DBHZ[1]:g}] dB-Hz")
-    if values.size not in (1, len(const)) or (values.size > 1 and args.cn0_model != "constant"):
-        raise InputError(f"--cn0-dbhz: {values.size} values; give one, or one per satellite "
+    if values.size not in (1, len(const)) or (values.size > 1 and cn0_model != "constant"):
+        raise InputError(f"{option}: {values.size} values; give one, or one per satellite "
                          f"({len(const)}) with --cn0-model constant")
-    if args.cn0_model == "constant":
+    if cn0_model == "constant":
         return np.broadcast_to(np.broadcast_to(values, (len(const),))[:, None], range_m.shape)
     return cn0_geometry_dbhz(values[0], range_m, elev_rad)
 
@@ -256,12 +324,7 @@ def run(args):
         raise InputError(f"--sat-offset-max-hz {args.sat_offset_max_hz:g}: must be in [0, {fs / 2:g}] "
                          "(half the sample rate)")
     rx_offset, rx_drift, fe, datatype = _front_end(args)
-    if abs(rx_offset) > fs / 2:
-        raise InputError(f"--rx-offset-hz {rx_offset:g}: must be within +-{fs / 2:g} Hz (half the sample rate)")
-    if abs(rx_offset + rx_drift * duration) > fs / 2:
-        raise InputError(f"--rx-drift-hz-per-s {rx_drift:g}: the receiver offset at the end, "
-                         f"{rx_offset + rx_drift * duration:g} Hz, must be within +-{fs / 2:g} Hz (half the sample "
-                         "rate)")
+    _check_rx(rx_offset, rx_drift, duration, fs, "--rx-offset-hz", "--rx-drift-hz-per-s")
     for f_hz, _ in fe.cw:
         if abs(f_hz) > fs / 2:
             raise InputError(f"--cw {f_hz:g}: the interferer must be within +-{fs / 2:g} Hz (half the sample rate)")
@@ -272,9 +335,14 @@ def run(args):
             raise InputError(f"--orbit-error-{axis}-m {value:g}: must be a standard deviation in "
                              f"[0, {_MAX_ORBIT_ERROR_M:g}] m")
         sigma_orbit_m[f"{axis}_sigma_m"] = value
+    sat_drift_sigma = args.sat_drift_sigma_hz_per_s
+    if not 0 <= sat_drift_sigma <= _MAX_SAT_DRIFT_HZ_PER_S:
+        raise InputError(f"--sat-drift-sigma-hz-per-s {sat_drift_sigma:g}: must be a standard deviation in "
+                         f"[0, {_MAX_SAT_DRIFT_HZ_PER_S:g}] Hz/s")
     out = Path(args.output)
     if out.suffix != ".sigmf-meta":
         raise InputError(f"-o {out}: the output must end in .sigmf-meta")
+    base, base_out, base_offset_s = _base(args, out)
     n = int(round(duration * fs))
     n_step = int(round(step * fs))
     if n_step > n and args.snapshot_s is None:
@@ -290,59 +358,30 @@ def run(args):
     const = load_constellation(args.tle)
     warn_stale(const, start)
     const = _select(const, pos_rx, start, n / fs, args.sat, mask)
-    clock = rng.uniform(0.0, args.sat_offset_max_hz, len(const)) + rx_offset
+    sat_offset = rng.uniform(0.0, args.sat_offset_max_hz, len(const))
     phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
     speed = inertial_speed_mps(const, start)
-    orbit_error = OrbitError.draw(rng, speed, **sigma_orbit_m)
-    vel_rx = C_e_n(np.radians(lat), np.radians(lon)) @ vel_enu
-    t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=orbit_error,
-                                           vel_rx_ecef_mps=vel_rx)
-    cn0_nodes = _cn0(args, const, t_nodes, range_m, elev)
-    if np.isfinite(range_m).all() and not np.isfinite(cn0_nodes).any():  # (SGP4 failures: SiteChannel)
-        raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
-                         f"during the recording from {format_utc(start)}")
-    channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb,
-                          phase_rad=phase, waveform=args.waveform, rx_drift_hz_per_s=rx_drift)
-
-    blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
-    t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
-    dop, rate, cn0 = channel.doppler_hz(t_c), channel.doppler_rate_hz_per_s(t_c), channel.cn0_at(t_c)
-    annotations = [
-        (f0, m, {"core:label": str(sid), "leosop:sat_id": str(sid), "leosop:t_s": float(t_c[j]),
-                 "leosop:doppler_hz": float(dop[i, j]), "leosop:doppler_rate_hz_per_s": float(rate[i, j]),
-                 "leosop:cn0_dbhz": float(cn0[i, j])})
-        for j, (f0, _, m) in enumerate(blocks) for i, sid in enumerate(const.sat_ids) if np.isfinite(cn0[i, j])
-    ]
-    cn0_start = channel.cn0_at([0.0])[:, 0]
-    satellites = [
-        {"sat_id": str(sid), "doppler_hz_start": float(channel.doppler_hz([0.0])[i, 0]),
-         "doppler_rate_hz_per_s_start": float(channel.doppler_rate_hz_per_s([0.0])[i, 0]),
-         "clock_offset_hz": float(clock[i]), "cn0_dbhz": _num(cn0_start[i]),
-         "orbit_error_along_s": float(orbit_error.along_s[i]),
-         "orbit_error_along_m": float(orbit_error.along_s[i] * speed[i]),
-         "orbit_error_radial_m": float(orbit_error.radial_m[i]), "orbit_error_cross_m": float(orbit_error.cross_m[i])}
-        for i, sid in enumerate(const.sat_ids)
-    ]
-    # Full scale for ci16: tones add to at most sum of amplitudes; OFDM
-    # subcarriers and noise are Gaussian-like. Four sigmas above the comb's
-    # peak keeps clipping ~1e-7.
-    spread = np.hypot(channel.noise_sigma(), np.sqrt(channel.n_subcarriers * len(const))) / np.sqrt(2.0)
-    full_scale = comb.n_tones * len(const) + 4.0 * spread
-    if fe.active:  # a receiver's quantiser: full scale at --headroom-db over the RMS (clipping possible)
-        full_scale = fe.full_scale(fe.rms_component(comb.n_tones * len(const) + channel.n_subcarriers * len(const),
-                                                    channel.cn0_ref_dbhz, fs))
-    cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
-    extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
-             "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites, "leosop:waveform": args.waveform,
-             "core:description": f"leosop generate: Starlink {_WAVEFORM_TEXT[args.waveform]} of {len(const)} "
-                                 f"satellite(s) "
-                                 f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}",
-             "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
-             "leosop:vel_enu_mps": [float(v) for v in vel_enu],
-             "leosop:rx_offset_hz": float(rx_offset),
-             "leosop:rx_drift_hz_per_s": float(rx_drift)}
-    if fe.active:
-        extra["leosop:front_end"] = dict(fe.metadata(), preset=args.front_end, full_scale=full_scale)
+    sats = _Satellites(sat_offset, np.zeros(len(const)), OrbitError.draw(rng, speed, **sigma_orbit_m), speed)
+    if sat_drift_sigma > 0:  # drawn only when asked, so that recordings without it keep their noise
+        sats = replace(sats, drift_hz_per_s=rng.normal(0.0, sat_drift_sigma, len(const)))
+    plan = (file_starts, signal_starts, lengths, n_step)
+    recs = [_site_recording(args, const, sats, plan, site=(lat, lon, alt), vel_enu=vel_enu, start=start,
+                            t0_s=0.0, rx=(rx_offset, rx_drift, fe, datatype), cn0_dbhz=args.cn0_dbhz,
+                            phase_rad=phase, rng=rng, n=n, fs=fs, comb=comb)]
+    if base is not None:
+        brng = np.random.default_rng([args.seed, 1])  # the base's own stream: its clock, phases, noise
+        b_offset, b_drift, b_fe, _ = _front_end(args)
+        b_offset = (rx_offset + brng.uniform(-_BASE_OFFSET_SPREAD_HZ, _BASE_OFFSET_SPREAD_HZ)
+                    if args.base_rx_offset_hz is None else args.base_rx_offset_hz)
+        b_drift = rx_drift if args.base_rx_drift_hz_per_s is None else args.base_rx_drift_hz_per_s
+        _check_rx(b_offset, b_drift, duration, fs, "--base-rx-offset-hz", "--base-rx-drift-hz-per-s")
+        b_start = start + np.timedelta64(round(base_offset_s * 1e9), "ns")
+        recs.append(_site_recording(args, const, sats, plan, site=base, vel_enu=np.zeros(3), start=b_start,
+                                    t0_s=base_offset_s, rx=(b_offset, b_drift, b_fe, datatype),
+                                    cn0_dbhz=args.cn0_dbhz if args.base_cn0_dbhz is None else [args.base_cn0_dbhz],
+                                    phase_rad=brng.uniform(0.0, 2.0 * np.pi, len(const)), rng=brng, n=n, fs=fs,
+                                    comb=comb, what="base"))
+    rover = recs[0]
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
@@ -359,21 +398,125 @@ def run(args):
         "vel_enu_mps": [float(v) for v in vel_enu],
         "rx_offset_hz": float(rx_offset),
         "rx_drift_hz_per_s": float(rx_drift),
-        "front_end": extra.get("leosop:front_end"),
-        "satellites": satellites,
+        "front_end": rover.extra.get("leosop:front_end"),
+        "satellites": rover.satellites,
     }
-    # All outputs or none: the data file, then its metadata, then generate.json.
-    paths = [out.with_suffix(".sigmf-data"), out] + ([Path(args.out) / "generate.json"] if args.out else [])
+    metas = [out]
+    if base is not None:
+        metas.append(base_out)
+        b = recs[1]
+        doc["base"] = {"meta": str(base_out), "data": str(base_out.with_suffix(".sigmf-data")),
+                       "site": list(base), "start_utc": format_utc(b_start), "offset_s": base_offset_s,
+                       "rx_offset_hz": float(b.rx[0]), "rx_drift_hz_per_s": float(b.rx[1]),
+                       "satellites": b.satellites}
+    # All outputs or none: each data file, then its metadata, then generate.json.
+    paths = [p for m in metas for p in (m.with_suffix(".sigmf-data"), m)]
+    paths += [Path(args.out) / "generate.json"] if args.out else []
     with atomic_files(paths) as tmps:
-        write_sigmf_files(tmps[0], tmps[1], _chunks(channel, signal_starts, lengths, rng, fe, full_scale,
-                                                       extra.get("leosop:front_end", {})),
-                          sample_rate_hz=fs,
-                          center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, cap_times)),
-                          datatype=datatype, annotations=annotations, global_extra=extra,
-                          full_scale=full_scale)
+        for k, r in enumerate(recs):
+            fe_k = r.rx[2]
+            write_sigmf_files(tmps[2 * k], tmps[2 * k + 1],
+                              _chunks(r.channel, signal_starts, lengths, r.rng, fe_k, r.full_scale,
+                                      r.extra.get("leosop:front_end", {})),
+                              sample_rate_hz=fs, center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, r.cap_times)),
+                              datatype=datatype, annotations=r.annotations, global_extra=r.extra,
+                              full_scale=r.full_scale)
         if args.out:
-            tmps[2].write_text(json_text(doc) + "\n")
+            tmps[-1].write_text(json_text(doc) + "\n")
     return doc
+
+
+@dataclass(frozen=True)
+class _Satellites:
+    """What every receiver shares: each satellite's oscillator offset [Hz] and drift [Hz/s], orbit error, speed."""
+
+    offset_hz: np.ndarray
+    drift_hz_per_s: np.ndarray
+    orbit_error: OrbitError
+    speed_mps: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Recording:
+    """One receiver's channel and what its SigMF files say of it."""
+
+    channel: SiteChannel
+    rx: tuple  # (offset_hz, drift_hz_per_s, FrontEnd, datatype)
+    rng: np.random.Generator
+    annotations: list
+    satellites: list
+    extra: dict
+    full_scale: float
+    cap_times: list
+
+
+def _site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, cn0_dbhz, phase_rad, rng, n, fs,
+                    comb, what="rover"):
+    """One receiver's recording of the shared satellites.
+
+    ``start`` is its first sample, ``t0_s`` seconds after the satellite
+    errors' reference (the rover's first sample): a drifting satellite
+    oscillator is further off by then. ``plan`` is ``(file_starts,
+    signal_starts, lengths, n_step)`` of :func:`_captures` and the truth blocks.
+    """
+    file_starts, signal_starts, lengths, n_step = plan
+    lat, lon, alt = site
+    rx_offset, rx_drift, fe, _ = rx
+    pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
+    clock = sats.offset_hz + sats.drift_hz_per_s * t0_s + rx_offset
+    vel_rx = C_e_n(np.radians(lat), np.radians(lon)) @ vel_enu
+    t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=sats.orbit_error,
+                                           vel_rx_ecef_mps=vel_rx)
+    cn0_nodes = _cn0(cn0_dbhz, args.cn0_model, const, range_m, elev,
+                     "--cn0-dbhz" if what == "rover" else "--base-cn0-dbhz")
+    if np.isfinite(range_m).all() and not np.isfinite(cn0_nodes).any():  # (SGP4 failures: SiteChannel)
+        raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
+                         f"({what}) during the recording from {format_utc(start)}")
+    channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb, phase_rad=phase_rad,
+                          waveform=args.waveform, rx_drift_hz_per_s=rx_drift, sat_drift_hz_per_s=sats.drift_hz_per_s)
+    blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
+    t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
+    dop, rate, cn0 = channel.doppler_hz(t_c), channel.doppler_rate_hz_per_s(t_c), channel.cn0_at(t_c)
+    annotations = [
+        (f0, m, {"core:label": str(sid), "leosop:sat_id": str(sid), "leosop:t_s": float(t_c[j]),
+                 "leosop:doppler_hz": float(dop[i, j]), "leosop:doppler_rate_hz_per_s": float(rate[i, j]),
+                 "leosop:cn0_dbhz": float(cn0[i, j])})
+        for j, (f0, _, m) in enumerate(blocks) for i, sid in enumerate(const.sat_ids) if np.isfinite(cn0[i, j])
+    ]
+    cn0_start = channel.cn0_at([0.0])[:, 0]
+    err, speed = sats.orbit_error, sats.speed_mps
+    satellites = [
+        {"sat_id": str(sid), "doppler_hz_start": float(channel.doppler_hz([0.0])[i, 0]),
+         "doppler_rate_hz_per_s_start": float(channel.doppler_rate_hz_per_s([0.0])[i, 0]),
+         "clock_offset_hz": float(clock[i]), "sat_offset_hz": float(sats.offset_hz[i]),
+         "sat_drift_hz_per_s": float(sats.drift_hz_per_s[i]), "cn0_dbhz": _num(cn0_start[i]),
+         "orbit_error_along_s": float(err.along_s[i]),
+         "orbit_error_along_m": float(err.along_s[i] * speed[i]),
+         "orbit_error_radial_m": float(err.radial_m[i]), "orbit_error_cross_m": float(err.cross_m[i])}
+        for i, sid in enumerate(const.sat_ids)
+    ]
+    # Full scale for ci16: tones add to at most sum of amplitudes; OFDM
+    # subcarriers and noise are Gaussian-like. Four sigmas above the comb's
+    # peak keeps clipping ~1e-7.
+    spread = np.hypot(channel.noise_sigma(), np.sqrt(channel.n_subcarriers * len(const))) / np.sqrt(2.0)
+    full_scale = comb.n_tones * len(const) + 4.0 * spread
+    if fe.active:  # a receiver's quantiser: full scale at --headroom-db over the RMS (clipping possible)
+        full_scale = fe.full_scale(fe.rms_component(comb.n_tones * len(const) + channel.n_subcarriers * len(const),
+                                                    channel.cn0_ref_dbhz, fs))
+    cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
+    extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
+             "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites, "leosop:waveform": args.waveform,
+             "core:description": f"leosop generate: Starlink {_WAVEFORM_TEXT[args.waveform]} of {len(const)} "
+                                 f"satellite(s) "
+                                 f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}" + ("" if what == "rover" else
+                                                                                     f" ({what})"),
+             "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
+             "leosop:vel_enu_mps": [float(v) for v in vel_enu],
+             "leosop:rx_offset_hz": float(rx_offset),
+             "leosop:rx_drift_hz_per_s": float(rx_drift)}
+    if fe.active:
+        extra["leosop:front_end"] = dict(fe.metadata(), preset=args.front_end, full_scale=full_scale)
+    return _Recording(channel, rx, rng, annotations, satellites, extra, full_scale, cap_times)
 
 
 def summary(doc):
@@ -388,4 +531,10 @@ def summary(doc):
                      f"{s['doppler_rate_hz_per_s_start']:+.1f} Hz/s, clock {s['clock_offset_hz']:.2f} Hz, "
                      f"C/N0 {cn0}, orbit error along {s['orbit_error_along_m']:+.1f} m, "
                      f"radial {s['orbit_error_radial_m']:+.1f} m, cross {s['orbit_error_cross_m']:+.1f} m")
+    if "base" in doc:
+        b = doc["base"]
+        heard = sum(s["cn0_dbhz"] is not None for s in b["satellites"])
+        lines.append(f"wrote {b['meta']}: base at {','.join(f'{v:g}' for v in b['site'])}, captures from "
+                     f"{b['start_utc']} ({b['offset_s']:+g} s), receiver offset {b['rx_offset_hz']:+.2f} Hz, "
+                     f"{heard} of {len(b['satellites'])} satellites above its horizon; satellite errors shared")
     return "\n".join(lines)

@@ -8,6 +8,13 @@ without it by a global search), and the identified tracks' Doppler gives a
 static batch fix (``--static``) or a snapshot fix per block. A track that no
 satellite explains keeps a null ``sat_id``. Nothing detected is not an
 error: the JSON has empty ``tracks`` and ``solutions``.
+
+With ``--base BASE --base-site LAT,LON,ALT`` (differential, issue 23) the
+base's recording is replayed too (a receiver at rest at its known site) and
+the satellites identified in both give the rover's differential fix
+(:mod:`leosop.replay.differential`): ``solutions`` is that fix,
+``solutions_alone`` the rover's own, ``differential`` says which satellites
+were matched.
 """
 
 import sys
@@ -15,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constants import STARLINK_PILOT_HZ
 from ..errors import InputError
 from ..fileio import atomic_files, check_output_file, write_csv, write_json
 from ..frames import geodetic_to_ecef
@@ -30,8 +38,9 @@ from .options import mask_deg, parse_site, positive
 #: the band of any SDR recording is below 100 MHz; an LNB drifting 1 kHz/s is broken).
 _LO_OFFSET_LIMIT_HZ = 50e6
 _LO_DRIFT_LIMIT_HZ_PER_S = 1e3
-#: The files ``--out`` may hold, written all or none (measurements, fixes and the spectrogram when there are any).
-OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png")
+#: The files ``--out`` may hold, written all or none (measurements, fixes and the spectrogram when there are any;
+#: the base's measurements with ``--base``).
+OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png", "base_measurements.csv")
 
 _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 
@@ -53,6 +62,9 @@ def register(subparsers):
     p.add_argument("--lo-offset-max-hz", type=float, default=LO_OFFSET_MAX_HZ, metavar="HZ",
                    help="largest receiver (LNB local oscillator) offset searched, +- (default %(default)g: PLL "
                         "LNBs; free-running ones need up to 3e6)")
+    p.add_argument("--base", metavar="BASE.sigmf-meta",
+                   help="a base station's recording of the same satellites (with --base-site): differential fix")
+    p.add_argument("--base-site", metavar="LAT_DEG,LON_DEG,ALT_M", help="the base's known position")
     p.add_argument("--lo-drift-max-hz-per-s", type=float, default=LO_DRIFT_MAX_HZ_PER_S, metavar="HZ_PER_S",
                    help="largest drift of that offset searched, +- (default %(default)g)")
 
@@ -86,6 +98,13 @@ def run(args):
     if not (np.isfinite(drift_max) and 0 <= drift_max <= _LO_DRIFT_LIMIT_HZ_PER_S):
         raise InputError(f"--lo-drift-max-hz-per-s {drift_max:g}: expected 0 to {_LO_DRIFT_LIMIT_HZ_PER_S:g}")
     mask = mask_deg(args.mask_deg)
+    if (args.base is None) != (args.base_site is None):
+        raise InputError("--base needs --base-site, the base's known position" if args.base else
+                         "--base-site goes with --base, the base's recording")
+    base_pos = None
+    if args.base_site:
+        lat, lon, alt = parse_site(args.base_site, "--base-site")
+        base_pos = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     init = None
     if args.init:
         lat, lon, alt = parse_site(args.init, "--init")
@@ -94,6 +113,12 @@ def run(args):
         check_output_file(Path(args.out) / name, "--out")  # before the work, not after
     path = Path(args.recording)
     rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
+    base_rec = None
+    if args.base:
+        from ..replay.differential import check_pair
+
+        base_rec = open_sigmf(Path(args.base))
+        check_pair(rec, base_rec)
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
                  lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True)
@@ -112,18 +137,56 @@ def run(args):
                                           for t in acq.frame_start_s]}
     if not res.tracks:
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
+    diff = None
+    if base_rec is not None:
+        from ..replay.differential import BASE_PRIOR_RADIUS_M, differential_fix
+
+        base_res = replay(base_rec, const, block_s=block_s, init_pos_ecef_m=base_pos, static=True, mask_deg=mask,
+                          lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True,
+                          prior_radius_m=BASE_PRIOR_RADIUS_M)
+        diff = differential_fix(res, base_res, const, base_pos, carrier_hz=rec.center_hz or STARLINK_PILOT_HZ,
+                                static=args.static, block_s=block_s)
+        doc["solutions_alone"] = doc["solutions"]
+        doc["solutions"] = _differential_solutions(diff)
+        doc["differential"] = {
+            "n_common": len(diff.common_sats), "common": list(diff.common_sats),
+            "base_only": list(diff.fix.base_only_sats), "rover_only": list(diff.fix.rover_only_sats),
+            "n_unmatched_rows": int(diff.fix.n_unmatched_rows), "base_recording": str(args.base),
+            "base_site": list(parse_site(args.base_site, "--base-site")),
+            "base_tracks": [_track_doc(tr) for tr in base_res.tracks],
+            "base_n_identified": sum(tr.sat_id is not None for tr in base_res.tracks)}
     if args.out:
-        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc)
+        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff)
     return doc
 
 
-def _write_outputs(out, doc, res, name, start_utc):
+def _differential_solutions(diff):
+    """The differential fixes with the keys of replay's solutions (DESIGN 4.1); the clock is rover minus base."""
+    from ..replay.differential import block_times
+    from .position import _solution
+
+    f = diff.fix
+    time_utc, t_s = block_times(diff)
+    out = []
+    for k in np.flatnonzero(np.isfinite(f.pos_ecef_m).all(-1)):
+        res = f.residuals_hz[(f.block == k) & f.used]
+        rms = float(np.sqrt(np.mean(res**2))) if res.size else None
+        sol = _solution(t_s[k], time_utc[k], f.pos_ecef_m[k], np.zeros(3), float(f.clock_poly_hz[k, 0]),
+                        float(f.gdop[k]), f.n_sats[k], f.n_used[k], f.iterations[k], rms,
+                        (f.status[k], f.dof[k], f.chi2_p[k]), f.cov[k, :3, :3])
+        if f.clock_poly_hz.shape[1] > 1:
+            sol["clock_drift_hz_per_s"] = float(f.clock_poly_hz[k, 1])
+        out.append(sol)
+    return out
+
+
+def _write_outputs(out, doc, res, name, start_utc, diff=None):
     from ..plots.spectra import plot_spectrogram
     from .position import fixes_csv_rows
 
     # The files this run makes, all or none (a directory in the place of one leaves no other behind).
     names = [n for n, made in zip(OUT_FILES, (True, True, res.measurements is not None, bool(doc["solutions"]),
-                                              res.spectrum.shape[1] > 0)) if made]
+                                              res.spectrum.shape[1] > 0, diff is not None)) if made]
     with atomic_files([out / n for n in names]) as tmps:
         path = dict(zip(names, tmps))
         write_json(path["replay.json"], doc)
@@ -134,6 +197,8 @@ def _write_outputs(out, doc, res, name, start_utc):
             write_measurements(path["measurements.csv"], res.measurements)
         if "fixes.csv" in path:
             write_csv(path["fixes.csv"], *fixes_csv_rows(doc["solutions"]))
+        if "base_measurements.csv" in path:
+            write_measurements(path["base_measurements.csv"], diff.base)
         if "spectrogram.png" in path:
             labelled = [(tr.t_s, tr.doppler_hz, tr.sat_id or "unidentified") for tr in res.tracks]
             plot_spectrogram(path["spectrogram.png"], res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,
@@ -169,6 +234,14 @@ def summary(doc):
         lines.append(f"PSS: {'detected' if p['detected'] else 'not detected'} (metric {p['metric']:.2f}), "
                      f"{len(p['frame_start_utc'])} frames from {p['frame_start_utc'][0] if p['frame_start_utc'] else 'n/a'}, "
                      f"OFDM centre offset {p['doppler_hz']:+.0f} Hz")
+    if "differential" in doc:
+        d = doc["differential"]
+        lines.append(f"differential against {d['base_recording']}: {d['n_common']} satellite(s) in common, "
+                     f"base only: {', '.join(d['base_only']) or 'none'}, rover only: "
+                     f"{', '.join(d['rover_only']) or 'none'}; the fixes above are the rover's differential fixes")
+        for s in doc["solutions_alone"][:1]:
+            lines.append(f"rover alone: {format_or_na(s['lat_deg'], '.6f')} {format_or_na(s['lon_deg'], '.6f')} "
+                         f"{format_or_na(s['alt_m'], '.1f')} m  {s['status']}")
     if len(doc["solutions"]) > 10:
         lines.append(f"... {len(doc['solutions']) - 10} more fixes (use --json or --out)")
     if doc["solutions"]:

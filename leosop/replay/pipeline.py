@@ -62,6 +62,9 @@ LO_REFIT_CYCLES = 0.01
 #: Radius searched round the first identification's position when the
 #: refitted tracks are identified again [m]: that position is good to ~1-2 km.
 REFIT_PRIOR_RADIUS_M = 20e3
+#: Default radius of identification's search around a prior position [m] (DESIGN 4.1: ``--init`` within
+#: ~100 km).
+PRIOR_RADIUS_M = 150e3
 #: Longest gap between two tracks of one comb that are joined [s].
 JOIN_GAP_S = 10.0
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
@@ -371,7 +374,7 @@ def track_measurements(tracks, carrier_hz, model_sigma_hz=0.0):
 
 def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True, mask_deg=10.0,
            max_gap_s=None, lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
-           show_progress=False):
+           show_progress=False, prior_radius_m=PRIOR_RADIUS_M):
     """Find, track and identify the combs of a recording, then fix the receiver.
 
     Parameters
@@ -396,6 +399,9 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         offset (up to the band's edges, :func:`search_band`) and the
         identification searches both (:func:`~leosop.replay.identify.identify_tracks`).
     show_progress : bool
+    prior_radius_m : float
+        How far from ``init_pos_ecef_m`` identification searches [m]: a
+        known site (a differential base) needs only a few km, and is fast.
 
     Returns
     -------
@@ -452,7 +458,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     cpu_s = {"blocks": time.process_time() - t0}
     raw = [remove_outliers(tr) for tr in join_fragments(tracker.finish(), max(JOIN_GAP_S, 2.0 * max_gap_s))]
 
-    def identify(raw, init, radius_m=150e3):
+    def identify(raw, init, radius_m):
         tracks = [replace(tr) for tr in raw]  # _correct_rate_change assigns a new doppler_hz
         for tr in tracks:
             _correct_rate_change(tr, np.array([block_len[t] for t in tr.t_s]), fs)
@@ -462,7 +468,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
                                 rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
         return tracks, ident
 
-    tracks, ident = identify(raw, init_pos_ecef_m)
+    tracks, ident = identify(raw, init_pos_ecef_m, prior_radius_m)
     cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
     lo = lo_estimate(ident)
     # The edge tones' misfit over the longest block [cycles] under the Doppler-only tone model.

@@ -296,6 +296,10 @@ class SiteChannel:
         receiver's offset at t is its offset at 0 plus this times t (a
         temperature drift of an LNB oscillator). It is part of every
         satellite's Doppler and Doppler rate (DESIGN 4.2: clocks included).
+    sat_drift_hz_per_s : ndarray, (n_sats,), optional
+        Each satellite oscillator's frequency drift: its offset at t is its
+        part of ``clock_offset_hz`` plus this times t (None: no drift).
+        Receivers of a base/rover pair share it, as they share the orbit.
     """
 
     t_nodes_s: np.ndarray
@@ -307,6 +311,7 @@ class SiteChannel:
     phase_rad: np.ndarray | None = None
     waveform: str = "tones"
     rx_drift_hz_per_s: float = 0.0
+    sat_drift_hz_per_s: np.ndarray | None = None
 
     def __post_init__(self):
         if not np.all(np.isfinite(self.range_m)):
@@ -320,6 +325,8 @@ class SiteChannel:
             raise InputError("C/N0 must be finite (or -inf for silence) and finite somewhere")
         self.clock_offset_hz = np.broadcast_to(np.asarray(self.clock_offset_hz, dtype=float), (n_sats,))
         self.phase_rad = np.zeros(n_sats) if self.phase_rad is None else np.asarray(self.phase_rad, dtype=float)
+        drift = 0.0 if self.sat_drift_hz_per_s is None else np.asarray(self.sat_drift_hz_per_s, dtype=float)
+        self.sat_drift_hz_per_s = np.broadcast_to(drift, (n_sats,))
         self._range = CubicSpline(self.t_nodes_s, self.range_m, axis=1)
         self._range0 = self._range(0.0)
         self._cn0_ref = float(np.max(self.cn0_dbhz[finite]))
@@ -348,11 +355,16 @@ class SiteChannel:
         """Central-tone Doppler of each satellite, clocks included, (n_sats, n)."""
         t = np.asarray(t_s, dtype=float)
         rr = self._range(t, 1)
-        return -rr * self.comb.carrier_hz / C_MPS + self.clock_offset_hz[:, None] + self.rx_drift_hz_per_s * t
+        return -rr * self.comb.carrier_hz / C_MPS + self.clock_offset_hz[:, None] + self._drift_hz_per_s()[:, None] * t
 
     def doppler_rate_hz_per_s(self, t_s):
         """Rate of the central-tone Doppler, (n_sats, n)."""
-        return -self._range(np.asarray(t_s, dtype=float), 2) * self.comb.carrier_hz / C_MPS + self.rx_drift_hz_per_s
+        rate = -self._range(np.asarray(t_s, dtype=float), 2) * self.comb.carrier_hz / C_MPS
+        return rate + self._drift_hz_per_s()[:, None]
+
+    def _drift_hz_per_s(self):
+        """Clock drift in each satellite's Doppler, the receiver's plus the satellite's, (n_sats,)."""
+        return self.rx_drift_hz_per_s + self.sat_drift_hz_per_s
 
     def amplitude(self, t_s):
         """Tone amplitude of each satellite (1 at the strongest node of all), (n_sats, n)."""
@@ -385,10 +397,10 @@ class SiteChannel:
         t = (start + np.arange(int(count))) / self.sample_rate_hz
         geom = -(self._range(t) - self._range0[:, None]) * self.comb.carrier_hz / C_MPS
         amp = self.amplitude(t)
-        drift_cycles = 0.5 * self.rx_drift_hz_per_s * t**2
+        drift = self._drift_hz_per_s()
         iq = np.zeros(t.size, dtype=complex)
         for i in np.flatnonzero(np.any(amp > 0, axis=1)):
-            clock_cycles = self.clock_offset_hz[i] * t + drift_cycles
+            clock_cycles = self.clock_offset_hz[i] * t + 0.5 * drift[i] * t**2
             if self._ofdm is None:
                 iq += amp[i] * comb_baseband(self.comb, t, geom[i], clock_cycles, phase_rad=self.phase_rad[i])
             else:
