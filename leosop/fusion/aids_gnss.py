@@ -55,9 +55,9 @@ def zwd_block(options):
 
 
 def ambiguity_block(sv, arc_start_s, b0_m, sigma_m, step_s):
-    """The IF ambiguity [m] of one arc: constant, prior ``b0_m +- sigma_m``, dropped at the first epoch without it."""
+    """The IF ambiguity [m] of one arc: constant, prior ``b0_m +- sigma_m``, dropped one epoch after its last (a new arc then has a new key)."""
     return StateBlock(f"amb {sv} {arc_start_s:.3f}", (float(b0_m),), (float(sigma_m),), (0.0,),
-                      drop_after_s=0.5 * step_s)
+                      drop_after_s=1.5 * step_s)
 
 
 class PppEpoch(Aid):
