@@ -132,7 +132,7 @@ class PppEpoch(Aid):
 
     def design(self, ins):
         """``dh/dx``, shape (3 (m' - 1), 15 + 1 + m): INS errors, wet delay, ambiguities (the rate's position term,
-        ``(v_sv - v - e e.(v_sv - v)) / rho`` ~ 4e-5 /s for GPS, neglected as in :mod:`leosop.gnss.ppp_ins`)."""
+        ``(v_sv - v - e e.(v_sv - v)) / rho``, below 2e-4 /s for GPS, neglected as in :mod:`leosop.gnss.ppp_ins`)."""
         s = ins.state
         _, m_wet, los, _, C, used, ref = self._rows(ins)
         m = self.orb_idx.size

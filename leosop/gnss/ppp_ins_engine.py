@@ -73,10 +73,11 @@ def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options):
     return aids
 
 
-def run_float(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, options=PppInsOptions()):
+def run_float(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, options=None):
     """The float PPP/INS solution on the engine (no outlier screening, no ambiguity fixing).
 
-    Arguments as :func:`leosop.gnss.ppp_ins.run`. The filter's clock is the
+    Arguments as :func:`leosop.gnss.ppp_ins.run` (``options`` None: the
+    defaults of :class:`PppInsOptions`). The filter's clock is the
     GNSS time ``gnss.t_s``; the IMU increments end at ``gnss.t_s[0] + (i + 1)
     dt_s``; the INS biases have no random walk (as :mod:`leosop.gnss.ppp_ins`).
 
@@ -87,7 +88,8 @@ def run_float(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, sett
         ``pos_fixed_ecef_m`` NaN, ``cov_ins`` NaN (the engine keeps only the
         sigmas of the INS errors), the counters zero.
     """
-    per = int(round(settings.step_s / dt_s))
+    options = PppInsOptions() if options is None else options
+    per = round(settings.step_s / dt_s)
     n_ep = min(len(gnss.t_s), dtheta_b_rad.shape[0] // per + 1)
     n_imu = (n_ep - 1) * per
     t_imu = gnss.t_s[0] + np.arange(1, n_imu + 1) * dt_s
