@@ -148,7 +148,7 @@ def test_float_run_on_the_engine_matches_the_sd_filter(products, monkeypatch):
     sd_run = ppp_ins.run
 
     def both(*args):
-        runs["engine"] = ppp_ins_engine.run_float(*args)
+        runs["engine"] = ppp_ins_engine.run(*args)
         runs["sd"] = sd_run(*args)
         return runs["sd"]
 

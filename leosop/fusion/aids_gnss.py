@@ -82,6 +82,12 @@ class PppEpoch(Aid):
         Day of year of ``t_orbit_s = 0`` (for the Niell mapping).
     options : leosop.gnss.ppp_ins.PppInsOptions
         ``mask_deg`` and the zenith sigmas ``sigma_code_m``, ``sigma_phase_m``, ``sigma_rate_mps``.
+
+    Attributes
+    ----------
+    used : ndarray of int
+        Satellites (indices into ``orb_idx``) above the mask at the last
+        :meth:`matrices` call, ``ref`` their reference (for ambiguity fixing).
     """
 
     name = "ppp"
@@ -97,6 +103,7 @@ class PppEpoch(Aid):
         self.doy = float(doy)
         self.options = options
         self.sigma_zenith = np.array([options.sigma_code_m, options.sigma_phase_m, options.sigma_rate_mps])
+        self.used, self.ref = np.zeros(0, int), -1
 
     def geometry(self, ins):
         """Range, rate, line of sight, elevation at the INS; shapes (m,), (m,), (m, 3), (m,); and ``C_e_n``."""
@@ -164,6 +171,7 @@ class PppEpoch(Aid):
     def matrices(self, ins):
         """``(z, H, R)`` at ``ins``: innovation ``h(ins) - measured``, :meth:`design`, :meth:`noise`."""
         h, _, _, elev, _, used, ref = self._rows(ins)
+        self.used, self.ref = used, ref
         return self._sd(h - self.obs, used, ref), self.design(ins), self._noise(elev, used, ref)
 
     def rate(self, ins):

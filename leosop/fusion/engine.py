@@ -358,7 +358,7 @@ class _Filter:
 
 
 def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
-        time_offset_s=0.0, progress=None):
+        time_offset_s=0.0, progress=None, after_aid=None):
     """Run the filter over an IMU log with time-ordered aids.
 
     Parameters
@@ -382,6 +382,12 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
         IMU clock minus the aids' clock (the initial estimate when it is a state).
     progress : callable, optional
         Wraps the iterator over INS updates (a progress bar).
+    after_aid : callable, optional
+        Called after each aid is applied as ``after_aid(aid, state, P, blocks)``:
+        the INS after the feedback, the full covariance and the state blocks
+        ``{key: (first index in P, estimate)}``, to be read, not changed (a
+        step on the float filter that does not feed back, e.g. PPP ambiguity
+        fixing in :mod:`leosop.gnss.ppp_ins_engine`).
 
     Returns
     -------
@@ -431,6 +437,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
             f.propagate()
             f.admit(aid)
             f.apply(aid, f.view(t_aid, t_now))
+            if after_aid is not None:
+                after_aid(aid, f.state, f.P, {key: (b[1], b[2]) for key, b in f.blocks.items()})
         if f.pending_s >= settings.step_s:
             f.propagate()
         _record(out, k + 1, f)
