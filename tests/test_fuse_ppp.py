@@ -160,3 +160,62 @@ def test_float_run_on_the_engine_matches_the_sd_filter(products, monkeypatch):
     assert np.all(diff < 0.1 * sigma) and diff.max() > 0.0
     np.testing.assert_allclose(np.sqrt(np.trace(eng.cov_pos_enu_m2, axis1=1, axis2=2))[1:], sigma, rtol=0.03)
     assert np.all(eng.n_sats[1:] >= 5) and np.linalg.norm(eng.pos_float_ecef_m[-1] - truth[-1]) < 3 * sigma[-1]
+
+
+def test_ambiguity_fixing_equals_the_sd_filter_fixing():
+    # The same float filter in both layouts (undifferenced ambiguities B for the engine, D_j = B_j - B_ref
+    # for ppp_ins, mapped by T): the same wide-lanes, narrow-lanes, ratio, fixed position and conditioned
+    # covariance; 1e-9 relative is the rounding of the solves.
+    rng = np.random.default_rng(4)
+    m, ref = 7, 2
+    others = np.flatnonzero(np.arange(m) != ref)
+    n_x = N_INS + 1 + m
+    n_wl = np.r_[rng.integers(-20, 20, m)]
+    n_wl[ref] = 0
+    n1 = rng.integers(-50, 50, m)
+    n1[ref] = 0
+    b = 3.0 + ppp_ins.LAM_NL_M * n1 + ppp_ins.BETA_M * n_wl + rng.normal(size=m) * 0.002
+    A = rng.normal(size=(n_x, n_x)) * np.r_[np.full(3, 1e-4), np.full(3, 0.01), np.full(2, 2e-9), 0.01,
+                                            np.full(6, 1e-6), 0.01, np.full(m, 0.001)][:, None]
+    P = A @ A.T + np.diag(np.r_[np.full(N_INS + 1, 1e-16), np.full(m, 1e-6)])
+    P[-m:, -m:] += 4.0  # the unobservable common mode of B
+    col = N_INS + np.arange(1 + m)
+    est = np.r_[0.1, b]
+    n_mw = np.full(m, 30)
+    mean = 0.4 + n_wl + rng.normal(size=m) * 0.02
+    ep = ppp_ins_engine._Epoch(0, np.arange(m), np.zeros(m, bool), mean * n_mw, n_mw * (mean**2 + 0.01), n_mw,
+                               np.zeros(m))
+    inertial = (np.zeros(m, bool), np.zeros(m))
+    state = _state()
+
+    def result():
+        n = 1
+        return ppp_ins.PppInsResult(np.zeros(n), *np.full((2, n, 3), np.nan), np.full((n, 3, 3), np.nan),
+                                    np.full((n, N_INS, N_INS), np.nan), *np.zeros((3, n), int), np.full(n, np.nan),
+                                    np.zeros(n, bool), 0, 0, 0)
+
+    out = result()
+    dx, P_fix = ppp_ins_engine._fix(out, 0, state, P, est, col, np.arange(m), np.arange(m), ref, ep, inertial,
+                                    np.zeros(m), OPT)
+    T = np.zeros((ppp_ins._A0 + m, n_x))
+    T[:N_INS + 1, :N_INS + 1] = np.eye(N_INS + 1)
+    T[ppp_ins._A0 + others, N_INS + 1 + others] = 1.0
+    T[ppp_ins._A0 + others, N_INS + 1 + ref] = -1.0
+    T = np.diag(np.r_[np.ones(N_INS), -np.ones(1 + m)]) @ T
+    x_old = np.zeros(ppp_ins._A0 + m)
+    x_old[ppp_ins._ZWD] = est[0]
+    x_old[ppp_ins._A0 + others] = b[others] - b[ref]
+    out_old = result()
+
+    class Ins:
+        pass
+
+    ins = Ins()
+    ins.state = state
+    dx_old, P_fix_old = ppp_ins._fix(out_old, 0, ins, T @ P @ T.T, x_old, others, ref,
+                                     (ep.mw_sum, ep.mw_sq, ep.mw_n), inertial, np.zeros(m), OPT)
+    assert out.n_fixed[0] == out_old.n_fixed[0] == m - 1 and out.n_wl[0] == m - 1
+    assert out.ratio[0] == pytest.approx(out_old.ratio[0], rel=1e-9)
+    np.testing.assert_allclose(out.pos_fixed_ecef_m, out_old.pos_fixed_ecef_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(T @ dx, dx_old, rtol=1e-9, atol=1e-9 * np.abs(dx_old).max())
+    np.testing.assert_allclose(T @ P_fix @ T.T, P_fix_old, rtol=1e-7, atol=1e-9 * np.abs(P_fix_old).max())
