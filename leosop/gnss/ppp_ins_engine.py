@@ -27,7 +27,7 @@ from ..fusion.aids_gnss import ZWD_KEY, PppEpoch, ambiguity_block, zwd_block
 from ..fusion.common import N_INS, initial_covariance, pos_jacobian
 from ..ins.error_model import DPOS, DV, PHI
 from . import models
-from .geometry import satellite_clock
+from .geometry import range_and_rate, satellite_clock
 from .lambda_ import partial_fix
 from .ppp import PppOptions
 from .ppp_ins import (
@@ -46,8 +46,16 @@ from .ppp_obs import detect_slips
 __all__ = ["ppp_aids", "run"]
 
 
-def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options):
+def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options, pos_approx_ecef_m):
     """One :class:`PppEpoch` per GNSS epoch with at least two satellites.
+
+    The undifferenced ambiguities' common mode is not observed (the SD rows
+    see only differences): where every arc starts afresh (the first epoch,
+    after a gap) the highest satellite's ambiguity is the datum, prior sigma
+    zero, the others ``amb_sigma_m`` each, which gives the SD ambiguities
+    against it the priors of :mod:`leosop.gnss.ppp_ins` (independent,
+    ``amb_sigma_m``); elsewhere a new arc's ``amb_sigma_m`` is its SD prior
+    too, the others' common mode being known through the datum.
 
     Parameters
     ----------
@@ -61,6 +69,9 @@ def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options):
     step_s : float
         GNSS interval (an arc ends at a gap longer than 1.5 of it).
     options : PppInsOptions
+    pos_approx_ecef_m : ndarray, shape (3,)
+        Where the elevations that choose the datum are computed (kilometres
+        off move them by hundredths of a degree).
 
     Returns
     -------
@@ -83,8 +94,12 @@ def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options):
     for k in range(n_ep):
         js = np.flatnonzero(have[k])
         starts = js[new_arc[k, js] | ~seen[js]]
+        sigma = np.full(n_sv, options.amb_sigma_m)
+        if js.size >= 2 and starts.size == js.size:
+            los = range_and_rate(orbits, gnss.orb_idx[js], t[k], pos_approx_ecef_m, np.zeros(3))[2]
+            sigma[js[np.argmax(los @ pos_approx_ecef_m)]] = 0.0  # the highest: largest component along the radius
         for j in starts:
-            arc[j] = ambiguity_block(gnss.sv[j], t[k], Lc[k, j] - Pc[k, j], options.amb_sigma_m, step_s)
+            arc[j] = ambiguity_block(gnss.sv[j], t[k], Lc[k, j] - Pc[k, j], sigma[j], step_s)
         seen[:] = False
         seen[js] = True
         fresh = np.ones(n_sv, bool)  # a Melbourne-Wuebbena arc restarts with the ambiguity's, and in a gap
@@ -140,7 +155,8 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
     n_imu = (n_ep - 1) * per
     t_imu = gnss.t_s[0] + np.arange(1, n_imu + 1) * dt_s
     t_filter = np.r_[t_imu[0] - dt_s, t_imu[per - 1::per]]  # the engine's own record times, exactly
-    aids, epochs = ppp_aids(gnss, orbits, clocks, n_ep, t_filter, settings.step_s, options)
+    aids, epochs = ppp_aids(gnss, orbits, clocks, n_ep, t_filter, settings.step_s, options,
+                            geodetic_to_ecef(state0.lat_rad, state0.lon_rad, state0.alt_m))
     out = PppInsResult(t_s=gnss.t_s[:n_ep], pos_float_ecef_m=np.full((n_ep, 3), np.nan),
                        pos_fixed_ecef_m=np.full((n_ep, 3), np.nan), cov_pos_enu_m2=np.full((n_ep, 3, 3), np.nan),
                        cov_ins=np.full((n_ep, N_INS, N_INS), np.nan), n_sats=np.zeros(n_ep, int),
@@ -181,6 +197,7 @@ class _AfterEpoch:
         self.out, self.epochs, self.o = out, epochs, o
         self.iwl = _InertialWideLane(len(gnss.sv))
         self.snap_k = -1  # the last epoch before the gap the inertial wide-lanes were prepared for
+        self.ref_sv, self.last_sv = -1, set()
 
     def __call__(self, aid, state, P, blocks):
         ep, o, out, iwl = self.epochs[id(aid)], self.o, self.out, self.iwl
@@ -190,10 +207,11 @@ class _AfterEpoch:
         iwl.new_arcs(ep.fresh, js[aid.used], self.t[k])
         col = np.r_[blocks[ZWD_KEY][0], [blocks[b.key][0] for b in aid.states[1:]]]
         est = np.r_[blocks[ZWD_KEY][1][0], [blocks[b.key][1][0] for b in aid.states[1:]]]
-        used, ref = aid.used, aid.ref
-        iref = int(np.flatnonzero(used == ref)[0])
+        used = aid.used
         fixes = []
         h_pos, m_wet, g, sin_el = self._wide_lane(aid, state, est[0], k, js[used], ep.clk_m[used])
+        iref = self._reference(js[used], ep.fresh, sin_el, gap=iwl.k_last < k - 1)
+        ref = used[iref]
         if o.ar and o.wl_inertial:
             H_sd = np.column_stack([h_pos - h_pos[iref], -(m_wet - m_wet[iref])])
             pz = np.r_[np.arange(N_INS)[DPOS], col[0]]
@@ -220,6 +238,28 @@ class _AfterEpoch:
             # ambiguity is dropped in the gap, so conditioning on the fixed ones loses nothing).
             fixes.append(held)
         return fixes
+
+    def _reference(self, sv, fresh, sin_el, gap):
+        """The reference of the SD ambiguities fixed (index into ``sv``), chosen as :mod:`leosop.gnss.ppp_ins` does.
+
+        The float filter does not depend on it (:mod:`leosop.fusion.aids_gnss`),
+        the wide-lane rule does (both arcs' lengths): kept while its arc goes
+        on, else the highest satellite whose arc goes on (a reference
+        change), else (after a gap, at the start) the highest.
+        """
+        was = self.ref_sv
+        if gap:
+            was = -1
+        if not (was in sv and not fresh[was]):
+            order = np.argsort(-sin_el)
+            cand = [i for i in order if not fresh[sv[i]] and sv[i] in self.last_sv]
+            if cand and was >= 0:
+                self.ref_sv = int(sv[cand[0]])
+                self.out.n_ref_changes += 1
+            else:
+                self.ref_sv = int(sv[order[0]])
+        self.last_sv = set(sv.tolist())
+        return int(np.flatnonzero(sv == self.ref_sv)[0])
 
     def _wide_lane(self, aid, state, zwd_m, k, sv, clk_m):
         """Range rows ``h_pos`` (m, 3), wet mappings, ``g`` [cycles] and sin(elevation) of the used satellites."""
