@@ -136,7 +136,7 @@ def test_ppp_update_equals_the_sd_filter_update(products):
     np.testing.assert_allclose(T @ P1 @ T.T, P1_old, rtol=1e-9, atol=1e-9 * np.abs(P1_old).max())
 
 
-def test_float_run_on_the_engine_matches_the_sd_filter(products, monkeypatch):
+def test_float_run_on_the_engine_matches_the_sd_filter(products):
     # 40 s of the simulated car (seed 3, float): both filters on the same simulated data. They differ by
     # design in small ways: the engine applies the first epoch after its first pair of IMU samples (and
     # records the start before it, so epoch 0 is left out), evaluates the error model at the end of each
@@ -144,17 +144,11 @@ def test_float_run_on_the_engine_matches_the_sd_filter(products, monkeypatch):
     # the difference 5 m; measured over the last 5 of 10 min on 5 seeds the position differences are
     # below 1.5 mm (sigma 9 cm). Here (first 40 s) below 0.04 sigma, bound 0.1 sigma; the sigmas within
     # 1.1 % (bound 3 %).
-    runs = {}
-    sd_run = ppp_ins.run
-
-    def both(*args):
-        runs["engine"] = ppp_ins_engine.run(*args)
-        runs["sd"] = sd_run(*args)
-        return runs["sd"]
-
-    monkeypatch.setattr(ppp_ins_study.ppp_ins, "run", both)
-    truth, _ = ppp_ins_study.scenario(3, duration_s=40.0, outage_at_s=None, products=products, ar=False)
-    sd, eng = runs["sd"], runs["engine"]
+    runs = {e: ppp_ins_study.scenario(3, duration_s=40.0, outage_at_s=None, products=products, ar=False, engine=e)
+            for e in (False, True)}
+    truth = runs[False][0]
+    np.testing.assert_array_equal(runs[True][0], truth)  # the same simulated run
+    sd, eng = runs[False][1], runs[True][1]
     sigma = np.sqrt(np.trace(sd.cov_pos_enu_m2, axis1=1, axis2=2))[1:]
     diff = np.linalg.norm(eng.pos_float_ecef_m - sd.pos_float_ecef_m, axis=1)[1:]
     assert np.all(diff < 0.1 * sigma) and diff.max() > 0.0
