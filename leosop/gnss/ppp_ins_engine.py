@@ -4,15 +4,21 @@ The observations of :func:`leosop.gnss.ppp_ins.run` become one
 :class:`leosop.fusion.aids_gnss.PppEpoch` aid per GNSS epoch (SD IF code,
 phase and range rate; the wet delay and one undifferenced ambiguity per arc
 as engine state blocks; arcs cut by :func:`leosop.gnss.ppp_obs.detect_slips`)
-and :func:`leosop.fusion.engine.run` is the filter. Ambiguity fixing reads
-the float filter after each epoch (the engine's ``after_aid`` hook) as
-:mod:`leosop.gnss.ppp_ins` does: SD wide-lanes rounded from the arcs'
-Melbourne-Wuebbena means, narrow-lanes by LAMBDA with partial fixing, the
-fixed position the float one conditioned on them (no fix-and-hold). Not
-hosted yet, and still done by :mod:`leosop.gnss.ppp_ins` in its own loop:
-the per-row outlier screening (it needs ``P`` before the update), the bridge
-from the fixed solution into a gap and the inertial wide-lane re-fix after
-it (they replace the engine's ``P`` and states).
+and :func:`leosop.fusion.engine.run` is the filter. What follows an
+epoch's update runs in the engine's ``after_aid`` hook (:class:`_AfterEpoch`),
+as in :mod:`leosop.gnss.ppp_ins`: the inertial wide-lanes after a gap (an
+update of their ranges), SD wide-lanes rounded from the arcs'
+Melbourne-Wuebbena means, narrow-lanes by LAMBDA with partial fixing on the
+float filter (no fix-and-hold), and before a gap the bridge from the fixed
+solution (the hook hands the engine those corrections to feed back).
+
+Not hosted yet: the per-row outlier screening of :mod:`leosop.gnss.ppp_ins`
+(normalised innovations above ``k_outlier``; a phase outlier restarts the
+ambiguity), which needs ``P`` before the update, so :func:`run` takes every
+row. Measured against :func:`leosop.gnss.ppp_ins.run` on the simulated car
+(which has no outliers): the same fixed epochs and integers, positions
+within millimetres, except where a LAMBDA test sits on its threshold (one
+epoch's re-fix after a gap, seed 0 of the 330 s outage case).
 """
 
 from dataclasses import dataclass
