@@ -151,9 +151,9 @@ def run(gnss, orbits, clocks, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings, 
     Returns
     -------
     PppInsResult
-        At the GNSS epochs; ``cov_ins`` only where there is no GNSS (the
-        engine keeps the sigmas of the INS errors, not ``P``, elsewhere: NaN),
-        the counters of slips, outliers and reference changes zero.
+        At the GNSS epochs; ``cov_ins`` at the GNSS epochs only (after the
+        epoch's last step; NaN in gaps, where the engine records only the
+        sigmas), the counters of slips and outliers zero.
     """
     options = PppInsOptions() if options is None else options
     per = round(settings.step_s / dt_s)
@@ -290,6 +290,7 @@ class _AfterEpoch:
 
 
 def _record(out, k, state, P):
+    out.cov_ins[k] = P[:N_INS, :N_INS]
     out.pos_float_ecef_m[k] = geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
     J = pos_jacobian(state.lat_rad, state.alt_m)
     out.cov_pos_enu_m2[k] = J @ P[DPOS, DPOS] @ J.T
