@@ -338,7 +338,13 @@ class _Filter:
         count[0] += 1
         nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
         self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
-        dx, self.P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z, H, R)
+        dx, P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z, H, R)
+        self.feed_back(dx, P)
+        return nll
+
+    def feed_back(self, dx, P):
+        """Remove the estimated errors ``dx`` (n_x,) from the INS, sensor and block estimates; ``P`` (n_x, n_x) after."""
+        self.P = P
         self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
         self.bg = self.bg + dx[EPS]
         self.ba = self.ba + dx[NABLA]
@@ -349,7 +355,6 @@ class _Filter:
             self.td -= float(dx[self.TD.start])  # dx is td_hat minus the true offset
         for b, i, x, _ in self.blocks.values():
             x -= dx[i:i + b.size]
-        return nll
 
     def align_yaw(self, vel_enu_mps, sigma_rad):
         """Set the yaw to the course of ``vel_enu_mps``, keeping pitch and roll; reset the yaw's covariance."""
@@ -377,7 +382,7 @@ class _Filter:
 
 
 def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
-        time_offset_s=0.0, progress=None, on_aid=None):
+        time_offset_s=0.0, progress=None, on_aid=None, after_aid=None):
     """Run the filter over an IMU log with time-ordered aids.
 
     Parameters
@@ -405,6 +410,14 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
         Called after each aid's gate test as ``on_aid(aid, z, S, used, reopened)``:
         innovation (m,), its covariance (m, m) as used, whether the aid was
         used, and whether it failed the gate and was used all the same.
+    after_aid : callable, optional
+        Called after each aid is applied as ``after_aid(aid, state, P, blocks)``:
+        the INS after the feedback, the full covariance and the state blocks
+        ``{key: (first index in P, estimate)}`` (read-only). It returns a list
+        of further corrections ``(dx, P_after)`` to feed back in turn (error
+        sense, as an update's), or None: steps on the filter that are not one
+        aid's (z, H, R), e.g. the PPP ambiguity fixing, wide-lane update and
+        bridge into a gap of :mod:`leosop.gnss.ppp_ins_engine`.
 
     Returns
     -------
@@ -455,6 +468,9 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
             f.propagate()
             f.admit(aid)
             f.apply(aid, f.view(t_aid, t_now))
+            if after_aid is not None:
+                for dx, P in after_aid(aid, f.state, f.P, {key: (b[1], b[2]) for key, b in f.blocks.items()}) or ():
+                    f.feed_back(dx, P)
         if f.pending_s >= settings.step_s:
             f.propagate()
         _record(out, k + 1, f)
