@@ -110,7 +110,9 @@ class PppOptions:
     sigma_code_m: float = 0.9
     sigma_phase_m: float = 0.009
     zwd_rw_m_per_rt_s: float = 1e-4
-    gradients: bool = True
+    # Troposphere gradients: off, because on ESBC00DNK they change nothing that matters (docs/ppp.md,
+    # "Troposphere gradients"); 1 mm/sqrt(h) after a 2 mm prior, about a typical mid-latitude gradient.
+    gradients: bool = False
     grad_rw_m_per_rt_s: float = 1e-3 / 60.0
     init_grad_sigma_m: float = 0.002
     kin_pos_sigma_m: float = 100.0
