@@ -80,7 +80,7 @@ def test_static_window_converges(day):
     assert 0.0 < z < 0.4  # zenith wet delay of a mid-latitude summer day
     # With troposphere gradients: the horizontal stays within 1 cm of the run without (measured 0.5 cm east),
     # and the gradients are millimetres (at most 0.9 mm north, 1.3 mm east over these 4 h; 5 mm would take
-    # a strong weather front, and a wrong sign or azimuth convention lets them absorb the phase residuals).
+    # a strong weather front).
     grad = run_ppp(obs2, orb, clk, PppOptions(static=True, gradients=True))
     lat, lon, _ = ecef_to_geodetic(REF_ITRF_ECEF_M)
     d_enu = (grad.pos_ecef_m[-1] - final["GE"]) @ C_e_n(lat, lon)
