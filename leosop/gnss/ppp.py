@@ -21,9 +21,10 @@ ambiguities, m), c_1 .. c_n (time-correlated phase errors, m)]``.
 Models (``leosop.gnss.models``): precise orbit and clock interpolation,
 relativistic clock term, Sagnac rotation, Shapiro delay, Saastamoinen
 hydrostatic delay with the [Niell 1996] mapping functions and an estimated
-zenith wet delay (random walk), north and east troposphere gradients with
-[Chen 1997]'s mapping (random walks; ``gradients``), phase wind-up, solid Earth tide, antenna reference
-point height from the RINEX header; with an ANTEX file
+zenith wet delay (random walk), optionally north and east troposphere
+gradients with [Chen 1997]'s mapping (random walks; ``gradients``, off by
+default), phase wind-up, solid Earth tide, antenna reference point height
+from the RINEX header; with an ANTEX file
 (:mod:`leosop.gnss.antex`), the receiver antenna's offset and elevation-
 dependent variations and the satellites' offsets (nominal yaw; satellites
 without a block valid on the day are left out, ``PppResult.no_antenna``).
@@ -259,8 +260,8 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
     return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "m_grad": m_grad, "ok": ok,
-            "new_arc": new_arc, "tide": tide, "arp_ecef": arp_ecef, "no_antenna": missing, "rx_calibrated": rx_cal, "x0": x0, "t_s": t_s,
-            "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
+            "new_arc": new_arc, "tide": tide, "arp_ecef": arp_ecef, "no_antenna": missing, "rx_calibrated": rx_cal,
+            "x0": x0, "t_s": t_s, "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
 
 
 def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None, *,
