@@ -111,8 +111,9 @@ class PppOptions:
     sigma_code_m: float = 0.9
     sigma_phase_m: float = 0.009
     zwd_rw_m_per_rt_s: float = 1e-4
-    # Troposphere gradients: off, because on ESBC00DNK they change nothing that matters (docs/ppp.md,
-    # "Troposphere gradients"); 1 mm/sqrt(h) after a 2 mm prior, about a typical mid-latitude gradient.
+    # Troposphere gradients: off, because on ESBC00DNK they change the position by millimetres either way
+    # (docs/ppp.md, "Troposphere: the mapping function and gradients"); 1 mm/sqrt(h) after a 2 mm prior,
+    # about a typical mid-latitude gradient.
     gradients: bool = False
     grad_rw_m_per_rt_s: float = 1e-3 / 60.0
     init_grad_sigma_m: float = 0.002
@@ -175,8 +176,8 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         removed, so that ``Pc = rho + clk + m_wet ZWD + m_grad . (G_N, G_E)``
         and ``Lc = Pc + N``; ``RS`` (n_epochs, n_sats, 3) satellite positions
         (Sagnac applied), ``elev``, ``m_wet``, ``m_grad`` (n_epochs, n_sats, 2)
-        (:func:`leosop.gnss.models.gradient_mapping`), ``ok`` (usable), ``new_arc``, ``MW`` (Melbourne-Wuebbena,
-        wide-lane cycles), ``tide``
+        (:func:`leosop.gnss.models.gradient_mapping`), ``ok`` (usable),
+        ``new_arc``, ``MW`` (Melbourne-Wuebbena, wide-lane cycles), ``tide``
         (n_epochs, 3), ``arp_ecef`` (3,), ``x0`` a priori position, ``t_s``.
     """
     opt = options
@@ -338,8 +339,8 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
             continue
         dt = 0.0 if last_t is None else t_s[i] - last_t
         last_t = t_s[i]
-        # Prediction: ZWD and gradients random walks, clocks white, position static or white (kinematic), phase errors
-        # first-order Gauss-Markov (their variance elevation-dependent as the white noise's).
+        # Prediction: ZWD and gradients random walks, clocks white, position static or white (kinematic),
+        # phase errors first-order Gauss-Markov (their variance elevation-dependent as the white noise's).
         Q = np.zeros(n_x)
         Q[5] = opt.zwd_rw_m_per_rt_s**2 * dt
         Q[6:amb0] = opt.grad_rw_m_per_rt_s**2 * dt
