@@ -9,7 +9,9 @@ Printed:
 - kinematic: time to first fix (goal <= 15 min), share of epochs fixed after it (>= 90 %), 3-D RMS after it
   (<= 3 cm), wrong fixes (fixed epochs more than 5 cm from the reference, and fixed epochs whose position
   jumps by more than 5 cm from the previous fixed epoch), the share of epoch-axis errors within 3 sigma
-  (>= 95 %) for the fixed epochs and for the float solution after 2 h;
+  (>= 95 %) for the fixed epochs and for the float solution after 2 h; the troposphere gradients;
+- where the kinematic error comes from: the RMS per component after the first fix by 3-h block of the day
+  (GPST) and by the number of satellites used;
 - re-convergence: the kinematic run with the data cut for 5 min (10 epochs) at each of ``--cuts`` hours,
   the time from the first epoch after the cut to the first fixed one (goal <= 2 min);
 - run times (goal <= 30 s for the day on one core).
@@ -18,6 +20,9 @@ With ``--up-budget`` it prints instead the static fixed final error with each ca
 up bias changed (elevation mask, receiver antenna variations set to zero, GPS alone, phase wind-up off, a
 hydrostatic delay 10 hPa heavier), and the factor on the receiver's ionosphere-free variations that would
 cancel the up error at each mask (docs/ppp.md, "Ambiguity resolution"): about 4 min on one core.
+
+``--ppp NAME=VALUE`` changes a ``PppOptions`` field (e.g. ``--ppp gradients=0`` for the filter without
+troposphere gradients), ``--option NAME=VALUE`` an ``ArOptions`` field.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ar.py [--hours 24] [--cuts 6 12 18] [--up-budget]``
 """
@@ -59,7 +64,29 @@ def select(obs, keep):
                                lli={k: v[keep] for k, v in obs.lli.items()})
 
 
-def up_budget(obs, orb, clk, atx, aro, no_ar, ref, C):
+def options(cls, pairs):
+    """``cls`` with the fields of ``NAME=VALUE`` strings (booleans as 0/1)."""
+    kw = {}
+    for k, v in (p.split("=") for p in pairs):
+        t = type(getattr(cls(), k))
+        kw[k] = bool(int(v)) if t is bool else t(v)
+    return cls(**kw)
+
+
+def breakdown(t_s, enu_m, after, n_used):
+    """RMS [cm] per ENU component after the first fix, by 3-h block and by satellites used."""
+    hour = t_s / 3600.0
+    groups = [(f"{h:2d}-{h + 3:2d} h", after & (hour >= h) & (hour < h + 3)) for h in range(0, 24, 3)]
+    groups += [(f"{lo:2d}-{hi:2d} sats", after & (n_used >= lo) & (n_used <= hi))
+               for lo, hi in ((5, 9), (10, 12), (13, 15), (16, 18), (19, 40))]
+    for label, m in groups:
+        if m.sum() >= 10:
+            rms = 100 * np.sqrt(np.mean(enu_m[m] ** 2, axis=0))
+            print(f"           {label}: {int(m.sum()):4d} epochs, RMS ENU {np.round(rms, 2).tolist()} cm, 3-D "
+                  f"{np.linalg.norm(rms):.2f}, mean up {100 * enu_m[m, 2].mean():+.2f} cm")
+
+
+def up_budget(obs, orb, clk, atx, aro, no_ar, ref, C, ppo):
     """Static fixed final ENU error [cm] with each candidate source of the up bias changed, one run each."""
     no_pcv = copy.deepcopy(atx)
     rx = no_pcv.receiver(obs.antenna_type)
@@ -75,7 +102,7 @@ def up_budget(obs, orb, clk, atx, aro, no_ar, ref, C):
     up = {}
     for label, kw, antex, patches in cases:
         with mock.patch.dict(vars(models), patches):
-            res = run_ppp(obs, orb, clk, PppOptions(static=True, **kw), antex, ar=aro, no_ar=no_ar)
+            res = run_ppp(obs, orb, clk, dataclasses.replace(ppo, static=True, **kw), antex, ar=aro, no_ar=no_ar)
         k = np.flatnonzero(np.isfinite(res.pos_ecef_m).all(axis=1))[-1]
         enu = 100 * C.T @ (res.pos_ecef_m[k] - ref)
         up[label] = enu[2]
@@ -93,9 +120,11 @@ def main():
     ap.add_argument("--cuts", type=float, nargs="*", default=[6.0, 12.0, 18.0], help="hours of the 5-min data cuts")
     ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
                     help="an ArOptions field (repeatable)")
+    ap.add_argument("--ppp", action="append", default=[], metavar="NAME=VALUE",
+                    help="a PppOptions field (repeatable; booleans 0/1)")
     ap.add_argument("--up-budget", action="store_true", help="the static up error's candidate sources instead")
     a = ap.parse_args()
-    aro = ArOptions(**{k: type(getattr(ArOptions(), k))(v) for k, v in (o.split("=") for o in a.option)})
+    aro, ppo = options(ArOptions, a.option), options(PppOptions, a.ppp)
     t0 = time.perf_counter()
     obs = read_obs(OBS, codes=CODES)
     orb, clk, atx = read_sp3(SP3), read_clk(CLK), read_antex(ATX)
@@ -107,12 +136,12 @@ def main():
     C = C_e_n(*ecef_to_geodetic(ref)[:2])
     print(f"read {t_read:.1f} s; reference ITRF2014 {np.round(ref, 4).tolist()}; not fixed: {', '.join(no_ar)}")
     if a.up_budget:
-        up_budget(obs, orb, clk, atx, aro, no_ar, ref, C)
+        up_budget(obs, orb, clk, atx, aro, no_ar, ref, C, ppo)
         return
 
     def run(o, static):
         t = time.perf_counter()
-        res = run_ppp(o, orb, clk, PppOptions(static=static), atx, ar=aro, no_ar=no_ar)
+        res = run_ppp(o, orb, clk, dataclasses.replace(ppo, static=static), atx, ar=aro, no_ar=no_ar)
         t_s = (res.time_gps - res.time_gps[0]).astype("timedelta64[s]").astype(float)
         return res, t_s, time.perf_counter() - t
 
@@ -123,6 +152,8 @@ def main():
     print(f"static: final ({'fixed' if res.fixed[k] else 'float'}) 3-D error {100 * np.linalg.norm(e[k]):.2f} cm, "
           f"ENU {np.round(100 * C.T @ e[k], 2).tolist()} cm, sigma {np.round(100 * res.sigma_enu_m[k], 2).tolist()}"
           f" cm; float {100 * np.linalg.norm(res.pos_float_ecef_m[k] - ref):.2f} cm; run {dt:.1f} s")
+    if np.isfinite(res.grad_ne_m[k]).all():
+        print(f"        troposphere gradients N / E at the end {np.round(1000 * res.grad_ne_m[k], 2).tolist()} mm")
     for h in (1, 3, 6, 12):
         i = np.flatnonzero(ok & (t_s < 3600 * h))
         if i.size and t_s[i[-1]] >= 3600 * h - 600:
@@ -153,6 +184,11 @@ def main():
           f"{np.round(100 * np.mean(r_fix <= 3, axis=0), 1).tolist()}), float after 2 h "
           f"{100 * np.mean(r_flt <= 3):.1f} % (ENU {np.round(100 * np.mean(r_flt <= 3, axis=0), 1).tolist()}); "
           f"median fixed sigma ENU {np.round(100 * np.median(res.sigma_enu_m[fx], axis=0), 2).tolist()} cm")
+    g = 1000 * res.grad_ne_m[ok]
+    if np.isfinite(g).all():
+        print(f"           troposphere gradients N / E: mean {np.round(g.mean(axis=0), 2).tolist()} mm, "
+              f"std {np.round(g.std(axis=0), 2).tolist()} mm")
+    breakdown(t_s, enu, after, res.n_used)
 
     for h in a.cuts:
         c0 = int(round(h * 120))

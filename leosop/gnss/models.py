@@ -14,9 +14,16 @@ from ..constants import C_MPS, DAY_S, GM_M3_PER_S2, JD_J2000, WGS84_A_M
 from ..frames import gmst1982
 
 __all__ = [
-    "saastamoinen_zhd_m", "niell_mapping", "sun_moon_ecef_m", "solid_tide_ecef_m", "satellite_axes",
+    "TT_MINUS_GPST_S",
+    "gradient_mapping",
+    "niell_mapping",
+    "relativistic_clock_s",
+    "saastamoinen_zhd_m",
+    "satellite_axes",
+    "shapiro_m",
+    "solid_tide_ecef_m",
+    "sun_moon_ecef_m",
     "windup_cycles",
-    "relativistic_clock_s", "shapiro_m", "TT_MINUS_GPST_S",
 ]
 
 #: TT - GPST [s] (TAI - GPST = 19 s, TT - TAI = 32.184 s).
@@ -91,6 +98,36 @@ def niell_mapping(elev_rad, lat_rad, alt_m, doy):
     m_dry = _marini(s, *coef_h) + (1.0 / s - _marini(s, *_NMF_HT)) * alt_m * 1e-3
     m_wet = _marini(s, *coef_w)
     return m_dry, m_wet
+
+
+#: [Chen 1997]'s gradient mapping constant for the total delay (0.0031 hydrostatic, 0.0007 wet alone).
+CHEN_HERRING_C = 0.0032
+
+
+def gradient_mapping(elev_rad, az_rad):
+    """Partials of the slant delay on the north and east troposphere gradients, [Chen 1997].
+
+    The slant delay's asymmetric part is ``m_g(e) (G_N cos a + G_E sin a)``
+    with ``m_g(e) = 1 / (sin e tan e + C)``, ``C = 0.0032``: for a
+    refractivity varying linearly across the horizon, ``G`` is the
+    height-weighted integral of its horizontal gradient (metres; about a
+    millimetre at mid-latitudes), ``1 / (sin e tan e)`` is the flat-Earth
+    geometry and ``C`` the Earth's curvature, which keeps it finite at the
+    horizon (about 29 at 10 deg, 0 at the zenith).
+
+    Parameters
+    ----------
+    elev_rad, az_rad : array_like, broadcastable
+        Elevation and azimuth (clockwise from north).
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        ``d slant / d (G_N, G_E)`` (dimensionless).
+    """
+    elev_rad, az_rad = np.broadcast_arrays(np.asarray(elev_rad, float), np.asarray(az_rad, float))
+    m_g = 1.0 / (np.sin(elev_rad) * np.tan(elev_rad) + CHEN_HERRING_C)
+    return np.stack([m_g * np.cos(az_rad), m_g * np.sin(az_rad)], axis=-1)
 
 
 def _rot_ecl_to_eq(lon_rad, lat_rad, r_m, eps_rad):
@@ -233,7 +270,7 @@ def windup_cycles(pos_sv_ecef_m, pos_rx_ecef_m, sun_ecef_m, lat_rad, lon_rad):
     sl, cl, so, co = np.sin(lat_rad), np.cos(lat_rad), np.sin(lon_rad), np.cos(lon_rad)
     xr = np.array([-so, co, 0.0])            # East
     yr = np.array([-sl * co, -sl * so, cl])  # North
-    dot = lambda a, b: np.sum(a * b, axis=-1, keepdims=True)  # noqa: E731
+    dot = lambda a, b: np.sum(a * b, axis=-1, keepdims=True)
     Ds = x - k * dot(k, x) - np.cross(k, y)
     Dr = xr - k * dot(k, xr) + np.cross(k, np.broadcast_to(yr, k.shape))
     cosang = dot(Ds, Dr)[..., 0] / (np.linalg.norm(Ds, axis=-1) * np.linalg.norm(Dr, axis=-1))

@@ -15,18 +15,21 @@ ambiguities are undifferenced float IF ambiguities, one state per
 satellite, reset on a cycle slip or a new arc.
 
 State ``x``: ``[x, y, z (marker, ECEF m), clk_G, clk_E (m), ZWD (m),
-N_1 .. N_n (IF ambiguities, m), c_1 .. c_n (time-correlated phase errors, m)]``.
+G_N, G_E (troposphere gradients, m; with ``gradients``), N_1 .. N_n (IF
+ambiguities, m), c_1 .. c_n (time-correlated phase errors, m)]``.
 
 Models (``leosop.gnss.models``): precise orbit and clock interpolation,
 relativistic clock term, Sagnac rotation, Shapiro delay, Saastamoinen
-hydrostatic delay with the Niell mapping functions and an estimated zenith
-wet delay (random walk), phase wind-up, solid Earth tide, antenna reference
-point height from the RINEX header; with an ANTEX file
+hydrostatic delay with the [Niell 1996] mapping functions and an estimated
+zenith wet delay (random walk), optionally north and east troposphere
+gradients with [Chen 1997]'s mapping (random walks; ``gradients``, off by
+default), phase wind-up, solid Earth tide, antenna reference point height
+from the RINEX header; with an ANTEX file
 (:mod:`leosop.gnss.antex`), the receiver antenna's offset and elevation-
 dependent variations and the satellites' offsets (nominal yaw; satellites
 without a block valid on the day are left out, ``PppResult.no_antenna``).
-Not modelled: satellite antenna variations, ocean loading, troposphere
-gradients, eclipse yaw manoeuvres. Without ANTEX the receiver offset alone
+Not modelled: satellite antenna variations, ocean loading, eclipse yaw
+manoeuvres. Without ANTEX the receiver offset alone
 (4.3 cm up, ionosphere-free, for ESBC00DNK's ASH701945E_M) goes into the
 height.
 
@@ -108,6 +111,12 @@ class PppOptions:
     sigma_code_m: float = 0.9
     sigma_phase_m: float = 0.009
     zwd_rw_m_per_rt_s: float = 1e-4
+    # Troposphere gradients: off, because on ESBC00DNK they change the position by millimetres either way
+    # (docs/ppp.md, "Troposphere: the mapping function and gradients"); 1 mm/sqrt(h) after a 2 mm prior,
+    # about a typical mid-latitude gradient.
+    gradients: bool = False
+    grad_rw_m_per_rt_s: float = 1e-3 / 60.0
+    init_grad_sigma_m: float = 0.002
     kin_pos_sigma_m: float = 100.0
     init_pos_sigma_m: float = 100.0
     init_amb_sigma_m: float = 30.0
@@ -133,6 +142,8 @@ class PppResult:
     ``ratio`` is the ratio test of the fixed subset (NaN where none).
     ``no_antenna``: satellites without an ANTEX block (out of the
     solution); ``no_ar``: satellites left out of ambiguity fixing, with why.
+    ``grad_ne_m`` (n_epochs, 2): the north and east troposphere gradients
+    (NaN without ``PppOptions.gradients``).
     """
 
     time_gps: np.ndarray
@@ -151,6 +162,7 @@ class PppResult:
     n_fixed: np.ndarray
     ratio: np.ndarray
     no_ar: dict
+    grad_ne_m: np.ndarray
 
 
 def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
@@ -161,10 +173,11 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     dict
         ``Pc, Lc`` (n_epochs, n_sats) IF code and phase with the satellite
         clock, hydrostatic delay, Shapiro delay (and wind-up for phase)
-        removed, so that ``Pc = rho + clk + m_wet ZWD`` and ``Lc = Pc + N``;
-        ``RS`` (n_epochs, n_sats, 3) satellite positions (Sagnac applied),
-        ``elev``, ``m_wet``, ``ok`` (usable), ``new_arc``, ``MW`` (Melbourne-Wuebbena,
-        wide-lane cycles), ``tide``
+        removed, so that ``Pc = rho + clk + m_wet ZWD + m_grad . (G_N, G_E)``
+        and ``Lc = Pc + N``; ``RS`` (n_epochs, n_sats, 3) satellite positions
+        (Sagnac applied), ``elev``, ``m_wet``, ``m_grad`` (n_epochs, n_sats, 2)
+        (:func:`leosop.gnss.models.gradient_mapping`), ``ok`` (usable),
+        ``new_arc``, ``MW`` (Melbourne-Wuebbena, wide-lane cycles), ``tide``
         (n_epochs, 3), ``arp_ecef`` (3,), ``x0`` a priori position, ``t_s``.
     """
     opt = options
@@ -226,7 +239,9 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     RS = rotate_to_later_ecef(RS, tau)
     los = RS - x0
     rng = np.linalg.norm(los, axis=-1)
-    elev = np.arcsin(np.clip(los @ up0 / rng, -1, 1))
+    los_enu = los @ C_e_n(lat0, lon0)
+    elev = np.arcsin(np.clip(los_enu[..., 2] / rng, -1, 1))
+    m_grad = models.gradient_mapping(elev, np.arctan2(los_enu[..., 0], los_enu[..., 1]))
     doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
     m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
     zhd = models.saastamoinen_zhd_m(lat0, alt0)
@@ -245,9 +260,9 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     ok &= elev > np.radians(opt.mask_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
-    return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "ok": ok, "new_arc": new_arc, "tide": tide,
-            "arp_ecef": arp_ecef, "no_antenna": missing, "rx_calibrated": rx_cal, "x0": x0, "t_s": t_s,
-            "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
+    return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "m_grad": m_grad, "ok": ok,
+            "new_arc": new_arc, "tide": tide, "arp_ecef": arp_ecef, "no_antenna": missing, "rx_calibrated": rx_cal,
+            "x0": x0, "t_s": t_s, "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
 
 
 def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None, *,
@@ -272,21 +287,27 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     """
     opt = options
     d = prepare(obs, orbits, clocks, options, antex)
-    Pc, Lc, RS, elev, m_wet, ok, new_arc = (d[k] for k in ("Pc", "Lc", "RS", "elev", "m_wet", "ok", "new_arc"))
+    Pc, Lc, RS, elev, ok, new_arc = (d[k] for k in ("Pc", "Lc", "RS", "elev", "ok", "new_arc"))
+    # Troposphere states: the zenith wet delay, then the north and east gradients (with opt.gradients).
+    n_tr = 3 if opt.gradients else 1
+    m_trop = np.concatenate([d["m_wet"][..., None], d["m_grad"]], axis=-1)[..., :n_tr]
     tide, arp_ecef, x0, t_s, lat0, lon0 = (d[k] for k in ("tide", "arp_ecef", "x0", "t_s", "lat0", "lon0"))
     sv = obs.sv
     n_ep, n_sv = len(t_s), len(sv)
     # Filter.
     sysof = np.array([s[0] for s in sv])
     clk_col = np.where(sysof == "E", 4, 3)
-    n_x = 6 + 2 * n_sv
-    gm0 = 6 + n_sv  # first Gauss-Markov phase error state
+    trop = slice(5, 5 + n_tr)
+    amb0 = 5 + n_tr  # first ambiguity state
+    gm0 = amb0 + n_sv  # first Gauss-Markov phase error state
+    n_x = gm0 + n_sv
     x = np.zeros(n_x)
     P = np.zeros((n_x, n_x))
     x[:3] = x0
     P[:3, :3] = np.eye(3) * opt.init_pos_sigma_m**2
     x[5] = 0.1
     P[5, 5] = 0.3**2
+    P[6:amb0, 6:amb0] = np.eye(n_tr - 1) * opt.init_grad_sigma_m**2
     # Arc of each satellite at each epoch; an ambiguity state belongs to one arc (-1: none yet). An arc that
     # starts at an epoch the filter skips (fewer than 5 satellites) must still restart the ambiguity.
     arc_id = np.cumsum(new_arc, axis=0)
@@ -294,6 +315,7 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     out_pos = np.full((n_ep, 3), np.nan)
     out_sig = np.full((n_ep, 3), np.nan)
     out_zwd = np.full(n_ep, np.nan)
+    out_grad = np.full((n_ep, 2), np.nan)
     out_clk = np.full((n_ep, 2), np.nan)
     n_used = np.zeros(n_ep, int)
     n_slips = n_outl = 0
@@ -317,10 +339,11 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
             continue
         dt = 0.0 if last_t is None else t_s[i] - last_t
         last_t = t_s[i]
-        # Prediction: ZWD random walk, clocks white, position static or white (kinematic), phase errors
-        # first-order Gauss-Markov (their variance elevation-dependent as the white noise's).
+        # Prediction: ZWD and gradients random walks, clocks white, position static or white (kinematic),
+        # phase errors first-order Gauss-Markov (their variance elevation-dependent as the white noise's).
         Q = np.zeros(n_x)
         Q[5] = opt.zwd_rw_m_per_rt_s**2 * dt
+        Q[6:amb0] = opt.grad_rw_m_per_rt_s**2 * dt
         phi = np.ones(n_x)
         phi[gm0:] = np.exp(-dt / opt.phase_gm_tau_s)
         el_factor = np.ones(n_sv)
@@ -340,22 +363,23 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         rho = np.linalg.norm(los_i, axis=1)
         e_i = los_i / rho[:, None]
         cs = clk_col[js_i]
+        m_i = m_trop[i, js_i]  # (n, n_tr)
         for s_col in (3, 4):
             sel = cs == s_col
             P[s_col, :] = 0.0
             P[:, s_col] = 0.0
             P[s_col, s_col] = opt.clk_sigma_m**2
             if sel.any():
-                x[s_col] = np.median(Pc[i, js_i[sel]] - rho[sel] - m_wet[i, js_i[sel]] * x[5])
+                x[s_col] = np.median(Pc[i, js_i[sel]] - rho[sel] - m_i[sel] @ x[trop])
         reset = js_i[arc_id[i, js_i] != amb_arc[js_i]]
         n_slips += int(np.sum(amb_arc[reset] >= 0))
         for j in reset:
-            for a, var in ((6 + j, opt.init_amb_sigma_m**2), (gm0 + j, gm_var[j])):
+            for a, var in ((amb0 + j, opt.init_amb_sigma_m**2), (gm0 + j, gm_var[j])):
                 P[a, :] = 0.0
                 P[:, a] = 0.0
                 P[a, a] = var
                 x[a] = 0.0
-            x[6 + j] = Lc[i, j] - Pc[i, j]
+            x[amb0 + j] = Lc[i, j] - Pc[i, j]
             amb_arc[j] = arc_id[i, j]
         use_code = np.ones(len(js_i), bool)
         use_phase = np.ones(len(js_i), bool)
@@ -372,12 +396,12 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
                 jj = js_i[rows]
                 H[sl, :3] = -e_i[rows]
                 H[sl.start + np.arange(len(rows)), cs[rows]] = 1.0
-                H[sl, 5] = m_wet[i, jj]
-                pred = rho[rows] + x[cs[rows]] + m_wet[i, jj] * x[5]
+                H[sl, trop] = m_i[rows]
+                pred = rho[rows] + x[cs[rows]] + m_i[rows] @ x[trop]
                 if is_phase:
-                    H[sl.start + np.arange(len(rows)), 6 + jj] = 1.0
+                    H[sl.start + np.arange(len(rows)), amb0 + jj] = 1.0
                     H[sl.start + np.arange(len(rows)), gm0 + jj] = 1.0
-                    z[sl] = Lc[i, jj] - pred - x[6 + jj] - x[gm0 + jj]
+                    z[sl] = Lc[i, jj] - pred - x[amb0 + jj] - x[gm0 + jj]
                     r_var[sl] = opt.sigma_phase_m**2 * 0.5 * (1.0 + 1.0 / sin_el[rows] ** 2)
                 else:
                     z[sl] = Pc[i, jj] - pred
@@ -393,7 +417,7 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
                 use_code[rows_c[worst]] = False
             else:
                 j = js_i[rows_p[worst - len(rows_c)]]
-                a = 6 + j
+                a = amb0 + j
                 P[a, :] = 0.0
                 P[:, a] = 0.0
                 P[a, a] = opt.init_amb_sigma_m**2
@@ -407,11 +431,12 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         out_pos[i] = x[:3]
         out_sig[i] = np.sqrt(np.clip(np.diag(C_en0.T @ P[:3, :3] @ C_en0), 0, None) + floor2)
         out_zwd[i] = x[5]
+        out_grad[i, :n_tr - 1] = x[6:amb0]
         out_clk[i] = x[3:5]
         n_used[i] = len(js_i)
         if ar is not None:
             jf = js_i[ar_ok[i, js_i]]
-            f = fix_epoch(x, P, 6, jf, wl_cyc[i], wl_se[i], sysof, elev[i], lam_nl, beta, ar) if jf.size else None
+            f = fix_epoch(x, P, amb0, jf, wl_cyc[i], wl_se[i], sysof, elev[i], lam_nl, beta, ar) if jf.size else None
             if f is not None:
                 fix_pos[i] = x[:3] + f.dx[:3]
                 fix_sig[i] = np.sqrt(np.clip(np.diag(C_en0.T @ f.P[:3, :3] @ C_en0), 0, None) + floor2)
@@ -421,7 +446,7 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
                      sigma_enu_m=np.where(fixed[:, None], fix_sig, out_sig), zwd_m=out_zwd, clock_m=out_clk,
                      n_used=n_used, sv=sv, n_slips=n_slips, n_outliers=n_outl, no_antenna=d["no_antenna"],
                      pos_float_ecef_m=out_pos, sigma_float_enu_m=out_sig, fixed=fixed, n_fixed=n_fixed, ratio=ratio,
-                     no_ar=skip_ar)
+                     no_ar=skip_ar, grad_ne_m=out_grad)
 
 
 def _no_ar(sv, no_antenna, wl_biases_cyc, no_ar):
