@@ -111,47 +111,66 @@ class LeoDoppler(Aid):
             return self.pos_sv_ecef_m
         return self.pos_sv_ecef_m - ins.states[self.states[2].key]
 
-    def _antenna(self, ins):
-        """``C_e_n``, the lever arm and its rotation velocity in ENU, antenna position and velocity (ECEF)."""
+    def _geometry(self, ins):
+        """``C_e_n``, ``C_n_b``, lever arm and its rotation velocity (ENU), antenna position and velocity,
+        satellite position (ECEF), as a tuple; the lever terms are None without a lever arm."""
         s = ins.state
         C = frames.C_e_n(s.lat_rad, s.lon_rad)
-        l_n = s.C_n_b @ self.lever_arm_b_m
-        w_n = s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
-        r = frames.geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m) + C @ l_n
-        return C, l_n, w_n, r, C @ (s.vel_enu_mps + w_n)
+        r = frames.geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
+        v_n = s.vel_enu_mps
+        C_n_b = l_n = w_n = None
+        if self.lever_arm_b_m.any():
+            C_n_b = s.C_n_b
+            l_n = C_n_b @ self.lever_arm_b_m
+            w_n = C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
+            r, v_n = r + C @ l_n, v_n + w_n
+        return C, C_n_b, l_n, w_n, r, C @ v_n, self._sv_ecef_m(ins)
 
     def _clock_hz(self, ins):
         return ins.states[self.states[0].key][0] + ins.states[self.states[1].key][0]
 
-    def predict(self, ins):
-        _, _, _, r, v = self._antenna(ins)
-        rate = frames.range_rate(self._sv_ecef_m(ins), self.vel_sv_ecef_mps, r, v)
+    def _predict(self, ins, g):
+        rate = frames.range_rate(g[6], self.vel_sv_ecef_mps, g[4], g[5])
         return np.array([-float(rate) * self.carrier_hz / C_MPS + self._clock_hz(ins)])
 
-    def _jacobian(self, ins):
-        C, l_n, w_n, r, v = self._antenna(ins)
-        J = doppler_jacobian(self._sv_ecef_m(ins)[None], self.vel_sv_ecef_mps[None], r, v, self.carrier_hz)[0]
-        return J[:3], J[3:6], C, l_n, w_n, v
+    def _jacobian(self, g):
+        """``dh/dr_a`` and ``dh/dv_a`` (ECEF), (3,) each."""
+        J = doppler_jacobian(g[6][None], self.vel_sv_ecef_mps[None], g[4], g[5], self.carrier_hz)[0]
+        return J[:3], J[3:6]
+
+    def predict(self, ins):
+        return self._predict(ins, self._geometry(ins))
 
     def rate(self, ins):
-        J_r, J_v, C, _, _, v = self._jacobian(ins)
-        return np.array([J_r @ v + J_v @ C @ ins.accel_enu_mps2])
+        g = self._geometry(ins)
+        J_r, J_v = self._jacobian(g)
+        return np.array([J_r @ g[5] + J_v @ g[0] @ ins.accel_enu_mps2])
 
     def design(self, ins):
+        return self._design(ins, self._geometry(ins))
+
+    def matrices(self, ins):
+        g = self._geometry(ins)
+        return self._predict(ins, g) - self.measured, self._design(ins, g), self.R
+
+    def _design(self, ins, g):
         s = ins.state
-        J_r, J_v, C, l_n, w_n, _ = self._jacobian(ins)
+        C, C_n_b, l_n, w_n = g[:4]
+        J_r, J_v = self._jacobian(g)
+        JC_r, JC_v = J_r @ C, J_v @ C
         # A position change [dlat, dlon, dalt] turns the ENU frame by (-dlat, dlon cos lat, dlon sin lat):
         # C_e_n x moves by -C_e_n [x x] M dpos for any ENU vector x (the velocity, the lever arm).
         M = np.zeros((3, 3))
         M[0, 0], M[1, 1], M[2, 1] = -1.0, np.cos(s.lat_rad), np.sin(s.lat_rad)
         c = N_INS + self.states[0].size  # the satellite's columns
         H = np.zeros((1, c + sum(b.size for b in self.states[1:])))
-        H[0, PHI] = J_r @ C @ skew(l_n) + J_v @ C @ skew(w_n)
-        H[0, DV] = J_v @ C
-        H[0, DPOS] = (J_r @ C @ pos_jacobian(s.lat_rad, s.alt_m) - J_r @ C @ skew(l_n) @ M
-                      - J_v @ C @ skew(s.vel_enu_mps + w_n) @ M)
-        H[0, EPS] = -J_v @ C @ s.C_n_b @ skew(self.lever_arm_b_m)
-        H[0, N_INS] = 1.0  # receiver offset (its drift enters through the block's transition)
+        H[0, DV] = JC_v
+        H[0, DPOS] = JC_r @ pos_jacobian(s.lat_rad, s.alt_m) - JC_v @ skew(s.vel_enu_mps) @ M
+        if l_n is not None:
+            H[0, PHI] = JC_r @ skew(l_n) + JC_v @ skew(w_n)
+            H[0, DPOS] -= (JC_r @ skew(l_n) + JC_v @ skew(w_n)) @ M
+            H[0, EPS] = -JC_v @ C_n_b @ skew(self.lever_arm_b_m)
+        H[0, N_INS] = 1.0  # receiver offset (a drift enters through the block's transition)
         H[0, c] = 1.0  # satellite offset
         if len(self.states) == 3:
             H[0, c + 1:] = J_r  # the satellite believed at r_s - dr: dh/d(dr) = -dh/d(r_s) = dh/d(r_a)
