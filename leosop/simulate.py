@@ -56,10 +56,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import earth, frames
+from . import earth, frames, simulate_tight
 from .constants import C_MPS, DAY_S
 from .errors import InputError
-from . import simulate_tight
 from .fusion import common, kalman, loose
 from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory

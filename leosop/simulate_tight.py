@@ -66,7 +66,7 @@ def run(state0, measured, dt_s, pairs, settings, n_epochs, *, offset_max_sat_hz,
         normalised innovation (measured minus predicted); ``nis`` and
         ``nis_dof`` sum the Doppler of each update.
     """
-    per_step = int(round(settings.step_s / dt_s))
+    per_step = round(settings.step_s / dt_s)
     n_imu = (n_epochs - 1) * per_step
     t_imu = (np.arange(n_imu) + 1) * dt_s
     ep, sat = pairs["epoch_index"], pairs["sat_index"]

@@ -3,7 +3,7 @@
 The strapdown INS (:func:`leosop.ins.strapdown.update`, two-sample, ENU)
 runs on every pair of IMU increments less the bias estimates; the 15 INS
 errors of :mod:`leosop.ins.error_model` are propagated with its ``model15``
-(second-order series, at most every ``settings.step_s`` and before every aid)
+(second-order series, at most every ``settings.step_s`` and before every aid applied)
 plus random walks of both biases; each aid (:mod:`leosop.fusion.aids`) gives
 ``(z, H, R)``, the update is the Joseph form of :mod:`leosop.fusion.kalman`
 and the estimated errors are fed back at once (closed loop, so the prior
@@ -492,11 +492,7 @@ def _record(out, k, f):
     J = pos_jacobian(s.lat_rad, s.alt_m)
     out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
     out["cv"][k] = P[DV, DV]
-    out["bg"][k] = f.bg
-    out["ba"][k] = f.ba
-    out["sg"][k] = f.sg
-    out["sa"][k] = f.sa
-    out["td"][k] = f.td
-    out["w"][k] = f.omega
+    out["bg"][k], out["ba"][k], out["sg"][k], out["sa"][k] = f.bg, f.ba, f.sg, f.sa
+    out["td"][k], out["w"][k] = f.td, f.omega
     if out["P"] is not None:
         out["P"][k] = P[:N_INS, :N_INS]
