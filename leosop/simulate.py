@@ -26,8 +26,8 @@ table reproductions call it. For a scenario it
    :mod:`leosop.fusion.aids_fix` in :mod:`leosop.fusion.engine`, each fix
    with its least-squares gain so that the filter can model the
    satellites' constant errors behind them) or tight
-   (:mod:`leosop.fusion.tight`, the Doppler measurements); both model the
-   orbit errors as the scenario draws them (independent or common).
+   (:mod:`leosop.simulate_tight`, each Doppler an aid of the engine); both
+   model the orbit errors as the scenario draws them (independent or common).
 
 Steps 3 and 4 go through the run :data:`FIX_BLOCK_EPOCHS` epochs at a
 time, keeping only each epoch's fix and what the EKF needs of it.
@@ -56,10 +56,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import earth, frames
+from . import earth, frames, simulate_tight
 from .constants import C_MPS, DAY_S
 from .errors import InputError
-from .fusion import aids_fix, common, kalman, tight
+from .fusion import aids_fix, common, kalman
 from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory
 from .orbits import CARRIERS, Constellation, load_constellation
@@ -481,7 +481,7 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
     per_pair : dict of ndarray, (m_b, ...)
         Loose coupling: the :class:`leosop.fusion.aids_fix.FixErrorModel` rows
         (:data:`leosop.fusion.aids_fix.PAIR_FIELDS`); tight: the
-        :class:`leosop.fusion.tight.DopplerMeasurements` fields.
+        :data:`leosop.simulate_tight.PAIR_FIELDS`.
     """
     pos_rx, vel_rx = vis.pos_rx_ecef_m, vis.vel_rx_ecef_mps
     n_ep = len(vis.times_utc)
@@ -635,12 +635,8 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
                               (np.where(checked[:, None], fix_pos, np.nan), fix_vel, per_epoch["fix_cov"][:, :6, :6]),
                               settings, fix_errors=fix_errors, progress=progress)
     else:
-        priors = tight.DopplerPriors(sat_offset_mean_hz=offset_max_sat / 2,
-                                     sat_offset_sigma_hz=offset_max_sat / np.sqrt(12), orbit_sigma_m=orbit_error_m,
-                                     orbit_model=orbit_error_model, n_clocks=len(scenario.leo.constellations))
-        meas = tight.DopplerMeasurements(**per_pair)
-        fused = tight.run(state0, measured.dtheta_b_rad, measured.dvel_b_mps, dt_s, meas, priors, settings, n_ep,
-                          progress=progress)
+        fused = simulate_tight.run(state0, measured, dt_s, per_pair, settings, n_ep, offset_max_sat_hz=offset_max_sat,
+                                   orbit_sigma_m=orbit_error_m, orbit_model=orbit_error_model, progress=progress)
     fix_vel_enu = np.einsum("kji,kj->ki", C_e_n, fix_vel)
     return SimulationResult(
         scenario=scenario, level=level, coupling=coupling, correction_period_s=float(correction_period_s),

@@ -97,3 +97,56 @@ def test_clock_block_transition_is_the_integrated_random_walk():
     # 20 000 samples: the variances' relative scatter is sqrt(2 / 20 000) = 1 %; 5 % is 5 sigma
     # (plus the fine grid's 1/n bias on the dt^3 term).
     np.testing.assert_allclose(emp, Qd, rtol=0.05)
+
+
+@pytest.mark.parametrize("lever", [(0.0, 0.0, 0.0), (0.3, -0.8, 1.2)])
+def test_orbit_error_columns_match_finite_differences(lever):
+    """With an orbit-error block (and a clock without drift), every column against central differences."""
+    clock = StateBlock("leo_clock:0", (0.0,), (10.0,), (1e-6,))
+    orbit = StateBlock("leo_orbit:44713", (0.0,) * 3, (20.0,) * 3, (0.0,) * 3, drop_after_s=30.0)
+    base = _aid(lever)
+    aid = aids_leo.LeoDoppler(0.0, -25e3, 3.0, CARRIER_HZ, base.pos_sv_ecef_m, base.vel_sv_ecef_mps, lever, clock,
+                              SAT, orbit)
+    x = {clock.key: np.array([7.0]), SAT.key: np.array([-1.7]), orbit.key: np.array([12.0, -30.0, 5.0])}
+
+    def view(e):
+        """The truth moved by the error ``e`` (INS errors, then the blocks: estimate minus truth)."""
+        d = np.split(e[N_INS:], [1, 2])
+        return dataclasses.replace(_true_view(e[:N_INS]), states={k: x[k] - di for k, di in zip(x, d)})
+
+    _, H, _ = aid.matrices(view(np.zeros(N_INS + 5)))
+    assert H.shape == (1, N_INS + 5)
+    step = np.r_[100 * STEP, 1e-3, 1e-3, np.full(3, 1e-2)]  # 1 cm of orbit: the Doppler is linear to 1e-8 there
+    H_fd = np.empty_like(H)
+    for i in range(H.shape[1]):
+        e = np.zeros(H.shape[1])
+        e[i] = step[i]
+        H_fd[:, i] = (aid.predict(view(-e)) - aid.predict(view(e))) / (2 * step[i])
+    # As test_design_matrix_matches_finite_differences; the orbit columns are dD/dr_rx, ~1e-2 Hz/m at Ku.
+    scale = np.maximum(np.abs(H_fd), 1e-3)
+    np.testing.assert_array_less(np.abs(H - H_fd), 1e-6 * scale + 1e-9 * np.abs(H).max())
+    assert np.abs(H[0, N_INS + 2:]).min() > 1e-4  # the orbit columns are not trivially zero
+
+
+@pytest.mark.parametrize("model", ["independent", "common"])
+def test_leo_aids_share_the_orbit_blocks_as_the_model_says(model):
+    """Independent: one orbit block per satellite (dropped with it); common: one for all, never dropped."""
+    opts = aids_leo.LeoOptions(rx_drift_sigma_hz_per_s=None, orbit_sigma_m=5.0, orbit_model=model)
+    m = 4
+    sv = np.tile([7e6, 0.0, 0.0], (m, 1))
+    aids = aids_leo.leo_aids(np.arange(m, dtype=float), ["1", "2", "1", "3"], ["0"] * m, np.ones(m), np.ones(m),
+                             np.full(m, CARRIER_HZ), sv, sv, np.zeros(3), opts,
+                             sat_offset_mean_hz=np.array([2.5, 1.0, 9.0, 0.5]))
+    orbit_keys = [a.states[2].key for a in aids]
+    if model == "common":
+        assert set(orbit_keys) == {"leo_orbit:common"} and aids[0].states[2].drop_after_s is None
+    else:
+        assert orbit_keys == ["leo_orbit:1", "leo_orbit:2", "leo_orbit:1", "leo_orbit:3"]
+        assert aids[0].states[2].drop_after_s == aids_leo.SAT_DROP_AFTER_S
+    assert all(a.states[0].size == 1 for a in aids) and aids[0].states[0] is aids[3].states[0]
+    # Each satellite's prior is its first row's.
+    assert [a.states[1].mean0[0] for a in aids] == [2.5, 1.0, 2.5, 0.5]
+    assert aids[0].states[2].sigma0 == (5.0,) * 3
+    with pytest.raises(ValueError, match="orbit_model"):
+        aids_leo.leo_aids(np.zeros(1), ["1"], ["0"], np.ones(1), np.ones(1), np.ones(1), sv[:1], sv[:1], np.zeros(3),
+                          dataclasses.replace(opts, orbit_model="shared"))

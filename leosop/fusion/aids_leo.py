@@ -8,12 +8,17 @@ with the antenna ``r_a = r + C_e_n C_n_b l`` and ``v_a = C_e_n (v + C_n_b
 (omega x l))`` (lever arm ``l`` in the body frame, as the GNSS aids), the
 satellite state as given (CSV columns, or propagated from element sets),
 ``T_u[g]`` the receiver's frequency offset of constellation g (a state
-block with its drift, each family received by its own chain) and ``o_j``
-the satellite's clock-induced offset (a block per satellite, a slow random
-walk that also takes the slowly varying Doppler of an orbit error; dropped
-:data:`SAT_DROP_AFTER_S` after the satellite was last seen). The rows are
-those of :func:`leosop.geometry.doppler.doppler_jacobian` chained to the INS
-errors; ``tests/test_fuse_leo.py`` checks them against finite differences.
+block, with or without its drift, each family received by its own chain) and
+``o_j`` the satellite's clock-induced offset (a block per satellite, a slow
+random walk that may also take the slowly varying Doppler of an orbit error;
+dropped :data:`SAT_DROP_AFTER_S` after the satellite was last seen).
+Optionally the satellite position carries an estimated constant orbit error
+``dr`` (ECEF, m; [Shen 2024] Table 1): the satellite is believed at
+``r_s - dr``, with ``dr`` a block of three states per satellite
+(``orbit_model="independent"``) or one shift shared by all
+(``"common"``, [Shen 2024] Table 6's [E, E, E]). The rows are those of
+:func:`leosop.geometry.doppler.doppler_jacobian` chained to the INS errors;
+``tests/test_fuse_leo.py`` checks them against finite differences.
 """
 
 import dataclasses
@@ -26,7 +31,7 @@ from ..geometry.doppler import doppler_jacobian
 from ..ins.error_model import DPOS, DV, EPS, PHI
 from ..rotations import skew
 from .aids import Aid, StateBlock
-from .common import DROP_AFTER_S, N_INS, pos_jacobian
+from .common import DROP_AFTER_S, N_INS, ORBIT_MODELS, pos_jacobian
 
 __all__ = ["SAT_DROP_AFTER_S", "LeoDoppler", "LeoOptions", "leo_aids"]
 
@@ -40,13 +45,17 @@ class LeoOptions:
 
     ``rx_offset_sigma_hz``: prior of each receiver frequency offset (a real
     receiver's oscillator may be kHz off at 11 GHz; the first Doppler of a
-    constellation settles it); ``rx_drift_sigma_hz_per_s`` its drift's prior;
+    constellation settles it); ``rx_drift_sigma_hz_per_s`` its drift's prior
+    (None: no drift state, the offset is a random walk alone);
     ``rx_offset_psd_hz2_per_s`` and ``rx_drift_psd_hz2_per_s3`` their random
     walks; ``sat_offset_sigma_hz`` each satellite's offset about the
     receiver's (simulate's offsets, uniform in [0, 5 Hz]: 5 / sqrt(12)) and
     ``sat_offset_psd_hz2_per_s`` its random walk (an orbit error of 1 m moves
     a Doppler by ~0.4 Hz over a pass of minutes); ``default_sigma_hz`` the
-    noise of a row without ``sigma_hz``.
+    noise of a row without ``sigma_hz``; ``orbit_sigma_m`` the prior of the
+    orbit error per ECEF axis (None: no orbit states) and ``orbit_model``
+    whether each satellite has its own (``"independent"``) or all share one
+    (``"common"``).
     """
 
     rx_offset_sigma_hz: float = 1000.0
@@ -56,6 +65,8 @@ class LeoOptions:
     sat_offset_sigma_hz: float = 5.0 / np.sqrt(12.0)
     sat_offset_psd_hz2_per_s: float = 2e-3
     default_sigma_hz: float = 1.0
+    orbit_sigma_m: float | None = None
+    orbit_model: str = "independent"
 
 
 class LeoDoppler(Aid):
@@ -71,16 +82,20 @@ class LeoDoppler(Aid):
     lever_arm_b_m : array_like, (3,)
         Antenna minus IMU in the body frame (Right-Forward-Up).
     clock : StateBlock
-        The receiver's offset and drift of the satellite's constellation (2 states).
+        The receiver's offset of the satellite's constellation (state 0; a
+        drift, if any, reaches the measurement through the block's transition).
     sat : StateBlock
         The satellite's offset (1 state).
+    orbit : StateBlock, optional
+        The satellite's orbit error (3 states, ECEF m): the satellite is
+        believed at ``pos_sv_ecef_m`` less its estimate.
     """
 
     name = "leo_doppler"
     external_clock = True
 
     def __init__(self, t_s, doppler_hz, sigma_hz, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps, lever_arm_b_m, clock,
-                 sat):
+                 sat, orbit=None):
         super().__init__(t_s)
         self.measured = np.array([float(doppler_hz)])
         self.R = np.eye(1) * float(sigma_hz) ** 2
@@ -88,54 +103,82 @@ class LeoDoppler(Aid):
         self.pos_sv_ecef_m = np.asarray(pos_sv_ecef_m, dtype=float).reshape(3)
         self.vel_sv_ecef_mps = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(3)
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
-        self.states = (clock, sat)
+        self.states = (clock, sat) if orbit is None else (clock, sat, orbit)
 
-    def _antenna(self, ins):
-        """``C_e_n``, the lever arm and its rotation velocity in ENU, antenna position and velocity (ECEF)."""
+    def _sv_ecef_m(self, ins):
+        """The satellite position less the estimated orbit error, (3,)."""
+        if len(self.states) == 2:
+            return self.pos_sv_ecef_m
+        return self.pos_sv_ecef_m - ins.states[self.states[2].key]
+
+    def _geometry(self, ins):
+        """``C_e_n``, ``C_n_b``, lever arm and its rotation velocity (ENU), antenna position and velocity,
+        satellite position (ECEF), as a tuple; the lever terms are None without a lever arm."""
         s = ins.state
         C = frames.C_e_n(s.lat_rad, s.lon_rad)
-        l_n = s.C_n_b @ self.lever_arm_b_m
-        w_n = s.C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
-        r = frames.geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m) + C @ l_n
-        return C, l_n, w_n, r, C @ (s.vel_enu_mps + w_n)
+        r = frames.geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
+        v_n = s.vel_enu_mps
+        C_n_b = l_n = w_n = None
+        if self.lever_arm_b_m.any():
+            C_n_b = s.C_n_b
+            l_n = C_n_b @ self.lever_arm_b_m
+            w_n = C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
+            r, v_n = r + C @ l_n, v_n + w_n
+        return C, C_n_b, l_n, w_n, r, C @ v_n, self._sv_ecef_m(ins)
 
     def _clock_hz(self, ins):
         return ins.states[self.states[0].key][0] + ins.states[self.states[1].key][0]
 
-    def predict(self, ins):
-        _, _, _, r, v = self._antenna(ins)
-        rate = frames.range_rate(self.pos_sv_ecef_m, self.vel_sv_ecef_mps, r, v)
+    def _predict(self, ins, g):
+        rate = frames.range_rate(g[6], self.vel_sv_ecef_mps, g[4], g[5])
         return np.array([-float(rate) * self.carrier_hz / C_MPS + self._clock_hz(ins)])
 
-    def _jacobian(self, ins):
-        C, l_n, w_n, r, v = self._antenna(ins)
-        J = doppler_jacobian(self.pos_sv_ecef_m[None], self.vel_sv_ecef_mps[None], r, v, self.carrier_hz)[0]
-        return J[:3], J[3:6], C, l_n, w_n, v
+    def _jacobian(self, g):
+        """``dh/dr_a`` and ``dh/dv_a`` (ECEF), (3,) each."""
+        J = doppler_jacobian(g[6][None], self.vel_sv_ecef_mps[None], g[4], g[5], self.carrier_hz)[0]
+        return J[:3], J[3:6]
+
+    def predict(self, ins):
+        return self._predict(ins, self._geometry(ins))
 
     def rate(self, ins):
-        J_r, J_v, C, _, _, v = self._jacobian(ins)
-        return np.array([J_r @ v + J_v @ C @ ins.accel_enu_mps2])
+        g = self._geometry(ins)
+        J_r, J_v = self._jacobian(g)
+        return np.array([J_r @ g[5] + J_v @ g[0] @ ins.accel_enu_mps2])
 
     def design(self, ins):
+        return self._design(ins, self._geometry(ins))
+
+    def matrices(self, ins):
+        g = self._geometry(ins)
+        return self._predict(ins, g) - self.measured, self._design(ins, g), self.R
+
+    def _design(self, ins, g):
         s = ins.state
-        J_r, J_v, C, l_n, w_n, _ = self._jacobian(ins)
+        C, C_n_b, l_n, w_n = g[:4]
+        J_r, J_v = self._jacobian(g)
+        JC_r, JC_v = J_r @ C, J_v @ C
         # A position change [dlat, dlon, dalt] turns the ENU frame by (-dlat, dlon cos lat, dlon sin lat):
         # C_e_n x moves by -C_e_n [x x] M dpos for any ENU vector x (the velocity, the lever arm).
         M = np.zeros((3, 3))
         M[0, 0], M[1, 1], M[2, 1] = -1.0, np.cos(s.lat_rad), np.sin(s.lat_rad)
-        H = np.zeros((1, N_INS + 3))
-        H[0, PHI] = J_r @ C @ skew(l_n) + J_v @ C @ skew(w_n)
-        H[0, DV] = J_v @ C
-        H[0, DPOS] = (J_r @ C @ pos_jacobian(s.lat_rad, s.alt_m) - J_r @ C @ skew(l_n) @ M
-                      - J_v @ C @ skew(s.vel_enu_mps + w_n) @ M)
-        H[0, EPS] = -J_v @ C @ s.C_n_b @ skew(self.lever_arm_b_m)
-        H[0, N_INS] = 1.0  # receiver offset (its drift enters through the block's transition)
-        H[0, N_INS + 2] = 1.0  # satellite offset
+        c = N_INS + self.states[0].size  # the satellite's columns
+        H = np.zeros((1, c + sum(b.size for b in self.states[1:])))
+        H[0, DV] = JC_v
+        H[0, DPOS] = JC_r @ pos_jacobian(s.lat_rad, s.alt_m) - JC_v @ skew(s.vel_enu_mps) @ M
+        if l_n is not None:
+            H[0, PHI] = JC_r @ skew(l_n) + JC_v @ skew(w_n)
+            H[0, DPOS] -= (JC_r @ skew(l_n) + JC_v @ skew(w_n)) @ M
+            H[0, EPS] = -JC_v @ C_n_b @ skew(self.lever_arm_b_m)
+        H[0, N_INS] = 1.0  # receiver offset (a drift enters through the block's transition)
+        H[0, c] = 1.0  # satellite offset
+        if len(self.states) == 3:
+            H[0, c + 1:] = J_r  # the satellite believed at r_s - dr: dh/d(dr) = -dh/d(r_s) = dh/d(r_a)
         return H
 
 
 def leo_aids(t_s, sat_id, clock_label, doppler_hz, sigma_hz, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps,
-             lever_arm_b_m, options=None):
+             lever_arm_b_m, options=None, *, sat_offset_mean_hz=None, sat_offset_sigma_hz=None):
     """One :class:`LeoDoppler` per measurement, sharing the state blocks of each clock and each satellite.
 
     Parameters
@@ -149,6 +192,9 @@ def leo_aids(t_s, sat_id, clock_label, doppler_hz, sigma_hz, carrier_hz, pos_sv_
     pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (m, 3)
     lever_arm_b_m : array_like, (3,)
     options : LeoOptions, optional
+    sat_offset_mean_hz, sat_offset_sigma_hz : ndarray, (m,), optional
+        Prior of the offset of each row's satellite (its first row's is
+        taken); default zero and ``options.sat_offset_sigma_hz``.
 
     Returns
     -------
@@ -156,17 +202,36 @@ def leo_aids(t_s, sat_id, clock_label, doppler_hz, sigma_hz, carrier_hz, pos_sv_
         Rows with a non-finite Doppler or satellite state are left out.
     """
     o = options or LeoOptions()
-    clocks, sats, out = {}, {}, []
+    if o.orbit_model not in ORBIT_MODELS:
+        raise ValueError(f"orbit_model {o.orbit_model!r}: expected one of {', '.join(ORBIT_MODELS)}")
+    m = len(doppler_hz)
+    mean = np.zeros(m) if sat_offset_mean_hz is None else np.asarray(sat_offset_mean_hz, dtype=float)
+    spread = np.full(m, o.sat_offset_sigma_hz) if sat_offset_sigma_hz is None else np.asarray(sat_offset_sigma_hz)
+    clocks, sats, orbits, out = {}, {}, {}, []
     sigma = np.where(np.isfinite(sigma_hz), sigma_hz, o.default_sigma_hz)
     ok = np.isfinite(doppler_hz) & np.isfinite(pos_sv_ecef_m).all(-1) & np.isfinite(vel_sv_ecef_mps).all(-1)
     for k in np.flatnonzero(ok):
         g, j = str(clock_label[k]), str(sat_id[k])
         if g not in clocks:
-            clocks[g] = StateBlock(f"leo_clock:{g}", (0.0, 0.0), (o.rx_offset_sigma_hz, o.rx_drift_sigma_hz_per_s),
-                                   (o.rx_offset_psd_hz2_per_s, o.rx_drift_psd_hz2_per_s3), integrated=True)
+            clocks[g] = _clock_block(g, o)
         if j not in sats:
-            sats[j] = StateBlock(f"leo_sat:{j}", (0.0,), (o.sat_offset_sigma_hz,), (o.sat_offset_psd_hz2_per_s,),
-                                 drop_after_s=SAT_DROP_AFTER_S)
+            sats[j] = StateBlock(f"leo_sat:{j}", (float(mean[k]),), (float(spread[k]),),
+                                 (o.sat_offset_psd_hz2_per_s,), drop_after_s=SAT_DROP_AFTER_S)
+        orbit = None
+        if o.orbit_sigma_m is not None:
+            key = "common" if o.orbit_model == "common" else j
+            if key not in orbits:
+                orbits[key] = StateBlock(f"leo_orbit:{key}", (0.0,) * 3, (o.orbit_sigma_m,) * 3, (0.0,) * 3,
+                                         drop_after_s=None if key == "common" else SAT_DROP_AFTER_S)
+            orbit = orbits[key]
         out.append(LeoDoppler(t_s[k], doppler_hz[k], sigma[k], carrier_hz[k], pos_sv_ecef_m[k], vel_sv_ecef_mps[k],
-                              lever_arm_b_m, clocks[g], sats[j]))
+                              lever_arm_b_m, clocks[g], sats[j], orbit))
     return out
+
+
+def _clock_block(label, o):
+    """The receiver offset of clock ``label``: offset and drift, or the offset alone (a random walk)."""
+    if o.rx_drift_sigma_hz_per_s is None:
+        return StateBlock(f"leo_clock:{label}", (0.0,), (o.rx_offset_sigma_hz,), (o.rx_offset_psd_hz2_per_s,))
+    return StateBlock(f"leo_clock:{label}", (0.0, 0.0), (o.rx_offset_sigma_hz, o.rx_drift_sigma_hz_per_s),
+                      (o.rx_offset_psd_hz2_per_s, o.rx_drift_psd_hz2_per_s3), integrated=True)

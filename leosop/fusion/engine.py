@@ -3,7 +3,7 @@
 The strapdown INS (:func:`leosop.ins.strapdown.update`, two-sample, ENU)
 runs on every pair of IMU increments less the bias estimates; the 15 INS
 errors of :mod:`leosop.ins.error_model` are propagated with its ``model15``
-(second-order series, at most every ``settings.step_s`` and before every aid)
+(second-order series, at most every ``settings.step_s`` and before every aid applied)
 plus random walks of both biases; each aid (:mod:`leosop.fusion.aids`) gives
 ``(z, H, R)``, the update is the Joseph form of :mod:`leosop.fusion.kalman`
 and the estimated errors are fed back at once (closed loop, so the prior
@@ -51,7 +51,7 @@ from . import kalman
 from .aids import InsView
 from .common import GATE_PROBABILITY, N_INS, pos_jacobian
 
-__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
+__all__ = ["AID_LOG_DTYPE", "CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,7 +72,12 @@ class EngineSettings:
     accelerometer scale-factor errors (dimensionless; None: no such states);
     ``time_offset_sigma_s`` the initial sigma of the IMU time offset (None: no
     such state, the offset is taken as known) and
-    ``time_offset_rw_s_per_rt_s`` its random walk.
+    ``time_offset_rw_s_per_rt_s`` its random walk. ``correction_period_s``:
+    an aid less than this after the last update is not applied (it still
+    names its state blocks), except at the time of that update (all aids of
+    one epoch make one correction; 0: every aid). ``record_every``: the result
+    holds the start and every ``record_every``-th INS update;
+    ``record_cov_ins``: with the covariance of the 15 INS errors.
     """
 
     gyro_arw_rad_per_rt_s: float
@@ -86,6 +91,9 @@ class EngineSettings:
     scale_sigma: tuple | None = None
     time_offset_sigma_s: float | None = None
     time_offset_rw_s_per_rt_s: float = 1e-4
+    correction_period_s: float = 0.0
+    record_every: int = 1
+    record_cov_ins: bool = False
 
     def noise_psd(self):
         """PSDs of ``[w_gyro_b, w_accel_b]`` (6,), the ``Qc`` of :func:`leosop.ins.error_model.discretize`."""
@@ -102,7 +110,7 @@ class CourseAlignment:
 
 @dataclasses.dataclass(frozen=True)
 class EngineResult:
-    """The filter's INS after every INS update (n epochs: the start and one per pair of samples).
+    """The filter's INS after the INS updates (n epochs: the start and one per ``record_every`` pairs of samples).
 
     Attributes
     ----------
@@ -136,6 +144,13 @@ class EngineResult:
         The aids' state blocks alive at the end: estimate and sigma, by key.
     cov_vel_pos_enu : ndarray, (n, 3, 3)
         Cross-covariance of the velocity and position errors in ENU [m^2/s].
+    aid_log : structured ndarray, (k,)
+        One row per aid offered to the gate, in the order applied: ``aid``
+        (its index in the sequence given), ``used`` (passed the gate),
+        ``nis`` and ``normalized`` (a one-row aid's ``z / sqrt(S)``, NaN for
+        larger ones).
+    cov_ins : ndarray, (n, 15, 15), or None
+        Covariance of the INS errors (``settings.record_cov_ins``).
     """
 
     t_s: np.ndarray
@@ -158,6 +173,14 @@ class EngineResult:
     nll: dict
     states: dict = dataclasses.field(default_factory=dict)
     cov_vel_pos_enu: np.ndarray | None = None
+    aid_log: np.ndarray | None = None
+    cov_ins: np.ndarray | None = None
+
+
+#: Rows of :attr:`EngineResult.aid_log`.
+AID_LOG_DTYPE = np.dtype([("aid", int), ("used", bool), ("nis", float), ("normalized", float)])
+#: Slack on comparisons of times [s] (sums of IMU intervals round far below it).
+_TIME_SLACK_S = 1e-9
 
 
 def state_slices(settings):
@@ -213,6 +236,8 @@ class _Filter:
         self.nll = {}
         self.rejected_run = {}
         self.gate = {}
+        self.log = []
+        self.last_update_s = -math.inf
 
     def correct_increments(self, dth, dv, dt2):
         """Raw increments (2, 3) less the bias and scale-factor estimates."""
@@ -305,8 +330,14 @@ class _Filter:
             H[:, self.TD.start] = aid.rate(ins)
         return z, H, R
 
-    def apply(self, aid, ins):
-        """Gate and apply one aid; feed the estimated errors back into the INS.
+    def waits(self, aid, t0_s):
+        """Whether ``aid`` comes within the correction period of the last update (or of the start ``t0_s``)."""
+        last = max(self.last_update_s, t0_s)
+        period = self.settings.correction_period_s
+        return period > 0 and aid.t_s != self.last_update_s and aid.t_s - last < period - _TIME_SLACK_S
+
+    def apply(self, aid, ins, index):
+        """Gate and apply one aid (``index`` in the run's sequence); feed the estimated errors back into the INS.
 
         Returns
         -------
@@ -320,10 +351,12 @@ class _Filter:
         run = self.rejected_run.get(aid.name, 0)
         if z.size not in self.gate:
             self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
+        normalized = z[0] / math.sqrt(S[0, 0]) if z.size == 1 else math.nan
         failed = aid.gated and nis > self.gate[z.size]
         if failed and run < self.settings.reopen_after:
             count[1] += 1
             self.rejected_run[aid.name] = run + 1
+            self.log.append((index, False, nis, normalized))
             if self.on_aid is not None:
                 self.on_aid(aid, z, S, False, False)
             return None
@@ -334,6 +367,8 @@ class _Filter:
             nis = float(z @ np.linalg.solve(S, z))
         if self.on_aid is not None:
             self.on_aid(aid, z, S, True, failed)
+        self.log.append((index, True, nis, normalized))
+        self.last_update_s = aid.t_s
         self.rejected_run[aid.name] = 0
         count[0] += 1
         nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
@@ -424,38 +459,38 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     EngineResult
     """
     t_s, dt_s = np.asarray(t_s, dtype=float), np.asarray(dt_s, dtype=float)
-    m = t_s.size // 2
-    t_out = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
+    m, every = t_s.size // 2, settings.record_every
+    t_pairs = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
     f = _Filter(state0, P0, settings, time_offset_s, on_aid)
-    n_x = f.n_core
-    n = m + 1
-    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, n_x)),
+    n = m // every + 1
+    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, f.n_core)),
            "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
            "sg": np.empty((n, 3)), "sa": np.empty((n, 3)), "td": np.empty(n), "w": np.empty((n, 3)),
-           "cvp": np.empty((n, 3, 3))}
+           "cvp": np.empty((n, 3, 3)), "P": np.empty((n, N_INS, N_INS)) if settings.record_cov_ins else None}
     aligned_s = None
     heading_known = course_alignment is None
     aids = list(aids)
     if any(b.t_s < a.t_s for a, b in zip(aids, aids[1:])):
         raise ValueError("aids must be sorted by time")
-    queues = [[a for a in aids if a.external_clock], [a for a in aids if not a.external_clock]]
+    queues = [[(j, a) for j, a in enumerate(aids) if a.external_clock],
+              [(j, a) for j, a in enumerate(aids) if not a.external_clock]]
     heads = [0, 0]
     for q, i in zip(queues, (0, 1)):
-        while heads[i] < len(q) and f.due_s(q[heads[i]]) < t_out[0]:
+        while heads[i] < len(q) and f.due_s(q[heads[i]][1]) < t_pairs[0]:
             heads[i] += 1
     _record(out, 0, f)
     ks = range(m) if progress is None else progress(range(m))
     for k in ks:
         i = 2 * k
         f.step(dtheta_b_rad[i:i + 2], dvel_b_mps[i:i + 2], dt_s[i:i + 2])
-        t_now = t_out[k + 1]
+        t_now = t_pairs[k + 1]
         while True:
-            due = [(f.due_s(q[h]), c) for c, (q, h) in enumerate(zip(queues, heads)) if h < len(q)]
+            due = [(f.due_s(q[h][1]), c) for c, (q, h) in enumerate(zip(queues, heads)) if h < len(q)]
             due = [d for d in due if d[0] <= t_now]
             if not due:
                 break
             t_aid, c = min(due)
-            aid = queues[c][heads[c]]
+            index, aid = queues[c][heads[c]]
             heads[c] += 1
             if not heading_known:
                 v = getattr(aid, "vel_enu_mps", None)
@@ -465,22 +500,26 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
                 else:
                     f.align_yaw(v, course_alignment.sigma_rad)
                     heading_known, aligned_s = True, aid.t_s
+            if f.waits(aid, t_pairs[0]):
+                f.admit(aid)
+                continue
             f.propagate()
             f.admit(aid)
-            f.apply(aid, f.view(t_aid, t_now))
+            f.apply(aid, f.view(t_aid, t_now), index)
             if after_aid is not None:
                 for dx, P in after_aid(aid, f.state, f.P, {key: (b[1], b[2]) for key, b in f.blocks.items()}) or ():
                     f.feed_back(dx, P)
-        if f.pending_s >= settings.step_s:
+        if f.pending_s >= settings.step_s - _TIME_SLACK_S:
             f.propagate()
-        _record(out, k + 1, f)
+        if (k + 1) % every == 0:
+            _record(out, (k + 1) // every, f)
     f.propagate()
     pos, cp = out["pos"], out["cp"]
-    return EngineResult(t_out, pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp, out["cv"],
-                        out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
+    return EngineResult(t_pairs[::every], pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp,
+                        out["cv"], out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
                         {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll),
                         {k: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for k, (b, i, x, _) in f.blocks.items()},
-                        out["cvp"])
+                        out["cvp"], np.array(f.log, dtype=AID_LOG_DTYPE), out["P"])
 
 
 def _record(out, k, f):
@@ -493,9 +532,7 @@ def _record(out, k, f):
     out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
     out["cv"][k] = P[DV, DV]
     out["cvp"][k] = P[DV, DPOS] @ J.T
-    out["bg"][k] = f.bg
-    out["ba"][k] = f.ba
-    out["sg"][k] = f.sg
-    out["sa"][k] = f.sa
-    out["td"][k] = f.td
-    out["w"][k] = f.omega
+    out["bg"][k], out["ba"][k], out["sg"][k], out["sa"][k] = f.bg, f.ba, f.sg, f.sa
+    out["td"][k], out["w"][k] = f.td, f.omega
+    if out["P"] is not None:
+        out["P"][k] = P[:N_INS, :N_INS]
