@@ -5,9 +5,14 @@ folder's PROVENANCE.md there) and never copied into the repository. Tests
 that need a folder skip cleanly when it is absent.
 """
 
+import os
 from pathlib import Path
 
-import pytest
+# As the CLI does (leosop/cli/__init__.py): the filters' many small matrix products are several times slower
+# under a multi-threaded BLAS on a busy machine. It acts only if numpy is not imported yet (pytest does not).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import pytest  # noqa: E402
 
 DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
