@@ -175,9 +175,12 @@ class FuseOptions:
     zero_rate_sigma_deg_per_s: float = 0.01
     nhc_sigma_mps: float = 0.1
     nhc_rate_hz: float = 10.0
+    nhc_slip_s: float = 0.0
+    nhc_offset_m: float = 0.0
     gnss_vel_sigma_floor_mps: float = 0.1
     time_offset_sigma_s: float | None = 0.1
     scale_sigma: tuple | None = None
+    gyro_cross_sigma: float | None = None
     yaw_hypotheses: int = 12
     yaw_bank_s: float = 20.0
     course_yaw: tuple | None = None
@@ -391,14 +394,15 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
         for te, wm in zip(ends, w):
             aid_list += [aid_models.ZeroVelocity(te, options.zupt_sigma_mps), aid_models.ZeroRate(te, wm, zr_sigma)]
     if options.nhc:
-        aid_list += [aid_models.NonHolonomic(t, options.nhc_sigma_mps)
+        aid_list += [aid_models.NonHolonomic(t, options.nhc_sigma_mps, slip_s=options.nhc_slip_s,
+                                             offset_m=options.nhc_offset_m)
                      for t in np.arange(t_imu[0], t_imu[-1], 1.0 / options.nhc_rate_hz)]
     aid_list.sort(key=lambda a: a.t_s)
     n_aids = {}
     for a in aid_list:
         n_aids[a.name] = n_aids.get(a.name, 0) + 1
     settings = dataclasses.replace(options.spec.settings(), time_offset_sigma_s=options.time_offset_sigma_s,
-                                   scale_sigma=options.scale_sigma)
+                                   scale_sigma=options.scale_sigma, gyro_cross_sigma=options.gyro_cross_sigma)
     if course is not None and options.yaw_hypotheses and not options.nhc and options.course_yaw is None:
         chosen = _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, t_g, sol, withheld, options)
         if chosen is not None:
