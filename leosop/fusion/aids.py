@@ -210,23 +210,37 @@ class GnssPosition(Aid):
 class GnssVelocity(Aid):
     """A GNSS antenna velocity in ENU [m/s]: ``v + C_n_b (omega_ib_b x lever arm)`` (Earth rate neglected).
 
+    A receiver's Doppler velocity is a mean over its measurement interval,
+    not the velocity at the epoch: its error grows with the acceleration
+    ``a`` (that of the INS at the aid), as ``accel_sigma_s |a|`` per axis,
+    added to ``cov_enu_m2ps2``.
+
     Parameters
     ----------
     t_s : float
     vel_enu_mps : array_like, (3,)
     cov_enu_m2ps2 : array_like, (3, 3)
     lever_arm_b_m : array_like, (3,)
+    accel_sigma_s : float
+        Velocity error per acceleration [m/s per m/s^2].
     """
 
     name = "gnss_velocity"
     gated = False
     external_clock = True
 
-    def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m):
+    def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m, *, accel_sigma_s=0.0):
         super().__init__(t_s)
         self.vel_enu_mps = self.measured = np.asarray(vel_enu_mps, dtype=float).reshape(3)
         self.R = np.asarray(cov_enu_m2ps2, dtype=float).reshape(3, 3)
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
+        self.accel_sigma_s = float(accel_sigma_s)
+
+    def matrices(self, ins):
+        z, H, R = super().matrices(ins)
+        if self.accel_sigma_s:
+            R = R + np.eye(3) * (self.accel_sigma_s * np.linalg.norm(ins.accel_enu_mps2)) ** 2
+        return z, H, R
 
     def predict(self, ins):
         s = ins.state

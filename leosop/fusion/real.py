@@ -178,6 +178,7 @@ class FuseOptions:
     nhc_slip_s: float = 0.0
     nhc_offset_m: float = 0.0
     gnss_vel_sigma_floor_mps: float = 0.1
+    gnss_vel_accel_sigma_s: float = 0.0
     time_offset_sigma_s: float | None = 0.1
     scale_sigma: tuple | None = None
     gyro_cross_sigma: float | None = None
@@ -267,7 +268,7 @@ class FuseRun:
     n_aids: dict
 
 
-def _gnss_aids(sol, t_g, use, lever, vel_floor_mps):
+def _gnss_aids(sol, t_g, use, lever, vel_floor_mps, vel_accel_sigma_s):
     out = []
     for k in np.flatnonzero(use):
         gain2 = _Q_GAIN.get(int(sol.q[k]), 5.0) ** 2
@@ -275,7 +276,7 @@ def _gnss_aids(sol, t_g, use, lever, vel_floor_mps):
                                            sol.alt_m[k], sol.cov_enu_m2[k] * gain2, lever))
         if sol.vel_enu_mps is not None:
             cov = sol.cov_vel_enu_m2ps2[k] * gain2 + np.eye(3) * vel_floor_mps**2
-            out.append(aid_models.GnssVelocity(t_g[k], sol.vel_enu_mps[k], cov, lever))
+            out.append(aid_models.GnssVelocity(t_g[k], sol.vel_enu_mps[k], cov, lever, accel_sigma_s=vel_accel_sigma_s))
     return out
 
 
@@ -386,7 +387,8 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     state0, P0, course = _initial(sol, k0, t_g, t_imu[0] - dt[0], dvl[:n_level].sum(0) / dt[:n_level].sum(),
                                   options.spec, options.course_alignment())
     lever = np.asarray(options.lever_arm_b_m, dtype=float)
-    aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps)
+    aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps,
+                          options.gnss_vel_accel_sigma_s)
     aid_list += [a for a in extra_aids if a.t_s > t_imu[0] - dt[0]]
     if options.zupt:
         ends, w = stationary_windows(t_imu, dvl / dt[:, None], dth / dt[:, None])
