@@ -146,10 +146,23 @@ class FuseOptions:
     ``gnss_vel_sigma_floor_mps`` is added (in quadrature) to the stated GNSS
     velocity sigmas: RTKLIB's Doppler velocity sigmas (0.06 m/s on the drive)
     left a quarter of the velocity innovations beyond their 99 % quantile.
+    ``gnss_vel_accel_sigma_s``: the GNSS velocity's sigma per axis grows by
+    this times the acceleration (:class:`leosop.fusion.aids.GnssVelocity`):
+    against the velocity of the Q = 1 fixes (0.25 s differences), outside
+    the bench outages, RTKLIB's Doppler velocities err by 0.04 m/s RMS at
+    under 0.5 m/s^2, 0.1 at 0.5-1, 0.2 at 1-2, 0.3 m/s at 2-4 m/s^2 on the
+    drive, alike on the walk (docs/fusion-real.md).
+    ``nhc_slip_s``, ``nhc_offset_m``: the NHC's lateral sigma grows with the
+    lateral acceleration and the yaw rate (:class:`leosop.fusion.aids.NonHolonomic`):
+    fitted, outside the bench outages, to the drive's lateral body velocity
+    (GNSS velocity in the filter's attitude) as ``-0.10 w_up + 0.115 w_up v``
+    (residual 0.09 m/s with the GNSS velocity noise).
     ``time_offset_sigma_s``: the IMU time offset is a filter state with this
     prior sigma around the given offset (None: taken as known);
     ``scale_sigma``: gyro and accelerometer scale-factor states with these
-    prior sigmas (None: none).
+    prior sigmas (None: none). ``gyro_cross_sigma``: the six gyro cross-axis
+    (misalignment) terms as states with this prior sigma (None: none); with
+    ``scale_sigma`` the full 3 x 3 gyro error matrix.
     ``yaw_hypotheses``, ``yaw_bank_s``: a start at rest without NHC (a
     hand-held IMU, whose Forward axis need not point along the motion) runs
     this many filters with yaws spread over the circle, each with the yaw
@@ -175,10 +188,10 @@ class FuseOptions:
     zero_rate_sigma_deg_per_s: float = 0.01
     nhc_sigma_mps: float = 0.1
     nhc_rate_hz: float = 10.0
-    nhc_slip_s: float = 0.0
-    nhc_offset_m: float = 0.0
+    nhc_slip_s: float = 0.12
+    nhc_offset_m: float = 0.1
     gnss_vel_sigma_floor_mps: float = 0.1
-    gnss_vel_accel_sigma_s: float = 0.0
+    gnss_vel_accel_sigma_s: float = 0.1
     time_offset_sigma_s: float | None = 0.1
     scale_sigma: tuple | None = None
     gyro_cross_sigma: float | None = None
