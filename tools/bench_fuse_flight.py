@@ -113,7 +113,8 @@ def main(argv=None):
     lag, _ = gps_lag_s(log, gps, attitude)
     t_offset = float(gps.t_gpst_s[0] - log.epoch_gpst_s)  # the run's clock starts at the first GPS epoch
     opts = real.FuseOptions(spec=real.GRADES["consumer"], outages=OUTAGES, zupt=True, time_offset_sigma_s=None,
-                            course_yaw=(5.0, 10.0), scale_sigma=GYRO_ERROR_SIGMA[0], gyro_cross_sigma=GYRO_ERROR_SIGMA[1])
+                            course_yaw=(5.0, 10.0), scale_sigma=GYRO_ERROR_SIGMA[0],
+                            gyro_cross_sigma=GYRO_ERROR_SIGMA[1])
     t0 = time.perf_counter()
     run = real.fuse(log, gps, opts)
     runtime = time.perf_counter() - t0
