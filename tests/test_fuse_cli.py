@@ -79,6 +79,8 @@ def test_walk_outputs_and_errors_recomputed_from_solution_pos(tmp_path, capsys):
     (["--imu-format", "csv"], "needs --imu-columns"),
     (["--course-yaw", "5"], "--course-yaw '5': expected MIN_SPEED_MPS,SIGMA_DEG"),
     (["--course-yaw", "5,0"], "SIGMA_DEG in (0, 180]"),
+    (["--gyro-error-sigma", "0.03"], "--gyro-error-sigma '0.03': expected SCALE,CROSS"),
+    (["--gyro-error-sigma", "3,2"], "SCALE and CROSS must be fractions in (0, 1)"),
 ])
 def test_bad_options_are_one_line_exit_2(extra, message, capsys):
     assert main(["fuse", *_walk(), *extra]) == 2

@@ -6,6 +6,7 @@ differences), closed-form geometry of a lever arm, and simulated truth
 independent of the strapdown algorithm).
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -46,10 +47,10 @@ def _all_aids():
     lever = np.array([0.3, -0.8, 1.2])
     return [
         aids.GnssPosition(0.0, LAT + 1e-7, LON - 2e-7, ALT + 0.5, np.eye(3) * 1e-4, lever),
-        aids.GnssVelocity(0.0, [4.1, -6.8, 0.2], np.eye(3) * 1e-3, lever),
+        aids.GnssVelocity(0.0, [4.1, -6.8, 0.2], np.eye(3) * 1e-3, lever, accel_sigma_s=0.1),
         aids.ZeroVelocity(0.0, 0.01),
         aids.ZeroRate(0.0, [1e-4, -1e-4, 2e-4], 1e-4),
-        aids.NonHolonomic(0.0, 0.1, rotvec_to_dcm([0.01, -0.02, 0.03])),
+        aids.NonHolonomic(0.0, 0.1, rotvec_to_dcm([0.01, -0.02, 0.03]), slip_s=0.1, offset_m=0.1),
         aids.Height(0.0, ALT - 1.0, 0.5),
     ]
 
@@ -141,6 +142,45 @@ def test_static_imu_with_zupt_keeps_velocity_zero_and_attitude_bounded():
                                  - truth.pos_ecef_m[-1], truth.lat_rad[-1], truth.lon_rad[-1])
     assert np.linalg.norm(pos_err) < 0.2  # 120 s of velocity errors at 0.01 m/s: 1.2 m worst case, ~0.1 m random
 
+
+
+def test_nhc_and_gnss_velocity_noise_grow_with_the_motion():
+    """Heading North at 10 m/s, turning left at 0.3 rad/s and braking at 2 m/s^2 (lateral acceleration 3 m/s^2)."""
+    state = NavState.from_dcm(LAT, LON, ALT, [0.0, 10.0, 0.0], np.eye(3))
+    ins = aids.InsView(state, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.3]), np.array([-3.0, -2.0, 0.0]))
+    nhc = aids.NonHolonomic(0.0, 0.1, slip_s=0.12, offset_m=0.5)
+    # Lateral: 0.1^2 + (0.12 s x 3 m/s^2)^2 + (0.5 m x 0.3 rad/s)^2; vertical unchanged.
+    np.testing.assert_allclose(nhc.matrices(ins)[2], np.diag([0.01 + 0.36**2 + 0.15**2, 0.01]), rtol=1e-12)
+    np.testing.assert_allclose(aids.NonHolonomic(0.0, 0.1).matrices(ins)[2], np.eye(2) * 0.01, rtol=1e-12)
+    vel = aids.GnssVelocity(0.0, [0.0, 10.0, 0.0], np.eye(3) * 0.04, np.zeros(3), accel_sigma_s=0.1)
+    # |a| = sqrt(13) m/s^2: 0.04 + 0.01 x 13 per axis.
+    np.testing.assert_allclose(vel.matrices(ins)[2], np.eye(3) * 0.17, rtol=1e-12)
+
+
+def test_gyro_cross_axis_states_tilt_a_turning_imu_as_the_closed_form():
+    """Level, still, turning about Up at w for half a turn, only the six cross-axis terms uncertain (sigma s).
+
+    The rate error ``(M_xz w, M_yz w, 0)`` in the turning body tilts the
+    level frame by ``-int C_n_b dt``: summed over both level axes its variance
+    is ``2 s^2 (sin^2 wT + (1 - cos wT)^2) = 4 s^2 (1 - cos wT)``, 8 s^2 at half
+    a turn; the Up terms (``M_zx``, ``M_zy``) see no rate and the yaw none.
+    """
+    w, T, s, rate = 0.5, math.pi / 0.5, 0.01, 100.0
+    n, dt = round(T * rate), 1.0 / rate
+    g = 9.80
+    dth = np.tile([0.0, 0.0, w * dt], (n, 1))
+    dvl = np.tile([0.0, 0.0, g * dt], (n, 1))
+    state0 = NavState.from_dcm(LAT, LON, ALT, [0.0, 0.0, 0.0], np.eye(3))
+    settings = dataclasses.replace(_settings(gyro_cross_sigma=s, step_s=0.02), gyro_arw_rad_per_rt_s=0.0,
+                                   accel_vrw_mps_per_rt_s=0.0, gyro_bias_rw_rad_per_s_per_rt_s=0.0,
+                                   accel_bias_rw_mps2_per_rt_s=0.0)
+    res = engine.run(state0, np.zeros((N_INS, N_INS)), dt * np.arange(1, n + 1), np.full(n, dt), dth, dvl, [],
+                     settings)
+    tilt_var = res.sigma[-1, PHI.start] ** 2 + res.sigma[-1, PHI.start + 1] ** 2
+    # 1 %: the rate of each 20 ms propagation is its mean (the body turns 0.01 rad within it).
+    np.testing.assert_allclose(tilt_var, 4 * s**2 * (1 - math.cos(w * T)), rtol=1e-2)
+    assert res.sigma[-1, PHI.start + 2] < 1e-3 * s
+    np.testing.assert_allclose(res.sigma[-1, engine.cross_slice(settings)], s, rtol=1e-12)
 
 
 def res_C(res):

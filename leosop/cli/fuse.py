@@ -36,6 +36,8 @@ from .options import parse_span
 IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv", "psins", "flight-mat")
 #: The GeoJSON track keeps at most this many epochs per second (the INS updates are at half the IMU rate).
 GEOJSON_RATE_HZ = 10.0
+#: Prior sigma of the accelerometer scale factors with --gyro-error-sigma (a MEMS part's +-1-3 %).
+ACCEL_SCALE_SIGMA = 0.01
 
 
 def register(subparsers):
@@ -73,6 +75,10 @@ def register(subparsers):
                    help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, sigma "
                         "SIGMA_DEG (sideslip, crab), never the yaw bank: e.g. 5,10 for an aircraft handled on the "
                         "ground before launch (default: 1 m/s and 10 deg with --nhc, else a bank of yaws at rest)")
+    p.add_argument("--gyro-error-sigma", metavar="SCALE,CROSS",
+                   help="gyro scale-factor (3) and cross-axis (6) errors as filter states with these prior sigmas "
+                        "(fractions, e.g. 0.03,0.03 for a MEMS gyro rated +-3 %% scale, +-2 %% cross-axis; the "
+                        "accelerometer scale factors get 0.01); for sustained turns (aircraft)")
     p.add_argument("--mount-rpy-deg", default="0,0,0", metavar="R,P,Y",
                    help="IMU mounting in the forward-right-down vehicle body, as GNSS_IMU's imu_misalign "
                         "(default 0,0,0: the IMU axes are forward-right-down)")
@@ -114,6 +120,19 @@ def _course_yaw(text):
     if not (np.isfinite(speed) and np.isfinite(sigma) and speed > 0 and 0 < sigma <= 180):
         raise InputError(f"--course-yaw {text!r}: MIN_SPEED_MPS must be > 0 and SIGMA_DEG in (0, 180]")
     return speed, sigma
+
+
+def _gyro_error_sigma(text):
+    """``(scale_sigma, gyro_cross_sigma)`` of :class:`leosop.fusion.real.FuseOptions` from ``SCALE,CROSS``."""
+    if text is None:
+        return None, None
+    try:
+        scale, cross = (float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"--gyro-error-sigma {text!r}: expected SCALE,CROSS") from None
+    if not (np.isfinite(scale) and np.isfinite(cross) and 0 < scale < 1 and 0 < cross < 1):
+        raise InputError(f"--gyro-error-sigma {text!r}: SCALE and CROSS must be fractions in (0, 1)")
+    return (scale, ACCEL_SCALE_SIGMA), cross
 
 
 def _columns(text):
@@ -165,10 +184,12 @@ def run(args):
     mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
     f, r, d = _triple(args.lever_arm_m, "--lever-arm-m")
     outages = tuple(parse_span(t, "--outage") for t in args.outage)
+    scale_sigma, cross_sigma = _gyro_error_sigma(args.gyro_error_sigma)
     options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=outages,
                                lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
                                time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s),
-                               course_yaw=_course_yaw(args.course_yaw))
+                               course_yaw=_course_yaw(args.course_yaw), scale_sigma=scale_sigma,
+                               gyro_cross_sigma=cross_sigma)
     if args.gnss:
         check_input_file(Path(args.gnss), "GNSS solution file (--gnss)")
     sol = rtklib_pos.read_pos(args.gnss) if args.gnss else None

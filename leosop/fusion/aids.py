@@ -210,23 +210,37 @@ class GnssPosition(Aid):
 class GnssVelocity(Aid):
     """A GNSS antenna velocity in ENU [m/s]: ``v + C_n_b (omega_ib_b x lever arm)`` (Earth rate neglected).
 
+    A receiver's Doppler velocity is a mean over its measurement interval,
+    not the velocity at the epoch: its error grows with the acceleration
+    ``a`` (that of the INS at the aid), as ``accel_sigma_s |a|`` per axis,
+    added to ``cov_enu_m2ps2``.
+
     Parameters
     ----------
     t_s : float
     vel_enu_mps : array_like, (3,)
     cov_enu_m2ps2 : array_like, (3, 3)
     lever_arm_b_m : array_like, (3,)
+    accel_sigma_s : float
+        Velocity error per acceleration [m/s per m/s^2].
     """
 
     name = "gnss_velocity"
     gated = False
     external_clock = True
 
-    def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m):
+    def __init__(self, t_s, vel_enu_mps, cov_enu_m2ps2, lever_arm_b_m, *, accel_sigma_s=0.0):
         super().__init__(t_s)
         self.vel_enu_mps = self.measured = np.asarray(vel_enu_mps, dtype=float).reshape(3)
         self.R = np.asarray(cov_enu_m2ps2, dtype=float).reshape(3, 3)
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
+        self.accel_sigma_s = float(accel_sigma_s)
+
+    def matrices(self, ins):
+        z, H, R = super().matrices(ins)
+        if self.accel_sigma_s:
+            R = R + np.eye(3) * (self.accel_sigma_s * np.linalg.norm(ins.accel_enu_mps2)) ** 2
+        return z, H, R
 
     def predict(self, ins):
         s = ins.state
@@ -307,23 +321,44 @@ class NonHolonomic(Aid):
     frame, ``C_v_b C_n_b^T v_enu``; ``C_v_b`` is a residual mounting of the
     body in the vehicle (identity when the IMU mounting is already applied).
 
+    In a turn the tyres slip (their slip angle grows with the lateral force,
+    hence with the lateral acceleration ``a = v_forward omega_up``) and a
+    sensor off the rear axle moves sideways with ``omega_up`` times its
+    offset: the lateral variance grows to ``sigma^2 + (slip_s a)^2 +
+    (offset_m omega_up)^2``, from the INS's own velocity and rate.
+
     Parameters
     ----------
     t_s : float
     sigma_mps : float
         Allowed lateral and vertical speed (slip, bumps) per axis.
     C_v_b : array_like, (3, 3)
+    slip_s : float
+        Lateral speed per lateral acceleration [m/s per m/s^2].
+    offset_m : float
+        Lateral speed per yaw rate [m/s per rad/s]: the sensor's distance along the vehicle from the point
+        that does not slip.
     """
 
     name = "nhc"
     needs_heading = True
     _ROWS = [0, 2]
 
-    def __init__(self, t_s, sigma_mps, C_v_b=np.eye(3)):
+    def __init__(self, t_s, sigma_mps, C_v_b=np.eye(3), *, slip_s=0.0, offset_m=0.0):
         super().__init__(t_s)
         self.R = np.eye(2) * float(sigma_mps) ** 2
         self.measured = np.zeros(2)
         self.C_v_b = np.asarray(C_v_b, dtype=float).reshape(3, 3)
+        self.slip_s, self.offset_m = float(slip_s), float(offset_m)
+
+    def matrices(self, ins):
+        z, H, R = super().matrices(ins)
+        if self.slip_s or self.offset_m:
+            v_b = self.C_v_b @ ins.state.C_n_b.T @ ins.state.vel_enu_mps
+            w_up = (self.C_v_b @ ins.omega_ib_b_rad_per_s)[2]
+            R = R.copy()
+            R[0, 0] += (self.slip_s * v_b[1] * w_up) ** 2 + (self.offset_m * w_up) ** 2
+        return z, H, R
 
     def predict(self, ins):
         s = ins.state

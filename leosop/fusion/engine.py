@@ -72,7 +72,10 @@ class EngineSettings:
     accelerometer scale-factor errors (dimensionless; None: no such states);
     ``time_offset_sigma_s`` the initial sigma of the IMU time offset (None: no
     such state, the offset is taken as known) and
-    ``time_offset_rw_s_per_rt_s`` its random walk. ``correction_period_s``:
+    ``time_offset_rw_s_per_rt_s`` its random walk. ``gyro_cross_sigma``:
+    initial sigma of the six cross-axis (misalignment) terms of the gyro,
+    ``M`` in ``measured = (I + diag(s) + M) true + bias`` with ``M`` zero on
+    its diagonal (dimensionless; None: no such states). ``correction_period_s``:
     an aid less than this after the last update is not applied (it still
     names its state blocks), except at the time of that update (all aids of
     one epoch make one correction; 0: every aid). ``record_every``: the result
@@ -94,6 +97,7 @@ class EngineSettings:
     correction_period_s: float = 0.0
     record_every: int = 1
     record_cov_ins: bool = False
+    gyro_cross_sigma: float | None = None
 
     def noise_psd(self):
         """PSDs of ``[w_gyro_b, w_accel_b]`` (6,), the ``Qc`` of :func:`leosop.ins.error_model.discretize`."""
@@ -183,6 +187,10 @@ AID_LOG_DTYPE = np.dtype([("aid", int), ("used", bool), ("nis", float), ("normal
 _TIME_SLACK_S = 1e-9
 
 
+#: Row and column of the six off-diagonal gyro cross-axis terms, in the order of their states.
+CROSS_IJ = (np.array([0, 0, 1, 1, 2, 2]), np.array([1, 2, 0, 2, 0, 1]))
+
+
 def state_slices(settings):
     """Slices of the optional states in the filter state: ``(SG, SA, TD)``, None for those not estimated."""
     n = N_INS
@@ -194,10 +202,19 @@ def state_slices(settings):
     return SG, SA, TD
 
 
+def cross_slice(settings):
+    """Slice of the six gyro cross-axis states (after those of :func:`state_slices`), None when not estimated."""
+    if settings.gyro_cross_sigma is None:
+        return None
+    n = max([N_INS] + [x.stop for x in state_slices(settings) if x is not None])
+    return slice(n, n + 6)
+
+
 def initial_covariance(P0_ins, settings):
     """The full ``P`` from the 15 INS errors' (15, 15) and the sigmas of the optional states of ``settings``."""
     SG, SA, TD = state_slices(settings)
-    n = max([N_INS] + [x.stop for x in (SG, SA, TD) if x is not None])
+    MG = cross_slice(settings)
+    n = max([N_INS] + [x.stop for x in (SG, SA, TD, MG) if x is not None])
     P = np.zeros((n, n))
     P[:N_INS, :N_INS] = P0_ins
     if SG is not None:
@@ -205,6 +222,8 @@ def initial_covariance(P0_ins, settings):
         P[SA, SA] = np.eye(3) * settings.scale_sigma[1] ** 2
     if TD is not None:
         P[TD, TD] = settings.time_offset_sigma_s**2
+    if MG is not None:
+        P[MG, MG] = np.eye(6) * settings.gyro_cross_sigma**2
     return P
 
 
@@ -216,6 +235,7 @@ class _Filter:
         self.state = state0
         self.settings = settings
         self.SG, self.SA, self.TD = state_slices(settings)
+        self.MG = cross_slice(settings)
         self.P = initial_covariance(P0, settings) if np.shape(P0) == (N_INS, N_INS) else np.array(P0, dtype=float)
         self.n_core = self.P.shape[0]
         self.blocks = {}  # key -> [StateBlock, first index, estimate, time last named]
@@ -226,6 +246,7 @@ class _Filter:
         self.ba = np.zeros(3)
         self.sg = np.zeros(3)
         self.sa = np.zeros(3)
+        self.mg = np.zeros((3, 3))
         self.td = float(time_offset_s)
         self.omega = np.zeros(3)
         self.accel_enu = np.zeros(3)
@@ -240,8 +261,8 @@ class _Filter:
         self.last_update_s = -math.inf
 
     def correct_increments(self, dth, dv, dt2):
-        """Raw increments (2, 3) less the bias and scale-factor estimates."""
-        th = dth * (1.0 - self.sg) - self.bg * dt2[:, None]
+        """Raw increments (2, 3) less the bias, scale-factor and cross-axis estimates."""
+        th = dth * (1.0 - self.sg) - dth @ self.mg.T - self.bg * dt2[:, None]
         return th, dv * (1.0 - self.sa) - self.ba * dt2[:, None]
 
     def propagate(self):
@@ -259,6 +280,9 @@ class _Filter:
         if self.SG is not None:
             F[:N_INS, self.SG] = F15[:, EPS] * (self.pending_dth_b / dt)
             F[:N_INS, self.SA] = F15[:, NABLA] * f_b
+        if self.MG is not None:
+            i, j = CROSS_IJ
+            F[:N_INS, self.MG] = F15[:, EPS][:, i] * (self.pending_dth_b / dt)[j]
         Phi, Qd = error_model.discretize(F, G, self.Qc, dt, method="series")
         Qd[EPS, EPS] += np.diag(self.bias_q[:3] * dt)
         Qd[NABLA, NABLA] += np.diag(self.bias_q[3:] * dt)
@@ -386,6 +410,8 @@ class _Filter:
         if self.SG is not None:
             self.sg = self.sg + dx[self.SG]
             self.sa = self.sa + dx[self.SA]
+        if self.MG is not None:
+            self.mg[CROSS_IJ] += dx[self.MG]
         if self.TD is not None:
             self.td -= float(dx[self.TD.start])  # dx is td_hat minus the true offset
         for b, i, x, _ in self.blocks.values():

@@ -146,10 +146,23 @@ class FuseOptions:
     ``gnss_vel_sigma_floor_mps`` is added (in quadrature) to the stated GNSS
     velocity sigmas: RTKLIB's Doppler velocity sigmas (0.06 m/s on the drive)
     left a quarter of the velocity innovations beyond their 99 % quantile.
+    ``gnss_vel_accel_sigma_s``: the GNSS velocity's sigma per axis grows by
+    this times the acceleration (:class:`leosop.fusion.aids.GnssVelocity`):
+    against the velocity of the Q = 1 fixes (0.25 s differences), outside
+    the bench outages, RTKLIB's Doppler velocities err by 0.04 m/s RMS at
+    under 0.5 m/s^2, 0.1 at 0.5-1, 0.2 at 1-2, 0.3 m/s at 2-4 m/s^2 on the
+    drive, alike on the walk (docs/fusion-real.md).
+    ``nhc_slip_s``, ``nhc_offset_m``: the NHC's lateral sigma grows with the
+    lateral acceleration and the yaw rate (:class:`leosop.fusion.aids.NonHolonomic`):
+    fitted, outside the bench outages, to the drive's lateral body velocity
+    (GNSS velocity in the filter's attitude) as ``-0.10 w_up + 0.115 w_up v``
+    (residual 0.09 m/s with the GNSS velocity noise).
     ``time_offset_sigma_s``: the IMU time offset is a filter state with this
     prior sigma around the given offset (None: taken as known);
     ``scale_sigma``: gyro and accelerometer scale-factor states with these
-    prior sigmas (None: none).
+    prior sigmas (None: none). ``gyro_cross_sigma``: the six gyro cross-axis
+    (misalignment) terms as states with this prior sigma (None: none); with
+    ``scale_sigma`` the full 3 x 3 gyro error matrix.
     ``yaw_hypotheses``, ``yaw_bank_s``: a start at rest without NHC (a
     hand-held IMU, whose Forward axis need not point along the motion) runs
     this many filters with yaws spread over the circle, each with the yaw
@@ -175,9 +188,13 @@ class FuseOptions:
     zero_rate_sigma_deg_per_s: float = 0.01
     nhc_sigma_mps: float = 0.1
     nhc_rate_hz: float = 10.0
+    nhc_slip_s: float = 0.12
+    nhc_offset_m: float = 0.1
     gnss_vel_sigma_floor_mps: float = 0.1
+    gnss_vel_accel_sigma_s: float = 0.1
     time_offset_sigma_s: float | None = 0.1
     scale_sigma: tuple | None = None
+    gyro_cross_sigma: float | None = None
     yaw_hypotheses: int = 12
     yaw_bank_s: float = 20.0
     course_yaw: tuple | None = None
@@ -264,7 +281,7 @@ class FuseRun:
     n_aids: dict
 
 
-def _gnss_aids(sol, t_g, use, lever, vel_floor_mps):
+def _gnss_aids(sol, t_g, use, lever, vel_floor_mps, vel_accel_sigma_s):
     out = []
     for k in np.flatnonzero(use):
         gain2 = _Q_GAIN.get(int(sol.q[k]), 5.0) ** 2
@@ -272,7 +289,7 @@ def _gnss_aids(sol, t_g, use, lever, vel_floor_mps):
                                            sol.alt_m[k], sol.cov_enu_m2[k] * gain2, lever))
         if sol.vel_enu_mps is not None:
             cov = sol.cov_vel_enu_m2ps2[k] * gain2 + np.eye(3) * vel_floor_mps**2
-            out.append(aid_models.GnssVelocity(t_g[k], sol.vel_enu_mps[k], cov, lever))
+            out.append(aid_models.GnssVelocity(t_g[k], sol.vel_enu_mps[k], cov, lever, accel_sigma_s=vel_accel_sigma_s))
     return out
 
 
@@ -383,7 +400,8 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     state0, P0, course = _initial(sol, k0, t_g, t_imu[0] - dt[0], dvl[:n_level].sum(0) / dt[:n_level].sum(),
                                   options.spec, options.course_alignment())
     lever = np.asarray(options.lever_arm_b_m, dtype=float)
-    aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps)
+    aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps,
+                          options.gnss_vel_accel_sigma_s)
     aid_list += [a for a in extra_aids if a.t_s > t_imu[0] - dt[0]]
     if options.zupt:
         ends, w = stationary_windows(t_imu, dvl / dt[:, None], dth / dt[:, None])
@@ -391,14 +409,15 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
         for te, wm in zip(ends, w):
             aid_list += [aid_models.ZeroVelocity(te, options.zupt_sigma_mps), aid_models.ZeroRate(te, wm, zr_sigma)]
     if options.nhc:
-        aid_list += [aid_models.NonHolonomic(t, options.nhc_sigma_mps)
+        aid_list += [aid_models.NonHolonomic(t, options.nhc_sigma_mps, slip_s=options.nhc_slip_s,
+                                             offset_m=options.nhc_offset_m)
                      for t in np.arange(t_imu[0], t_imu[-1], 1.0 / options.nhc_rate_hz)]
     aid_list.sort(key=lambda a: a.t_s)
     n_aids = {}
     for a in aid_list:
         n_aids[a.name] = n_aids.get(a.name, 0) + 1
     settings = dataclasses.replace(options.spec.settings(), time_offset_sigma_s=options.time_offset_sigma_s,
-                                   scale_sigma=options.scale_sigma)
+                                   scale_sigma=options.scale_sigma, gyro_cross_sigma=options.gyro_cross_sigma)
     if course is not None and options.yaw_hypotheses and not options.nhc and options.course_yaw is None:
         chosen = _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, t_g, sol, withheld, options)
         if chosen is not None:
