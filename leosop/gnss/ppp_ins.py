@@ -63,7 +63,7 @@ from ..frames import ecef_to_geodetic, geodetic_to_ecef
 from ..fusion import engine
 from ..fusion.aids_gnss import PppEpoch, ambiguity_block, zwd_block
 from ..fusion.common import N_INS, initial_covariance
-from .geometry import range_and_rate, satellite_at_reception, satellite_clock
+from .geometry import satellite_at_reception, satellite_clock
 from .ppp import PppOptions
 from .ppp_ins_ar import AfterEpoch
 from .ppp_ins_widelane import BETA_M, KAPPA_WL_PER_GF, LAM_NL_M, LAM_WL_M, if_combinations
@@ -256,18 +256,23 @@ def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options, pos_approx
     seen = np.zeros(n_sv, bool)
     mw_sum, mw_sq, mw_n = np.zeros(n_sv), np.zeros(n_sv), np.zeros(n_sv, int)
     pos = np.asarray(pos_approx_ecef_m, float)
+    # Satellite clocks and positions of every observation at once (light time from the rough position:
+    # 50 km off moves a satellite by 0.7 m, far below what the mask and the code position need).
+    kk, jj = np.nonzero(have)
+    clk_all, drift_all, rs_all = np.zeros((n_ep, n_sv)), np.zeros((n_ep, n_sv)), np.zeros((n_ep, n_sv, 3))
+    clk_all[kk, jj], drift_all[kk, jj] = satellite_clock(orbits, clocks, gnss.orb_idx[jj], gnss.clk_idx[jj],
+                                                         t[kk] - gnss.P1_m[kk, jj] / C_MPS)
+    rs_all[kk, jj] = satellite_at_reception(orbits, gnss.orb_idx[jj], t[kk], pos)[0]
     aids, arcs, n_slips = [], [], 0
     for k in range(n_ep):
         js = np.flatnonzero(have[k])
-        clk_m = drift_mps = np.zeros(0)
+        clk_m, drift_mps, rs = clk_all[k, js], drift_all[k, js], rs_all[k, js]
         if js.size >= 2:
-            clk_m, drift_mps = satellite_clock(orbits, clocks, gnss.orb_idx[js], gnss.clk_idx[js],
-                                               t[k] - gnss.P1_m[k, js] / C_MPS)
             if js.size >= 4:
-                pos = spp_position(satellite_at_reception(orbits, gnss.orb_idx[js], t[k], pos)[0], Pc[k, js] + clk_m)
+                pos = spp_position(rs, Pc[k, js] + clk_m, iterations=4 if k else 8)
             lat, lon, _ = ecef_to_geodetic(pos)
             up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
-            sin_el = range_and_rate(orbits, gnss.orb_idx[js], t[k], pos, np.zeros(3))[2] @ up
+            sin_el = (rs - pos) @ up / np.linalg.norm(rs - pos, axis=1)
             above = sin_el > np.sin(np.radians(options.mask_deg))
             js, clk_m, drift_mps, sin_el = js[above], clk_m[above], drift_mps[above], sin_el[above]
         if js.size < 2:
