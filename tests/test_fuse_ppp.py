@@ -1,9 +1,10 @@
 """PPP/INS on the fusion engine: the PPP epoch aid against finite differences and against the SD filter.
 
-References: the aid's own nonlinear model (central differences), one update
-of :mod:`leosop.gnss.ppp_ins`'s single-differenced filter (a second
-implementation: SD ambiguity states, its own design rows), and a short run
-of that filter on the simulated car.
+References: the aid's own nonlinear model (central differences), and the
+values of the single-differenced filter the engine replaced (a second
+implementation: SD ambiguity states, its own design rows, its own outlier
+loop; deleted in issue 21), recorded from its last version (commit
+9c5a62d): one update, one ambiguity fixing, short runs on the simulated car.
 """
 
 import math
@@ -15,7 +16,7 @@ from conftest import ESBC_CLK, ESBC_SP3
 from leosop.fusion import aids, kalman
 from leosop.fusion.aids_gnss import ZWD_KEY, PppEpoch, ambiguity_block, zwd_block
 from leosop.fusion.common import N_INS, pos_jacobian
-from leosop.gnss import models, ppp_ins, ppp_ins_engine, ppp_ins_study
+from leosop.gnss import models, ppp_ins, ppp_ins_ar, ppp_ins_study
 from leosop.gnss.products import read_clk, read_sp3
 from leosop.ins.error_model import DPOS, DV, PHI
 from leosop.ins.strapdown import NavState
@@ -27,6 +28,8 @@ T_ORBIT_S = 6 * 3600.0
 DOY = 177.0
 # Central-difference steps per INS error group: position 1e-8 rad (6 cm; range curvature 1e-10 m) and
 # 1 cm, so that the ranges' float rounding (~4e-9 m of 2e7 m) stays below 1e-6 of the differences.
+# The SD filter's state layout: 15 INS errors, the wet delay, one SD ambiguity slot per satellite.
+A0 = N_INS + 1
 STEP = np.r_[np.full(3, 1e-6), np.full(3, 1e-3), np.full(2, 1e-8), 1e-2, np.full(3, 1e-7), np.full(3, 1e-5)]
 
 
@@ -96,9 +99,9 @@ def test_ppp_design_matches_finite_differences(products):
 
 
 def test_ppp_update_equals_the_sd_filter_update(products):
-    # One update of the engine's aid (undifferenced ambiguities B) and of ppp_ins's SD rows (states
-    # D_j = B_j - B_ref) from the same prior: the same INS and wet-delay corrections and the same D,
-    # exactly (a linear map of the state; 1e-9 relative is the rounding of two solves).
+    # One update of the engine's aid (undifferenced ambiguities B) mapped to the SD filter's states
+    # (D_j = B_j - B_ref, non-INS states as corrections: sign S) against that filter's update from the same
+    # prior, recorded (9 digits). The two agreed to 1e-9 relative; 1e-7 allows the recording's rounding.
     aid, states, b0 = _epoch(products[0])
     state = _state()
     view = _view(state, states)
@@ -110,54 +113,75 @@ def test_ppp_update_equals_the_sd_filter_update(products):
                                             np.full(6, 1e-5), 0.1, np.full(m, 2.0)][:, None]
     P = A @ A.T + np.diag(np.r_[np.full(N_INS + 1, 1e-14), np.full(m, 1e-4)])
     dx, P1, _, _ = kalman.update(np.zeros(n_x), P, z, H, R)
-    # The SD filter: observations with the zenith hydrostatic delay removed, states mapped by T, the
-    # non-INS states there being corrections (estimate + dx) instead of errors (estimate - dx): sign S.
-    rho, rate, los, elev, C = aid.geometry(view)
-    ref = int(np.argmax(elev))
+    ref = int(np.argmax(aid.geometry(view)[3]))
     others = np.flatnonzero(np.arange(m) != ref)
-    m_dry, m_wet = models.niell_mapping(elev, state.lat_rad, state.alt_m, DOY + T_ORBIT_S / 86400.0)
-    zhd = models.saastamoinen_zhd_m(state.lat_rad, state.alt_m) * m_dry
-    obs = aid.obs - np.stack([zhd, zhd, np.zeros(m)])
-    x_old = np.zeros(ppp_ins._A0 + m)
-    x_old[ppp_ins._ZWD] = states[ZWD_KEY][0]
-    x_old[ppp_ins._A0 + others] = b0[others] - b0[ref]
-    T = np.zeros((x_old.size, n_x))
+    T = np.zeros((A0 + m, n_x))
     T[:N_INS + 1, :N_INS + 1] = np.eye(N_INS + 1)
-    T[ppp_ins._A0 + others, N_INS + 1 + others] = 1.0
-    T[ppp_ins._A0 + others, N_INS + 1 + ref] = -1.0
+    T[A0 + others, N_INS + 1 + others] = 1.0
+    T[A0 + others, N_INS + 1 + ref] = -1.0
     T = np.diag(np.r_[np.ones(N_INS), -np.ones(1 + m)]) @ T
-    geo = ppp_ins._Geometry(rho, rate, los, m_wet, np.sin(elev), ref, others, others)
-    use = [np.ones(m - 1, bool)] * 3
-    H_old, y, R_old, _ = ppp_ins._sd_measurements(geo, tuple(obs), x_old, C, pos_jacobian(state.lat_rad, state.alt_m),
-                                                  use, OPT)
-    dx_old, P1_old, _, _ = kalman.update(np.zeros(x_old.size), T @ P @ T.T, y, H_old, R_old)
-    assert np.abs(z).max() > 1.0  # a real correction, not a no-op
-    np.testing.assert_allclose(T @ dx, dx_old, rtol=1e-9, atol=1e-9 * np.abs(dx_old).max())
-    np.testing.assert_allclose(T @ P1 @ T.T, P1_old, rtol=1e-9, atol=1e-9 * np.abs(P1_old).max())
+    dx_sd = np.array([-1.31887178e+03, 5.84305175e+02, -7.42568334e+02, 2.66004505e+03, 1.21832565e+04,
+                      1.91732481e+04, -5.56623659e-02, -4.18421540e-02, 3.99989115e+06, -1.94438787e+00,
+                      -8.37035236e-01, -9.85121294e+00, 1.67225999e+01, -1.43978546e+01, 1.16903575e+01,
+                      2.21992229e+04, -1.26889050e+06, -7.64155801e+05, 0.0, -1.02194946e+06, -3.59069161e+05,
+                      -7.41070596e+05, -2.51836206e+05, -6.89427119e+05])
+    sigma_sd = np.array([3.15135393e-03, 4.27874056e-03, 3.48188167e-03, 6.38845094e-02, 1.02383182e-01,
+                         1.40549243e-01, 1.98236249e-07, 2.13913465e-07, 2.10875293e+00, 5.40794928e-05,
+                         2.94293430e-05, 4.32455339e-05, 3.58135767e-05, 3.99843985e-05, 4.42938162e-05,
+                         3.42194053e-01, 1.38290842e+00, 1.17779692e+00, 0.0, 1.24884815e+00, 1.28520159e+00,
+                         9.31913617e-01, 6.68885870e-01, 1.00632478e+00])
+    assert m == 8 and ref == 2 and np.abs(z).max() > 1.0  # the recorded case; a real correction, not a no-op
+    np.testing.assert_allclose(T @ dx, dx_sd, rtol=1e-7, atol=1e-7 * np.abs(dx_sd).max())
+    np.testing.assert_allclose(np.sqrt(np.diag(T @ P1 @ T.T)), sigma_sd, rtol=1e-7, atol=1e-12)
 
 
-def test_float_run_on_the_engine_matches_the_sd_filter(products):
-    # 30 s of the simulated car (seed 3, float): both filters on the same simulated data. They differ by
-    # design in small ways: the engine applies the first epoch after its first pair of IMU samples (and
-    # records the start before it, so epoch 0 is left out), evaluates the error model at the end of each
-    # step and the range rows at the updated INS. Measured here: 6e-4 sigma and sigmas within 5e-6 (bounds
-    # 0.01 sigma, 1e-3); over 10 min on 5 seeds the differences stay below 1.5 mm (sigma 9 cm).
-    runs = {e: ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False, engine=e)
-            for e in (False, True)}
-    truth = runs[False][0]
-    np.testing.assert_array_equal(runs[True][0], truth)  # the same simulated run
-    sd, eng = runs[False][1], runs[True][1]
-    sigma = np.sqrt(np.trace(sd.cov_pos_enu_m2, axis1=1, axis2=2))[1:]
-    diff = np.linalg.norm(eng.pos_float_ecef_m - sd.pos_float_ecef_m, axis=1)[1:]
-    assert np.all(diff < 0.01 * sigma) and diff.max() > 0.0
-    np.testing.assert_allclose(np.sqrt(np.trace(eng.cov_pos_enu_m2, axis1=1, axis2=2))[1:], sigma, rtol=1e-3)
-    assert np.all(eng.n_sats[1:] >= 5) and np.linalg.norm(eng.pos_float_ecef_m[-1] - truth[-1]) < 3 * sigma[-1]
+def test_float_run_matches_the_sd_filter(products):
+    # 30 s of the simulated car (seed 3, float) against the SD filter's errors on the same simulated data,
+    # recorded at epochs 1, 10, 20, 30 (and its 3-D sigmas). The two differ by design in small ways: the
+    # engine applies the first epoch after its first pair of IMU samples (so epoch 0 is left out),
+    # evaluates the error model at the end of each step and the range rows at the updated INS. Measured:
+    # 6e-4 sigma and sigmas within 5e-6 (bounds 0.01 sigma, 1e-3).
+    truth, res = ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False)
+    k = [1, 10, 20, 30]
+    err_sd = np.array([[0.206371089, -0.0685214518, 0.266397624], [-0.0833771061, -0.140029451, 0.101565198],
+                       [0.173090710, 0.0838758453, 0.845179004], [-0.0402151723, 0.0122218047, 0.597065702]])
+    sigma_sd = np.array([1.21736726, 0.77040661, 0.61238624, 0.52745989])
+    sigma = np.sqrt(np.trace(res.cov_pos_enu_m2[k], axis1=1, axis2=2))
+    diff = np.linalg.norm(res.pos_float_ecef_m[k] - truth[k] - err_sd, axis=1)
+    assert np.all(diff < 0.01 * sigma_sd)
+    np.testing.assert_allclose(sigma, sigma_sd, rtol=1e-3)
+    assert np.all(res.n_sats[1:] == 9) and res.n_outliers == 0
+
+
+def test_outliers_screened_as_the_sd_filter_did(products, monkeypatch):
+    # The run above with an 8 m code outlier (one satellite, not the reference, epoch 15) and 0.3 m on both
+    # phases of another at epoch 20 (no geometry-free jump: not a slip for the detector). The SD filter
+    # screened the same two rows (normalised innovation above k_outlier = 5) and its errors after them are
+    # recorded (epochs 16, 21, 30): within 2 mm here (its sigma 0.5 m; measured 0.9 mm).
+    real = ppp_ins_study.simulate
+
+    def with_outliers(*args, **kwargs):
+        g = real(*args, **kwargs)
+        js = np.flatnonzero(np.isfinite(g.P1_m[15]))
+        g.P1_m[15, js[5]] += 8.0
+        g.P2_m[15, js[5]] += 8.0
+        g.L1_cyc[20, js[4]] += 0.3 / 0.1903
+        g.L2_cyc[20, js[4]] += 0.3 / 0.2442
+        return g
+
+    monkeypatch.setattr(ppp_ins_study, "simulate", with_outliers)
+    truth, res = ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False)
+    err_sd = np.array([[0.25779746, 0.07080471, 0.53847887], [0.15584844, 0.08575542, 0.80788906],
+                       [-0.03315894, 0.02591545, 0.65107996]])
+    assert res.n_outliers == 2
+    np.testing.assert_allclose(res.pos_float_ecef_m[[16, 21, 30]] - truth[[16, 21, 30]], err_sd, atol=2e-3)
 
 
 def test_ambiguity_fixing_equals_the_sd_filter_fixing():
-    # The same float filter in both layouts (undifferenced ambiguities B for the engine, D_j = B_j - B_ref
-    # for ppp_ins, mapped by T): the same wide-lanes, narrow-lanes, ratio, fixed position and conditioned
-    # covariance; 1e-9 relative is the rounding of the solves.
+    # A float filter in the engine's layout (undifferenced ambiguities B); the SD filter's fixing of the
+    # same filter in its layout (D_j = B_j - B_ref), recorded: the same wide-lanes and narrow-lanes, ratio,
+    # fixed position (1e-6 m: the recording's digits) and state increment mapped to its layout (1e-7
+    # relative: the recording's 9 digits; the two agreed to 1e-9).
     rng = np.random.default_rng(4)
     m, ref = 7, 2
     others = np.flatnonzero(np.arange(m) != ref)
@@ -175,39 +199,26 @@ def test_ambiguity_fixing_equals_the_sd_filter_fixing():
     est = np.r_[0.1, b]
     n_mw = np.full(m, 30)
     mean = 0.4 + n_wl + rng.normal(size=m) * 0.02
-    ep = ppp_ins_engine._Epoch(0, np.arange(m), np.zeros(m, bool), mean * n_mw, n_mw * (mean**2 + 0.01), n_mw,
-                               np.zeros(m))
+    mw = (mean * n_mw, n_mw * (mean**2 + 0.01), n_mw)
     inertial = (np.zeros(m, bool), np.zeros(m))
-    state = _state()
-
-    def result():
-        n = 1
-        return ppp_ins.PppInsResult(np.zeros(n), *np.full((2, n, 3), np.nan), np.full((n, 3, 3), np.nan),
-                                    np.full((n, N_INS, N_INS), np.nan), *np.zeros((3, n), int), np.full(n, np.nan),
-                                    np.zeros(n, bool), 0, 0, 0)
-
-    out = result()
-    dx, P_fix = ppp_ins_engine._fix(out, 0, state, P, est, col, np.arange(m), np.arange(m), ref, ep, inertial,
-                                    np.zeros(m), OPT)
-    T = np.zeros((ppp_ins._A0 + m, n_x))
+    n = 1
+    out = ppp_ins.PppInsResult(np.zeros(n), *np.full((2, n, 3), np.nan), np.full((n, 3, 3), np.nan),
+                               np.full((n, N_INS, N_INS), np.nan), *np.zeros((3, n), int), np.full(n, np.nan),
+                               np.zeros(n, bool), 0, 0, 0)
+    dx, _ = ppp_ins_ar._fix(out, 0, _state(), P, est, col, np.arange(m), np.arange(m), ref, mw, inertial,
+                            np.zeros(m), OPT)
+    T = np.zeros((A0 + m, n_x))
     T[:N_INS + 1, :N_INS + 1] = np.eye(N_INS + 1)
-    T[ppp_ins._A0 + others, N_INS + 1 + others] = 1.0
-    T[ppp_ins._A0 + others, N_INS + 1 + ref] = -1.0
+    T[A0 + others, N_INS + 1 + others] = 1.0
+    T[A0 + others, N_INS + 1 + ref] = -1.0
     T = np.diag(np.r_[np.ones(N_INS), -np.ones(1 + m)]) @ T
-    x_old = np.zeros(ppp_ins._A0 + m)
-    x_old[ppp_ins._ZWD] = est[0]
-    x_old[ppp_ins._A0 + others] = b[others] - b[ref]
-    out_old = result()
-
-    class Ins:
-        pass
-
-    ins = Ins()
-    ins.state = state
-    dx_old, P_fix_old = ppp_ins._fix(out_old, 0, ins, T @ P @ T.T, x_old, others, ref,
-                                     (ep.mw_sum, ep.mw_sq, ep.mw_n), inertial, np.zeros(m), OPT)
-    assert out.n_fixed[0] == out_old.n_fixed[0] == m - 1 and out.n_wl[0] == m - 1
-    assert out.ratio[0] == pytest.approx(out_old.ratio[0], rel=1e-9)
-    np.testing.assert_allclose(out.pos_fixed_ecef_m, out_old.pos_fixed_ecef_m, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(T @ dx, dx_old, rtol=1e-9, atol=1e-9 * np.abs(dx_old).max())
-    np.testing.assert_allclose(T @ P_fix @ T.T, P_fix_old, rtol=1e-7, atol=1e-9 * np.abs(P_fix_old).max())
+    dx_sd = np.array([-1.50405802e-04, -6.38981882e-05, 1.33558532e-05, 1.53907173e-02, -3.70905703e-03,
+                      7.08615708e-03, 2.04031765e-09, -3.31064293e-09, 1.17825314e-02, 1.73863717e-06,
+                      -1.32132572e-06, 1.33640839e-06, 1.85377625e-06, -6.34528006e-07, 4.40453403e-07,
+                      -8.11594174e-03, 1.86280707e-04, 3.69991932e-03, 0.0, 1.27819163e-05, -2.66770831e-03,
+                      -1.49746279e-04, -5.37549570e-04])
+    assert out.n_fixed[0] == m - 1 and out.n_wl[0] == m - 1
+    assert out.ratio[0] == pytest.approx(339.0681525, rel=1e-8)
+    np.testing.assert_allclose(out.pos_fixed_ecef_m[0], [3585191.73278647, 532612.3721856, 5230604.55838963],
+                               rtol=0, atol=1e-6)
+    np.testing.assert_allclose(T @ dx, dx_sd, rtol=1e-7, atol=1e-7 * np.abs(dx_sd).max())

@@ -1,4 +1,4 @@
-"""Simulated GPS on real orbits, SD ambiguity bookkeeping, the tight PPP/INS filter, real GRG wide-lane biases."""
+"""Simulated GPS on real orbits, the tight PPP/INS filter, real GRG wide-lane biases."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ from conftest import ESBC_CLK, ESBC_DAY, ESBC_OBS, ESBC_SP3
 from leosop.constants import C_MPS
 from leosop.datadir import ENV_VAR
 from leosop.errors import InputError
-from leosop.gnss import ppp_ins, ppp_ins_study
+from leosop.gnss import ppp_ins, ppp_ins_study, ppp_ins_widelane
 from leosop.gnss.geometry import range_and_rate
 from leosop.gnss.ppp import PppOptions, prepare
 from leosop.gnss.products import read_clk, read_sp3, read_wl_biases
@@ -24,34 +24,6 @@ QUIET = SimSettings(code_sigma_m=0.0, phase_sigma_cyc=0.0, rate_sigma_mps=0.0, c
 def products():
     day = np.datetime64("2020-06-25", "ns")
     return read_sp3(SP3, systems="G", ref_gps=day), read_clk(CLK, systems="G", ref_gps=day)
-
-
-def test_reference_change_keeps_single_differences():
-    # Undifferenced ambiguities B with covariance Q; SD states against satellite 1, then against satellite 3.
-    rng = np.random.default_rng(0)
-    n_sv = 5
-    B = rng.normal(size=n_sv) * 10
-    A = rng.normal(size=(n_sv, n_sv))
-    Q = A @ A.T
-    n_x = ppp_ins._A0 + n_sv
-
-    def sd_state(ref):
-        D = np.zeros((n_x, n_sv))
-        for j in range(n_sv):
-            if j != ref:
-                D[ppp_ins._A0 + j, j], D[ppp_ins._A0 + j, ref] = 1.0, -1.0
-        return D @ B, D @ Q @ D.T
-
-    amb = ppp_ins._Ambiguities(n_sv)
-    x, P = sd_state(1)
-    amb.on[:] = True
-    amb.on[1] = False
-    amb.ref = 1
-    amb.change_reference(P, x, 3)
-    x3, P3 = sd_state(3)
-    np.testing.assert_allclose(x, x3, atol=1e-12)
-    np.testing.assert_allclose(P, P3, atol=1e-12)
-    assert amb.ref == 3 and amb.on.tolist() == [True, True, True, False, True]
 
 
 @needs_data
@@ -157,7 +129,7 @@ def test_outage_bridged_from_the_fixed_solution(products):
     # After the gap the wide-lanes come from the INS geometry at its first epochs (wl_inertial), and none is
     # contradicted by the Melbourne-Wuebbena rule once its averages fix the same arcs (within the run's 20 s).
     # Here at the second epoch: the old arcs are 250 s long and their means' variances count the multipath
-    # correlation (_mw_var_mean), which holds the success-rate gate one epoch (the first, before it).
+    # correlation (mw_var_mean), which holds the success-rate gate one epoch (the first, before it).
     k1 = k + int(np.flatnonzero(res.gnss[k:])[0])
     assert res.n_wl[k1:k1 + 2].max() >= ppp_ins.PppInsOptions().min_fixed
     assert res.n_wl_checked > 0 and res.n_wl_mismatch == 0
@@ -177,7 +149,7 @@ def test_outage_budget_reproduces_the_filter_covariance(products):
 def _gap_case(pos_sigma_m, seed=1):
     """Synthetic wide-lane bookkeeping across a 60 s gap: 8 satellites, new integers after it.
 
-    ``g = kappa I_gf + N + b + wsb + clock`` per satellite (see ppp_ins._InertialWideLane); the
+    ``g = kappa I_gf + N + b + wsb + clock`` per satellite (see ppp_ins_widelane.InertialWideLane); the
     geometry-free phase ramps linearly (slopes of a few mm/s, 3 mm noise); after the gap the range is
     predicted at a position ``pos_sigma_m`` (per axis) off, which the filter's covariance says.
     """
@@ -199,7 +171,7 @@ def _gap_case(pos_sigma_m, seed=1):
     P_sub = np.diag([pos_sigma_m**2] * 3 + [1e-6])
     dr = rng.normal(size=3) * pos_sigma_m
     o = ppp_ins.PppInsOptions()
-    iwl = ppp_ins._InertialWideLane(n)
+    iwl = ppp_ins_widelane.InertialWideLane(n)
     js = np.arange(n)
     sin_el = np.full(n, 0.7)
     iwl.store(js, kap * iono[k0] + n_old + b_rx + wsb + 12.3, sin_el, t[k0], k0, np.zeros((n, 4)), np.zeros((4, 4)))
@@ -226,7 +198,7 @@ def test_inertial_wide_lane_across_a_gap():
 def test_mw_mean_variance_counts_the_multipath_correlation():
     # Melbourne-Wuebbena noise as simulated: white plus a 2 s Gauss-Markov (the code multipath), equal
     # powers. 2000 arcs of 300 s: the spread of their means is what _mw_var_mean must give (Bartlett
-    # weights bias it low by a few %; 15 % allowed), and the white scatter over n - 1 (_mw_mean) is 1.6x
+    # weights bias it low by a few %; 15 % allowed), and the white scatter over n - 1 (mw_mean) is 1.6x
     # too small in sigma, the defect that made the inertial wide-lane ranges too tight.
     rng = np.random.default_rng(0)
     n_arc, n = 2000, 300
@@ -237,8 +209,8 @@ def test_mw_mean_variance_counts_the_multipath_correlation():
         gm[k] = rho * gm[k - 1] + np.sqrt(1.0 - rho**2) * rng.normal(size=n_arc)
     mw = 0.1 * (gm + rng.normal(size=(n, n_arc)))
     mean = mw.mean(axis=0)
-    var = ppp_ins._mw_var_mean(mw, np.full(n_arc, n), mean, ppp_ins.PppInsOptions().wl_mw_lags)
-    _, var_white = ppp_ins._mw_mean(mw.sum(axis=0), (mw**2).sum(axis=0), np.full(n_arc, n))
+    var = ppp_ins_widelane.mw_var_mean(mw, np.full(n_arc, n), mean, ppp_ins.PppInsOptions().wl_mw_lags)
+    _, var_white = ppp_ins_widelane.mw_mean(mw.sum(axis=0), (mw**2).sum(axis=0), np.full(n_arc, n))
     assert np.sqrt(np.mean(var) / mean.var()) == pytest.approx(1.0, abs=0.15)
     assert np.sqrt(mean.var() / np.mean(var_white)) > 1.4
 

@@ -7,7 +7,7 @@ chi2(3N)/N. Baseline in the same run: the INS alone (no GNSS after the first epo
 (it drifts by kilometres); the float solution without AR is the baseline of the fixed one.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python tools/bench_ppp_ins.py [--seeds 20] [--duration 1200] [--grade fog]
-[--outage] [--engine]``
+[--outage]``
 """
 
 import argparse
@@ -30,7 +30,6 @@ def main():
     ap.add_argument("--duration", type=float, default=1200.0)
     ap.add_argument("--grade", default="fog", choices=sorted(ppp_ins_study.GRADES))
     ap.add_argument("--outage", action="store_true", help="a 60 s outage 2/3 into each run")
-    ap.add_argument("--engine", action="store_true", help="the filter on the fusion engine (gnss/ppp_ins_engine.py)")
     a = ap.parse_args()
     products = ppp_ins_study._products(Path(__file__).resolve().parents[2] / "shared" / "data")
     nees, rows = [], []
@@ -38,7 +37,7 @@ def main():
     outage = 2.0 * a.duration / 3.0 if a.outage else None
     for seed in range(a.seeds):
         truth, res = ppp_ins_study.scenario(seed, duration_s=a.duration, outage_at_s=outage, products=products,
-                                            grade=a.grade, engine=a.engine)
+                                            grade=a.grade)
         lat, lon, _ = ecef_to_geodetic(truth[0])
         e = (res.pos_float_ecef_m - truth) @ C_e_n(lat, lon)
         nees.append(np.einsum("ki,kij,kj->k", e, np.linalg.inv(res.cov_pos_enu_m2), e))

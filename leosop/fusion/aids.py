@@ -165,6 +165,17 @@ class Aid:
         """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` as :meth:`design`, ``R`` (m, m)."""
         return self.predict(ins) - self.measured, self.design(ins), self.R
 
+    def screen(self, z, H, R, P):
+        """Per-row outlier screening before the update; None: every row (the default).
+
+        An aid that screens returns ``(keep, restart)``: the rows to use
+        (bool, (m,)) and state blocks of its :attr:`states` to restart at
+        their ``mean0``, ``sigma0`` (same key) before the update. ``z``,
+        ``H``, ``R`` as from :meth:`matrices` over the full state (n_x
+        columns), ``P`` (n_x, n_x) the covariance before the update.
+        """
+        return None
+
 
 class GnssPosition(Aid):
     """A GNSS antenna position; ``h`` is the antenna's ENU offset [m] from the measured point.

@@ -31,6 +31,8 @@ satellites below the elevation mask (at the INS) give no rows. The rows of
 :mod:`leosop.gnss.ppp_ins`, in ``tests/test_fuse_ppp.py``.
 """
 
+import dataclasses
+
 import numpy as np
 
 from ..constants import DAY_S
@@ -88,10 +90,13 @@ class PppEpoch(Aid):
     used : ndarray of int
         Satellites (indices into ``orb_idx``) above the mask at the last
         :meth:`matrices` call, ``ref`` their reference (for ambiguity fixing).
+    restarted : ndarray of int
+        Satellites (indices into ``orb_idx``) whose phase row :meth:`screen`
+        took for an outlier, ``n_outliers`` the rows it screened.
     """
 
     name = "ppp"
-    gated = False  # outliers are screened per row, not by the engine's whole-aid gate
+    gated = False  # outliers are screened per row (:meth:`screen`), not by the engine's whole-aid gate
     external_clock = True
 
     def __init__(self, t_s, t_orbit_s, orbits, orb_idx, code_m, phase_m, rate_mps, amb_blocks, zwd, doy, options):
@@ -104,6 +109,7 @@ class PppEpoch(Aid):
         self.options = options
         self.sigma_zenith = np.array([options.sigma_code_m, options.sigma_phase_m, options.sigma_rate_mps])
         self.used, self.ref = np.zeros(0, int), -1
+        self.restarted, self.n_outliers = np.zeros(0, int), 0
 
     def geometry(self, ins):
         """Range, rate, line of sight, elevation at the INS; shapes (m,), (m,), (m, 3), (m,); and ``C_e_n``."""
@@ -173,6 +179,44 @@ class PppEpoch(Aid):
         h, _, _, elev, _, used, ref = self._rows(ins)
         self.used, self.ref = used, ref
         return self._sd(h - self.obs, used, ref), self.design(ins), self._noise(elev, used, ref)
+
+    def screen(self, z, H, R, P):
+        """Outliers: the rows whose normalised innovation exceeds ``k_outlier``, the largest first, at most six.
+
+        ``|z_i| / sqrt(S_ii)``, ``S = H P H^T + R``; removing a row changes
+        no other row's ``S_ii``, so one pass ranks them. A phase outlier is
+        taken for a slip the detector missed: that satellite's ambiguity
+        restarts at this epoch's ``L - P`` with the prior sigma
+        ``amb_sigma_m`` (:attr:`restarted`; its wide-lane average restarts
+        in :mod:`leosop.gnss.ppp_ins_ar`).
+
+        Parameters
+        ----------
+        z : ndarray, shape (r,)
+        H : ndarray, shape (r, n_x)
+        R : ndarray, shape (r, r)
+        P : ndarray, shape (n_x, n_x)
+            The covariance before the update.
+
+        Returns
+        -------
+        keep : ndarray of bool, shape (r,)
+        restart : list of StateBlock
+            Ambiguity blocks to restart at their (new) prior.
+        """
+        w = np.abs(z) / np.sqrt(np.einsum("ij,jk,ik->i", H, P, H) + np.diag(R))
+        order = np.argsort(-w)[:6]
+        bad = order[w[order] > self.options.k_outlier]
+        keep = np.ones(z.size, bool)
+        keep[bad] = False
+        others = self.used[self.used != self.ref]
+        kind, row = np.divmod(bad, others.size)
+        self.restarted = others[row[kind == 1]]
+        self.n_outliers = bad.size
+        b_m = self.obs[1] - self.obs[0]
+        restart = [dataclasses.replace(self.states[1 + j], mean0=(float(b_m[j]),),
+                                       sigma0=(self.options.amb_sigma_m,)) for j in self.restarted]
+        return keep, restart
 
     def rate(self, ins):
         """``dh/dt`` of the SD rows as the INS moves (satellites fixed): ``-e . v`` for code and phase, 0 for the rate."""

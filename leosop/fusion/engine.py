@@ -340,6 +340,16 @@ class _Filter:
                 self.blocks[b.key] = [b, n, np.array(b.mean0, dtype=float), aid.t_s]
             self.blocks[b.key][3] = aid.t_s
 
+    def restart(self, blocks):
+        """Re-initialise alive state blocks at their ``mean0``, ``sigma0``: no correlation with the rest left."""
+        for b in blocks:
+            entry = self.blocks[b.key]
+            sl = slice(entry[1], entry[1] + b.size)
+            self.P[sl, :] = 0.0
+            self.P[:, sl] = 0.0
+            self.P[sl, sl] = np.diag(np.square(b.sigma0))
+            entry[2][:] = b.mean0
+
     def innovation(self, aid, ins):
         """``(z, H, R)`` of ``aid`` over the full state (the time-offset column for aids on the aids' clock)."""
         z, Ha, R = aid.matrices(ins)
@@ -369,6 +379,11 @@ class _Filter:
             The aid's negative log-likelihood, None when it was rejected.
         """
         z, H, R = self.innovation(aid, ins)
+        screened = aid.screen(z, H, R, self.P)
+        if screened is not None:
+            keep, restart = screened
+            self.restart(restart)
+            z, H, R = z[keep], H[keep], R[np.ix_(keep, keep)]
         count = self.counts.setdefault(aid.name, [0, 0])
         S = H @ self.P @ H.T + R
         nis = float(z @ np.linalg.solve(S, z))
@@ -468,7 +483,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     progress : callable, optional
         Wraps the iterator over INS updates (a progress bar).
     on_aid : callable, optional
-        Called after each aid's gate test as ``on_aid(aid, z, S, used, reopened)``:
+        Called after each aid's gate test (and its rows' screening,
+        :meth:`leosop.fusion.aids.Aid.screen`) as ``on_aid(aid, z, S, used, reopened)``:
         innovation (m,), its covariance (m, m) as used, whether the aid was
         used, and whether it failed the gate and was used all the same.
     after_aid : callable, optional

@@ -27,7 +27,7 @@ from ..fusion.common import FilterSettings, pos_jacobian
 from ..ins import error_model, strapdown
 from ..ins.imu import ImuErrors, corrupt
 from ..ins.trajectory import Segment, from_segments
-from . import ppp_ins, ppp_ins_engine
+from . import ppp_ins
 from .products import read_clk, read_sp3
 from .simulate import SimSettings, simulate
 
@@ -104,12 +104,8 @@ def _trajectory(duration_s):
 
 
 def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None, ar=True, sim=SimSettings(),
-             grade="fog", options=ppp_ins.PppInsOptions(), engine=False):
-    """Simulate one run and filter it (``options`` with ``ar`` replaced).
-
-    ``engine``: filter with :func:`leosop.gnss.ppp_ins_engine.run` (the same
-    filter on the fusion engine, without the per-row outlier screening)
-    instead of :func:`leosop.gnss.ppp_ins.run`.
+             grade="fog", options=ppp_ins.PppInsOptions()):
+    """Simulate one run and filter it with :func:`leosop.gnss.ppp_ins.run` (``options`` with ``ar`` replaced).
 
     Returns
     -------
@@ -139,8 +135,7 @@ def scenario(seed, *, duration_s=3600.0, outage_at_s=OUTAGE_AT_S, products=None,
     true0 = strapdown.NavState.from_dcm(traj.lat_rad[0], traj.lon_rad[0], traj.alt_m[0], traj.vel_enu_mps[0],
                                         traj.C_n_b[0])
     state0 = true0.corrected(-att, -dv, -dpos)
-    run = ppp_ins_engine.run if engine else ppp_ins.run
-    res = run(gnss, orbits, clocks, state0, dth, dvl, traj.dt_s, settings, dataclasses.replace(options, ar=ar))
+    res = ppp_ins.run(gnss, orbits, clocks, state0, dth, dvl, traj.dt_s, settings, dataclasses.replace(options, ar=ar))
     return gnss.pos_ecef_m[:n], res
 
 
