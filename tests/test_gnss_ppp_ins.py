@@ -139,11 +139,14 @@ def test_outage_budget_reproduces_the_filter_covariance(products):
     # The budget propagates the recorded INS-error covariance (PppInsResult.cov_ins) at the gap's first epoch
     # along the true trajectory (Van Loan steps, true specific force, position mapped to ENU metres); the
     # filter propagated it along its own INS (series steps, measured specific force) to its recorded position
-    # covariance. Independent paths that agree to 4e-4 here (seed 0); 0.5 % allowed.
+    # covariance. Independent paths: 1.1 % apart here (seed 0) since the filter is the fusion engine, which
+    # evaluates the error model at the end of each step on its own INS (the former loop, at the start: 4e-4);
+    # 1.5 % allowed: a lost gyro-noise or velocity term (0.17, 0.065-0.078 m of 0.35 m in quadrature) moves the
+    # total by 12 % and 2-3 %; a lost accelerometer-noise term (0.05 m, 1 %) would pass.
     truth, res = ppp_ins_study.scenario(0, duration_s=330.0, outage_at_s=250.0, products=products)
     gap = np.flatnonzero(~res.gnss[1:]) + 1
     doc = ppp_ins_study.outage_budget(res, "fog", 330.0, gap[0], gap[-1])
-    np.testing.assert_allclose(doc["total"], doc["filter sigma"], rtol=5e-3)
+    np.testing.assert_allclose(doc["total"], doc["filter sigma"], rtol=1.5e-2)
 
 
 def _gap_case(pos_sigma_m, seed=1):
