@@ -28,9 +28,11 @@ time span of their satellite's base rows (or in a gap wider than
 w-test outlier exclusion) and each block's status is
 :func:`~leosop.positioning.quality.fix_status` with its satellites as passes.
 
-The element-set error's residual (the differential term above) is not
-modelled: it grows with the baseline, and the covariance does not include
-it (tools/bench_differential.py measures how the error and its NEES grow).
+The element-set error's residual (the differential term above) grows with
+the baseline: each common satellite's radial / along / cross-track offset is
+a state with a prior, moving its position and, as the RTN frame turns
+(:func:`_rtn_frames`, the orbit plane's turn in ECEF included), its
+velocity. tools/bench_differential.py measures the NEES over the baseline.
 """
 
 from dataclasses import dataclass
