@@ -138,3 +138,34 @@ def test_consistent_passes_leave_the_covariance_bit_identical(starlink_like):  #
     np.testing.assert_array_equal(on.cov, off.cov)
     np.testing.assert_array_equal(on.pos_ecef_m, off.pos_ecef_m)
     assert off.pass_offset_sigma_m is None
+
+
+def test_element_set_sigma_floors_the_offsets_variance(starlink_like):  # noqa: F811
+    """The element sets' radial / cross-track sigma enters the covariance as the fix's sensitivity to them.
+
+    Reference: the fix solved again with one satellite's states moved by one sigma along one axis, for
+    each satellite and axis (a second, finite-difference computation of the sandwich term): the
+    covariance the prior adds must be the sum of those shifts' outer products (sigmas 35-69 m here).
+    The shifts are linear in the 30 / 60 m offsets to ~1e-4 (offset over range), the fixes converge to
+    1e-3 of their sigma (0.3 m of the shifts' tens of metres); achieved 2e-4 of the largest element,
+    bound 1e-3.
+    """
+    geo, rate, p, v, t_s, sat, rx = starlink_like
+    extra, *_ = _common_truth(rate, t_s, sat, np.random.default_rng(2))
+    y = geo + extra + np.random.default_rng(3).normal(0.0, 0.3, geo.shape)
+    kw = {"clock": "common", "pos0_ecef_m": rx, "alpha": None}
+    sigma_rc = np.array([30.0, 60.0])
+    off = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, **kw)
+    on = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, orbit_sigma_rc_m=sigma_rc, **kw)
+    np.testing.assert_array_equal(on.pos_ecef_m, off.pos_ecef_m)  # the fix itself is unchanged
+    e_r = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    e_c = np.cross(p, v)
+    e_c /= np.linalg.norm(e_c, axis=-1, keepdims=True)
+    added = np.zeros((3, 3))
+    for k in range(7):
+        for axis, s in zip((e_r, e_c), sigma_rc):
+            moved = p + np.where((sat == k)[:, None], s * axis, 0.0)
+            d = solve_static_passes(y, 0.3, moved, v, F0_HZ, t_s, sat, pass_offsets=False, **kw).pos_ecef_m - \
+                off.pos_ecef_m
+            added += np.outer(d, d)
+    np.testing.assert_allclose(on.cov[:3, :3] - off.cov[:3, :3], added, atol=1e-3 * np.abs(added).max())

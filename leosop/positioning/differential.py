@@ -28,15 +28,18 @@ time span of their satellite's base rows (or in a gap wider than
 w-test outlier exclusion) and each block's status is
 :func:`~leosop.positioning.quality.fix_status` with its satellites as passes.
 
-The element-set error's residual (the differential term above) is not
-modelled: it grows with the baseline, and the covariance does not include
-it (tools/bench_differential.py measures how the error and its NEES grow).
+The element-set error's residual (the differential term above) grows with
+the baseline: each common satellite's radial / along / cross-track offset is
+a state with a prior, moving its position and, as the RTN frame turns
+(:func:`_rtn_frames`, the orbit plane's turn in ECEF included), its
+velocity. tools/bench_differential.py measures the NEES over the baseline.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..frames import ecef_to_geodetic
 from ..geometry.dop import cofactor
@@ -132,18 +135,34 @@ def _states(meas, name):
 
 
 def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
-    """Radial / along-track / cross-track axes (columns of C, (..., 3, 3)) and their velocity map W = [w]x C.
+    """Radial / along-track / cross-track axes (columns of C, (..., 3, 3)) and their rate W = dC/dt (..., 3, 3).
 
-    ``w = r x v / |r|^2`` is the satellite's orbital angular velocity: an
-    offset ``C d`` fixed in that frame moves with velocity ``W d``.
+    The axes are built from the ECEF state: radial along ``r``, cross-track
+    along ``h = r x v``, along-track ``n x r``. An offset ``C d`` fixed in
+    that frame moves with velocity ``W d``. The radial axis turns with the
+    orbital angular velocity ``r x v / |r|^2``; the cross-track axis turns
+    too, as the ECEF orbit plane does: ``dh/dt = r x a``, and of the ECEF
+    acceleration ``a`` only the Earth's rotation terms (Coriolis ``-2 w x v``
+    and centrifugal ``-w x (w x r)``, ``w`` the Earth's rate) leave the
+    plane, central gravity does not (the Earth's oblateness, ~1e-3 of it,
+    is left out). That turn, ~1e-4 rad/s, moves a 300 m along-track offset
+    by 3 cm/s, ~1 Hz at Ku band, which the rover and the base see the more
+    differently the longer the baseline.
     """
     r, v = np.asarray(pos_sv_ecef_m, float), np.asarray(vel_sv_ecef_mps, float)
-    radial = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    norm_r = np.linalg.norm(r, axis=-1, keepdims=True)
+    radial = r / norm_r
     h = np.cross(r, v)
-    normal = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    C = np.stack([radial, np.cross(normal, radial), normal], axis=-1)
-    w = h / np.sum(r * r, axis=-1, keepdims=True)
-    return C, np.cross(w[..., None, :], np.swapaxes(C, -1, -2)).swapaxes(-1, -2)
+    norm_h = np.linalg.norm(h, axis=-1, keepdims=True)
+    normal = h / norm_h
+    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
+    a_rot = -2.0 * np.cross(omega, v) - np.cross(omega, np.cross(omega, r))
+    h_dot = np.cross(r, a_rot)
+    d_normal = (h_dot - normal * np.sum(normal * h_dot, axis=-1, keepdims=True)) / norm_h
+    d_radial = (v - radial * np.sum(radial * v, axis=-1, keepdims=True)) / norm_r
+    along = np.cross(normal, radial)
+    d_along = np.cross(d_normal, radial) + np.cross(normal, d_radial)
+    return np.stack([radial, along, normal], axis=-1), np.stack([d_radial, d_along, d_normal], axis=-1)
 
 
 def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz):

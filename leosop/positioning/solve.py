@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.doppler import N_DOPPLER_STATES
+from ..orbits.accuracy import element_set_sigma_rc_m
 from .measurements import clock_groups, sv_states_from_tle
 from .snapshot import solve_snapshots
 from .starts import subpoint_centroid_ecef_m
@@ -125,6 +126,15 @@ def _epochs(meas):
     slot = np.empty(len(epoch), dtype=int)
     slot[order] = np.arange(len(epoch)) - np.repeat(np.cumsum(counts) - counts, counts)
     return epoch, first, slot, counts.max()
+
+
+def _element_set_sigma_rc_m(meas, constellation, usable):
+    """Radial and cross-track sigma of each usable row's element set at its age (m, 2); 0 on other rows."""
+    sigma = np.zeros((len(meas), 2))
+    if usable.any():
+        epochs = constellation.epochs_utc[constellation.index_of(meas.sat_id[usable])]
+        sigma[usable] = element_set_sigma_rc_m((meas.time_utc[usable] - epochs) / np.timedelta64(1, "D"))
+    return sigma
 
 
 def _robust_sigma(residuals_hz, n_states):
@@ -326,6 +336,9 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
     time_bias, time_bias_sigma_s
         Estimate a time offset of each pass's satellite states (its element
         set's along-track error) with a zero-mean prior (None: no prior).
+        States from element sets also put their radial and cross-track
+        error at each one's age (:func:`~leosop.orbits.accuracy.element_set_sigma_rc_m`)
+        into the covariance, which no residual of one receiver shows.
 
     Returns
     -------
@@ -343,7 +356,8 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
         labels = ()
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable, clock=clock,
               clock_degree=clock_degree, sat_offset_sigma_hz=sat_offset_sigma_hz, time_bias=time_bias,
-              time_bias_sigma_s=time_bias_sigma_s, clock_group=group if len(labels) > 1 else None)
+              time_bias_sigma_s=time_bias_sigma_s, clock_group=group if len(labels) > 1 else None,
+              orbit_sigma_rc_m=_element_set_sigma_rc_m(meas, constellation, usable) if source == "tle" else None)
     pos_lt = init_pos_ecef_m
     sigma_pass = None
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():

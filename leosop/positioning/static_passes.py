@@ -375,7 +375,8 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
                         pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=4000, alpha=1e-3,
                         clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
                         time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
-                        ambiguity_m=10e3, clock_group=None, decorrelate=True, pass_offsets=True):
+                        ambiguity_m=10e3, clock_group=None, decorrelate=True, pass_offsets=True,
+                        orbit_sigma_rc_m=None):
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has
@@ -457,6 +458,12 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         not take up) and, where the test is significant, add the variance
         they imply to the covariance (module docstring; the fix itself is
         unchanged).
+    orbit_sigma_rc_m : array_like, (2,) or (m, 2), optional
+        Radial and cross-track standard deviation of the satellite states'
+        error [m] (per row; a pass takes its rows' largest), e.g.
+        :func:`~leosop.orbits.accuracy.element_set_sigma_rc_m`: the floor of
+        the pass offsets' variance in the covariance (with ``pass_offsets``).
+        None: the passes' disagreement alone sets it.
 
     Returns
     -------
@@ -662,9 +669,14 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         # its score test, variance component and sandwich term on the covariance (module docstring).
         G, M_b, g_b = _offset_blocks(r_s, v_s, x[0], f0, wd, D, B_glob, A, seg, res[0, :n])
         variance_factor, offset_sigma_m, offset_chi2, offset_dof = _pass_disagreement(M_b - G.T @ N_inv @ G, g_b)
-        if variance_factor > 1.0 or offset_sigma_m > 0.0:
+        var_b = np.full((n_pass, 2), offset_sigma_m**2)
+        if orbit_sigma_rc_m is not None:
+            # The element sets' own accuracy is the floor: the disagreement may show more, never less.
+            sig_rows = np.broadcast_to(np.asarray(orbit_sigma_rc_m, dtype=float), (n, 2))[order]
+            var_b = np.maximum(var_b, np.maximum.reduceat(np.where(m[:n, None], sig_rows, 0.0), seg, axis=0) ** 2)
+        if variance_factor > 1.0 or var_b.any():
             NG = N_inv @ G
-            N_inv = variance_factor * N_inv + offset_sigma_m**2 * (NG @ NG.T)
+            N_inv = variance_factor * N_inv + (NG * var_b.ravel()) @ NG.T
     cov = N_inv * scale[:, None] * scale[None, :]
     # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
     loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
