@@ -23,7 +23,9 @@ def test_json_contract_and_outputs(tmp_path, capsys):
                  "--mask-deg", "40", "--json", "--out", str(tmp_path)])
     doc = json.loads(capsys.readouterr().out)
     assert code == 0
-    assert set(doc) == {"epochs_utc", "n_visible", "gdop", "visible_ids"}
+    assert {"epochs_utc", "n_visible", "gdop", "visible_ids"} <= set(doc)
+    assert doc["per_epoch"]["in_document"] and doc["n_epochs"] == 61
+    assert doc["stats"]["n_visible_max"] == max(doc["n_visible"])
     assert len(doc["epochs_utc"]) == 61 and doc["epochs_utc"][1] == "2025-01-01T00:00:05.000000Z"
     for n, g, ids in zip(doc["n_visible"], doc["gdop"], doc["visible_ids"]):
         assert n == len(ids) and all(isinstance(s, str) and s.isdigit() for s in ids)
@@ -39,6 +41,8 @@ def test_json_contract_and_outputs(tmp_path, capsys):
     assert [r["time_utc"] for r in rows] == doc["epochs_utc"]
     for r, g in zip(rows, doc["gdop"]):
         assert (r["gdop"] == "") if g is None else float(r["gdop"]) == pytest.approx(g, abs=5e-5)
+    with open(tmp_path / "passes.csv") as fh:
+        assert len(list(csv.DictReader(fh))) == doc["n_passes"] > 0
 
 
 def test_sub_second_steps_print_whole_instants(capsys):
