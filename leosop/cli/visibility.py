@@ -48,6 +48,9 @@ DEFAULT_MASK_DEG = 40.0
 DEFAULT_CHUNK_S = 3600.0
 #: Per-epoch lists in the JSON document up to this many epochs: a day at 1 s, both ends included.
 DEFAULT_JSON_MAX_EPOCHS = 86_401
+#: Points per curve of visibility.png at most: a longer span is drawn as each bin's minimum and maximum (the
+#: envelope its ~700 pixel columns show anyway), so the figure's memory does not grow with the span.
+PLOT_MAX_POINTS = 20_000
 
 
 #: What ``--help`` says about the outputs, the Doppler GDOP's meaning above all.
@@ -150,12 +153,43 @@ def run(args):
         run.close_passes()
         doc = run.document(files=True)
         write_json(stage / "visibility.json", doc, compact=True)
-        times = utc_from_seconds(np.arange(n_epochs) * step, start)
-        plot_visibility(stage / "visibility.png", times, run.n_visible, run.gdop, run.gdop_range, mask_deg=mask,
-                        title=title)
+        times, (n_vis, gdop, gdop_range) = _envelope(start, step, run.n_visible, run.gdop, run.gdop_range)
+        plot_visibility(stage / "visibility.png", times, n_vis, gdop, gdop_range, mask_deg=mask, title=title)
         az, el, t_s, ids = (np.concatenate(x) for x in zip(*run.sky))
         plot_skyplot(stage / "skyplot.png", az, el, t_s, ids, start, mask_deg=mask, title=title)
     return doc
+
+
+def _envelope(start, step_s, *series):
+    """The per-epoch series for the figure: whole up to :data:`PLOT_MAX_POINTS` epochs, else binned.
+
+    Parameters
+    ----------
+    start : numpy.datetime64
+    step_s : float
+    *series : ndarray, (n_epochs,)
+
+    Returns
+    -------
+    times : ndarray of datetime64[ns], (n_points,)
+        The epochs, or each bin's first epoch twice.
+    list of ndarray, (n_points,)
+        The series, or each bin's minimum then maximum (NaN where a bin has no finite value).
+    """
+    n = len(series[0])
+    k = -(-2 * n // PLOT_MAX_POINTS)  # epochs per bin, two points each
+    if k <= 1:
+        return utc_from_seconds(np.arange(n) * step_s, start), list(series)
+    n_bins = -(-n // k)
+    out = []
+    for x in series:
+        bins = np.full(n_bins * k, np.nan)
+        bins[:n] = x
+        bins = bins.reshape(n_bins, k)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN bins (too few satellites) stay NaN
+            out.append(np.stack([np.nanmin(bins, 1), np.nanmax(bins, 1)], 1).ravel())
+    return np.repeat(utc_from_seconds(np.arange(0, n, k) * step_s, start), 2), out
 
 
 def _families(names):
@@ -244,7 +278,8 @@ class _Run:
         g = self.gdop[fixable]
         stats = {"n_visible_min": int(self.n_visible.min()), "n_visible_median": float(np.median(self.n_visible)),
                  "n_visible_max": int(self.n_visible.max()), "fixable_fraction": float(fixable.mean()),
-                 "gdop_median": float(np.median(g)) if g.size else None, "gdop_max": float(g.max(initial=np.nan))}
+                 "gdop_median": float(np.median(g)) if g.size else None,
+                 "gdop_max": float(g.max()) if g.size else None}
         if not files:
             self.stitcher.finish()
         doc = {
