@@ -1,14 +1,31 @@
-"""Screened visibility against brute-force SatrecArray propagation, in one run.
+"""Screened visibility against brute-force SatrecArray propagation, in one run; with ``--spans``, the
+``leosop visibility`` command's time and peak memory over long spans, chunked against the whole-span code.
 
 Default: the real 10,138-satellite Starlink snapshot of 2026-04-08 (from
 ../shared/data/tle), one site (Delft), 24 h at 1 s, 40 deg mask. Prints both
 times, their ratio, and whether the visible (satellite, epoch) sets are
 identical. Goal (DESIGN 6): screened >= 20x faster, identical sets.
 
+``--spans 6 24 168`` runs ``leosop visibility --out`` for each span (hours)
+in a child process of its own and prints its wall time and peak RSS
+(``os.wait4``), this tree's streamed code beside the code of ``--baseline-ref``
+(default ``main``, exported with ``git archive``), the ratios, and whether
+the two wrote the same ``visibility.csv`` and ``passes.csv``. The baseline
+holds the whole span in memory (~1.4 GB a day), so it runs only up to
+``--baseline-max-hours``. Goal (issue 24): 24 h <= 10 s and <= 400 MB, 7 d
+<= 7x the 24 h time at the same memory.
+
     python tools/bench_visibility.py [--hours 24] [--mask-deg 40] [--tle FILE]
+    python tools/bench_visibility.py --spans 6 24 168 [--baseline-ref main]
 """
 
 import argparse
+import filecmp
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
@@ -18,7 +35,49 @@ from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.visibility import compute_visibility
 
-SNAPSHOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
+REPO = Path(__file__).resolve().parents[1]
+SNAPSHOT = REPO.parent / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
+
+
+def run_cli(code_dir, out_dir, args):
+    """Wall time [s] and peak RSS [MB] of ``leosop visibility ARGS --out OUT_DIR`` run from ``code_dir``."""
+    env = dict(os.environ, PYTHONPATH=str(code_dir))
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "leosop", "visibility", *args, "--out", str(out_dir)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    stderr = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        sys.exit(f"{code_dir}: leosop visibility failed: {stderr.decode().strip()}")
+    return time.perf_counter() - t0, usage.ru_maxrss / 1024
+
+
+def bench_spans(args):
+    """Streamed against whole-span ``leosop visibility --out`` for each of ``args.spans`` hours."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        base = tmp / "baseline"
+        base.mkdir()
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", args.baseline_ref, "leosop"], check=True,
+                                 capture_output=True).stdout
+        (tmp / "base.tar").write_bytes(archive)
+        with tarfile.open(tmp / "base.tar") as tar:
+            tar.extractall(base, filter="data")
+        print(f"{'span':>6} {'streamed s':>10} {'MB':>6} | {args.baseline_ref + ' s':>10} {'MB':>6} | "
+              f"{'time ratio':>10} {'memory ratio':>12} | same files")
+        for hours in args.spans:
+            cli = ["--tle", args.tle, "--site", args.site, "--start", args.start, "--duration-s",
+                   f"{hours * 3600:g}", "--step-s", f"{args.step_s:g}", "--mask-deg", f"{args.mask_deg:g}"]
+            t_new, m_new = run_cli(REPO, tmp / f"new{hours}", cli)
+            line = f"{hours:>5g}h {t_new:>10.1f} {m_new:>6.0f} | "
+            if hours <= args.baseline_max_hours:
+                t_old, m_old = run_cli(base, tmp / f"old{hours}", cli)
+                same = all(filecmp.cmp(tmp / f"new{hours}" / f, tmp / f"old{hours}" / f, shallow=False)
+                           for f in ("visibility.csv", "passes.csv"))
+                line += f"{t_old:>10.1f} {m_old:>6.0f} | {t_old / t_new:>9.2f}x {m_old / m_new:>11.2f}x | {same}"
+            else:
+                line += f"{'(skipped: over --baseline-max-hours)':>42}"
+            print(line, flush=True)
 
 
 def main():
@@ -29,7 +88,15 @@ def main():
     parser.add_argument("--step-s", type=float, default=1.0)
     parser.add_argument("--mask-deg", type=float, default=40.0)
     parser.add_argument("--site", default="51.9989,4.3733585,95")
+    parser.add_argument("--spans", type=float, nargs="+", metavar="HOURS",
+                        help="time and peak memory of leosop visibility --out for these spans, against the baseline")
+    parser.add_argument("--baseline-ref", default="main", help="git ref of the whole-span code (default main)")
+    parser.add_argument("--baseline-max-hours", type=float, default=24.0,
+                        help="longest span run with the baseline (default 24)")
     args = parser.parse_args()
+    if args.spans:
+        bench_spans(args)
+        return
 
     const = load_constellation(args.tle)
     lat, lon, alt = (float(x) for x in args.site.split(","))

@@ -6,19 +6,35 @@ receiver clock of its own, and ``gdop`` is that of the mix (position,
 velocity and one clock per family seen: null below ``6 + k`` satellites of
 ``k`` families); the JSON document adds ``families`` and
 ``n_visible_by_family`` and the CSV a ``n_visible_<family>`` column each.
+
+Long spans run in bounded memory: the grid goes by in chunks of
+``--chunk-s`` (:mod:`leosop.orbits.chunks`), ``visibility.csv`` and
+``passes.csv`` are written as the chunks come, and what is kept of the whole
+span is a few numbers per epoch (count and GDOPs for the figure and the
+statistics, ~20 bytes). The results do not depend on the chunk. The JSON
+document holds the contract's per-epoch lists up to ``--json-max-epochs``
+epochs (default a day at 1 s, a ~25 MB document): the size is known before
+any work, and a longer span's lists would cost memory in proportion to it.
+Beyond that those keys are null, ``per_epoch`` says why and points at the
+files that hold them: ``visibility.csv`` (one row per epoch) and
+``passes.csv``, whose rise-set intervals are the visible sets (a satellite
+is visible at every grid epoch from ``rise_utc`` to ``set_utc`` inclusive).
+``stats`` and ``n_passes`` are always there.
 """
 
+import csv
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from ..fileio import atomic_outputs, write_csv, write_json
+from ..fileio import atomic_outputs, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import CARRIERS, load_constellation
+from ..orbits.chunks import PassStitcher, visibility_chunks
 from ..orbits.propagate import drop_failing
-from ..orbits.visibility import compute_visibility
 from ..timebase import format_utc, seconds_since, utc_from_seconds
 from . import add_command
 from .options import mask_deg, parse_site, parse_time, positive, warn_stale
@@ -27,6 +43,14 @@ from .options import mask_deg, parse_site, parse_time, positive, warn_stale
 #: from the bundled element sets' epoch, the paper's 40 deg mask.
 DEFAULT_SITE = "34.342,108.940,400"
 DEFAULT_MASK_DEG = 40.0
+#: Chunk length: an hour (3,600 epochs at 1 s, ~60 MB of working memory for 10,000 satellites at a 40 deg mask);
+#: a whole number of the 60 s screening steps.
+DEFAULT_CHUNK_S = 3600.0
+#: Per-epoch lists in the JSON document up to this many epochs: a day at 1 s, both ends included.
+DEFAULT_JSON_MAX_EPOCHS = 86_401
+#: Points per curve of visibility.png at most: a longer span is drawn as each bin's minimum and maximum (the
+#: envelope its ~700 pixel columns show anyway), so the figure's memory does not grow with the span.
+PLOT_MAX_POINTS = 20_000
 
 
 #: What ``--help`` says about the outputs, the Doppler GDOP's meaning above all.
@@ -58,6 +82,12 @@ def register(subparsers):
                    "family only)")
     p.add_argument("--skip-bad", action="store_true", help="skip malformed TLE records with a warning")
     p.add_argument("--no-screen", action="store_true", help="propagate every satellite every epoch (slow)")
+    p.add_argument("--chunk-s", type=float, default=DEFAULT_CHUNK_S,
+                   help=f"work through the span in chunks of this length (default {DEFAULT_CHUNK_S:g}); memory is "
+                   "set by the chunk, the results do not depend on it")
+    p.add_argument("--json-max-epochs", type=int, default=DEFAULT_JSON_MAX_EPOCHS, metavar="N",
+                   help=f"per-epoch lists in the JSON document up to N epochs (default {DEFAULT_JSON_MAX_EPOCHS}, "
+                   "a day at 1 s); beyond, they are null and the document points at visibility.csv and passes.csv")
 
 
 def run(args):
@@ -65,6 +95,9 @@ def run(args):
     duration = positive(args.duration_s, "--duration-s")
     step = positive(args.step_s, "--step-s")
     mask = mask_deg(args.mask_deg)
+    chunk_epochs = max(1, round(positive(args.chunk_s, "--chunk-s") / step))
+    if args.json_max_epochs < 0:
+        raise InputError(f"--json-max-epochs {args.json_max_epochs}: must be an integer >= 0")
     if args.carrier_hz is not None:
         positive(args.carrier_hz, "--carrier-hz")
     if duration / step > 5_000_000:
@@ -84,10 +117,10 @@ def run(args):
     if args.start:
         start = parse_time(args.start)
     else:
-        start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[ns]").astype("datetime64[m]")
+        start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[m]").astype("datetime64[ns]")
     warn_stale(const, start)
-    times = utc_from_seconds(np.arange(n_epochs) * step, start)
-    const = drop_failing(const, times[[0, -1]], what=f"{format_utc(times[0])} .. {format_utc(times[-1])}")
+    ends = utc_from_seconds(np.array([0, n_epochs - 1]) * step, start)
+    const = drop_failing(const, ends, what=f"{format_utc(ends[0])} .. {format_utc(ends[1])}")
     family = families[0] if families else next((f for f in const.families if f), "starlink")
     carrier_hz = args.carrier_hz or CARRIERS[family].default_hz
     clock_group = None
@@ -96,23 +129,67 @@ def run(args):
         clock_group = np.array([families.index(f) for f in const.families])
         carrier_hz = np.array([CARRIERS[f].default_hz for f in const.families])
 
+    in_doc = n_epochs <= args.json_max_epochs
+    if not in_doc:
+        where = "visibility.csv and passes.csv in --out" if args.out else "files only with --out DIR"
+        warnings.warn(f"{n_epochs} epochs > --json-max-epochs {args.json_max_epochs}: the per-epoch lists are left "
+                      f"out of the JSON document ({where})")
     site = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
-    vis = compute_visibility(const, times, site, mask, screen=not args.no_screen)
-    gdop = vis.doppler_gdop(carrier_hz, clock_group)
-    doc = {
-        "epochs_utc": format_utc(times),
-        "n_visible": vis.n_visible.tolist(),
-        "gdop": [None if not np.isfinite(g) else float(g) for g in gdop],
-        "visible_ids": vis.visible_ids(),
-    }
-    if len(families) > 1:
-        counts = vis.n_visible_by_group(clock_group)
-        doc["families"] = families
-        doc["n_visible_by_family"] = {f: counts[:, j].tolist() for j, f in enumerate(families)}
-    if args.out:
-        title = f"{Path(const.source).name} at {lat:.3f}, {lon:.3f} deg, {alt:g} m"
-        _write_outputs(Path(args.out), doc, vis, gdop, times, mask, title)
+    run = _Run(const, start, step, n_epochs, families, in_doc)
+    chunks = visibility_chunks(const, start, step, n_epochs, site, mask, chunk_epochs=chunk_epochs,
+                               screen=not args.no_screen)
+    if not args.out:
+        for a, vis in chunks:
+            run.add(a, vis, carrier_hz, clock_group)
+        return run.document(files=False)
+    from ..plots.sky import SKYPLOT_WINDOW_S, plot_skyplot, plot_visibility
+
+    title = f"{Path(const.source).name} at {lat:.3f}, {lon:.3f} deg, {alt:g} m"
+    with atomic_outputs(Path(args.out)) as stage, open(stage / "visibility.csv", "w", newline="") as rows, \
+            open(stage / "passes.csv", "w", newline="") as passes:
+        run.write_to(csv.writer(rows), csv.writer(passes))
+        for a, vis in chunks:
+            run.add(a, vis, carrier_hz, clock_group, sky_window_s=SKYPLOT_WINDOW_S)
+        run.close_passes()
+        doc = run.document(files=True)
+        write_json(stage / "visibility.json", doc, compact=True)
+        times, (n_vis, gdop, gdop_range) = _envelope(start, step, run.n_visible, run.gdop, run.gdop_range)
+        plot_visibility(stage / "visibility.png", times, n_vis, gdop, gdop_range, mask_deg=mask, title=title)
+        az, el, t_s, ids = (np.concatenate(x) for x in zip(*run.sky))
+        plot_skyplot(stage / "skyplot.png", az, el, t_s, ids, start, mask_deg=mask, title=title)
     return doc
+
+
+def _envelope(start, step_s, *series):
+    """The per-epoch series for the figure: whole up to :data:`PLOT_MAX_POINTS` epochs, else binned.
+
+    Parameters
+    ----------
+    start : numpy.datetime64
+    step_s : float
+    *series : ndarray, (n_epochs,)
+
+    Returns
+    -------
+    times : ndarray of datetime64[ns], (n_points,)
+        The epochs, or each bin's first epoch twice.
+    list of ndarray, (n_points,)
+        The series, or each bin's minimum then maximum (NaN where a bin has no finite value).
+    """
+    n = len(series[0])
+    k = -(-2 * n // PLOT_MAX_POINTS)  # epochs per bin, two points each
+    if k <= 1:
+        return utc_from_seconds(np.arange(n) * step_s, start), list(series)
+    n_bins = -(-n // k)
+    out = []
+    for x in series:
+        bins = np.full(n_bins * k, np.nan)
+        bins[:n] = x
+        bins = bins.reshape(n_bins, k)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN bins (too few satellites) stay NaN
+            out.append(np.stack([np.nanmin(bins, 1), np.nanmax(bins, 1)], 1).ravel())
+    return np.repeat(utc_from_seconds(np.arange(0, n, k) * step_s, start), 2), out
 
 
 def _families(names):
@@ -130,49 +207,122 @@ def _families(names):
     return out
 
 
-def _write_outputs(out, doc, vis, gdop, times, mask, title):
-    with atomic_outputs(out) as stage:
-        _write_files(stage, doc, vis, gdop, times, mask, title)
+class _Run:
+    """What a run keeps of the whole span, filled chunk by chunk, and the files it streams.
 
+    Kept per epoch: visible count, Doppler and range GDOP (and the counts per
+    family), for the statistics and the figure; the contract's per-epoch
+    lists only when ``in_doc``; the sky plot's first window of points.
+    """
 
-def _write_files(out, doc, vis, gdop, times, mask, title):
-    from ..plots.sky import plot_skyplot, plot_visibility
+    def __init__(self, const, start, step_s, n_epochs, families, in_doc):
+        self.const, self.start, self.step_s, self.families, self.in_doc = const, start, step_s, families, in_doc
+        self.n_visible = np.zeros(n_epochs, np.int32)
+        self.gdop = np.full(n_epochs, np.nan)
+        self.gdop_range = np.full(n_epochs, np.nan)
+        self.by_family = np.zeros((n_epochs, len(families)), np.int32) if len(families) > 1 else None
+        self.lists = {"epochs_utc": [], "visible_ids": []} if in_doc else None
+        self.stitcher = PassStitcher(const.sat_ids, n_epochs)
+        self.sky = [(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, str))]
+        self.csv = self.passes_csv = None
 
-    write_json(out / "visibility.json", doc, compact=True)
-    t_s = seconds_since(times, times[0])
-    dops = vis.range_dops()
-    blank = lambda x: "" if not np.isfinite(x) else f"{x:.4f}"  # noqa: E731
-    by_family = doc.get("n_visible_by_family", {})
-    per_family = list(zip(*by_family.values())) if by_family else [()] * len(t_s)
-    write_csv(out / "visibility.csv",
-              ["time_utc", "t_s", "n_visible", "gdop", "gdop_range", "pdop_range", "hdop_range", "vdop_range"]
-              + [f"n_visible_{f}" for f in by_family],
-              ([e, f"{t:.3f}", n, blank(g), blank(a), blank(b), blank(c), blank(d), *nf]
-               for e, t, n, g, a, b, c, d, nf in
-               zip(doc["epochs_utc"], t_s, doc["n_visible"], gdop, dops["gdop"], dops["pdop"], dops["hdop"],
-                   dops["vdop"], per_family)))
-    write_csv(out / "passes.csv", ["sat_id", "rise_utc", "culmination_utc", "set_utc", "max_elev_deg", "truncated"],
-              ([p.sat_id, format_utc(p.rise_utc), format_utc(p.culmination_utc), format_utc(p.set_utc),
-                f"{p.max_elev_deg:.3f}", int(p.truncated)] for p in vis.passes()))
-    plot_visibility(out / "visibility.png", times, vis.n_visible, gdop, dops["gdop"], mask_deg=mask, title=title)
-    plot_skyplot(out / "skyplot.png", vis.az_rad, vis.elev_rad, t_s[vis.epoch_index], vis.sat_ids[vis.sat_index],
-                 times[0], mask_deg=mask, title=title)
+    def write_to(self, rows, passes):
+        """Stream the epochs to ``rows`` (``visibility.csv``) and the passes to ``passes``: csv writers."""
+        fams = self.families if self.by_family is not None else []
+        self.csv, self.passes_csv = rows, passes
+        self.csv.writerow(["time_utc", "t_s", "n_visible", "gdop", "gdop_range", "pdop_range", "hdop_range",
+                           "vdop_range"] + [f"n_visible_{f}" for f in fams])
+        self.passes_csv.writerow(["sat_id", "rise_utc", "culmination_utc", "set_utc", "max_elev_deg", "truncated"])
+
+    def add(self, a, vis, carrier_hz, clock_group, *, sky_window_s=None):
+        """Take the chunk whose first epoch is ``a``: keep its per-epoch numbers, write its rows."""
+        b = a + len(vis.times_utc)
+        self.n_visible[a:b] = vis.n_visible
+        self.gdop[a:b] = vis.doppler_gdop(carrier_hz, clock_group)
+        if self.by_family is not None:
+            self.by_family[a:b] = vis.n_visible_by_group(clock_group)
+        epochs = format_utc(vis.times_utc)
+        if self.in_doc:
+            self.lists["epochs_utc"] += epochs
+            self.lists["visible_ids"] += vis.visible_ids()
+        passes = self.stitcher.add(a, vis)
+        if self.csv is None:
+            return
+        dops = vis.range_dops()
+        self.gdop_range[a:b] = dops["gdop"]
+        t_s = seconds_since(vis.times_utc, self.start)
+        cols = [self.gdop[a:b], dops["gdop"], dops["pdop"], dops["hdop"], dops["vdop"]]
+        text = [[f"{x:.4f}" if np.isfinite(x) else "" for x in c.tolist()] for c in cols]
+        per_family = self.by_family[a:b].tolist() if self.by_family is not None else [()] * len(epochs)
+        self.csv.writerows([e, f"{t:.3f}", n, *dop, *nf] for e, t, n, *dop, nf in
+                           zip(epochs, t_s.tolist(), self.n_visible[a:b].tolist(), *text, per_family))
+        self._write_passes(passes)
+        t_pair = seconds_since(vis.times_utc[vis.epoch_index], self.start)
+        near = t_pair <= sky_window_s
+        if near.any():
+            self.sky.append((vis.az_rad[near], vis.elev_rad[near], t_pair[near],
+                             vis.sat_ids[vis.sat_index[near]]))
+
+    def close_passes(self):
+        """Write the passes held until the end."""
+        self._write_passes(self.stitcher.finish())
+
+    def _write_passes(self, passes):
+        self.passes_csv.writerows([p.sat_id, format_utc(p.rise_utc), format_utc(p.culmination_utc),
+                                   format_utc(p.set_utc), f"{p.max_elev_deg:.3f}", int(p.truncated)]
+                                  for p in passes)
+
+    def document(self, *, files):
+        """The JSON document: the contract's keys (per-epoch lists or null), ``stats``, ``per_epoch``."""
+        fixable = np.isfinite(self.gdop)
+        g = self.gdop[fixable]
+        stats = {"n_visible_min": int(self.n_visible.min()), "n_visible_median": float(np.median(self.n_visible)),
+                 "n_visible_max": int(self.n_visible.max()), "fixable_fraction": float(fixable.mean()),
+                 "gdop_median": float(np.median(g)) if g.size else None,
+                 "gdop_max": float(g.max()) if g.size else None}
+        if not files:
+            self.stitcher.finish()
+        doc = {
+            "epochs_utc": self.lists["epochs_utc"] if self.in_doc else None,
+            "n_visible": self.n_visible.tolist() if self.in_doc else None,
+            "gdop": self.gdop.tolist() if self.in_doc else None,
+            "visible_ids": self.lists["visible_ids"] if self.in_doc else None,
+            "n_epochs": len(self.n_visible),
+            "start_utc": format_utc(self.start),
+            "step_s": self.step_s,
+            "n_passes": self.stitcher.n_passes,
+            "stats": stats,
+            "per_epoch": {"in_document": self.in_doc, "files": {
+                "epochs_utc": "visibility.csv:time_utc", "n_visible": "visibility.csv:n_visible",
+                "gdop": "visibility.csv:gdop",
+                "visible_ids": "passes.csv:sat_id,rise_utc,set_utc (visible at every epoch from rise to set)",
+            } if files else None},
+        }
+        if self.by_family is not None:
+            doc["families"] = self.families
+            doc["n_visible_by_family"] = {f: self.by_family[:, j].tolist() if self.in_doc else None
+                                          for j, f in enumerate(self.families)}
+            stats["n_visible_by_family"] = {
+                f: {"min": int(c.min()), "median": float(np.median(c)), "max": int(c.max())}
+                for f, c in zip(self.families, self.by_family.T)}
+        return doc
 
 
 def summary(doc):
-    n = np.array(doc["n_visible"])
-    g = np.array([np.nan if x is None else x for x in doc["gdop"]])
-    fixable = np.isfinite(g)
+    st = doc["stats"]
     lines = [
-        f"{len(n)} epochs from {doc['epochs_utc'][0]} to {doc['epochs_utc'][-1]}",
-        f"visible satellites: min {n.min()}, median {np.median(n):g}, max {n.max()}",
-        f"epochs with >= 7 satellites (Doppler fix possible): {fixable.mean():.1%}" if "families" not in doc else
-        f"epochs with >= 6 + one per constellation seen (Doppler fix possible): {fixable.mean():.1%}",
+        f"{doc['n_epochs']} epochs of {doc['step_s']:g} s from {doc['start_utc']}, {doc['n_passes']} passes",
+        (f"visible satellites: min {st['n_visible_min']}, median {st['n_visible_median']:g}, "
+         f"max {st['n_visible_max']}"),
+        f"epochs with >= 7 satellites (Doppler fix possible): {st['fixable_fraction']:.1%}" if "families" not in doc
+        else f"epochs with >= 6 + one per constellation seen (Doppler fix possible): {st['fixable_fraction']:.1%}",
     ]
-    for fam, counts in doc.get("n_visible_by_family", {}).items():
-        c = np.array(counts)
-        lines.append(f"  {fam}: min {c.min()}, median {np.median(c):g}, max {c.max()}")
-    if fixable.any():
-        lines.append(f"Doppler GDOP (m of position per Hz of Doppler noise): median {np.median(g[fixable]):.1f}, "
-                     f"max {g[fixable].max():.1f}")
+    for fam, c in st.get("n_visible_by_family", {}).items():
+        lines.append(f"  {fam}: min {c['min']}, median {c['median']:g}, max {c['max']}")
+    if st["gdop_median"] is not None:
+        lines.append(f"Doppler GDOP (m of position per Hz of Doppler noise): median {st['gdop_median']:.1f}, "
+                     f"max {st['gdop_max']:.1f}")
+    if not doc["per_epoch"]["in_document"]:
+        lines.append("per-epoch lists: " + ("in visibility.csv and passes.csv" if doc["per_epoch"]["files"] else
+                                            "not kept (--out DIR writes them)"))
     return "\n".join(lines)

@@ -81,7 +81,8 @@ class Visibility:
     def visible_ids(self):
         """Catalogue numbers visible at each epoch: list of lists of str."""
         bounds = np.searchsorted(self.epoch_index, np.arange(len(self.times_utc) + 1))
-        ids = self.sat_ids[self.sat_index]
+        # One str per satellite, shared by every epoch's list (not one per visible pair).
+        ids = self.sat_ids.astype(object)[self.sat_index]
         return [ids[a:b].tolist() for a, b in zip(bounds[:-1], bounds[1:])]
 
     def epochs(self, start, stop):
@@ -190,25 +191,34 @@ class Visibility:
         los = self.padded(los)
         return range_dops(los, weights=np.isfinite(los[..., 0]).astype(float))
 
-    def passes(self):
-        """Passes (rise, culmination, set) of every satellite, by rise time."""
+    def runs(self):
+        """Runs of consecutive visible epochs of each satellite: the passes as index arrays.
+
+        Returns
+        -------
+        sat, first, last, top : ndarray of int, (n_runs,)
+            Satellite index and the first, last and highest epoch of each run
+            (the first of equal maxima), sorted by satellite then epoch.
+        top_elev_rad : ndarray, (n_runs,)
+        """
         order = np.lexsort((self.epoch_index, self.sat_index))
         sat, ep, el = self.sat_index[order], self.epoch_index[order], self.elev_rad[order]
-        breaks = np.flatnonzero((np.diff(sat) != 0) | (np.diff(ep) != 1)) + 1
-        out = []
-        last = len(self.times_utc) - 1
-        for run in np.split(np.arange(len(sat)), breaks):
-            if run.size == 0:
-                continue
-            top = run[np.argmax(el[run])]
-            out.append(Pass(
-                str(self.sat_ids[sat[run[0]]]),
-                self.times_utc[ep[run[0]]],
-                self.times_utc[ep[top]],
-                self.times_utc[ep[run[-1]]],
-                float(np.degrees(el[top])),
-                bool(ep[run[0]] == 0 or ep[run[-1]] == last),
-            ))
+        if len(sat) == 0:
+            return sat, ep, ep, ep, el
+        starts = np.flatnonzero(np.r_[True, (np.diff(sat) != 0) | (np.diff(ep) != 1)])
+        ends = np.r_[starts[1:], len(sat)] - 1
+        top_el = np.maximum.reduceat(el, starts)
+        run = np.repeat(np.arange(len(starts)), ends - starts + 1)
+        top = np.minimum.reduceat(np.where(el == top_el[run], np.arange(len(sat)), len(sat)), starts)
+        return sat[starts], ep[starts], ep[ends], ep[top], top_el
+
+    def passes(self):
+        """Passes (rise, culmination, set) of every satellite, by rise time."""
+        sat, first, last, top, top_el = self.runs()
+        end = len(self.times_utc) - 1
+        t = self.times_utc
+        out = [Pass(str(self.sat_ids[k]), t[a], t[c], t[b], float(np.degrees(e)), bool(a == 0 or b == end))
+               for k, a, b, c, e in zip(sat, first, last, top, top_el)]
         return sorted(out, key=lambda p: (p.rise_utc, p.sat_id))
 
 
