@@ -48,7 +48,7 @@ from ..progress import progress
 from ..scenarios import XIAN_BAOJI
 from ..signal.channel import WAVEFORMS, OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
 from ..signal.frontend import BITS_DATATYPE, PRESETS, FrontEnd
-from ..signal.iq import write_sigmf_files
+from ..signal.iq_write import write_sigmf_files
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
 from . import add_command
