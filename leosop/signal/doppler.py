@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, coarse_fft
 from .fft import fft
-from .fine import start_step_hz, fine_fast, fine_fmlef, fine_ml
+from .fine import fine_fast, fine_fmlef, fine_ml, start_step_hz
 from .pilot import PilotComb
 from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
