@@ -275,7 +275,7 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
         Test the passes for a common offset of each one's satellite states
         (radial and cross-track, the element-set errors the time offsets do
         not take up) and, where the test is significant, add the variance
-        they imply to the covariance (module docstring; the fix itself is
+        they imply to the covariance (:mod:`.passes_noise`; the fix itself is
         unchanged).
 
     Returns
@@ -374,7 +374,7 @@ def _pick_start(out, rows, ambiguity_m):
 
 
 def _pass_sigma_scale(rows, residuals_hz, used, decorrelate):
-    """Each pass's correlation time and the factor on its sigma, (n_pass,) each (module docstring).
+    """Each pass's correlation time and the factor on its sigma, (n_pass,) each (:mod:`.passes_noise`).
 
     Each correlated pass's variance is raised to tau x its whitened
     residuals' mean square, never lowered: a sigma already above the
@@ -393,7 +393,7 @@ def _covariance(model, x, w, residuals_hz, ok, pass_offsets):
     """Covariance of ``[pos, global terms, per-pass polynomials or offsets, time biases]`` at the solution.
 
     The inverse full normal matrix, with the passes' disagreement priced in
-    (``pass_offsets``, module docstring), in [Hz/s^k]. Returns ``(cov,
+    (``pass_offsets``, :mod:`.passes_noise`), in [Hz/s^k]. Returns ``(cov,
     (variance_factor, offset_sigma_m, offset_chi2, offset_dof), c_g, c_s)``,
     the last two the linear terms at ``x`` in scaled time.
     """
@@ -406,7 +406,7 @@ def _covariance(model, x, w, residuals_hz, ok, pass_offsets):
     offsets = (1.0, 0.0, 0.0, 0) if pass_offsets else (None,) * 4
     if pass_offsets and n_pass and np.isfinite(N_inv).all():
         # Each pass's satellite offset (radial, cross-track) as a random effect the fix does not estimate:
-        # its score test, variance component and sandwich term on the covariance (module docstring).
+        # its score test, variance component and sandwich term on the covariance (passes_noise).
         G, M_b, g_b = pass_offset_blocks(rows.pos_sv_ecef_m, rows.vel_sv_ecef_mps, x[0], rows.carrier_hz,
                                          w[0, :rows.n], D, rows.B_glob, A, rows.seg, residuals_hz)
         offsets = pass_disagreement(M_b - G.T @ N_inv @ G, g_b)
