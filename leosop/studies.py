@@ -45,7 +45,7 @@ def chunk_generators(seed, n_chunks):
 
 
 @contextlib.contextmanager
-def _client(scheduler, n_chunks, n_workers=None):
+def dask_client(scheduler, n_chunks, n_workers=None):
     """A client for ``scheduler``; a local cluster gets ``n_workers`` (default: the cores) but no more than chunks."""
     from distributed import Client, LocalCluster
 
@@ -95,7 +95,7 @@ def map_chunks(func, chunks, *, seed=0, scheduler=None, desc=None):
         return [func(c, r) for c, r in progress(zip(chunks, rngs), total=len(chunks), desc=desc, unit="chunk")]
     from distributed import as_completed
 
-    with _client(scheduler, len(chunks)) as client:
+    with dask_client(scheduler, len(chunks)) as client:
         futures = client.map(func, chunks, rngs, pure=False)
         for _ in progress(as_completed(futures), total=len(futures), desc=desc, unit="chunk"):
             pass

@@ -7,7 +7,7 @@ import pytest
 
 from leosop.cli import main
 from leosop.signal.error_model import doppler_sigma_hz
-from leosop.signal.iq import write_sigmf
+from leosop.signal.iq_write import write_sigmf
 
 SAT = "71585"  # above 40 deg from Xi'an at the default start (2025-01-01T19:40Z)
 

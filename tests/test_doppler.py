@@ -8,7 +8,7 @@ from leosop.signal.channel import doppler_blocks
 from leosop.signal.crlb import crlb_frequency_hz2
 from leosop.signal.doppler import estimate_block, estimate_blocks
 from leosop.signal.error_model import doppler_sigma_hz
-from leosop.signal.fine import _interleaved, _phasors, cubic_bias_hz, fine_fmlef, fine_ml, periodogram_grid
+from leosop.signal.fine import interleaved_matrix, comb_phasors, cubic_bias_hz, fine_fmlef, fine_ml, periodogram_grid
 from leosop.signal.pilot import PilotComb
 
 FS = 1e6          # Hz: holds the comb (+-176 kHz) and +-300 kHz of Doppler
@@ -113,14 +113,14 @@ def test_decimation_product_matches_direct_sum(dtype, rtol):
     rng = np.random.default_rng(7)
     # Phases as in a block: up to ~50 cycles per segment (Doppler and tone offsets).
     a, b = rng.uniform(-50.0, 50.0, 500), rng.uniform(-10.0, 10.0, 500)
-    mix = _phasors(a, b, 4)
+    mix = comb_phasors(a, b, 4)
     direct = np.exp(-2j * np.pi * (a[:, None] + np.arange(-4, 5) * b[:, None]))
     # Arguments up to ~600 rad carry ~1e-13 rad of rounding; four recurrence
     # products add a few ulps.
     np.testing.assert_allclose(mix, direct, rtol=0, atol=1e-12)
     x = (rng.standard_normal((600, 500)) + 1j * rng.standard_normal((600, 500))).astype(dtype)
     xr = x.view(x.real.dtype)
-    y = (xr @ _interleaved(mix, xr.dtype)).view(dtype)
+    y = (xr @ interleaved_matrix(mix, xr.dtype)).view(dtype)
     # Sums of 500 unit terms: rounding of order eps * sqrt(500) relative to
     # the typical |y| ~ sqrt(500) (float32: eps 6e-8; float64: 1e-16).
     np.testing.assert_allclose(y, x.astype(complex) @ direct, rtol=0, atol=rtol * np.sqrt(500))

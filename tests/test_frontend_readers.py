@@ -9,7 +9,8 @@ from sigmf import sigmffile
 
 from leosop.cli import main
 from leosop.errors import InputError
-from leosop.signal.iq import FULL_SCALE, open_raw, open_sigmf, quantise, write_sigmf
+from leosop.signal.iq import FULL_SCALE, open_raw, open_sigmf
+from leosop.signal.iq_write import quantise, write_sigmf
 from leosop.signal.recorders import name_metadata
 
 FS = 1e6

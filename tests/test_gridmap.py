@@ -8,8 +8,9 @@ import pytest
 
 from leosop.errors import InputError
 from leosop.orbits import load_constellation
+from leosop.orbits.gridcells import _normal_gdop
 from leosop.orbits.gridmap import (
-    FOOTPRINT_MARGIN_DEG, ConstellationSource, _normal_gdop, brute_force_epoch, check_grid_deg, epoch_maps,
+    FOOTPRINT_MARGIN_DEG, ConstellationSource, brute_force_epoch, check_grid_deg, epoch_maps,
     READABLE_GRID_DEG, footprint_pairs, gdop_map, make_grid, satellite_carriers_hz,
 )
 from leosop.orbits.propagate import state_ecef

@@ -235,7 +235,7 @@ def test_generate_leaves_nothing_when_a_later_step_fails(tmp_path, capsys, monke
         yield np.zeros(1000, complex)
         raise RuntimeError("disk went away")
 
-    monkeypatch.setattr(generate, "_chunks", chunks)
+    monkeypatch.setattr(generate, "sample_chunks", chunks)
     status, _, err = _run(capsys, "generate", "-o", str(tmp_path / "rec" / "r.sigmf-meta"), *SMALL,
                           "--out", str(tmp_path / "out"))
     assert status == 1 and "disk went away" in _one_line(err)

@@ -7,7 +7,8 @@ import pytest
 from sigmf import sigmffile
 
 from leosop.errors import InputError
-from leosop.signal.iq import Capture, open_raw, open_sigmf, write_sigmf
+from leosop.signal.iq import Capture, open_raw, open_sigmf
+from leosop.signal.iq_write import write_sigmf
 
 FS = 1e6
 

@@ -58,18 +58,18 @@ def test_frequency_domain_decimation_is_integrate_and_dump():
     # rounding of the input. A channel eps off the bin grid is rotated at the
     # segment centres: first-order error 2 pi eps (L / fs) times the tone's
     # offset times L / fs, here <= 2 pi 10 Hz 0.25 ms * 1 kHz 0.25 ms = 4e-3.
-    from leosop.signal.multicomb import _ALIAS_BANDS, _Grid
+    from leosop.signal.comb_grid import ALIAS_BANDS, DecimationGrid
 
     n, fs = 125_000, 2.5e6
     df = fs / n
     rng = np.random.default_rng(3)
     t = np.arange(n) / fs
-    n_seg = _Grid(np.zeros(n, dtype=np.complex64), fs, 500.0).n_seg
-    for f_c, reach, tol in ((200 * df, _ALIAS_BANDS * n_seg, 1e-5), (-55_551.2, 50, 4e-3)):
+    n_seg = DecimationGrid(np.zeros(n, dtype=np.complex64), fs, 500.0).n_seg
+    for f_c, reach, tol in ((200 * df, ALIAS_BANDS * n_seg, 1e-5), (-55_551.2, 50, 4e-3)):
         x = np.zeros(n, dtype=complex)
         for k in rng.integers(-reach, reach, 5):
             x += rng.normal() * np.exp(2j * np.pi * ((np.round(f_c / df) + k) * df * t + rng.uniform()))
-        grid = _Grid(x.astype(np.complex64), fs, 500.0)
+        grid = DecimationGrid(x.astype(np.complex64), fs, 500.0)
         got = grid.channels([f_c])[:, 0]
         ref = (x * np.exp(-2j * np.pi * f_c * t)).reshape(n_seg, -1).sum(axis=1)
         assert np.max(np.abs(got - ref)) < tol * np.max(np.abs(ref))

@@ -19,7 +19,8 @@ from leosop.geometry.doppler import doppler_jacobian, doppler_rate
 from leosop.positioning.snapshot import solve_snapshots
 from leosop.rotations import (dcm_to_euler, dcm_to_quat, euler_to_dcm, quat_multiply, quat_normalize, quat_to_dcm,
                               rotvec_to_dcm)
-from leosop.signal.iq import open_sigmf, write_sigmf
+from leosop.signal.iq import open_sigmf
+from leosop.signal.iq_write import write_sigmf
 from leosop.timebase import format_utc, parse_utc, round_utc
 
 FAST = settings(max_examples=40, deadline=None, database=None,

@@ -9,8 +9,9 @@ satellites of ``test_doppler_ls.starlink_like`` (one receiver clock) with each s
 import numpy as np
 import pytest
 
+from leosop.positioning.passes_noise import integrated_autocorrelation
 from leosop.positioning.robust_ls import FixStatus
-from leosop.positioning.static_passes import _sees, integrated_autocorrelation, solve_static_passes
+from leosop.positioning.static_passes import _sees, solve_static_passes
 from test_doppler_ls import F0_HZ, _common_truth, _doppler, starlink_like, two_passes  # noqa: F401  (fixtures)
 
 

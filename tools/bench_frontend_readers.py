@@ -27,7 +27,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from leosop.cli import main  # noqa: E402
-from leosop.signal.iq import open_sigmf, write_sigmf  # noqa: E402
+from leosop.signal.iq import open_sigmf  # noqa: E402
+from leosop.signal.iq_write import write_sigmf  # noqa: E402
 from leosop.signal.multicomb import find_combs  # noqa: E402
 
 FORMATS = ("cf32_le", "ci16_le", "ci8", "cu8")

@@ -39,29 +39,26 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import STARLINK_N_TONES, STARLINK_PILOT_HZ, STARLINK_TONE_SPACING_HZ
+from ..constants import STARLINK_PILOT_HZ
 from ..errors import InputError
 from ..fileio import atomic_files, json_text
-from ..frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
+from ..frames import azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
-from ..progress import progress
 from ..scenarios import XIAN_BAOJI
-from ..signal.channel import WAVEFORMS, OrbitError, SiteChannel, cn0_geometry_dbhz, inertial_speed_mps, site_geometry
+from ..signal.channel import WAVEFORMS, OrbitError, inertial_speed_mps
 from ..signal.frontend import BITS_DATATYPE, PRESETS, FrontEnd
-from ..signal.iq import write_sigmf_files
+from ..signal.iq_write import write_sigmf_files
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
 from . import add_command
+from .generate_site import WAVEFORM_TEXT, Satellites, sample_chunks, site_recording
 from .options import mask_deg, parse_site, parse_time, parse_velocity, positive, warn_stale
 
 DEFAULT_SITE = "34.342,108.940,400"
 #: Bounds of the numeric options: beyond them a value is a typo, not an experiment.
 _MAX_SAMPLE_RATE_HZ = 1e10  # above any SDR
 _MAX_SAMPLES = 10**11  # 800 GB of cf32
-_CN0_RANGE_DBHZ = (-20.0, 100.0)
 _MAX_ORBIT_ERROR_M = 1e5  # 100 km: beyond it the truth is not the element set's satellite
-_WAVEFORM_TEXT = {"tones": "pilot combs", "ofdm": "OFDM downlink frames with pilot combs"}
-_CHUNK = 1 << 18
 #: A satellite oscillator drifting faster than this is not a clock [Hz/s].
 _MAX_SAT_DRIFT_HZ_PER_S = 100.0
 #: The base's default receiver offset is the rover's plus a draw uniform in +-this [Hz] (a different
@@ -258,56 +255,33 @@ def _captures(args, n, fs):
     return starts, np.full(starts.size, n_snap)
 
 
-def _cn0(cn0_dbhz, cn0_model, const, range_m, elev_rad, option="--cn0-dbhz"):
-    """C/N0 per satellite at every node, (n_sats, n_nodes)."""
-    values = np.asarray(cn0_dbhz, dtype=float)
-    if not np.all((values >= _CN0_RANGE_DBHZ[0]) & (values <= _CN0_RANGE_DBHZ[1])):
-        raise InputError(f"{option} {' '.join(f'{v:g}' for v in values)}: must be in "
-                         f"[{_CN0_RANGE_DBHZ[0]:g}, {_CN0_RANGE_DBHZ[1]:g}] dB-Hz")
-    if values.size not in (1, len(const)) or (values.size > 1 and cn0_model != "constant"):
-        raise InputError(f"{option}: {values.size} values; give one, or one per satellite "
-                         f"({len(const)}) with --cn0-model constant")
-    if cn0_model == "constant":
-        return np.broadcast_to(np.broadcast_to(values, (len(const),))[:, None], range_m.shape)
-    return cn0_geometry_dbhz(values[0], range_m, elev_rad)
+@dataclass(frozen=True)
+class _Settings:
+    """The checked options of one run (``rx``: the rover's offset [Hz], drift [Hz/s], FrontEnd, datatype)."""
+
+    site: tuple
+    vel_enu: np.ndarray
+    start: np.datetime64
+    duration: float
+    fs: float
+    mask: float
+    rx: tuple
+    sigma_orbit_m: dict
+    sat_drift_sigma: float
+    out: Path
+    base: tuple
+    base_out: Path
+    base_offset_s: float
+    n: int
+    n_step: int
+    comb: PilotComb
+    signal_starts: np.ndarray
+    lengths: np.ndarray
+    file_starts: np.ndarray
 
 
-def _truth_blocks(cap_file_starts, cap_signal_starts, cap_lengths, n_step, fs):
-    """File start, signal start and length of every truth block (whole blocks within each capture)."""
-    rows = []
-    for f0, s0, m in zip(cap_file_starts, cap_signal_starts, cap_lengths):
-        step = min(n_step, m)
-        offs = np.arange(0, m - step + 1, step)
-        rows.append(np.stack([f0 + offs, s0 + offs, np.full(offs.size, step)], axis=1))
-    return np.concatenate(rows)
-
-
-def _num(x):
-    """JSON number, or None for +-inf / NaN."""
-    return float(x) if np.isfinite(x) else None
-
-
-def _chunks(channel, signal_starts, lengths, rng, fe, full_scale, fe_meta):
-    """Received samples of every capture through the front end, chunk by chunk (bounded memory).
-
-    The AGC gains drawn go into ``fe_meta`` (the ``leosop:front_end`` dict, written after the data).
-    """
-    pieces = [(s + i, min(_CHUNK, m - i)) for s, m in zip(signal_starts, lengths) for i in range(0, m, _CHUNK)]
-    fs = channel.sample_rate_hz
-    for start, count in progress(pieces, desc="generate", unit="chunk"):
-        x = channel.samples(start, count, rng)
-        if fe.active:
-            x = fe.apply(x, (start + np.arange(count)) / fs, fs, channel.cn0_ref_dbhz, rng)
-        if fe.bits == 12:  # a 12-bit ADC's levels, stored in ci16
-            levels = 2047.0 / full_scale
-            x = (np.clip(np.round(x.real * levels), -2048, 2047) + 1j * np.clip(np.round(x.imag * levels), -2048, 2047)
-                 ) / levels
-        yield x
-    if fe.agc_step_db:
-        fe_meta["agc_steps"] = fe.agc_steps()
-
-
-def run(args):
+def _settings(args):
+    """The options checked (InputError naming the first bad one) and what follows from them."""
     lat, lon, alt = parse_site(args.site)
     vel_enu = parse_velocity(args.velocity_enu_mps)
     start = parse_time(args.start) if args.start else XIAN_BAOJI.start_utc
@@ -352,178 +326,113 @@ def run(args):
         raise InputError(f"--sample-rate-hz {fs:g}: must exceed the comb's width, {2 * comb.offsets_hz.max():.0f} Hz")
     signal_starts, lengths = _captures(args, n, fs)
     file_starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    return _Settings((lat, lon, alt), vel_enu, start, duration, fs, mask, (rx_offset, rx_drift, fe, datatype),
+                     sigma_orbit_m, sat_drift_sigma, out, base, base_out, base_offset_s, n, n_step, comb,
+                     signal_starts, lengths, file_starts)
 
+
+def run(args):
+    s = _settings(args)
+    recs, b_start = _recordings(args, s)
+    doc = _document(args, s, recs, b_start)
+    _write(args, s, recs, doc)
+    return doc
+
+
+def _recordings(args, s):
+    """The rover's recording and, with ``--base-site``, the base's, from the shared satellite draws.
+
+    Returns the recordings and the base's first sample time (None without a base).
+    """
+    lat, lon, alt = s.site
+    rx_offset, rx_drift, fe, datatype = s.rx
+    n, fs, start = s.n, s.fs, s.start
     rng = np.random.default_rng(args.seed)
     pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     const = load_constellation(args.tle)
     warn_stale(const, start)
-    const = _select(const, pos_rx, start, n / fs, args.sat, mask)
+    const = _select(const, pos_rx, start, n / fs, args.sat, s.mask)
     sat_offset = rng.uniform(0.0, args.sat_offset_max_hz, len(const))
     phase = rng.uniform(0.0, 2.0 * np.pi, len(const))
     speed = inertial_speed_mps(const, start)
-    sats = _Satellites(sat_offset, np.zeros(len(const)), OrbitError.draw(rng, speed, **sigma_orbit_m), speed)
-    if sat_drift_sigma > 0:  # drawn only when asked, so that recordings without it keep their noise
-        sats = replace(sats, drift_hz_per_s=rng.normal(0.0, sat_drift_sigma, len(const)))
-    plan = (file_starts, signal_starts, lengths, n_step)
-    recs = [_site_recording(args, const, sats, plan, site=(lat, lon, alt), vel_enu=vel_enu, start=start,
-                            t0_s=0.0, rx=(rx_offset, rx_drift, fe, datatype), cn0_dbhz=args.cn0_dbhz,
-                            phase_rad=phase, rng=rng, n=n, fs=fs, comb=comb)]
-    if base is not None:
-        brng = np.random.default_rng([args.seed, 1])  # the base's own stream: its clock, phases, noise
-        b_offset, b_drift, b_fe, _ = _front_end(args)
-        b_offset = (rx_offset + brng.uniform(-_BASE_OFFSET_SPREAD_HZ, _BASE_OFFSET_SPREAD_HZ)
-                    if args.base_rx_offset_hz is None else args.base_rx_offset_hz)
-        b_drift = rx_drift if args.base_rx_drift_hz_per_s is None else args.base_rx_drift_hz_per_s
-        _check_rx(b_offset, b_drift, duration, fs, "--base-rx-offset-hz", "--base-rx-drift-hz-per-s")
-        b_start = start + np.timedelta64(round(base_offset_s * 1e9), "ns")
-        recs.append(_site_recording(args, const, sats, plan, site=base, vel_enu=np.zeros(3), start=b_start,
-                                    t0_s=base_offset_s, rx=(b_offset, b_drift, b_fe, datatype),
-                                    cn0_dbhz=args.cn0_dbhz if args.base_cn0_dbhz is None else [args.base_cn0_dbhz],
-                                    phase_rad=brng.uniform(0.0, 2.0 * np.pi, len(const)), rng=brng, n=n, fs=fs,
-                                    comb=comb, what="base"))
-    rover = recs[0]
+    sats = Satellites(sat_offset, np.zeros(len(const)), OrbitError.draw(rng, speed, **s.sigma_orbit_m), speed)
+    if s.sat_drift_sigma > 0:  # drawn only when asked, so that recordings without it keep their noise
+        sats = replace(sats, drift_hz_per_s=rng.normal(0.0, s.sat_drift_sigma, len(const)))
+    plan = (s.file_starts, s.signal_starts, s.lengths, s.n_step)
+    recs = [site_recording(args, const, sats, plan, site=(lat, lon, alt), vel_enu=s.vel_enu, start=start,
+                           t0_s=0.0, rx=(rx_offset, rx_drift, fe, datatype), cn0_dbhz=args.cn0_dbhz,
+                           phase_rad=phase, rng=rng, n=n, fs=fs, comb=s.comb)]
+    if s.base is None:
+        return recs, None
+    brng = np.random.default_rng([args.seed, 1])  # the base's own stream: its clock, phases, noise
+    b_offset, b_drift, b_fe, _ = _front_end(args)
+    b_offset = (rx_offset + brng.uniform(-_BASE_OFFSET_SPREAD_HZ, _BASE_OFFSET_SPREAD_HZ)
+                if args.base_rx_offset_hz is None else args.base_rx_offset_hz)
+    b_drift = rx_drift if args.base_rx_drift_hz_per_s is None else args.base_rx_drift_hz_per_s
+    _check_rx(b_offset, b_drift, s.duration, fs, "--base-rx-offset-hz", "--base-rx-drift-hz-per-s")
+    b_start = start + np.timedelta64(round(s.base_offset_s * 1e9), "ns")
+    recs.append(site_recording(args, const, sats, plan, site=s.base, vel_enu=np.zeros(3), start=b_start,
+                               t0_s=s.base_offset_s, rx=(b_offset, b_drift, b_fe, datatype),
+                               cn0_dbhz=args.cn0_dbhz if args.base_cn0_dbhz is None else [args.base_cn0_dbhz],
+                               phase_rad=brng.uniform(0.0, 2.0 * np.pi, len(const)), rng=brng, n=n, fs=fs,
+                               comb=s.comb, what="base"))
+    return recs, b_start
+
+
+def _document(args, s, recs, b_start):
+    """The JSON document of the run (DESIGN's ``generate`` contract)."""
+    rover, out = recs[0], s.out
     doc = {
         "meta": str(out),
         "data": str(out.with_suffix(".sigmf-data")),
-        "datatype": datatype,
-        "n_samples": int(lengths.sum()),
-        "sample_rate_hz": fs,
-        "start_utc": format_utc(start),
-        "duration_s": n / fs,
-        "n_captures": int(signal_starts.size),
-        "snapshot_s": None if args.snapshot_s is None else float(lengths[0] / fs),
+        "datatype": s.rx[3],
+        "n_samples": int(s.lengths.sum()),
+        "sample_rate_hz": s.fs,
+        "start_utc": format_utc(s.start),
+        "duration_s": s.n / s.fs,
+        "n_captures": int(s.signal_starts.size),
+        "snapshot_s": None if args.snapshot_s is None else float(s.lengths[0] / s.fs),
         "period_s": args.period_s,
         "cn0_model": args.cn0_model,
         "waveform": args.waveform,
-        "vel_enu_mps": [float(v) for v in vel_enu],
-        "rx_offset_hz": float(rx_offset),
-        "rx_drift_hz_per_s": float(rx_drift),
+        "vel_enu_mps": [float(v) for v in s.vel_enu],
+        "rx_offset_hz": float(s.rx[0]),
+        "rx_drift_hz_per_s": float(s.rx[1]),
         "front_end": rover.extra.get("leosop:front_end"),
         "satellites": rover.satellites,
     }
-    metas = [out]
-    if base is not None:
-        metas.append(base_out)
+    if s.base is not None:
         b = recs[1]
-        doc["base"] = {"meta": str(base_out), "data": str(base_out.with_suffix(".sigmf-data")),
-                       "site": list(base), "start_utc": format_utc(b_start), "offset_s": base_offset_s,
+        doc["base"] = {"meta": str(s.base_out), "data": str(s.base_out.with_suffix(".sigmf-data")),
+                       "site": list(s.base), "start_utc": format_utc(b_start), "offset_s": s.base_offset_s,
                        "rx_offset_hz": float(b.rx[0]), "rx_drift_hz_per_s": float(b.rx[1]),
                        "satellites": b.satellites}
-    # All outputs or none: each data file, then its metadata, then generate.json.
+    return doc
+
+
+def _write(args, s, recs, doc):
+    """All outputs or none: each data file, then its metadata, then generate.json."""
+    metas = [s.out] + ([s.base_out] if s.base is not None else [])
     paths = [p for m in metas for p in (m.with_suffix(".sigmf-data"), m)]
     paths += [Path(args.out) / "generate.json"] if args.out else []
     with atomic_files(paths) as tmps:
         for k, r in enumerate(recs):
             fe_k = r.rx[2]
             write_sigmf_files(tmps[2 * k], tmps[2 * k + 1],
-                              _chunks(r.channel, signal_starts, lengths, r.rng, fe_k, r.full_scale,
-                                      r.extra.get("leosop:front_end", {})),
-                              sample_rate_hz=fs, center_hz=STARLINK_PILOT_HZ, captures=list(zip(file_starts, r.cap_times)),
-                              datatype=datatype, annotations=r.annotations, global_extra=r.extra,
-                              full_scale=r.full_scale)
+                              sample_chunks(r.channel, s.signal_starts, s.lengths, r.rng, fe_k, r.full_scale,
+                                            r.extra.get("leosop:front_end", {})),
+                              sample_rate_hz=s.fs, center_hz=STARLINK_PILOT_HZ,
+                              captures=list(zip(s.file_starts, r.cap_times)), datatype=s.rx[3],
+                              annotations=r.annotations, global_extra=r.extra, full_scale=r.full_scale)
         if args.out:
             tmps[-1].write_text(json_text(doc) + "\n")
-    return doc
-
-
-@dataclass(frozen=True)
-class _Satellites:
-    """What every receiver shares: each satellite's oscillator offset [Hz] and drift [Hz/s], orbit error, speed."""
-
-    offset_hz: np.ndarray
-    drift_hz_per_s: np.ndarray
-    orbit_error: OrbitError
-    speed_mps: np.ndarray
-
-
-@dataclass(frozen=True)
-class _Recording:
-    """One receiver's channel and what its SigMF files say of it."""
-
-    channel: SiteChannel
-    rx: tuple  # (offset_hz, drift_hz_per_s, FrontEnd, datatype)
-    rng: np.random.Generator
-    annotations: list
-    satellites: list
-    extra: dict
-    full_scale: float
-    cap_times: list
-
-
-def _site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, cn0_dbhz, phase_rad, rng, n, fs,
-                    comb, what="rover"):
-    """One receiver's recording of the shared satellites.
-
-    ``start`` is its first sample, ``t0_s`` seconds after the satellite
-    errors' reference (the rover's first sample): a drifting satellite
-    oscillator is further off by then. ``plan`` is ``(file_starts,
-    signal_starts, lengths, n_step)`` of :func:`_captures` and the truth blocks.
-    """
-    file_starts, signal_starts, lengths, n_step = plan
-    lat, lon, alt = site
-    rx_offset, rx_drift, fe, _ = rx
-    pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
-    clock = sats.offset_hz + sats.drift_hz_per_s * t0_s + rx_offset
-    vel_rx = C_e_n(np.radians(lat), np.radians(lon)) @ vel_enu
-    t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=sats.orbit_error,
-                                           vel_rx_ecef_mps=vel_rx)
-    cn0_nodes = _cn0(cn0_dbhz, args.cn0_model, const, range_m, elev,
-                     "--cn0-dbhz" if what == "rover" else "--base-cn0-dbhz")
-    if np.isfinite(range_m).all() and not np.isfinite(cn0_nodes).any():  # (SGP4 failures: SiteChannel)
-        raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
-                         f"({what}) during the recording from {format_utc(start)}")
-    channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb, phase_rad=phase_rad,
-                          waveform=args.waveform, rx_drift_hz_per_s=rx_drift, sat_drift_hz_per_s=sats.drift_hz_per_s)
-    blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
-    t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
-    dop, rate, cn0 = channel.doppler_hz(t_c), channel.doppler_rate_hz_per_s(t_c), channel.cn0_at(t_c)
-    annotations = [
-        (f0, m, {"core:label": str(sid), "leosop:sat_id": str(sid), "leosop:t_s": float(t_c[j]),
-                 "leosop:doppler_hz": float(dop[i, j]), "leosop:doppler_rate_hz_per_s": float(rate[i, j]),
-                 "leosop:cn0_dbhz": float(cn0[i, j])})
-        for j, (f0, _, m) in enumerate(blocks) for i, sid in enumerate(const.sat_ids) if np.isfinite(cn0[i, j])
-    ]
-    cn0_start = channel.cn0_at([0.0])[:, 0]
-    err, speed = sats.orbit_error, sats.speed_mps
-    satellites = [
-        {"sat_id": str(sid), "doppler_hz_start": float(channel.doppler_hz([0.0])[i, 0]),
-         "doppler_rate_hz_per_s_start": float(channel.doppler_rate_hz_per_s([0.0])[i, 0]),
-         "clock_offset_hz": float(clock[i]), "sat_offset_hz": float(sats.offset_hz[i]),
-         "sat_drift_hz_per_s": float(sats.drift_hz_per_s[i]), "cn0_dbhz": _num(cn0_start[i]),
-         "orbit_error_along_s": float(err.along_s[i]),
-         "orbit_error_along_m": float(err.along_s[i] * speed[i]),
-         "orbit_error_radial_m": float(err.radial_m[i]), "orbit_error_cross_m": float(err.cross_m[i])}
-        for i, sid in enumerate(const.sat_ids)
-    ]
-    # Full scale for ci16: tones add to at most sum of amplitudes; OFDM
-    # subcarriers and noise are Gaussian-like. Four sigmas above the comb's
-    # peak keeps clipping ~1e-7.
-    spread = np.hypot(channel.noise_sigma(), np.sqrt(channel.n_subcarriers * len(const))) / np.sqrt(2.0)
-    full_scale = comb.n_tones * len(const) + 4.0 * spread
-    if fe.active:  # a receiver's quantiser: full scale at --headroom-db over the RMS (clipping possible)
-        full_scale = fe.full_scale(fe.rms_component(comb.n_tones * len(const) + channel.n_subcarriers * len(const),
-                                                    channel.cn0_ref_dbhz, fs))
-    cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
-    extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
-             "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites, "leosop:waveform": args.waveform,
-             "core:description": f"leosop generate: Starlink {_WAVEFORM_TEXT[args.waveform]} of {len(const)} "
-                                 f"satellite(s) "
-                                 f"at {lat:g},{lon:g},{alt:g}; seed {args.seed}" + ("" if what == "rover" else
-                                                                                     f" ({what})"),
-             "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
-             "leosop:vel_enu_mps": [float(v) for v in vel_enu],
-             "leosop:rx_offset_hz": float(rx_offset),
-             "leosop:rx_drift_hz_per_s": float(rx_drift)}
-    if fe.active:
-        extra["leosop:front_end"] = dict(fe.metadata(), preset=args.front_end, full_scale=full_scale)
-    return _Recording(channel, rx, rng, annotations, satellites, extra, full_scale, cap_times)
 
 
 def summary(doc):
     snap = (f", {doc['n_captures']} snapshots of {doc['snapshot_s']:g} s every {doc['period_s']:g} s"
             if doc["snapshot_s"] else "")
     lines = [f"wrote {doc['meta']} ({doc['n_samples']} {doc['datatype']} samples at {doc['sample_rate_hz']:g} Hz, "
-             f"{doc['duration_s']:g} s from {doc['start_utc']}{snap}; {_WAVEFORM_TEXT[doc['waveform']]}; "
+             f"{doc['duration_s']:g} s from {doc['start_utc']}{snap}; {WAVEFORM_TEXT[doc['waveform']]}; "
              f"C/N0 model {doc['cn0_model']})"]
     for s in doc["satellites"]:
         cn0 = "below horizon" if s["cn0_dbhz"] is None else f"{s['cn0_dbhz']:.1f} dB-Hz"

@@ -138,9 +138,9 @@ def _run_dask(store, chunks, todo, payload, scheduler, n_workers, bar):
     """Submit ``todo`` through a bounded window, saving each chunk as it finishes; returns the worker count."""
     from distributed import as_completed
 
-    from ..studies import _client
+    from ..studies import dask_client
 
-    with _client(scheduler, len(todo), n_workers) as client:
+    with dask_client(scheduler, len(todo), n_workers) as client:
         workers = max(len(client.scheduler_info()["workers"]), 1)
         window = max(2 * workers, 4)
         queue = iter(todo)

@@ -14,7 +14,8 @@ import numpy as np
 from ..errors import InputError
 from .pilot import PilotComb
 
-__all__ = ["MAX_DOPPLER_HZ", "MAX_RATE_HZ_PER_S", "PFA", "CoarseEstimate", "coarse_fft", "coarse_stft"]
+__all__ = ["MAX_DOPPLER_HZ", "MAX_RATE_HZ_PER_S", "PFA", "CoarseEstimate", "coarse_fft", "coarse_stft",
+           "detection_threshold", "abs2", "parabola_vertex"]
 
 #: Default search half-width for the central tone's Doppler [Hz]: a LEO
 #: satellite at 550 km seen down to 10 deg elevation stays within +-270 kHz
@@ -48,20 +49,20 @@ class CoarseEstimate:
 
 
 @lru_cache(maxsize=64)
-def _threshold(n_terms, n_cells, pfa):
+def detection_threshold(n_terms, n_cells, pfa):
     """Threshold on a mean of ``n_terms`` unit exponentials, false alarm ``pfa`` over ``n_cells``."""
     from scipy.special import gammainccinv
 
     return float(gammainccinv(n_terms, pfa / n_cells) / n_terms)
 
 
-def _abs2(z):
+def abs2(z):
     """|z|^2 in two passes (np.abs is vectorised; real*real + imag*imag costs four)."""
     p = np.abs(z)
     return np.multiply(p, p, out=p)
 
 
-def _parabola_vertex(y_minus, y0, y_plus):
+def parabola_vertex(y_minus, y0, y_plus):
     """Offset in [-0.5, 0.5] of the vertex of the parabola through three equally spaced points."""
     den = y_minus - 2.0 * y0 + y_plus
     if not den < 0.0:
@@ -115,14 +116,14 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
         raise InputError(f"the comb (+-{offsets_hz.max():.0f} Hz) with +-{max_doppler_hz:.0f} Hz of Doppler "
                          f"does not fit in the {sample_rate_hz:.0f} Hz sample rate")
     if hi >= n or hi < 0:  # a search centred far off 0 Hz (an LO offset): wrapped indices
-        power = _abs2(spectrum[np.arange(lo, hi + 1) % n])
+        power = abs2(spectrum[np.arange(lo, hi + 1) % n])
     elif lo < 0:  # the band wraps around bin 0: |X| of both ends in place, then squared
         power = np.empty(hi - lo + 1, dtype=spectrum.real.dtype)
         np.abs(spectrum[lo:], out=power[:-lo])
         np.abs(spectrum[:hi + 1], out=power[-lo:])
         np.multiply(power, power, out=power)
     else:
-        power = _abs2(spectrum[lo:hi + 1])
+        power = abs2(spectrum[lo:hi + 1])
     # Noise mean from the median of a subsample of the band (the comb fills a
     # small fraction of it); exponential power: median = mean * ln 2.
     sub = power[::max(1, power.size // 8192)]
@@ -138,13 +139,13 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     j = int(np.argmax(smooth))
     stat = float(smooth[j])
     n_terms = width * g * comb.n_tones
-    thr = _threshold(n_terms, smooth.size, pfa)  # Bonferroni over every (overlapping) window
+    thr = detection_threshold(n_terms, smooth.size, pfa)  # Bonferroni over every (overlapping) window
     # Central tone: its strongest bin within the window, interpolated.
     first = c_lo + j * g
     p_win = power[first - lo: first - lo + width * g]
     b = first + int(np.argmax(p_win))
-    p3 = _abs2(spectrum[np.arange(b - 1, b + 2) % n])
-    doppler_hz = (b + _parabola_vertex(*p3)) * df
+    p3 = abs2(spectrum[np.arange(b - 1, b + 2) % n])
+    doppler_hz = (b + parabola_vertex(*p3)) * df
     # The strongest bin lies on the central tone's smeared track.
     error_hz = 0.5 * smear_hz + 2.0 * df
     step = int(round(comb.tone_spacing_hz / df / g))
@@ -194,4 +195,4 @@ def coarse_stft(iq, sample_rate_hz, comb=None, *, nperseg=4096, hop=None,
                          smear_hz=2.0 * sample_rate_hz / nperseg, pfa=pfa)
         if est.detected:
             doppler[j] = est.doppler_hz
-    return t_s, doppler, stft.f, _abs2(s)
+    return t_s, doppler, stft.f, abs2(s)

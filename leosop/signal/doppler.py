@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, coarse_fft
 from .fft import fft
-from .fine import _start_step, fine_fast, fine_fmlef, fine_ml
+from .fine import fine_fast, fine_fmlef, fine_ml, start_step_hz
 from .pilot import PilotComb
 from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
@@ -58,7 +58,7 @@ def ml_grid_points(coarse_error_hz, resolution_hz):
     Its grid spans +-10 start steps (:func:`~.fine.fine_ml`) at ``resolution_hz``;
     each point costs a pass over the block's samples.
     """
-    return 2 * int(round(10.0 * _start_step(coarse_error_hz) / resolution_hz)) + 1
+    return 2 * int(round(10.0 * start_step_hz(coarse_error_hz) / resolution_hz)) + 1
 
 
 def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_hz=1e-3,
@@ -130,7 +130,7 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
         return out
     # The paper's estimators start from the strongest bin of the central tone,
     # good to half a bin when the tone is steady.
-    start = _start_step(coarse.error_hz if coarse_hz is not None else 0.5 * sample_rate_hz / iq.shape[-1])
+    start = start_step_hz(coarse.error_hz if coarse_hz is not None else 0.5 * sample_rate_hz / iq.shape[-1])
     if method == "fmlef":
         d = fine_fmlef(iq, sample_rate_hz, coarse.doppler_hz, resolution_hz, start)
     else:

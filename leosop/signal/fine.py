@@ -47,12 +47,14 @@ from functools import lru_cache
 
 import numpy as np
 
-from .coarse import MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, _abs2, _parabola_vertex, _threshold
+from .coarse import MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, abs2, detection_threshold, parabola_vertex
 from .crlb import crlb_frequency_hz2
 from .fft import fft
 from .quality import position_margin_sigma, tone_spread
 
-__all__ = ["CombFit", "periodogram_grid", "fine_ml", "fine_fmlef", "fine_fast", "cubic_bias_hz"]
+__all__ = ["CombFit", "periodogram_grid", "fine_ml", "fine_fmlef", "fine_fast", "cubic_bias_hz", "start_step_hz",
+           "decimation_size", "comb_phasors", "interleaved_matrix", "segment_grid", "newton_comb", "wrap_hz",
+           "trimmed_tone_sum", "rate_dpt", "dechirped_peak_hz", "rate_grid_search"]
 
 #: Tone positions decimated beyond each end of the comb to check the comb position.
 _EXTRA_TONES = 2
@@ -110,7 +112,7 @@ def periodogram_grid(iq, sample_rate_hz, f_start_hz, step_hz, n_freqs):
     return out
 
 
-def _start_step(error_hz):
+def start_step_hz(error_hz):
     """Decade step whose +-10 steps cover the coarse error."""
     return 10.0 ** np.ceil(np.log10(max(error_hz, 1e-12) / 10.0))
 
@@ -131,14 +133,14 @@ def fine_fmlef(iq, sample_rate_hz, coarse_hz, resolution_hz, start_step_hz):
         i = int(np.argmax(values))
         f = f + (i - 10) * step
         if 0 < i < 20:
-            f += step * _parabola_vertex(values[i - 1], values[i], values[i + 1])
+            f += step * parabola_vertex(values[i - 1], values[i], values[i + 1])
         if step <= resolution_hz * (1.0 + 1e-9):
             return f
         step /= 10.0
 
 
 @lru_cache(maxsize=64)
-def _decimation(n, target):
+def decimation_size(n, target):
     """Segments B >= target and samples per segment L with B * L >= n (a divisor of n if one is near)."""
     target = max(16, min(int(target), n // 4))
     for b in range(target, min(2 * target, n) + 1):
@@ -148,7 +150,7 @@ def _decimation(n, target):
     return int(np.ceil(n / seg)), seg
 
 
-def _phasors(a_cycles, b_cycles, half):
+def comb_phasors(a_cycles, b_cycles, half):
     """exp(-j 2 pi (a + k b)) for k = -half..half, shape (len(a), 2 half + 1).
 
     One exponential call for both phases and a product per further column:
@@ -166,7 +168,7 @@ def _phasors(a_cycles, b_cycles, half):
     return out
 
 
-def _interleaved(mix, dtype):
+def interleaved_matrix(mix, dtype):
     """Real (2L, 2K) matrix acting on interleaved (re, im) samples as the complex (L, K) ``mix``."""
     m = np.empty((mix.shape[0], 2, mix.shape[1], 2), dtype=dtype)
     m[:, 0, :, 0] = m[:, 1, :, 1] = mix.real
@@ -176,7 +178,7 @@ def _interleaved(mix, dtype):
 
 
 @lru_cache(maxsize=32)
-def _segments(n, fs, n_seg, seg):
+def segment_grid(n, fs, n_seg, seg):
     """Decimation grid: sample times in a segment, segment start times, segment centres re the
     block centre (tau), and tau^0..tau^4 (B, 5). Read-only, cached per block geometry."""
     t_l = np.arange(seg) / fs
@@ -189,7 +191,7 @@ def _segments(n, fs, n_seg, seg):
     return t_l, t_m, tau, tpow
 
 
-def _newton(y, tau, tpow, ratio, delta_hz, rate, known_cycles, n_iter=2):
+def newton_comb(y, tau, tpow, ratio, delta_hz, rate, known_cycles, n_iter=2):
     """Maximise J(f, r) = sum_k |sum_m y_mk exp(-j 2 pi s_k (f tau + r tau^2/2 + c))|^2 by Newton steps.
 
     ``s_k = 1 + k ratio`` (k = -half..half); ``c`` (B,) a known phase in
@@ -205,7 +207,7 @@ def _newton(y, tau, tpow, ratio, delta_hz, rate, known_cycles, n_iter=2):
     step_f = step_r = 0.0
     for _ in range(n_iter):
         phase = f * tau + (0.5 * r) * tpow[:, 2] + known_cycles
-        u = _phasors(phase, ratio * phase, half)
+        u = comb_phasors(phase, ratio * phase, half)
         np.multiply(u, y, out=u)
         # (5, K): sum_m u tau^p, as one real product on the interleaved parts.
         m = (tpow.T @ u.view(float)).view(complex)
@@ -214,9 +216,9 @@ def _newton(y, tau, tpow, ratio, delta_hz, rate, known_cycles, n_iter=2):
         # J = sum |Y_k|^2 with dY/df = -j a m1, dY/dr = -j b m2, d2Y/df2 = -a^2 m2, ...
         g_f = 2.0 * np.dot(a, q[0].imag)
         g_r = 2.0 * np.dot(b, q[1].imag)
-        h_ff = 2.0 * np.dot(a2, _abs2(m1) - q[1].real)
+        h_ff = 2.0 * np.dot(a2, abs2(m1) - q[1].real)
         h_fr = 2.0 * np.dot(ab, (np.conj(m1) * m2).real - q[2].real)
-        h_rr = 2.0 * np.dot(b2, _abs2(m2) - q[3].real)
+        h_rr = 2.0 * np.dot(b2, abs2(m2) - q[3].real)
         det = h_ff * h_rr - h_fr * h_fr
         if not (np.isfinite(det) and h_ff < 0.0 and det > 0.0):
             step_f = step_r = 0.0
@@ -237,11 +239,12 @@ def cubic_bias_hz(doppler_accel_hz_per_s2, n_samples, sample_rate_hz):
     return np.asarray(doppler_accel_hz_per_s2) / 6.0 * (3.0 * n**2 - 7.0) / (20.0 * sample_rate_hz**2)
 
 
-def _wrap(f_hz, fs_hz):
+def wrap_hz(f_hz, fs_hz):
+    """``f_hz`` wrapped into [-fs/2, fs/2) [Hz]."""
     return (f_hz + 0.5 * fs_hz) % fs_hz - 0.5 * fs_hz
 
 
-def _trimmed_sum(power):
+def trimmed_tone_sum(power):
     """Sum over tones (axis -2, tones first: contiguous reductions) without the largest at each bin.
 
     Another satellite's tone falling into one tone band then cannot outvote
@@ -251,31 +254,31 @@ def _trimmed_sum(power):
     return power.sum(axis=-2) - power.max(axis=-2) if power.shape[-2] >= 5 else power.sum(axis=-2)
 
 
-def _rate_dpt(yt, dt_dec, pfa):
+def rate_dpt(yt, dt_dec, pfa):
     """Rate from ``y[m + h] conj(y[m])``, a tone at ``rate h dt_dec`` (discrete polynomial-phase
     transform); None when its peak is not significant at false-alarm ``pfa``. ``yt``: (K, B)."""
     h = yt.shape[1] // 2
     v = yt[:, h:2 * h] * np.conj(yt[:, :h])
-    p = _trimmed_sum(_abs2(fft(v, 2 * h, scratch=True)))
+    p = trimmed_tone_sum(abs2(fft(v, 2 * h, scratch=True)))
     i = int(np.argmax(p))
     k = yt.shape[0]
-    if p[i] / np.mean(p) < _threshold(k - 1 if k >= 5 else k, p.size, pfa):  # Gamma(k-1): conservative
+    if p[i] / np.mean(p) < detection_threshold(k - 1 if k >= 5 else k, p.size, pfa):  # Gamma(k-1): conservative
         return None
-    nu = (i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % p.size])) / (2 * h * dt_dec)
-    return _wrap(nu, 1.0 / dt_dec) / (h * dt_dec)
+    nu = (i + parabola_vertex(p[i - 1], p[i], p[(i + 1) % p.size])) / (2 * h * dt_dec)
+    return wrap_hz(nu, 1.0 / dt_dec) / (h * dt_dec)
 
 
-def _dechirped_peak(yt, tau, rate, known, dt_dec):
+def dechirped_peak_hz(yt, tau, rate, known, dt_dec):
     """Residual frequency of the tones after removing a rate: peak of the summed zero-padded spectra.
     ``yt``: (K, B)."""
     z = yt * np.exp(-2j * np.pi * (0.5 * rate * tau**2 + known)).astype(yt.dtype)  # s_k ~ 1 is close enough
     n_fft = 2 * yt.shape[1]
-    p = _trimmed_sum(_abs2(fft(z, n_fft, scratch=True)))
+    p = trimmed_tone_sum(abs2(fft(z, n_fft, scratch=True)))
     i = int(np.argmax(p))
-    return _wrap((i + _parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec), 1.0 / dt_dec)
+    return wrap_hz((i + parabola_vertex(p[i - 1], p[i], p[(i + 1) % n_fft])) / (n_fft * dt_dec), 1.0 / dt_dec)
 
 
-def _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur):
+def rate_grid_search(yt, tau, known, dt_dec, max_rate_hz_per_s, dur):
     """(rate, frequency) of the largest dechirped comb power over rates 1/T^2 apart (low C/N0 fallback).
 
     Pairs of segments are summed first: the band still holds the residual
@@ -289,9 +292,9 @@ def _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur):
     rates = np.arange(-max_rate_hz_per_s, max_rate_hz_per_s + 1.0 / dur**2, 1.0 / dur**2)
     z = y2 * np.exp(-2j * np.pi * (0.5 * rates[:, None] * t2**2 + k2))[:, None, :].astype(yt.dtype)  # (J, K, B/2)
     n_fft = 2 * y2.shape[1]
-    p = _trimmed_sum(_abs2(fft(z, n_fft, scratch=True)))  # (J, n_fft)
+    p = trimmed_tone_sum(abs2(fft(z, n_fft, scratch=True)))  # (J, n_fft)
     j, i = np.unravel_index(int(np.argmax(p)), p.shape)
-    return float(rates[j]), _wrap(i / (n_fft * dt2), 1.0 / dt2)
+    return float(rates[j]), wrap_hz(i / (n_fft * dt2), 1.0 / dt2)
 
 
 def _residual_sigma_hz(white, tau, counts, weight):
@@ -320,8 +323,8 @@ def _residual_sigma_hz(white, tau, counts, weight):
     noise_k : ndarray, shape (n_tones,)
         Each tone's noise variance per sample as the frequency sees it.
     """
-    g2 = _abs2(np.fft.fft(tau * counts))
-    p = _abs2(np.fft.fft(white, axis=0))  # (B, n_tones)
+    g2 = abs2(np.fft.fft(tau * counts))
+    p = abs2(np.fft.fft(white, axis=0))  # (B, n_tones)
     noise_k = (g2 @ p) / (white.shape[0] * np.sum(g2))
     s2 = counts @ tau**2
     den = 2.0 * (2.0 * np.pi) ** 2 * s2 * np.sum(weight) ** 2
@@ -365,22 +368,22 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     # The decimated band must hold the coarse error and the smear with the
     # integrate-and-dump sinc loss under ~3 % at its edge: fs_dec >= 8x.
     bw_hz = coarse.error_hz + 0.5 * max_rate_hz_per_s * dur
-    n_seg, seg = _decimation(n, int(np.ceil(8.0 * bw_hz * dur)))
+    n_seg, seg = decimation_size(n, int(np.ceil(8.0 * bw_hz * dur)))
     x = iq if n_seg * seg == n else np.concatenate([iq, np.zeros(n_seg * seg - n, dtype=iq.dtype)])
     # Tone k at f_k = k spacing + s_k D = D + k spacing (1 + D / f_c).
     d_c = coarse.doppler_hz
     spacing = comb.tone_spacing_hz * (1.0 + d_c / comb.carrier_hz)
-    t_l, t_m, tau, tpow = _segments(n, fs, n_seg, seg)
+    t_l, t_m, tau, tpow = segment_grid(n, fs, n_seg, seg)
     # When the coarse search is not sure of the central tone (weak comb), two
     # more tone positions either side decide it once the fit is coherent.
     check = not coarse.margin_sigma >= _SURE_SIGMA
     extra = _EXTRA_TONES if check else 0
     wide = half + extra
-    mix = _phasors(d_c * t_l, spacing * t_l, wide)
+    mix = comb_phasors(d_c * t_l, spacing * t_l, wide)
     # The one full-length pass: a real product on interleaved (re, im) samples
     # runs ~15 % faster than the complex one (single precision for complex64).
     xr = np.ascontiguousarray(x).view(x.real.dtype).reshape(n_seg, 2 * seg)
-    y_wide = (xr @ _interleaved(mix, xr.dtype)).view(x.dtype) * _phasors(d_c * t_m, spacing * t_m, wide)
+    y_wide = (xr @ interleaved_matrix(mix, xr.dtype)).view(x.dtype) * comb_phasors(d_c * t_m, spacing * t_m, wide)
     y = y_wide[:, extra:y_wide.shape[1] - extra]
     dt_dec = seg / fs
     known = doppler_accel_hz_per_s2 / 6.0 * tpow[:, 3]  # known cubic phase [cycles]
@@ -388,15 +391,15 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     # The searches only start Newton: single precision, tones first (contiguous FFTs and sums).
     yt = np.ascontiguousarray(y.T, dtype=np.complex64)
     if max_rate_hz_per_s * dur**2 > 0.25:
-        rate = _rate_dpt(yt, dt_dec, pfa)
+        rate = rate_dpt(yt, dt_dec, pfa)
         if rate is None:  # the product is too weak: search a grid of rates
-            rate, f_res = _rate_grid(yt, tau, known, dt_dec, max_rate_hz_per_s, dur)
+            rate, f_res = rate_grid_search(yt, tau, known, dt_dec, max_rate_hz_per_s, dur)
     if f_res is None:
-        f_res = _dechirped_peak(yt, tau, rate, known, dt_dec)
-    delta, rate, y_sum = _newton(y, tau, tpow, ratio, f_res, rate, known)
+        f_res = dechirped_peak_hz(yt, tau, rate, known, dt_dec)
+    delta, rate, y_sum = newton_comb(y, tau, tpow, ratio, f_res, rate, known)
     phase = delta * tau + 0.5 * rate * tau**2 + known
     if check:
-        power = _abs2(np.sum(y_wide * _phasors(phase, ratio * phase, wide), axis=0))
+        power = abs2(np.sum(y_wide * comb_phasors(phase, ratio * phase, wide), axis=0))
         shift = int(np.argmax(np.convolve(power, np.ones(comb.n_tones), mode="valid"))) - extra
         if shift and resolve:
             moved = CoarseEstimate(d_c + delta + shift * spacing, 2.0 / dur, True, np.nan, np.nan)
@@ -406,10 +409,10 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
     # variance c_m sigma^2; the least-squares residual is sum|y|^2 - |Y|^2 / B.
     # Per tone, so that another satellite's tone in one band does not count as noise.
     energy = (np.ones(n_seg) @ np.square(y.view(float))).reshape(-1, 2).sum(axis=1)  # sum_m |y_mk|^2
-    resid = np.sort(np.maximum(energy - _abs2(y_sum) / n_seg, 0.0))
+    resid = np.sort(np.maximum(energy - abs2(y_sum) / n_seg, 0.0))
     sigma2 = 0.5 * float(resid[(resid.size - 1) // 2] + resid[resid.size // 2]) / ((n_seg - 1) * seg)  # median
     scale = comb.doppler_scale
-    a2 = np.maximum(_abs2(y_sum) - n * sigma2, 0.0) / n**2
+    a2 = np.maximum(abs2(y_sum) - n * sigma2, 0.0) / n**2
     cn0_k = a2 * fs / sigma2 if sigma2 > 0 else np.full(comb.n_tones, np.inf)
     w = np.sum(cn0_k * scale**2)
     sigma_hz = np.sqrt(crlb_frequency_hz2(10.0 * np.log10(w), n, fs)) if w > 0 else np.inf
@@ -418,18 +421,18 @@ def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ
         tone_cn0_dbhz = 10.0 * np.log10(cn0_k)
     # The checks of leosop.signal.quality: coherent comb power, comb position, whiteness of the residual.
     counts = np.minimum(seg, n - np.arange(n_seg) * seg).astype(float)
-    z = y * _phasors(phase, ratio * phase, half)
+    z = y * comb_phasors(phase, ratio * phase, half)
     amp = (counts @ z) / (counts @ counts)  # (n_tones,) least-squares amplitude per tone
     white = (z - counts[:, None] * amp) / np.sqrt(counts)[:, None]
     noise_sum = n * sigma2 if sigma2 > 0 else np.inf  # noise mean of a coherent sum over the block
     resid_sigma_hz, noise_k = _residual_sigma_hz(white, tau, counts, a2 * scale**2)
-    snr = float(np.sum(_abs2(np.sum(z, axis=0))) / noise_sum)
+    snr = float(np.sum(abs2(np.sum(z, axis=0))) / noise_sum)
     n_rates = 1 + int(2.0 * max_rate_hz_per_s * dur**2)
     margin = (position_margin_sigma(power / noise_sum, comb.n_tones) if check else float(coarse.margin_sigma))
     return CombFit(doppler_hz=d_c + delta, doppler_rate_hz_per_s=rate,
                    cn0_dbhz=10.0 * np.log10(mean_cn0) if mean_cn0 > 0 else -np.inf,
                    sigma_hz=float(max(sigma_hz, resid_sigma_hz)), crlb_sigma_hz=float(sigma_hz),
                    tone_cn0_dbhz=tone_cn0_dbhz, tone_noise_ratio=noise_k / sigma2 if sigma2 > 0 else noise_k, snr=snr,
-                   snr_threshold=comb.n_tones * _threshold(comb.n_tones, n_seg * n_rates, pfa),
+                   snr_threshold=comb.n_tones * detection_threshold(comb.n_tones, n_seg * n_rates, pfa),
                    position_margin_sigma=margin,
                    tone_spread=tone_spread(np.abs(np.sum(z, axis=0)), comb.tone_amplitudes, noise_sum, pfa))

@@ -23,7 +23,7 @@ antenna and the file the samples pass, in this order (:meth:`FrontEnd.apply`):
    every ``agc_period_s`` of the signal's timeline (snapshots a period apart
    each get their own gain).
 6. **Quantisation and clipping** (in the writer,
-   :func:`~.iq.quantise`): ``bits`` of 8 (ci8 / cu8), 12 (ci16 with four
+   :func:`~.iq_write.quantise`): ``bits`` of 8 (ci8 / cu8), 12 (ci16 with four
    zero LSBs) or 16; the full scale sits ``headroom_db`` above the RMS
    of a component at nominal gain, so a gain step up clips.
 

@@ -1,0 +1,201 @@
+"""The noise of a multi-pass static fix beyond its white sigmas: correlated residuals, passes that disagree.
+
+Used by :func:`~leosop.positioning.static_passes.solve_static_passes` (DopTrack, design note):
+
+- Residuals correlated in time (unmodelled orbit, clock and ionosphere
+  terms vary slowly over a pass) carry fewer independent samples than rows,
+  so a white-noise sigma makes the posterior too confident by
+  ``sqrt(tau)``, ``tau`` the integrated autocorrelation time of the
+  residuals in samples. Each pass's ``tau`` is estimated from its residuals
+  (:func:`integrated_autocorrelation`); where it is significantly above 1
+  the pass's variance is raised to ``tau`` times its residuals' mean square
+  (about ``sqrt(tau)`` on the sigma when the sigma came from the residuals;
+  never lowered) and the fix solved again from its solution (the effective-sample-size treatment of an AR/Gauss-Markov
+  error; white residuals leave the fix unchanged). ``tau`` is the larger of
+  the integrated autocorrelation time and the AR(1) one from the lag-1
+  correlation (:func:`pass_tau`).
+- A bias common to a pass (its element set's radial and cross-track error;
+  the time offset takes the along-track part) shows in no residual of that
+  pass: the position absorbs it. It shows only as disagreement between
+  passes, so the fix tests for it (``pass_offsets``): each pass's satellite
+  offset ``b_p`` (radial, cross-track) enters its rows as ``-H_pos . b_p``;
+  with the fix's states eliminated, the offsets' score ``g`` (weighted
+  residuals on their columns, :func:`pass_offset_blocks`) has covariance ``F``
+  (their information with the states eliminated) when there are none, so
+  ``T = g^T F^+ g`` is chi-square with ``rank F`` dof (Rao's score test; it
+  needs no solve with the offsets). Two random effects explain an excess: the offsets
+  ``~ N(0, s^2 I)`` and a factor ``k2`` on the white sigmas (an error slow
+  enough to pass for each pass's own terms, which the residuals'
+  correlation time underrates); in F's eigenbasis ``E[z_i^2] = k2 lam_i +
+  lam_i^2 s^2``. Both are fitted by maximum likelihood (:func:`pass_disagreement`;
+  ``k2 >= 1``, ``s`` capped at :data:`PASS_OFFSET_MAX_M`) and the
+  covariance of the fix (unchanged) becomes ``k2 N^-1 + s^2 N^-1 G G^T
+  N^-1`` (``G`` the offsets' cross information with the states). Passes
+  whose disagreement is likeliest without either leave the covariance
+  unchanged, bit for bit. Simulated per-pass offsets of 30 m are found as
+  such (``s`` 29 m, ``k2`` 1, position NEES 5.9 on 3 dof); on DopTrack the
+  disagreement is a factor (all 98 passes: ``k2`` 4.7, ``s`` 0), which fits
+  it better than offsets alone (those would have to be 3 km cross-track, 8
+  km on low passes, for 1-2 day old element sets) and leaves each day's fix
+  within 3 sigma (tools/doptrack_err_sigma.py).
+"""
+
+import numpy as np
+from scipy import optimize
+
+from ..geometry.doppler import doppler_jacobian
+
+__all__ = ["PASS_OFFSET_MAX_M", "integrated_autocorrelation", "pass_disagreement", "pass_offset_blocks", "pass_tau"]
+
+#: Largest per-pass satellite offset (radial, cross-track) the passes' disagreement may put into the
+#: covariance [m]: element-set radial and cross-track errors of a LEO object are 0.1-0.3 km at epoch
+#: (Flohrer et al. 2008, AMOS, TLE accuracy assessment) and grow over the 1-2 days to a pass; the few-pass
+#: test cannot tell offsets from other disagreement in its weakly observed directions.
+PASS_OFFSET_MAX_M = 1000.0
+#: Sokal's window constant: the autocorrelation sum runs to the first lag M >= C tau(M).
+_SOKAL_C = 5.0
+#: A pass's sigma is scaled only when its tau exceeds 1 by this many white-noise standard deviations.
+_TAU_SIGNIFICANCE = 3.0
+
+
+def integrated_autocorrelation(residuals, c=_SOKAL_C):
+    """Integrated autocorrelation time of a series, with Sokal's automatic window.
+
+    ``tau = 1 + 2 sum_{k=1}^{M} rho_k`` (``rho_k`` the sample autocorrelation
+    at lag k, mean removed), M the first lag with ``M >= c tau(M)``: the
+    number of rows per independent sample, so that a mean of ``n``
+    correlated rows has the variance of ``n / tau`` independent ones. For
+    white noise ``tau`` scatters about 1 with standard deviation
+    ``2 sqrt(M / n)``.
+
+    Parameters
+    ----------
+    residuals : array_like, (n,)
+        Equally spaced in time (gaps are taken as one step).
+    c : float
+
+    Returns
+    -------
+    tau : float
+    M : int
+        The window (0 for fewer than 4 values or a constant series: tau 1).
+    """
+    x = np.asarray(residuals, dtype=float).ravel()
+    n = x.size
+    x = x - x.mean() if n else x
+    if n < 4 or not np.any(x):
+        return 1.0, 0
+    f = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f), 2 * n)[:n]
+    taus = 1.0 + 2.0 * np.cumsum(acf[1:] / acf[0])
+    lags = np.arange(1, n)
+    reached = lags >= c * taus
+    M = int(lags[np.argmax(reached)]) if reached.any() else n - 1
+    return float(taus[M - 1]), M
+
+
+def pass_tau(residuals_hz, used, gi, n_pass):
+    """Each pass's residual correlation time [rows], (n_pass,); 1 where the residuals are white.
+
+    The larger of two estimates, each kept only when significantly above 1:
+    the integrated autocorrelation time (:func:`integrated_autocorrelation`,
+    long-range structure) and that of a first-order Gauss-Markov (AR(1))
+    error with the residuals' lag-1 correlation rho, ``(1 + rho) / (1 - rho)``.
+    The second matters because the per-pass polynomial absorbs the
+    low-frequency part of the noise, which biases the first low (AR(1) with
+    tau = 9 on 230 rows: estimated 3-4), while rho is hardly affected.
+    """
+    tau = np.ones(n_pass)
+    for p in range(n_pass):
+        r = residuals_hz[(gi == p) & used]
+        t, M = integrated_autocorrelation(r)
+        if M and t > 1.0 + _TAU_SIGNIFICANCE * 2.0 * np.sqrt(M / r.size):
+            tau[p] = t
+        x = r - r.mean() if r.size > 3 else np.zeros(1)
+        rho = float(x[1:] @ x[:-1] / (x @ x)) if np.any(x) else 0.0
+        if rho > _TAU_SIGNIFICANCE / np.sqrt(r.size):
+            tau[p] = max(tau[p], (1.0 + rho) / (1.0 - rho))
+    return tau
+
+
+def pass_offset_blocks(pos_sv_ecef_m, vel_sv_ecef_mps, pos_ecef_m, carrier_hz, w, D, B_glob, A, seg, residuals_hz):
+    """Information blocks of each pass's (radial, cross-track) satellite offset at the solution.
+
+    A satellite offset ``db`` (ECEF) changes a row's Doppler by ``-H_pos . db``
+    (the range rate depends on the difference of the positions), ``H_pos`` the
+    receiver position derivative; radial is along the satellite position,
+    cross-track along ``r x v`` (ECEF velocity: within a few degrees of the
+    orbit normal, enough for a variance). Returns the cross information with
+    the fix's states ``G`` (n_states, 2 n_pass; state order of the normal
+    matrix: position, global terms, per-pass terms pass-major), the offsets'
+    own block ``M`` (2 n_pass, 2 n_pass, block diagonal) and their score
+    ``g`` (2 n_pass,), the weighted residuals projected on their columns.
+    """
+    n_pass = len(seg)
+    H = doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_ecef_m[None], np.zeros((1, 3)), carrier_hz)[0, :, :3]
+    e_r = pos_sv_ecef_m / np.linalg.norm(pos_sv_ecef_m, axis=-1, keepdims=True)
+    h = np.cross(pos_sv_ecef_m, vel_sv_ecef_mps)
+    norm_h = np.linalg.norm(h, axis=-1, keepdims=True)
+    e_c = np.divide(h, norm_h, out=np.zeros_like(h), where=norm_h > 0)
+    q = -np.stack([np.einsum("mi,mi->m", H, e_r), np.einsum("mi,mi->m", H, e_c)], -1)  # (m, 2)
+    wq = w[:, None] * q
+    blocks = [np.add.reduceat(a[:, :, None] * wq[:, None, :], seg, axis=0) for a in (D, B_glob, A)]
+    n_glob, n_loc = B_glob.shape[1], A.shape[1]
+    G = np.zeros((3 + n_glob + n_pass * n_loc, n_pass, 2))
+    G[:3] = blocks[0].transpose(1, 0, 2)
+    G[3:3 + n_glob] = blocks[1].transpose(1, 0, 2)
+    for p in range(n_pass):
+        G[3 + n_glob + p * n_loc:3 + n_glob + (p + 1) * n_loc, p] = blocks[2][p]
+    M = np.zeros((n_pass, 2, n_pass, 2))
+    M[np.arange(n_pass), :, np.arange(n_pass)] = np.add.reduceat(q[:, :, None] * wq[:, None, :], seg, axis=0)
+    g = np.add.reduceat(np.where(w[:, None] > 0, wq * residuals_hz[:, None], 0.0), seg, axis=0)
+    return G.reshape(-1, 2 * n_pass), M.reshape(2 * n_pass, 2 * n_pass), g.ravel()
+
+
+def pass_disagreement(F, g):
+    """Score test of the passes' disagreement and its two variance components.
+
+    ``F`` is the pass offsets' information with the fix's states eliminated
+    (the covariance of their score ``g`` at the fix when the passes agree):
+    ``T = g^T F^+ g`` is then chi-square with ``rank F`` degrees of freedom.
+    In F's eigenbasis (``z = V^T g``) two departures make ``E[z_i^2] = k2 lam_i
+    + s^2 lam_i^2``: white sigmas too small by a factor ``k2`` (an error slow
+    enough to pass for each pass's own terms: its variance shows in every
+    direction alike) and per-pass radial and cross-track satellite offsets
+    ``~ N(0, s^2 I)`` (weighted by ``lam_i`` once more: they show most where
+    the passes see them best). Both are fitted by maximum likelihood, ``z``
+    Gaussian, with ``k2 >= 1`` (a sigma is never lowered, as the Particle Data
+    Group's scale factor) and ``0 <= s <= PASS_OFFSET_MAX_M``: on a grid, then
+    refined. Returns ``(k2, s, T, dof)``; ``(1, 0, T, dof)`` when the passes
+    agree (their likelihood is largest without either).
+    """
+    lam, V = np.linalg.eigh(0.5 * (F + F.T))
+    keep = lam > 1e-9 * max(lam[-1], 0.0) if lam.size and lam[-1] > 0 else np.zeros(lam.size, bool)
+    lam, z2 = lam[keep], (V[:, keep].T @ g) ** 2
+    dof = int(keep.sum())
+    if not dof:
+        return 1.0, 0.0, 0.0, 0
+    T = float(np.sum(z2 / lam))
+
+    def nll(k2, s):
+        v = np.multiply.outer(k2, lam) + np.multiply.outer(s**2, lam**2)
+        return 0.5 * np.sum(np.log(v) + z2 / v, axis=-1)
+
+    k2_grid = np.concatenate([[1.0], np.logspace(0.0, 4.0, 161)[1:]])
+    s_grid = np.concatenate([[0.0], np.logspace(-1.0, np.log10(PASS_OFFSET_MAX_M), 81)])
+    cost = nll(k2_grid[:, None], s_grid[None, :])
+    i, j = np.unravel_index(np.argmin(cost), cost.shape)
+    if i == 0 and j == 0:
+        return 1.0, 0.0, T, dof
+    start = [np.log(k2_grid[i]), s_grid[j] / PASS_OFFSET_MAX_M]
+    res = optimize.minimize(lambda p: nll(*_disagreement_params(p)), start, method="Nelder-Mead",
+                            options={"xatol": 1e-4, "fatol": 1e-9})
+    k2, s_m = _disagreement_params(res.x)
+    if nll(k2, s_m) > cost[i, j]:
+        k2, s_m = k2_grid[i], s_grid[j]
+    return float(k2), float(s_m), T, dof
+
+
+def _disagreement_params(p):
+    """``(k2, s)`` of :func:`pass_disagreement` from its search variables ``(log k2, s / cap)``, inside the bounds."""
+    return np.exp(max(p[0], 0.0)), min(max(p[1], 0.0), 1.0) * PASS_OFFSET_MAX_M
