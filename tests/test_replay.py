@@ -232,16 +232,27 @@ def test_bundled_example_identified_and_fixed_with_and_without_a_prior(capsys):
         assert err_m < 5.0 * np.linalg.norm(s["sigma_enu_m"])
 
 
-def test_continuous_recording_in_tracking_mode_identifies_every_satellite(tmp_path, capsys):
+def test_continuous_recording_in_tracking_mode_identifies_every_satellite(tmp_path, capsys, monkeypatch):
+    from leosop.orbits import load_constellation
+    from leosop.replay import pipeline
+    from leosop.signal.iq import open_sigmf
+
     path = tmp_path / "cont.sigmf-meta"
     # Five satellites of the default set for 3 s: 30 blocks of 0.1 s, full searches at blocks 0, 10, 20
     # and tracking mode (predicted combs only) in between.
-    _generate(path, "--duration-s", "3", "--sat", "70002", "70524", "71563", "71607", "72129")
+    sats = ["70002", "70524", "71563", "71607", "72129"]
+    _generate(path, "--duration-s", "3", "--sat", *sats)
     code, doc, err = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static")
     assert code == 0, err
     ids = [t["sat_id"] for t in doc["tracks"]]
-    assert sorted(ids) == ["70002", "70524", "71563", "71607", "72129"]
+    assert sorted(ids) == sats
     assert all(t["n_blocks"] >= 28 for t in doc["tracks"])  # no block lost to tracking mode
+    # More satellites than a search finds in one block (here 2, normally 10): tracking keeps every comb
+    # found and the searches at blocks 10 and 20 add the rest (tracking once kept only the first 2).
+    monkeypatch.setattr(pipeline, "MAX_NEW_COMBS", 2)
+    res = pipeline.replay(open_sigmf(path), load_constellation(), init_pos_ecef_m=geodetic_to_ecef(
+        np.radians(34.98), np.radians(109.71), 0.0), static=True)
+    assert sorted(tr.sat_id for tr in res.tracks if tr.sat_id) == sats
 
 
 def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording, tmp_path, capsys):

@@ -18,6 +18,8 @@ front end) is always replayed first. Reported per run:
   when a longer track of it is identified);
 - the static fix's horizontal and 3-D error and its ratio to the same
   kind's clean recording with the same search (``x_zero``);
+- ``img``: tracks that are no satellite's but mirror one about 0 Hz (an IQ
+  imbalance's image of its comb at minus its Doppler, within 20 Hz);
 - the estimated offset and drift minus the truth. The truth offset is the
   receiver's plus the mean of the identified satellites' own offsets (drawn
   in [0, 5] Hz): nothing separates that mean from the receiver's offset
@@ -26,12 +28,18 @@ front end) is always replayed first. Reported per run:
   compared (receiver offset plus the satellites' mean offset), the one the
   error should be measured against.
 
+``--impair "OPTIONS"`` (repeatable) adds a run per string of generator
+options at zero offset and drift (an interferer or IQ-imbalance sweep:
+``--impair "--cw 150e3 70" --impair "--iq-gain-db 2 --iq-phase-deg 10"``).
+
 Usage: python tools/bench_lo_offset.py [--kinds snapshot continuous] [--offsets 0 5e3 ...]
-       [--drifts 0 25 50] [--front-end consumer] [--no-global] [--workdir DIR]
+       [--drifts 0 25 50] [--front-end consumer] [--impair "OPTIONS" ...] [--no-global] [--workdir DIR]
 """
 
 import argparse
 import json
+import re
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -53,17 +61,18 @@ START = "2025-01-01T19:40:00Z"
 SAMPLE_RATE_HZ = 4e6
 KINDS = {
     "snapshot": ["--duration-s", "60", "--snapshot-s", "0.02", "--period-s", "1"],
-    "continuous": ["--duration-s", "12"],
+    "continuous": [],  # --duration-s from --continuous-s
 }
 #: A track is a satellite's when its truth Doppler is this close (median over the blocks) [Hz].
 MATCH_HZ = 20.0
 
 
-def generate(path, kind, offset_hz, drift_hz_per_s, front_end):
+def generate(path, kind, offset_hz, drift_hz_per_s, front_end, impair="", mask_deg=25.0, continuous_s=12.0):
+    span = ["--duration-s", f"{continuous_s:g}"] if kind == "continuous" else KINDS[kind]
     cmd = [sys.executable, "-m", "leosop", "generate", "-o", str(path), "--site", ",".join(map(str, SITE)),
-           "--start", START, "--sample-rate-hz", str(SAMPLE_RATE_HZ), "--mask-deg", "25", "--seed", "7",
+           "--start", START, "--sample-rate-hz", str(SAMPLE_RATE_HZ), "--mask-deg", f"{mask_deg:g}", "--seed", "7",
            "--orbit-error-along-m", "300", "--rx-offset-hz", str(offset_hz), "--rx-drift-hz-per-s",
-           str(drift_hz_per_s), "--front-end", front_end, *KINDS[kind]]
+           str(drift_hz_per_s), "--front-end", front_end, *span, *shlex.split(impair)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
@@ -81,18 +90,21 @@ def truth(meta_path):
 
 
 def score(res, curves):
-    """(true tracks, identified true tracks, wrong identities, satellites tracked, satellites identified) of a replay.
+    """(true tracks, identified true tracks, wrong identities, satellites tracked, satellites identified, images).
 
     A satellite is tracked when one of its tracks is true, identified when one of its tracks is
     identified rightly (a fragment of a satellite's track is ``duplicate`` when the longer one has it).
+    An image is a track that is no satellite's but follows minus one's Doppler.
     """
-    n_true = n_ok = n_wrong = 0
+    n_true = n_ok = n_wrong = n_image = 0
     tracked, named = set(), set()
     for tr in res.tracks:
         err = {sid: np.median(np.abs(np.interp(tr.t_s, c[:, 0], c[:, 1]) - tr.doppler_hz)) for sid, c in curves.items()}
         best = min(err, key=err.get)
         real = err[best] < MATCH_HZ
         n_true += real
+        n_image += not real and min(np.median(np.abs(np.interp(tr.t_s, c[:, 0], c[:, 1]) + tr.doppler_hz))
+                                    for c in curves.values()) < MATCH_HZ
         if real:
             tracked.add(best)
         if tr.sat_id is not None:
@@ -101,7 +113,7 @@ def score(res, curves):
             n_wrong += not right
             if right:
                 named.add(tr.sat_id)
-    return n_true, n_ok, n_wrong, len(tracked), len(named)
+    return n_true, n_ok, n_wrong, len(tracked), len(named), n_image
 
 
 def main(argv=None):
@@ -111,6 +123,10 @@ def main(argv=None):
     ap.add_argument("--drifts", nargs="+", type=float, default=[0.0])
     ap.add_argument("--front-end", default="none", choices=("none", *PRESETS),
                     help="the generator's front-end preset (its offset and drift replaced by the sweep's)")
+    ap.add_argument("--impair", action="append", default=[], metavar="OPTIONS",
+                    help="generator options of one more run at zero offset and drift (repeatable)")
+    ap.add_argument("--mask-deg", type=float, default=25.0, help="the generator's elevation mask (default 25)")
+    ap.add_argument("--continuous-s", type=float, default=12.0, help="length of a continuous recording (default 12)")
     ap.add_argument("--no-global", action="store_true", help="only with --init 100 km off")
     ap.add_argument("--workdir", help="keep the recordings here (default a temporary directory)")
     args = ap.parse_args(argv)
@@ -122,24 +138,26 @@ def main(argv=None):
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_lo_"))
     work.mkdir(parents=True, exist_ok=True)
     # The clean recording (no offset, drift or front end) first: every fix error is compared with its.
-    runs = [(0.0, 0.0, "none")] + [(o, d, args.front_end) for d in args.drifts for o in args.offsets
-                                   if (o, d, args.front_end) != (0.0, 0.0, "none")]
+    runs = [(0.0, 0.0, "none", "")] + [(o, d, args.front_end, "") for d in args.drifts for o in args.offsets
+                                       if (o, d, args.front_end) != (0.0, 0.0, "none")]
+    runs += [(0.0, 0.0, "none", imp) for imp in args.impair]
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
-          f"{'id':>3} {'wrong':>5} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} "
+          f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} "
           f"{'sig_hz':>6} {'sig_sep':>7} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
-        for offset, drift, fe in runs:
-            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}.sigmf-meta"
+        for offset, drift, fe, impair in runs:
+            tag = re.sub(r"[^0-9A-Za-z.+-]+", "_", impair.replace("--", "")).strip("_")
+            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}{'_' + tag if tag else ''}.sigmf-meta"
             if not path.exists():
-                generate(path, kind, offset, drift, fe)
+                generate(path, kind, offset, drift, fe, impair, args.mask_deg, args.continuous_s)
             curves, clock = truth(path)
             lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
             for name, init in searches:
                 t0 = time.perf_counter()
                 res = replay(open_sigmf(path), const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
                 elapsed = time.perf_counter() - t0
-                n_true, n_ok, n_wrong, n_sats, n_sats_id = score(res, curves)
+                n_true, n_ok, n_wrong, n_sats, n_sats_id, n_image = score(res, curves)
                 fix = None if res.position is None else res.position.fixes
                 err = np.full(3, np.nan) if fix is None else fix.pos_ecef_m - site
                 enu = C_e_n(*ecef_to_geodetic(site)[:2]).T @ err
@@ -152,9 +170,9 @@ def main(argv=None):
                 d_drift = lo.drift_hz_per_s - drift if lo else np.nan
                 status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
                 print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
-                      f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} {err3d:8.1f} "
+                      f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} {err3d:8.1f} "
                       f"{ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} {_separable_sigma_hz(fix):7.2f} {d_drift:8.4f} "
-                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f}", flush=True)
+                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
 
 
 def _separable_sigma_hz(fix):

@@ -46,6 +46,10 @@ BAND_MARGIN = 0.05
 #: others only fit the combs the tracks predict (tracking mode, a fifth of
 #: the cost), so a rising satellite is picked up within this many blocks.
 SEARCH_EVERY = 10
+#: Combs a full search finds in one block; a tracking block fits every
+#: tracked comb and, when it also searches, looks for up to this many more
+#: (a continuous recording of more than ten satellites keeps them all).
+MAX_NEW_COMBS = 10
 #: Half-width of the window a tracked comb is fitted in around its
 #: prediction [Hz]: the tracks predict the next block to well below a hertz;
 #: the window sets the decimated band, so it is kept small. A comb outside
@@ -426,6 +430,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     t0 = time.process_time()
     spec_t, spec = [], []
     block_len = {}
+    n_last = 0  # combs found in the last block
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
         # NaN/inf samples: find_combs sees them in the block's FFT (every bin turns NaN), which
         # spares read() a pass over the samples (~5 % of the streaming time).
@@ -436,17 +441,21 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         pred = tracker.predictions(b.t_s) if contiguous else None
         try:
             if pred is None:
-                found = find_combs(iq, fs, comb=comb, max_doppler_hz=max_doppler)
+                # After a birth the combs of the last block are searched for again, with as many new.
+                n_known = n_last if contiguous else 0
+                found = find_combs(iq, fs, comb=comb, max_doppler_hz=max_doppler, max_combs=n_known + MAX_NEW_COMBS)
             else:
                 # Every SEARCH_EVERY-th block also searches the spectrum for new
                 # combs, with the tracked ones fitted first and removed.
                 search = k % SEARCH_EVERY == 0
                 found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=max_doppler, n_refine=2 if search else TRACK_REFINE)
+                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=max_doppler,
+                                   max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE)
         except NonFiniteSamples:
             raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
                              "inf") from None
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
+        n_last = len(det)
         # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
         shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz
         tracker.update(b.t_s - shift_s, b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns"), det,
