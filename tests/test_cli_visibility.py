@@ -51,6 +51,14 @@ def test_json_contract_and_outputs(tmp_path, capsys):
     assert from_passes == [sorted(ids) for ids in doc["visible_ids"]]
 
 
+def test_default_start_is_the_median_element_set_epoch_to_the_minute(capsys):
+    # The bundled set (starlink_walker.tle) has every epoch at 2025-01-01T00:00Z (tle info says so); a median in the wrong
+    # datetime unit once put the start in 2111.
+    code = main(["visibility", "--duration-s", "60", "--step-s", "60", "--json"])
+    assert code == 0
+    assert json.loads(capsys.readouterr().out)["start_utc"] == "2025-01-01T00:00:00.000000Z"
+
+
 def test_sub_second_steps_print_whole_instants(capsys):
     # 3 x 0.3 s in floating point is 0.8999999999 s: the epoch is 00.900000, neither 00.899999 nor 1 ns early.
     assert main(["visibility", "--start", "2025-01-01T00:00:00Z", "--duration-s", "1", "--step-s", "0.3",

@@ -117,7 +117,8 @@ def run(args):
     if args.start:
         start = parse_time(args.start)
     else:
-        start = np.median(const.epochs_utc.astype(np.int64)).astype("datetime64[m]").astype("datetime64[ns]")
+        median_ns = np.median(const.epochs_utc.astype(np.int64)).astype(np.int64)
+        start = median_ns.astype("datetime64[ns]").astype("datetime64[m]").astype("datetime64[ns]")
     warn_stale(const, start)
     ends = utc_from_seconds(np.array([0, n_epochs - 1]) * step, start)
     const = drop_failing(const, ends, what=f"{format_utc(ends[0])} .. {format_utc(ends[1])}")
