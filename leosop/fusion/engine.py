@@ -38,9 +38,11 @@ axis along the velocity, as a car drives) and the yaw's covariance row to
 """
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
+import scipy.linalg
 import scipy.stats
 
 from .. import earth
@@ -49,9 +51,10 @@ from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..rotations import dcm_to_euler, euler_to_dcm
 from . import kalman
 from .aids import InsView
-from .common import GATE_PROBABILITY, N_INS, pos_jacobian
+from .common import GATE_PROBABILITY, N_INS
+from .record import EngineResult, Recorder
 
-__all__ = ["AID_LOG_DTYPE", "CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
+__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,77 +111,6 @@ class CourseAlignment:
     sigma_rad: float = math.radians(10.0)
 
 
-@dataclasses.dataclass(frozen=True)
-class EngineResult:
-    """The filter's INS after the INS updates (n epochs: the start and one per ``record_every`` pairs of samples).
-
-    Attributes
-    ----------
-    t_s : ndarray, (n,)
-        On the IMU's clock.
-    lat_rad, lon_rad, alt_m : ndarray, (n,)
-    vel_enu_mps : ndarray, (n, 3)
-    q_n_b : ndarray, (n, 4)
-        Attitude (scalar-first quaternion of ``C_n_b``).
-    sigma : ndarray, (n, n_x)
-        Square roots of the diagonal of ``P``: the 15 INS errors (position in
-        rad, rad, m), then the optional states of :class:`EngineSettings` in
-        their order (scale factors, time offset).
-    cov_pos_enu_m2, cov_vel_enu_m2ps2 : ndarray, (n, 3, 3)
-        Position and velocity error covariances in ENU.
-    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
-    gyro_scale, accel_scale : ndarray, (n, 3)
-        Scale-factor estimates (zero without those states).
-    time_offset_s : ndarray, (n,)
-        IMU time offset estimate (the initial value without that state).
-    omega_ib_b_rad_per_s : ndarray, (n, 3)
-        Bias-corrected body rate of each update.
-    aids : dict of str to [int, int]
-        Per kind of aid: used, rejected by the gate.
-    yaw_aligned_s : float or None
-        When the yaw was set from the course (None: never, or not asked).
-    nll : dict of str to float
-        Per kind of aid: the negative log-likelihood of its used innovations,
-        ``sum 0.5 (z^T S^-1 z + ln det(2 pi S))`` (compares runs on the same aids).
-    states : dict of str to (ndarray, ndarray)
-        The aids' state blocks alive at the end: estimate and sigma, by key.
-    cov_vel_pos_enu : ndarray, (n, 3, 3)
-        Cross-covariance of the velocity and position errors in ENU [m^2/s].
-    aid_log : structured ndarray, (k,)
-        One row per aid offered to the gate, in the order applied: ``aid``
-        (its index in the sequence given), ``used`` (passed the gate),
-        ``nis`` and ``normalized`` (a one-row aid's ``z / sqrt(S)``, NaN for
-        larger ones).
-    cov_ins : ndarray, (n, 15, 15), or None
-        Covariance of the INS errors (``settings.record_cov_ins``).
-    """
-
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    alt_m: np.ndarray
-    vel_enu_mps: np.ndarray
-    q_n_b: np.ndarray
-    sigma: np.ndarray
-    cov_pos_enu_m2: np.ndarray
-    cov_vel_enu_m2ps2: np.ndarray
-    gyro_bias_rad_per_s: np.ndarray
-    accel_bias_mps2: np.ndarray
-    gyro_scale: np.ndarray
-    accel_scale: np.ndarray
-    time_offset_s: np.ndarray
-    omega_ib_b_rad_per_s: np.ndarray
-    aids: dict
-    yaw_aligned_s: float | None
-    nll: dict
-    states: dict = dataclasses.field(default_factory=dict)
-    cov_vel_pos_enu: np.ndarray | None = None
-    aid_log: np.ndarray | None = None
-    cov_ins: np.ndarray | None = None
-
-
-#: Rows of :attr:`EngineResult.aid_log`.
-AID_LOG_DTYPE = np.dtype([("aid", int), ("used", bool), ("nis", float), ("normalized", float)])
 #: Slack on comparisons of times [s] (sums of IMU intervals round far below it).
 _TIME_SLACK_S = 1e-9
 
@@ -236,7 +168,6 @@ class _Filter:
         self.nll = {}
         self.rejected_run = {}
         self.gate = {}
-        self.log = []
         self.last_update_s = -math.inf
 
     def correct_increments(self, dth, dv, dt2):
@@ -336,46 +267,62 @@ class _Filter:
         period = self.settings.correction_period_s
         return period > 0 and aid.t_s != self.last_update_s and aid.t_s - last < period - _TIME_SLACK_S
 
-    def apply(self, aid, ins, index):
-        """Gate and apply one aid (``index`` in the run's sequence); feed the estimated errors back into the INS.
+    def apply(self, aids, ins, indices):
+        """Gate the aids due at one instant in turn, apply those used as one update and feed the errors back.
 
-        Returns
-        -------
-        float or None
-            The aid's negative log-likelihood, None when it was rejected.
+        Each aid's gate sees its innovation and covariance given the aids
+        used before it at the instant: a sequential update carried out on
+        the stacked innovations ``z`` (m,) and their covariance ``S`` (m, m)
+        alone (``S -= S[:, a] S[a, a]^-1 S[a, :]`` for each aid ``a`` used),
+        so that the one update of the aids used is that sequence of
+        updates, uncorrelated aids being independent measurements
+        [Bar-Shalom 2001], except that every aid is linearised at the INS
+        before the instant's correction (a sequence re-linearises after
+        each: second order in the correction). ``indices`` (len(aids),):
+        the aids' places in the run's sequence.
         """
-        z, H, R = self.innovation(aid, ins)
-        count = self.counts.setdefault(aid.name, [0, 0])
-        S = H @ self.P @ H.T + R
-        nis = float(z @ np.linalg.solve(S, z))
-        run = self.rejected_run.get(aid.name, 0)
-        if z.size not in self.gate:
-            self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
-        normalized = z[0] / math.sqrt(S[0, 0]) if z.size == 1 else math.nan
-        failed = aid.gated and nis > self.gate[z.size]
-        if failed and run < self.settings.reopen_after:
-            count[1] += 1
-            self.rejected_run[aid.name] = run + 1
-            self.log.append((index, False, nis, normalized))
-            if self.on_aid is not None:
-                self.on_aid(aid, z, S, False, False)
-            return None
-        if failed and self.settings.reopen_inflates:
-            H_plus = np.linalg.pinv(H[:, :N_INS])
-            self.P[:N_INS, :N_INS] += H_plus @ np.diag(z**2) @ H_plus.T
-            S = H @ self.P @ H.T + R
+        mats = [self.innovation(aid, ins) for aid in aids]
+        z_all = np.concatenate([m[0] for m in mats])
+        H_all = np.concatenate([m[1] for m in mats])
+        R_all = scipy.linalg.block_diag(*(m[2] for m in mats))
+        S_all = H_all @ (self.P @ H_all.T) + R_all
+        y, take, lo = z_all, np.zeros(z_all.size, dtype=bool), 0
+        for aid, index, (z, H, R) in zip(aids, indices, mats):
+            rows = slice(lo, lo + z.size)
+            lo = rows.stop
+            z, S = y[rows], S_all[rows, rows]
+            count = self.counts.setdefault(aid.name, [0, 0])
             nis = float(z @ np.linalg.solve(S, z))
-        if self.on_aid is not None:
-            self.on_aid(aid, z, S, True, failed)
-        self.log.append((index, True, nis, normalized))
-        self.last_update_s = aid.t_s
-        self.rejected_run[aid.name] = 0
-        count[0] += 1
-        nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
-        self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
-        dx, P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z, H, R)
-        self.feed_back(dx, P)
-        return nll
+            run = self.rejected_run.get(aid.name, 0)
+            if z.size not in self.gate:
+                self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
+            failed = aid.gated and nis > self.gate[z.size]
+            if failed and run < self.settings.reopen_after:
+                count[1] += 1
+                self.rejected_run[aid.name] = run + 1
+                if self.on_aid is not None:
+                    self.on_aid(index, aid, z, S, False, False)
+                continue
+            if failed and self.settings.reopen_inflates:  # such an aid is alone at its instant (run)
+                H_plus = np.linalg.pinv(H[:, :N_INS])
+                self.P[:N_INS, :N_INS] += H_plus @ np.diag(z**2) @ H_plus.T
+                S_all = H_all @ (self.P @ H_all.T) + R_all
+                S = S_all[rows, rows]
+                nis = float(z @ np.linalg.solve(S, z))
+            if self.on_aid is not None:
+                self.on_aid(index, aid, z, S, True, failed)
+            self.last_update_s = aid.t_s
+            self.rejected_run[aid.name] = 0
+            count[0] += 1
+            nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
+            self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
+            take[rows] = True
+            G = np.linalg.solve(S, S_all[rows]).T  # the later aids given this one
+            y, S_all = y - G @ z, S_all - G @ S_all[rows]
+        if take.any():
+            dx, P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z_all[take], H_all[take],
+                                        R_all[np.ix_(take, take)])
+            self.feed_back(dx, P)
 
     def feed_back(self, dx, P):
         """Remove the estimated errors ``dx`` (n_x,) from the INS, sensor and block estimates; ``P`` (n_x, n_x) after."""
@@ -442,11 +389,15 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     progress : callable, optional
         Wraps the iterator over INS updates (a progress bar).
     on_aid : callable, optional
-        Called after each aid's gate test as ``on_aid(aid, z, S, used, reopened)``:
-        innovation (m,), its covariance (m, m) as used, whether the aid was
-        used, and whether it failed the gate and was used all the same.
+        Called after each aid's gate test as ``on_aid(index, aid, z, S, used, reopened)``:
+        the aid's place in ``aids``, its innovation (m,) and covariance
+        (m, m) as gated (given the aids used before it at the same instant),
+        whether it was used, and whether it failed the gate and was used all
+        the same.
     after_aid : callable, optional
-        Called after each aid is applied as ``after_aid(aid, state, P, blocks)``:
+        Called after each aid is applied as ``after_aid(aid, state, P, blocks)``
+        (each aid is then an update of its own; without it the aids due at
+        one instant make one update, :meth:`_Filter.apply`):
         the INS after the feedback, the full covariance and the state blocks
         ``{key: (first index in P, estimate)}`` (read-only). It returns a list
         of further corrections ``(dx, P_after)`` to feed back in turn (error
@@ -462,15 +413,14 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     m, every = t_s.size // 2, settings.record_every
     t_pairs = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
     f = _Filter(state0, P0, settings, time_offset_s, on_aid)
-    n = m // every + 1
-    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, f.n_core)),
-           "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
-           "sg": np.empty((n, 3)), "sa": np.empty((n, 3)), "td": np.empty(n), "w": np.empty((n, 3)),
-           "cvp": np.empty((n, 3, 3)), "P": np.empty((n, N_INS, N_INS)) if settings.record_cov_ins else None}
+    out = Recorder(m // every + 1, f.n_core, settings.record_cov_ins)
     aligned_s = None
     heading_known = course_alignment is None
+    # The aids due with one join its update, unless a re-opened gate may raise P or after_aid must see
+    # each aid's update (and once the heading is known: no aid then waits for it).
+    stack = after_aid is None and not settings.reopen_inflates
     aids = list(aids)
-    if any(b.t_s < a.t_s for a, b in zip(aids, aids[1:])):
+    if any(b.t_s < a.t_s for a, b in itertools.pairwise(aids)):
         raise ValueError("aids must be sorted by time")
     queues = [[(j, a) for j, a in enumerate(aids) if a.external_clock],
               [(j, a) for j, a in enumerate(aids) if not a.external_clock]]
@@ -478,7 +428,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     for q, i in zip(queues, (0, 1)):
         while heads[i] < len(q) and f.due_s(q[heads[i]][1]) < t_pairs[0]:
             heads[i] += 1
-    _record(out, 0, f)
+    out.record(0, f)
     ks = range(m) if progress is None else progress(range(m))
     for k in ks:
         i = 2 * k
@@ -503,36 +453,20 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
             if f.waits(aid, t_pairs[0]):
                 f.admit(aid)
                 continue
+            group = [(index, aid)]
+            while stack and heading_known and heads[c] < len(queues[c]) and f.due_s(queues[c][heads[c]][1]) == t_aid:
+                group.append(queues[c][heads[c]])
+                heads[c] += 1
             f.propagate()
-            f.admit(aid)
-            f.apply(aid, f.view(t_aid, t_now), index)
+            for _, a in group:
+                f.admit(a)
+            f.apply([a for _, a in group], f.view(t_aid, t_now), [j for j, _ in group])
             if after_aid is not None:
                 for dx, P in after_aid(aid, f.state, f.P, {key: (b[1], b[2]) for key, b in f.blocks.items()}) or ():
                     f.feed_back(dx, P)
         if f.pending_s >= settings.step_s - _TIME_SLACK_S:
             f.propagate()
         if (k + 1) % every == 0:
-            _record(out, (k + 1) // every, f)
+            out.record((k + 1) // every, f)
     f.propagate()
-    pos, cp = out["pos"], out["cp"]
-    return EngineResult(t_pairs[::every], pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp,
-                        out["cv"], out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
-                        {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll),
-                        {k: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for k, (b, i, x, _) in f.blocks.items()},
-                        out["cvp"], np.array(f.log, dtype=AID_LOG_DTYPE), out["P"])
-
-
-def _record(out, k, f):
-    s, P = f.state, f.P
-    out["pos"][k] = (s.lat_rad, s.lon_rad, s.alt_m)
-    out["vel"][k] = s.vel_enu_mps
-    out["q"][k] = s.q_n_b
-    out["sigma"][k] = np.sqrt(np.diagonal(P)[:f.n_core])
-    J = pos_jacobian(s.lat_rad, s.alt_m)
-    out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
-    out["cv"][k] = P[DV, DV]
-    out["cvp"][k] = P[DV, DPOS] @ J.T
-    out["bg"][k], out["ba"][k], out["sg"][k], out["sa"][k] = f.bg, f.ba, f.sg, f.sa
-    out["td"][k], out["w"][k] = f.td, f.omega
-    if out["P"] is not None:
-        out["P"][k] = P[:N_INS, :N_INS]
+    return out.result(t_pairs[::every], f, aligned_s)
