@@ -5,9 +5,10 @@ runs on every pair of IMU increments less the bias estimates; the 15 INS
 errors of :mod:`leosop.ins.error_model` are propagated with its ``model15``
 (second-order series, at most every ``settings.step_s`` and before every aid applied)
 plus random walks of both biases; each aid (:mod:`leosop.fusion.aids`) gives
-``(z, H, R)``, the update is the Joseph form of :mod:`leosop.fusion.kalman`
-and the estimated errors are fed back at once (closed loop, so the prior
-error estimate is always zero).
+``(z, H, R)``, the aids due at one instant are gated one after the other
+and make one update, the Joseph form of :mod:`leosop.fusion.kalman`
+(:meth:`_Filter.apply`), and the estimated errors are fed back at once
+(closed loop, so the prior error estimate is always zero).
 
 An aid at ``t_s`` is applied after the INS update that ends at or just after
 ``t_s``; it sees the INS moved back to ``t_s`` along its velocity (a pair of
@@ -27,8 +28,10 @@ States of the aids (:class:`leosop.fusion.aids.StateBlock`, e.g. a LEO
 receiver's clock per constellation and each satellite's offset) come after
 those: a block is added with its prior when the first aid naming it is due,
 propagated by its own transition (no coupling to the INS errors) and
-dropped (marginalised) once stale; its estimate is kept beside ``P`` and
-corrected by every update (error = estimate minus truth, as the time offset).
+dropped (marginalised) once stale (:class:`leosop.fusion.blocks.Blocks`); its
+estimate is kept beside ``P`` and corrected by every update (error =
+estimate minus truth, as the time offset). The result is an
+:class:`leosop.fusion.record.EngineResult`.
 
 Heading: a MEMS IMU cannot find North at rest, so a run may start with the
 yaw unknown (:class:`CourseAlignment`): the first GNSS velocity faster than
@@ -51,6 +54,7 @@ from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..rotations import dcm_to_euler, euler_to_dcm
 from . import kalman
 from .aids import InsView
+from .blocks import Blocks
 from .common import GATE_PROBABILITY, N_INS
 from .record import EngineResult, Recorder
 
@@ -150,7 +154,7 @@ class _Filter:
         self.SG, self.SA, self.TD = state_slices(settings)
         self.P = initial_covariance(P0, settings) if np.shape(P0) == (N_INS, N_INS) else np.array(P0, dtype=float)
         self.n_core = self.P.shape[0]
-        self.blocks = {}  # key -> [StateBlock, first index, estimate, time last named]
+        self.blocks = Blocks()
         self.Qc = settings.noise_psd()
         self.bias_q = np.r_[np.full(3, settings.gyro_bias_rw_rad_per_s_per_rt_s**2),
                             np.full(3, settings.accel_bias_rw_mps2_per_rt_s**2)]
@@ -198,10 +202,7 @@ class _Filter:
         if n_all > n:
             Phi_all, Qd_all = np.eye(n_all), np.zeros((n_all, n_all))
             Phi_all[:n, :n], Qd_all[:n, :n] = Phi, Qd
-            for block, i, x, _ in self.blocks.values():
-                sl = slice(i, i + block.size)
-                Phi_all[sl, sl], Qd_all[sl, sl] = block.transition(dt)
-                x[:] = Phi_all[sl, sl] @ x
+            self.blocks.propagate(Phi_all, Qd_all, dt)
             Phi, Qd = Phi_all, Qd_all
         P = Phi @ self.P @ Phi.T + Qd
         self.P = 0.5 * (P + P.T)
@@ -221,42 +222,17 @@ class _Filter:
         moved = strapdown.NavState(s.lat_rad + v[1] * dt / (R_M + s.alt_m),
                                    s.lon_rad + v[0] * dt / ((R_N + s.alt_m) * math.cos(s.lat_rad)),
                                    s.alt_m + v[2] * dt, v + self.accel_enu * dt, s.q_n_b)
-        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu,
-                       {k: b[2] for k, b in self.blocks.items()})
+        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu, self.blocks.estimates())
 
     def admit(self, aid):
         """Drop the stale state blocks, add those ``aid`` names for the first time, mark its blocks named now."""
-        stale = [k for k, (b, _, _, last) in self.blocks.items()
-                 if b.drop_after_s is not None and aid.t_s - last > b.drop_after_s]
-        if stale:
-            keep = np.ones(self.P.shape[0], dtype=bool)
-            for k in stale:
-                b, i = self.blocks.pop(k)[:2]
-                keep[i:i + b.size] = False
-            self.P = self.P[np.ix_(keep, keep)]
-            first = np.cumsum(keep) - 1
-            for entry in self.blocks.values():
-                entry[1] = int(first[entry[1]])
-        for b in aid.states:
-            if b.key not in self.blocks:
-                n = self.P.shape[0]
-                P = np.zeros((n + b.size, n + b.size))
-                P[:n, :n] = self.P
-                P[n:, n:] = np.diag(np.square(b.sigma0))
-                self.P = P
-                self.blocks[b.key] = [b, n, np.array(b.mean0, dtype=float), aid.t_s]
-            self.blocks[b.key][3] = aid.t_s
+        self.P = self.blocks.admit(self.P, aid)
 
     def innovation(self, aid, ins):
         """``(z, H, R)`` of ``aid`` over the full state (the time-offset column for aids on the aids' clock)."""
         z, Ha, R = aid.matrices(ins)
         H = np.zeros((z.size, self.P.shape[0]))
-        H[:, :N_INS] = Ha[:, :N_INS]
-        c = N_INS
-        for b in aid.states:
-            i = self.blocks[b.key][1]
-            H[:, i:i + b.size] = Ha[:, c:c + b.size]
-            c += b.size
+        self.blocks.design(aid, Ha, H)
         if self.TD is not None and aid.external_clock:
             H[:, self.TD.start] = aid.rate(ins)
         return z, H, R
@@ -335,8 +311,7 @@ class _Filter:
             self.sa = self.sa + dx[self.SA]
         if self.TD is not None:
             self.td -= float(dx[self.TD.start])  # dx is td_hat minus the true offset
-        for b, i, x, _ in self.blocks.values():
-            x -= dx[i:i + b.size]
+        self.blocks.feed_back(dx)
 
     def align_yaw(self, vel_enu_mps, sigma_rad):
         """Set the yaw to the course of ``vel_enu_mps``, keeping pitch and roll; reset the yaw's covariance."""
@@ -462,7 +437,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
                 f.admit(a)
             f.apply([a for _, a in group], f.view(t_aid, t_now), [j for j, _ in group])
             if after_aid is not None:
-                for dx, P in after_aid(aid, f.state, f.P, {key: (b[1], b[2]) for key, b in f.blocks.items()}) or ():
+                for dx, P in after_aid(aid, f.state, f.P, f.blocks.layout()) or ():
                     f.feed_back(dx, P)
         if f.pending_s >= settings.step_s - _TIME_SLACK_S:
             f.propagate()

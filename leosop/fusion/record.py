@@ -96,7 +96,7 @@ class Recorder:
         self.cov_ins = np.empty((n, N_INS, N_INS)) if cov_ins else None
 
     def record(self, k, f):
-        """Keep epoch ``k`` of the filter ``f`` (a :class:`leosop.fusion.engine` filter: its state, ``P``, estimates)."""
+        """Keep epoch ``k`` of the engine's running filter ``f``: its INS, ``P`` and sensor estimates."""
         s, P = f.state, f.P
         self.pos[k] = (s.lat_rad, s.lon_rad, s.alt_m)
         self.vel[k], self.q[k] = s.vel_enu_mps, s.q_n_b
@@ -110,9 +110,8 @@ class Recorder:
             self.cov_ins[k] = P[:N_INS, :N_INS]
 
     def result(self, t_s, f, yaw_aligned_s):
-        """The :class:`EngineResult` at the times ``t_s`` (n,), with the counters and state blocks of ``f`` at the end."""
-        blocks = {key: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for key, (b, i, x, _) in f.blocks.items()}
+        """The :class:`EngineResult` at the times ``t_s`` (n,), with the counters and blocks of ``f`` at the end."""
         return EngineResult(t_s, self.pos[:, 0], self.pos[:, 1], self.pos[:, 2], self.vel, self.q, self.sigma,
                             self.cov_pos, self.cov_vel, self.bg, self.ba, self.sg, self.sa, self.td, self.omega,
-                            {k: tuple(v) for k, v in f.counts.items()}, yaw_aligned_s, dict(f.nll), blocks,
+                            {k: tuple(v) for k, v in f.counts.items()}, yaw_aligned_s, dict(f.nll), f.blocks.summary(f.P),
                             self.cov_ins)
