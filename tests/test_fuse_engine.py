@@ -149,49 +149,51 @@ def res_C(res):
 
 
 class _Linear(aids.Aid):
-    """An aid linear in the errors: fixed ``(z, H, R)`` whatever the INS (the gate and update alone)."""
+    """An aid linear in the bias errors: ``z = z0 - H b``, ``b`` the bias estimates the filter moved from zero."""
 
     name = "linear"
 
-    def __init__(self, t_s, z, H, R, states=()):
+    def __init__(self, t_s, z0, H, R, states=()):
         super().__init__(t_s)
-        self.z, self.H, self.R, self.states = z, H, R, states
+        self.z0, self.H, self.R, self.states = z0, H, R, states
 
     def matrices(self, ins):
-        return self.z, self.H, self.R
+        b = np.r_[ins.gyro_bias_rad_per_s, ins.accel_bias_mps2]
+        return self.z0 - self.H[:, 9:15] @ b, self.H, self.R
 
 
 def test_aids_of_one_instant_make_the_sequence_of_their_updates():
     # Reference: the textbook sequence, each aid gated on the innovation left by those before it and
-    # applied by kalman.update; the engine conditions the stacked innovations in measurement space
-    # and makes one update. Same algebra in another order: equal to rounding (1e-9 relative), where
-    # conditioning each aid on the joint prior instead would be off by the updates' size (~10 %).
+    # applied by kalman.update; the engine carries the correction and gains from aid to aid and makes
+    # one update. Same algebra in another order: equal to rounding (1e-9 relative), where gating each
+    # aid on the joint prior instead would be off by the updates' size (~10 %).
     rng = np.random.default_rng(3)
     A = rng.standard_normal((N_INS, N_INS))
     P0 = 1e-2 * A @ A.T + 1e-3 * np.eye(N_INS)
     settings = engine.EngineSettings(1e-3, 1e-2, 0.0, 0.0)
     group = []
     for m in (1, 2, 1, 3, 1):
-        H = rng.standard_normal((m, N_INS))
+        H = np.zeros((m, N_INS))
+        H[:, 9:15] = rng.standard_normal((m, 6))  # the biases: the aid sees the filter's corrections
         R = np.diag(rng.uniform(0.01, 0.1, m))
         group.append(_Linear(0.0, H @ rng.multivariate_normal(np.zeros(N_INS), P0)
                              + rng.multivariate_normal(np.zeros(m), R), H, R))
-    group[2].z = group[2].z + 1e3  # an outlier: rejected, the aids after it conditioned without it
+    group[2].z0 = group[2].z0 + 1e3  # an outlier: rejected, the aids after it conditioned without it
     seen = []
 
     def on_aid(index, aid, z, S, used, reopened):
         seen.append((index, used, z @ np.linalg.solve(S, z)))
 
     f = engine._Filter(_computed()[0], P0, settings, 0.0, on_aid)
-    f.apply(group, None, list(range(len(group))))
+    f.apply(group, 0.0, 0.0, list(range(len(group))))
     x, P, ref = np.zeros(N_INS), P0, []
     for j, a in enumerate(group):
-        y = a.z - a.H @ x
+        y = a.z0 - a.H @ x
         nis = float(y @ np.linalg.solve(a.H @ P @ a.H.T + a.R, y))
         used = nis <= scipy.stats.chi2.ppf(settings.gate_probability, y.size)
         ref.append((j, used, nis))
         if used:
-            x, P, _, _ = kalman.update(x, P, a.z, a.H, a.R)
+            x, P, _, _ = kalman.update(x, P, a.z0, a.H, a.R)
     assert [r[:2] for r in seen] == [r[:2] for r in ref] and not ref[2][1] and sum(r[1] for r in ref) == 4
     np.testing.assert_allclose([r[2] for r in seen], [r[2] for r in ref], rtol=1e-9)
     np.testing.assert_allclose(f.P, P, rtol=1e-9, atol=1e-9 * np.abs(P).max())

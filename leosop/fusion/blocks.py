@@ -70,9 +70,9 @@ class Blocks:
         for b, i, x, _ in self.entries.values():
             x -= dx[i:i + b.size]
 
-    def estimates(self):
-        """The estimates by key (the arrays themselves)."""
-        return {k: e[2] for k, e in self.entries.items()}
+    def estimates(self, dx):
+        """The estimates by key, less the errors ``dx`` (n_x,)."""
+        return {k: x - dx[i:i + b.size] for k, (b, i, x, _) in self.entries.items()}
 
     def layout(self):
         """``{key: (first index in P, estimate)}``."""

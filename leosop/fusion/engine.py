@@ -214,15 +214,17 @@ class _Filter:
         """When ``aid`` is due on the IMU clock."""
         return aid.t_s + self.td if aid.external_clock else aid.t_s
 
-    def view(self, t_aid_s, t_now_s):
-        """The INS moved back along its velocity and acceleration from ``t_now_s`` to the aid's time."""
-        s, dt = self.state, t_aid_s - t_now_s
+    def view(self, t_aid_s, t_now_s, dx):
+        """The INS less the errors ``dx`` (n_x,), moved back along its velocity and acceleration from ``t_now_s``
+        to the aid's time."""
+        s, dt = self.state.corrected(dx[PHI], dx[DV], dx[DPOS]) if dx.any() else self.state, t_aid_s - t_now_s
         R_M, R_N = earth.radii_m(s.lat_rad)
         v = s.vel_enu_mps
         moved = strapdown.NavState(s.lat_rad + v[1] * dt / (R_M + s.alt_m),
                                    s.lon_rad + v[0] * dt / ((R_N + s.alt_m) * math.cos(s.lat_rad)),
                                    s.alt_m + v[2] * dt, v + self.accel_enu * dt, s.q_n_b)
-        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu, self.blocks.estimates())
+        return InsView(moved, self.bg + dx[EPS], self.ba + dx[NABLA], self.omega, self.accel_enu,
+                       self.blocks.estimates(dx))
 
     def admit(self, aid):
         """Drop the stale state blocks, add those ``aid`` names for the first time, mark its blocks named now."""
@@ -243,30 +245,25 @@ class _Filter:
         period = self.settings.correction_period_s
         return period > 0 and aid.t_s != self.last_update_s and aid.t_s - last < period - _TIME_SLACK_S
 
-    def apply(self, aids, ins, indices):
-        """Gate the aids due at one instant in turn, apply those used as one update and feed the errors back.
+    def apply(self, aids, t_aid_s, t_now_s, indices):
+        """Gate the aids due at ``t_aid_s`` one after the other, apply those used as one update, feed back.
 
-        Each aid's gate sees its innovation and covariance given the aids
-        used before it at the instant: a sequential update carried out on
-        the stacked innovations ``z`` (m,) and their covariance ``S`` (m, m)
-        alone (``S -= S[:, a] S[a, a]^-1 S[a, :]`` for each aid ``a`` used),
-        so that the one update of the aids used is that sequence of
-        updates, uncorrelated aids being independent measurements
-        [Bar-Shalom 2001], except that every aid is linearised at the INS
-        before the instant's correction (a sequence re-linearises after
-        each: second order in the correction). ``indices`` (len(aids),):
-        the aids' places in the run's sequence.
+        The sequence of their updates, each aid linearised at the INS the
+        ones before it corrected, without the (n_x, n_x) work of each: the
+        correction ``dx`` and the gains ``K_i`` are carried from aid to aid
+        (``P_i = P - U U^T``, ``U`` the columns ``K_i chol(S_i)``, so
+        ``P_i H^T`` costs ``n_x m``); the one Joseph update of the aids used
+        then makes the sequence's ``P`` (it depends on the ``H`` alone) and,
+        given each innovation as if linearised before the instant (``z +
+        H dx``), its correction. ``indices`` (len(aids),): the aids' places
+        in the run's sequence.
         """
-        mats = [self.innovation(aid, ins) for aid in aids]
-        z_all = np.concatenate([m[0] for m in mats])
-        H_all = np.concatenate([m[1] for m in mats])
-        R_all = scipy.linalg.block_diag(*(m[2] for m in mats))
-        S_all = H_all @ (self.P @ H_all.T) + R_all
-        y, take, lo = z_all, np.zeros(z_all.size, dtype=bool), 0
-        for aid, index, (z, H, R) in zip(aids, indices, mats):
-            rows = slice(lo, lo + z.size)
-            lo = rows.stop
-            z, S = y[rows], S_all[rows, rows]
+        n = self.P.shape[0]
+        dx, U, used_rows = np.zeros(n), np.zeros((n, 0)), []
+        for aid, index in zip(aids, indices):
+            z, H, R = self.innovation(aid, self.view(t_aid_s, t_now_s, dx))
+            PHt = self.P @ H.T - U @ (U.T @ H.T)
+            S = H @ PHt + R
             count = self.counts.setdefault(aid.name, [0, 0])
             nis = float(z @ np.linalg.solve(S, z))
             run = self.rejected_run.get(aid.name, 0)
@@ -282,8 +279,8 @@ class _Filter:
             if failed and self.settings.reopen_inflates:  # such an aid is alone at its instant (run)
                 H_plus = np.linalg.pinv(H[:, :N_INS])
                 self.P[:N_INS, :N_INS] += H_plus @ np.diag(z**2) @ H_plus.T
-                S_all = H_all @ (self.P @ H_all.T) + R_all
-                S = S_all[rows, rows]
+                PHt = self.P @ H.T
+                S = H @ PHt + R
                 nis = float(z @ np.linalg.solve(S, z))
             if self.on_aid is not None:
                 self.on_aid(index, aid, z, S, True, failed)
@@ -292,12 +289,14 @@ class _Filter:
             count[0] += 1
             nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
             self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
-            take[rows] = True
-            G = np.linalg.solve(S, S_all[rows]).T  # the later aids given this one
-            y, S_all = y - G @ z, S_all - G @ S_all[rows]
-        if take.any():
-            dx, P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z_all[take], H_all[take],
-                                        R_all[np.ix_(take, take)])
+            K = np.linalg.solve(S, PHt.T).T
+            used_rows.append((z + H @ dx, H, R))
+            dx = dx + K @ z
+            U = np.column_stack([U, K @ np.linalg.cholesky(S)])
+        if used_rows:
+            dx, P, _, _ = kalman.update(np.zeros(n), self.P, np.concatenate([r[0] for r in used_rows]),
+                                        np.concatenate([r[1] for r in used_rows]),
+                                        scipy.linalg.block_diag(*(r[2] for r in used_rows)))
             self.feed_back(dx, P)
 
     def feed_back(self, dx, P):
@@ -435,7 +434,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
             f.propagate()
             for _, a in group:
                 f.admit(a)
-            f.apply([a for _, a in group], f.view(t_aid, t_now), [j for j, _ in group])
+            f.apply([a for _, a in group], t_aid, t_now, [j for j, _ in group])
             if after_aid is not None:
                 for dx, P in after_aid(aid, f.state, f.P, f.blocks.layout()) or ():
                     f.feed_back(dx, P)
