@@ -84,9 +84,11 @@ def main():
         rows = []
         for n in args.threads:
             env = dict(os.environ, OPENBLAS_NUM_THREADS=n)
-            out = subprocess.run([sys.executable, __file__, "--child", path, "--repeat", str(args.repeat)], env=env,
-                                 check=True, capture_output=True, text=True).stdout
-            rows.append(json.loads(out))
+            proc = subprocess.run([sys.executable, __file__, "--child", path, "--repeat", str(args.repeat)], env=env,
+                                  check=False, capture_output=True, text=True)
+            if proc.returncode:
+                raise SystemExit(f"timing with {n} thread(s) failed:\n{proc.stderr}")
+            rows.append(json.loads(proc.stdout))
     if args.json:
         print(json.dumps({"scenario": args.scenario, "runs": rows}, indent=1))
         return

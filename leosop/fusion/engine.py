@@ -45,7 +45,6 @@ import itertools
 import math
 
 import numpy as np
-import scipy.linalg
 import scipy.stats
 
 from .. import earth
@@ -294,9 +293,12 @@ class _Filter:
             dx = dx + K @ z
             U = np.column_stack([U, K @ np.linalg.cholesky(S)])
         if used_rows:
-            dx, P, _, _ = kalman.update(np.zeros(n), self.P, np.concatenate([r[0] for r in used_rows]),
-                                        np.concatenate([r[1] for r in used_rows]),
-                                        scipy.linalg.block_diag(*(r[2] for r in used_rows)))
+            z, H = np.concatenate([r[0] for r in used_rows]), np.concatenate([r[1] for r in used_rows])
+            R, lo = np.zeros((z.size, z.size)), 0
+            for _, _, Ra in used_rows:
+                R[lo:lo + Ra.shape[0], lo:lo + Ra.shape[0]] = Ra
+                lo += Ra.shape[0]
+            dx, P, _, _ = kalman.update(np.zeros(n), self.P, z, H, R)
             self.feed_back(dx, P)
 
     def feed_back(self, dx, P):
