@@ -392,8 +392,9 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     out = Recorder(m // every + 1, f.n_core, settings.record_cov_ins)
     aligned_s = None
     heading_known = course_alignment is None
-    # The aids due with one join its update, unless a re-opened gate may raise P or after_aid must see
-    # each aid's update (and once the heading is known: no aid then waits for it).
+    # The aids due with one join its update, unless a re-opened gate may raise P, after_aid must see each
+    # aid's update, or (aids on the aids' clock) an update of the time offset moves when the next is due.
+    # And once the heading is known: no aid then waits for it.
     stack = after_aid is None and not settings.reopen_inflates
     aids = list(aids)
     if any(b.t_s < a.t_s for a, b in itertools.pairwise(aids)):
@@ -430,7 +431,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
                 f.admit(aid)
                 continue
             group = [(index, aid)]
-            while stack and heading_known and heads[c] < len(queues[c]) and f.due_s(queues[c][heads[c]][1]) == t_aid:
+            joins = stack and heading_known and not (aid.external_clock and f.TD is not None)
+            while joins and heads[c] < len(queues[c]) and f.due_s(queues[c][heads[c]][1]) == t_aid:
                 group.append(queues[c][heads[c]])
                 heads[c] += 1
             f.propagate()
