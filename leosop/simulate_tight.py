@@ -9,9 +9,10 @@ its draw (uniform in [0, max]: mean max/2, sigma max/sqrt(12)) and the
 constant orbit errors, three per satellite (``"independent"``) or three
 shared by all (``"common"``, [Shen 2024] Table 6's [E, E, E]). The engine
 propagates the covariance once per filter step, corrects the INS with all
-Doppler of an epoch at most once per correction period, gates each Doppler
-alone (chi-square, one degree of freedom, never re-opened) and records the
-INS at the filter's epochs, which :func:`run` maps to the
+Doppler of an epoch at most once per correction period, in one update,
+gates each Doppler on its own innovation given the epoch's Doppler before it
+(chi-square, one degree of freedom, never re-opened) and records the INS at
+the filter's epochs, which :func:`run` maps to the
 :class:`leosop.fusion.common.FusionResult` the loose filter gives too.
 
 Tight coupling beats a snapshot fix where satellites are few: one Doppler of
@@ -86,23 +87,36 @@ def run(state0, measured, dt_s, pairs, settings, n_epochs, *, offset_max_sat_hz,
         reopen_after=_NEVER_REOPEN, correction_period_s=settings.correction_period_s, record_every=per_step // 2,
         record_cov_ins=True)
     P0 = common.initial_covariance(settings, state0.lat_rad, state0.alt_m)
+    log = _DopplerLog(len(aids))
     res = engine.run(state0, P0, t_imu, np.full(n_imu, dt_s), measured.dtheta_b_rad, measured.dvel_b_mps, aids,
-                     engine_settings, progress=progress)
-    return _fusion_result(res, ep[use], sat[use], n_epochs, settings.step_s)
+                     engine_settings, progress=progress, on_aid=log)
+    return log.result(res, ep[use], sat[use], n_epochs, settings.step_s)
 
 
-def _fusion_result(res, epoch_index, sat_index, n, step_s):
-    """The :class:`leosop.fusion.common.FusionResult` of an engine run whose aid j was Doppler j of the epochs."""
-    log = res.aid_log
-    ep, used = epoch_index[log["aid"]], log["used"]
-    updated, rejected = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-    updated[ep[used]], rejected[ep[~used]] = True, True
-    nis_dof = np.bincount(ep[used], minlength=n)
-    nis = np.where(updated, np.bincount(ep[used], weights=log["nis"][used], minlength=n), np.nan)
-    innovations = np.zeros(int(used.sum()), dtype=[("epoch", int), ("sat", int), ("normalized", float)])
-    # The engine's innovation is predicted minus measured.
-    innovations["epoch"], innovations["sat"], innovations["normalized"] = (
-        ep[used], sat_index[log["aid"][used]], -log["normalized"][used])
-    return common.FusionResult(np.arange(n) * step_s, res.lat_rad, res.lon_rad, res.alt_m, res.vel_enu_mps,
-                               quat_to_dcm(res.q_n_b), res.cov_ins, updated, rejected, nis, nis_dof,
-                               res.gyro_bias_rad_per_s, res.accel_bias_mps2, doppler_innovation=innovations)
+class _DopplerLog:
+    """The engine's gate test of each Doppler aid (its ``on_aid``): offered, used, NIS and normalised innovation."""
+
+    def __init__(self, n_aids):
+        self.offered = np.zeros(n_aids, dtype=bool)
+        self.used = np.zeros(n_aids, dtype=bool)
+        self.nis = np.full(n_aids, np.nan)
+        self.normalized = np.full(n_aids, np.nan)
+
+    def __call__(self, index, aid, z, S, used, reopened):
+        self.offered[index], self.used[index] = True, used
+        # The engine's innovation is predicted minus measured.
+        self.nis[index], self.normalized[index] = z[0] ** 2 / S[0, 0], -z[0] / np.sqrt(S[0, 0])
+
+    def result(self, res, epoch_index, sat_index, n, step_s):
+        """The :class:`leosop.fusion.common.FusionResult` of engine run ``res`` whose aid j was Doppler j."""
+        used, rejected_aid = self.used, self.offered & ~self.used
+        updated, rejected = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        updated[epoch_index[used]], rejected[epoch_index[rejected_aid]] = True, True
+        nis_dof = np.bincount(epoch_index[used], minlength=n)
+        nis = np.where(updated, np.bincount(epoch_index[used], weights=self.nis[used], minlength=n), np.nan)
+        innovations = np.zeros(int(used.sum()), dtype=[("epoch", int), ("sat", int), ("normalized", float)])
+        innovations["epoch"], innovations["sat"], innovations["normalized"] = (
+            epoch_index[used], sat_index[used], self.normalized[used])
+        return common.FusionResult(np.arange(n) * step_s, res.lat_rad, res.lon_rad, res.alt_m, res.vel_enu_mps,
+                                   quat_to_dcm(res.q_n_b), res.cov_ins, updated, rejected, nis, nis_dof,
+                                   res.gyro_bias_rad_per_s, res.accel_bias_mps2, doppler_innovation=innovations)

@@ -11,9 +11,10 @@ import math
 
 import numpy as np
 import pytest
+import scipy.stats
 
 from leosop import frames
-from leosop.fusion import aids, engine
+from leosop.fusion import aids, engine, kalman
 from leosop.fusion.common import N_INS, pos_jacobian
 from leosop.ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from leosop.ins.strapdown import NavState
@@ -88,8 +89,8 @@ def test_lever_arm_geometry_closed_form():
 
 
 def _settings(**kw):
-    base = dict(gyro_arw_rad_per_rt_s=math.radians(0.2) / 60, accel_vrw_mps_per_rt_s=1e-3,
-                gyro_bias_rw_rad_per_s_per_rt_s=1e-6, accel_bias_rw_mps2_per_rt_s=1e-5)
+    base = {"gyro_arw_rad_per_rt_s": math.radians(0.2) / 60, "accel_vrw_mps_per_rt_s": 1e-3,
+            "gyro_bias_rw_rad_per_s_per_rt_s": 1e-6, "accel_bias_rw_mps2_per_rt_s": 1e-5}
     return engine.EngineSettings(**{**base, **kw})
 
 
@@ -185,3 +186,74 @@ def test_gyro_cross_axis_states_tilt_a_turning_imu_as_the_closed_form():
 
 def res_C(res):
     return quat_to_dcm(res.q_n_b)
+
+
+class _Linear(aids.Aid):
+    """An aid linear in the bias errors: ``z = z0 - H b``, ``b`` the bias estimates the filter moved from zero."""
+
+    name = "linear"
+
+    def __init__(self, t_s, z0, H, R, states=()):
+        super().__init__(t_s)
+        self.z0, self.H, self.R, self.states = z0, H, R, states
+
+    def matrices(self, ins):
+        b = np.r_[ins.gyro_bias_rad_per_s, ins.accel_bias_mps2]
+        return self.z0 - self.H[:, 9:15] @ b, self.H, self.R
+
+
+def test_aids_of_one_instant_make_the_sequence_of_their_updates():
+    # Reference: the textbook sequence, each aid gated on the innovation left by those before it and
+    # applied by kalman.update; the engine carries the correction and gains from aid to aid and makes
+    # one update. Same algebra in another order: equal to rounding (1e-9 relative), where gating each
+    # aid on the joint prior instead would be off by the updates' size (~10 %).
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((N_INS, N_INS))
+    P0 = 1e-2 * A @ A.T + 1e-3 * np.eye(N_INS)
+    settings = engine.EngineSettings(1e-3, 1e-2, 0.0, 0.0)
+    group = []
+    for m in (1, 2, 1, 3, 1):
+        H = np.zeros((m, N_INS))
+        H[:, 9:15] = rng.standard_normal((m, 6))  # the biases: the aid sees the filter's corrections
+        R = np.diag(rng.uniform(0.01, 0.1, m))
+        group.append(_Linear(0.0, H @ rng.multivariate_normal(np.zeros(N_INS), P0)
+                             + rng.multivariate_normal(np.zeros(m), R), H, R))
+    group[2].z0 = group[2].z0 + 1e3  # an outlier: rejected, the aids after it conditioned without it
+    seen = []
+
+    def on_aid(index, aid, z, S, used, reopened):
+        seen.append((index, used, z @ np.linalg.solve(S, z)))
+
+    f = engine._Filter(_computed()[0], P0, settings, 0.0, on_aid)
+    f.apply(group, 0.0, 0.0, list(range(len(group))))
+    x, P, ref = np.zeros(N_INS), P0, []
+    for j, a in enumerate(group):
+        y = a.z0 - a.H @ x
+        nis = float(y @ np.linalg.solve(a.H @ P @ a.H.T + a.R, y))
+        used = nis <= scipy.stats.chi2.ppf(settings.gate_probability, y.size)
+        ref.append((j, used, nis))
+        if used:
+            x, P, _, _ = kalman.update(x, P, a.z0, a.H, a.R)
+    assert [r[:2] for r in seen] == [r[:2] for r in ref] and not ref[2][1] and sum(r[1] for r in ref) == 4
+    np.testing.assert_allclose([r[2] for r in seen], [r[2] for r in ref], rtol=1e-9)
+    np.testing.assert_allclose(f.P, P, rtol=1e-9, atol=1e-9 * np.abs(P).max())
+    np.testing.assert_allclose(np.r_[f.bg, f.ba], np.r_[x[EPS], x[NABLA]], rtol=1e-9, atol=1e-15)
+    assert f.counts["linear"] == [4, 1]
+
+
+def test_stale_state_block_is_marginalised_exactly():
+    # Dropping a block is Gaussian marginalisation: the other states keep their rows and columns of P,
+    # to the bit, and the blocks after it move up.
+    settings = engine.EngineSettings(1e-3, 1e-2, 0.0, 0.0)
+    f = engine._Filter(_computed()[0], np.eye(N_INS), settings, 0.0)
+    old, kept = (aids.StateBlock(k, (0.0, 0.0), (2.0, 3.0), (0.0, 0.0), drop_after_s=30.0) for k in ("a", "b"))
+    f.admit(_Linear(0.0, None, None, None, (old,)))
+    f.admit(_Linear(10.0, None, None, None, (kept,)))
+    assert f.P.shape == (N_INS + 4,) * 2 and np.array_equal(np.diag(f.P)[N_INS:], [4.0, 9.0, 4.0, 9.0])
+    B = np.random.default_rng(4).standard_normal(f.P.shape)
+    f.P = B @ B.T
+    keep = np.r_[np.arange(N_INS), N_INS + 2, N_INS + 3]
+    P_keep = f.P[np.ix_(keep, keep)]
+    f.admit(_Linear(30.5, None, None, None, (kept,)))  # "a" last named at 0 s: stale after 30 s
+    assert list(f.blocks.entries) == ["b"] and f.blocks.entries["b"][1] == N_INS
+    np.testing.assert_array_equal(f.P, P_keep)

@@ -135,6 +135,9 @@ class Aid:
         Time-tagged by another clock than the IMU's (GNSS): the filter's IMU
         time offset state applies to it through :meth:`rate`. Aids derived
         from the IMU log itself (ZUPT, NHC) are not.
+    screens : bool
+        It screens its own rows (:meth:`screen`); the filter then applies it
+        as an update of its own, never stacked with others due at its time.
     states : tuple of StateBlock
         Blocks of states beside the INS errors the aid depends on; the
         columns of :meth:`design` after the 15 INS errors are theirs, in order.
@@ -144,6 +147,7 @@ class Aid:
     needs_heading = False
     gated = True
     external_clock = False
+    screens = False
     states = ()
 
     def __init__(self, t_s):
@@ -166,7 +170,7 @@ class Aid:
         return self.predict(ins) - self.measured, self.design(ins), self.R
 
     def screen(self, z, H, R, P):
-        """Per-row outlier screening before the update; None: every row (the default).
+        """Per-row outlier screening before the update (aids with ``screens`` True); None: every row.
 
         An aid that screens returns ``(keep, restart)``: the rows to use
         (bool, (m,)) and state blocks of its :attr:`states` to restart at

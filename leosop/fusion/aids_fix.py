@@ -427,7 +427,7 @@ class FixLog:
         self.innovation = np.full((n, 6), np.nan)
         self.innovation_cov = np.full((n, 6, 6), np.nan)
 
-    def __call__(self, aid, z, S, used, failed):
+    def __call__(self, index, aid, z, S, used, failed):
         if not isinstance(aid, LeoFix):
             return
         k = aid.epoch
@@ -438,26 +438,15 @@ class FixLog:
         self.nis[k], self.nis_dof[k] = float(z @ np.linalg.solve(S, z)), z.size
         self.innovation[k], self.innovation_cov[k] = z[:6], S[:6, :6]
 
-    def result(self, res, every):
-        """The :class:`leosop.fusion.common.FusionResult` of engine result ``res`` at every ``every``-th output.
-
-        Its ``P`` holds what the engine keeps: the velocity and position
-        blocks with their cross term, and the other INS errors' variances.
-        """
+    def result(self, res):
+        """The :class:`leosop.fusion.common.FusionResult` of engine result ``res``, recorded at the fix epochs
+        with its ``cov_ins`` (:func:`fuse`'s settings)."""
         n = self.updated.size
-        sl = slice(0, every * (n - 1) + 1, every)
-        J = pos_jacobian(res.lat_rad[sl], res.alt_m[sl])
-        J_inv_T = np.swapaxes(np.linalg.inv(J), 1, 2)
-        P = np.zeros((n, N_INS, N_INS))
-        P[:, np.arange(N_INS), np.arange(N_INS)] = res.sigma[sl, :N_INS] ** 2
-        P[:, DV, DV] = res.cov_vel_enu_m2ps2[sl]
-        P[:, DPOS, DPOS] = np.swapaxes(J_inv_T, 1, 2) @ res.cov_pos_enu_m2[sl] @ J_inv_T
-        P[:, DV, DPOS] = res.cov_vel_pos_enu[sl] @ J_inv_T
-        P[:, DPOS, DV] = np.swapaxes(P[:, DV, DPOS], 1, 2)
-        return FusionResult(res.t_s[sl] - res.t_s[0], res.lat_rad[sl], res.lon_rad[sl], res.alt_m[sl],
-                            res.vel_enu_mps[sl], quat_to_dcm(res.q_n_b[sl]), P, self.updated, self.rejected,
-                            self.nis, self.nis_dof, res.gyro_bias_rad_per_s[sl], res.accel_bias_mps2[sl],
-                            innovation=self.innovation, innovation_cov=self.innovation_cov, reopened=self.reopened)
+        return FusionResult(res.t_s[:n] - res.t_s[0], res.lat_rad[:n], res.lon_rad[:n], res.alt_m[:n],
+                            res.vel_enu_mps[:n], quat_to_dcm(res.q_n_b[:n]), res.cov_ins[:n], self.updated,
+                            self.rejected, self.nis, self.nis_dof, res.gyro_bias_rad_per_s[:n],
+                            res.accel_bias_mps2[:n], innovation=self.innovation,
+                            innovation_cov=self.innovation_cov, reopened=self.reopened)
 
 
 def fuse(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=None, reopen_after=REOPEN_AFTER,
@@ -495,6 +484,7 @@ def fuse(state0, dtheta_b_rad, dvel_b_mps, dt_s, fixes, settings, *, fix_errors=
     t_fix = np.r_[0.0, t_imu[2 * every * np.arange(1, n) - 1]]  # exactly the engine's output times
     aids = fix_aids(t_fix, pos_fix[:n], vel_fix[:n], cov_fix[:n], settings.correction_period_s, fix_errors)
     log = FixLog(n)
+    es = dataclasses.replace(engine_settings(settings, reopen_after), record_every=every, record_cov_ins=True)
     res = run(state0, initial_covariance(settings, state0.lat_rad, state0.alt_m), t_imu, np.full(t_imu.size, dt_s),
-              dtheta_b_rad, dvel_b_mps, aids, engine_settings(settings, reopen_after), progress=progress, on_aid=log)
-    return log.result(res, every)
+              dtheta_b_rad, dvel_b_mps, aids, es, progress=progress, on_aid=log)
+    return log.result(res)

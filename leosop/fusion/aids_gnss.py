@@ -98,6 +98,7 @@ class PppEpoch(Aid):
     name = "ppp"
     gated = False  # outliers are screened per row (:meth:`screen`), not by the engine's whole-aid gate
     external_clock = True
+    screens = True
 
     def __init__(self, t_s, t_orbit_s, orbits, orb_idx, code_m, phase_m, rate_mps, amb_blocks, zwd, doy, options):
         super().__init__(t_s)

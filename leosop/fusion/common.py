@@ -1,13 +1,12 @@
-"""What the loose and tight INS/LEO filters share.
+"""What the fusion filters share: tuning, output, the INS-error conventions and constants.
 
-Both are error-state EKFs with feedback correction around the strapdown INS:
-the same tuning (:class:`FilterSettings`), output (:class:`FusionResult`),
-initial covariance of the 15 INS errors of :mod:`leosop.ins.error_model`,
-prediction step and feedback (:class:`FeedbackIns`), and the same constant
-error states of the satellites in use (:class:`SatelliteStates`): each
-satellite's clock-induced Doppler offset and its orbit error, either three
-ECEF states per satellite (``"independent"``) or three shared by all
-(``"common"``: every satellite position shifted by the same vector).
+:class:`FilterSettings` (priors and noise of the 15 INS errors of
+:mod:`leosop.ins.error_model`) with :func:`initial_covariance`, the output
+:class:`FusionResult` of simulate's loose (:func:`leosop.fusion.aids_fix.fuse`)
+and tight (:mod:`leosop.simulate_tight`) couplings, :func:`pos_jacobian`
+(``[dlat, dlon, dalt]`` to ENU metres), the gate and the satellites' error
+models of the LEO aids, and :class:`FeedbackIns`, the prediction and feedback
+of :mod:`leosop.gnss.ppp_ins`'s own filter loop.
 """
 
 import dataclasses
@@ -19,8 +18,8 @@ from ..ins import error_model, strapdown
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..ins.track import NavTrack
 
-__all__ = ["FilterSettings", "FusionResult", "FeedbackIns", "SatelliteStates", "Track", "Corrections", "epochs",
-           "pos_jacobian", "initial_covariance", "ORBIT_MODELS", "DROP_AFTER_S", "N_INS", "GATE_PROBABILITY"]
+__all__ = ["DROP_AFTER_S", "GATE_PROBABILITY", "N_INS", "ORBIT_MODELS", "RX_OFFSET_PSD_HZ2_PER_S", "RX_OFFSET_SIGMA_HZ",
+           "FeedbackIns", "FilterSettings", "FusionResult", "initial_covariance", "pos_jacobian"]
 
 #: How the satellites' orbit errors are related: each its own, or one shift of all.
 ORBIT_MODELS = ("independent", "common")
@@ -32,6 +31,9 @@ N_INS = 15
 #: a consistent filter loses one good measurement in a million (a single Doppler: 4.9 sigma), while a
 #: wrong Doppler peak is tens of Hz off and its fix hundreds of metres.
 GATE_PROBABILITY = 1.0 - 1e-6
+#: Prior sigma of each receiver frequency offset [Hz] and its random walk [Hz^2/s], for both couplings.
+RX_OFFSET_SIGMA_HZ = 10.0
+RX_OFFSET_PSD_HZ2_PER_S = 1e-6
 #: Slack on comparisons of epoch times [s]: ``k * step_s`` and ``per_step * dt_s`` round far below it.
 _TIME_SLACK_S = 1e-9
 
@@ -127,28 +129,6 @@ def pos_jacobian(lat_rad, alt_m):
     return J
 
 
-def epochs(n, step_s, progress=None):
-    """Filter epochs ``k < n`` and their times ``k * step_s`` [s]; ``progress`` wraps the iterator."""
-    ks = range(n) if progress is None else progress(range(n))
-    return ((k, k * step_s) for k in ks)
-
-
-class Corrections:
-    """When a filter corrects the INS: at P, 2P, ... (``period_s``), or at the first epoch with data after."""
-
-    def __init__(self, period_s):
-        self.period_s = period_s
-        self.last_s = 0.0
-
-    def due(self, t_s):
-        """Whether a correction is due at time ``t_s`` [s]."""
-        return t_s - self.last_s >= self.period_s - _TIME_SLACK_S
-
-    def done(self, t_s):
-        """Record a correction at ``t_s`` [s]."""
-        self.last_s = t_s
-
-
 def initial_covariance(settings, lat_rad, alt_m):
     """Initial 15 x 15 covariance of the INS errors (position in rad, rad, m)."""
     J_inv = np.linalg.inv(pos_jacobian(lat_rad, alt_m))
@@ -186,7 +166,7 @@ class FeedbackIns:
     """
 
     def __init__(self, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings):
-        self.per_step = int(round(settings.step_s / dt_s))
+        self.per_step = round(settings.step_s / dt_s)
         if self.per_step < 2 or self.per_step % 2 or abs(self.per_step * dt_s - settings.step_s) > _TIME_SLACK_S:
             raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
         self.dtheta_b_rad, self.dvel_b_mps, self.dt_s, self.step_s = dtheta_b_rad, dvel_b_mps, dt_s, settings.step_s
@@ -223,122 +203,3 @@ class FeedbackIns:
         self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
         self.gyro_bias_rad_per_s = self.gyro_bias_rad_per_s + dx[EPS]
         self.accel_bias_mps2 = self.accel_bias_mps2 + dx[NABLA]
-
-
-#: Prior sigma of each receiver frequency offset [Hz] and its random walk [Hz^2/s], for both couplings.
-RX_OFFSET_SIGMA_HZ = 10.0
-RX_OFFSET_PSD_HZ2_PER_S = 1e-6
-
-
-class SatelliteStates:
-    """Bookkeeping of the satellites' constant error states, after the first ``n_before`` states.
-
-    Layout: under ``"common"`` three shared orbit-error states (ECEF, m)
-    come first, then one offset state [Hz] per satellite; under
-    ``"independent"`` each satellite has four, its offset and its own orbit
-    error. A satellite's states get their prior when it is first seen and
-    are marginalised :data:`DROP_AFTER_S` after it was last seen.
-
-    Parameters
-    ----------
-    n_before : int
-        States ahead of the satellite block (INS errors and any receiver state).
-    orbit_model : {"independent", "common"}
-    offset_mean_hz, offset_sigma_hz : float or ndarray, (n_sats,)
-        Prior of each offset: one for all, or satellite j's at index j (the
-        families of a mixed sky have offsets of different sizes).
-    orbit_sigma_m : float
-        Prior of the orbit error per axis.
-    """
-
-    def __init__(self, n_before, orbit_model, offset_mean_hz, offset_sigma_hz, orbit_sigma_m):
-        if orbit_model not in ORBIT_MODELS:
-            raise ValueError(f"orbit_model {orbit_model!r}: expected one of {', '.join(ORBIT_MODELS)}")
-        self.common = orbit_model == "common"
-        self.n_before = n_before
-        self.per_sat = 1 if self.common else 4
-        self.first = n_before + (3 if self.common else 0)
-        self.offset_mean_hz = np.asarray(offset_mean_hz, dtype=float)
-        self.offset_var = np.asarray(offset_sigma_hz, dtype=float) ** 2
-        self.orbit_var = max(orbit_sigma_m, 1e-3) ** 2
-        self.ids = []
-        self.last_seen = []
-
-    def initial(self, x_hat, P):
-        """Append the shared orbit states (common model; zero mean); returns ``(x_hat, P)``."""
-        if not self.common:
-            return x_hat, P
-        return _grow(x_hat, P, np.zeros(3), np.full(3, self.orbit_var))
-
-    def columns(self, j):
-        """Offset column and orbit columns (a slice) of satellite j."""
-        c = self.first + self.per_sat * self.ids.index(j)
-        return c, (slice(self.n_before, self.n_before + 3) if self.common else slice(c + 1, c + 4))
-
-    def see(self, x_hat, P, sat_ids, t_s):
-        """Drop the stale satellites, add the new ones of ``sat_ids``, mark all of them seen at ``t_s``."""
-        x_hat, P = self._drop_stale(x_hat, P, t_s)
-        for j in sat_ids:
-            if j not in self.ids:
-                x_hat, P = self._add(x_hat, P, int(j), t_s)
-            self.last_seen[self.ids.index(j)] = t_s
-        return x_hat, P
-
-    def _add(self, x_hat, P, j, t_s):
-        self.ids.append(j)
-        self.last_seen.append(t_s)
-        mean = np.zeros(self.per_sat)
-        mean[0] = self.offset_mean_hz if self.offset_mean_hz.ndim == 0 else self.offset_mean_hz[j]
-        var = np.full(self.per_sat, self.orbit_var)
-        var[0] = self.offset_var if self.offset_var.ndim == 0 else self.offset_var[j]
-        return _grow(x_hat, P, mean, var)
-
-    def _drop_stale(self, x_hat, P, t_s):
-        keep_sat = [t_s - seen <= DROP_AFTER_S for seen in self.last_seen]
-        if all(keep_sat):
-            return x_hat, P
-        keep = np.ones(P.shape[0], dtype=bool)
-        for i, k in enumerate(keep_sat):
-            keep[self.first + self.per_sat * i: self.first + self.per_sat * (i + 1)] = k
-        self.ids = [j for j, k in zip(self.ids, keep_sat) if k]
-        self.last_seen = [s for s, k in zip(self.last_seen, keep_sat) if k]
-        return x_hat[keep], P[np.ix_(keep, keep)]
-
-
-def _grow(x_hat, P, mean, var):
-    """Append uncorrelated states of the given mean and variance."""
-    n, m = P.shape[0], len(mean)
-    P_new = np.zeros((n + m, n + m))
-    P_new[:n, :n] = P
-    P_new[n:, n:] = np.diag(var)
-    return np.concatenate([x_hat, mean]), P_new
-
-
-class Track:
-    """The filter's output epoch by epoch, made into a :class:`FusionResult` at the end.
-
-    ``updated``, ``rejected``, ``nis`` and ``nis_dof`` are (n,) arrays the filter sets at its updates.
-    """
-
-    def __init__(self, n):
-        self._out = {k: np.full(shape, np.nan) for k, shape in (
-            ("lat", (n,)), ("lon", (n,)), ("alt", (n,)), ("vel", (n, 3)), ("C", (n, 3, 3)),
-            ("P", (n, N_INS, N_INS)), ("eps", (n, 3)), ("nabla", (n, 3)))}
-        self.updated = np.zeros(n, dtype=bool)
-        self.rejected = np.zeros(n, dtype=bool)
-        self.nis = np.full(n, np.nan)
-        self.nis_dof = np.zeros(n, dtype=int)
-
-    def record(self, k, ins, P):
-        """Keep epoch k's INS state, bias estimates and INS-error covariance."""
-        o, s = self._out, ins.state
-        o["lat"][k], o["lon"][k], o["alt"][k] = s.lat_rad, s.lon_rad, s.alt_m
-        o["vel"][k], o["C"][k], o["P"][k] = s.vel_enu_mps, s.C_n_b, P[:N_INS, :N_INS]
-        o["eps"][k], o["nabla"][k] = ins.gyro_bias_rad_per_s, ins.accel_bias_mps2
-
-    def result(self, step_s, **innovations):
-        """The :class:`FusionResult`; ``innovations`` fills its coupling's innovation fields."""
-        o = self._out
-        return FusionResult(np.arange(self.updated.size) * step_s, o["lat"], o["lon"], o["alt"], o["vel"], o["C"],
-                            o["P"], self.updated, self.rejected, self.nis, self.nis_dof, o["eps"], o["nabla"],
-                            **innovations)

@@ -5,9 +5,10 @@ runs on every pair of IMU increments less the bias estimates; the 15 INS
 errors of :mod:`leosop.ins.error_model` are propagated with its ``model15``
 (second-order series, at most every ``settings.step_s`` and before every aid applied)
 plus random walks of both biases; each aid (:mod:`leosop.fusion.aids`) gives
-``(z, H, R)``, the update is the Joseph form of :mod:`leosop.fusion.kalman`
-and the estimated errors are fed back at once (closed loop, so the prior
-error estimate is always zero).
+``(z, H, R)``, the aids due at one instant are gated one after the other
+and make one update, the Joseph form of :mod:`leosop.fusion.kalman`
+(:meth:`_Filter.apply`), and the estimated errors are fed back at once
+(closed loop, so the prior error estimate is always zero).
 
 An aid at ``t_s`` is applied after the INS update that ends at or just after
 ``t_s``; it sees the INS moved back to ``t_s`` along its velocity (a pair of
@@ -27,8 +28,10 @@ States of the aids (:class:`leosop.fusion.aids.StateBlock`, e.g. a LEO
 receiver's clock per constellation and each satellite's offset) come after
 those: a block is added with its prior when the first aid naming it is due,
 propagated by its own transition (no coupling to the INS errors) and
-dropped (marginalised) once stale; its estimate is kept beside ``P`` and
-corrected by every update (error = estimate minus truth, as the time offset).
+dropped (marginalised) once stale (:class:`leosop.fusion.blocks.Blocks`); its
+estimate is kept beside ``P`` and corrected by every update (error =
+estimate minus truth, as the time offset). The result is an
+:class:`leosop.fusion.record.EngineResult`.
 
 Heading: a MEMS IMU cannot find North at rest, so a run may start with the
 yaw unknown (:class:`CourseAlignment`): the first GNSS velocity faster than
@@ -38,6 +41,7 @@ axis along the velocity, as a car drives) and the yaw's covariance row to
 """
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -49,9 +53,11 @@ from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..rotations import dcm_to_euler, euler_to_dcm
 from . import kalman
 from .aids import InsView
-from .common import GATE_PROBABILITY, N_INS, pos_jacobian
+from .blocks import Blocks
+from .common import GATE_PROBABILITY, N_INS
+from .record import EngineResult, Recorder
 
-__all__ = ["AID_LOG_DTYPE", "CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
+__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,77 +118,6 @@ class CourseAlignment:
     sigma_rad: float = math.radians(10.0)
 
 
-@dataclasses.dataclass(frozen=True)
-class EngineResult:
-    """The filter's INS after the INS updates (n epochs: the start and one per ``record_every`` pairs of samples).
-
-    Attributes
-    ----------
-    t_s : ndarray, (n,)
-        On the IMU's clock.
-    lat_rad, lon_rad, alt_m : ndarray, (n,)
-    vel_enu_mps : ndarray, (n, 3)
-    q_n_b : ndarray, (n, 4)
-        Attitude (scalar-first quaternion of ``C_n_b``).
-    sigma : ndarray, (n, n_x)
-        Square roots of the diagonal of ``P``: the 15 INS errors (position in
-        rad, rad, m), then the optional states of :class:`EngineSettings` in
-        their order (scale factors, time offset).
-    cov_pos_enu_m2, cov_vel_enu_m2ps2 : ndarray, (n, 3, 3)
-        Position and velocity error covariances in ENU.
-    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (n, 3)
-    gyro_scale, accel_scale : ndarray, (n, 3)
-        Scale-factor estimates (zero without those states).
-    time_offset_s : ndarray, (n,)
-        IMU time offset estimate (the initial value without that state).
-    omega_ib_b_rad_per_s : ndarray, (n, 3)
-        Bias-corrected body rate of each update.
-    aids : dict of str to [int, int]
-        Per kind of aid: used, rejected by the gate.
-    yaw_aligned_s : float or None
-        When the yaw was set from the course (None: never, or not asked).
-    nll : dict of str to float
-        Per kind of aid: the negative log-likelihood of its used innovations,
-        ``sum 0.5 (z^T S^-1 z + ln det(2 pi S))`` (compares runs on the same aids).
-    states : dict of str to (ndarray, ndarray)
-        The aids' state blocks alive at the end: estimate and sigma, by key.
-    cov_vel_pos_enu : ndarray, (n, 3, 3)
-        Cross-covariance of the velocity and position errors in ENU [m^2/s].
-    aid_log : structured ndarray, (k,)
-        One row per aid offered to the gate, in the order applied: ``aid``
-        (its index in the sequence given), ``used`` (passed the gate),
-        ``nis`` and ``normalized`` (a one-row aid's ``z / sqrt(S)``, NaN for
-        larger ones).
-    cov_ins : ndarray, (n, 15, 15), or None
-        Covariance of the INS errors (``settings.record_cov_ins``).
-    """
-
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    alt_m: np.ndarray
-    vel_enu_mps: np.ndarray
-    q_n_b: np.ndarray
-    sigma: np.ndarray
-    cov_pos_enu_m2: np.ndarray
-    cov_vel_enu_m2ps2: np.ndarray
-    gyro_bias_rad_per_s: np.ndarray
-    accel_bias_mps2: np.ndarray
-    gyro_scale: np.ndarray
-    accel_scale: np.ndarray
-    time_offset_s: np.ndarray
-    omega_ib_b_rad_per_s: np.ndarray
-    aids: dict
-    yaw_aligned_s: float | None
-    nll: dict
-    states: dict = dataclasses.field(default_factory=dict)
-    cov_vel_pos_enu: np.ndarray | None = None
-    aid_log: np.ndarray | None = None
-    cov_ins: np.ndarray | None = None
-
-
-#: Rows of :attr:`EngineResult.aid_log`.
-AID_LOG_DTYPE = np.dtype([("aid", int), ("used", bool), ("nis", float), ("normalized", float)])
 #: Slack on comparisons of times [s] (sums of IMU intervals round far below it).
 _TIME_SLACK_S = 1e-9
 
@@ -238,7 +173,7 @@ class _Filter:
         self.MG = cross_slice(settings)
         self.P = initial_covariance(P0, settings) if np.shape(P0) == (N_INS, N_INS) else np.array(P0, dtype=float)
         self.n_core = self.P.shape[0]
-        self.blocks = {}  # key -> [StateBlock, first index, estimate, time last named]
+        self.blocks = Blocks()
         self.Qc = settings.noise_psd()
         self.bias_q = np.r_[np.full(3, settings.gyro_bias_rw_rad_per_s_per_rt_s**2),
                             np.full(3, settings.accel_bias_rw_mps2_per_rt_s**2)]
@@ -257,7 +192,6 @@ class _Filter:
         self.nll = {}
         self.rejected_run = {}
         self.gate = {}
-        self.log = []
         self.last_update_s = -math.inf
 
     def correct_increments(self, dth, dv, dt2):
@@ -291,10 +225,7 @@ class _Filter:
         if n_all > n:
             Phi_all, Qd_all = np.eye(n_all), np.zeros((n_all, n_all))
             Phi_all[:n, :n], Qd_all[:n, :n] = Phi, Qd
-            for block, i, x, _ in self.blocks.values():
-                sl = slice(i, i + block.size)
-                Phi_all[sl, sl], Qd_all[sl, sl] = block.transition(dt)
-                x[:] = Phi_all[sl, sl] @ x
+            self.blocks.propagate(Phi_all, Qd_all, dt)
             Phi, Qd = Phi_all, Qd_all
         P = Phi @ self.P @ Phi.T + Qd
         self.P = 0.5 * (P + P.T)
@@ -306,60 +237,27 @@ class _Filter:
         """When ``aid`` is due on the IMU clock."""
         return aid.t_s + self.td if aid.external_clock else aid.t_s
 
-    def view(self, t_aid_s, t_now_s):
-        """The INS moved back along its velocity and acceleration from ``t_now_s`` to the aid's time."""
-        s, dt = self.state, t_aid_s - t_now_s
+    def view(self, t_aid_s, t_now_s, dx):
+        """The INS less the errors ``dx`` (n_x,), moved back along its velocity and acceleration from ``t_now_s``
+        to the aid's time."""
+        s, dt = self.state.corrected(dx[PHI], dx[DV], dx[DPOS]) if dx.any() else self.state, t_aid_s - t_now_s
         R_M, R_N = earth.radii_m(s.lat_rad)
         v = s.vel_enu_mps
         moved = strapdown.NavState(s.lat_rad + v[1] * dt / (R_M + s.alt_m),
                                    s.lon_rad + v[0] * dt / ((R_N + s.alt_m) * math.cos(s.lat_rad)),
                                    s.alt_m + v[2] * dt, v + self.accel_enu * dt, s.q_n_b)
-        return InsView(moved, self.bg, self.ba, self.omega, self.accel_enu,
-                       {k: b[2] for k, b in self.blocks.items()})
+        return InsView(moved, self.bg + dx[EPS], self.ba + dx[NABLA], self.omega, self.accel_enu,
+                       self.blocks.estimates(dx))
 
     def admit(self, aid):
         """Drop the stale state blocks, add those ``aid`` names for the first time, mark its blocks named now."""
-        stale = [k for k, (b, _, _, last) in self.blocks.items()
-                 if b.drop_after_s is not None and aid.t_s - last > b.drop_after_s]
-        if stale:
-            keep = np.ones(self.P.shape[0], dtype=bool)
-            for k in stale:
-                b, i = self.blocks.pop(k)[:2]
-                keep[i:i + b.size] = False
-            self.P = self.P[np.ix_(keep, keep)]
-            first = np.cumsum(keep) - 1
-            for entry in self.blocks.values():
-                entry[1] = int(first[entry[1]])
-        for b in aid.states:
-            if b.key not in self.blocks:
-                n = self.P.shape[0]
-                P = np.zeros((n + b.size, n + b.size))
-                P[:n, :n] = self.P
-                P[n:, n:] = np.diag(np.square(b.sigma0))
-                self.P = P
-                self.blocks[b.key] = [b, n, np.array(b.mean0, dtype=float), aid.t_s]
-            self.blocks[b.key][3] = aid.t_s
-
-    def restart(self, blocks):
-        """Re-initialise alive state blocks at their ``mean0``, ``sigma0``: no correlation with the rest left."""
-        for b in blocks:
-            entry = self.blocks[b.key]
-            sl = slice(entry[1], entry[1] + b.size)
-            self.P[sl, :] = 0.0
-            self.P[:, sl] = 0.0
-            self.P[sl, sl] = np.diag(np.square(b.sigma0))
-            entry[2][:] = b.mean0
+        self.P = self.blocks.admit(self.P, aid)
 
     def innovation(self, aid, ins):
         """``(z, H, R)`` of ``aid`` over the full state (the time-offset column for aids on the aids' clock)."""
         z, Ha, R = aid.matrices(ins)
         H = np.zeros((z.size, self.P.shape[0]))
-        H[:, :N_INS] = Ha[:, :N_INS]
-        c = N_INS
-        for b in aid.states:
-            i = self.blocks[b.key][1]
-            H[:, i:i + b.size] = Ha[:, c:c + b.size]
-            c += b.size
+        self.blocks.design(aid, Ha, H)
         if self.TD is not None and aid.external_clock:
             H[:, self.TD.start] = aid.rate(ins)
         return z, H, R
@@ -370,51 +268,70 @@ class _Filter:
         period = self.settings.correction_period_s
         return period > 0 and aid.t_s != self.last_update_s and aid.t_s - last < period - _TIME_SLACK_S
 
-    def apply(self, aid, ins, index):
-        """Gate and apply one aid (``index`` in the run's sequence); feed the estimated errors back into the INS.
+    def apply(self, aids, t_aid_s, t_now_s, indices):
+        """Gate the aids due at ``t_aid_s`` one after the other, apply those used as one update, feed back.
 
-        Returns
-        -------
-        float or None
-            The aid's negative log-likelihood, None when it was rejected.
+        The sequence of their updates, each aid linearised at the INS the
+        ones before it corrected, without the (n_x, n_x) work of each: the
+        correction ``dx`` and the gains ``K_i`` are carried from aid to aid
+        (``P_i = P - U U^T``, ``U`` the columns ``K_i chol(S_i)``, so
+        ``P_i H^T`` costs ``n_x m``); the one Joseph update of the aids used
+        then makes the sequence's ``P`` (it depends on the ``H`` alone) and,
+        given each innovation as if linearised before the instant (``z +
+        H dx``), its correction. ``indices`` (len(aids),): the aids' places
+        in the run's sequence.
         """
-        z, H, R = self.innovation(aid, ins)
-        screened = aid.screen(z, H, R, self.P)
-        if screened is not None:
-            keep, restart = screened
-            self.restart(restart)
-            z, H, R = z[keep], H[keep], R[np.ix_(keep, keep)]
-        count = self.counts.setdefault(aid.name, [0, 0])
-        S = H @ self.P @ H.T + R
-        nis = float(z @ np.linalg.solve(S, z))
-        run = self.rejected_run.get(aid.name, 0)
-        if z.size not in self.gate:
-            self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
-        normalized = z[0] / math.sqrt(S[0, 0]) if z.size == 1 else math.nan
-        failed = aid.gated and nis > self.gate[z.size]
-        if failed and run < self.settings.reopen_after:
-            count[1] += 1
-            self.rejected_run[aid.name] = run + 1
-            self.log.append((index, False, nis, normalized))
-            if self.on_aid is not None:
-                self.on_aid(aid, z, S, False, False)
-            return None
-        if failed and self.settings.reopen_inflates:
-            H_plus = np.linalg.pinv(H[:, :N_INS])
-            self.P[:N_INS, :N_INS] += H_plus @ np.diag(z**2) @ H_plus.T
-            S = H @ self.P @ H.T + R
+        n = self.P.shape[0]
+        dx, U, used_rows = np.zeros(n), np.zeros((n, 0)), []
+        for aid, index in zip(aids, indices):
+            z, H, R = self.innovation(aid, self.view(t_aid_s, t_now_s, dx))
+            PHt = self.P @ H.T - U @ (U.T @ H.T)
+            S = H @ PHt + R
+            count = self.counts.setdefault(aid.name, [0, 0])
+            if aid.screens:  # such an aid is alone at its instant (run): P is the covariance before it
+                screened = aid.screen(z, H, R, self.P)
+                if screened is not None:
+                    keep, restart = screened
+                    self.blocks.restart(self.P, restart)
+                    z, H, R = z[keep], H[keep], R[np.ix_(keep, keep)]
+                    PHt = self.P @ H.T
+                    S = H @ PHt + R
             nis = float(z @ np.linalg.solve(S, z))
-        if self.on_aid is not None:
-            self.on_aid(aid, z, S, True, failed)
-        self.log.append((index, True, nis, normalized))
-        self.last_update_s = aid.t_s
-        self.rejected_run[aid.name] = 0
-        count[0] += 1
-        nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
-        self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
-        dx, P, _, _ = kalman.update(np.zeros(self.P.shape[0]), self.P, z, H, R)
-        self.feed_back(dx, P)
-        return nll
+            run = self.rejected_run.get(aid.name, 0)
+            if z.size not in self.gate:
+                self.gate[z.size] = scipy.stats.chi2.ppf(self.settings.gate_probability, z.size)
+            failed = aid.gated and nis > self.gate[z.size]
+            if failed and run < self.settings.reopen_after:
+                count[1] += 1
+                self.rejected_run[aid.name] = run + 1
+                if self.on_aid is not None:
+                    self.on_aid(index, aid, z, S, False, False)
+                continue
+            if failed and self.settings.reopen_inflates:  # such an aid is alone at its instant (run)
+                H_plus = np.linalg.pinv(H[:, :N_INS])
+                self.P[:N_INS, :N_INS] += H_plus @ np.diag(z**2) @ H_plus.T
+                PHt = self.P @ H.T
+                S = H @ PHt + R
+                nis = float(z @ np.linalg.solve(S, z))
+            if self.on_aid is not None:
+                self.on_aid(index, aid, z, S, True, failed)
+            self.last_update_s = aid.t_s
+            self.rejected_run[aid.name] = 0
+            count[0] += 1
+            nll = 0.5 * (nis + np.linalg.slogdet(2.0 * math.pi * S)[1])
+            self.nll[aid.name] = self.nll.get(aid.name, 0.0) + nll
+            K = np.linalg.solve(S, PHt.T).T
+            used_rows.append((z + H @ dx, H, R))
+            dx = dx + K @ z
+            U = np.column_stack([U, K @ np.linalg.cholesky(S)])
+        if used_rows:
+            z, H = np.concatenate([r[0] for r in used_rows]), np.concatenate([r[1] for r in used_rows])
+            R, lo = np.zeros((z.size, z.size)), 0
+            for _, _, Ra in used_rows:
+                R[lo:lo + Ra.shape[0], lo:lo + Ra.shape[0]] = Ra
+                lo += Ra.shape[0]
+            dx, P, _, _ = kalman.update(np.zeros(n), self.P, z, H, R)
+            self.feed_back(dx, P)
 
     def feed_back(self, dx, P):
         """Remove the estimated errors ``dx`` (n_x,) from the INS, sensor and block estimates; ``P`` (n_x, n_x) after."""
@@ -429,8 +346,7 @@ class _Filter:
             self.mg[CROSS_IJ] += dx[self.MG]
         if self.TD is not None:
             self.td -= float(dx[self.TD.start])  # dx is td_hat minus the true offset
-        for b, i, x, _ in self.blocks.values():
-            x -= dx[i:i + b.size]
+        self.blocks.feed_back(dx)
 
     def align_yaw(self, vel_enu_mps, sigma_rad):
         """Set the yaw to the course of ``vel_enu_mps``, keeping pitch and roll; reset the yaw's covariance."""
@@ -484,11 +400,15 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
         Wraps the iterator over INS updates (a progress bar).
     on_aid : callable, optional
         Called after each aid's gate test (and its rows' screening,
-        :meth:`leosop.fusion.aids.Aid.screen`) as ``on_aid(aid, z, S, used, reopened)``:
-        innovation (m,), its covariance (m, m) as used, whether the aid was
-        used, and whether it failed the gate and was used all the same.
+        :meth:`leosop.fusion.aids.Aid.screen`) as ``on_aid(index, aid, z, S, used, reopened)``:
+        the aid's place in ``aids``, its innovation (m,) and covariance
+        (m, m) as gated (given the aids used before it at the same instant),
+        whether it was used, and whether it failed the gate and was used all
+        the same.
     after_aid : callable, optional
-        Called after each aid is applied as ``after_aid(aid, state, P, blocks)``:
+        Called after each aid is applied as ``after_aid(aid, state, P, blocks)``
+        (each aid is then an update of its own; without it the aids due at
+        one instant make one update, :meth:`_Filter.apply`):
         the INS after the feedback, the full covariance and the state blocks
         ``{key: (first index in P, estimate)}`` (read-only). It returns a list
         of further corrections ``(dx, P_after)`` to feed back in turn (error
@@ -504,15 +424,15 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     m, every = t_s.size // 2, settings.record_every
     t_pairs = np.r_[t_s[0] - dt_s[0], t_s[1:2 * m:2]]
     f = _Filter(state0, P0, settings, time_offset_s, on_aid)
-    n = m // every + 1
-    out = {"pos": np.empty((n, 3)), "vel": np.empty((n, 3)), "q": np.empty((n, 4)), "sigma": np.empty((n, f.n_core)),
-           "cp": np.empty((n, 3, 3)), "cv": np.empty((n, 3, 3)), "bg": np.empty((n, 3)), "ba": np.empty((n, 3)),
-           "sg": np.empty((n, 3)), "sa": np.empty((n, 3)), "td": np.empty(n), "w": np.empty((n, 3)),
-           "cvp": np.empty((n, 3, 3)), "P": np.empty((n, N_INS, N_INS)) if settings.record_cov_ins else None}
+    out = Recorder(m // every + 1, f.n_core, settings.record_cov_ins)
     aligned_s = None
     heading_known = course_alignment is None
+    # The aids due with one join its update, unless a re-opened gate may raise P, after_aid must see each
+    # aid's update, or (aids on the aids' clock) an update of the time offset moves when the next is due.
+    # And once the heading is known: no aid then waits for it.
+    stack = after_aid is None and not settings.reopen_inflates
     aids = list(aids)
-    if any(b.t_s < a.t_s for a, b in zip(aids, aids[1:])):
+    if any(b.t_s < a.t_s for a, b in itertools.pairwise(aids)):
         raise ValueError("aids must be sorted by time")
     queues = [[(j, a) for j, a in enumerate(aids) if a.external_clock],
               [(j, a) for j, a in enumerate(aids) if not a.external_clock]]
@@ -520,7 +440,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     for q, i in zip(queues, (0, 1)):
         while heads[i] < len(q) and f.due_s(q[heads[i]][1]) < t_pairs[0]:
             heads[i] += 1
-    _record(out, 0, f)
+    out.record(0, f)
     ks = range(m) if progress is None else progress(range(m))
     for k in ks:
         i = 2 * k
@@ -545,36 +465,22 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
             if f.waits(aid, t_pairs[0]):
                 f.admit(aid)
                 continue
+            group = [(index, aid)]
+            joins = stack and heading_known and not aid.screens and not (aid.external_clock and f.TD is not None)
+            while joins and heads[c] < len(queues[c]) and f.due_s(queues[c][heads[c]][1]) == t_aid \
+                    and not queues[c][heads[c]][1].screens:
+                group.append(queues[c][heads[c]])
+                heads[c] += 1
             f.propagate()
-            f.admit(aid)
-            f.apply(aid, f.view(t_aid, t_now), index)
+            for _, a in group:
+                f.admit(a)
+            f.apply([a for _, a in group], t_aid, t_now, [j for j, _ in group])
             if after_aid is not None:
-                for dx, P in after_aid(aid, f.state, f.P, {key: (b[1], b[2]) for key, b in f.blocks.items()}) or ():
+                for dx, P in after_aid(aid, f.state, f.P, f.blocks.layout()) or ():
                     f.feed_back(dx, P)
         if f.pending_s >= settings.step_s - _TIME_SLACK_S:
             f.propagate()
         if (k + 1) % every == 0:
-            _record(out, (k + 1) // every, f)
+            out.record((k + 1) // every, f)
     f.propagate()
-    pos, cp = out["pos"], out["cp"]
-    return EngineResult(t_pairs[::every], pos[:, 0], pos[:, 1], pos[:, 2], out["vel"], out["q"], out["sigma"], cp,
-                        out["cv"], out["bg"], out["ba"], out["sg"], out["sa"], out["td"], out["w"],
-                        {k: tuple(v) for k, v in f.counts.items()}, aligned_s, dict(f.nll),
-                        {k: (x.copy(), np.sqrt(np.diagonal(f.P)[i:i + b.size])) for k, (b, i, x, _) in f.blocks.items()},
-                        out["cvp"], np.array(f.log, dtype=AID_LOG_DTYPE), out["P"])
-
-
-def _record(out, k, f):
-    s, P = f.state, f.P
-    out["pos"][k] = (s.lat_rad, s.lon_rad, s.alt_m)
-    out["vel"][k] = s.vel_enu_mps
-    out["q"][k] = s.q_n_b
-    out["sigma"][k] = np.sqrt(np.diagonal(P)[:f.n_core])
-    J = pos_jacobian(s.lat_rad, s.alt_m)
-    out["cp"][k] = J @ P[DPOS, DPOS] @ J.T
-    out["cv"][k] = P[DV, DV]
-    out["cvp"][k] = P[DV, DPOS] @ J.T
-    out["bg"][k], out["ba"][k], out["sg"][k], out["sa"][k] = f.bg, f.ba, f.sg, f.sa
-    out["td"][k], out["w"][k] = f.td, f.omega
-    if out["P"] is not None:
-        out["P"][k] = P[:N_INS, :N_INS]
+    return out.result(t_pairs[::every], f, aligned_s)

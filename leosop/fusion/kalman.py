@@ -12,7 +12,7 @@ innovation and ``S`` so that callers can keep them for consistency checks
 
 import numpy as np
 
-__all__ = ["predict", "update", "nis", "nees"]
+__all__ = ["nees", "nis", "predict", "update"]
 
 
 def _symmetric(P):

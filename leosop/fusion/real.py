@@ -18,6 +18,7 @@ meet in Unix-style GPST seconds.
 """
 
 import dataclasses
+import itertools
 import json
 import math
 from pathlib import Path
@@ -232,7 +233,7 @@ def stationary_windows(t_s, accel_mps2, gyro_rad_per_s, *, window_s=1.0, max_acc
     """
     edges = np.searchsorted(t_s, np.arange(t_s[0], t_s[-1], window_s))
     ends, means = [], []
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in itertools.pairwise(edges):
         q = (b - a) // 4
         if q < 2:
             continue
