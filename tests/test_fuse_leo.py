@@ -3,7 +3,8 @@
 References: central differences of the aid's own nonlinear model (as for the
 other aids in test_fuse_engine.py); the Doppler closed form written out here
 from the DESIGN 4.3 definition (range rate = -doppler c / f0); the clock
-block's transition against the integral of white noise.
+block's transition against the integral of white noise; the velocity of a
+circular drive in closed form for the ``--leo-sim`` reference track.
 """
 
 import dataclasses
@@ -15,9 +16,10 @@ from test_fuse_engine import STEP, _computed, _true_view
 
 from leosop import frames
 from leosop.constants import C_MPS
-from leosop.fusion import aids_leo
+from leosop.fusion import aids_leo, leo_input
 from leosop.fusion.aids import StateBlock
 from leosop.fusion.common import N_INS
+from leosop.gnss.rtklib_pos import PosSolution
 
 CARRIER_HZ = 11.325e9
 CLOCK = StateBlock("leo_clock:starlink", (0.0, 0.0), (100.0, 1.0), (1e-6, 1e-6), integrated=True)
@@ -150,3 +152,33 @@ def test_leo_aids_share_the_orbit_blocks_as_the_model_says(model):
     with pytest.raises(ValueError, match="orbit_model"):
         aids_leo.leo_aids(np.zeros(1), ["1"], ["0"], np.ones(1), np.ones(1), np.ones(1), sv[:1], sv[:1], np.zeros(3),
                           dataclasses.replace(opts, orbit_model="shared"))
+
+
+def test_reference_track_velocity_in_a_turn_is_the_chord_closed_form():
+    """``--leo-sim``'s reference velocity from 4 Hz fixes on a circle, 10 m/s at 30 deg/s (the drive's sharpest).
+
+    It is the 1 s chord: along the mid-point tangent, the speed times ``sin(w / 2) / (w / 2)`` (0.11 m/s short
+    here, the mean velocity over the second), exactly; the tolerance is the geodetic round trip.
+    """
+    speed_mps, rate_rad_per_s, step_s = 10.0, math.radians(30.0), 0.25
+    t = np.arange(0.0, 20.0, step_s)
+    radius = speed_mps / rate_rad_per_s
+    lat0, lon0 = math.radians(40.1), math.radians(-105.1)
+    C = frames.C_e_n(lat0, lon0)
+    r0 = frames.geodetic_to_ecef(lat0, lon0, 1600.0)
+
+    def circle_ecef_m(t_s):
+        a = rate_rad_per_s * t_s
+        return r0 + radius * np.stack([np.sin(a), 1.0 - np.cos(a), 0.0 * a], axis=-1) @ C.T
+
+    lat, lon, alt = frames.ecef_to_geodetic(circle_ecef_m(t))
+    n = t.size
+    sol = PosSolution(1.75e9 + t, np.degrees(lat), np.degrees(lon), alt, np.ones(n, dtype=int), np.full(n, 20),
+                      np.tile(np.eye(3) * 1e-4, (n, 1, 1)), None, None, "circle.pos")
+    t_s, pos, vel, valid = leo_input.reference_track(sol)
+    assert valid.all() and t_s[0] == 0.5 and t_s[-1] == 18.5
+    np.testing.assert_allclose(pos, circle_ecef_m(t_s), rtol=0, atol=1e-6)
+    a, half = rate_rad_per_s * t_s, 0.5 * rate_rad_per_s
+    chord = speed_mps * math.sin(half) / half * np.stack([np.cos(a), np.sin(a), 0.0 * a], axis=-1) @ C.T
+    np.testing.assert_allclose(vel, chord, rtol=0, atol=1e-5)  # 1e-6 m over the 1 s chord, doubled
+    assert 0.11 < speed_mps - np.linalg.norm(vel, axis=1).max() < 0.12
