@@ -20,6 +20,13 @@ default). With identical epochs the correction is the base's own row and
 ``z`` is the plain single difference; between base epochs the linear
 interpolation carries a satellite drift exactly (a satellite offset or drift
 cancels to round-off) and its variance is that of the weighted base rows.
+Rover rows that interpolate the same base row share its noise: the fit
+whitens each block's rows with the Cholesky factor of that covariance
+(:func:`_whitener`; banded, diagonal when the epochs coincide), so the
+chi-square, the w-test and the covariance see independent rows. A row's
+exclusion drops its whitened row (the row's innovation given the earlier
+rows it is correlated with); rows of different blocks that share a base row
+are treated as independent (each block's covariance is right on its own).
 
 Rows of a satellite that only one receiver saw, and rover rows outside the
 time span of their satellite's base rows (or in a gap wider than
@@ -38,6 +45,7 @@ velocity. tools/bench_differential.py measures the NEES over the baseline.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import cholesky_banded, solve_banded
 
 from ..constants import OMEGA_E_RAD_PER_S
 from ..errors import InputError
@@ -191,6 +199,11 @@ def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_g
     -------
     corr_hz, var_hz2 : ndarray, (m,)
         Interpolated correction and its variance; NaN where the row has none.
+    base_rows : ndarray of int, (m, 2)
+        The two base rows each correction interpolates (-1 where none).
+    base_weights : ndarray, (m, 2)
+        Their weights (sum 1; 0 where none): rover rows that share a base
+        row share its noise, ``cov = sum w_i w_j var_base``.
     """
     pos_sv, vel_sv = _states(base, "base")
     tb = np.asarray(base.t_s if t_base_s is None else t_base_s, dtype=float)
@@ -199,7 +212,7 @@ def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_g
     var_b = np.asarray(base.sigma_hz, float) ** 2
     ids = np.asarray(sat_id, dtype=str)
     t = np.asarray(t_s, dtype=float)
-    corr, var = np.full(len(ids), np.nan), np.full(len(ids), np.nan)
+    rows_out, w_out = np.full((len(ids), 2), -1), np.zeros((len(ids), 2))
     for sid in np.intersect1d(ids, base.sat_id):
         rows = np.flatnonzero(base.sat_id == sid)
         rows = rows[np.argsort(tb[rows], kind="stable")]
@@ -212,11 +225,73 @@ def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_g
         # A single base row (or a rover time on a base row) takes that row's correction alone.
         near = np.abs(t[want] - tr[lo]) <= _TIME_TOL_S
         a = np.where(near, 0.0, a)
-        c = (1.0 - a) * c_b[rows[lo]] + a * c_b[rows[hi]]
-        v = (1.0 - a) ** 2 * var_b[rows[lo]] + a**2 * var_b[rows[hi]]
-        corr[want] = np.where(inside | near, c, np.nan)
-        var[want] = np.where(inside | near, v, np.nan)
-    return corr, var
+        ok = (inside | near)[:, None]
+        rows_out[want] = np.where(ok, np.stack([rows[lo], rows[hi]], axis=-1), -1)
+        w_out[want] = np.where(ok, np.stack([1.0 - a, a], axis=-1), 0.0)
+    has = rows_out[:, 0] >= 0
+    take = np.maximum(rows_out, 0)
+    corr = np.where(has, np.sum(w_out * c_b[take], axis=-1), np.nan)
+    var = np.where(has, np.sum(w_out**2 * var_b[take], axis=-1), np.nan)
+    return corr, var, rows_out, w_out
+
+
+def _whitener(var_rover_hz2, base_rows, base_weights, var_base_hz2, pad):
+    """Whitening of each block's single differences: ``v -> L^-1 v`` with ``L L^T`` their covariance.
+
+    Parameters
+    ----------
+    var_rover_hz2 : ndarray, (n_b, w)
+        Rover noise variance of each block's rows.
+    base_rows, base_weights : ndarray, (n_b, w, 2)
+        The base rows each row interpolates and their weights
+        (:func:`base_corrections`).
+    var_base_hz2 : ndarray, (n,)
+        Noise variance of the base rows.
+    pad : ndarray of bool, (n_b, w)
+        Padding rows (unit variance, uncorrelated).
+
+    Returns
+    -------
+    whiten : callable
+        ``whiten(v, idx)``: ``L^-1 v`` for the blocks ``idx`` (k,), ``v``
+        (k, w) or (k, w, n).
+
+    Notes
+    -----
+    Rows interpolating the same base row share its noise::
+
+        R_ij = var_rover_i [i == j] + sum_pq [b_ip == b_jq] w_ip w_jq var_base(b_ip)
+
+    so a base off the rover's epochs correlates a satellite's neighbouring
+    rows (a base on them leaves ``R`` diagonal and ``L^-1`` the plain
+    weights). Those rows lie a few rows apart (one epoch of satellites), so
+    ``R`` is banded: its Cholesky factor and the triangular solves are banded
+    too (:func:`scipy.linalg.cholesky_banded`).
+    """
+    n_b, width = pad.shape
+    b = np.where(pad[..., None] | (base_weights == 0), -1, base_rows)
+    wv = np.where(b >= 0, base_weights, 0.0) * np.sqrt(var_base_hz2[np.maximum(b, 0)])
+    # Bandwidth: the widest spread of a base row's users within a block.
+    pos = np.broadcast_to(np.arange(width)[None, :, None], b.shape)[b >= 0]
+    key = (np.broadcast_to(np.arange(n_b)[:, None, None], b.shape)[b >= 0] * (var_base_hz2.size + 1)
+           + b[b >= 0])
+    order = np.lexsort((pos, key))
+    key, pos = key[order], pos[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if key.size else np.zeros(0, int)
+    band = int(np.max(np.maximum.reduceat(pos, starts) - np.minimum.reduceat(pos, starts))) if key.size else 0
+    ab = np.zeros((n_b, band + 1, width))  # lower banded form: ab[d, i] = R[i + d, i]
+    for d in range(band + 1):
+        for p in range(2):
+            for q in range(2):
+                same = (b[:, d:, p] == b[:, : width - d, q]) & (b[:, d:, p] >= 0)
+                ab[:, d, : width - d] += np.where(same, wv[:, d:, p] * wv[:, : width - d, q], 0.0)
+    ab[:, 0] += np.where(pad, 1.0, var_rover_hz2)
+    chol = [cholesky_banded(ab[k], lower=True) for k in range(n_b)]
+
+    def whiten(v, idx):
+        return np.stack([solve_banded((band, 0), chol[k], v[j]) for j, k in enumerate(idx)])
+
+    return whiten
 
 
 def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, clock_degree=1,
@@ -270,9 +345,11 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
         if fr.size != 1 or fb.size != 1 or fr[0] != fb[0]:
             raise InputError(f"satellite {sid}: carrier {fr[0]:.10g} Hz at the rover, {fb[0]:.10g} Hz at the base "
                              "(different bands cannot be differenced)")
-    corr, var_b = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb, max_gap_s=max_gap_s)
+    corr, var_b, base_rows, base_w = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb,
+                                                      max_gap_s=max_gap_s)
     z = rover.doppler_hz - corr
-    sigma = np.sqrt(np.asarray(rover.sigma_hz, float) ** 2 + var_b)
+    var_r = np.asarray(rover.sigma_hz, float) ** 2
+    sigma = np.sqrt(var_r + var_b)
     usable = np.isfinite(z) & (sigma > 0) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1)
     n_unmatched = int((np.isin(rover.sat_id, common) & ~usable).sum())
 
@@ -295,6 +372,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     rs_b = np.where(pad[..., None], [2e7, 0.0, 0.0], r_s[take])
     vs_b = np.where(pad[..., None], [0.0, 7e3, 0.0], v_s[take])
     t_b = t[take]
+    whiten = _whitener(var_r[take], base_rows[take], base_w[take], np.asarray(base.sigma_hz, float) ** 2, pad)
     empty = pad.all(-1)
     lo, hi = np.where(pad, np.inf, t_b).min(-1), np.where(pad, -np.inf, t_b).max(-1)
     t_ref = np.where(empty, 0.0, 0.5 * (np.where(empty, 0.0, lo) + np.where(empty, 0.0, hi)))
@@ -311,18 +389,23 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     n_states = n_lin + n_orb
     prior_sigma = np.tile(np.asarray(orbit_sigma_rtn_m if n_orb else [], dtype=float), len(sats))
 
-    def model(x, idx, w):
+    def model_raw(x, idx):
         pred, H = _model_hz(rs_b[idx], vs_b[idx], x[:, :3], f_b[idx])
         pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3:n_lin])
         J = np.concatenate([H[..., :3], powers[idx]], axis=-1)
         if not n_orb:
-            return pred, J
+            return pred, J, H
         # d(z)/d(offset): the satellite moved by C r and its velocity by W r, seen from rover minus base.
         dH = H - H_base[idx]
         g = -(np.einsum("pmi,pmij->pmj", dH[..., :3], C_rtn[idx]) + np.einsum("pmi,pmij->pmj", dH[..., 3:6], W_rtn[idx]))
         G = (onehot[idx][..., :, None] * g[..., None, :]).reshape(g.shape[:2] + (n_orb,))
-        pred = np.concatenate([pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), x[:, n_lin:]], axis=-1)
-        J = np.concatenate([np.concatenate([J, G], axis=-1),
+        return pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), np.concatenate([J, G], axis=-1), H
+
+    def model(x, idx, w):
+        # Whitened rows (T_w z), then the orbit offsets' prior rows.
+        pred, J, _ = model_raw(x, idx)
+        pred = np.concatenate([whiten(pred, idx), x[:, n_lin:]], axis=-1)
+        J = np.concatenate([whiten(J, idx),
                             np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_orb, n_states))], axis=1)
         return pred, J
 
@@ -330,19 +413,19 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
                            np.full(n_orb, XTOL_POS_M)])
     x0 = np.zeros((n_b, n_states))
     x0[:, :3] = base_pos if pos0_ecef_m is None else np.asarray(pos0_ecef_m, float).reshape(3)
-    y_all = np.concatenate([y_b, np.zeros((n_b, n_orb))], axis=-1)
-    s_all = np.concatenate([s_b, np.broadcast_to(prior_sigma, (n_b, n_orb))], axis=-1)
+    y_all = np.concatenate([whiten(y_b, np.arange(n_b)), np.zeros((n_b, n_orb))], axis=-1)
+    s_all = np.concatenate([np.ones((n_b, width)), np.broadcast_to(prior_sigma, (n_b, n_orb))], axis=-1)
     m_all = np.concatenate([~pad, np.ones((n_b, n_orb), bool)], axis=-1)
     fixed = np.arange(width + n_orb) >= width
     x, res, J, Q, used_all, iterations, chi2, solver_status = solve_robust(
         model, x0, y_all, s_all, m_all, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha, fixed=fixed,
         step_sigma_tol=_STEP_SIGMA_TOL)
-    used_b, res = used_all[:, :width], res[:, :width]
+    used_b = used_all[:, :width]
     solved = np.isin(solver_status, (FixStatus.OK, FixStatus.INCONSISTENT))
     x = np.where(solved[:, None], x, np.nan)
     Q = np.where(solved[:, None, None], Q, np.nan)
     med = np.array([np.median(s_b[k][~pad[k]]) if (~pad[k]).any() else 1.0 for k in range(n_b)])
-    w_rel = np.where(used_b, (med[:, None] / s_b) ** 2, 0.0)
+    w_rel = np.where(used_b, med[:, None] ** 2, 0.0)
     gdop = np.sqrt(np.trace(cofactor(J[:, :width, :n_lin], w_rel), axis1=-2, axis2=-1))
     n_used = used_b.sum(-1)
     dof = n_used - n_lin
@@ -351,6 +434,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     _, _, alt = ecef_to_geodetic(np.nan_to_num(x[:, :3]))
     status, chi2_p = fix_status(solver_status, dof, chi2, np.where(solved, alt, np.nan), n_passes=n_sats, alpha=alpha)
 
+    res = np.where(used_b, y_b - model_raw(x, np.arange(n_b))[0], np.nan)
     used = np.zeros(len(z), bool)
     residuals = np.full(len(z), np.nan)
     used[slots[~pad]] = used_b[~pad]
