@@ -56,7 +56,7 @@ from ..timebase import seconds_since
 from .quality import fix_status
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
 
-__all__ = ["MAX_GAP_S", "DifferentialFix", "base_corrections", "solve_differential"]
+__all__ = ["MAX_GAP_S", "MOTIONS", "DifferentialFix", "base_corrections", "solve_differential"]
 
 #: Default prior standard deviation of an element-set offset, radial / along-track / cross-track [m]:
 #: along-track as tools/bench_static_time_offset.py (300 m); radial and cross-track smaller, as for any
@@ -65,6 +65,10 @@ ORBIT_SIGMA_RTN_M = (30.0, 300.0, 100.0)
 #: Widest gap between two base rows of a satellite that is interpolated across [s]: a few snapshot periods
 #: (1 s); the satellite's frequency terms are smooth over it, the base's noise is what interpolation adds.
 MAX_GAP_S = 5.0
+#: Convergence threshold of a rover velocity [m/s]: 10 um/s (a 0.1 mm position over 10 s).
+_XTOL_VEL_MPS = 1e-5
+#: Motion models of the rover within a block.
+MOTIONS = ("rest", "constant_velocity")
 #: Convergence thresholds of the clock terms: 10 uHz and 0.1 uHz/s (higher terms divided by powers of the
 #: half span).
 _XTOL_CLOCK = (1e-5, 1e-7)
@@ -81,13 +85,16 @@ class DifferentialFix:
     Attributes
     ----------
     pos_ecef_m : ndarray, (n_b, 3)
-        Rover position of each block; NaN where not solved.
+        Rover position of each block (at ``t_ref_s``); NaN where not solved.
+    vel_ecef_mps : ndarray, (n_b, 3), or None
+        Rover velocity of each block (``motion="constant_velocity"``); None
+        for a rover at rest.
     clock_poly_hz : ndarray, (n_b, d + 1)
         Rover-minus-base frequency offset polynomial in ``t - t_ref_s`` [Hz/s^k], lowest first.
     t_ref_s : ndarray, (n_b,)
         Mid-time of each block's rows (the time base of the inputs).
-    cov : ndarray, (n_b, 4 + d, 4 + d)
-        Covariance of ``[pos, clock terms]`` (times ``chi2 / dof`` when the
+    cov : ndarray, (n_b, k, k)
+        Covariance of ``[pos, vel (when estimated), clock terms]`` (times ``chi2 / dof`` when the
         residuals fail their test, see :mod:`~leosop.positioning.robust_ls`).
     gdop : ndarray, (n_b,)
         ``sqrt(trace((H^T W H)^-1))`` over the used rows, weights relative
@@ -113,6 +120,7 @@ class DifferentialFix:
     """
 
     pos_ecef_m: np.ndarray
+    vel_ecef_mps: np.ndarray | None
     clock_poly_hz: np.ndarray
     t_ref_s: np.ndarray
     cov: np.ndarray
@@ -173,10 +181,18 @@ def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
     return np.stack([radial, along, normal], axis=-1), np.stack([d_radial, d_along, d_normal], axis=-1)
 
 
-def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz):
-    """Doppler of satellites (..., m, 3) seen from receivers at rest (..., 3): predictions (..., m), Jacobians (..., m, 7)."""
-    H = doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, np.zeros_like(pos_rx_ecef_m), carrier_hz)
-    return np.einsum("...mi,...mi->...m", H[..., 3:6], -vel_sv_ecef_mps), H
+def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=0.0):
+    """Doppler of satellites (..., m, 3) seen from receivers broadcastable to them (one per row or per set).
+
+    Returns predictions (..., m) and Jacobians (..., m, 7) (:func:`doppler_jacobian`); the receivers at rest
+    unless ``vel_rx_ecef_mps`` is given.
+    """
+    r_s, v_s = np.asarray(pos_sv_ecef_m, float), np.asarray(vel_sv_ecef_mps, float)
+    p_rx = np.broadcast_to(np.asarray(pos_rx_ecef_m, float), r_s.shape)
+    v_rx = np.broadcast_to(np.asarray(vel_rx_ecef_mps, float), r_s.shape)
+    H = doppler_jacobian(r_s[..., None, :], v_s[..., None, :], p_rx, v_rx,
+                         np.asarray(carrier_hz, float)[..., None])[..., 0, :]
+    return np.einsum("...mi,...mi->...m", H[..., 3:6], v_rx - v_s), H
 
 
 def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_gap_s=MAX_GAP_S):
@@ -294,9 +310,10 @@ def _whitener(var_rover_hz2, base_rows, base_weights, var_base_hz2, pad):
     return whiten
 
 
-def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, clock_degree=1,
-                       orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, max_gap_s=MAX_GAP_S, max_iter=200, alpha=1e-3):
-    """Differential Doppler fix of a rover at rest (per block) against a base at a known site.
+def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, motion="rest",
+                       clock_degree=1, orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, max_gap_s=MAX_GAP_S, max_iter=200,
+                       alpha=1e-3):
+    """Differential Doppler fix of a rover at rest or moving (per block) against a base at a known site.
 
     Parameters
     ----------
@@ -310,6 +327,13 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     block_s : float, optional
         Length of the blocks, each with its own rover position and clock
         terms (from the first rover row); None: one static fix.
+    motion : {"rest", "constant_velocity"}
+        The rover within a block: at rest, or moving at a constant ECEF
+        velocity (three more states; position ``p + v (t - t_ref)``, its
+        Doppler with the rover's velocity). A car's blocks of a few seconds
+        are nearly straight; the velocity trades against the position
+        (1 m of position moves the Doppler like ~1 cm/s), so a moving
+        block's fix is much weaker than a static one of the same length.
     clock_degree : int
         Degree of the rover-minus-base frequency-offset polynomial of each block.
     orbit_sigma_rtn_m : array_like, (3,), or None
@@ -328,6 +352,8 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     -------
     DifferentialFix
     """
+    if motion not in MOTIONS:
+        raise ValueError(f"{motion=} must be one of {MOTIONS}")
     if clock_degree < 0:
         raise ValueError(f"{clock_degree=} must be >= 0")
     if block_s is not None and not block_s > 0:
@@ -379,7 +405,8 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     dt = np.where(pad, 0.0, t_b - t_ref[:, None])
     half_span = np.maximum(np.max(np.abs(dt), axis=-1).max(), 1.0)
     powers = dt[..., None] ** np.arange(clock_degree + 1)
-    n_lin = 4 + clock_degree
+    n_vel = 3 if motion == "constant_velocity" else 0
+    n_lin = 4 + n_vel + clock_degree
     # Element-set offsets: one radial / along / cross-track offset per common satellite, with a prior.
     sats = np.unique(np.where(pad, "", rover.sat_id[take])[~pad]) if orbit_sigma_rtn_m is not None else []
     n_orb = 3 * len(sats)
@@ -390,9 +417,12 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     prior_sigma = np.tile(np.asarray(orbit_sigma_rtn_m if n_orb else [], dtype=float), len(sats))
 
     def model_raw(x, idx):
-        pred, H = _model_hz(rs_b[idx], vs_b[idx], x[:, :3], f_b[idx])
-        pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3:n_lin])
-        J = np.concatenate([H[..., :3], powers[idx]], axis=-1)
+        vel = x[:, None, 3:3 + n_vel] if n_vel else 0.0
+        pos = x[:, None, :3] + (vel * dt[idx][..., None] if n_vel else 0.0)
+        pred, H = _model_hz(rs_b[idx], vs_b[idx], pos, f_b[idx], vel)
+        pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3 + n_vel:n_lin])
+        d_vel = [H[..., 3:6] + H[..., :3] * dt[idx][..., None]] if n_vel else []
+        J = np.concatenate([H[..., :3], *d_vel, powers[idx]], axis=-1)
         if not n_orb:
             return pred, J, H
         # d(z)/d(offset): the satellite moved by C r and its velocity by W r, seen from rover minus base.
@@ -409,7 +439,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
                             np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_orb, n_states))], axis=1)
         return pred, J
 
-    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree),
+    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_VEL_MPS] * n_vel, [_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree),
                            np.full(n_orb, XTOL_POS_M)])
     x0 = np.zeros((n_b, n_states))
     x0[:, :3] = base_pos if pos0_ecef_m is None else np.asarray(pos0_ecef_m, float).reshape(3)
@@ -440,7 +470,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     used[slots[~pad]] = used_b[~pad]
     residuals[slots[~pad]] = res[~pad]
     return DifferentialFix(
-        pos_ecef_m=x[:, :3], clock_poly_hz=x[:, 3:n_lin], t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
+        pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6] if n_vel else None, clock_poly_hz=x[:, 3 + n_vel:n_lin], t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
         status=status, chi2=chi2, chi2_p=chi2_p, dof=dof, n_used=n_used, n_sats=n_sats, iterations=iterations,
         block=block, z_hz=z, sigma_hz=sigma, residuals_hz=residuals, used=used,
         rover_only_sats=tuple(np.setdiff1d(rover.sat_id, base.sat_id).tolist()),
