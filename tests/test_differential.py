@@ -16,7 +16,11 @@ from leosop.positioning.differential import (
     base_corrections,
     solve_differential,
 )
-from leosop.positioning.differential_sim import draw_satellite_errors, simulate_receiver, straight_drive
+from leosop.positioning.differential_sim import (
+    draw_satellite_errors,
+    simulate_receiver,
+    straight_drive,
+)
 
 #: Noise-free fixes: the single differences cancel satellite offsets and drifts to round-off; 1e-6 Hz noise
 #: on ~1e5 Hz Doppler leaves micrometres, 1 mm bounds it with margin.
