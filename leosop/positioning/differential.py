@@ -20,6 +20,13 @@ default). With identical epochs the correction is the base's own row and
 ``z`` is the plain single difference; between base epochs the linear
 interpolation carries a satellite drift exactly (a satellite offset or drift
 cancels to round-off) and its variance is that of the weighted base rows.
+Rover rows that interpolate the same base row share its noise: the fit
+whitens each block's rows with the Cholesky factor of that covariance
+(:func:`_whitener`; banded, diagonal when the epochs coincide), so the
+chi-square, the w-test and the covariance see independent rows. A row's
+exclusion drops its whitened row (the row's innovation given the earlier
+rows it is correlated with); rows of different blocks that share a base row
+are treated as independent (each block's covariance is right on its own).
 
 Rows of a satellite that only one receiver saw, and rover rows outside the
 time span of their satellite's base rows (or in a gap wider than
@@ -38,6 +45,7 @@ velocity. tools/bench_differential.py measures the NEES over the baseline.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import cholesky_banded, solve_banded
 
 from ..constants import OMEGA_E_RAD_PER_S
 from ..errors import InputError
@@ -48,7 +56,7 @@ from ..timebase import seconds_since
 from .quality import fix_status
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
 
-__all__ = ["MAX_GAP_S", "DifferentialFix", "base_corrections", "solve_differential"]
+__all__ = ["MAX_GAP_S", "MOTIONS", "DifferentialFix", "base_corrections", "solve_differential"]
 
 #: Default prior standard deviation of an element-set offset, radial / along-track / cross-track [m]:
 #: along-track as tools/bench_static_time_offset.py (300 m); radial and cross-track smaller, as for any
@@ -57,6 +65,10 @@ ORBIT_SIGMA_RTN_M = (30.0, 300.0, 100.0)
 #: Widest gap between two base rows of a satellite that is interpolated across [s]: a few snapshot periods
 #: (1 s); the satellite's frequency terms are smooth over it, the base's noise is what interpolation adds.
 MAX_GAP_S = 5.0
+#: Convergence threshold of a rover velocity [m/s]: 10 um/s (a 0.1 mm position over 10 s).
+_XTOL_VEL_MPS = 1e-5
+#: Motion models of the rover within a block.
+MOTIONS = ("rest", "constant_velocity")
 #: Convergence thresholds of the clock terms: 10 uHz and 0.1 uHz/s (higher terms divided by powers of the
 #: half span).
 _XTOL_CLOCK = (1e-5, 1e-7)
@@ -73,13 +85,16 @@ class DifferentialFix:
     Attributes
     ----------
     pos_ecef_m : ndarray, (n_b, 3)
-        Rover position of each block; NaN where not solved.
+        Rover position of each block (at ``t_ref_s``); NaN where not solved.
+    vel_ecef_mps : ndarray, (n_b, 3), or None
+        Rover velocity of each block (``motion="constant_velocity"``); None
+        for a rover at rest.
     clock_poly_hz : ndarray, (n_b, d + 1)
         Rover-minus-base frequency offset polynomial in ``t - t_ref_s`` [Hz/s^k], lowest first.
     t_ref_s : ndarray, (n_b,)
         Mid-time of each block's rows (the time base of the inputs).
-    cov : ndarray, (n_b, 4 + d, 4 + d)
-        Covariance of ``[pos, clock terms]`` (times ``chi2 / dof`` when the
+    cov : ndarray, (n_b, k, k)
+        Covariance of ``[pos, vel (when estimated), clock terms]`` (times ``chi2 / dof`` when the
         residuals fail their test, see :mod:`~leosop.positioning.robust_ls`).
     gdop : ndarray, (n_b,)
         ``sqrt(trace((H^T W H)^-1))`` over the used rows, weights relative
@@ -105,6 +120,7 @@ class DifferentialFix:
     """
 
     pos_ecef_m: np.ndarray
+    vel_ecef_mps: np.ndarray | None
     clock_poly_hz: np.ndarray
     t_ref_s: np.ndarray
     cov: np.ndarray
@@ -165,10 +181,18 @@ def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
     return np.stack([radial, along, normal], axis=-1), np.stack([d_radial, d_along, d_normal], axis=-1)
 
 
-def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz):
-    """Doppler of satellites (..., m, 3) seen from receivers at rest (..., 3): predictions (..., m), Jacobians (..., m, 7)."""
-    H = doppler_jacobian(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, np.zeros_like(pos_rx_ecef_m), carrier_hz)
-    return np.einsum("...mi,...mi->...m", H[..., 3:6], -vel_sv_ecef_mps), H
+def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=0.0):
+    """Doppler of satellites (..., m, 3) seen from receivers broadcastable to them (one per row or per set).
+
+    Returns predictions (..., m) and Jacobians (..., m, 7) (:func:`doppler_jacobian`); the receivers at rest
+    unless ``vel_rx_ecef_mps`` is given.
+    """
+    r_s, v_s = np.asarray(pos_sv_ecef_m, float), np.asarray(vel_sv_ecef_mps, float)
+    p_rx = np.broadcast_to(np.asarray(pos_rx_ecef_m, float), r_s.shape)
+    v_rx = np.broadcast_to(np.asarray(vel_rx_ecef_mps, float), r_s.shape)
+    H = doppler_jacobian(r_s[..., None, :], v_s[..., None, :], p_rx, v_rx,
+                         np.asarray(carrier_hz, float)[..., None])[..., 0, :]
+    return np.einsum("...mi,...mi->...m", H[..., 3:6], v_rx - v_s), H
 
 
 def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_gap_s=MAX_GAP_S):
@@ -191,6 +215,11 @@ def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_g
     -------
     corr_hz, var_hz2 : ndarray, (m,)
         Interpolated correction and its variance; NaN where the row has none.
+    base_rows : ndarray of int, (m, 2)
+        The two base rows each correction interpolates (-1 where none).
+    base_weights : ndarray, (m, 2)
+        Their weights (sum 1; 0 where none): rover rows that share a base
+        row share its noise, ``cov = sum w_i w_j var_base``.
     """
     pos_sv, vel_sv = _states(base, "base")
     tb = np.asarray(base.t_s if t_base_s is None else t_base_s, dtype=float)
@@ -199,7 +228,7 @@ def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_g
     var_b = np.asarray(base.sigma_hz, float) ** 2
     ids = np.asarray(sat_id, dtype=str)
     t = np.asarray(t_s, dtype=float)
-    corr, var = np.full(len(ids), np.nan), np.full(len(ids), np.nan)
+    rows_out, w_out = np.full((len(ids), 2), -1), np.zeros((len(ids), 2))
     for sid in np.intersect1d(ids, base.sat_id):
         rows = np.flatnonzero(base.sat_id == sid)
         rows = rows[np.argsort(tb[rows], kind="stable")]
@@ -212,16 +241,79 @@ def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_g
         # A single base row (or a rover time on a base row) takes that row's correction alone.
         near = np.abs(t[want] - tr[lo]) <= _TIME_TOL_S
         a = np.where(near, 0.0, a)
-        c = (1.0 - a) * c_b[rows[lo]] + a * c_b[rows[hi]]
-        v = (1.0 - a) ** 2 * var_b[rows[lo]] + a**2 * var_b[rows[hi]]
-        corr[want] = np.where(inside | near, c, np.nan)
-        var[want] = np.where(inside | near, v, np.nan)
-    return corr, var
+        ok = (inside | near)[:, None]
+        rows_out[want] = np.where(ok, np.stack([rows[lo], rows[hi]], axis=-1), -1)
+        w_out[want] = np.where(ok, np.stack([1.0 - a, a], axis=-1), 0.0)
+    has = rows_out[:, 0] >= 0
+    take = np.maximum(rows_out, 0)
+    corr = np.where(has, np.sum(w_out * c_b[take], axis=-1), np.nan)
+    var = np.where(has, np.sum(w_out**2 * var_b[take], axis=-1), np.nan)
+    return corr, var, rows_out, w_out
 
 
-def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, clock_degree=1,
-                       orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, max_gap_s=MAX_GAP_S, max_iter=200, alpha=1e-3):
-    """Differential Doppler fix of a rover at rest (per block) against a base at a known site.
+def _whitener(var_rover_hz2, base_rows, base_weights, var_base_hz2, pad):
+    """Whitening of each block's single differences: ``v -> L^-1 v`` with ``L L^T`` their covariance.
+
+    Parameters
+    ----------
+    var_rover_hz2 : ndarray, (n_b, w)
+        Rover noise variance of each block's rows.
+    base_rows, base_weights : ndarray, (n_b, w, 2)
+        The base rows each row interpolates and their weights
+        (:func:`base_corrections`).
+    var_base_hz2 : ndarray, (n,)
+        Noise variance of the base rows.
+    pad : ndarray of bool, (n_b, w)
+        Padding rows (unit variance, uncorrelated).
+
+    Returns
+    -------
+    whiten : callable
+        ``whiten(v, idx)``: ``L^-1 v`` for the blocks ``idx`` (k,), ``v``
+        (k, w) or (k, w, n).
+
+    Notes
+    -----
+    Rows interpolating the same base row share its noise::
+
+        R_ij = var_rover_i [i == j] + sum_pq [b_ip == b_jq] w_ip w_jq var_base(b_ip)
+
+    so a base off the rover's epochs correlates a satellite's neighbouring
+    rows (a base on them leaves ``R`` diagonal and ``L^-1`` the plain
+    weights). Those rows lie a few rows apart (one epoch of satellites), so
+    ``R`` is banded: its Cholesky factor and the triangular solves are banded
+    too (:func:`scipy.linalg.cholesky_banded`).
+    """
+    n_b, width = pad.shape
+    b = np.where(pad[..., None] | (base_weights == 0), -1, base_rows)
+    wv = np.where(b >= 0, base_weights, 0.0) * np.sqrt(var_base_hz2[np.maximum(b, 0)])
+    # Bandwidth: the widest spread of a base row's users within a block.
+    pos = np.broadcast_to(np.arange(width)[None, :, None], b.shape)[b >= 0]
+    key = (np.broadcast_to(np.arange(n_b)[:, None, None], b.shape)[b >= 0] * (var_base_hz2.size + 1)
+           + b[b >= 0])
+    order = np.lexsort((pos, key))
+    key, pos = key[order], pos[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if key.size else np.zeros(0, int)
+    band = int(np.max(np.maximum.reduceat(pos, starts) - np.minimum.reduceat(pos, starts))) if key.size else 0
+    ab = np.zeros((n_b, band + 1, width))  # lower banded form: ab[d, i] = R[i + d, i]
+    for d in range(band + 1):
+        for p in range(2):
+            for q in range(2):
+                same = (b[:, d:, p] == b[:, : width - d, q]) & (b[:, d:, p] >= 0)
+                ab[:, d, : width - d] += np.where(same, wv[:, d:, p] * wv[:, : width - d, q], 0.0)
+    ab[:, 0] += np.where(pad, 1.0, var_rover_hz2)
+    chol = [cholesky_banded(ab[k], lower=True) for k in range(n_b)]
+
+    def whiten(v, idx):
+        return np.stack([solve_banded((band, 0), chol[k], v[j]) for j, k in enumerate(idx)])
+
+    return whiten
+
+
+def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, motion="rest",
+                       clock_degree=1, orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, max_gap_s=MAX_GAP_S, max_iter=200,
+                       alpha=1e-3):
+    """Differential Doppler fix of a rover at rest or moving (per block) against a base at a known site.
 
     Parameters
     ----------
@@ -235,6 +327,13 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     block_s : float, optional
         Length of the blocks, each with its own rover position and clock
         terms (from the first rover row); None: one static fix.
+    motion : {"rest", "constant_velocity"}
+        The rover within a block: at rest, or moving at a constant ECEF
+        velocity (three more states; position ``p + v (t - t_ref)``, its
+        Doppler with the rover's velocity). A car's blocks of a few seconds
+        are nearly straight; the velocity trades against the position
+        (1 m of position moves the Doppler like ~1 cm/s), so a moving
+        block's fix is much weaker than a static one of the same length.
     clock_degree : int
         Degree of the rover-minus-base frequency-offset polynomial of each block.
     orbit_sigma_rtn_m : array_like, (3,), or None
@@ -253,6 +352,8 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     -------
     DifferentialFix
     """
+    if motion not in MOTIONS:
+        raise ValueError(f"{motion=} must be one of {MOTIONS}")
     if clock_degree < 0:
         raise ValueError(f"{clock_degree=} must be >= 0")
     if block_s is not None and not block_s > 0:
@@ -270,9 +371,11 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
         if fr.size != 1 or fb.size != 1 or fr[0] != fb[0]:
             raise InputError(f"satellite {sid}: carrier {fr[0]:.10g} Hz at the rover, {fb[0]:.10g} Hz at the base "
                              "(different bands cannot be differenced)")
-    corr, var_b = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb, max_gap_s=max_gap_s)
+    corr, var_b, base_rows, base_w = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb,
+                                                      max_gap_s=max_gap_s)
     z = rover.doppler_hz - corr
-    sigma = np.sqrt(np.asarray(rover.sigma_hz, float) ** 2 + var_b)
+    var_r = np.asarray(rover.sigma_hz, float) ** 2
+    sigma = np.sqrt(var_r + var_b)
     usable = np.isfinite(z) & (sigma > 0) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1)
     n_unmatched = int((np.isin(rover.sat_id, common) & ~usable).sum())
 
@@ -295,13 +398,15 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     rs_b = np.where(pad[..., None], [2e7, 0.0, 0.0], r_s[take])
     vs_b = np.where(pad[..., None], [0.0, 7e3, 0.0], v_s[take])
     t_b = t[take]
+    whiten = _whitener(var_r[take], base_rows[take], base_w[take], np.asarray(base.sigma_hz, float) ** 2, pad)
     empty = pad.all(-1)
     lo, hi = np.where(pad, np.inf, t_b).min(-1), np.where(pad, -np.inf, t_b).max(-1)
     t_ref = np.where(empty, 0.0, 0.5 * (np.where(empty, 0.0, lo) + np.where(empty, 0.0, hi)))
     dt = np.where(pad, 0.0, t_b - t_ref[:, None])
     half_span = np.maximum(np.max(np.abs(dt), axis=-1).max(), 1.0)
     powers = dt[..., None] ** np.arange(clock_degree + 1)
-    n_lin = 4 + clock_degree
+    n_vel = 3 if motion == "constant_velocity" else 0
+    n_lin = 4 + n_vel + clock_degree
     # Element-set offsets: one radial / along / cross-track offset per common satellite, with a prior.
     sats = np.unique(np.where(pad, "", rover.sat_id[take])[~pad]) if orbit_sigma_rtn_m is not None else []
     n_orb = 3 * len(sats)
@@ -311,38 +416,46 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     n_states = n_lin + n_orb
     prior_sigma = np.tile(np.asarray(orbit_sigma_rtn_m if n_orb else [], dtype=float), len(sats))
 
-    def model(x, idx, w):
-        pred, H = _model_hz(rs_b[idx], vs_b[idx], x[:, :3], f_b[idx])
-        pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3:n_lin])
-        J = np.concatenate([H[..., :3], powers[idx]], axis=-1)
+    def model_raw(x, idx):
+        vel = x[:, None, 3:3 + n_vel] if n_vel else 0.0
+        pos = x[:, None, :3] + (vel * dt[idx][..., None] if n_vel else 0.0)
+        pred, H = _model_hz(rs_b[idx], vs_b[idx], pos, f_b[idx], vel)
+        pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3 + n_vel:n_lin])
+        d_vel = [H[..., 3:6] + H[..., :3] * dt[idx][..., None]] if n_vel else []
+        J = np.concatenate([H[..., :3], *d_vel, powers[idx]], axis=-1)
         if not n_orb:
-            return pred, J
+            return pred, J, H
         # d(z)/d(offset): the satellite moved by C r and its velocity by W r, seen from rover minus base.
         dH = H - H_base[idx]
         g = -(np.einsum("pmi,pmij->pmj", dH[..., :3], C_rtn[idx]) + np.einsum("pmi,pmij->pmj", dH[..., 3:6], W_rtn[idx]))
         G = (onehot[idx][..., :, None] * g[..., None, :]).reshape(g.shape[:2] + (n_orb,))
-        pred = np.concatenate([pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), x[:, n_lin:]], axis=-1)
-        J = np.concatenate([np.concatenate([J, G], axis=-1),
+        return pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), np.concatenate([J, G], axis=-1), H
+
+    def model(x, idx, w):
+        # Whitened rows (T_w z), then the orbit offsets' prior rows.
+        pred, J, _ = model_raw(x, idx)
+        pred = np.concatenate([whiten(pred, idx), x[:, n_lin:]], axis=-1)
+        J = np.concatenate([whiten(J, idx),
                             np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_orb, n_states))], axis=1)
         return pred, J
 
-    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree),
+    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_VEL_MPS] * n_vel, [_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree),
                            np.full(n_orb, XTOL_POS_M)])
     x0 = np.zeros((n_b, n_states))
     x0[:, :3] = base_pos if pos0_ecef_m is None else np.asarray(pos0_ecef_m, float).reshape(3)
-    y_all = np.concatenate([y_b, np.zeros((n_b, n_orb))], axis=-1)
-    s_all = np.concatenate([s_b, np.broadcast_to(prior_sigma, (n_b, n_orb))], axis=-1)
+    y_all = np.concatenate([whiten(y_b, np.arange(n_b)), np.zeros((n_b, n_orb))], axis=-1)
+    s_all = np.concatenate([np.ones((n_b, width)), np.broadcast_to(prior_sigma, (n_b, n_orb))], axis=-1)
     m_all = np.concatenate([~pad, np.ones((n_b, n_orb), bool)], axis=-1)
     fixed = np.arange(width + n_orb) >= width
     x, res, J, Q, used_all, iterations, chi2, solver_status = solve_robust(
         model, x0, y_all, s_all, m_all, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha, fixed=fixed,
         step_sigma_tol=_STEP_SIGMA_TOL)
-    used_b, res = used_all[:, :width], res[:, :width]
+    used_b = used_all[:, :width]
     solved = np.isin(solver_status, (FixStatus.OK, FixStatus.INCONSISTENT))
     x = np.where(solved[:, None], x, np.nan)
     Q = np.where(solved[:, None, None], Q, np.nan)
     med = np.array([np.median(s_b[k][~pad[k]]) if (~pad[k]).any() else 1.0 for k in range(n_b)])
-    w_rel = np.where(used_b, (med[:, None] / s_b) ** 2, 0.0)
+    w_rel = np.where(used_b, med[:, None] ** 2, 0.0)
     gdop = np.sqrt(np.trace(cofactor(J[:, :width, :n_lin], w_rel), axis1=-2, axis2=-1))
     n_used = used_b.sum(-1)
     dof = n_used - n_lin
@@ -351,12 +464,13 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     _, _, alt = ecef_to_geodetic(np.nan_to_num(x[:, :3]))
     status, chi2_p = fix_status(solver_status, dof, chi2, np.where(solved, alt, np.nan), n_passes=n_sats, alpha=alpha)
 
+    res = np.where(used_b, y_b - model_raw(x, np.arange(n_b))[0], np.nan)
     used = np.zeros(len(z), bool)
     residuals = np.full(len(z), np.nan)
     used[slots[~pad]] = used_b[~pad]
     residuals[slots[~pad]] = res[~pad]
     return DifferentialFix(
-        pos_ecef_m=x[:, :3], clock_poly_hz=x[:, 3:n_lin], t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
+        pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6] if n_vel else None, clock_poly_hz=x[:, 3 + n_vel:n_lin], t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
         status=status, chi2=chi2, chi2_p=chi2_p, dof=dof, n_used=n_used, n_sats=n_sats, iterations=iterations,
         block=block, z_hz=z, sigma_hz=sigma, residuals_hz=residuals, used=used,
         rover_only_sats=tuple(np.setdiff1d(rover.sat_id, base.sat_id).tolist()),

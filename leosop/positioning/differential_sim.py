@@ -12,8 +12,9 @@ shared by every receiver (:func:`simulate_receiver`):
   the orbital rate) is in the truth too;
 - the satellite's oscillator: a frequency offset and drift.
 
-Each receiver has its own position (at rest in ECEF), epochs, clock offset and
-drift, white noise and elevation mask. The model states handed out with the
+Each receiver has its own position (at rest in ECEF, or a trajectory with
+its velocity, e.g. :func:`straight_drive`), epochs, clock offset and drift,
+white noise and elevation mask. The model states handed out with the
 measurements are the element sets' (SGP4 with light time,
 :func:`~leosop.positioning.measurements.sv_states_from_tle`), as a receiver
 would compute them; the truth is those states plus the offset.
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import C_MPS, STARLINK_PILOT_HZ
-from ..frames import azimuth_elevation_range, range_rate
+from ..frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, range_rate
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import seconds_since
 from .differential import ORBIT_SIGMA_RTN_M
@@ -36,6 +37,7 @@ __all__ = [
     "SatelliteErrors",
     "draw_satellite_errors",
     "simulate_receiver",
+    "straight_drive",
 ]
 
 #: Satellite frequency offsets are uniform in +-this [Hz] ([Shen 2024] Table 1: 0-5 Hz).
@@ -103,9 +105,34 @@ def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
     return (orbit_rtn_m[:, :1] * radial + orbit_rtn_m[:, 1:2] * along + orbit_rtn_m[:, 2:] * normal)
 
 
-def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, clock_offset_hz=0.0,
-                      clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ, source="simulated"):
-    """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver at rest measures them.
+def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
+    """A vehicle at constant speed along a straight line of the local horizon.
+
+    Parameters
+    ----------
+    start_ecef_m : array_like, (3,)
+    heading_enu : array_like, (3,)
+        Direction of travel, east / north / up (normalised here).
+    speed_mps : float
+    t_s : array_like, (n,)
+        Seconds from the start.
+
+    Returns
+    -------
+    pos_ecef_m, vel_ecef_mps : ndarray, (n, 3)
+    """
+    start = np.asarray(start_ecef_m, dtype=float).reshape(3)
+    lat, lon, _ = ecef_to_geodetic(start)
+    d = np.asarray(heading_enu, dtype=float)
+    vel = C_e_n(lat, lon) @ (speed_mps * d / np.linalg.norm(d))
+    t = np.asarray(t_s, dtype=float)[:, None]
+    return start + vel * t, np.broadcast_to(vel, (t.shape[0], 3)).copy()
+
+
+def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, vel_rx_ecef_mps=None,
+                      clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ,
+                      source="simulated"):
+    """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver measures them.
 
     Parameters
     ----------
@@ -114,9 +141,12 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
     errors : SatelliteErrors
         Shared satellite errors; their ``t0_utc`` is also the reference
         time of the receiver clock.
-    pos_rx_ecef_m : array_like, (3,)
+    pos_rx_ecef_m : array_like, (3,) or (n, 3)
+        The receiver at rest, or its position at each epoch.
     time_utc : array_like of datetime64, (n,)
         The receiver's epochs.
+    vel_rx_ecef_mps : array_like, (n, 3), optional
+        Its velocity at each epoch (default at rest).
     rng : numpy.random.Generator
         The receiver's noise.
     sigma_hz : float
@@ -136,8 +166,9 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
         and ``t_s`` (seconds after ``errors.t0_utc``), the element-set
         states (light time included) and ``sigma_hz``.
     """
-    rx = np.asarray(pos_rx_ecef_m, dtype=float)
     t_ep = np.asarray(time_utc, dtype="datetime64[ns]")
+    rx_ep = np.broadcast_to(np.asarray(pos_rx_ecef_m, dtype=float), (len(t_ep), 3))
+    vrx_ep = np.zeros((len(t_ep), 3)) if vel_rx_ecef_mps is None else np.asarray(vel_rx_ecef_mps, float)
     lookup = {s: i for i, s in enumerate(constellation.sat_ids.tolist())}
     missing = [s for s in errors.sat_ids.tolist() if s not in lookup]
     if missing:
@@ -147,17 +178,19 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
     t_rows = np.repeat(t_ep, k)
     sat_rows = np.tile(np.arange(k), len(t_ep))
     ids = errors.sat_ids[sat_rows]
+    rx, vrx = rx_ep[np.repeat(np.arange(len(t_ep)), k)], vrx_ep[np.repeat(np.arange(len(t_ep)), k)]
     pos_sv, vel_sv, reason = sv_states_from_tle(constellation, ids, t_rows, rx)
     _, elev, _ = azimuth_elevation_range(pos_sv, rx)
     keep = (reason == "") & (np.nan_to_num(elev, nan=-1.0) >= np.radians(mask_deg))
     t_rows, sat_rows, ids, pos_sv, vel_sv = t_rows[keep], sat_rows[keep], ids[keep], pos_sv[keep], vel_sv[keep]
+    rx, vrx = rx[keep], vrx[keep]
     rtn = errors.orbit_rtn_m[sat_rows]
     h = np.timedelta64(int(_STEP_S * 1e9), "ns")
     off = _rtn_offset(constellation, index[sat_rows], t_rows, rtn)
     off_vel = (_rtn_offset(constellation, index[sat_rows], t_rows + h, rtn)
                - _rtn_offset(constellation, index[sat_rows], t_rows - h, rtn)) / (2.0 * _STEP_S)
     t_s = seconds_since(t_rows, errors.t0_utc)
-    doppler = (-range_rate(pos_sv + off, vel_sv + off_vel, rx) * carrier_hz / C_MPS
+    doppler = (-range_rate(pos_sv + off, vel_sv + off_vel, rx, vrx) * carrier_hz / C_MPS
                + errors.offset_hz[sat_rows] + errors.drift_hz_per_s[sat_rows] * t_s
                + clock_offset_hz + clock_drift_hz_per_s * t_s + sigma_hz * rng.standard_normal(len(t_s)))
     n = len(t_s)
