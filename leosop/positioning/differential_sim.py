@@ -23,12 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import C_MPS, STARLINK_PILOT_HZ
+from ..constants import C_MPS
 from ..frames import azimuth_elevation_range, range_rate
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import seconds_since
 from .differential import ORBIT_SIGMA_RTN_M
-from .measurements import Measurements, sv_states_from_tle
+from .measurements import DEFAULT_CARRIER_HZ, Measurements, sv_states_from_tle
 
 __all__ = [
     "SAT_DRIFT_SIGMA_HZ_PER_S",
@@ -104,7 +104,7 @@ def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
 
 
 def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, clock_offset_hz=0.0,
-                      clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ, source="simulated"):
+                      clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ, source="simulated"):
     """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver at rest measures them.
 
     Parameters
