@@ -194,7 +194,7 @@ def _envelope(start, step_s, *series):
 
 
 def _families(names):
-    """Requested families, validated against the carrier table, in order without repeats."""
+    """Requested families, validated against the constellation registry, in order without repeats."""
     if not names:
         return []
     out = []
