@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
-from leosop.constellations import REGISTRY, CombModel, Family, carriers_hz, clock_scale, family
+from leosop.constellations import (
+    REGISTRY,
+    CombModel,
+    Family,
+    carriers_hz,
+    clock_scale,
+    family,
+)
 from leosop.errors import InputError
 from leosop.orbits import DEFAULT_TLE
 
@@ -24,7 +31,7 @@ def newsat_tle(tmp_path):
     records = [lines[i:i + 3] for i in range(0, len(lines) - 2, 3)]
     kept = [[r[0].replace("STARLINK", "NEWSAT") if k % 4 else r[0], *r[1:]] for k, r in enumerate(records) if k % 4 < 2]
     path = tmp_path / "mixed.tle"
-    path.write_text("\n".join(sum(kept, [])) + "\n")
+    path.write_text("".join(line + "\n" for record in kept for line in record))
     return path
 
 
