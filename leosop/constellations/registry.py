@@ -48,8 +48,17 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["CombModel", "Family", "REGISTRY", "DEFAULT_FAMILY", "family", "family_of",
-           "carriers_hz", "clock_scale", "tone_sigma_hz"]
+__all__ = [
+    "DEFAULT_FAMILY",
+    "REGISTRY",
+    "CombModel",
+    "Family",
+    "carriers_hz",
+    "clock_scale",
+    "family",
+    "family_of",
+    "tone_sigma_hz",
+]
 
 
 @dataclass(frozen=True)
