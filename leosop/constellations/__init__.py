@@ -4,26 +4,8 @@ Imports only the base modules, so that every stage (orbits, signal,
 positioning, replay, the applications) can read it. See :mod:`.registry`.
 """
 
-from .registry import (
-                       DEFAULT_FAMILY,
-                       REGISTRY,
-                       CombModel,
-                       Family,
-                       carriers_hz,
-                       clock_scale,
-                       family,
-                       family_of,
-                       tone_sigma_hz,
-)
+from .registry import (DEFAULT_FAMILY, REGISTRY, CombModel, Family, carriers_hz, clock_scale, family, family_of,
+                       tone_sigma_hz)
 
-__all__ = [
-                       "DEFAULT_FAMILY",
-                       "REGISTRY",
-                       "CombModel",
-                       "Family",
-                       "carriers_hz",
-                       "clock_scale",
-                       "family",
-                       "family_of",
-                       "tone_sigma_hz",
-]
+__all__ = ["DEFAULT_FAMILY", "REGISTRY", "CombModel", "Family", "carriers_hz", "clock_scale", "family", "family_of",
+           "tone_sigma_hz"]

@@ -48,17 +48,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = [
-    "DEFAULT_FAMILY",
-    "REGISTRY",
-    "CombModel",
-    "Family",
-    "carriers_hz",
-    "clock_scale",
-    "family",
-    "family_of",
-    "tone_sigma_hz",
-]
+__all__ = ["DEFAULT_FAMILY", "REGISTRY", "CombModel", "Family", "carriers_hz", "clock_scale", "family", "family_of",
+           "tone_sigma_hz"]
 
 
 @dataclass(frozen=True)
