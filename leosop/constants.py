@@ -1,6 +1,7 @@
-"""Physical constants and published signal parameters, SI units.
+"""Physical constants, SI units.
 
-Each value names its source. Nothing here is tunable: configuration lives
+Each value names its source; constellation signal parameters are in
+:mod:`leosop.constellations`. Nothing here is tunable: configuration lives
 with the code that uses it.
 """
 
@@ -37,12 +38,3 @@ JD_J2000 = 2_451_545.0
 JD_UNIX_EPOCH = 2_440_587.5
 #: Seconds per day.
 DAY_S = 86_400.0
-
-# Starlink Ku-band downlink pilot comb ([Shen 2024] eq. 1, section 2.1).
-#: Nominal RF frequency of the pilot comb's central tone [Hz] ([Shen 2024]).
-STARLINK_PILOT_HZ = 11.325e9
-#: Spacing of the pilot tones [Hz]: the published measurement of the
-#: Starlink comb; [Shen 2024] quotes "about 44 kHz".
-STARLINK_TONE_SPACING_HZ = 43_949.5
-#: Number of tones in the pilot comb ([Shen 2024]: N_c = 9).
-STARLINK_N_TONES = 9

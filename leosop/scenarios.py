@@ -16,8 +16,8 @@ import numpy as np
 
 from .constants import DAY_S
 from .datadir import is_data_ref, resolve_data_ref
+from .constellations import REGISTRY, family
 from .errors import InputError
-from .orbits import CARRIERS
 from .timebase import format_utc, parse_utc
 
 __all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN", "load_scenario",
@@ -54,18 +54,19 @@ class LeoSpec:
     conservative figure for the Starlink pilot tone seen by a small dish).
 
     Several constellations (DESIGN.md 4.1 ``leo.constellations``, keys of
-    :data:`leosop.orbits.CARRIERS`): each family transmits on its own carrier
+    :data:`leosop.constellations.REGISTRY`): each family transmits on its own carrier
     and is measured by its own receiver chain. ``rx_freq_offsets_hz`` gives
     a family's receiver offset [Hz] (missing families: ``rx_freq_offset_hz``
     scaled by the carrier ratio to Starlink's, one oscillator);
     ``cn0_dbhz_by_family`` a family's C/N0 (missing:
-    :data:`leosop.simulate_families.FAMILY_MODELS`; Starlink's is
+    :data:`leosop.constellations.REGISTRY`; Starlink's is
     ``cn0_dbhz``). The satellites' offsets scale with the carrier the same way
     (the same fractional oscillator error as Starlink's 0-5 Hz at 11.325 GHz).
     ``mask_deg_by_family``: a family's elevation mask [deg] (its own antenna:
     the omnidirectional L-band and VHF antennas of Iridium NEXT and Orbcomm
-    track far lower than a Ku-band dish); missing families use the scenario's
-    ``mask_deg`` (:func:`family_masks_deg`). ``outage_s``: ``[start, end]``
+    track far lower than a Ku-band dish); missing families use the registry's
+    ``mask_deg`` of the family, else the scenario's ``mask_deg``
+    (:func:`family_masks_deg`). ``outage_s``: ``[start, end]``
     seconds of the flight during which only the ``outage_max_sats`` highest
     satellites are tracked (a degraded sky: foliage, banking, jamming of the
     other bands); None: no outage.
@@ -213,15 +214,14 @@ def _families(value, where):
     if not isinstance(value, (list, tuple)) or not value or not all(isinstance(v, str) for v in value):
         raise InputError(f"{where}: expected a non-empty list of constellation names")
     for name in value:
-        if name not in CARRIERS:
-            raise InputError(f"{where}: unknown constellation {name!r}; expected one of {', '.join(CARRIERS)}")
+        family(name, where)
     if len(set(value)) != len(value):
         raise InputError(f"{where}: a constellation is listed twice")
     return tuple(value)
 
 
 def _per_family(value, where, low, high):
-    _check_keys(value, CARRIERS, where)
+    _check_keys(value, REGISTRY, where)
     return {k: _number(v, f"{where}.{k}", low=low, high=high) for k, v in value.items()}
 
 
@@ -340,9 +340,11 @@ def scenario_from_dict(doc, *, source="scenario", base=XIAN_BAOJI):
 def family_masks_deg(scenario):
     """The elevation mask of each of ``scenario.leo.constellations`` [deg], ndarray (k,).
 
-    A family's ``leo.mask_deg_by_family`` entry, else the scenario's ``mask_deg``.
+    A family's ``leo.mask_deg_by_family`` entry, else its registry ``mask_deg``, else the scenario's ``mask_deg``.
     """
-    return np.array([scenario.leo.mask_deg_by_family.get(f, scenario.mask_deg) for f in scenario.leo.constellations])
+    own = {f: family(f).mask_deg for f in scenario.leo.constellations}
+    return np.array([scenario.leo.mask_deg_by_family.get(f, scenario.mask_deg if own[f] is None else own[f])
+                     for f in scenario.leo.constellations])
 
 
 def mask_label(scenario):

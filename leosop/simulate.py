@@ -14,9 +14,10 @@ table reproductions call it. For a scenario it
    fixed offset;
 3. measures every Doppler, either at signal level (a pilot block per
    satellite-epoch, estimated by the ``fast`` estimator) or at measurement
-   level (the estimator's error model); the families other than Starlink
-   (``leo.constellations``) always at measurement level, each on its own
-   carrier with its own receiver offset (:mod:`leosop.simulate_families`);
+   level (the estimator's error model); the families of ``leo.constellations``
+   without a pilot comb always at measurement level (the sigma model of
+   :mod:`leosop.constellations`), each on its own carrier with its own
+   receiver offset;
    in an outage (``leo.outage_s``) only the highest few are tracked;
 4. solves a snapshot Doppler fix per epoch with 6 + k or more satellites
    (one receiver clock per constellation seen), with
@@ -58,11 +59,12 @@ import numpy as np
 
 from . import earth, frames, simulate_tight
 from .constants import C_MPS, DAY_S
+from .constellations import DEFAULT_FAMILY, clock_scale, family, tone_sigma_hz
 from .errors import InputError
 from .fusion import aids_fix, common, kalman
 from .geometry.doppler import doppler_jacobian, doppler_rate
 from .ins import imu, strapdown, trajectory
-from .orbits import CARRIERS, Constellation, load_constellation
+from .orbits import Constellation, load_constellation
 from .orbits.propagate import drop_failing
 from .orbits.visibility import compute_visibility
 from .positioning.robust_ls import FixStatus
@@ -71,7 +73,6 @@ from .scenarios import family_masks_deg, mask_label, scenario_tle
 from .signal.doppler import estimate_block
 from .signal.error_model import doppler_sigma_hz
 from .signal.pilot import PilotComb, add_noise, comb_baseband
-from .simulate_families import FAMILY_MODELS, carrier_ratio, tone_sigma_hz
 from .timebase import format_utc, seconds_since
 
 __all__ = ["COUPLINGS", "LEVELS", "SimulationResult", "aided", "metrics", "run_scenario"]
@@ -229,8 +230,8 @@ def _initial_state(truth, init):
                                        alt + du, truth.vel_enu_mps[0] + np.asarray(init.vel_mps), truth.C_n_b[0])
 
 
-def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_dbhz, rng, progress):
-    """Generate a pilot block per pair and estimate its Doppler with ``fast``.
+def _signal_level(comb, doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_dbhz, rng, progress):
+    """Generate a block of the pilot ``comb`` per pair and estimate its Doppler with ``fast``.
 
     Each block is centred on its epoch and mixed down by the predicted
     Doppler, as an aided receiver's oscillator would do; the estimate is
@@ -241,7 +242,6 @@ def _signal_level(doppler_geom_hz, rate_hz_per_s, clock_hz, predicted_hz, cn0_db
     doppler_hz, sigma_hz : ndarray, (m,)
         NaN where the comb was not detected.
     """
-    comb = PilotComb()
     n = int(round(BLOCK_S * SAMPLE_RATE_HZ))
     tau = (np.arange(n) - 0.5 * (n - 1)) / SAMPLE_RATE_HZ
     est = np.full(doppler_geom_hz.shape, np.nan)
@@ -326,13 +326,13 @@ def _constellation(families, tle, span_utc):
         Naming a requested family of which the file holds no satellite.
     """
     if tle is None:
-        parts = [load_constellation()] + ([load_constellation(FAMILIES_TLE)] if set(families) - {"starlink"} else [])
+        parts = [load_constellation()] + ([load_constellation(FAMILIES_TLE)] if set(families) - {DEFAULT_FAMILY} else [])
         every = Constellation(sum((c.names for c in parts), ()), np.concatenate([c.sat_ids for c in parts]),
                               sum((c.satrecs for c in parts), ()), np.concatenate([c.epochs_utc for c in parts]),
                               "bundled sky")
     else:
         every = load_constellation(tle)
-    if tuple(families) == ("starlink",) and not (every.families != "").any():
+    if tuple(families) == (DEFAULT_FAMILY,) and not (every.families != "").any():
         every = drop_failing(every, span_utc, what="the flight")
         return every, np.zeros(len(every), int)
     every = drop_failing(every.subset(np.isin(every.families, families)), span_utc, what="the flight")
@@ -344,24 +344,26 @@ def _constellation(families, tle, span_utc):
 
 
 def _family_models(leo):
-    """Per family of ``leo.constellations``: carrier, clock scale, receiver offset and measurement sigma.
+    """Per family of ``leo.constellations``: carrier, clock scale, receiver offset, sigma and signal models.
 
     Returns
     -------
     dict
-        ``carrier_hz``, ``clock_scale``, ``rx_offset_hz``, ``sigma_hz``:
-        ndarray (k,); ``starlink``: Starlink's index (-1 when absent).
+        ``carrier_hz``, ``clock_scale``, ``rx_offset_hz``, ``sigma_hz`` (the
+        single-tone sigma model): ndarray (k,); ``comb``: tuple (k,) of each
+        family's :class:`~leosop.signal.pilot.PilotComb`, None for a family
+        without one. A comb family's C/N0 is the scenario's ``leo.cn0_dbhz``.
     """
-    fams = leo.constellations
-    cn0 = [leo.cn0_dbhz if f == "starlink" else leo.cn0_dbhz_by_family.get(f, FAMILY_MODELS[f].cn0_dbhz) for f in fams]
-    scale = np.array([carrier_ratio(f) for f in fams])
+    fams = [family(f) for f in leo.constellations]
+    cn0 = [leo.cn0_dbhz if f.comb is not None else leo.cn0_dbhz_by_family.get(f.key, f.cn0_dbhz) for f in fams]
+    scale = np.array([clock_scale(f.key) for f in fams])
     return {
-        "carrier_hz": np.array([CARRIERS[f].default_hz for f in fams]),
+        "carrier_hz": np.array([f.carrier_hz for f in fams]),
         "clock_scale": scale,
-        "rx_offset_hz": np.array([leo.rx_freq_offsets_hz.get(f, leo.rx_freq_offset_hz * r)
+        "rx_offset_hz": np.array([leo.rx_freq_offsets_hz.get(f.key, leo.rx_freq_offset_hz * r)
                                   for f, r in zip(fams, scale)]),
-        "sigma_hz": tone_sigma_hz(cn0, [FAMILY_MODELS[f].integration_s for f in fams]),
-        "starlink": fams.index("starlink") if "starlink" in fams else -1,
+        "sigma_hz": tone_sigma_hz(cn0, [f.integration_s for f in fams]),
+        "comb": tuple(None if f.comb is None else PilotComb.of(f.key) for f in fams),
     }
 
 
@@ -495,21 +497,27 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
     pos_sv_known = vis.pos_sv_ecef_m + orbit_err_ecef_m[sat]
     H_known = doppler_jacobian(pos_sv_known[:, None], vis.vel_sv_ecef_mps[:, None], ins_pos_ecef_m[ep],
                                ins_vel_ecef_mps[ep], carrier[:, None])[:, 0]
-    # Measurement-level sigma of each family; Starlink's is the comb's (fast estimator).
-    sigma_est = np.where(fam == models["starlink"],
-                         doppler_sigma_hz(cn0_dbhz, BLOCK_S, sample_rate_hz=SAMPLE_RATE_HZ), models["sigma_hz"][fam])
+    # Measurement-level sigma of each family; a comb family's is the comb's (fast estimator).
+    sigma_est = models["sigma_hz"][fam]
     doppler_meas = np.full(doppler_geom.shape, np.nan)
-    comb = (fam == models["starlink"]) & (level == "signal")
-    if comb.any():
-        # Starlink at signal level: prediction from the INS alone and the known
+    signal = np.zeros(fam.shape, bool)
+    for k, pilot in enumerate(models["comb"]):
+        if pilot is None:
+            continue
+        comb = fam == k
+        sigma_est[comb] = doppler_sigma_hz(cn0_dbhz, BLOCK_S, comb=pilot, sample_rate_hz=SAMPLE_RATE_HZ)
+        if level != "signal" or not comb.any():
+            continue
+        # At signal level: prediction from the INS alone and the known
         # orbits (range-rate part of the Jacobian).
         predicted = np.einsum("mi,mi->m", H_known[comb, 3:6], ins_vel_ecef_mps[ep[comb]] - vis.vel_sv_ecef_mps[comb])
         # Only the shape of the generated chirp depends on the rate (the aircraft's acceleration neglected).
         rate = doppler_rate(vis.pos_sv_ecef_m[comb, None], vis.vel_sv_ecef_mps[comb, None], pos_rx[ep[comb]],
                             carrier[comb, None], vel_rx[ep[comb], None])[0][:, 0]
-        doppler_meas[comb], sigma_est[comb] = _signal_level(doppler_geom[comb], rate, clock_hz[comb], predicted,
-                                                            cn0_dbhz, rng_meas, progress)
-    modelled = ~comb
+        doppler_meas[comb], sigma_est[comb] = _signal_level(pilot, doppler_geom[comb], rate, clock_hz[comb],
+                                                            predicted, cn0_dbhz, rng_meas, progress)
+        signal |= comb
+    modelled = ~signal
     doppler_meas[modelled] = (doppler_geom[modelled] + clock_hz[modelled]
                               + sigma_est[modelled] * rng_meas.standard_normal(int(modelled.sum())))
 

@@ -2,11 +2,12 @@
 
 import numpy as np
 
-from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+from leosop.constants import C_MPS
+from leosop.constellations import REGISTRY
 from leosop.geometry.dop import cofactor, gdop, range_dops
 from leosop.geometry.doppler import doppler_jacobian
 
-F0 = STARLINK_PILOT_HZ
+F0 = REGISTRY["starlink"].carrier_hz
 
 
 def _doppler(x, r_s, v_s):

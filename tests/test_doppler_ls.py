@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+from leosop.constants import C_MPS
+from leosop.constellations import REGISTRY
 from leosop.frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
@@ -13,7 +14,7 @@ from leosop.positioning.static import solve_static
 from leosop.positioning.static_passes import solve_static_passes
 from leosop.geometry.doppler import doppler_jacobian, doppler_rate
 
-F0_HZ = STARLINK_PILOT_HZ
+F0_HZ = REGISTRY["starlink"].carrier_hz
 #: Noise-free recovery: the solver stops when a step is below 0.1 mm and
 #: 1 um/s; float64 Doppler of ~1e5 Hz carries ~1e-11 Hz, i.e. ~1e-10 m.
 ONE_MM = 1e-3

@@ -2,13 +2,14 @@
 
 import numpy as np
 
-from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+from leosop.constants import C_MPS
+from leosop.constellations import REGISTRY
 from leosop.frames import geodetic_to_ecef, range_rate
 from leosop.geometry.doppler import doppler_rate
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
 
-F_KU_HZ = STARLINK_PILOT_HZ
+F_KU_HZ = REGISTRY["starlink"].carrier_hz
 
 
 def test_moving_receiver_doppler_rate_matches_differences_of_propagated_states():

@@ -117,7 +117,8 @@ def test_tle_states_give_the_doppler_of_the_light_time_range():
     differentiates a spline of the range; the positioning side differentiates
     the apparent satellite position and projects it on the line of sight.
     """
-    from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+    from leosop.constants import C_MPS
+    from leosop.constellations import REGISTRY
     from leosop.frames import geodetic_to_ecef
     from leosop.orbits import load_constellation
     from leosop.positioning.measurements import sv_states_from_tle
@@ -135,7 +136,7 @@ def test_tle_states_give_the_doppler_of_the_light_time_range():
     times = start + np.tile((t * 1e9).astype("timedelta64[ns]"), len(const))
     p, v, reason = sv_states_from_tle(const, ids, times, rx)
     u = (p - rx) / np.linalg.norm(p - rx, axis=-1, keepdims=True)
-    model = -np.sum(u * v, axis=-1) * STARLINK_PILOT_HZ / C_MPS
+    model = -np.sum(u * v, axis=-1) * REGISTRY["starlink"].carrier_hz / C_MPS
     # Spline of a 0.1 s node grid: ~1e-4 Hz; the old model (SGP4 velocity, no light-time
     # rate) was up to ~6 Hz off.
     assert (reason == "").all()

@@ -10,7 +10,7 @@ from leosop.errors import InputError
 from leosop.montecarlo import IMU_GRADES, METRICS, bundled_specs, load_spec, run_seeds, spec_from_dict, to_dataset
 from leosop.montecarlo import spec as spec_module
 from leosop.montecarlo.parameters import apply
-from leosop.orbits import CARRIERS
+from leosop.constellations import REGISTRY
 from leosop.scenarios import XIAN_BAOJI, load_scenario
 from leosop.repro.fusion_tables import PAPER_TABLE5, PAPER_TABLE6
 
@@ -104,7 +104,7 @@ def test_bundled_specs_are_the_papers_grids():
     assert list(t6.axes["orbit_error_m"]) == sorted(PAPER_TABLE6) and t6.fixed["correction_period_s"] == 1.0
     assert set(t6.axes["orbit_error_model"]) == {"independent", "common"}
     assert cn0.axes["imu_grade"] == tuple(IMU_GRADES) and len(cn0.axes["cn0_dbhz"]) == 5
-    assert fam.axes["constellations"] == (("starlink",), tuple(CARRIERS)) and fam.axes["coupling"] == ("loose", "tight")
+    assert fam.axes["constellations"] == (("starlink",), tuple(REGISTRY)) and fam.axes["coupling"] == ("loose", "tight")
     assert fam.scenario == load_scenario("xian-baoji-multi")  # each family its own receiver clock
     assert {s.n_seeds for s in specs.values()} == {20} and all(s.scenario == XIAN_BAOJI for s in (t5, t6, cn0))
 

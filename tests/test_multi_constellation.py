@@ -327,8 +327,9 @@ def test_cli_visibility_three_families_real_snapshot(capsys):
 @pytest.mark.skipif(not TLE_2026.is_file(), reason="shared TLE data absent")
 def test_cli_position_sgp4_starlink_oneweb_from_family_carriers(capsys, tmp_path):
     """SGP4 states with light time, no carrier column: carriers and clocks from the families of --tle's names."""
+    from leosop.constellations import carriers_hz
     from leosop.frames import azimuth_elevation_range
-    from leosop.orbits import CARRIERS, load_constellation
+    from leosop.orbits import load_constellation
     from leosop.orbits.propagate import state_ecef
     from leosop.positioning.measurements import sv_states_from_tle
 
@@ -341,7 +342,7 @@ def test_cli_position_sgp4_starlink_oneweb_from_family_carriers(capsys, tmp_path
     si, ti = np.nonzero(el > np.radians(30))
     ids, tt, fam = const.sat_ids[si], t[ti], const.families[si]
     p, v, _ = sv_states_from_tle(const, ids, tt, pos_rx)
-    f0 = np.array([CARRIERS[f].default_hz for f in fam])
+    f0 = carriers_hz(fam)
     clock = {"starlink": 1234.5, "oneweb": -3210.0}
     y = _doppler(p, v, pos_rx, np.zeros(3), f0, np.array([clock[f] for f in fam]))
     path = tmp_path / "sgp4.csv"
@@ -374,10 +375,10 @@ def test_family_sigma_model_is_the_single_tone_bound():
     # Second implementation: the discrete-time Cramér-Rao bound of one tone
     # (leosop.signal.crlb) at 100 kS/s, whose N(N^2 - 1) differs from the
     # continuous N^3 by 1e-6 relative at N >= 1000 samples.
+    from leosop.constellations import REGISTRY, tone_sigma_hz
     from leosop.signal.crlb import crlb_frequency_hz2
-    from leosop.simulate_families import FAMILY_MODELS, tone_sigma_hz
 
-    for m in FAMILY_MODELS.values():
+    for m in REGISTRY.values():
         n = m.integration_s * 1e5
         ref = np.sqrt(crlb_frequency_hz2(m.cn0_dbhz, n, 1e5, amplitudes=[1.0]))
         np.testing.assert_allclose(tone_sigma_hz(m.cn0_dbhz, m.integration_s), ref, rtol=1e-5)

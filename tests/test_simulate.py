@@ -12,7 +12,7 @@ from leosop.ins import strapdown
 from leosop.ins import trajectory
 from leosop.montecarlo.parameters import apply
 from leosop.montecarlo.spec import load_spec
-from leosop.orbits import CARRIERS
+from leosop.constellations import REGISTRY
 from leosop.orbits.visibility import compute_visibility
 from leosop.geometry.doppler import doppler_jacobian
 from leosop.positioning.robust_ls import FixStatus
@@ -43,7 +43,7 @@ def _noise_free_mixed_fixes():
                              show_progress=False)
     fam = family_sat[vis.sat_index]
     assert set(fam) == {0, 2}
-    f0 = np.array([CARRIERS[f].default_hz for f in ("starlink", "orbcomm", "oneweb")])[fam]
+    f0 = np.array([REGISTRY[f].carrier_hz for f in ("starlink", "orbcomm", "oneweb")])[fam]
     rng = np.random.default_rng(3)
     offset_hz = rng.uniform(0.0, 5.0, len(constellation))
     orbit_m = 30.0 * rng.standard_normal((len(constellation), 3))

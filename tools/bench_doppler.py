@@ -17,7 +17,6 @@ leaving it out costs. Writes bench_doppler.png (and .json) into --out.
 """
 
 import argparse
-import json
 import os
 import time
 from pathlib import Path

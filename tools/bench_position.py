@@ -13,12 +13,13 @@ import time
 
 import numpy as np
 
-from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+from leosop.constants import C_MPS
+from leosop.constellations import REGISTRY
 from leosop.frames import geodetic_to_ecef
 from leosop.geometry.doppler import doppler_jacobian
 from leosop.positioning.snapshot import solve_snapshots
 
-F0_HZ = STARLINK_PILOT_HZ
+F0_HZ = REGISTRY["starlink"].carrier_hz
 
 
 def simulate(n_ep, n_sv, rng):

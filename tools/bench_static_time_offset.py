@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from leosop.constants import C_MPS, STARLINK_PILOT_HZ
+from leosop.constants import C_MPS
+from leosop.constellations import REGISTRY
 from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.orbits.propagate import state_ecef
@@ -62,7 +63,7 @@ def scene(tle_path):
 def doppler(pos, vel, site):
     """Geometric pilot Doppler (n_sats, n_ep) of a receiver at rest at ``site``."""
     los = pos - site
-    return -np.sum(los * vel, -1) / np.linalg.norm(los, axis=-1) * STARLINK_PILOT_HZ / C_MPS
+    return -np.sum(los * vel, -1) / np.linalg.norm(los, axis=-1) * REGISTRY["starlink"].carrier_hz / C_MPS
 
 
 def trial(const, site, t, rng, sigma_hz):
@@ -81,7 +82,7 @@ def trial(const, site, t, rng, sigma_hz):
     sat = np.repeat(np.arange(N_SATS), N_EPOCHS)
     start = site + C_e_n(np.radians(LAT_DEG), np.radians(LON_DEG)) @ np.array([1.5e3, -1.3e3, 0.0])
     args = (y.ravel(), sigma_hz)
-    common = dict(t_s=np.tile(t_s, N_SATS), pass_id=sat, pos0_ecef_m=start, carrier_hz=STARLINK_PILOT_HZ)
+    common = dict(t_s=np.tile(t_s, N_SATS), pass_id=sat, pos0_ecef_m=start, carrier_hz=REGISTRY["starlink"].carrier_hz)
     runs = [(pos_tle, vel_tle, dict(clock="common", time_bias=False)),
             (pos_tle, vel_tle, dict(clock="common")),
             (pos_true, vel_true, dict(clock="common", time_bias=False)),

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from leosop.constellations import REGISTRY, carriers_hz
 from leosop.frames import geodetic_to_ecef
-from leosop.orbits import CARRIERS, load_constellation
+from leosop.orbits import load_constellation
 from leosop.orbits.visibility import compute_visibility
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle"
@@ -41,7 +42,7 @@ def main():
     site = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     vis = compute_visibility(const, times, site, args.mask_deg, show_progress=False)
     group = np.array([FAMILIES.index(f) for f in const.families])
-    carrier = np.array([CARRIERS[f].default_hz for f in const.families])
+    carrier = carriers_hz(const.families)
     counts = vis.n_visible_by_group(group)
     print(f"{Path(args.tle).name}: site {args.site}, {len(times)} epochs from {args.start}Z every {args.step_s:g} s, "
           f"mask {args.mask_deg:g} deg; satellites in file: "
@@ -56,7 +57,7 @@ def main():
 
     for j, fam in enumerate(FAMILIES):
         sub = compute_visibility(const.subset(group == j), times, site, args.mask_deg, show_progress=False)
-        report(f"{fam} alone (7 states)", counts[:, j], sub.doppler_gdop(CARRIERS[fam].default_hz))
+        report(f"{fam} alone (7 states)", counts[:, j], sub.doppler_gdop(REGISTRY[fam].carrier_hz))
     report("mix (6 + one clock each)", vis.n_visible, vis.doppler_gdop(carrier, group))
 
 

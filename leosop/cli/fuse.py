@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constellations import REGISTRY
 from ..errors import InputError
 from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
 from ..fusion import leo_input, real
 from ..gnss import rtklib_pos
 from ..ins import flight_mat, imu_io
-from ..orbits import CARRIERS
 from ..positioning.measurements import write_measurements
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
@@ -62,7 +62,7 @@ def register(subparsers):
     p.add_argument("--tle", metavar="FILE",
                    help="element sets: the satellite states of a --leo table without state columns, or the sky of "
                         "--leo-sim (default the bundled one)")
-    p.add_argument("--constellation", nargs="+", metavar="NAME", choices=tuple(CARRIERS),
+    p.add_argument("--constellation", nargs="+", metavar="NAME", choices=tuple(REGISTRY),
                    help="transmitting families of --leo-sim (default starlink)")
     p.add_argument("--coupling", choices=("loose", "tight"), default="tight",
                    help="LEO coupling: tight (each Doppler an aid, default); loose is not yet supported")

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import STARLINK_PILOT_HZ
+from ..constellations import DEFAULT_FAMILY
 from ..errors import InputError
 from ..fileio import atomic_files, json_text
 from ..frames import azimuth_elevation_range, geodetic_to_ecef
@@ -321,7 +321,7 @@ def _settings(args):
     n_step = int(round(step * fs))
     if n_step > n and args.snapshot_s is None:
         raise InputError(f"--truth-step-s {step:g} is longer than --duration-s {duration:g}")
-    comb = PilotComb()
+    comb = PilotComb.of(DEFAULT_FAMILY)
     if fs <= 2.0 * comb.offsets_hz.max():
         raise InputError(f"--sample-rate-hz {fs:g}: must exceed the comb's width, {2 * comb.offsets_hz.max():.0f} Hz")
     signal_starts, lengths = _captures(args, n, fs)
@@ -421,7 +421,7 @@ def _write(args, s, recs, doc):
             write_sigmf_files(tmps[2 * k], tmps[2 * k + 1],
                               sample_chunks(r.channel, s.signal_starts, s.lengths, r.rng, fe_k, r.full_scale,
                                             r.extra.get("leosop:front_end", {})),
-                              sample_rate_hz=s.fs, center_hz=STARLINK_PILOT_HZ,
+                              sample_rate_hz=s.fs, center_hz=s.comb.carrier_hz,
                               captures=list(zip(s.file_starts, r.cap_times)), datatype=s.rx[3],
                               annotations=r.annotations, global_extra=r.extra, full_scale=r.full_scale)
         if args.out:

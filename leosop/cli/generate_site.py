@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
 from ..errors import InputError
 from ..frames import C_e_n, geodetic_to_ecef
 from ..progress import progress
@@ -105,7 +104,7 @@ def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, c
         full_scale = fe.full_scale(fe.rms_component(comb.n_tones * len(const) + channel.n_subcarriers * len(const),
                                                     channel.cn0_ref_dbhz, fs))
     cap_times = [start + np.timedelta64(int(round(s / fs * 1e9)), "ns") for s in signal_starts]
-    extra = {"leosop:n_tones": STARLINK_N_TONES, "leosop:tone_spacing_hz": STARLINK_TONE_SPACING_HZ,
+    extra = {"leosop:n_tones": comb.n_tones, "leosop:tone_spacing_hz": comb.tone_spacing_hz,
              "leosop:cn0_model": args.cn0_model, "leosop:satellites": satellites, "leosop:waveform": args.waveform,
              "core:description": f"leosop generate: Starlink {WAVEFORM_TEXT[args.waveform]} of {len(const)} "
                                  f"satellite(s) "

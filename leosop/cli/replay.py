@@ -22,12 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import STARLINK_PILOT_HZ
 from ..errors import InputError
 from ..fileio import atomic_files, check_output_file, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
-from ..positioning.measurements import write_measurements
+from ..positioning.measurements import DEFAULT_CARRIER_HZ, write_measurements
 from ..replay.lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ
 from ..signal.iq import open_sigmf
 from ..timebase import format_utc
@@ -144,7 +143,7 @@ def run(args):
         base_res = replay(base_rec, const, block_s=block_s, init_pos_ecef_m=base_pos, static=True, mask_deg=mask,
                           lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True,
                           prior_radius_m=BASE_PRIOR_RADIUS_M)
-        diff = differential_fix(res, base_res, const, base_pos, carrier_hz=rec.center_hz or STARLINK_PILOT_HZ,
+        diff = differential_fix(res, base_res, const, base_pos, carrier_hz=rec.center_hz or DEFAULT_CARRIER_HZ,
                                 static=args.static, block_s=block_s)
         doc["solutions_alone"] = doc["solutions"]
         doc["solutions"] = _differential_solutions(diff)

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from ..chunkstore import ChunkStore, code_digest
+from ..constellations import REGISTRY
 from ..errors import InputError
 from ..montecarlo import bundled_specs
 from ..montecarlo.parameters import PARAMETERS
-from ..orbits import CARRIERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
 from ..timebase import format_utc, utc_from_seconds
 from . import add_action, add_command
@@ -44,8 +44,8 @@ def register(subparsers):
     g.add_argument("--step-s", type=float, default=60.0, help="epoch step in seconds (default 60)")
     g.add_argument("--grid-deg", type=float, default=5.0, help="grid step, dividing 180 (default 5)")
     g.add_argument("--mask-deg", type=float, default=40.0, help="elevation mask (default 40)")
-    g.add_argument("--constellation", nargs="+", choices=sorted(CARRIERS), metavar="NAME",
-                   help=f"only these families of a mixed file ({', '.join(sorted(CARRIERS))})")
+    g.add_argument("--constellation", nargs="+", choices=sorted(REGISTRY), metavar="NAME",
+                   help=f"only these families of a mixed file ({', '.join(sorted(REGISTRY))})")
     g.add_argument("--skip-bad", action="store_true", help="skip malformed TLE records with a warning")
     g.add_argument("--workers", type=int, metavar="N", help="workers of the local Dask cluster (default: the cores)")
     g.add_argument("--scheduler", metavar="ADDR",

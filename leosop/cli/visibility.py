@@ -29,10 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constellations import DEFAULT_FAMILY, REGISTRY, carriers_hz
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_json
 from ..frames import geodetic_to_ecef
-from ..orbits import CARRIERS, load_constellation
+from ..orbits import load_constellation
 from ..orbits.chunks import PassStitcher, visibility_chunks
 from ..orbits.propagate import drop_failing
 from ..timebase import format_utc, seconds_since, utc_from_seconds
@@ -76,7 +77,7 @@ def register(subparsers):
     p.add_argument("--mask-deg", type=float, default=DEFAULT_MASK_DEG, help="elevation mask (default 40)")
     p.add_argument("--tle", metavar="FILE", help="TLE or OMM (.json/.csv) file (default: bundled Walker set)")
     p.add_argument("--constellation", nargs="+", metavar="NAME",
-                   help=f"use only these families of a mixed file ({', '.join(sorted(CARRIERS))}); several: one "
+                   help=f"use only these families of a mixed file ({', '.join(sorted(REGISTRY))}); several: one "
                    "receiver clock each, GDOP of the mix")
     p.add_argument("--carrier-hz", type=float, help="carrier for the Doppler GDOP (default: the family's; one "
                    "family only)")
@@ -122,13 +123,13 @@ def run(args):
     warn_stale(const, start)
     ends = utc_from_seconds(np.array([0, n_epochs - 1]) * step, start)
     const = drop_failing(const, ends, what=f"{format_utc(ends[0])} .. {format_utc(ends[1])}")
-    family = families[0] if families else next((f for f in const.families if f), "starlink")
-    carrier_hz = args.carrier_hz or CARRIERS[family].default_hz
+    family = families[0] if families else next((f for f in const.families if f), DEFAULT_FAMILY)
+    carrier_hz = args.carrier_hz or REGISTRY[family].carrier_hz
     clock_group = None
     if len(families) > 1:
         # Each satellite on its family's carrier, each family its own receiver clock.
         clock_group = np.array([families.index(f) for f in const.families])
-        carrier_hz = np.array([CARRIERS[f].default_hz for f in const.families])
+        carrier_hz = carriers_hz(const.families)
 
     in_doc = n_epochs <= args.json_max_epochs
     if not in_doc:
@@ -194,14 +195,14 @@ def _envelope(start, step_s, *series):
 
 
 def _families(names):
-    """Requested families, validated against the carrier table, in order without repeats."""
+    """Requested families, validated against the constellation registry, in order without repeats."""
     if not names:
         return []
     out = []
     for name in names:
         for key in (k.strip().lower() for k in name.split(",") if k.strip()):
-            if key not in CARRIERS:
-                known = ", ".join(sorted(CARRIERS))
+            if key not in REGISTRY:
+                known = ", ".join(sorted(REGISTRY))
                 raise InputError(f"--constellation {key!r}: unknown constellation; known: {known}")
             if key not in out:
                 out.append(key)

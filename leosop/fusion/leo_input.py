@@ -95,7 +95,7 @@ def simulate(sol, *, tle=None, constellations=("starlink",), seed=0):
     tle : path, optional
         Element sets; default the bundled sky of ``simulate``.
     constellations : sequence of str
-        Transmitting families (keys of :data:`leosop.orbits.CARRIERS`).
+        Transmitting families (keys of :data:`leosop.constellations.REGISTRY`).
     seed : int
         Seeds the satellite offsets and orbit errors, and the measurement noise (two streams).
 

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constellations import REGISTRY
 from ..errors import InputError
 from ..fusion.common import ORBIT_MODELS
-from ..orbits import CARRIERS
 from ..scenarios import scenario_from_dict
 from ..simulate import COUPLINGS, LEVELS
 
@@ -84,7 +84,7 @@ def _params():
         Parameter("sat_doppler_offset_max_hz", "leo", "Hz", "largest clock-induced Doppler offset of a satellite"),
         Parameter("rx_freq_offset_hz", "leo", "Hz", "receiver frequency offset"),
         Parameter("fix_rate_hz", "leo", "Hz", "LEO fix and fusion rate"),
-        Parameter("constellations", "leo", "", "LEO constellation families received", tuple(CARRIERS),
+        Parameter("constellations", "leo", "", "LEO constellation families received", tuple(REGISTRY),
                   multiple=True),
         Parameter("gyro_bias_deg_per_h", "imu", "degree h-1", "gyro constant bias"),
         Parameter("gyro_arw_deg_per_rt_h", "imu", "degree h-1/2", "gyro angle random walk"),

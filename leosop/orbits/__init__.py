@@ -10,11 +10,11 @@ inside the package and linked from the top-level ``tle/``; epoch
 from importlib.resources import files
 from pathlib import Path
 
-from .constellation import CARRIERS, Constellation
+from .constellation import Constellation
 from .omm import read_omm
 from .tle import read_tle
 
-__all__ = ["DEFAULT_TLE", "CARRIERS", "Constellation", "load_constellation", "read_tle", "read_omm"]
+__all__ = ["DEFAULT_TLE", "Constellation", "load_constellation", "read_tle", "read_omm"]
 
 #: The bundled default constellation (package data, so found from any install).
 DEFAULT_TLE = Path(str(files("leosop") / "data" / "starlink_walker.tle"))

@@ -1,10 +1,11 @@
-"""A set of satellites with their SGP4 elements, and the carriers they transmit.
+"""A set of satellites with their SGP4 elements.
 
 A :class:`Constellation` is what the TLE and OMM readers return and what the
-propagator takes. Satellites are grouped into families (Starlink, OneWeb,
-Iridium NEXT, Orbcomm) by name, so that a mixed CelesTrak "active" snapshot can
-be filtered by constellation; files without names (2-line TLEs) can be grouped
-by catalogue number with :meth:`Constellation.select_ids`.
+propagator takes. Satellites are grouped into the families of
+:data:`leosop.constellations.REGISTRY` by name, so that a mixed CelesTrak
+"active" snapshot can be filtered by constellation; files without names
+(2-line TLEs) can be grouped by catalogue number with
+:meth:`Constellation.select_ids`.
 """
 
 from dataclasses import dataclass
@@ -13,69 +14,10 @@ from functools import cached_property
 import numpy as np
 from sgp4.api import SatrecArray
 
-from ..constants import STARLINK_PILOT_HZ
+from ..constellations import family, family_of
 from ..errors import InputError
 
-__all__ = ["Carrier", "CARRIERS", "Constellation", "family_of"]
-
-
-@dataclass(frozen=True)
-class Carrier:
-    """Downlink carrier(s) of one satellite family.
-
-    Attributes
-    ----------
-    family : str
-        Key of :data:`CARRIERS`.
-    name_prefixes : tuple of str
-        Satellite-name prefixes (upper case) that identify the family.
-    default_hz : float
-        Carrier used when none is given.
-    channels_hz : tuple of float
-        Other published channel centres.
-    note : str
-        Where the numbers come from.
-    """
-
-    family: str
-    name_prefixes: tuple
-    default_hz: float
-    channels_hz: tuple
-    note: str
-
-
-#: Starlink Ku downlink: eight 240 MHz channels on a 250 MHz raster from
-#: 10.7 GHz; the pilot comb is seen at the channel centres 11.325 and
-#: 11.575 GHz ([Shen 2024]).
-_STARLINK_CHANNELS_HZ = tuple(10.7e9 + 250e6 * (k + 0.5) for k in range(8))
-
-CARRIERS = {
-    "starlink": Carrier(
-        "starlink", ("STARLINK",), STARLINK_PILOT_HZ, _STARLINK_CHANNELS_HZ,
-        "Ku downlink channels 10.825-12.575 GHz on a 250 MHz raster; pilot at 11.325 GHz ([Shen 2024])",
-    ),
-    "oneweb": Carrier(
-        "oneweb", ("ONEWEB",), 11.7e9, tuple(10.7e9 + 250e6 * (k + 0.5) for k in range(8)),
-        "Ku downlink 10.7-12.7 GHz; 11.7 GHz used as a nominal centre",
-    ),
-    "iridium": Carrier(
-        "iridium", ("IRIDIUM",), 1626.2708e6, (1626.2708e6, 1626.1042e6, 1626.4375e6),
-        "Iridium NEXT ring-alert channel 1626.2708 MHz (simplex band 1626.0-1626.5 MHz)",
-    ),
-    "orbcomm": Carrier(
-        "orbcomm", ("ORBCOMM",), 137.5e6, (137.2e6, 137.25e6, 137.3125e6, 137.5e6, 137.6625e6, 137.7375e6, 137.8e6),
-        "VHF subscriber downlink 137-138 MHz",
-    ),
-}
-
-
-def family_of(name):
-    """Family key of a satellite name (``"starlink"``, ...) or ``""`` if unknown."""
-    upper = name.strip().upper()
-    for key, carrier in CARRIERS.items():
-        if upper.startswith(carrier.name_prefixes):
-            return key
-    return ""
+__all__ = ["Constellation"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,7 +82,5 @@ class Constellation:
         return self.subset(self.index_of(ids))
 
     def family(self, key):
-        """Satellites of one family (a key of :data:`CARRIERS`)."""
-        if key not in CARRIERS:
-            raise InputError(f"unknown constellation {key!r}; expected one of {', '.join(CARRIERS)}")
-        return self.subset(self.families == key)
+        """Satellites of one family (a key of :data:`leosop.constellations.REGISTRY`)."""
+        return self.subset(self.families == family(key).key)

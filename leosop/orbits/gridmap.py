@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ExternalError, InputError
-from .constellation import CARRIERS
+from ..constellations import REGISTRY, carriers_hz
 from .gridcells import (FOOTPRINT_MARGIN_DEG, READABLE_GRID_DEG, Grid, brute_force_epoch, check_grid_deg, epoch_maps,
                         footprint_pairs, make_grid)
 from .gridmap_netcdf import GDOP_UNITS, map_dataset, write_netcdf
@@ -32,9 +32,7 @@ _CONNECT_TIMEOUT = "10s"
 
 def satellite_carriers_hz(constellation):
     """Carrier of each satellite from its family; unknown families get Starlink's, (n_sats,)."""
-    default = CARRIERS["starlink"].default_hz
-    table = {k: c.default_hz for k, c in CARRIERS.items()}
-    return np.array([table.get(f, default) for f in constellation.families], dtype=float)
+    return carriers_hz(constellation.families)
 
 
 @dataclass(frozen=True)
@@ -60,8 +58,8 @@ def _load_cached(source):
     const = load_constellation(source.path, skip_bad=source.skip_bad)
     if source.families:
         for key in source.families:
-            if key not in CARRIERS:
-                raise InputError(f"--constellation {key}: unknown; expected one of {', '.join(CARRIERS)}")
+            if key not in REGISTRY:
+                raise InputError(f"--constellation {key}: unknown; expected one of {', '.join(REGISTRY)}")
         const = const.subset(np.isin(const.families, list(source.families)))
     if len(const) == 0:
         what = "/".join(source.families) if source.families else "any"

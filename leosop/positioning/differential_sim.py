@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import C_MPS, STARLINK_PILOT_HZ
+from ..constants import C_MPS
 from ..frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, range_rate
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import seconds_since
 from .differential import ORBIT_SIGMA_RTN_M
-from .measurements import Measurements, sv_states_from_tle
+from .measurements import DEFAULT_CARRIER_HZ, Measurements, sv_states_from_tle
 
 __all__ = [
     "SAT_DRIFT_SIGMA_HZ_PER_S",
@@ -130,7 +130,7 @@ def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
 
 
 def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, vel_rx_ecef_mps=None,
-                      clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ,
+                      clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ,
                       source="simulated"):
     """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver measures them.
 

@@ -11,7 +11,7 @@ non-positive sigma or carrier, duplicate of an earlier row) is set aside with
 its reason in :attr:`Measurements.rejected` so that the rest can be solved.
 
 Carrier of a row: its ``carrier_hz`` value; else the default carrier of its
-satellite's family (:data:`~leosop.orbits.constellation.CARRIERS`, the family
+satellite's family (:data:`leosop.constellations.REGISTRY`, the family
 from the element sets' names); else the caller's ``carrier_hz``
 (``--carrier-hz``); else, when nothing in the file points to another carrier,
 :data:`DEFAULT_CARRIER_HZ`. A row left without a carrier in a file that mixes
@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import C_MPS, DAY_S, STARLINK_PILOT_HZ
+from ..constants import C_MPS, DAY_S
+from ..constellations import DEFAULT_FAMILY, REGISTRY, carriers_hz
 from ..errors import InputError
 from ..fileio import check_input_file, write_csv
 from ..frames import rotate_to_later_ecef
@@ -43,8 +44,8 @@ __all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states
 
 #: Satellite state columns, ECEF at the measurement time.
 SV_STATE_COLUMNS = ("x_sv_m", "y_sv_m", "z_sv_m", "vx_sv_mps", "vy_sv_mps", "vz_sv_mps")
-#: Carrier when neither the table nor the caller gives one (Starlink pilot, [Shen 2024]).
-DEFAULT_CARRIER_HZ = STARLINK_PILOT_HZ
+#: Carrier when neither the table nor the caller gives one: the default family's (Starlink pilot).
+DEFAULT_CARRIER_HZ = REGISTRY[DEFAULT_FAMILY].carrier_hz
 #: Largest distance in time from an element set's epoch that is propagated [days].
 MAX_TLE_AGE_DAYS = 30.0
 
@@ -69,7 +70,7 @@ class Measurements:
     pass_id : ndarray of str, (n,), or None
         From the optional ``pass_id`` column (empty fields read as ``""``).
     family : ndarray of str, (n,), or None
-        Constellation of each row's satellite (a key of ``CARRIERS``, ``""``
+        Constellation of each row's satellite (a key of :data:`leosop.constellations.REGISTRY`, ``""``
         unknown); None when read without element sets.
     rejected : tuple of (int, str)
         Line number and reason of every row set aside.
@@ -239,11 +240,9 @@ def read_measurements(path, *, carrier_hz=None, constellation=None):
 
 def _fill_carriers(path, carrier, blank, family, carrier_hz, lines, sat_id, reason):
     """Carriers of the rows without a value: family, caller, default (see the module notes)."""
-    from ..orbits.constellation import CARRIERS
-
     carrier = carrier.copy()
     fam = blank & (family != "")
-    carrier[fam] = [CARRIERS[f].default_hz for f in family[fam]]
+    carrier[fam] = carriers_hz(family[fam])
     rest = blank & ~fam & (reason == "")
     if not rest.any():
         return carrier
@@ -262,7 +261,7 @@ def _fill_carriers(path, carrier, blank, family, carrier_hz, lines, sat_id, reas
 
 
 def row_families(sat_id, constellation):
-    """Family (key of ``CARRIERS``, ``""`` unknown) of each satellite id from the element sets' names, (n,)."""
+    """Family (registry key, ``""`` unknown) of each satellite id from the element sets' names, (n,)."""
     ids = np.asarray(sat_id, dtype=str)
     if constellation is None:
         return np.full(ids.shape, "")

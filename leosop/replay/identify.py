@@ -53,9 +53,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import C_MPS, STARLINK_PILOT_HZ
+from ..constants import C_MPS
 from ..errors import InputError
 from ..frames import ecef_to_geodetic
+from ..positioning.measurements import DEFAULT_CARRIER_HZ
 from .cellvote import CellSearch, fibonacci_cells, grid_around
 from .ephemeris import Ephemeris
 from .features import prepare_track
@@ -139,7 +140,7 @@ _DEFAULTS = {
 }
 
 
-def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.0, carrier_hz=STARLINK_PILOT_HZ,
+def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ,
                     lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
                     prior_radius_m=150e3, alt_m=None, global_spacing_m=150e3, keep_cells=None, **options):
     """Identify Doppler tracks against element sets; sets ``track.sat_id`` and ``track.match_rms_hz`` in place.

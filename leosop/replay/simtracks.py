@@ -8,7 +8,8 @@ the identification uses.
 
 import numpy as np
 
-from ..constants import C_MPS, STARLINK_PILOT_HZ
+from ..constants import C_MPS
+from ..constellations import DEFAULT_FAMILY, REGISTRY
 from ..frames import azimuth_elevation_range, range_rate
 from ..orbits.propagate import state_ecef
 from ..positioning.measurements import sv_states_from_tle
@@ -26,7 +27,7 @@ def visible_indices(constellation, pos_rx_ecef_m, times_utc, mask_deg):
 
 def simulate_track(constellation, sat_index, pos_rx_ecef_m, time_utc, rng, *, clock_hz=0.0,
                    clock_drift_hz_per_s=0.0, sat_offset_hz=0.0, along_track_m=0.0, sigma_hz=0.5,
-                   carrier_hz=STARLINK_PILOT_HZ):
+                   carrier_hz=REGISTRY[DEFAULT_FAMILY].carrier_hz):
     """One satellite's track as a static receiver measures it.
 
     Parameters

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import STARLINK_N_TONES, STARLINK_TONE_SPACING_HZ
+from ..constellations import DEFAULT_FAMILY, REGISTRY
 from ..errors import InputError
 from ..fileio import check_input_file
 from ..timebase import format_utc, parse_utc
@@ -77,7 +77,7 @@ class Recording:
         UTC time of the first sample.
     n_samples : int
     n_tones, tone_spacing_hz : int, float
-        The comb as declared by the recording (defaults: Starlink).
+        The comb as declared by the recording (defaults: the default family's, Starlink).
     annotations : list of dict
         SigMF annotations (``leosop generate`` stores its truth there).
     offset_bytes : int
@@ -95,8 +95,8 @@ class Recording:
     center_hz: float | None
     start_utc: np.datetime64 | None
     n_samples: int
-    n_tones: int = STARLINK_N_TONES
-    tone_spacing_hz: float = STARLINK_TONE_SPACING_HZ
+    n_tones: int = REGISTRY[DEFAULT_FAMILY].comb.n_tones
+    tone_spacing_hz: float = REGISTRY[DEFAULT_FAMILY].comb.tone_spacing_hz
     annotations: list = field(default_factory=list)
     offset_bytes: int = 0
     captures: list = field(default_factory=list)
@@ -251,8 +251,8 @@ def open_sigmf(meta_path, *, verify=True):
         center_hz=center_hz,
         start_utc=captures[0].start_utc,
         n_samples=int(n),
-        n_tones=int(info.get("leosop:n_tones", STARLINK_N_TONES)),
-        tone_spacing_hz=float(info.get("leosop:tone_spacing_hz", STARLINK_TONE_SPACING_HZ)),
+        n_tones=int(info.get("leosop:n_tones", Recording.n_tones)),
+        tone_spacing_hz=float(info.get("leosop:tone_spacing_hz", Recording.tone_spacing_hz)),
         annotations=annotations,
         offset_bytes=offset,
         captures=captures,

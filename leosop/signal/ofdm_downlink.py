@@ -20,11 +20,22 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft
 
-from ..constants import STARLINK_PILOT_HZ
+from ..constellations import REGISTRY
 from ..errors import InputError
-from ..orbits.constellation import CARRIERS
-from .ofdm_frame import (FRAME_SAMPLES, FS_HZ, N_CP, N_DATA_SYMBOLS, N_FFT, N_SYMBOL, N_SYMBOLS_PER_FRAME,
-                         SUBCARRIER_SPACING_HZ, active_subcarriers, pss_spectrum, qam4_codes, sss_spectrum)
+from .ofdm_frame import (
+    FRAME_SAMPLES,
+    FS_HZ,
+    N_CP,
+    N_DATA_SYMBOLS,
+    N_FFT,
+    N_SYMBOL,
+    N_SYMBOLS_PER_FRAME,
+    SUBCARRIER_SPACING_HZ,
+    active_subcarriers,
+    pss_spectrum,
+    qam4_codes,
+    sss_spectrum,
+)
 from .pilot import PilotComb, comb_baseband
 
 __all__ = ["OfdmDownlink", "ofdm_baseband"]
@@ -47,7 +58,7 @@ class OfdmDownlink:
     sample_rate_hz : float
         The recording's sample rate; its band is centred on the channel centre.
     channel_hz : float
-        Channel centre [Hz], one of ``CARRIERS["starlink"].channels_hz``;
+        Channel centre [Hz], one of ``REGISTRY["starlink"].channels_hz``;
         ``geom_cycles`` refer to it.
     frame_offset_s : float
         Receive time of the start of frame 0 at ``geom_cycles = 0``.
@@ -65,7 +76,7 @@ class OfdmDownlink:
     """
 
     sample_rate_hz: float
-    channel_hz: float = STARLINK_PILOT_HZ
+    channel_hz: float = REGISTRY["starlink"].carrier_hz
     frame_offset_s: float = 0.0
     seed: int = 0
     subcarrier_amplitude: float = 1.0
@@ -75,7 +86,7 @@ class OfdmDownlink:
     def __post_init__(self):
         if not (np.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
             raise InputError(f"sample_rate_hz={self.sample_rate_hz} must be a finite number > 0")
-        channels = CARRIERS["starlink"].channels_hz
+        channels = REGISTRY["starlink"].channels_hz
         if not np.any(np.isclose(self.channel_hz, channels, rtol=0.0, atol=1.0)):
             raise InputError(f"channel_hz={self.channel_hz} is not a Starlink channel centre "
                              f"({', '.join(f'{c / 1e9:g}' for c in channels)} GHz)")
@@ -199,7 +210,7 @@ class OfdmDownlink:
         return out
 
 
-def ofdm_baseband(t_s, geom_cycles, clock_cycles=0.0, *, sample_rate_hz, channel_hz=STARLINK_PILOT_HZ,
+def ofdm_baseband(t_s, geom_cycles, clock_cycles=0.0, *, sample_rate_hz, channel_hz=REGISTRY["starlink"].carrier_hz,
                   frame_offset_s=0.0, seed=0, subcarrier_amplitude=1.0, comb=None, band_hz=None, phase_rad=0.0):
     """Received OFDM downlink (plus the pilot comb if ``comb`` is given) at sample times ``t_s``.
 

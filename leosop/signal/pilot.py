@@ -1,4 +1,4 @@
-"""The Starlink downlink pilot comb as complex baseband ([Shen 2024], eq. 1).
+"""A downlink pilot comb as complex baseband (Starlink's: [Shen 2024], eq. 1).
 
 The pilot is ``n_tones`` unmodulated tones spaced ``tone_spacing_hz`` around
 the carrier ``carrier_hz`` (tone k = -(n-1)/2 .. (n-1)/2 at RF frequency
@@ -17,10 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import STARLINK_N_TONES, STARLINK_PILOT_HZ, STARLINK_TONE_SPACING_HZ
+from ..constellations import DEFAULT_FAMILY, REGISTRY, family
 from ..errors import InputError
 
 __all__ = ["PilotComb", "comb_baseband", "add_noise", "noise_sigma"]
+
+#: The comb assumed when none is given: the default family's (Starlink's).
+_DEFAULT = REGISTRY[DEFAULT_FAMILY]
 
 
 @dataclass(frozen=True)
@@ -30,12 +33,14 @@ class PilotComb:
     ``amplitudes`` default to one (each tone then has the C/N0 given to
     :func:`add_noise`); ``phases_rad`` default to Newman phases
     ``pi k^2 / n_tones``, which keep the crest factor of the sum low (it
-    matters for 16-bit recordings).
+    matters for 16-bit recordings). The defaults are the comb of
+    :data:`leosop.constellations.DEFAULT_FAMILY`; :meth:`of` builds any
+    registered family's.
     """
 
-    carrier_hz: float = STARLINK_PILOT_HZ
-    n_tones: int = STARLINK_N_TONES
-    tone_spacing_hz: float = STARLINK_TONE_SPACING_HZ
+    carrier_hz: float = _DEFAULT.carrier_hz
+    n_tones: int = _DEFAULT.comb.n_tones
+    tone_spacing_hz: float = _DEFAULT.comb.tone_spacing_hz
     amplitudes: tuple | None = None
     phases_rad: tuple | None = None
 
@@ -48,6 +53,14 @@ class PilotComb:
             value = getattr(self, name)
             if value is not None and len(value) != self.n_tones:
                 raise InputError(f"{name} has {len(value)} values, expected n_tones={self.n_tones}")
+
+    @classmethod
+    def of(cls, key):
+        """The pilot comb of the registered family ``key``; InputError when it has none."""
+        fam = family(key)
+        if fam.comb is None:
+            raise InputError(f"constellation {key!r} has no pilot comb in the registry (measurement level only)")
+        return cls(carrier_hz=fam.carrier_hz, n_tones=fam.comb.n_tones, tone_spacing_hz=fam.comb.tone_spacing_hz)
 
     def through_lo(self, lo_offset_hz):
         """The comb as a receiver whose LO is ``lo_offset_hz`` off sees it, for the estimators' tone model.
