@@ -97,7 +97,7 @@ def test_teme_to_ecef_matches_skyfield_itrs_for_real_starlink_over_a_day():
 
     const = read_tle(data_path("tle", "starlink_3le_2026-04-08_Bochika.txt"))
     const = const.subset(np.arange(0, len(const), len(const) // 12))
-    start = dt.datetime(2026, 4, 8, tzinfo=dt.timezone.utc)
+    start = dt.datetime(2026, 4, 8, tzinfo=dt.UTC)
     steps = [start + dt.timedelta(minutes=m) for m in range(0, 24 * 60, 97)]
     times = np.array([np.datetime64(s.replace(tzinfo=None), "ns") for s in steps])
     pos, vel, status = state_ecef(const, times)

@@ -61,7 +61,7 @@ def test_elevation_and_azimuth_match_skyfield(real_subset):
     picks = np.linspace(0, len(vis.epoch_index) - 1, 25).astype(int)
     for k in picks:
         sat = EarthSatellite.from_satrec(real_subset.satrecs[vis.sat_index[k]], ts)
-        when = vis.times_utc[vis.epoch_index[k]].astype("datetime64[us]").item().replace(tzinfo=dt.timezone.utc)
+        when = vis.times_utc[vis.epoch_index[k]].astype("datetime64[us]").item().replace(tzinfo=dt.UTC)
         alt, az, dist = (sat - site).at(ts.from_datetime(when)).altaz()
         # Same SGP4 and Earth rotation model: agreement is limited by UT1
         # interpolation (< 0.2 ms, ~1.5 m at 7.5 km/s) -> < 1e-3 deg at 500 km.

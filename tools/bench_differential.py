@@ -74,7 +74,10 @@ def trial(const, base, t, rovers, sigma_hz, seed):
     """One seed: per case, errors (n, 3), position covariances (n, 3, 3) (n = 1, or the car's blocks), run time."""
     rng = np.random.default_rng(seed)
     err = draw_satellite_errors(const.sat_ids, t[0], rng)
-    clock = lambda: {"clock_offset_hz": rng.normal(0.0, 2e3), "clock_drift_hz_per_s": rng.normal(0.0, 1.0)}
+
+    def clock():
+        return {"clock_offset_hz": rng.normal(0.0, 2e3), "clock_drift_hz_per_s": rng.normal(0.0, 1.0)}
+
     b = simulate_receiver(const, err, base, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock())
     b_off = simulate_receiver(const, err, base, t - np.timedelta64(500, "ms"), rng, sigma_hz=sigma_hz, mask_deg=10.0,
                               **clock())
@@ -89,7 +92,10 @@ def trial(const, base, t, rovers, sigma_hz, seed):
                                       r.t_s, sat, clock="common", pos0_ecef_m=pos + [1.5e3, -1.3e3, 0.0])
             out.append((f"{name} single receiver", (fix.pos_ecef_m - pos)[None], fix.cov[None, :3, :3],
                         time.perf_counter() - tic))
-            short = lambda m: m.take(np.flatnonzero(m.t_s < SHORT_S - 1e-6))
+
+            def short(m):
+                return m.take(np.flatnonzero(m.t_s < SHORT_S - 1e-6))
+
             cases.append((f"differential, first {SHORT_S:g} s", short(b), short(r)))
         for label, base_meas, *rover in cases:
             tic = time.perf_counter()

@@ -78,8 +78,13 @@ def _terms(res, scale, white_scale, unit, white_unit):
 
 def summary(doc):
     g, a = doc["gyro"], doc["accel"]
-    fmt = lambda v: " / ".join(f"{x:.3g}" for x in v)
-    bound = lambda d, key: " / ".join(f"{'' if r else '<= '}{x:.3g}" for x, r in zip(d[key], d["floor_reached"]))
+
+    def fmt(v):
+        return " / ".join(f"{x:.3g}" for x in v)
+
+    def bound(d, key):
+        return " / ".join(f"{'' if r else '<= '}{x:.3g}" for x, r in zip(d[key], d["floor_reached"]))
+
     return "\n".join([
         f"{doc['source']}: {doc['segment_s'][1]:.0f} s at {doc['rate_hz']:.0f} Hz (axes R / F / U)",
         (f"  gyro: ARW {fmt(g['white_density_deg_per_rt_h'])} deg/sqrt(h), bias instability "

@@ -158,22 +158,22 @@ def sun_moon_ecef_m(jd_tt):
     sun = _rot_ecl_to_eq(lam, 0.0 * lam, r_sun, eps)
     d = np.radians
     L0 = d(218.31617 + 481267.88088 * T - 1.3972 * T)
-    l = d(134.96292 + 477198.86753 * T)
+    lm = d(134.96292 + 477198.86753 * T)  # Montenbruck's l (Moon's mean anomaly); lp is his l' (the Sun's)
     lp = d(357.52543 + 35999.04944 * T)
     F = d(93.27283 + 483202.01873 * T)
     D = d(297.85027 + 445267.11135 * T)
-    dlam = (22640 * np.sin(l) + 769 * np.sin(2 * l) - 4586 * np.sin(l - 2 * D) + 2370 * np.sin(2 * D)
-            - 668 * np.sin(lp) - 412 * np.sin(2 * F) - 212 * np.sin(2 * l - 2 * D) - 206 * np.sin(l + lp - 2 * D)
-            + 192 * np.sin(l + 2 * D) - 165 * np.sin(lp - 2 * D) + 148 * np.sin(l - lp) - 125 * np.sin(D)
-            - 110 * np.sin(l + lp) - 55 * np.sin(2 * F - 2 * D)) * _ARCSEC
+    dlam = (22640 * np.sin(lm) + 769 * np.sin(2 * lm) - 4586 * np.sin(lm - 2 * D) + 2370 * np.sin(2 * D)
+            - 668 * np.sin(lp) - 412 * np.sin(2 * F) - 212 * np.sin(2 * lm - 2 * D) - 206 * np.sin(lm + lp - 2 * D)
+            + 192 * np.sin(lm + 2 * D) - 165 * np.sin(lp - 2 * D) + 148 * np.sin(lm - lp) - 125 * np.sin(D)
+            - 110 * np.sin(lm + lp) - 55 * np.sin(2 * F - 2 * D)) * _ARCSEC
     lam_m = L0 + dlam
     beta = (18520 * np.sin(F + lam_m - L0 + (412 * np.sin(2 * F) + 541 * np.sin(lp)) * _ARCSEC)
-            - 526 * np.sin(F - 2 * D) + 44 * np.sin(l + F - 2 * D) - 31 * np.sin(-l + F - 2 * D)
-            - 25 * np.sin(-2 * l + F) - 23 * np.sin(lp + F - 2 * D) + 21 * np.sin(-l + F)
+            - 526 * np.sin(F - 2 * D) + 44 * np.sin(lm + F - 2 * D) - 31 * np.sin(-lm + F - 2 * D)
+            - 25 * np.sin(-2 * lm + F) - 23 * np.sin(lp + F - 2 * D) + 21 * np.sin(-lm + F)
             + 11 * np.sin(-lp + F - 2 * D)) * _ARCSEC
-    r_moon = (385000 - 20905 * np.cos(l) - 3699 * np.cos(2 * D - l) - 2956 * np.cos(2 * D)
-              - 570 * np.cos(2 * l) + 246 * np.cos(2 * l - 2 * D) - 205 * np.cos(lp - 2 * D)
-              - 171 * np.cos(l + 2 * D) - 152 * np.cos(l + lp - 2 * D)) * 1e3
+    r_moon = (385000 - 20905 * np.cos(lm) - 3699 * np.cos(2 * D - lm) - 2956 * np.cos(2 * D)
+              - 570 * np.cos(2 * lm) + 246 * np.cos(2 * lm - 2 * D) - 205 * np.cos(lp - 2 * D)
+              - 171 * np.cos(lm + 2 * D) - 152 * np.cos(lm + lp - 2 * D)) * 1e3
     moon = _rot_ecl_to_eq(lam_m, beta, r_moon, eps)
     jd_ut1 = jd_tt - 69.184 / DAY_S
     theta = gmst1982(np.floor(jd_ut1), jd_ut1 - np.floor(jd_ut1))[0]
@@ -270,7 +270,10 @@ def windup_cycles(pos_sv_ecef_m, pos_rx_ecef_m, sun_ecef_m, lat_rad, lon_rad):
     sl, cl, so, co = np.sin(lat_rad), np.cos(lat_rad), np.sin(lon_rad), np.cos(lon_rad)
     xr = np.array([-so, co, 0.0])            # East
     yr = np.array([-sl * co, -sl * so, cl])  # North
-    dot = lambda a, b: np.sum(a * b, axis=-1, keepdims=True)
+
+    def dot(a, b):
+        return np.sum(a * b, axis=-1, keepdims=True)
+
     Ds = x - k * dot(k, x) - np.cross(k, y)
     Dr = xr - k * dot(k, xr) + np.cross(k, np.broadcast_to(yr, k.shape))
     cosang = dot(Ds, Dr)[..., 0] / (np.linalg.norm(Ds, axis=-1) * np.linalg.norm(Dr, axis=-1))

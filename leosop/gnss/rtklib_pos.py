@@ -67,7 +67,10 @@ class PosSolution:
 def _cov_enu(sd):
     """ENU covariance from RTKLIB's ``sdn sde sdu sdne sdeu sdun`` (signed square roots), (n, 6) -> (n, 3, 3)."""
     sn, se, su, sne, seu, sun = (sd[:, i] for i in range(6))
-    c = lambda x: np.sign(x) * x * x  # RTKLIB stores sgn(c) sqrt|c|
+
+    def c(x):
+        return np.sign(x) * x * x  # RTKLIB stores sgn(c) sqrt|c|
+
     cov = np.empty((sd.shape[0], 3, 3))
     cov[:, 0, 0], cov[:, 1, 1], cov[:, 2, 2] = se**2, sn**2, su**2
     cov[:, 0, 1] = cov[:, 1, 0] = c(sne)
@@ -78,7 +81,10 @@ def _cov_enu(sd):
 
 def _signed_roots(cov):
     """RTKLIB's ``sdn sde sdu sdne sdeu sdun`` of ENU covariances, (n, 3, 3) -> (n, 6)."""
-    r = lambda x: np.sign(x) * np.sqrt(np.abs(x))
+
+    def r(x):
+        return np.sign(x) * np.sqrt(np.abs(x))
+
     return np.stack([np.sqrt(cov[:, 1, 1]), np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 2, 2]),
                      r(cov[:, 0, 1]), r(cov[:, 0, 2]), r(cov[:, 1, 2])], axis=-1)
 
