@@ -21,8 +21,8 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["atomic_path", "atomic_files", "atomic_outputs", "check_input_file", "check_output_file", "check_output_dir", "write_json",
-           "write_csv"]
+__all__ = ["atomic_path", "atomic_files", "atomic_outputs", "check_input_file", "check_output_file", "check_output_dir",
+           "write_json", "write_csv"]
 
 
 def _missing_dirs(directory):

@@ -40,8 +40,8 @@ from ..fileio import check_output_dir, check_output_file, json_ready  # noqa: E4
 from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "doctor", "replay",
-            "study", "ppp", "export", "fuse", "imu")
+COMMANDS = ("visibility", "tle", "position", "simulate", "align", "reproduce", "generate", "doppler", "doctor",
+            "replay", "study", "ppp", "export", "fuse", "imu")
 
 
 class _Parser(argparse.ArgumentParser):

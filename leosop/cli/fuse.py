@@ -306,11 +306,13 @@ def summary(doc):
              + ", ".join(f"{k} {v}" for k, v in doc["aids"].items())]
     for o in doc["outages"]:
         if o["n_ref"]:
-            lines.append(f"  outage {o['start_s']:7.1f} s + {o['duration_s']:4.1f} s: max {o['max_horiz_err_m']:.2f} m, "
-                         f"end {o['end_horiz_err_m']:.2f} m, {o['n_inside_3sigma']}/{o['n_ref']} inside 3 sigma")
+            lines.append(f"  outage {o['start_s']:7.1f} s + {o['duration_s']:4.1f} s: "
+                         f"max {o['max_horiz_err_m']:.2f} m, end {o['end_horiz_err_m']:.2f} m, "
+                         f"{o['n_inside_3sigma']}/{o['n_ref']} inside 3 sigma")
         else:
             lines.append(f"  outage {o['start_s']:7.1f} s + {o['duration_s']:4.1f} s: no reference epoch")
     if doc["mean_max_horiz_err_m"] is not None:
-        lines.append(f"mean of the maxima {doc['mean_max_horiz_err_m']:.2f} m, worst {doc['worst_max_horiz_err_m']:.2f} m, "
+        lines.append(f"mean of the maxima {doc['mean_max_horiz_err_m']:.2f} m, "
+                     f"worst {doc['worst_max_horiz_err_m']:.2f} m, "
                      f"{100 * doc['inside_3sigma_fraction']:.1f} % inside 3 sigma (reference {doc['reference']})")
     return "\n".join(lines)

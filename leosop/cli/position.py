@@ -65,8 +65,9 @@ def register(subparsers):
                    "pass_id; use --static); fll: a GNU Radio frequency-locked-loop log, CSV with "
                    "doppler_offset, timestamp (ISO UTC) and measured_freq columns, of the satellite --sat-id")
     p.add_argument("--sat-id", metavar="ID", help="catalogue number of the satellite of a --format fll log")
-    p.add_argument("meas", metavar="MEAS.csv", help="Doppler measurements: columns time_utc or t_s, sat_id, doppler_hz; optional sigma_hz, carrier_hz, "
-                   "pass_id and the satellite state x_sv_m ... vz_sv_mps")
+    p.add_argument("meas", metavar="MEAS.csv",
+                   help="Doppler measurements: columns time_utc or t_s, sat_id, doppler_hz; "
+                   "optional sigma_hz, carrier_hz, pass_id and the satellite state x_sv_m ... vz_sv_mps")
     p.add_argument("--tle", metavar="FILE", help="element sets for rows without satellite state columns "
                    "(default: the bundled constellation)")
     p.add_argument("--carrier-hz", type=float, metavar="F",

@@ -35,8 +35,8 @@ _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 
 
 def register(subparsers):
-    p = add_command(subparsers, "ppp", sys.modules[__name__], help="PPP, float or ambiguity-fixed, from RINEX 3 observations, SP3 and CLK",
-                    description=_DESCRIPTION)
+    p = add_command(subparsers, "ppp", sys.modules[__name__], description=_DESCRIPTION,
+                    help="PPP, float or ambiguity-fixed, from RINEX 3 observations, SP3 and CLK")
     p.add_argument("obs", metavar="OBS", help="RINEX 3 observation file (plain, .gz or Hatanaka .crx[.gz])")
     p.add_argument("--nav", metavar="NAV", required=True, help="RINEX 3 navigation file of the same day (checked)")
     p.add_argument("--sp3", metavar="SP3", required=True, help="precise orbits, SP3-c/d")

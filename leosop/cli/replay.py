@@ -69,9 +69,9 @@ def register(subparsers):
 
 
 def _track_doc(tr):
-    return {"sat_id": tr.sat_id, "id_status": tr.id_status, "n_blocks": len(tr), "start_utc": format_utc(tr.time_utc[0]),
-            "end_utc": format_utc(tr.time_utc[-1]), "cn0_dbhz": float(np.nanmedian(tr.cn0_dbhz)),
-            "match_rms_hz": tr.match_rms_hz,
+    return {"sat_id": tr.sat_id, "id_status": tr.id_status, "n_blocks": len(tr),
+            "start_utc": format_utc(tr.time_utc[0]), "end_utc": format_utc(tr.time_utc[-1]),
+            "cn0_dbhz": float(np.nanmedian(tr.cn0_dbhz)), "match_rms_hz": tr.match_rms_hz,
             "doppler_hz_start": float(tr.doppler_hz[0]), "doppler_hz_end": float(tr.doppler_hz[-1])}
 
 
@@ -220,7 +220,8 @@ def summary(doc):
     for s in doc["solutions"][:10]:
         sig = s.get("sigma_enu_m") or [None] * 3
         sig_txt = "n/a" if None in sig else "/".join(f"{v:.1f}" for v in sig)
-        lat, lon, alt = (format_or_na(s[k], spec) for k, spec in (("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f")))
+        lat, lon, alt = (format_or_na(s[k], spec)
+                         for k, spec in (("lat_deg", ".6f"), ("lon_deg", ".6f"), ("alt_m", ".1f")))
         lines.append(f"fix {s['time_utc']}: {lat} {lon} {alt} m  "
                      f"sigma E/N/U {sig_txt} m  {s['n_used']} measurements used  {s['status']}")
     if doc["lo_offset_hz"] is not None:
@@ -230,8 +231,9 @@ def summary(doc):
                      f"{doc['lo_offset_max_hz']:g} Hz, +-{doc['lo_drift_max_hz_per_s']:g} Hz/s)")
     if "pss" in doc:
         p = doc["pss"]
+        first = p["frame_start_utc"][0] if p["frame_start_utc"] else "n/a"
         lines.append(f"PSS: {'detected' if p['detected'] else 'not detected'} (metric {p['metric']:.2f}), "
-                     f"{len(p['frame_start_utc'])} frames from {p['frame_start_utc'][0] if p['frame_start_utc'] else 'n/a'}, "
+                     f"{len(p['frame_start_utc'])} frames from {first}, "
                      f"OFDM centre offset {p['doppler_hz']:+.0f} Hz")
     if "differential" in doc:
         d = doc["differential"]
