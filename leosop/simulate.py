@@ -326,7 +326,8 @@ def _constellation(families, tle, span_utc):
         Naming a requested family of which the file holds no satellite.
     """
     if tle is None:
-        parts = [load_constellation()] + ([load_constellation(FAMILIES_TLE)] if set(families) - {DEFAULT_FAMILY} else [])
+        needs_families = bool(set(families) - {DEFAULT_FAMILY})
+        parts = [load_constellation()] + ([load_constellation(FAMILIES_TLE)] if needs_families else [])
         every = Constellation(sum((c.names for c in parts), ()), np.concatenate([c.sat_ids for c in parts]),
                               sum((c.satrecs for c in parts), ()), np.concatenate([c.epochs_utc for c in parts]),
                               "bundled sky")

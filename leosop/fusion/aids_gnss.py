@@ -57,7 +57,10 @@ def zwd_block(options):
 
 
 def ambiguity_block(sv, arc_start_s, b0_m, sigma_m, step_s):
-    """The IF ambiguity [m] of one arc: constant, prior ``b0_m +- sigma_m``, dropped one epoch after its last (a new arc then has a new key)."""
+    """The IF ambiguity [m] of one arc: constant, prior ``b0_m +- sigma_m``.
+
+    Dropped one epoch after the arc's last (a new arc then has a new key).
+    """
     return StateBlock(f"amb {sv} {arc_start_s:.3f}", (float(b0_m),), (float(sigma_m),), (0.0,),
                       drop_after_s=1.5 * step_s)
 
@@ -220,7 +223,10 @@ class PppEpoch(Aid):
         return keep, restart
 
     def rate(self, ins):
-        """``dh/dt`` of the SD rows as the INS moves (satellites fixed): ``-e . v`` for code and phase, 0 for the rate."""
+        """``dh/dt`` of the SD rows as the INS moves (satellites fixed).
+
+        ``-e . v`` for code and phase, 0 for the rate.
+        """
         s = ins.state
         _, _, los, _, C, used, ref = self._rows(ins)
         move = -self._sd(los @ (C @ s.vel_enu_mps), used, ref)

@@ -334,7 +334,10 @@ class _Filter:
             self.feed_back(dx, P)
 
     def feed_back(self, dx, P):
-        """Remove the estimated errors ``dx`` (n_x,) from the INS, sensor and block estimates; ``P`` (n_x, n_x) after."""
+        """Remove the estimated errors ``dx`` (n_x,) from the INS, sensor and block estimates.
+
+        ``P`` (n_x, n_x) is the covariance after the update.
+        """
         self.P = P
         self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
         self.bg = self.bg + dx[EPS]

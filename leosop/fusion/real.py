@@ -107,7 +107,8 @@ class ImuSpec:
 #: Noise models by grade. ``consumer``: a MEMS IMU in a car or a hand (the rtklibexplorer logs), its white
 #: noise raised far above the data sheet's (~0.2 deg/sqrt(h), ~100 ug/sqrt(Hz)) to cover engine vibration,
 #: hand shake and the unmodelled scale factors and misalignments (chosen on the drive: with 1 deg/sqrt(h) and
-#: 1000 ug/sqrt(Hz) only 48 % of the outage errors were inside 3 sigma; tools/bench_fuse.py); the others are typical values of their grades (Groves 2013, section 4.4).
+#: 1000 ug/sqrt(Hz) only 48 % of the outage errors were inside 3 sigma; tools/bench_fuse.py); the others are
+#: typical values of their grades (Groves 2013, section 4.4).
 GRADES = {
     "consumer": ImuSpec(6.0, 3000.0, 0.5, 0.2, 1e-3, 1e-3),
     "industrial": ImuSpec(0.2, 100.0, 0.05, 0.05, 1e-4, 1e-4),
@@ -311,7 +312,8 @@ def _initial(sol, k, t_g, t_start, f_b_mps2, spec, course):
     yaw = math.atan2(-v[0], v[1]) if moving else 0.0
     state = NavState.from_dcm(lat, lon, alt, v, euler_to_dcm(pitch, roll, yaw))
     P = np.zeros((N_INS, N_INS))
-    P[PHI, PHI] = np.diag([math.radians(2.0), math.radians(2.0), course.sigma_rad if moving else math.radians(30.0)]) ** 2
+    sigma_yaw_rad = course.sigma_rad if moving else math.radians(30.0)
+    P[PHI, PHI] = np.diag([math.radians(2.0), math.radians(2.0), sigma_yaw_rad]) ** 2
     P[DV, DV] = (np.eye(3) * 0.1**2 if sol.cov_vel_enu_m2ps2 is None else sol.cov_vel_enu_m2ps2[k]) + np.eye(3) * 1e-4
     J_inv = np.linalg.inv(pos_jacobian(lat, alt))
     P[DPOS, DPOS] = J_inv @ (sol.cov_enu_m2[k] + np.eye(3) * 0.01) @ J_inv.T

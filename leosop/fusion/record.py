@@ -113,5 +113,5 @@ class Recorder:
         """The :class:`EngineResult` at the times ``t_s`` (n,), with the counters and blocks of ``f`` at the end."""
         return EngineResult(t_s, self.pos[:, 0], self.pos[:, 1], self.pos[:, 2], self.vel, self.q, self.sigma,
                             self.cov_pos, self.cov_vel, self.bg, self.ba, self.sg, self.sa, self.td, self.omega,
-                            {k: tuple(v) for k, v in f.counts.items()}, yaw_aligned_s, dict(f.nll), f.blocks.summary(f.P),
-                            self.cov_ins)
+                            {k: tuple(v) for k, v in f.counts.items()}, yaw_aligned_s, dict(f.nll),
+                            f.blocks.summary(f.P), self.cov_ins)

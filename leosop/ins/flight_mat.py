@@ -76,7 +76,7 @@ def read_flight_mat(path, *, C_b_s=None):
     cov = np.broadcast_to(np.diag([sh**2, sh**2, sv**2]), (k.size, 3, 3)).copy()
     gps = PosSolution(_GPS_EPOCH_S + t[k], np.degrees(lla[k, 0]), np.degrees(lla[k, 1]), lla[k, 2],
                       np.full(k.size, Q_SINGLE), np.zeros(k.size, dtype=int), cov,
-                      vel_ned[:, [1, 0, 2]] * [1.0, 1.0, -1.0], np.broadcast_to(np.eye(3) * svel**2, (k.size, 3, 3)).copy(),
-                      str(path))
+                      vel_ned[:, [1, 0, 2]] * [1.0, 1.0, -1.0],
+                      np.broadcast_to(np.eye(3) * svel**2, (k.size, 3, 3)).copy(), str(path))
     attitude = {"t_s": t, **{a: m[a][:, 0].astype(float) for a in ("roll", "pitch", "yaw")}}
     return log, gps, attitude

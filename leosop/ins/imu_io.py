@@ -374,7 +374,8 @@ def read_csv_columns(path, columns, *, C_b_s=np.eye(3), delimiter=",", skip_rows
     for i, line in enumerate(lines):
         fields = line.split(delimiter)
         if len(fields) <= max(idx):
-            raise InputError(f"{path}:{skip_rows + 1 + i}: {len(fields)} column(s); the column map needs {max(idx) + 1}")
+            raise InputError(f"{path}:{skip_rows + 1 + i}: {len(fields)} column(s); "
+                             f"the column map needs {max(idx) + 1}")
         used.append(",".join(fields[j] for j in idx))
     data = _table(path, used, skip_rows + 1, len(idx), ",")
     col = {q: data[:, k] * CSV_COLUMNS[name] for k, (q, name) in enumerate(picks.items())}

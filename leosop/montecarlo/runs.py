@@ -45,10 +45,13 @@ def run_one(scenario, options, tle, seed):
     doc = metrics(result)
     nis, dof = result.nis()
     values = {
-        "fused_pos_err_mean_m": doc["fused"]["pos_err_mean_m"], "fused_vel_err_mean_mps": doc["fused"]["vel_err_mean_mps"],
+        "fused_pos_err_mean_m": doc["fused"]["pos_err_mean_m"],
+        "fused_vel_err_mean_mps": doc["fused"]["vel_err_mean_mps"],
         "fused_pos_err_rms_m": doc["fused"]["pos_err_rms_m"], "fused_availability": doc["fused"]["availability"],
-        "ins_pos_err_mean_m": doc["ins_only"]["pos_err_mean_m"], "ins_vel_err_mean_mps": doc["ins_only"]["vel_err_mean_mps"],
-        "fix_pos_err_mean_m": doc["leo_fix"]["pos_err_mean_m"], "fix_vel_err_mean_mps": doc["leo_fix"]["vel_err_mean_mps"],
+        "ins_pos_err_mean_m": doc["ins_only"]["pos_err_mean_m"],
+        "ins_vel_err_mean_mps": doc["ins_only"]["vel_err_mean_mps"],
+        "fix_pos_err_mean_m": doc["leo_fix"]["pos_err_mean_m"],
+        "fix_vel_err_mean_mps": doc["leo_fix"]["vel_err_mean_mps"],
         "n_fixes": doc["leo_fix"]["n_fixes"], "n_visible_min": doc["visible"]["min"],
         "n_visible_max": doc["visible"]["max"], "gdop_max": doc["gdop"]["max"],
         "nees_per_dim": float(np.nanmean(result.nees()[1:])) / 6.0 if result.fused.updated.any() else None,

@@ -199,7 +199,8 @@ def spec_from_dict(doc, *, source="<dict>", base_dir=Path(".")):
         if not isinstance(tle, str) or not (base_dir / tle).is_file():
             raise InputError(f"{where}: tle: {tle!r} is not a file (paths are relative to the spec)")
         tle = str((base_dir / tle).resolve())
-    fixed = {k: check_value(k, v, f"{where}: fixed.{k}") for k, v in _names(doc.get("fixed", {}), f"{where}: fixed").items()}
+    fixed = {k: check_value(k, v, f"{where}: fixed.{k}")
+             for k, v in _names(doc.get("fixed", {}), f"{where}: fixed").items()}
     params = _names(doc["parameters"], f"{where}: parameters")
     if not params:
         raise InputError(f"{where}: parameters: expected at least one parameter with a list of values")

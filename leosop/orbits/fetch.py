@@ -52,7 +52,8 @@ def fetch_group(group, out_path, *, fmt="tle", base_url=None, timeout_s=30.0):
         raise ExternalError(f"{url}: server answered HTTP {exc.code} {exc.reason}") from None
     except (urllib.error.URLError, OSError) as exc:
         reason = getattr(exc, "reason", exc)
-        raise ExternalError(f"cannot download {url}: {reason} (no network? set LEOSOP_CELESTRAK_URL for a mirror)") from None
+        raise ExternalError(f"cannot download {url}: {reason} "
+                            "(no network? set LEOSOP_CELESTRAK_URL for a mirror)") from None
     text = body.decode("ascii", errors="replace").strip()
     if not text or text.lower().startswith(("invalid query", "no gp data found")):
         raise ExternalError(f"{url}: CelesTrak returned no element sets for group {group!r} ({text[:60]!r})")

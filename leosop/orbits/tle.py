@@ -141,7 +141,8 @@ def parse_tle_lines(lines, source="<text>", *, skip_bad=False):
             _check_line(l2, "2", f"{source}:{n2}")
             if l1[2:7] != l2[2:7]:
                 raise InputError(
-                    f"{source}:{n2}: catalogue number {l2[2:7].strip()} on line 2 differs from {l1[2:7].strip()} on line 1"
+                    f"{source}:{n2}: catalogue number {l2[2:7].strip()} on line 2 "
+                    f"differs from {l1[2:7].strip()} on line 1"
                 )
             try:
                 sat = Satrec.twoline2rv(l1, l2)

@@ -54,7 +54,10 @@ def outage_errors(path, outages, title):
 
 
 def biases(path, res):
-    """Estimated gyro [deg/s] and accelerometer [m/s^2] biases (body Right, Forward, Up) with 1 sigma; IMU time offset."""
+    """Estimated gyro [deg/s] and accelerometer [m/s^2] biases with 1 sigma, and the IMU time offset.
+
+    Bias axes are the body's Right, Forward, Up.
+    """
     plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, height_ratios=(3, 3, 2))
     for ax, est, sig, scale, unit in ((axes[0], res.gyro_bias_rad_per_s, res.sigma[:, 9:12], np.degrees(1.0), "deg/s"),

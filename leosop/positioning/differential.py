@@ -427,7 +427,8 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
             return pred, J, H
         # d(z)/d(offset): the satellite moved by C r and its velocity by W r, seen from rover minus base.
         dH = H - H_base[idx]
-        g = -(np.einsum("pmi,pmij->pmj", dH[..., :3], C_rtn[idx]) + np.einsum("pmi,pmij->pmj", dH[..., 3:6], W_rtn[idx]))
+        g = -(np.einsum("pmi,pmij->pmj", dH[..., :3], C_rtn[idx])
+              + np.einsum("pmi,pmij->pmj", dH[..., 3:6], W_rtn[idx]))
         G = (onehot[idx][..., :, None] * g[..., None, :]).reshape(g.shape[:2] + (n_orb,))
         return pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), np.concatenate([J, G], axis=-1), H
 
@@ -439,8 +440,8 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
                             np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_orb, n_states))], axis=1)
         return pred, J
 
-    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_VEL_MPS] * n_vel, [_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree),
-                           np.full(n_orb, XTOL_POS_M)])
+    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_VEL_MPS] * n_vel, [_XTOL_CLOCK[0]],
+                           _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree), np.full(n_orb, XTOL_POS_M)])
     x0 = np.zeros((n_b, n_states))
     x0[:, :3] = base_pos if pos0_ecef_m is None else np.asarray(pos0_ecef_m, float).reshape(3)
     y_all = np.concatenate([whiten(y_b, np.arange(n_b)), np.zeros((n_b, n_orb))], axis=-1)
@@ -470,7 +471,8 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     used[slots[~pad]] = used_b[~pad]
     residuals[slots[~pad]] = res[~pad]
     return DifferentialFix(
-        pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6] if n_vel else None, clock_poly_hz=x[:, 3 + n_vel:n_lin], t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
+        pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6] if n_vel else None, clock_poly_hz=x[:, 3 + n_vel:n_lin],
+        t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
         status=status, chi2=chi2, chi2_p=chi2_p, dof=dof, n_used=n_used, n_sats=n_sats, iterations=iterations,
         block=block, z_hz=z, sigma_hz=sigma, residuals_hz=residuals, used=used,
         rover_only_sats=tuple(np.setdiff1d(rover.sat_id, base.sat_id).tolist()),
