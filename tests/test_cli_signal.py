@@ -205,7 +205,8 @@ def test_per_satellite_cn0_and_orbit_error(tmp_path, capsys):
     rec = open_sigmf(meta)
     drawn = {s["sat_id"]: s for s in json.loads(meta.read_text())["global"]["leosop:satellites"]}
     for s in doc["satellites"]:  # the draws in the JSON are those in the metadata, and nonzero
-        assert drawn[s["sat_id"]] == s and min(abs(s[f"orbit_error_{k}"]) for k in ("along_m", "radial_m", "cross_m")) > 0
+        assert drawn[s["sat_id"]] == s
+        assert min(abs(s[f"orbit_error_{k}"]) for k in ("along_m", "radial_m", "cross_m")) > 0
     # Three 0.1 s blocks x 3 satellites at the bound; C/N0 within 1 dB (spread ~0.05 dB
     # at 39-45 dB-Hz over 0.1 s; a comb 6 dB stronger in the band lifts the estimator's
     # noise floor by ~0.6 dB).

@@ -66,7 +66,8 @@ def _spec_file(tmp_path, **changes):
 
 def test_montecarlo_netcdf_table_and_figures(tmp_path, capsys):
     out = tmp_path / "mc"
-    code = main(["study", "montecarlo", str(_spec_file(tmp_path)), "--scheduler", "serial", "--json", "--out", str(out)])
+    code = main(["study", "montecarlo", str(_spec_file(tmp_path)), "--scheduler", "serial", "--json",
+                 "--out", str(out)])
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc["n_runs"] == 12 and doc["n_chunks"] == 3 and doc["n_chunks_resumed"] == 0
     with xr.open_dataset(out / "montecarlo.nc", engine="scipy") as ds:

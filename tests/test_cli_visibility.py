@@ -52,8 +52,8 @@ def test_json_contract_and_outputs(tmp_path, capsys):
 
 
 def test_default_start_is_the_median_element_set_epoch_to_the_minute(capsys):
-    # The bundled set (starlink_walker.tle) has every epoch at 2025-01-01T00:00Z (tle info says so); a median in the wrong
-    # datetime unit once put the start in 2111.
+    # The bundled set (starlink_walker.tle) has every epoch at 2025-01-01T00:00Z (tle info says so); a median in the
+    # wrong datetime unit once put the start in 2111.
     code = main(["visibility", "--duration-s", "60", "--step-s", "60", "--json"])
     assert code == 0
     assert json.loads(capsys.readouterr().out)["start_utc"] == "2025-01-01T00:00:00.000000Z"

@@ -94,7 +94,8 @@ def test_pair_shares_satellite_errors(pair):
 def test_differential_fix_from_signal(pair, capsys, tmp_path):
     rover, base, _, _ = pair
     code, doc, err = _replay(capsys, str(rover), "--base", str(base), "--base-site", ",".join(map(str, BASE)),
-                             "--tle", str(pair[3]), "--init", "34.3,108.9,0", "--static", "--out", str(tmp_path / "out"))
+                             "--tle", str(pair[3]), "--init", "34.3,108.9,0", "--static",
+                             "--out", str(tmp_path / "out"))
     assert code == 0, err
     d = doc["differential"]
     assert d["n_common"] >= 7 and d["base_only"] == [] and d["rover_only"] == []

@@ -53,7 +53,8 @@ def test_model15_matches_jacobian_of_navigation_equations():
     for k in range(15):
         dx = np.zeros(15)
         dx[k] = scale[k]
-        J[:, k] = (_error_rate(dx, C_t, v_t, p_t, w_t, f_t) - _error_rate(-dx, C_t, v_t, p_t, w_t, f_t)) / (2 * scale[k])
+        J[:, k] = ((_error_rate(dx, C_t, v_t, p_t, w_t, f_t) - _error_rate(-dx, C_t, v_t, p_t, w_t, f_t))
+                   / (2 * scale[k]))
     blocks = [em.PHI, em.DV, em.DPOS, em.EPS, em.NABLA]
     for rows in blocks[:3]:
         for cols in blocks:

@@ -38,7 +38,8 @@ def test_truth_holds_the_common_lo(pair, capsys):
     for a, b in zip(clean.annotations, lo.annotations):
         assert a["leosop:sat_id"] == b["leosop:sat_id"]
         t = b["leosop:t_s"]
-        assert b["leosop:doppler_hz"] - a["leosop:doppler_hz"] == pytest.approx(OFFSET_HZ + DRIFT_HZ_PER_S * t, abs=1e-6)
+        assert b["leosop:doppler_hz"] - a["leosop:doppler_hz"] == pytest.approx(OFFSET_HZ + DRIFT_HZ_PER_S * t,
+                                                                                abs=1e-6)
         assert b["leosop:doppler_rate_hz_per_s"] - a["leosop:doppler_rate_hz_per_s"] == pytest.approx(
             DRIFT_HZ_PER_S, abs=1e-6)
 

@@ -1,4 +1,7 @@
-"""Ambiguity-fixed PPP on the real ESBC00DNK day against its ITRF2014 coordinate; ANTEX strictness; MW arc statistics."""
+"""Ambiguity-fixed PPP on the real ESBC00DNK day against its ITRF2014 coordinate.
+
+Also ANTEX strictness and MW arc statistics.
+"""
 
 import dataclasses
 import json

@@ -1,4 +1,6 @@
-"""Loose coupling (the fix aids of fusion/aids_fix.py in the engine): measurement model round trip, consistency, bias recovery, gaps, correction period.
+"""Loose coupling (the fix aids of fusion/aids_fix.py in the engine).
+
+Measurement model round trip, consistency, bias recovery, gaps, correction period.
 
 The truth is a short straight flight of the [Shen 2024] kind; fixes are the
 truth plus white Gaussian errors drawn from the covariance handed to the

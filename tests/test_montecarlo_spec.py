@@ -75,7 +75,8 @@ def test_grid_cells_and_scenarios():
     assert cells[1] == {"level": "measurement", "cn0_dbhz": 35.0, "imu_grade": "mems"}  # C order, fixed included
     scenario, options = apply(XIAN_BAOJI, cells[1], "test")
     assert options == {"level": "measurement"}
-    assert scenario.leo.cn0_dbhz == 35.0 and scenario.imu.gyro_bias_deg_per_h == IMU_GRADES["mems"]["gyro_bias_deg_per_h"]
+    assert scenario.leo.cn0_dbhz == 35.0
+    assert scenario.imu.gyro_bias_deg_per_h == IMU_GRADES["mems"]["gyro_bias_deg_per_h"]
     assert scenario.imu.rate_hz == XIAN_BAOJI.imu.rate_hz and scenario.waypoints == XIAN_BAOJI.waypoints
 
 

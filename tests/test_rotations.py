@@ -8,7 +8,8 @@ from leosop import rotations as rot
 def test_euler_convention_closed_forms():
     forward, right = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
     # Pitch up 30 deg: the nose rises.
-    np.testing.assert_allclose(rot.euler_to_dcm(np.radians(30), 0, 0) @ forward, [0, np.cos(np.pi / 6), 0.5], atol=1e-15)
+    np.testing.assert_allclose(rot.euler_to_dcm(np.radians(30), 0, 0) @ forward, [0, np.cos(np.pi / 6), 0.5],
+                               atol=1e-15)
     # Roll 30 deg right wing down.
     np.testing.assert_allclose(rot.euler_to_dcm(0, np.radians(30), 0) @ right, [np.cos(np.pi / 6), 0, -0.5], atol=1e-15)
     # Yaw +90 (counter-clockwise) points the nose West: heading 270 deg.

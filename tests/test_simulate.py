@@ -115,7 +115,8 @@ def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
         state = strapdown.NavState.from_dcm(truth.lat_rad[k], truth.lon_rad[k], truth.alt_m[k],
                                             truth.vel_enu_mps[k], np.eye(3))
         zeros = np.zeros(3)
-        z, H, R = aid.matrices(InsView(state, zeros, zeros, zeros, states={b.key: np.zeros(b.size) for b in aid.states}))
+        zero_states = {b.key: np.zeros(b.size) for b in aid.states}
+        z, H, R = aid.matrices(InsView(state, zeros, zeros, zeros, states=zero_states))
         n_res = rows.size - 8
         assert z.shape == (6 + 2 + n_res,) and H.shape == (z.size, N_INS + x_true.size) and R.shape == (z.size, z.size)
         np.testing.assert_allclose(np.sum(z[8:] ** 2), fixes.chi2[k], rtol=1e-6)

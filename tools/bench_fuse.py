@@ -60,7 +60,10 @@ OUTAGE_LENGTHS_S = (15.0, 30.0)
 
 
 def schedule(duration_s, start_s, end_s, length_s):
-    """GNSS_IMU's outages: ``length_s`` long from ``start_s``, one every ``3 length_s``, cut at ``duration_s - end_s``."""
+    """GNSS_IMU's outages: ``length_s`` long from ``start_s``, one every ``3 length_s``.
+
+    The schedule is cut at ``duration_s - end_s``.
+    """
     last = duration_s - end_s
     return tuple((s, min(length_s, last - s)) for s in np.arange(start_s, last, 3 * length_s))
 
@@ -202,11 +205,12 @@ def leo_rows(args):
             row["mean_ratio"] = row["leo_mean_m"] / row["gnss_mean_m"]
             rows.append(row)
             if not args.json:
-                print(f"{name:5s} {length:4.0f} s x{row['n_outages']:2d}: GNSS-only mean {row['gnss_mean_m']:6.2f} m worst "
-                      f"{row['gnss_worst_m']:6.2f} m | +LEO sim mean {row['leo_mean_m']:6.2f} m worst "
-                      f"{row['leo_worst_m']:6.2f} m | ratio {row['mean_ratio']:.3f} | inside 3 sigma "
-                      f"{100 * row['gnss_inside_3sigma']:.0f} % / {100 * row['leo_inside_3sigma']:.0f} % | LEO run "
-                      f"{row['leo_runtime_s']:.1f} s ({row['leo_runtime_s'] / row['log_s']:.3f} x log)", flush=True)
+                print(f"{name:5s} {length:4.0f} s x{row['n_outages']:2d}: "
+                      f"GNSS-only mean {row['gnss_mean_m']:6.2f} m worst {row['gnss_worst_m']:6.2f} m | "
+                      f"+LEO sim mean {row['leo_mean_m']:6.2f} m worst {row['leo_worst_m']:6.2f} m | "
+                      f"ratio {row['mean_ratio']:.3f} | inside 3 sigma {100 * row['gnss_inside_3sigma']:.0f} % / "
+                      f"{100 * row['leo_inside_3sigma']:.0f} % | LEO run {row['leo_runtime_s']:.1f} s "
+                      f"({row['leo_runtime_s'] / row['log_s']:.3f} x log)", flush=True)
     if args.json:
         print(json.dumps(rows, indent=2))
 

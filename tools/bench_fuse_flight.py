@@ -60,12 +60,12 @@ def gps_lag_s(log, gps, attitude, *, lags_s=LAGS_S):
 
     The specific force is put in North-East-Down by the MIDG II attitude; in flight (360-820 s), on a 0.1 s grid.
     """
-    r, p, y = (np.interp(log.t_s, attitude["t_s"], np.unwrap(np.radians(attitude[k]))) for k in ("roll", "pitch", "yaw"))
+    r, p, y = (np.interp(log.t_s, attitude["t_s"], np.unwrap(np.radians(attitude[k])))
+               for k in ("roll", "pitch", "yaw"))
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    f_frd = np.stack([log.accel_mps2[:, 1], log.accel_mps2[:, 0], -log.accel_mps2[:, 2]], axis=-1)
-    f_n = np.stack([cp * cy * f_frd[:, 0] + (sr * sp * cy - cr * sy) * f_frd[:, 1] + (cr * sp * cy + sr * sy) * f_frd[:, 2],
-                    cp * sy * f_frd[:, 0] + (sr * sp * sy + cr * cy) * f_frd[:, 1] + (cr * sp * sy - sr * cy) * f_frd[:, 2]],
-                   axis=-1)
+    f_fwd, f_rgt, f_dwn = log.accel_mps2[:, 1], log.accel_mps2[:, 0], -log.accel_mps2[:, 2]
+    f_n = np.stack([cp * cy * f_fwd + (sr * sp * cy - cr * sy) * f_rgt + (cr * sp * cy + sr * sy) * f_dwn,
+                    cp * sy * f_fwd + (sr * sp * sy + cr * cy) * f_rgt + (cr * sp * sy - sr * cy) * f_dwn], axis=-1)
     grid = np.arange(360.0, 820.0, 0.1)
     a_imu = np.stack([np.interp(grid, log.t_s, f_n[:, c]) for c in range(2)], axis=-1)
     tg = gps.t_gpst_s - log.epoch_gpst_s  # the file's clock, that of log.t_s and attitude["t_s"]
@@ -96,7 +96,8 @@ def _attitude_rms_deg(res, attitude, t_offset_s, span):
     pitch, roll, yaw = dcm_to_euler(quat_to_dcm(res.q_n_b))
     sel = (res.t_s >= span[0]) & (res.t_s < span[1])
     out = {}
-    for name, ours, ref in (("roll", np.degrees(roll), attitude["roll"]), ("pitch", np.degrees(pitch), attitude["pitch"]),
+    for name, ours, ref in (("roll", np.degrees(roll), attitude["roll"]),
+                            ("pitch", np.degrees(pitch), attitude["pitch"]),
                             ("heading", np.degrees(heading_from_yaw(yaw)), attitude["yaw"])):
         r = np.interp(res.t_s[sel], attitude["t_s"] - t_offset_s, np.unwrap(ref, period=360.0))
         out[name] = float(np.sqrt(np.mean(((ours[sel] - r + 180.0) % 360.0 - 180.0) ** 2)))
@@ -128,7 +129,8 @@ def main(argv=None):
                                       arw_rad_per_rt_s=float(ga.white_density.max()),
                                       vrw_mps_per_rt_s=float(aa.white_density.max()))
     spec = real.GRADES["consumer"]
-    cf60_spec, _ = closed_form_drift_m(60.0, tilt_rad=tilt, gyro_bias_rad_per_s=math.radians(spec.gyro_bias_sigma_deg_per_s),
+    cf60_spec, _ = closed_form_drift_m(60.0, tilt_rad=tilt,
+                                       gyro_bias_rad_per_s=math.radians(spec.gyro_bias_sigma_deg_per_s),
                                        accel_bias_mps2=spec.accel_bias_sigma_mps2,
                                        arw_rad_per_rt_s=math.radians(spec.gyro_arw_deg_per_rt_h) / 60.0,
                                        vrw_mps_per_rt_s=spec.accel_vrw_ug_per_rt_hz * 1e-6 * G)
@@ -145,7 +147,8 @@ def main(argv=None):
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
-        print(f"GPS lag behind the IMU (MIDG II attitude): {lag:+.1f} s; yaw from the course at {doc['yaw_aligned_s']:.1f} s; "
+        print(f"GPS lag behind the IMU (MIDG II attitude): {lag:+.1f} s; "
+              f"yaw from the course at {doc['yaw_aligned_s']:.1f} s; "
               f"run {runtime:.1f} s ({runtime / doc['log_s']:.3f} x the log)")
         print("aided flight {}-{} s, RMS against MIDG II: roll {roll:.2f}, pitch {pitch:.2f}, heading {heading:.2f} deg"
               .format(*AIDED_FLIGHT_S, **att))
@@ -155,7 +158,8 @@ def main(argv=None):
         for o in errs:
             print(f"  outage {o['start_s']:.0f}+{o['duration_s']:.0f} s: max {o['max_horiz_err_m']:7.1f} m, end "
                   f"{o['end_horiz_err_m']:7.1f} m, inside 3 sigma {o['n_inside_3sigma']}/{o['n_ref']}")
-        print(f"mean of the maxima {doc['mean_max_horiz_err_m']:.1f} m; inside 3 sigma {100 * doc['inside_3sigma']:.0f} %")
+        print(f"mean of the maxima {doc['mean_max_horiz_err_m']:.1f} m; "
+              f"inside 3 sigma {100 * doc['inside_3sigma']:.0f} %")
     if args.figure:
         _figure(args.figure, errs, lambda t: closed_form_drift_m(t, tilt_rad=tilt,
                 gyro_bias_rad_per_s=float(ga.bias_instability.max()), accel_bias_mps2=float(aa.bias_instability.max()),

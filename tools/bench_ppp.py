@@ -78,8 +78,9 @@ def main():
                 k = np.flatnonzero(ok & (tsec < 3600 * h))
                 if len(k) and tsec[k[-1]] >= 3600 * h - 1200:
                     e_enu, s_enu = C.T @ err[k[-1]], res.sigma_enu_m[k[-1]]
-                    print(f"        at {h:2d} h: ENU error {np.round(100 * e_enu, 1).tolist()} cm, sigma "
-                          f"{np.round(100 * s_enu, 2).tolist()} cm, |error|/sigma {np.round(np.abs(e_enu) / s_enu, 1).tolist()}")
+                    print(f"        at {h:2d} h: ENU error {np.round(100 * e_enu, 1).tolist()} cm, "
+                          f"sigma {np.round(100 * s_enu, 2).tolist()} cm, "
+                          f"|error|/sigma {np.round(np.abs(e_enu) / s_enu, 1).tolist()}")
         else:
             sel = ok & (tsec >= 60 * a.converge_min)
             enu = err[sel] @ C

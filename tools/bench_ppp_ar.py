@@ -158,8 +158,8 @@ def main():
         i = np.flatnonzero(ok & (t_s < 3600 * h))
         if i.size and t_s[i[-1]] >= 3600 * h - 600:
             i = i[-1]
-            print(f"        at {h:2d} h: 3-D {100 * np.linalg.norm(e[i]):.2f} cm ({'fixed' if res.fixed[i] else 'float'})"
-                  f", ENU {np.round(100 * C.T @ e[i], 2).tolist()} cm")
+            print(f"        at {h:2d} h: 3-D {100 * np.linalg.norm(e[i]):.2f} cm "
+                  f"({'fixed' if res.fixed[i] else 'float'}), ENU {np.round(100 * C.T @ e[i], 2).tolist()} cm")
 
     res, t_s, dt = run(obs, False)
     ok = np.isfinite(res.pos_ecef_m).all(axis=1)

@@ -27,7 +27,8 @@ one: ``python -m pip install --target /tmp/cssr_site --no-deps cssrlib==1.2.1`` 
 numpy, scipy and bitstruct, which are here) and ``--cssrlib-path /tmp/cssr_site``.
 
 With ``--ar`` both get the day's ANTEX subset (satellite and receiver antennas; the satellites without a
-block are left out by both; the IGS14 satellite blocks have no PCV rows, zero in both) and fix ambiguities: leosop its wide-lane/narrow-lane fixing with the GRG
+block are left out by both; the IGS14 satellite blocks have no PCV rows, zero in both) and fix ambiguities:
+leosop its wide-lane/narrow-lane fixing with the GRG
 integer clocks and the clock file's wide-lane biases (``leosop.gnss.ar``); cssrlib its own
 (``armode = 1``, partial fixing, LAMBDA on the between-satellite single differences of the *uncombined*
 L1 and L2 ambiguities), which needs per-signal phase biases (Bias-SINEX or SSR) that the GRG set does not

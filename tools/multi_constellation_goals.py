@@ -17,8 +17,8 @@ leosop.studies), and prints
   dimension (goal 0.5-2), NIS per degree of freedom with its 99 % interval,
   lag-1 correlation of the whitened innovations with its null 3-sigma bound.
 
-Usage: LEOSOP_DATA=../shared/data OPENBLAS_NUM_THREADS=1 python tools/multi_constellation_goals.py [--seeds 20] [--scheduler serial]
-       [--only high-latitude xian-baoji-multi outage urban-canyon]
+Usage: LEOSOP_DATA=../shared/data OPENBLAS_NUM_THREADS=1 python tools/multi_constellation_goals.py
+       [--seeds 20] [--scheduler serial] [--only high-latitude xian-baoji-multi outage urban-canyon]
 """
 
 import argparse

@@ -10,7 +10,8 @@ sliding windows of N consecutive passes; errors against the station, the
 posterior sigma and their ratio; without the per-pass time offsets of the
 satellite states (along-track errors of the element sets), then with them
 (the default, prior TIME_OFFSET_SIGMA_S). ``--windows ''`` and
-``--no-single`` shorten the run (the full one takes ~10 min). FOX-1D: the trimmed pass with each candidate catalogue number.
+``--no-single`` shorten the run (the full one takes ~10 min). FOX-1D: the
+trimmed pass with each candidate catalogue number.
 GSDC: snapshot velocity, clock drift and position, and a static fix.
 ``--export DIR`` also writes each data set as a DESIGN 4.3 table (plus the
 element sets) so that ``leosop position`` can be run on them.
@@ -90,7 +91,8 @@ def fix_passes(passes, **kw):
         return first
     starts = np.vstack([first.pos_ecef_m] + [first.mirror_pos_ecef_m] * bool(np.isfinite(first.mirror_chi2)))
     meas = doptrack_table(passes, first.pos_ecef_m)
-    again = position_static_passes(meas, meas.pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=starts, **kw).fixes
+    again = position_static_passes(meas, meas.pass_id, alt_m=passes[0].station_alt_m, init_pos_ecef_m=starts,
+                                   **kw).fixes
     return again if np.isfinite(again.pos_ecef_m).all() else first
 
 

@@ -76,7 +76,8 @@ def main():
     good.sort(key=lambda r: (-r[0], abs(r[1] - 30)))
     print("start_utc                       frac>=7 outside  s<7 inside  min  mean")
     for frac_out, low_inside, start, n in good[:15]:
-        print(f"{np.datetime_as_string(start, unit='s')}Z  {frac_out:14.3f}  {low_inside:10d}  {n.min():3d}  {n.mean():5.2f}")
+        print(f"{np.datetime_as_string(start, unit='s')}Z  {frac_out:14.3f}  {low_inside:10d}  "
+              f"{n.min():3d}  {n.mean():5.2f}")
 
 
 if __name__ == "__main__":
