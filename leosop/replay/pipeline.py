@@ -63,6 +63,12 @@ TRACK_REFINE = 1
 #: more than this many cycles over a block: a tone then loses at most
 #: (pi x)^2 / 3 of its power, 0.03 % at 0.01 (5 kHz in 20 ms blocks is below).
 LO_REFIT_CYCLES = 0.01
+#: A continuous recording's tracking blocks fit the tone model through the median Doppler of the first
+#: full search's combs when it is beyond this [Hz] (:func:`rough_lo_hz`): satellites' Doppler alone
+#: rarely puts the median of a handful of combs this far from 0 Hz.
+ROUGH_LO_MIN_HZ = 0.5 * MAX_DOPPLER_HZ
+#: Combs a full search must find for :func:`rough_lo_hz` to take their median.
+ROUGH_LO_MIN_COMBS = 3
 #: Radius searched round the first identification's position when the
 #: refitted tracks are identified again [m]: that position is good to ~1-2 km.
 REFIT_PRIOR_RADIUS_M = 20e3
@@ -227,6 +233,35 @@ def _correct_rate_change(track, n_samples, fs):
         return
     accel = np.gradient(track.doppler_rate_hz_per_s, track.t_s)
     track.doppler_hz = track.doppler_hz - cubic_bias_hz(accel, n_samples, fs)
+
+
+def rough_lo_hz(doppler_hz):
+    """The LO offset a continuous recording's tracking blocks fit their tone model through, from one full search.
+
+    The Doppler-only tone model misplaces a comb's edge tones by 15 Hz at a
+    1 MHz LO offset, a cycle and a half over a 0.1 s block: tracked combs
+    lose most of their edge tones' power, fall below the detector and their
+    tracks break up, and no refit (:func:`refit_through_lo`) brings back a
+    detection the first pass did not make. The median of the combs'
+    Dopplers is the offset to ~100 kHz (their geometric parts spread
+    +-200 kHz round it), which leaves the edge tones within 1.5 Hz.
+
+    Parameters
+    ----------
+    doppler_hz : ndarray, (n_combs,)
+        The combs of a full search.
+
+    Returns
+    -------
+    float or None
+        The median when it lies beyond :data:`ROUGH_LO_MIN_HZ`, else 0 (the
+        Doppler-only model); None with fewer than :data:`ROUGH_LO_MIN_COMBS`
+        combs (the next full search tries again).
+    """
+    if len(doppler_hz) < ROUGH_LO_MIN_COMBS:
+        return None
+    median = float(np.median(doppler_hz))
+    return median if abs(median) > ROUGH_LO_MIN_HZ else 0.0
 
 
 def refit_through_lo(rec, tracks, blocks, factor, comb, lo):
@@ -431,6 +466,9 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     spec_t, spec = [], []
     block_len = {}
     n_last = 0  # combs found in the last block
+    lo_rough = None  # the tracking blocks' tone-model LO offset, from the first full search (rough_lo_hz)
+    # Central tones within the band (BAND_MARGIN off its edges), as search_band's.
+    band_hz = (0.5 - BAND_MARGIN) * fs - float(np.max(np.abs(comb.offsets_hz)))
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
         # NaN/inf samples: find_combs sees them in the block's FFT (every bin turns NaN), which
         # spares read() a pass over the samples (~5 % of the streaming time).
@@ -439,17 +477,24 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
         contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
         pred = tracker.predictions(b.t_s) if contiguous else None
+        # Following blocks of a continuous recording fit the tone model through the rough LO offset, the
+        # search centred on it as far either side as the band allows (snapshots: the refit does it).
+        lo = (lo_rough or 0.0) if contiguous else 0.0
+        span = min(max_doppler, band_hz - abs(lo))
         try:
             if pred is None:
                 # After a birth the combs of the last block are searched for again, with as many new.
                 n_known = n_last if contiguous else 0
-                found = find_combs(iq, fs, comb=comb, max_doppler_hz=max_doppler, max_combs=n_known + MAX_NEW_COMBS)
+                found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
+                                   lo_offset_hz=lo)
+                if lo_rough is None:
+                    lo_rough = rough_lo_hz(found.doppler_hz)
             else:
                 # Every SEARCH_EVERY-th block also searches the spectrum for new
                 # combs, with the tracked ones fitted first and removed.
                 search = k % SEARCH_EVERY == 0
                 found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=max_doppler,
+                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
                                    max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE)
         except NonFiniteSamples:
             raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
