@@ -32,7 +32,7 @@ from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
-from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate, rough_lo_hz
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -63,12 +63,6 @@ TRACK_REFINE = 1
 #: more than this many cycles over a block: a tone then loses at most
 #: (pi x)^2 / 3 of its power, 0.03 % at 0.01 (5 kHz in 20 ms blocks is below).
 LO_REFIT_CYCLES = 0.01
-#: A continuous recording's tracking blocks fit the tone model through the median Doppler of the first
-#: full search's combs when it is beyond this [Hz] (:func:`rough_lo_hz`): satellites' Doppler alone
-#: rarely puts the median of a handful of combs this far from 0 Hz.
-ROUGH_LO_MIN_HZ = 0.5 * MAX_DOPPLER_HZ
-#: Combs a full search must find for :func:`rough_lo_hz` to take their median.
-ROUGH_LO_MIN_COMBS = 3
 #: Radius searched round the first identification's position when the
 #: refitted tracks are identified again [m]: that position is good to ~1-2 km.
 REFIT_PRIOR_RADIUS_M = 20e3
@@ -233,35 +227,6 @@ def _correct_rate_change(track, n_samples, fs):
         return
     accel = np.gradient(track.doppler_rate_hz_per_s, track.t_s)
     track.doppler_hz = track.doppler_hz - cubic_bias_hz(accel, n_samples, fs)
-
-
-def rough_lo_hz(doppler_hz):
-    """The LO offset a continuous recording's tracking blocks fit their tone model through, from one full search.
-
-    The Doppler-only tone model misplaces a comb's edge tones by 15 Hz at a
-    1 MHz LO offset, a cycle and a half over a 0.1 s block: tracked combs
-    lose most of their edge tones' power, fall below the detector and their
-    tracks break up, and no refit (:func:`refit_through_lo`) brings back a
-    detection the first pass did not make. The median of the combs'
-    Dopplers is the offset to ~100 kHz (their geometric parts spread
-    +-200 kHz round it), which leaves the edge tones within 1.5 Hz.
-
-    Parameters
-    ----------
-    doppler_hz : ndarray, (n_combs,)
-        The combs of a full search.
-
-    Returns
-    -------
-    float or None
-        The median when it lies beyond :data:`ROUGH_LO_MIN_HZ`, else 0 (the
-        Doppler-only model); None with fewer than :data:`ROUGH_LO_MIN_COMBS`
-        combs (the next full search tries again).
-    """
-    if len(doppler_hz) < ROUGH_LO_MIN_COMBS:
-        return None
-    median = float(np.median(doppler_hz))
-    return median if abs(median) > ROUGH_LO_MIN_HZ else 0.0
 
 
 def refit_through_lo(rec, tracks, blocks, factor, comb, lo):
