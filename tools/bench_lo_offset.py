@@ -16,8 +16,11 @@ front end) is always replayed first. Reported per run:
   is not within 20 Hz); satellites with a true track (``sats``) and those
   identified (``s_id``: a fragment of a satellite's track is ``duplicate``
   when a longer track of it is identified);
-- the static fix's horizontal and 3-D error and its ratio to the same
-  kind's clean recording with the same search (``x_zero``);
+- the static fix's horizontal and 3-D error, its 3-D sigma (``sig3d_m``,
+  from the fix's covariance: the error to judge it by, as the recordings
+  share their satellites' orbit errors and a few metres of ratio to the
+  clean one say little) and its ratio to the same kind's clean recording
+  with the same search (``x_zero``);
 - ``img``: tracks that are no satellite's but mirror one about 0 Hz (an IQ
   imbalance's image of its comb at minus its Doppler, within 20 Hz);
 - the estimated offset and drift minus the truth. The truth offset is the
@@ -142,7 +145,7 @@ def main(argv=None):
                                        if (o, d, args.front_end) != (0.0, 0.0, "none")]
     runs += [(0.0, 0.0, "none", imp) for imp in args.impair]
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
-          f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} "
+          f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} "
           f"{'sig_hz':>6} {'sig_sep':>7} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
@@ -162,6 +165,7 @@ def main(argv=None):
                 err = np.full(3, np.nan) if fix is None else fix.pos_ecef_m - site
                 enu = C_e_n(*ecef_to_geodetic(site)[:2]).T @ err
                 err3d, horiz = float(np.linalg.norm(err)), float(np.hypot(enu[0], enu[1]))
+                sig3d = np.nan if fix is None else float(np.sqrt(np.trace(fix.cov[:3, :3])))
                 ratio = err3d / base.setdefault((kind, name), err3d)
                 ids = [tr.sat_id for tr in res.tracks if tr.sat_id is not None]
                 true_off = np.mean([clock[s] for s in ids]) if ids else np.nan
@@ -171,7 +175,7 @@ def main(argv=None):
                 status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
                 print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
                       f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} {err3d:8.1f} "
-                      f"{ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} {_separable_sigma_hz(fix):7.2f} {d_drift:8.4f} "
+                      f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} {_separable_sigma_hz(fix):7.2f} {d_drift:8.4f} "
                       f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
 
 

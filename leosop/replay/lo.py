@@ -12,13 +12,20 @@ What is estimated is the common part of all tracks' frequency offsets: the
 satellites' own offsets (0-5 Hz for Starlink, [Shen 2024] Table 1) have a
 zero-mean prior, so their mean is not separable from the receiver's and
 is in the estimate.
+
+Before identification, a continuous recording's tracking blocks fit the
+tone model through a rough offset, the median Doppler of the first full
+search's combs (:func:`rough_lo_hz`).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "LoEstimate", "lo_estimate"]
+from ..signal.coarse import MAX_DOPPLER_HZ
+
+__all__ = ["LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "ROUGH_LO_MIN_COMBS", "ROUGH_LO_MIN_HZ", "LoEstimate",
+           "lo_estimate", "rough_lo_hz"]
 
 #: Default bound of the receiver's common offset searched [Hz]: PLL LNBs are within ~+-25 ppm of
 #: 10.6-10.75 GHz at the worst (+-270 kHz); typical ones within a few ppm (tens of kHz). Free-running
@@ -26,6 +33,13 @@ __all__ = ["LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "LoEstimate", "lo_estima
 LO_OFFSET_MAX_HZ = 100e3
 #: Default bound of the common offset's drift [Hz/s]: an LNB warming up drifts tens of Hz/s.
 LO_DRIFT_MAX_HZ_PER_S = 50.0
+
+#: A continuous recording's tracking blocks fit the tone model through the median Doppler of the first
+#: full search's combs when it is beyond this [Hz] (:func:`rough_lo_hz`): satellites' Doppler alone
+#: rarely puts the median of a handful of combs this far from 0 Hz.
+ROUGH_LO_MIN_HZ = 0.5 * MAX_DOPPLER_HZ
+#: Combs a full search must find for :func:`rough_lo_hz` to take their median.
+ROUGH_LO_MIN_COMBS = 3
 
 
 @dataclass(frozen=True)
@@ -79,3 +93,32 @@ def lo_estimate(identification, position=None, measurements=None):
     ident = identification
     return LoEstimate(ident.lo_offset_hz, ident.lo_offset_sigma_hz, ident.lo_drift_hz_per_s,
                       ident.lo_drift_sigma_hz_per_s, ident.t_ref_utc, "identification")
+
+
+def rough_lo_hz(doppler_hz):
+    """The LO offset a continuous recording's tracking blocks fit their tone model through, from one full search.
+
+    The Doppler-only tone model misplaces a comb's edge tones by 15 Hz at a
+    1 MHz LO offset, a cycle and a half over a 0.1 s block: tracked combs
+    lose most of their edge tones' power, fall below the detector and their
+    tracks break up, and no refit (:func:`~leosop.replay.pipeline.refit_through_lo`) brings back a
+    detection the first pass did not make. The median of the combs'
+    Dopplers is the offset to ~100 kHz (their geometric parts spread
+    +-200 kHz round it), which leaves the edge tones within 1.5 Hz.
+
+    Parameters
+    ----------
+    doppler_hz : ndarray, (n_combs,)
+        The combs of a full search.
+
+    Returns
+    -------
+    float or None
+        The median when it lies beyond :data:`ROUGH_LO_MIN_HZ`, else 0 (the
+        Doppler-only model); None with fewer than :data:`ROUGH_LO_MIN_COMBS`
+        combs (the next full search tries again).
+    """
+    if len(doppler_hz) < ROUGH_LO_MIN_COMBS:
+        return None
+    median = float(np.median(doppler_hz))
+    return median if abs(median) > ROUGH_LO_MIN_HZ else 0.0

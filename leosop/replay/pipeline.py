@@ -32,7 +32,7 @@ from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
-from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate, rough_lo_hz
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -431,6 +431,9 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     spec_t, spec = [], []
     block_len = {}
     n_last = 0  # combs found in the last block
+    lo_rough = None  # the tracking blocks' tone-model LO offset, from the first full search (rough_lo_hz)
+    # Central tones within the band (BAND_MARGIN off its edges), as search_band's.
+    band_hz = (0.5 - BAND_MARGIN) * fs - float(np.max(np.abs(comb.offsets_hz)))
     for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
         # NaN/inf samples: find_combs sees them in the block's FFT (every bin turns NaN), which
         # spares read() a pass over the samples (~5 % of the streaming time).
@@ -439,17 +442,24 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
         contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
         pred = tracker.predictions(b.t_s) if contiguous else None
+        # Following blocks of a continuous recording fit the tone model through the rough LO offset, the
+        # search centred on it as far either side as the band allows (snapshots: the refit does it).
+        lo = (lo_rough or 0.0) if contiguous else 0.0
+        span = min(max_doppler, band_hz - abs(lo))
         try:
             if pred is None:
                 # After a birth the combs of the last block are searched for again, with as many new.
                 n_known = n_last if contiguous else 0
-                found = find_combs(iq, fs, comb=comb, max_doppler_hz=max_doppler, max_combs=n_known + MAX_NEW_COMBS)
+                found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
+                                   lo_offset_hz=lo)
+                if lo_rough is None:
+                    lo_rough = rough_lo_hz(found.doppler_hz)
             else:
                 # Every SEARCH_EVERY-th block also searches the spectrum for new
                 # combs, with the tracked ones fitted first and removed.
                 search = k % SEARCH_EVERY == 0
                 found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=max_doppler,
+                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
                                    max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE)
         except NonFiniteSamples:
             raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
