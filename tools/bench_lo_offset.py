@@ -145,7 +145,8 @@ def main(argv=None):
                                        if (o, d, args.front_end) != (0.0, 0.0, "none")]
     runs += [(0.0, 0.0, "none", imp) for imp in args.impair]
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
-          f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} {'x_zero':>6} {'d_off_hz':>8} "
+          f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} "
+          f"{'x_zero':>6} {'d_off_hz':>8} "
           f"{'sig_hz':>6} {'sig_sep':>7} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
@@ -174,8 +175,10 @@ def main(argv=None):
                 d_drift = lo.drift_hz_per_s - drift if lo else np.nan
                 status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
                 print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
-                      f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} {err3d:8.1f} "
-                      f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} {_separable_sigma_hz(fix):7.2f} {d_drift:8.4f} "
+                      f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} "
+                      f"{err3d:8.1f} "
+                      f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
+                      f"{_separable_sigma_hz(fix):7.2f} {d_drift:8.4f} "
                       f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
 
 

@@ -141,7 +141,8 @@ class Tracker:
             w2 = 1.0 / np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0) ** 2
             a = tau[..., None] ** np.arange(3)  # (n, P, 3)
             aw = a * w2[..., None]
-            c = np.linalg.solve(np.einsum("npi,npj->nij", aw, a), np.einsum("npi,np->ni", aw, recent[:, :, 1])[..., None])[..., 0]
+            normal = np.einsum("npi,npj->nij", aw, a)
+            c = np.linalg.solve(normal, np.einsum("npi,np->ni", aw, recent[:, :, 1])[..., None])[..., 0]
             dt = t_s - t_last
             f = c[:, 0] + c[:, 1] * dt + c[:, 2] * dt**2
             rate = c[:, 1] + 2.0 * c[:, 2] * dt
