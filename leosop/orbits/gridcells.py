@@ -42,8 +42,9 @@ __all__ = [
 #: moves by at most as much, |d cap / d elevation| <= 1) and geodetic versus
 #: geocentric latitude of the rows (<= 0.19 deg).
 FOOTPRINT_MARGIN_DEG = 0.5
-# Candidate pairs processed at once (memory ~ 250 bytes per pair).
-_BATCH_PAIRS = 400_000
+# Candidate pairs processed at once (~250 bytes each): small enough for the
+# cache, large enough to keep the Python overhead per pair small.
+_BATCH_PAIRS = 100_000
 #: Pairs whose elevation margin ``los.up - sin(mask) |los|`` is within this of
 #: zero [m] get the reference test :func:`_visible`: the table form of
 #: :func:`_visible_segments` differs from it by rounding, ~1e-8 m at LEO ranges.
@@ -358,6 +359,10 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
         NaN below 7 visible satellites or for a singular geometry.
     """
     sat, row, j0, n_cols = _footprint_segments(pos_sv_ecef_m, grid, mask_deg)
+    # Row by row, so that a batch's pairs fall in a narrow band of cells: the
+    # scatter-adds below then stay in cache.
+    order = np.argsort(row, kind="stable")
+    sat, row, j0, n_cols = sat[order], row[order], j0[order], n_cols[order]
     sin_mask = math.sin(math.radians(mask_deg))
     n_cells, n_lon = grid.n_cells, grid.shape[1]
     count = np.zeros(n_cells, dtype=np.int64)
@@ -366,7 +371,10 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     cell_of_lon = np.tile(np.arange(n_lon), 2)
     ends = np.cumsum(n_cols)
     cuts = np.searchsorted(ends, np.arange(_BATCH_PAIRS, ends[-1] if ends.size else 0, _BATCH_PAIRS), side="right")
+    prod = np.empty(_BATCH_PAIRS + n_lon)
     for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(sat)]):
+        if a == b:
+            continue
         seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
         vis, rng = _visible_segments(pos_sv_ecef_m, grid, sat[a:b], row[a:b], seg, lon, sin_mask)
         keep = np.flatnonzero(vis)
@@ -378,10 +386,13 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
                         pos_sv_ecef_m[:, 2][s] - grid.z_row_m[rows]])
         vel = np.stack([vel_sv_ecef_mps[:, 0][s], vel_sv_ecef_mps[:, 1][s], vel_sv_ecef_mps[:, 2][s]])
         H = _jacobian_static(los, rng, vel, carrier_hz[s])
-        cell = rows * n_lon + cell_of_lon[lon]
-        count += np.bincount(cell, minlength=n_cells)
+        c0, c1 = row[a] * n_lon, (row[b - 1] + 1) * n_lon
+        cell = rows * n_lon + cell_of_lon[lon] - c0
+        count[c0:c1] += np.bincount(cell, minlength=c1 - c0)
+        p = prod[:len(keep)]
         for q, (i, j) in enumerate(zip(_IU[:-1], _JU[:-1])):  # H^T H summed over each cell's pairs
-            normal[q] += np.bincount(cell, weights=H[i] * H[j] if j < last else H[i], minlength=n_cells)
+            normal[q, c0:c1] += np.bincount(cell, weights=np.multiply(H[i], H[j], out=p) if j < last else H[i],
+                                            minlength=c1 - c0)
     normal[-1] = count
     gdop = np.full(n_cells, np.nan)
     fix = np.flatnonzero(count >= N_DOPPLER_STATES)
