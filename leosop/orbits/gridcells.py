@@ -33,7 +33,8 @@ from ..geometry.dop import gdop as gdop_of_h
 from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian
 
 __all__ = [
-    "Grid", "make_grid", "check_grid_deg", "footprint_pairs", "epoch_maps", "brute_force_epoch",
+    "Grid", "make_grid", "check_grid_deg", "footprint_pairs", "segment_batches", "epoch_maps",
+    "brute_force_epoch",
     "FOOTPRINT_MARGIN_DEG", "READABLE_GRID_DEG",
 ]
 
@@ -164,7 +165,7 @@ def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
     Returns
     -------
     sat, row, j0, n_cols : ndarray of int, (n_segments,)
-        Cells ``row * n_lon + (j0 + t) % n_lon`` for ``0 <= t < n_cols``;
+        In the order of ``row``. Cells ``row * n_lon + (j0 + t) % n_lon`` for ``0 <= t < n_cols``;
         ``0 <= j0 < n_lon`` and ``n_cols <= n_lon``, so ``j0 + t < 2 n_lon``.
     """
     pos = np.asarray(pos_sv_ecef_m, dtype=float)
@@ -198,7 +199,10 @@ def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
     n_cols = np.floor((centre + dlon) / step).astype(int) - j0 + 1
     n_cols = np.where(full | (n_cols >= n_lon), n_lon, np.maximum(n_cols, 0))
     j0 = np.where(n_cols == n_lon, 0, np.mod(j0, n_lon))
-    keep = n_cols > 0
+    # Row by row, so that a batch of segments covers a narrow band of cells
+    # and the scatter-adds of :func:`epoch_maps` stay in cache.
+    keep = np.flatnonzero(n_cols > 0)
+    keep = keep[np.argsort(row_i[keep], kind="stable")]
     return k[row_sat[keep]], row_i[keep], j0[keep], n_cols[keep]
 
 
@@ -207,6 +211,13 @@ def _segment_pairs(j0, n_cols):
     seg = np.repeat(np.arange(len(n_cols)), n_cols)
     lon = np.arange(seg.size) + np.repeat(j0 - (np.cumsum(n_cols) - n_cols), n_cols)
     return seg, lon
+
+
+def segment_batches(n_cols):
+    """Consecutive segments ``[a, b)`` with about :data:`_BATCH_PAIRS` pairs each (at least one segment each)."""
+    ends = np.cumsum(n_cols)
+    cuts = np.searchsorted(ends, np.arange(_BATCH_PAIRS, ends[-1] if ends.size else 0, _BATCH_PAIRS), side="right")
+    return [(int(a), int(b)) for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(n_cols)]) if b > a]
 
 
 def footprint_pairs(pos_sv_ecef_m, grid, mask_deg):
@@ -359,22 +370,14 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
         NaN below 7 visible satellites or for a singular geometry.
     """
     sat, row, j0, n_cols = _footprint_segments(pos_sv_ecef_m, grid, mask_deg)
-    # Row by row, so that a batch's pairs fall in a narrow band of cells: the
-    # scatter-adds below then stay in cache.
-    order = np.argsort(row, kind="stable")
-    sat, row, j0, n_cols = sat[order], row[order], j0[order], n_cols[order]
     sin_mask = math.sin(math.radians(mask_deg))
     n_cells, n_lon = grid.n_cells, grid.shape[1]
     count = np.zeros(n_cells, dtype=np.int64)
     normal = np.zeros((len(_IU), n_cells))
     last = N_DOPPLER_STATES - 1  # the clock column of H is 1
     cell_of_lon = np.tile(np.arange(n_lon), 2)
-    ends = np.cumsum(n_cols)
-    cuts = np.searchsorted(ends, np.arange(_BATCH_PAIRS, ends[-1] if ends.size else 0, _BATCH_PAIRS), side="right")
     prod = np.empty(_BATCH_PAIRS + n_lon)
-    for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(sat)]):
-        if a == b:
-            continue
+    for a, b in segment_batches(n_cols):
         seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
         vis, rng = _visible_segments(pos_sv_ecef_m, grid, sat[a:b], row[a:b], seg, lon, sin_mask)
         keep = np.flatnonzero(vis)
