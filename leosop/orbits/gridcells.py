@@ -285,29 +285,34 @@ def _normal_gdop(packed):
     return np.where(ok, np.sqrt(trace), np.nan)
 
 
-def _jacobian_static(los_ecef_m, rng_m, vel_sv_ecef_mps, carrier_hz):
-    """Doppler Jacobian rows of a static receiver, component first.
+def _jacobian_static(los_ecef_m, rng_m, vel_sv_ecef_mps, carrier_hz, out):
+    """Doppler Jacobian rows of a static receiver, component first, into ``out``.
 
     Same rows as :func:`leosop.geometry.doppler.doppler_jacobian` with zero
     receiver velocity, from the satellite-minus-receiver vector ``los``.
 
     Parameters
     ----------
-    los_ecef_m, vel_sv_ecef_mps : ndarray, (3, m)
+    los_ecef_m, vel_sv_ecef_mps : sequence of 3 ndarrays, (m,) each
     rng_m, carrier_hz : ndarray, (m,)
+    out : ndarray, (7, m)
 
     Returns
     -------
     H : ndarray, (7, m)
+        ``out``.
     """
-    e = los_ecef_m / rng_m
     k = carrier_hz / C_MPS  # u = -e and -f/c: both signs of doppler_jacobian cancel
-    H = np.empty((N_DOPPLER_STATES, len(rng_m)))
-    np.multiply(e, k, out=H[3:6])
-    H[0:3] = vel_sv_ecef_mps - e * (e[0] * vel_sv_ecef_mps[0] + e[1] * vel_sv_ecef_mps[1] + e[2] * vel_sv_ecef_mps[2])
-    H[0:3] *= k / rng_m
-    H[6] = 1.0
-    return H
+    e = [np.divide(c, rng_m, out=out[3 + i]) for i, c in enumerate(los_ecef_m)]
+    e_dot_v = e[0] * vel_sv_ecef_mps[0] + e[1] * vel_sv_ecef_mps[1] + e[2] * vel_sv_ecef_mps[2]
+    k_over_rng = k / rng_m
+    for i in range(3):
+        np.multiply(e[i], e_dot_v, out=out[i])
+        np.subtract(vel_sv_ecef_mps[i], out[i], out=out[i])
+        out[i] *= k_over_rng
+        out[3 + i] *= k
+    out[6] = 1.0
+    return out
 
 
 def _visible_segments(pos_sv_ecef_m, grid, sat, row, seg, lon, sin_mask):
@@ -377,18 +382,21 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     last = N_DOPPLER_STATES - 1  # the clock column of H is 1
     cell_of_lon = np.tile(np.arange(n_lon), 2)
     prod = np.empty(_BATCH_PAIRS + n_lon)
+    h_buf = np.empty((N_DOPPLER_STATES, _BATCH_PAIRS + n_lon))
+    pos_x, pos_y, pos_z = np.array(pos_sv_ecef_m, dtype=float).T.copy()
+    vel_x, vel_y, vel_z = np.array(vel_sv_ecef_mps, dtype=float).T.copy()
     for a, b in segment_batches(n_cols):
         seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
         vis, rng = _visible_segments(pos_sv_ecef_m, grid, sat[a:b], row[a:b], seg, lon, sin_mask)
         keep = np.flatnonzero(vis)
         seg, lon, rng = seg[keep], lon[keep], rng[keep]
-        s, rows = sat[a:b][seg], row[a:b][seg]
-        rho = grid.rho_row_m[rows]
-        los = np.stack([pos_sv_ecef_m[:, 0][s] - rho * grid.cos_lon[lon],
-                        pos_sv_ecef_m[:, 1][s] - rho * grid.sin_lon[lon],
-                        pos_sv_ecef_m[:, 2][s] - grid.z_row_m[rows]])
-        vel = np.stack([vel_sv_ecef_mps[:, 0][s], vel_sv_ecef_mps[:, 1][s], vel_sv_ecef_mps[:, 2][s]])
-        H = _jacobian_static(los, rng, vel, carrier_hz[s])
+        s, rows = sat[a:b], row[a:b]
+        rho = grid.rho_row_m[rows][seg]
+        los = (pos_x[s][seg] - rho * grid.cos_lon[lon], pos_y[s][seg] - rho * grid.sin_lon[lon],
+               (pos_z[s] - grid.z_row_m[rows])[seg])
+        H = _jacobian_static(los, rng, (vel_x[s][seg], vel_y[s][seg], vel_z[s][seg]), carrier_hz[s][seg],
+                             h_buf[:, :len(keep)])
+        rows = rows[seg]
         c0, c1 = row[a] * n_lon, (row[b - 1] + 1) * n_lon
         cell = rows * n_lon + cell_of_lon[lon] - c0
         count[c0:c1] += np.bincount(cell, minlength=c1 - c0)
