@@ -33,9 +33,15 @@ from ..geometry.dop import gdop as gdop_of_h
 from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian
 
 __all__ = [
-    "Grid", "make_grid", "check_grid_deg", "footprint_pairs", "segment_batches", "epoch_maps",
+    "FOOTPRINT_MARGIN_DEG",
+    "READABLE_GRID_DEG",
+    "Grid",
     "brute_force_epoch",
-    "FOOTPRINT_MARGIN_DEG", "READABLE_GRID_DEG",
+    "check_grid_deg",
+    "epoch_maps",
+    "footprint_pairs",
+    "make_grid",
+    "segment_batches",
 ]
 
 #: Widening of the spherical footprint cap [deg]: covers the tilt of the
