@@ -8,14 +8,17 @@ is a cap of angular radius ``arccos(R cos(mask) / r) - mask`` around the
 sub-satellite point. The cap is taken with the polar radius (the largest cap
 over the ellipsoid) and widened by :data:`FOOTPRINT_MARGIN_DEG` (geodetic
 normal versus geocentric direction, <= 0.19 deg), converted to one longitude
-interval per latitude row, and every candidate (satellite, cell) pair then gets
-the exact elevation test of :func:`_visible` -- the same test as the brute
-force :func:`brute_force_epoch`, so the counts are identical.
+interval per latitude row (a *segment*), and every candidate (satellite, cell)
+pair then gets the elevation test from row and longitude tables
+(:func:`_visible_segments`); the pairs within a millimetre of the mask get the
+3-vector test :func:`_visible` of the brute force :func:`brute_force_epoch`,
+so the counts are identical to it.
 
 The Doppler GDOP per cell (Shen 2024 eq. 10; 7 states, static receiver, see
 :mod:`leosop.geometry.dop`) needs ``H^T W H`` per cell: the outer products
 of the visible satellites' Jacobian rows are scatter-added to their cells
-(``numpy.bincount``), then inverted in one batch. NaN where fewer than 7
+(``numpy.bincount``, segments in row order so that a batch touches a narrow
+band of cells), then inverted in one batch. NaN where fewer than 7
 satellites are visible or the geometry is singular. The maps over time are
 :func:`leosop.orbits.gridmap.gdop_map`'s.
 """
