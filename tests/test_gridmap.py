@@ -7,15 +7,32 @@ import numpy as np
 import pytest
 
 from leosop.errors import InputError
-from leosop.orbits import load_constellation
-from leosop.orbits.gridcells import _normal_gdop
-from leosop.orbits.gridmap import (
-    FOOTPRINT_MARGIN_DEG, ConstellationSource, brute_force_epoch, check_grid_deg, epoch_maps,
-    READABLE_GRID_DEG, footprint_pairs, gdop_map, make_grid, satellite_carriers_hz,
-)
-from leosop.orbits.propagate import state_ecef
 from leosop.geometry.dop import gdop
 from leosop.geometry.doppler import doppler_jacobian
+from leosop.orbits import load_constellation
+from leosop.orbits.gridcells import (
+    _EXACT_BAND_M,
+    _IU,
+    _JU,
+    _footprint_segments,
+    _normal_gdop,
+    _segment_pairs,
+    _visible,
+    _visible_segments,
+)
+from leosop.orbits.gridmap import (
+    FOOTPRINT_MARGIN_DEG,
+    READABLE_GRID_DEG,
+    ConstellationSource,
+    brute_force_epoch,
+    check_grid_deg,
+    epoch_maps,
+    footprint_pairs,
+    gdop_map,
+    make_grid,
+    satellite_carriers_hz,
+)
+from leosop.orbits.propagate import state_ecef
 
 # Cholesky of the normal matrix against the eigen-decomposition of dop.cofactor:
 # both exact to rounding, conditioned geometries amplify it to ~1e-7.
@@ -33,7 +50,7 @@ def walker_states():
 
 @pytest.mark.parametrize("grid_deg, mask_deg", [(10.0, 40.0), (6.0, 10.0)])
 def test_footprints_match_brute_force(walker_states, grid_deg, mask_deg):
-    const, times, pos, vel, carrier = walker_states
+    _, times, pos, vel, carrier = walker_states
     grid = make_grid(grid_deg)
     for j in range(len(times)):
         n_f, g_f = epoch_maps(pos[:, j], vel[:, j], carrier, grid, mask_deg)
@@ -47,13 +64,40 @@ def test_footprints_match_brute_force(walker_states, grid_deg, mask_deg):
 
 
 def test_candidates_are_a_tight_superset(walker_states):
-    const, times, pos, vel, carrier = walker_states
+    _, _, pos, vel, carrier = walker_states
     grid = make_grid(5.0)
     sat, cell = footprint_pairs(pos[:, 0], grid, 40.0)
     n_b, _ = brute_force_epoch(pos[:, 0], vel[:, 0], carrier, grid, 40.0)
     assert len(np.unique(sat * grid.n_cells + cell)) == len(sat)  # each pair once
     # Widening the ~5 deg cap by the margin grows it by about (1 + margin/cap)^2.
     assert n_b.sum() <= len(sat) < 2.0 * n_b.sum()
+
+
+def test_table_elevation_test_is_the_reference_test(walker_states):
+    """The map's elevation test decides every candidate pair as :func:`_visible` does, at the mask too."""
+    _, _, pos, _, _ = walker_states
+    grid, mask_deg = make_grid(6.0), 10.0
+    sin_mask, cos_mask = math.sin(math.radians(mask_deg)), math.cos(math.radians(mask_deg))
+    # Satellites 1000 km from cells (lat 0, 48, 84) at exactly the mask elevation, towards north and east:
+    # their margins are rounding-sized, inside the band where the reference test decides.
+    n_lon = grid.shape[1]
+    cells = [(np.searchsorted(grid.lat_deg, lat) * n_lon + n_lon // 2) for lat in (0.0, 48.0, 84.0)]
+    up = grid.up_ecef[cells]
+    east = np.cross([0.0, 0.0, 1.0], up)
+    east /= np.linalg.norm(east, axis=1, keepdims=True)
+    north = np.cross(up, east)
+    edge = np.concatenate([grid.pos_ecef_m[cells] + 1e6 * (cos_mask * h + sin_mask * up) for h in (north, east)])
+    pos_sv = np.concatenate([pos[:, 0], edge])
+    sat, row, j0, n_cols = _footprint_segments(pos_sv, grid, mask_deg)
+    seg, lon = _segment_pairs(j0, n_cols)
+    vis, rng = _visible_segments(pos_sv, grid, sat, row, seg, lon, sin_mask)
+    cell = row[seg] * n_lon + lon % n_lon
+    ref, los, ref_rng = _visible(pos_sv[sat[seg]], grid.pos_ecef_m[cell], grid.up_ecef[cell], sin_mask)
+    np.testing.assert_array_equal(vis, ref)
+    np.testing.assert_allclose(rng, ref_rng, rtol=1e-12)  # same range to rounding
+    margin = np.einsum("mi,mi->m", los, grid.up_ecef[cell]) - sin_mask * ref_rng
+    on_edge = np.isin(sat[seg], len(pos) + np.arange(len(edge))) & np.isin(cell, cells)
+    assert on_edge.sum() == len(edge) and np.all(np.abs(margin[on_edge]) < _EXACT_BAND_M)
 
 
 def test_footprint_over_the_pole_and_dateline():
@@ -73,9 +117,9 @@ def test_normal_gdop_matches_dop_and_flags_singular():
     pos = rng.normal(size=(50, 9, 3)) * 1e6 + np.array([0, 0, 7e6])
     vel = rng.normal(size=(50, 9, 3)) * 7e3
     H = doppler_jacobian(pos, vel, np.zeros((50, 3)), np.zeros((50, 3)), 11.325e9)
-    normal = np.einsum("mki,mkj->mij", H, H)
+    normal = np.einsum("mki,mkj->mij", H, H)[:, _IU, _JU].T  # upper triangles, (28, 50)
     np.testing.assert_allclose(_normal_gdop(normal), gdop(H), rtol=1e-9)
-    normal[0, :, 6] = normal[0, 6, :] = 0.0  # no clock information: singular
+    normal[_JU == 6, 0] = 0.0  # no clock information: singular
     assert np.isnan(_normal_gdop(normal)[0]) and np.isfinite(_normal_gdop(normal)[1:]).all()
 
 

@@ -5,24 +5,49 @@
    ``--sample-epochs`` epochs, extrapolated to the full grid; the footprint
    method on the full grid at the same epochs. Counts must be identical on the
    sampled cells; GDOP agrees to the stated relative tolerance.
-2. ``--full``: the whole map (default 1 deg, 24 h at 60 s, 40 deg mask) through
-   the Dask local cluster, wall time, written to NetCDF in a temporary folder.
+2. ``--floor``: the floor over the whole span, one core: one SGP4 propagation
+   per satellite and epoch (sgp4's ``SatrecArray`` over all satellites and the
+   epochs of each task) plus the elevation tests of the (satellite, cell) pairs
+   that pass the footprint screen (the table form the map uses; the screen
+   itself is not counted). Prints the number of pairs per epoch.
+3. ``--full``: the whole map (default 1 deg, 24 h at 60 s, 40 deg mask) in one
+   process (``--scheduler serial``, the default) or on a Dask scheduler;
+   ``--dask-workers 1 2`` also runs it on local clusters of that many
+   single-threaded workers and checks that every run's maps are identical to
+   the first (SHA-256 of the arrays). Written to NetCDF in a temporary folder.
 
     OPENBLAS_NUM_THREADS=1 python tools/bench_gdop_map.py \
-        --tle ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt [--full]
+        --tle ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt [--floor] [--full] [--dask-workers 1 2]
 """
 
 import argparse
+import hashlib
+import math
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from leosop.orbits.gridcells import (
+    _footprint_segments,
+    _segment_pairs,
+    _visible_segments,
+    segment_batches,
+)
 from leosop.orbits.gridmap import (
-    ConstellationSource, brute_force_epoch, epoch_maps, gdop_map, make_grid, satellite_carriers_hz, write_netcdf,
+    ConstellationSource,
+    brute_force_epoch,
+    epoch_maps,
+    gdop_map,
+    make_grid,
+    satellite_carriers_hz,
+    write_netcdf,
 )
 from leosop.orbits.propagate import state_ecef
+from leosop.timebase import jd_utc
+
+EPOCHS_PER_BLOCK = 60  # the map's largest task
 
 GDOP_RTOL = 1e-5  # Cholesky on the normal matrix vs eigen-decomposition of H^T H
 
@@ -39,8 +64,11 @@ def main():
     ap.add_argument("--sample-cells", type=int, default=400)
     ap.add_argument("--sample-epochs", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--full", action="store_true", help="also run the whole map on a local Dask cluster")
-    ap.add_argument("--scheduler", default=None)
+    ap.add_argument("--floor", action="store_true", help="measure the floor over the whole span")
+    ap.add_argument("--full", action="store_true", help="also run the whole map")
+    ap.add_argument("--scheduler", default="serial", help="of the --full run: serial, or a Dask address")
+    ap.add_argument("--dask-workers", type=int, nargs="*", default=(),
+                    help="--full also on local Dask clusters of these many workers")
     a = ap.parse_args()
 
     source = ConstellationSource(a.tle, tuple(a.constellation))
@@ -81,18 +109,56 @@ def main():
           f"{n_epochs} epochs (one core)")
     print(f"speed-up: {brute_epoch_s / fast_epoch_s:.0f}x")
 
+    if a.floor:
+        floor(const, grid, times, a.mask_deg)
     if a.full:
-        with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
-            ds = gdop_map(source, times, a.grid_deg, a.mask_deg, scheduler=a.scheduler)
-            t_map = time.perf_counter() - t0
-            write_netcdf(ds, Path(tmp) / "gdop_map.nc")
-            t_all = time.perf_counter() - t0
-            size = (Path(tmp) / "gdop_map.nc").stat().st_size
-        fix = np.isfinite(ds["gdop"].values)
-        print(f"full map: {t_map:.0f} s computing, {t_all:.0f} s with the NetCDF ({size / 1e6:.0f} MB); "
-              f"mean visible {float(ds['n_visible'].mean()):.1f}, cell-epochs with a fix {fix.mean():.1%}")
+        runs = [(a.scheduler, None)] + [(None, n) for n in a.dask_workers]
+        first = None
+        for scheduler, n_workers in runs:
+            label = f"{n_workers} local Dask worker(s)" if n_workers else f"scheduler {scheduler}"
+            digest, t_map = full_map(source, times, a, scheduler, n_workers)
+            first = first or (digest, t_map)
+            print(f"full map, {label}: {t_map:.1f} s, speed-up {first[1] / t_map:.2f}x over the first run, "
+                  f"maps identical to it: {digest == first[0]}")
 
+
+def floor(const, grid, times, mask_deg):
+    """Time of SGP4 alone over all satellites and epochs, and of the elevation tests of the screened pairs."""
+    sin_mask = math.sin(math.radians(mask_deg))
+    t_sgp4 = t_elev = 0.0
+    n_pairs = []
+    for a in range(0, len(times), EPOCHS_PER_BLOCK):
+        block = times[a:a + EPOCHS_PER_BLOCK]
+        jd, fr = jd_utc(block)
+        t0 = time.perf_counter()
+        const.satrec_array.sgp4(jd, fr)
+        t_sgp4 += time.perf_counter() - t0
+        pos, _, _ = state_ecef(const, block)
+        for j in range(len(block)):
+            sat, row, j0, n_cols = _footprint_segments(pos[:, j], grid, mask_deg)
+            for b0, b1 in segment_batches(n_cols):  # the map's batches
+                seg, lon = _segment_pairs(j0[b0:b1], n_cols[b0:b1])
+                t0 = time.perf_counter()
+                _visible_segments(pos[:, j], grid, sat[b0:b1], row[b0:b1], seg, lon, sin_mask)
+                t_elev += time.perf_counter() - t0
+            n_pairs.append(n_cols.sum())
+    print(f"floor: SGP4 (SatrecArray) {t_sgp4:.1f} s for {len(const)} x {len(times)} satellite-epochs; "
+          f"{np.mean(n_pairs) / 1e6:.2f} M pairs per epoch pass the footprint screen "
+          f"({np.mean(n_pairs) / grid.n_cells:.1f} per cell), their elevation tests {t_elev:.1f} s; "
+          f"floor {t_sgp4 + t_elev:.1f} s")
+
+
+def full_map(source, times, a, scheduler, n_workers):
+    """SHA-256 of the maps and the wall time of one whole run (NetCDF included)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        ds = gdop_map(source, times, a.grid_deg, a.mask_deg, scheduler=scheduler, n_workers=n_workers)
+        write_netcdf(ds, Path(tmp) / "gdop_map.nc")
+        t_all = time.perf_counter() - t0
+    fix = np.isfinite(ds["gdop"].values)
+    print(f"  mean visible {float(ds['n_visible'].mean()):.2f}, cell-epochs with a fix {fix.mean():.2%}")
+    digest = hashlib.sha256(ds["n_visible"].values.tobytes() + ds["gdop"].values.tobytes()).hexdigest()
+    return digest, t_all
 
 if __name__ == "__main__":
     main()

@@ -8,14 +8,17 @@ is a cap of angular radius ``arccos(R cos(mask) / r) - mask`` around the
 sub-satellite point. The cap is taken with the polar radius (the largest cap
 over the ellipsoid) and widened by :data:`FOOTPRINT_MARGIN_DEG` (geodetic
 normal versus geocentric direction, <= 0.19 deg), converted to one longitude
-interval per latitude row, and every candidate (satellite, cell) pair then gets
-the exact elevation test of :func:`_visible` -- the same test as the brute
-force :func:`brute_force_epoch`, so the counts are identical.
+interval per latitude row (a *segment*), and every candidate (satellite, cell)
+pair then gets the elevation test from row and longitude tables
+(:func:`_visible_segments`); the pairs within a millimetre of the mask get the
+3-vector test :func:`_visible` of the brute force :func:`brute_force_epoch`,
+so the counts are identical to it.
 
 The Doppler GDOP per cell (Shen 2024 eq. 10; 7 states, static receiver, see
 :mod:`leosop.geometry.dop`) needs ``H^T W H`` per cell: the outer products
 of the visible satellites' Jacobian rows are scatter-added to their cells
-(``numpy.bincount``), then inverted in one batch. NaN where fewer than 7
+(``numpy.bincount``, segments in row order so that a batch touches a narrow
+band of cells), then inverted in one batch. NaN where fewer than 7
 satellites are visible or the geometry is singular. The maps over time are
 :func:`leosop.orbits.gridmap.gdop_map`'s.
 """
@@ -33,8 +36,15 @@ from ..geometry.dop import gdop as gdop_of_h
 from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian
 
 __all__ = [
-    "Grid", "make_grid", "check_grid_deg", "footprint_pairs", "epoch_maps", "brute_force_epoch",
-    "FOOTPRINT_MARGIN_DEG", "READABLE_GRID_DEG",
+    "FOOTPRINT_MARGIN_DEG",
+    "READABLE_GRID_DEG",
+    "Grid",
+    "brute_force_epoch",
+    "check_grid_deg",
+    "epoch_maps",
+    "footprint_pairs",
+    "make_grid",
+    "segment_batches",
 ]
 
 #: Widening of the spherical footprint cap [deg]: covers the tilt of the
@@ -42,8 +52,13 @@ __all__ = [
 #: moves by at most as much, |d cap / d elevation| <= 1) and geodetic versus
 #: geocentric latitude of the rows (<= 0.19 deg).
 FOOTPRINT_MARGIN_DEG = 0.5
-# Candidate pairs processed at once (memory ~ 250 bytes per pair).
-_BATCH_PAIRS = 400_000
+# Candidate pairs processed at once (~250 bytes each): small enough for the
+# cache, large enough to keep the Python overhead per pair small.
+_BATCH_PAIRS = 100_000
+#: Pairs whose elevation margin ``los.up - sin(mask) |los|`` is within this of
+#: zero [m] get the reference test :func:`_visible`: the table form of
+#: :func:`_visible_segments` differs from it by rounding, ~1e-8 m at LEO ranges.
+_EXACT_BAND_M = 1e-3
 # Cells x satellites per brute-force block.
 _BRUTE_BLOCK = 2_000_000
 _IU, _JU = np.triu_indices(N_DOPPLER_STATES)
@@ -64,6 +79,12 @@ class Grid:
         Cell positions on the ellipsoid (height 0).
     up_ecef : ndarray, (n_cells, 3)
         Unit geodetic normals.
+    rho_row_m, z_row_m : ndarray, (n_lat,)
+        Distance of each row from the polar axis and its height above the
+        equator plane: ``pos_ecef_m = (rho cos(lon), rho sin(lon), z)``.
+    cos_lat, sin_lat : ndarray, (n_lat,)
+    cos_lon, sin_lon : ndarray, (2 n_lon,)
+        Of ``lon_deg`` twice over, so that a longitude index up to ``2 n_lon - 1`` needs no modulo.
     """
 
     step_deg: float
@@ -71,6 +92,12 @@ class Grid:
     lon_deg: np.ndarray
     pos_ecef_m: np.ndarray
     up_ecef: np.ndarray
+    rho_row_m: np.ndarray
+    z_row_m: np.ndarray
+    cos_lat: np.ndarray
+    sin_lat: np.ndarray
+    cos_lon: np.ndarray
+    sin_lon: np.ndarray
 
     @property
     def shape(self):
@@ -115,11 +142,16 @@ def make_grid(grid_deg):
     n_lon = round(360.0 / step)
     lat_deg = -90.0 + step * np.arange(n_lat)
     lon_deg = -180.0 + step * np.arange(n_lon)
-    lat = np.radians(np.repeat(lat_deg, n_lon))
-    lon = np.radians(np.tile(lon_deg, n_lat))
-    pos = geodetic_to_ecef(lat, lon, 0.0)
-    up = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
-    return Grid(step, lat_deg, lon_deg, pos, up)
+    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+    on_axis = geodetic_to_ecef(lat, 0.0, 0.0)  # (rho, 0, z) of each row
+    cos_lat, sin_lat = np.cos(lat), np.sin(lat)
+    cos_lon, sin_lon = np.tile(np.cos(lon), 2), np.tile(np.sin(lon), 2)
+    rho, z = on_axis[:, 0], on_axis[:, 2]
+    pos = np.stack([np.outer(rho, cos_lon[:n_lon]), np.outer(rho, sin_lon[:n_lon]),
+                    np.repeat(z[:, None], n_lon, axis=1)], axis=-1).reshape(-1, 3)
+    up = np.stack([np.outer(cos_lat, cos_lon[:n_lon]), np.outer(cos_lat, sin_lon[:n_lon]),
+                   np.repeat(sin_lat[:, None], n_lon, axis=1)], axis=-1).reshape(-1, 3)
+    return Grid(step, lat_deg, lon_deg, pos, up, rho, z, cos_lat, sin_lat, cos_lon, sin_lon)
 
 
 def _visible(pos_sv_ecef_m, pos_cell_ecef_m, up_cell, sin_mask):
@@ -129,20 +161,21 @@ def _visible(pos_sv_ecef_m, pos_cell_ecef_m, up_cell, sin_mask):
     return np.einsum("...i,...i->...", los, up_cell) >= sin_mask * rng, los, rng
 
 
-def footprint_pairs(pos_sv_ecef_m, grid, mask_deg):
-    """Candidate (satellite, cell) pairs: cells inside each satellite's widened footprint cap.
+def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
+    """Each satellite's widened footprint cap as one longitude interval per latitude row.
 
     Parameters
     ----------
     pos_sv_ecef_m : ndarray, (n_sats, 3)
-        NaN rows (failed propagation) get no cells.
+        NaN rows (failed propagation) get no segment.
     grid : Grid
     mask_deg : float
 
     Returns
     -------
-    sat_index, cell_index : ndarray of int, (m,)
-        A superset of the visible pairs, each pair once.
+    sat, row, j0, n_cols : ndarray of int, (n_segments,)
+        In the order of ``row``. Cells ``row * n_lon + (j0 + t) % n_lon`` for ``0 <= t < n_cols``;
+        ``0 <= j0 < n_lon`` and ``n_cols <= n_lon``, so ``j0 + t < 2 n_lon``.
     """
     pos = np.asarray(pos_sv_ecef_m, dtype=float)
     step = grid.step_deg
@@ -174,58 +207,164 @@ def footprint_pairs(pos_sv_ecef_m, grid, mask_deg):
     j0 = np.ceil((centre - dlon) / step).astype(int)
     n_cols = np.floor((centre + dlon) / step).astype(int) - j0 + 1
     n_cols = np.where(full | (n_cols >= n_lon), n_lon, np.maximum(n_cols, 0))
-    j0 = np.where(n_cols == n_lon, 0, j0)
-    total = int(n_cols.sum())
-    offset = np.arange(total) - np.repeat(np.cumsum(n_cols) - n_cols, n_cols)
-    cell = np.repeat(row_i * n_lon, n_cols) + np.mod(np.repeat(j0, n_cols) + offset, n_lon)
-    return k[np.repeat(row_sat, n_cols)], cell
+    j0 = np.where(n_cols == n_lon, 0, np.mod(j0, n_lon))
+    # Row by row, so that a batch of segments covers a narrow band of cells
+    # and the scatter-adds of :func:`epoch_maps` stay in cache.
+    keep = np.flatnonzero(n_cols > 0)
+    keep = keep[np.argsort(row_i[keep], kind="stable")]
+    return k[row_sat[keep]], row_i[keep], j0[keep], n_cols[keep]
 
 
-def _normal_gdop(normal):
-    """GDOP from normal matrices ``H^T W H`` (m, 7, 7): ``sqrt(trace(inverse))``, NaN when singular.
+def _segment_pairs(j0, n_cols):
+    """Segment index and unwrapped longitude index ``j0 + t`` (< 2 n_lon) of every pair, (m,) each."""
+    seg = np.repeat(np.arange(len(n_cols)), n_cols)
+    lon = np.arange(seg.size) + np.repeat(j0 - (np.cumsum(n_cols) - n_cols), n_cols)
+    return seg, lon
 
-    Cholesky factor of the equilibrated matrix (unit diagonal), unrolled over
-    the batch: ``trace(A^-1) = sum (D L^-T)^2``. A pivot below 1e-12 marks the
-    geometry singular, the threshold of :func:`leosop.geometry.dop.cofactor`
-    (its eigenvalue ratio 1e-12 bounds every pivot from below).
+
+def segment_batches(n_cols):
+    """Consecutive segments ``[a, b)`` with about :data:`_BATCH_PAIRS` pairs each (at least one segment each)."""
+    ends = np.cumsum(n_cols)
+    cuts = np.searchsorted(ends, np.arange(_BATCH_PAIRS, ends[-1] if ends.size else 0, _BATCH_PAIRS), side="right")
+    return [(int(a), int(b)) for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(n_cols)]) if b > a]
+
+
+def footprint_pairs(pos_sv_ecef_m, grid, mask_deg):
+    """Candidate (satellite, cell) pairs: cells inside each satellite's widened footprint cap.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m : ndarray, (n_sats, 3)
+        NaN rows (failed propagation) get no cells.
+    grid : Grid
+    mask_deg : float
+
+    Returns
+    -------
+    sat_index, cell_index : ndarray of int, (m,)
+        A superset of the visible pairs, each pair once.
     """
-    n = normal.shape[-1]
-    diag = np.einsum("...ii->...i", normal)
-    ok = (diag > 0).all(-1)
-    d = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
-    A = normal * d[:, :, None] * d[:, None, :]
-    L = np.zeros_like(A)
+    sat, row, j0, n_cols = _footprint_segments(pos_sv_ecef_m, grid, mask_deg)
+    seg, lon = _segment_pairs(j0, n_cols)
+    n_lon = grid.shape[1]
+    return sat[seg], row[seg] * n_lon + np.mod(lon, n_lon)
+
+
+def _normal_gdop(packed):
+    """GDOP from normal matrices ``H^T W H`` given by their upper triangles: ``sqrt(trace(inverse))``, NaN when singular.
+
+    Parameters
+    ----------
+    packed : ndarray, (n_triu, m)
+        Row ``q`` holds entry ``(_IU[q], _JU[q])`` of each of the ``m`` matrices (7 x 7).
+
+    Returns
+    -------
+    gdop : ndarray, (m,)
+
+    Notes
+    -----
+    Cholesky factor of the equilibrated matrix (unit diagonal) with every
+    entry a vector over the batch: ``trace(A^-1) = sum (L^-1 D)^2``. A pivot
+    below 1e-12 marks the geometry singular, the threshold of
+    :func:`leosop.geometry.dop.cofactor` (its eigenvalue ratio 1e-12 bounds
+    every pivot from below).
+    """
+    n = N_DOPPLER_STATES
+    entry = {(i, j): packed[q] for q, (i, j) in enumerate(zip(_IU, _JU))}
+    diag = [entry[i, i] for i in range(n)]
+    ok = np.logical_and.reduce([g > 0 for g in diag])
+    d = [1.0 / np.sqrt(np.where(g > 0, g, 1.0)) for g in diag]
+    L = {}
     for j in range(n):
-        piv = A[:, j, j] - np.einsum("mk,mk->m", L[:, j, :j], L[:, j, :j])
+        piv = 1.0 - sum(L[j, k] ** 2 for k in range(j)) if j else np.ones_like(d[0])
         ok &= piv > 1e-12
-        L[:, j, j] = np.sqrt(np.where(ok, piv, 1.0))
-        if j + 1 < n:
-            L[:, j + 1:, j] = (A[:, j + 1:, j] - np.einsum("mik,mk->mi", L[:, j + 1:, :j], L[:, j, :j])) \
-                / L[:, j, j, None]
-    # X = L^-1 by forward substitution; A^-1 = X^T X, so trace(D A^-1 D) = sum_ij X_ij^2 d_j^2.
-    X = np.zeros_like(A)
-    for i in range(n):
-        X[:, i, :] = -np.einsum("mk,mkj->mj", L[:, i, :i], X[:, :i, :])
-        X[:, i, i] += 1.0
-        X[:, i, :] /= L[:, i, i, None]
-    trace = np.einsum("mij,mj->m", X**2, d**2)
+        L[j, j] = np.sqrt(np.where(ok, piv, 1.0))
+        for i in range(j + 1, n):
+            L[i, j] = (entry[j, i] * d[i] * d[j] - sum(L[i, k] * L[j, k] for k in range(j))) / L[j, j]
+    # X = L^-1 by forward substitution; A^-1 = D X^T X D, so its trace is sum_ij X_ij^2 d_j^2.
+    trace = 0.0
+    for j in range(n):
+        X = {j: 1.0 / L[j, j]}
+        col = X[j] ** 2
+        for i in range(j + 1, n):
+            X[i] = -sum(L[i, k] * X[k] for k in range(j, i)) / L[i, i]
+            col = col + X[i] ** 2
+        trace = trace + col * d[j] ** 2
     return np.where(ok, np.sqrt(trace), np.nan)
 
 
-def _jacobian_static(los_ecef_m, rng_m, vel_sv_ecef_mps, carrier_hz):
-    """Doppler Jacobian rows of a static receiver as columns (7, m), Fortran-friendly.
+def _jacobian_static(los_ecef_m, rng_m, vel_sv_ecef_mps, carrier_hz, out):
+    """Doppler Jacobian rows of a static receiver, component first, into ``out``.
 
     Same rows as :func:`leosop.geometry.doppler.doppler_jacobian` with zero
     receiver velocity, from the satellite-minus-receiver vector ``los``.
+
+    Parameters
+    ----------
+    los_ecef_m, vel_sv_ecef_mps : sequence of 3 ndarrays, (m,) each
+    rng_m, carrier_hz : ndarray, (m,)
+    out : ndarray, (7, m)
+
+    Returns
+    -------
+    H : ndarray, (7, m)
+        ``out``.
     """
-    u = -los_ecef_m / rng_m[:, None]
-    k = -carrier_hz / C_MPS
-    udv = np.einsum("mi,mi->m", u, vel_sv_ecef_mps)
-    H = np.empty((N_DOPPLER_STATES, len(rng_m)))
-    H[0:3] = (k / rng_m) * (u * udv[:, None] - vel_sv_ecef_mps).T
-    H[3:6] = k * u.T
-    H[6] = 1.0
-    return H
+    k = carrier_hz / C_MPS  # u = -e and -f/c: both signs of doppler_jacobian cancel
+    e = [np.divide(c, rng_m, out=out[3 + i]) for i, c in enumerate(los_ecef_m)]
+    e_dot_v = e[0] * vel_sv_ecef_mps[0] + e[1] * vel_sv_ecef_mps[1] + e[2] * vel_sv_ecef_mps[2]
+    k_over_rng = k / rng_m
+    for i in range(3):
+        np.multiply(e[i], e_dot_v, out=out[i])
+        np.subtract(vel_sv_ecef_mps[i], out[i], out=out[i])
+        out[i] *= k_over_rng
+        out[3 + i] *= k
+    out[6] = 1.0
+    return out
+
+
+def _visible_segments(pos_sv_ecef_m, grid, sat, row, seg, lon, sin_mask):
+    """Elevation test of the pairs of footprint segments, identical to :func:`_visible`'s.
+
+    The test ``los.up >= sin(mask) |los|`` is evaluated through the row and
+    longitude tables: with ``w = x_sv cos(lon) + y_sv sin(lon)``,
+    ``los.up = cos(lat) w + sin(lat) z_sv - pos.up`` and
+    ``|los|^2 = |pos_sv|^2 - 2 z_row z_sv + |pos|^2 - 2 rho_row w`` -- per pair
+    two table look-ups and a few products instead of gathering 3-vectors. It
+    differs from :func:`_visible` by rounding only (~1e-8 m); the pairs within
+    :data:`_EXACT_BAND_M` of the mask get :func:`_visible` itself.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m : ndarray, (n_sats, 3)
+    grid : Grid
+    sat, row : ndarray of int, (n_segments,)
+    seg, lon : ndarray of int, (m,)
+        Segment and unwrapped longitude index of each pair (:func:`_segment_pairs`).
+    sin_mask : float
+
+    Returns
+    -------
+    vis : ndarray of bool, (m,)
+    range_m : ndarray, (m,)
+    """
+    p = pos_sv_ecef_m[sat]
+    cos_lat, sin_lat = grid.cos_lat[row], grid.sin_lat[row]
+    rho, z = grid.rho_row_m[row], grid.z_row_m[row]
+    offset = sin_lat * p[:, 2] - (rho * cos_lat + z * sin_lat)
+    r2_row = np.einsum("si,si->s", p, p) - 2.0 * z * p[:, 2] + (rho * rho + z * z)
+    cos_lon, sin_lon = grid.cos_lon[lon], grid.sin_lon[lon]
+    w = p[:, 0][seg] * cos_lon + p[:, 1][seg] * sin_lon
+    rng = np.sqrt(r2_row[seg] - 2.0 * rho[seg] * w)
+    margin = cos_lat[seg] * w + offset[seg] - sin_mask * rng
+    vis = margin > 0.0
+    near = np.flatnonzero(np.abs(margin) <= _EXACT_BAND_M)
+    if near.size:
+        n_lon = grid.shape[1]
+        cell = row[seg[near]] * n_lon + lon[near] % n_lon
+        vis[near], _, _ = _visible(pos_sv_ecef_m[sat[seg[near]]], grid.pos_ecef_m[cell], grid.up_ecef[cell], sin_mask)
+    return vis, rng
 
 
 def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
@@ -244,31 +383,41 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     gdop : ndarray, (n_lat, n_lon)
         NaN below 7 visible satellites or for a singular geometry.
     """
-    sat, cell = footprint_pairs(pos_sv_ecef_m, grid, mask_deg)
+    sat, row, j0, n_cols = _footprint_segments(pos_sv_ecef_m, grid, mask_deg)
     sin_mask = math.sin(math.radians(mask_deg))
-    n_cells = grid.n_cells
+    n_cells, n_lon = grid.n_cells, grid.shape[1]
     count = np.zeros(n_cells, dtype=np.int64)
     normal = np.zeros((len(_IU), n_cells))
-    last = N_DOPPLER_STATES - 1
-    for a in range(0, len(sat), _BATCH_PAIRS):
-        s, c = sat[a:a + _BATCH_PAIRS], cell[a:a + _BATCH_PAIRS]
-        vis, los, rng = _visible(pos_sv_ecef_m[s], grid.pos_ecef_m[c], grid.up_ecef[c], sin_mask)
-        s, c, los, rng = s[vis], c[vis], los[vis], rng[vis]
-        count += np.bincount(c, minlength=n_cells)
-        H = _jacobian_static(los, rng, vel_sv_ecef_mps[s], carrier_hz[s])
-        for q, (i, j) in enumerate(zip(_IU, _JU)):
-            if j < last:
-                normal[q] += np.bincount(c, weights=H[i] * H[j], minlength=n_cells)
-            elif i < last:  # clock column is 1
-                normal[q] += np.bincount(c, weights=H[i], minlength=n_cells)
-    normal[len(_IU) - 1] = count
+    last = N_DOPPLER_STATES - 1  # the clock column of H is 1
+    cell_of_lon = np.tile(np.arange(n_lon), 2)
+    prod = np.empty(_BATCH_PAIRS + n_lon)
+    h_buf = np.empty((N_DOPPLER_STATES, _BATCH_PAIRS + n_lon))
+    pos_x, pos_y, pos_z = np.array(pos_sv_ecef_m, dtype=float).T.copy()
+    vel_x, vel_y, vel_z = np.array(vel_sv_ecef_mps, dtype=float).T.copy()
+    for a, b in segment_batches(n_cols):
+        seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
+        vis, rng = _visible_segments(pos_sv_ecef_m, grid, sat[a:b], row[a:b], seg, lon, sin_mask)
+        keep = np.flatnonzero(vis)
+        seg, lon, rng = seg[keep], lon[keep], rng[keep]
+        s, rows = sat[a:b], row[a:b]
+        rho = grid.rho_row_m[rows][seg]
+        los = (pos_x[s][seg] - rho * grid.cos_lon[lon], pos_y[s][seg] - rho * grid.sin_lon[lon],
+               (pos_z[s] - grid.z_row_m[rows])[seg])
+        H = _jacobian_static(los, rng, (vel_x[s][seg], vel_y[s][seg], vel_z[s][seg]), carrier_hz[s][seg],
+                             h_buf[:, :len(keep)])
+        rows = rows[seg]
+        c0, c1 = row[a] * n_lon, (row[b - 1] + 1) * n_lon
+        cell = rows * n_lon + cell_of_lon[lon] - c0
+        count[c0:c1] += np.bincount(cell, minlength=c1 - c0)
+        p = prod[:len(keep)]
+        for q, (i, j) in enumerate(zip(_IU[:-1], _JU[:-1])):  # H^T H summed over each cell's pairs
+            normal[q, c0:c1] += np.bincount(cell, weights=np.multiply(H[i], H[j], out=p) if j < last else H[i],
+                                            minlength=c1 - c0)
+    normal[-1] = count
     gdop = np.full(n_cells, np.nan)
     fix = np.flatnonzero(count >= N_DOPPLER_STATES)
     if fix.size:
-        full = np.empty((fix.size, N_DOPPLER_STATES, N_DOPPLER_STATES))
-        full[:, _IU, _JU] = normal[:, fix].T
-        full[:, _JU, _IU] = normal[:, fix].T
-        gdop[fix] = _normal_gdop(full)
+        gdop[fix] = _normal_gdop(normal[:, fix])
     return count.reshape(grid.shape), gdop.reshape(grid.shape)
 
 
