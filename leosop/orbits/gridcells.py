@@ -251,7 +251,9 @@ def footprint_pairs(pos_sv_ecef_m, grid, mask_deg):
 
 
 def _normal_gdop(packed):
-    """GDOP from normal matrices ``H^T W H`` given by their upper triangles: ``sqrt(trace(inverse))``, NaN when singular.
+    """GDOP from normal matrices ``H^T W H`` given by their upper triangles.
+
+    ``sqrt(trace(inverse))``, NaN when singular.
 
     Parameters
     ----------

@@ -170,7 +170,10 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
 
 
 def _resume(store, times, grid, counts, gdops):
-    """Fill ``counts`` and ``gdops`` from the chunks in ``store`` at matching epochs; (n_epochs,) bool of those filled."""
+    """Fill ``counts`` and ``gdops`` from the chunks in ``store`` at matching epochs.
+
+    Returns the (n_epochs,) bool of the epochs filled.
+    """
     done = np.zeros(len(times), bool)
     times_ns = times.astype(np.int64)
     for name in store.names():
