@@ -307,3 +307,41 @@ def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording
     code, _, err = _replay(capsys, str(path), "--tle", str(shifted(-40)), "--static", "--out", str(tmp_path / "o"))
     assert code == 2 and "no element set within 30 days" in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_recording_whose_band_misses_the_combs_is_refused(snapshot_recording, tmp_path, capsys):
+    # Centred 5 MHz above the 11.325 GHz channel at 2.5 MS/s: the combs would sit at -5 MHz, +-0.58 MHz
+    # (100 kHz offset searched, 300 kHz Doppler, 176 kHz half comb), all outside +-1.25 MHz.
+    path, _ = snapshot_recording
+    meta = json.loads(path.read_text())
+    for cap in meta["captures"]:
+        cap["core:frequency"] += 5e6
+    bad = tmp_path / "offband.sigmf-meta"
+    bad.write_text(json.dumps(meta))
+    (tmp_path / "offband.sigmf-data").symlink_to(path.with_suffix(".sigmf-data"))
+    code, _, err = _replay(capsys, str(bad), "--out", str(tmp_path / "o"))
+    assert code == 2 and err.count("\n") == 1
+    assert "offband.sigmf-data" in err and "11330.0000 MHz +- 1.25 MHz" in err and "-5.0000 MHz" in err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_band_check_refuses_exactly_beyond_the_combs_reach():
+    from types import SimpleNamespace
+
+    from leosop.errors import InputError
+    from leosop.replay.lo import check_band
+    from leosop.signal.coarse import MAX_DOPPLER_HZ
+
+    # Closed form: refused when |channel - centre| - (offset + Doppler + half comb) > rate / 2.
+    half_comb, lo_max, fs = 175_798.0, 100e3, 2.5e6
+    edge = 0.5 * fs + lo_max + MAX_DOPPLER_HZ + half_comb
+    for sign in (-1, 1):
+        check_band(SimpleNamespace(center_hz=11.325e9 + sign * (edge - 10.0), sample_rate_hz=fs, data_path="r"),
+                   half_comb, lo_max)
+        with pytest.raises(InputError, match="does not contain the pilot combs"):
+            check_band(SimpleNamespace(center_hz=11.325e9 + sign * (edge + 10.0), sample_rate_hz=fs,
+                                       data_path="r"), half_comb, lo_max)
+    # A wider offset searched reaches the combs again; no centre frequency: taken as on the carrier.
+    check_band(SimpleNamespace(center_hz=11.325e9 + edge + 10.0, sample_rate_hz=fs, data_path="r"),
+               half_comb, lo_max + 20.0)
+    check_band(SimpleNamespace(center_hz=None, sample_rate_hz=fs, data_path="r"), half_comb, lo_max)

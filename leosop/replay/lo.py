@@ -16,16 +16,22 @@ is in the estimate.
 Before identification, a continuous recording's tracking blocks fit the
 tone model through a rough offset, the median Doppler of the first full
 search's combs (:func:`rough_lo_hz`).
+
+A recording whose band cannot hold the combs, its centre too far from
+every channel for the offsets searched, is refused before any work
+(:func:`check_band`).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..constellations import DEFAULT_FAMILY, REGISTRY
+from ..errors import InputError
 from ..signal.coarse import MAX_DOPPLER_HZ
 
 __all__ = ["LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "ROUGH_LO_MIN_COMBS", "ROUGH_LO_MIN_HZ", "LoEstimate",
-           "lo_estimate", "rough_lo_hz"]
+           "check_band", "lo_estimate", "rough_lo_hz"]
 
 #: Default bound of the receiver's common offset searched [Hz]: PLL LNBs are within ~+-25 ppm of
 #: 10.6-10.75 GHz at the worst (+-270 kHz); typical ones within a few ppm (tens of kHz). Free-running
@@ -122,3 +128,41 @@ def rough_lo_hz(doppler_hz):
         return None
     median = float(np.median(doppler_hz))
     return median if abs(median) > ROUGH_LO_MIN_HZ else 0.0
+
+
+def check_band(rec, half_comb_hz, lo_offset_max_hz):
+    """Refuse a recording whose band cannot contain the pilot combs at the offsets searched.
+
+    The combs lie at the nearest channel of the default family
+    (``channels_hz``) less the recording's centre, within the receiver's
+    offset (``lo_offset_max_hz``), the satellites' Doppler
+    (:data:`~leosop.signal.coarse.MAX_DOPPLER_HZ`) and the comb's half-width;
+    the recording holds its centre +- half its sample rate. A recording
+    without a centre frequency is taken to be centred on the comb's carrier.
+
+    Parameters
+    ----------
+    rec : Recording
+        ``center_hz`` (or None), ``sample_rate_hz`` and ``data_path``.
+    half_comb_hz : float
+        The comb's outermost tone's offset from its carrier.
+    lo_offset_max_hz : float
+        Bound of the receiver's common offset searched.
+
+    Raises
+    ------
+    InputError
+        When no part of the combs' band lies within the recorded one.
+    """
+    if rec.center_hz is None:
+        return
+    channels_hz = np.asarray(REGISTRY[DEFAULT_FAMILY].channels_hz)
+    channel_hz = float(channels_hz[np.argmin(np.abs(channels_hz - rec.center_hz))])
+    at_hz = channel_hz - rec.center_hz
+    reach_hz = lo_offset_max_hz + MAX_DOPPLER_HZ + half_comb_hz
+    if abs(at_hz) - reach_hz > 0.5 * rec.sample_rate_hz:
+        raise InputError(
+            f"{rec.data_path}: its band ({rec.center_hz / 1e6:.4f} MHz +- {0.5e-6 * rec.sample_rate_hz:g} MHz, "
+            f"{rec.sample_rate_hz / 1e6:g} MS/s) does not contain the pilot combs: at the channel "
+            f"{channel_hz / 1e6:.4f} MHz they would be at {at_hz / 1e6:+.4f} MHz +- {reach_hz / 1e6:.4f} MHz "
+            f"(Doppler, comb span and --lo-offset-max-hz {lo_offset_max_hz:g})")

@@ -32,7 +32,7 @@ from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
 from .identify import identify_tracks
-from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, lo_estimate, rough_lo_hz
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, rough_lo_hz
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -416,6 +416,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
 
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
+    check_band(rec, float(np.max(np.abs(comb.offsets_hz))), lo_offset_max_hz)
     factor, max_doppler = search_band(rec.sample_rate_hz, comb, lo_offset_max_hz)
     fs = rec.sample_rate_hz / factor
     blocks = block_plan(rec, block_s)
