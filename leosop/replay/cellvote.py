@@ -12,7 +12,7 @@ import numpy as np
 
 from ..constants import WGS84_A_M
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
-from .ephemeris import SPEED_SV_MPS, doppler_model
+from .ephemeris import SPEED_SV_MPS, dot3, doppler_model
 from .features import FEATURES
 
 __all__ = ["CellSearch", "fibonacci_cells", "grid_around", "TRACK_CHI2_GATE"]
@@ -53,6 +53,17 @@ def grid_around(centre_ecef_m, offsets_m, alt_m):
 
 
 
+def _morton_order(cells):
+    """Cell indices (n,) along a Z-order curve of latitude and longitude (neighbours mostly adjacent)."""
+    u = cells / np.sqrt(dot3(cells, cells))[:, None]
+    q_lat = np.clip(((np.arcsin(np.clip(u[:, 2], -1, 1)) / np.pi + 0.5) * 1024).astype(np.int64), 0, 1023)
+    q_lon = np.clip(((np.arctan2(u[:, 1], u[:, 0]) / (2 * np.pi) + 0.5) * 1024).astype(np.int64), 0, 1023)
+    key = np.zeros(len(cells), np.int64)
+    for b in range(10):
+        key |= ((q_lat >> b) & 1) << (2 * b + 1) | ((q_lon >> b) & 1) << (2 * b)
+    return np.argsort(key, kind="stable")
+
+
 class CellSearch:
     """The tracks, the ephemeris and the options of one identification, and its cell vote."""
 
@@ -78,6 +89,7 @@ class CellSearch:
         # sees) at each track's reference times and 0.5 s either side, (n_tracks, n_cand, 3 offsets,
         # 3 ref times, 3), indexed through ``local``: memory grows with tracks x candidates, ~50 of a
         # 10,000-satellite snapshot with a prior.
+        self.cand_per_track = [np.flatnonzero(h > 0) for h in self.half_angle]
         cand = np.flatnonzero((self.half_angle > 0).any(axis=0))
         self.local = np.full(n_sats, -1)
         self.local[cand] = np.arange(len(cand))
@@ -85,12 +97,19 @@ class CellSearch:
         self.ref_pos, self.ref_vel = eph.state(cand[None, :, None, None], t_eval[:, None])
 
     def _pairs(self, cells, radius_m):
-        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3)."""
-        cu = cells / np.linalg.norm(cells, axis=1)[:, None]
+        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3).
+
+        Sorted by track, cell, satellite. Only the satellites whose footprint reaches the cap that bounds
+        all the cells are tested cell by cell (triangle inequality on the sphere, 1e-6 rad to spare).
+        """
+        cu = cells / np.sqrt(dot3(cells, cells))[:, None]
+        centre = cu.sum(axis=0)
+        centre /= max(np.linalg.norm(centre), 1e-300)
+        cap = np.arccos(np.clip(np.min(cu @ centre), -1, 1)) + radius_m / WGS84_A_M + 1e-6
         out = []
         for k in range(len(self.tracks)):
-            ok = self.half_angle[k] > 0
-            sats = np.flatnonzero(ok)
+            sats = self.cand_per_track[k]
+            sats = sats[self.unit[k][sats] @ centre >= np.cos(np.minimum(self.half_angle[k][sats] + cap, np.pi))]
             cos_reach = np.cos(self.half_angle[k][sats] + radius_m / WGS84_A_M)
             c, j = np.nonzero(cu @ self.unit[k][sats].T >= cos_reach)
             out.append(np.stack([c, np.full(len(c), k), sats[j]], axis=1))
@@ -118,16 +137,20 @@ class CellSearch:
         assign = np.full((n_cells, n_tr), -1)
         clock = np.zeros(n_cells)
         moved = cells.copy()
-        a = 0
-        while a < n_cells:
-            size = min(_CHUNK_CELLS, n_cells - a)
-            pairs = self._pairs(cells[a:a + size], radius_m)
-            while len(pairs) > _MAX_PAIRS and size > 1:
-                size = max(1, size * _MAX_PAIRS // len(pairs))
-                pairs = self._pairs(cells[a:a + size], radius_m)
-            sl = slice(a, a + size)
-            count[sl], cost[sl], assign[sl], clock[sl], moved[sl] = self._vote_chunk(cells[sl], radius_m, pairs)
-            a += size
+        # Cells are voted independently of each other: chunks of neighbours (Morton order) screen
+        # their satellites together, and a chunk with too many triples is cut between cells.
+        order = _morton_order(cells)
+        for a in range(0, n_cells, _CHUNK_CELLS):
+            chunk = order[a:a + _CHUNK_CELLS]
+            pairs = self._pairs(cells[chunk], radius_m)
+            per_cell = np.cumsum(np.bincount(pairs[:, 0], minlength=len(chunk)))
+            lo = 0
+            while lo < len(chunk):
+                hi = max(lo + 1, int(np.searchsorted(per_cell, per_cell[lo - 1] * (lo > 0) + _MAX_PAIRS, "right")))
+                sub = pairs[(pairs[:, 0] >= lo) & (pairs[:, 0] < hi)] - [lo, 0, 0]
+                i = chunk[lo:hi]
+                count[i], cost[i], assign[i], clock[i], moved[i] = self._vote_chunk(cells[i], radius_m, sub)
+                lo = hi
         return count, cost, assign, clock, moved
 
     def _vote_chunk(self, cells, radius_m, pairs):
