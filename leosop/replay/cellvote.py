@@ -12,7 +12,7 @@ import numpy as np
 
 from ..constants import WGS84_A_M
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
-from .ephemeris import SPEED_SV_MPS, dot3, doppler_model
+from .ephemeris import SPEED_SV_MPS, doppler_hz, doppler_model, dot3
 from .features import FEATURES
 
 __all__ = ["CellSearch", "fibonacci_cells", "grid_around", "TRACK_CHI2_GATE"]
@@ -165,18 +165,18 @@ class CellSearch:
         dt_max = o["along_track_max_m"] / SPEED_SV_MPS + _LIGHT_TIME_MAX_S
         s_loc = self.local[s]
         dm, gm = doppler_model(self.ref_pos[k, s_loc, 0, 1], self.ref_vel[k, s_loc, 0, 1], cells[c], self.k)
-        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.linalg.norm(gm, axis=1)
+        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.sqrt(dot3(gm, gm))
                                             + dt_max * _RATE_MAX_HZ_PER_S + o["sat_offset_max_hz"]
                                             + o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
         c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
         pos_rx = cells[c][:, None, :]
         p, v = self.ref_pos[k, s_loc[near]], self.ref_vel[k, s_loc[near]]  # (m, 3 offsets, 3 ref times, 3)
         dop, grad = doppler_model(p[:, 0], v[:, 0], pos_rx, self.k)
-        rate = doppler_model(p[:, 2], v[:, 2], pos_rx, self.k)[0] - doppler_model(p[:, 1], v[:, 1], pos_rx, self.k)[0]
+        rate = doppler_hz(p[:, 2], v[:, 2], pos_rx, self.k) - doppler_hz(p[:, 1], v[:, 1], pos_rx, self.k)
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
         feat = ((f_ref - dop) @ FEATURES.T) * scale
         feat_jac = np.einsum("fr,mrx->mfx", FEATURES, grad) * scale[..., None]  # d feature / d pos, negated
-        feat_grad = np.linalg.norm(feat_jac, axis=-1)
+        feat_grad = np.sqrt(dot3(feat_jac, feat_jac))
         feat_rate = np.abs(rate @ FEATURES.T) * scale
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
         drift = o["lo_drift_max_hz_per_s"]
