@@ -52,7 +52,7 @@ def run_replay(code_dir, extra):
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "leosop", "replay", str(RECORDING), "--static", "--json", *extra],
-                          env=env, capture_output=True, cwd=REPO)
+                          env=env, capture_output=True, cwd=code_dir)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:

@@ -26,6 +26,9 @@ _LIGHT_TIME_MAX_S = 0.012
 _RATE_MAX_HZ_PER_S = 5e3
 #: Largest angular rate of a line of sight to a LEO satellite [rad/s] (7.6 km/s at 550 km overhead).
 _SAT_RATE_MAX_RAD_PER_S = 0.014
+#: Bound of a satellite's acceleration in the ECEF frame [m/s^2]: gravity <= 9.9 above the surface,
+#: Coriolis 2 omega v <= 1.2 at 8 km/s, centrifugal < 0.04; twice that for the Hermite interpolant.
+_SAT_ACCEL_MAX_MPS2 = 20.0
 #: Chi-square (3 features) above which a cell's linearised fit does not count a track.
 TRACK_CHI2_GATE = 25.0
 #: Cells voted at once, and at most this many (cell, track, satellite) triples (memory bound:
@@ -51,6 +54,18 @@ def grid_around(centre_ecef_m, offsets_m, alt_m):
     lat2, lon2, _ = ecef_to_geodetic(pts.reshape(-1, 3))
     return geodetic_to_ecef(lat2, lon2, alt_m)
 
+
+
+def _range_accel_bound(pos_sv, vel_sv, pos_rx):
+    """Bound of |range rate change| over 1 s centred on the states [m/s], (...).
+
+    d(range rate)/dt = (|v|^2 - range rate^2) / range + u . a <= |v|^2 / range + |a|, with |v| and
+    the range bounded over the +-0.5 s by the acceleration bound.
+    """
+    los_m = pos_sv - pos_rx
+    speed_max = np.sqrt(dot3(vel_sv, vel_sv)) + 0.5 * _SAT_ACCEL_MAX_MPS2
+    rng_min = np.maximum(np.sqrt(dot3(los_m, los_m)) - 0.5 * speed_max, 1e-3)
+    return speed_max**2 / rng_min + _SAT_ACCEL_MAX_MPS2
 
 
 def _morton_order(cells):
@@ -170,14 +185,13 @@ class CellSearch:
                                             + o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
         c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
         pos_rx = cells[c][:, None, :]
-        p, v = self.ref_pos[k, s_loc[near]], self.ref_vel[k, s_loc[near]]  # (m, 3 offsets, 3 ref times, 3)
-        dop, grad = doppler_model(p[:, 0], v[:, 0], pos_rx, self.k)
-        rate = doppler_hz(p[:, 2], v[:, 2], pos_rx, self.k) - doppler_hz(p[:, 1], v[:, 1], pos_rx, self.k)
+        sat = s_loc[near]
+        p0, v0 = self.ref_pos[k, sat, 0], self.ref_vel[k, sat, 0]  # (m, 3 ref times, 3)
+        dop, grad = doppler_model(p0, v0, pos_rx, self.k)
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
         feat = ((f_ref - dop) @ FEATURES.T) * scale
         feat_jac = np.einsum("fr,mrx->mfx", FEATURES, grad) * scale[..., None]  # d feature / d pos, negated
         feat_grad = np.sqrt(dot3(feat_jac, feat_jac))
-        feat_rate = np.abs(rate @ FEATURES.T) * scale
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
         drift = o["lo_drift_max_hz_per_s"]
         t_mid = t_ref[:, 1]
@@ -187,12 +201,25 @@ class CellSearch:
             v3 = 3 * self.k * o["rx_speed_sigma_mps"]
             turn = np.minimum(2.0, _SAT_RATE_MAX_RAD_PER_S * span)
             extra = extra + v3 * np.stack([np.ones_like(span), turn / span, turn], axis=1)
+        b_max = o["lo_offset_max_hz"]
+        # The Doppler rates cost twice the rest: first a screen with a bound of them (most triples fail it).
+        rate_max = self.k * _range_accel_bound(p0, v0, pos_rx)  # (m, 3 ref times)
+        tol_max = (reach * feat_grad + dt_max * (rate_max @ np.abs(FEATURES).T) * scale + 4 * feat_sigma + extra
+                   + o["model_sigma_hz"] * 3) * (1 + 1e-9)
+        maybe = (np.abs(feat[:, 1]) <= tol_max[:, 1]) & (np.abs(feat[:, 2]) <= tol_max[:, 2]) & \
+                (np.abs(feat[:, 0]) <= b_max + tol_max[:, 0])
+        c, k, s, sat, feat, feat_jac, feat_grad = c[maybe], k[maybe], s[maybe], sat[maybe], feat[maybe], \
+            feat_jac[maybe], feat_grad[maybe]
+        t_mid, scale, feat_sigma, extra = t_mid[maybe], scale[maybe], feat_sigma[maybe], extra[maybe]
+        pos_rx = pos_rx[maybe]
+        rate = doppler_hz(self.ref_pos[k, sat, 2], self.ref_vel[k, sat, 2], pos_rx, self.k) - \
+            doppler_hz(self.ref_pos[k, sat, 1], self.ref_vel[k, sat, 1], pos_rx, self.k)
+        feat_rate = np.abs(rate @ FEATURES.T) * scale
         tol_other = dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
         tol = reach * feat_grad + tol_other
         # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
         # and the curvature of the Doppler across the cell (~ radius^2 / range, range >= 550 km, over 2 sigma).
         sig_fit = 0.5 * tol_other + ((radius_m / 3e5) * radius_m + 0.5 * o["cross_track_max_m"]) * feat_grad
-        b_max = o["lo_offset_max_hz"]
         ok = (np.abs(feat[:, 1]) <= tol[:, 1]) & (np.abs(feat[:, 2]) <= tol[:, 2]) & \
              (np.abs(feat[:, 0]) <= b_max + tol[:, 0])
         c, k, s, feat, tol = c[ok], k[ok], s[ok], feat[ok], tol[ok]
