@@ -125,3 +125,25 @@ def test_real_snapshot_10138_satellites(seed, continuous):
     # Runner-ups are rejected by far more than the acceptance margin (chi-square difference 25).
     assert np.all(res.margin > 25.0)
     assert np.linalg.norm(res.pos_ecef_m - rx) < 2e3
+
+
+def test_range_rate_bound_of_the_cell_vote_screen_holds_against_sgp4(walker):
+    """The cell vote skips the Doppler rates of triples that fail with a bound of them: the bound
+    must hold for every satellite and geometry (here all of the Walker set, above and below the
+    horizon, against SGP4 range rates 1 s apart; the states are SGP4's, no interpolation)."""
+    from leosop.positioning.measurements import sv_states_from_tle
+    from leosop.replay.cellvote import _range_accel_bound
+
+    rx = geodetic_to_ecef(0.6, 1.9, 300.0)
+    t0 = walker.epochs_utc[0] + np.timedelta64(5, "h")
+    ids = np.repeat(walker.sat_ids, 3)
+    times = np.tile(t0 + np.array([-500, 0, 500], "timedelta64[ms]").astype("timedelta64[ns]"), len(walker))
+    pos, vel, _ = sv_states_from_tle(walker, ids, times)
+    pos, vel = pos.reshape(-1, 3, 3), vel.reshape(-1, 3, 3)
+    los = pos - rx
+    rr = np.sum(los * vel, axis=-1) / np.linalg.norm(los, axis=-1)
+    bound = _range_accel_bound(pos[:, 1], vel[:, 1], rx)
+    change = np.abs(rr[:, 2] - rr[:, 0])
+    assert np.all(change <= bound)
+    # Not vacuous: overhead satellites change range rate by ~100 m/s in 1 s, the bound is the same order.
+    assert np.max(change) > 0.3 * np.max(bound)

@@ -12,11 +12,23 @@ Baseline for the run time: exact SGP4 (``sv_states_from_tle``, light time)
 of every candidate at every sample time of the tracks, the cost of the
 predicted curves without the interpolated grid; printed as a ratio.
 
+With ``--replay`` it times instead ``leosop replay`` of the bundled Xi'an recording with and without
+``--init`` (issue 24: the global search), this tree against ``--baseline-ref`` (default ``main``, exported
+with ``git archive`` into a temporary folder), each in a child process of its own: CPU time (user +
+system, ``os.wait4``, of the child, robust to other load on the machine), wall time, their ratio, and whether the two
+wrote the same JSON byte for byte.
+
 Usage: python tools/bench_identify.py [--cases N] [--seed S] [--global] [--extras]
+       python tools/bench_identify.py --replay [--baseline-ref main]
 """
 
 import argparse
+import os
+import resource
+import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
@@ -28,7 +40,42 @@ from leosop.positioning.measurements import sv_states_from_tle
 from leosop.replay.identify import identify_tracks
 from leosop.replay.simtracks import simulate_track, spurious_track, visible_indices
 
-SNAPSHOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
+REPO = Path(__file__).resolve().parents[1]
+SNAPSHOT = REPO.parent / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
+RECORDING = REPO / "signals" / "starlink_xian_snapshots.sigmf-meta"
+REPLAY_INIT = "34.98,109.71,0"  # ~70 km from the fix, as in the README
+
+
+def run_replay(code_dir, extra):
+    """CPU time [s], wall time [s] and stdout of ``leosop replay RECORDING --static --json EXTRA`` from ``code_dir``."""
+    env = dict(os.environ, PYTHONPATH=str(code_dir))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "leosop", "replay", str(RECORDING), "--static", "--json", *extra],
+                          env=env, capture_output=True, cwd=code_dir)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        sys.exit(f"{code_dir}: leosop replay failed: {proc.stderr.decode().strip()[-500:]}")
+    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, wall, proc.stdout
+
+
+def bench_replay(ref):
+    """``leosop replay`` with and without a prior, this tree against ``ref``: times, ratios, same JSON."""
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp)
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", ref, "leosop"], check=True,
+                                 capture_output=True).stdout
+        (base / "base.tar").write_bytes(archive)
+        with tarfile.open(base / "base.tar") as tar:
+            tar.extractall(base, filter="data")
+        print(f"{'replay':>12} {'this cpu s':>10} {'wall s':>7} | {ref + ' cpu s':>10} {'wall s':>7} | "
+              f"{'cpu ratio':>9} | same JSON")
+        for name, extra in (("no prior", []), ("--init", ["--init", REPLAY_INIT])):
+            cpu_new, wall_new, out_new = run_replay(REPO, extra)
+            cpu_old, wall_old, out_old = run_replay(base, extra)
+            print(f"{name:>12} {cpu_new:>10.1f} {wall_new:>7.1f} | {cpu_old:>10.1f} {wall_old:>7.1f} | "
+                  f"{cpu_old / cpu_new:>8.2f}x | {out_new == out_old}", flush=True)
 
 
 def make_case(const, rng, continuous, extras):
@@ -79,7 +126,13 @@ def main(argv=None):
     ap.add_argument("--global", dest="global_search", action="store_true", help="also without --init")
     ap.add_argument("--extras", action="store_true", help="add a spurious track and a missing satellite")
     ap.add_argument("--baseline", action="store_true", help="time the exact-SGP4 baseline once")
+    ap.add_argument("--replay", action="store_true", help="leosop replay of the bundled recording against the code "
+                    "of --baseline-ref, with and without a prior")
+    ap.add_argument("--baseline-ref", default="main", help="git ref of the code compared with --replay")
     args = ap.parse_args(argv)
+    if args.replay:
+        bench_replay(args.baseline_ref)
+        return 0
     if not SNAPSHOT.is_file():
         print(f"{SNAPSHOT} not found", file=sys.stderr)
         return 1

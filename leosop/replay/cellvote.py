@@ -12,7 +12,7 @@ import numpy as np
 
 from ..constants import WGS84_A_M
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
-from .ephemeris import SPEED_SV_MPS, doppler_model
+from .ephemeris import SPEED_SV_MPS, doppler_hz, doppler_model, dot3
 from .features import FEATURES
 
 __all__ = ["CellSearch", "fibonacci_cells", "grid_around", "TRACK_CHI2_GATE"]
@@ -26,6 +26,9 @@ _LIGHT_TIME_MAX_S = 0.012
 _RATE_MAX_HZ_PER_S = 5e3
 #: Largest angular rate of a line of sight to a LEO satellite [rad/s] (7.6 km/s at 550 km overhead).
 _SAT_RATE_MAX_RAD_PER_S = 0.014
+#: Bound of a satellite's acceleration in the ECEF frame [m/s^2]: gravity <= 9.9 above the surface,
+#: Coriolis 2 omega v <= 1.2 at 8 km/s, centrifugal < 0.04; twice that for the Hermite interpolant.
+_SAT_ACCEL_MAX_MPS2 = 20.0
 #: Chi-square (3 features) above which a cell's linearised fit does not count a track.
 TRACK_CHI2_GATE = 25.0
 #: Cells voted at once, and at most this many (cell, track, satellite) triples (memory bound:
@@ -53,6 +56,29 @@ def grid_around(centre_ecef_m, offsets_m, alt_m):
 
 
 
+def _range_accel_bound(pos_sv, vel_sv, pos_rx):
+    """Bound of |range rate change| over 1 s centred on the states [m/s], (...).
+
+    d(range rate)/dt = (|v|^2 - range rate^2) / range + u . a <= |v|^2 / range + |a|, with |v| and
+    the range bounded over the +-0.5 s by the acceleration bound.
+    """
+    los_m = pos_sv - pos_rx
+    speed_max = np.sqrt(dot3(vel_sv, vel_sv)) + 0.5 * _SAT_ACCEL_MAX_MPS2
+    rng_min = np.maximum(np.sqrt(dot3(los_m, los_m)) - 0.5 * speed_max, 1e-3)
+    return speed_max**2 / rng_min + _SAT_ACCEL_MAX_MPS2
+
+
+def _morton_order(cells):
+    """Cell indices (n,) along a Z-order curve of latitude and longitude (neighbours mostly adjacent)."""
+    u = cells / np.sqrt(dot3(cells, cells))[:, None]
+    q_lat = np.clip(((np.arcsin(np.clip(u[:, 2], -1, 1)) / np.pi + 0.5) * 1024).astype(np.int64), 0, 1023)
+    q_lon = np.clip(((np.arctan2(u[:, 1], u[:, 0]) / (2 * np.pi) + 0.5) * 1024).astype(np.int64), 0, 1023)
+    key = np.zeros(len(cells), np.int64)
+    for b in range(10):
+        key |= ((q_lat >> b) & 1) << (2 * b + 1) | ((q_lon >> b) & 1) << (2 * b)
+    return np.argsort(key, kind="stable")
+
+
 class CellSearch:
     """The tracks, the ephemeris and the options of one identification, and its cell vote."""
 
@@ -78,6 +104,7 @@ class CellSearch:
         # sees) at each track's reference times and 0.5 s either side, (n_tracks, n_cand, 3 offsets,
         # 3 ref times, 3), indexed through ``local``: memory grows with tracks x candidates, ~50 of a
         # 10,000-satellite snapshot with a prior.
+        self.cand_per_track = [np.flatnonzero(h > 0) for h in self.half_angle]
         cand = np.flatnonzero((self.half_angle > 0).any(axis=0))
         self.local = np.full(n_sats, -1)
         self.local[cand] = np.arange(len(cand))
@@ -85,12 +112,19 @@ class CellSearch:
         self.ref_pos, self.ref_vel = eph.state(cand[None, :, None, None], t_eval[:, None])
 
     def _pairs(self, cells, radius_m):
-        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3)."""
-        cu = cells / np.linalg.norm(cells, axis=1)[:, None]
+        """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3).
+
+        Sorted by track, cell, satellite. Only the satellites whose footprint reaches the cap that bounds
+        all the cells are tested cell by cell (triangle inequality on the sphere, 1e-6 rad to spare).
+        """
+        cu = cells / np.sqrt(dot3(cells, cells))[:, None]
+        centre = cu.sum(axis=0)
+        centre /= max(np.linalg.norm(centre), 1e-300)
+        cap = np.arccos(np.clip(np.min(cu @ centre), -1, 1)) + radius_m / WGS84_A_M + 1e-6
         out = []
         for k in range(len(self.tracks)):
-            ok = self.half_angle[k] > 0
-            sats = np.flatnonzero(ok)
+            sats = self.cand_per_track[k]
+            sats = sats[self.unit[k][sats] @ centre >= np.cos(np.minimum(self.half_angle[k][sats] + cap, np.pi))]
             cos_reach = np.cos(self.half_angle[k][sats] + radius_m / WGS84_A_M)
             c, j = np.nonzero(cu @ self.unit[k][sats].T >= cos_reach)
             out.append(np.stack([c, np.full(len(c), k), sats[j]], axis=1))
@@ -118,16 +152,20 @@ class CellSearch:
         assign = np.full((n_cells, n_tr), -1)
         clock = np.zeros(n_cells)
         moved = cells.copy()
-        a = 0
-        while a < n_cells:
-            size = min(_CHUNK_CELLS, n_cells - a)
-            pairs = self._pairs(cells[a:a + size], radius_m)
-            while len(pairs) > _MAX_PAIRS and size > 1:
-                size = max(1, size * _MAX_PAIRS // len(pairs))
-                pairs = self._pairs(cells[a:a + size], radius_m)
-            sl = slice(a, a + size)
-            count[sl], cost[sl], assign[sl], clock[sl], moved[sl] = self._vote_chunk(cells[sl], radius_m, pairs)
-            a += size
+        # Cells are voted independently of each other: chunks of neighbours (Morton order) screen
+        # their satellites together, and a chunk with too many triples is cut between cells.
+        order = _morton_order(cells)
+        for a in range(0, n_cells, _CHUNK_CELLS):
+            chunk = order[a:a + _CHUNK_CELLS]
+            pairs = self._pairs(cells[chunk], radius_m)
+            per_cell = np.cumsum(np.bincount(pairs[:, 0], minlength=len(chunk)))
+            lo = 0
+            while lo < len(chunk):
+                hi = max(lo + 1, int(np.searchsorted(per_cell, per_cell[lo - 1] * (lo > 0) + _MAX_PAIRS, "right")))
+                sub = pairs[(pairs[:, 0] >= lo) & (pairs[:, 0] < hi)] - [lo, 0, 0]
+                i = chunk[lo:hi]
+                count[i], cost[i], assign[i], clock[i], moved[i] = self._vote_chunk(cells[i], radius_m, sub)
+                lo = hi
         return count, cost, assign, clock, moved
 
     def _vote_chunk(self, cells, radius_m, pairs):
@@ -142,19 +180,18 @@ class CellSearch:
         dt_max = o["along_track_max_m"] / SPEED_SV_MPS + _LIGHT_TIME_MAX_S
         s_loc = self.local[s]
         dm, gm = doppler_model(self.ref_pos[k, s_loc, 0, 1], self.ref_vel[k, s_loc, 0, 1], cells[c], self.k)
-        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.linalg.norm(gm, axis=1)
+        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.sqrt(dot3(gm, gm))
                                             + dt_max * _RATE_MAX_HZ_PER_S + o["sat_offset_max_hz"]
                                             + o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
         c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
         pos_rx = cells[c][:, None, :]
-        p, v = self.ref_pos[k, s_loc[near]], self.ref_vel[k, s_loc[near]]  # (m, 3 offsets, 3 ref times, 3)
-        dop, grad = doppler_model(p[:, 0], v[:, 0], pos_rx, self.k)
-        rate = doppler_model(p[:, 2], v[:, 2], pos_rx, self.k)[0] - doppler_model(p[:, 1], v[:, 1], pos_rx, self.k)[0]
+        sat = s_loc[near]
+        p0, v0 = self.ref_pos[k, sat, 0], self.ref_vel[k, sat, 0]  # (m, 3 ref times, 3)
+        dop, grad = doppler_model(p0, v0, pos_rx, self.k)
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
         feat = ((f_ref - dop) @ FEATURES.T) * scale
         feat_jac = np.einsum("fr,mrx->mfx", FEATURES, grad) * scale[..., None]  # d feature / d pos, negated
-        feat_grad = np.linalg.norm(feat_jac, axis=-1)
-        feat_rate = np.abs(rate @ FEATURES.T) * scale
+        feat_grad = np.sqrt(dot3(feat_jac, feat_jac))
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
         drift = o["lo_drift_max_hz_per_s"]
         t_mid = t_ref[:, 1]
@@ -164,12 +201,25 @@ class CellSearch:
             v3 = 3 * self.k * o["rx_speed_sigma_mps"]
             turn = np.minimum(2.0, _SAT_RATE_MAX_RAD_PER_S * span)
             extra = extra + v3 * np.stack([np.ones_like(span), turn / span, turn], axis=1)
+        b_max = o["lo_offset_max_hz"]
+        # The Doppler rates cost twice the rest: first a screen with a bound of them (most triples fail it).
+        rate_max = self.k * _range_accel_bound(p0, v0, pos_rx)  # (m, 3 ref times)
+        tol_max = (reach * feat_grad + dt_max * (rate_max @ np.abs(FEATURES).T) * scale + 4 * feat_sigma + extra
+                   + o["model_sigma_hz"] * 3) * (1 + 1e-9)
+        maybe = (np.abs(feat[:, 1]) <= tol_max[:, 1]) & (np.abs(feat[:, 2]) <= tol_max[:, 2]) & \
+                (np.abs(feat[:, 0]) <= b_max + tol_max[:, 0])
+        c, k, s, sat, feat, feat_jac, feat_grad = c[maybe], k[maybe], s[maybe], sat[maybe], feat[maybe], \
+            feat_jac[maybe], feat_grad[maybe]
+        t_mid, scale, feat_sigma, extra = t_mid[maybe], scale[maybe], feat_sigma[maybe], extra[maybe]
+        pos_rx = pos_rx[maybe]
+        rate = doppler_hz(self.ref_pos[k, sat, 2], self.ref_vel[k, sat, 2], pos_rx, self.k) - \
+            doppler_hz(self.ref_pos[k, sat, 1], self.ref_vel[k, sat, 1], pos_rx, self.k)
+        feat_rate = np.abs(rate @ FEATURES.T) * scale
         tol_other = dt_max * feat_rate + 4 * feat_sigma + extra + o["model_sigma_hz"] * 3
         tol = reach * feat_grad + tol_other
         # Sigma of the features for the cell's linearised fit: the non-position tolerances (~2 sigma)
         # and the curvature of the Doppler across the cell (~ radius^2 / range, range >= 550 km, over 2 sigma).
         sig_fit = 0.5 * tol_other + ((radius_m / 3e5) * radius_m + 0.5 * o["cross_track_max_m"]) * feat_grad
-        b_max = o["lo_offset_max_hz"]
         ok = (np.abs(feat[:, 1]) <= tol[:, 1]) & (np.abs(feat[:, 2]) <= tol[:, 2]) & \
              (np.abs(feat[:, 0]) <= b_max + tol[:, 0])
         c, k, s, feat, tol = c[ok], k[ok], s[ok], feat[ok], tol[ok]

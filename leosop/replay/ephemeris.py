@@ -13,7 +13,7 @@ from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..frames import rotate_to_later_ecef
 from ..orbits.propagate import state_ecef
 
-__all__ = ["Ephemeris", "doppler_model", "NODE_STEP_S", "SPEED_SV_MPS"]
+__all__ = ["Ephemeris", "doppler_model", "doppler_hz", "dot3", "NODE_STEP_S", "SPEED_SV_MPS"]
 
 #: Node spacing of the propagated grid [s]: the cubic Hermite interpolation
 #: of a LEO orbit errs ~1 mm in position and ~0.1 mm/s in velocity at 10 s.
@@ -69,10 +69,26 @@ def doppler_model(pos_sv, vel_sv, pos_rx, hz_per_mps, los=False):
     ``vel_sv`` is relative to the receiver (satellite minus receiver
     velocity). With ``los`` the unit line of sight (..., 3) is returned too.
     """
-    los_m = pos_sv - pos_rx
-    rng = np.linalg.norm(los_m, axis=-1)
-    u = los_m / rng[..., None]
-    rr = np.sum(u * vel_sv, axis=-1)
+    rng, u, rr = _range_rate(pos_sv, vel_sv, pos_rx)
     grad = hz_per_mps * (vel_sv - rr[..., None] * u) / rng[..., None]
     return (-hz_per_mps * rr, grad, u) if los else (-hz_per_mps * rr, grad)
+
+
+def doppler_hz(pos_sv, vel_sv, pos_rx, hz_per_mps):
+    """Doppler (...) alone, as the first output of :func:`doppler_model` (bit for bit)."""
+    return -hz_per_mps * _range_rate(pos_sv, vel_sv, pos_rx)[2]
+
+
+def _range_rate(pos_sv, vel_sv, pos_rx):
+    """Range [m], unit line of sight (..., 3) and range rate [m/s] (...)."""
+    los_m = pos_sv - pos_rx
+    rng = np.sqrt(dot3(los_m, los_m))
+    u = los_m / rng[..., None]
+    return rng, u, dot3(u, vel_sv)
+
+
+def dot3(a, b):
+    """Dot products over the last axis of length 3, (...): as ``np.sum(a * b, axis=-1)`` bit for bit (the same
+    sequential order), without the slow short-axis reduction."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
