@@ -27,12 +27,13 @@ import os
 import resource
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from baseline_tree import export_package
 
 from leosop.frames import C_e_n, geodetic_to_ecef
 from leosop.orbits import load_constellation
@@ -64,11 +65,7 @@ def bench_replay(ref):
     """``leosop replay`` with and without a prior, this tree against ``ref``: times, ratios, same JSON."""
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp)
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", ref, "leosop"], check=True,
-                                 capture_output=True).stdout
-        (base / "base.tar").write_bytes(archive)
-        with tarfile.open(base / "base.tar") as tar:
-            tar.extractall(base, filter="data")
+        export_package(ref, base)
         print(f"{'replay':>12} {'this cpu s':>10} {'wall s':>7} | {ref + ' cpu s':>10} {'wall s':>7} | "
               f"{'cpu ratio':>9} | same JSON")
         for name, extra in (("no prior", []), ("--init", ["--init", REPLAY_INIT])):

@@ -24,12 +24,13 @@ import filecmp
 import os
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from baseline_tree import export_package
 
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation
@@ -58,11 +59,7 @@ def bench_spans(args):
         tmp = Path(tmp)
         base = tmp / "baseline"
         base.mkdir()
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", args.baseline_ref, "leosop"], check=True,
-                                 capture_output=True).stdout
-        (tmp / "base.tar").write_bytes(archive)
-        with tarfile.open(tmp / "base.tar") as tar:
-            tar.extractall(base, filter="data")
+        export_package(args.baseline_ref, base)
         print(f"{'span':>6} {'streamed s':>10} {'MB':>6} | {args.baseline_ref + ' s':>10} {'MB':>6} | "
               f"{'time ratio':>10} {'memory ratio':>12} | same files")
         for hours in args.spans:
