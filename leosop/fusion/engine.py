@@ -417,7 +417,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
         of further corrections ``(dx, P_after)`` to feed back in turn (error
         sense, as an update's), or None: steps on the filter that are not one
         aid's (z, H, R), e.g. the PPP ambiguity fixing, wide-lane update and
-        bridge into a gap of :mod:`leosop.gnss.ppp_ins_engine`.
+        bridge into a gap of :mod:`leosop.gnss.ppp_ins_ar`.
 
     Returns
     -------
