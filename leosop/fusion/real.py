@@ -3,10 +3,10 @@
 The pieces ``leosop fuse`` (DESIGN 4.1, 4.5) and ``tools/bench_fuse.py`` share:
 
 * :class:`ImuSpec`: the IMU noise model, by grade or from a JSON file;
-* :func:`stationary_windows`: where the IMU is at rest (for ZUPT and zero-rate aids);
 * :func:`fuse`: GNSS position and velocity aids (with lever arm, the
   epochs of the simulated outages withheld), optional ZUPT/zero-rate and NHC
-  aids, the start from the first GNSS epoch (levelled from the
+  aids (at rest where :func:`leosop.ins.stationary.stationary_windows`
+  says), the start from the first GNSS epoch (levelled from the
   accelerometers, yaw from the course over ground once moving), and the
   engine run (:mod:`leosop.fusion.engine`);
 * :func:`outage_errors`: horizontal errors of the antenna track against the
@@ -18,7 +18,6 @@ meet in Unix-style GPST seconds.
 """
 
 import dataclasses
-import itertools
 import json
 import math
 from pathlib import Path
@@ -30,6 +29,7 @@ from .. import earth, frames
 from ..errors import InputError
 from ..gnss.rtklib_pos import Q_DR, Q_FIX, Q_FLOAT, Q_SINGLE
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+from ..ins.stationary import stationary_windows
 from ..ins.strapdown import NavState
 from ..rotations import dcm_to_euler, euler_to_dcm, quat_to_dcm
 from . import aids as aid_models
@@ -45,7 +45,6 @@ __all__ = [
     "fuse",
     "imu_spec",
     "outage_errors",
-    "stationary_windows",
 ]
 
 #: Chi-square (2 degrees of freedom) of the probability of a 1-D 3-sigma interval, 0.9973: a horizontal
@@ -207,46 +206,6 @@ class FuseOptions:
             return engine.CourseAlignment()
         speed, sigma_deg = self.course_yaw
         return engine.CourseAlignment(min_speed_mps=speed, sigma_rad=math.radians(sigma_deg))
-
-
-def stationary_windows(t_s, accel_mps2, gyro_rad_per_s, *, window_s=1.0, max_accel_std_mps2=0.2,
-                       max_accel_change_mps2=0.05, max_rate_deg_per_s=0.3):
-    """Windows of an IMU log in which it is at rest.
-
-    A window is at rest when the scatter of the specific-force magnitude,
-    the change of the mean specific force between its quarters and the
-    magnitude of its mean body rate are all small. The thresholds separate
-    every 1 s window of the rtklibexplorer drive and walk logs in motion
-    (GNSS speed over 0.05 m/s: none flagged) from about 80 % of those at rest
-    (engine idling, hand-held) (docs/fusion-real.md).
-
-    Parameters
-    ----------
-    t_s : ndarray, (n,)
-    accel_mps2, gyro_rad_per_s : ndarray, (n, 3)
-
-    Returns
-    -------
-    t_end_s : ndarray, (k,)
-        End of each window at rest.
-    gyro_mean_rad_per_s : ndarray, (k, 3)
-        Its mean body rate.
-    """
-    edges = np.searchsorted(t_s, np.arange(t_s[0], t_s[-1], window_s))
-    ends, means = [], []
-    for a, b in itertools.pairwise(edges):
-        q = (b - a) // 4
-        if q < 2:
-            continue
-        f = accel_mps2[a:b]
-        quarters = f[:4 * q].reshape(4, q, 3).mean(axis=1)
-        w = gyro_rad_per_s[a:b].mean(axis=0)
-        if (np.linalg.norm(f, axis=1).std() < max_accel_std_mps2
-                and np.ptp(quarters, axis=0).max() < max_accel_change_mps2
-                and math.degrees(float(np.linalg.norm(w))) < max_rate_deg_per_s):
-            ends.append(t_s[b - 1])
-            means.append(w)
-    return np.asarray(ends), np.asarray(means).reshape(-1, 3)
 
 
 @dataclasses.dataclass(frozen=True)
