@@ -19,18 +19,18 @@ Doppler also come from the PSS of the first capture
 (:func:`~leosop.signal.ofdm.acquire_pss`).
 """
 
-import sys
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import InputError
-from ..positioning.measurements import MAX_TLE_AGE_DAYS, Measurements
+from ..positioning.measurements import Measurements
 from ..signal.coarse import MAX_DOPPLER_HZ
 from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import NonFiniteSamples, find_combs
 from ..signal.pilot import PilotComb
+from .elements import check_snapshot_age
 from .identify import identify_tracks
 from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, rough_lo_hz
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
@@ -175,33 +175,6 @@ def _pss(rec):
     if n < 2 * FRAME_SAMPLES:
         return None
     return acquire_pss(rec.read(cap.sample_start, n), FS_HZ), cap.start_utc
-
-
-#: Element sets older or newer than this against the recording are warned about [days]
-#: (along-track errors grow by ~km per day); beyond MAX_TLE_AGE_DAYS none is used.
-TLE_AGE_WARN_DAYS = 3.0
-
-
-def check_snapshot_age(rec, constellation):
-    """Warn when the element sets are far from the recording's date; refuse when none can be used.
-
-    Returns
-    -------
-    float
-        Median age of the element sets at the recording's start [days] (positive: older).
-    """
-    age_days = (rec.start_utc - constellation.epochs_utc) / np.timedelta64(1, "D")
-    usable = np.abs(age_days) <= MAX_TLE_AGE_DAYS
-    median = float(np.median(age_days))
-    name = getattr(constellation, "source", "") or "the element sets"
-    if not usable.any():
-        raise InputError(f"{name}: no element set within {MAX_TLE_AGE_DAYS:g} days of the recording "
-                         f"({np.datetime_as_string(rec.start_utc, unit='s')}Z; median age {median:+.1f} days): "
-                         "no satellite can be propagated to it")
-    if abs(median) > TLE_AGE_WARN_DAYS:
-        print(f"leosop replay: warning: {name}: the element sets are {median:+.1f} days from the recording "
-              f"(median); along-track errors of km per day make identification and fixes worse", file=sys.stderr)
-    return median
 
 
 #: Periodograms averaged per spectrogram column (a figure needs no more).
