@@ -5,8 +5,7 @@
 :class:`FusionResult` of simulate's loose (:func:`leosop.fusion.aids_fix.fuse`)
 and tight (:mod:`leosop.simulate_tight`) couplings, :func:`pos_jacobian`
 (``[dlat, dlon, dalt]`` to ENU metres), the gate and the satellites' error
-models of the LEO aids, and :class:`FeedbackIns`, the prediction and feedback
-of :mod:`leosop.gnss.ppp_ins`'s own filter loop.
+models of the LEO aids.
 """
 
 import dataclasses
@@ -14,12 +13,11 @@ import dataclasses
 import numpy as np
 
 from .. import earth
-from ..ins import error_model, strapdown
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..ins.track import NavTrack
 
 __all__ = ["DROP_AFTER_S", "GATE_PROBABILITY", "N_INS", "ORBIT_MODELS", "RX_OFFSET_PSD_HZ2_PER_S", "RX_OFFSET_SIGMA_HZ",
-           "FeedbackIns", "FilterSettings", "FusionResult", "initial_covariance", "pos_jacobian"]
+           "FilterSettings", "FusionResult", "initial_covariance", "pos_jacobian"]
 
 #: How the satellites' orbit errors are related: each its own, or one shift of all.
 ORBIT_MODELS = ("independent", "common")
@@ -34,8 +32,6 @@ GATE_PROBABILITY = 1.0 - 1e-6
 #: Prior sigma of each receiver frequency offset [Hz] and its random walk [Hz^2/s], for both couplings.
 RX_OFFSET_SIGMA_HZ = 10.0
 RX_OFFSET_PSD_HZ2_PER_S = 1e-6
-#: Slack on comparisons of epoch times [s]: ``k * step_s`` and ``per_step * dt_s`` round far below it.
-_TIME_SLACK_S = 1e-9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,67 +135,3 @@ def initial_covariance(settings, lat_rad, alt_m):
     P[EPS, EPS] = np.eye(3) * settings.gyro_bias_sigma_rad_per_s**2
     P[NABLA, NABLA] = np.eye(3) * settings.accel_bias_sigma_mps2**2
     return P
-
-
-class FeedbackIns:
-    """The strapdown INS a filter corrects: prediction of its errors and feedback.
-
-    The INS runs at the IMU rate on increments less the accumulated bias
-    estimates; the filter's epochs are ``k * settings.step_s``.
-
-    Parameters
-    ----------
-    state0 : leosop.ins.strapdown.NavState
-    dtheta_b_rad, dvel_b_mps : ndarray, (n_imu, 3)
-        Measured IMU increments at interval ``dt_s``.
-    dt_s : float
-    settings : FilterSettings
-
-    Attributes
-    ----------
-    state : leosop.ins.strapdown.NavState
-        The corrected INS state at the current epoch.
-    gyro_bias_rad_per_s, accel_bias_mps2 : ndarray, (3,)
-        Accumulated bias estimates.
-    n_epochs : int
-        Epochs the IMU data cover (the first is the start).
-    """
-
-    def __init__(self, state0, dtheta_b_rad, dvel_b_mps, dt_s, settings):
-        self.per_step = round(settings.step_s / dt_s)
-        if self.per_step < 2 or self.per_step % 2 or abs(self.per_step * dt_s - settings.step_s) > _TIME_SLACK_S:
-            raise ValueError(f"step_s={settings.step_s} must be an even multiple of dt_s={dt_s}")
-        self.dtheta_b_rad, self.dvel_b_mps, self.dt_s, self.step_s = dtheta_b_rad, dvel_b_mps, dt_s, settings.step_s
-        self.n_epochs = dtheta_b_rad.shape[0] // self.per_step + 1
-        self.Qc = settings.noise_psd
-        self.state = state0
-        self.gyro_bias_rad_per_s = np.zeros(3)
-        self.accel_bias_mps2 = np.zeros(3)
-
-    def predict(self, k, P):
-        """Move the INS from epoch k - 1 to k and propagate ``P`` (in place; returned).
-
-        Only the INS block moves: every state after the first :data:`N_INS` is constant.
-        """
-        sl = slice((k - 1) * self.per_step, k * self.per_step)
-        dth = self.dtheta_b_rad[sl] - self.gyro_bias_rad_per_s * self.dt_s
-        dvl = self.dvel_b_mps[sl] - self.accel_bias_mps2 * self.dt_s
-        state = self.state
-        f_n = state.C_n_b @ (dvl.sum(axis=0) / self.step_s)
-        F, G = error_model.model15(state.C_n_b, f_n, state.vel_enu_mps, state.lat_rad, state.alt_m)
-        # Second-order series: the modes of F (Schuler, Earth rate, vertical) are
-        # below 2e-3 rad/s, so at 1 s the terms left out are ~1e-6 of those kept
-        # (and Van Loan's matrix exponential costs 8x more per step).
-        Phi, Qd = error_model.discretize(F, G, self.Qc, self.step_s, method="series")
-        P[:N_INS, :] = Phi @ P[:N_INS, :]
-        P[:, :N_INS] = P[:, :N_INS] @ Phi.T
-        P[:N_INS, :N_INS] += Qd
-        P = 0.5 * (P + P.T)
-        self.state = strapdown.integrate(state, dth, dvl, self.dt_s, out_every=self.per_step // 2).state(-1)
-        return P
-
-    def feedback(self, dx):
-        """Correct the INS by the estimated errors ``dx[:N_INS]`` and accumulate the bias estimates."""
-        self.state = self.state.corrected(dx[PHI], dx[DV], dx[DPOS])
-        self.gyro_bias_rad_per_s = self.gyro_bias_rad_per_s + dx[EPS]
-        self.accel_bias_mps2 = self.accel_bias_mps2 + dx[NABLA]

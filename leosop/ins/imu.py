@@ -238,8 +238,8 @@ class MeasuredIncrements:
     """A series of measured increments made on demand, a block at a time: ideal ones from a source, corrupted.
 
     Only one block is held. :attr:`dtheta_b_rad` and :attr:`dvel_b_mps`
-    act as (n, 3) arrays read forward by slices, as the filters' INS reads
-    them (:class:`leosop.fusion.common.FeedbackIns`); reading an earlier
+    act as (n, 3) arrays read forward by slices, as the fusion engine's INS
+    reads them (:func:`leosop.fusion.engine.run`); reading an earlier
     slice starts the series again (same numbers: the corruption is reset).
 
     Parameters
