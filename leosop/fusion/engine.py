@@ -188,6 +188,7 @@ class _Filter:
         self.pending_s = 0.0
         self.pending_dv_b = np.zeros(3)
         self.pending_dth_b = np.zeros(3)
+        self.pending_var = np.zeros(6)
         self.counts = {}
         self.nll = {}
         self.rejected_run = {}
@@ -220,6 +221,7 @@ class _Filter:
         Phi, Qd = error_model.discretize(F, G, self.Qc, dt, method="series")
         Qd[EPS, EPS] += np.diag(self.bias_q[:3] * dt)
         Qd[NABLA, NABLA] += np.diag(self.bias_q[3:] * dt)
+        Qd[:N_INS, :N_INS] += (G15 * self.pending_var) @ G15.T
         if self.TD is not None:
             Qd[self.TD, self.TD] += self.settings.time_offset_rw_s_per_rt_s**2 * dt
         if n_all > n:
@@ -232,6 +234,7 @@ class _Filter:
         self.pending_s = 0.0
         self.pending_dv_b = np.zeros(3)
         self.pending_dth_b = np.zeros(3)
+        self.pending_var = np.zeros(6)
 
     def due_s(self, aid):
         """When ``aid`` is due on the IMU clock."""
@@ -363,8 +366,8 @@ class _Filter:
         self.P[:, k] = 0.0
         self.P[k, k] = sigma_rad**2
 
-    def step(self, dth, dv, dt2):
-        """One INS update over a pair of raw increments (2, 3)."""
+    def step(self, dth, dv, dt2, var2):
+        """One INS update over a pair of raw increments (2, 3) whose errors have the variances ``var2`` (2, 6)."""
         th, dvc = self.correct_increments(dth, dv, dt2)
         T = float(dt2[0] + dt2[1])
         v0 = self.state.vel_enu_mps
@@ -374,10 +377,11 @@ class _Filter:
         self.pending_s += T
         self.pending_dv_b += dvc[0] + dvc[1]
         self.pending_dth_b += th[0] + th[1]
+        self.pending_var += var2[0] + var2[1]
 
 
 def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
-        time_offset_s=0.0, progress=None, on_aid=None, after_aid=None):
+        time_offset_s=0.0, progress=None, on_aid=None, after_aid=None, increment_var=None):
     """Run the filter over an IMU log with time-ordered aids.
 
     Parameters
@@ -419,6 +423,11 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
         aid's (z, H, R), e.g. the PPP ambiguity fixing, wide-lane update and
         bridge into a gap of :mod:`leosop.gnss.ppp_ins_ar`.
 
+    increment_var : ndarray, (n, 6), optional
+        Variance of the error of each increment ``[dtheta (rad^2), dvel
+        ((m/s)^2)]`` beyond the white noise of ``settings``, added to the
+        process noise (a bridged gap, :func:`leosop.ins.gaps.bridge`).
+
     Returns
     -------
     EngineResult
@@ -443,11 +452,12 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
     for q, i in zip(queues, (0, 1)):
         while heads[i] < len(q) and f.due_s(q[heads[i]][1]) < t_pairs[0]:
             heads[i] += 1
+    var = np.zeros((t_s.size, 6)) if increment_var is None else np.asarray(increment_var, dtype=float)
     out.record(0, f)
     ks = range(m) if progress is None else progress(range(m))
     for k in ks:
         i = 2 * k
-        f.step(dtheta_b_rad[i:i + 2], dvel_b_mps[i:i + 2], dt_s[i:i + 2])
+        f.step(dtheta_b_rad[i:i + 2], dvel_b_mps[i:i + 2], dt_s[i:i + 2], var[i:i + 2])
         t_now = t_pairs[k + 1]
         while True:
             due = [(f.due_s(q[h][1]), c) for c, (q, h) in enumerate(zip(queues, heads)) if h < len(q)]

@@ -28,6 +28,7 @@ import scipy.stats
 from .. import earth, frames
 from ..errors import InputError
 from ..gnss.rtklib_pos import Q_DR, Q_FIX, Q_FLOAT, Q_SINGLE
+from ..ins import gaps
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
 from ..ins.stationary import stationary_windows
 from ..ins.strapdown import NavState
@@ -178,6 +179,9 @@ class FuseOptions:
     whose nose points along its motion once fast, up to a sideslip or wind
     crab, e.g. an aircraft handled on the ground before its launch. None:
     1 m/s and 10 deg (a car; the yaw bank without NHC).
+    ``bridge_gaps``: the increments over gaps in the log bridged by the
+    trapezoid rule and their error variance added to the process noise
+    (:func:`leosop.ins.gaps.bridge`; a log without gaps is unchanged).
     """
 
     spec: ImuSpec
@@ -199,6 +203,7 @@ class FuseOptions:
     yaw_hypotheses: int = 12
     yaw_bank_s: float = 20.0
     course_yaw: tuple | None = None
+    bridge_gaps: bool = True
 
     def course_alignment(self):
         """The :class:`leosop.fusion.engine.CourseAlignment` of a start whose yaw is not known."""
@@ -281,7 +286,7 @@ def _initial(sol, k, t_g, t_start, f_b_mps2, spec, course):
     return state, P, None if moving else course
 
 
-def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withheld, options):
+def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, var, aids, settings, t_g, sol, withheld, options):
     """The best of ``options.yaw_hypotheses`` starting yaws, and its yaw sigma; None when undecidable.
 
     Each hypothesis runs the engine from the start to the decision time on
@@ -314,7 +319,7 @@ def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aids, settings, t_g, sol, withhel
     for yaw in 2.0 * math.pi * np.arange(options.yaw_hypotheses) / options.yaw_hypotheses:
         state = NavState.from_dcm(state0.lat_rad, state0.lon_rad, state0.alt_m, state0.vel_enu_mps,
                                   euler_to_dcm(pitch, roll, yaw))
-        res = engine.run(state, P, t_imu[:n], dt[:n], dth[:n], dvl[:n], aids, settings)
+        res = engine.run(state, P, t_imu[:n], dt[:n], dth[:n], dvl[:n], aids, settings, increment_var=var[:n])
         nll = res.nll.get("gnss_position", 0.0) + res.nll.get("gnss_velocity", 0.0)
         if best is None or nll < best[0]:
             best = (nll, state)
@@ -357,7 +362,11 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     k0 = int(first[0])
     i0 = int(np.searchsorted(t_imu - log.dt_s, t_g[k0]))
     t_imu, dt = t_imu[i0:], log.dt_s[i0:]
-    dth, dvl = log.dtheta_b_rad[i0:], log.dvel_b_mps[i0:]
+    if options.bridge_gaps:
+        dth, dvl, var = gaps.bridge(log)
+    else:
+        dth, dvl, var = log.dtheta_b_rad, log.dvel_b_mps, np.zeros((log.t_s.size, 6))
+    dth, dvl, var = dth[i0:], dvl[i0:], var[i0:]
     n_level = max(2, int(np.searchsorted(t_imu, t_imu[0] + 1.0)))
     state0, P0, course = _initial(sol, k0, t_g, t_imu[0] - dt[0], dvl[:n_level].sum(0) / dt[:n_level].sum(),
                                   options.spec, options.course_alignment())
@@ -381,11 +390,11 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     settings = dataclasses.replace(options.spec.settings(), time_offset_sigma_s=options.time_offset_sigma_s,
                                    scale_sigma=options.scale_sigma, gyro_cross_sigma=options.gyro_cross_sigma)
     if course is not None and options.yaw_hypotheses and not options.nhc and options.course_yaw is None:
-        chosen = _yaw_bank(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, t_g, sol, withheld, options)
+        chosen = _yaw_bank(state0, P0, t_imu, dt, dth, dvl, var, aid_list, settings, t_g, sol, withheld, options)
         if chosen is not None:
             (state0, P0), course = chosen, None
     res = engine.run(state0, P0, t_imu, dt, dth, dvl, aid_list, settings, course_alignment=course,
-                     progress=progress)
+                     progress=progress, increment_var=var)
     res = _on_gnss_clock(res)
     lat, lon, alt = _antenna(res, lever)
     used = np.flatnonzero(~withheld)

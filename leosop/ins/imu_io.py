@@ -47,7 +47,7 @@ from ..rotations import euler_to_dcm
 __all__ = ["ImuLog", "read_psins", "read_rtklib_csv", "read_rtklib_sf_csv", "read_csv_columns", "CSV_COLUMNS",
            "DRIVE_0708_C_B_S", "WALK_0827_C_B_S", "mount_C_b_s"]
 
-_GAP_FACTOR = 2.5
+GAP_FACTOR = 2.5
 _RATE_RANGE_HZ = (1.0, 10_000.0)
 #: GPST seconds since 1970 that a log can start at: 1970 .. 2100-01-01.
 _GPST_RANGE_S = (0.0, 4_102_444_800.0)
@@ -175,9 +175,9 @@ def _check_times(path, t, first_line):
     if not _RATE_RANGE_HZ[0] <= rate <= _RATE_RANGE_HZ[1]:
         raise InputError(f"{path}: sample rate {rate:.6g} Hz is outside {_RATE_RANGE_HZ} Hz")
     gaps = [{"line": first_line + int(i) + 1, "t_s": float(t[i + 1]), "gap_s": float(dt[i])}
-            for i in np.flatnonzero(dt > _GAP_FACTOR * med)]
+            for i in np.flatnonzero(dt > GAP_FACTOR * med)]
     if gaps:
-        warnings.warn(f"{path}: {len(gaps)} gap(s) longer than {_GAP_FACTOR} x the {med:.4g} s interval, "
+        warnings.warn(f"{path}: {len(gaps)} gap(s) longer than {GAP_FACTOR} x the {med:.4g} s interval, "
                       f"first at line {gaps[0]['line']} ({gaps[0]['gap_s']:.4g} s)", UserWarning, stacklevel=3)
     return gaps
 
