@@ -23,6 +23,11 @@ horizontal drift of a free INS over the outage (:func:`closed_form_drift_m`)
 with the noise read off the log's still start (``leosop imu allan``) and the
 tilt error of the aided filter against the MIDG II.
 
+The log drops 0.14 s of samples every 1.8 s; the run is made twice, those
+gaps held by the rate after them (before) and bridged with their error
+variance in the process noise (:func:`leosop.ins.gaps.bridge`, the default),
+and both are printed (``gaps_not_bridged`` in the JSON).
+
 Usage: ``python tools/bench_fuse_flight.py [--data DIR] [--figure PNG] [--json]``.
 """
 
@@ -114,8 +119,7 @@ def _scored(log, gps, attitude, t_offset_s, opts):
     att = _attitude_rms_deg(run.result, attitude, t_offset_s, AIDED_FLIGHT_S)
     scored = [o for o in errs if o["n_ref"]]
     return {"errs": errs, "yaw_aligned_s": run.result.yaw_aligned_s, "runtime_s": runtime, "reference": reference,
-            "attitude_rms_vs_midg_deg": att, "tilt_used_deg": math.degrees(math.hypot(att["roll"], att["pitch"])
-                                                                           / math.sqrt(2.0)),
+            "attitude_rms_vs_midg_deg": att, "tilt_used_deg": math.hypot(att["roll"], att["pitch"]) / math.sqrt(2.0),
             "outages": [{**{k: o[k] for k in ("start_s", "duration_s", "max_horiz_err_m", "end_horiz_err_m", "n_ref",
                                                "n_inside_3sigma")},
                          "end_3sigma_m": 3.0 * o["horiz_sigma_m"][-1] if o["n_ref"] else None} for o in errs],

@@ -10,8 +10,8 @@ rate_k) dt_k / 2``, and gives the variance of its error, read off the log
 itself: the same bridge over the same number of sample periods of intact
 data (where the increments are known) near the gap, ``window_s`` wide, so
 that it follows the motion (still, handled, flying). On the flight the
-bridge halves the error of a 0.14 s hole in the air (gyro 0.77 / 0.50 /
-0.30 deg RMS to 0.32 / 0.28 / 0.08 deg per axis; docs/fusion-real.md).
+bridge cuts the error of a 0.14 s hole in the air from 0.50 / 0.86 / 0.29 to
+0.39 / 0.34 / 0.10 deg RMS (gyro, Right / Forward / Up; docs/fusion-real.md).
 The filter adds that variance to its process noise at the gap
 (``increment_var`` of :func:`leosop.fusion.engine.run`).
 """
