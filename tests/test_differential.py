@@ -10,12 +10,8 @@ from leosop.errors import InputError
 from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.differential import (
-    _rtn_frames,
-    _whitener,
-    base_corrections,
-    solve_differential,
-)
+from leosop.positioning.differential import _rtn_frames, solve_differential
+from leosop.positioning.differential_base import base_corrections, whitener
 from leosop.positioning.differential_sim import (
     draw_satellite_errors,
     simulate_receiver,
@@ -98,7 +94,7 @@ def test_whitening_against_interpolation_matrix(scene):
         mine = b.sat_id == b.sat_id[k]
         W[on, k] = np.interp(r.t_s[keep][on], b.t_s[mine], (np.arange(len(b.t_s)) == k)[mine].astype(float))
     R = np.diag(r.sigma_hz[keep] ** 2) + (W * b.sigma_hz**2) @ W.T
-    whiten = _whitener(r.sigma_hz[keep][None] ** 2, rows[keep][None], w[keep][None], b.sigma_hz**2,
+    whiten = whitener(r.sigma_hz[keep][None] ** 2, rows[keep][None], w[keep][None], b.sigma_hz**2,
                        np.zeros((1, keep.sum()), bool))
     Li_R = whiten(R[None], [0])[0]
     np.testing.assert_allclose(whiten(Li_R.T[None], [0])[0], np.eye(len(R)), atol=1e-9)
