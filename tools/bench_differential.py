@@ -66,6 +66,8 @@ from leosop.timebase import seconds_since
 ROVERS_ENU_M = {"7.5 km": (6e3, 4.5e3, 30.0), "50 km": (40e3, 30e3, 0.0), "200 km": (160e3, 120e3, 0.0)}
 #: The issue's short static case: the first 20 s of the 7.5 km rover (and of the base).
 SHORT_S = 20.0
+#: The joint fit of base and rover rows, each satellite's frequency offset and drift over the span.
+JOINT = {"sat_clock_degree": 1}
 #: The car: 20 m/s north-east on the horizon from the 7.5 km rover's site, 150 s (3 km); fixes per block.
 CAR_SPEED_MPS, CAR_HEADING_ENU, CAR_BLOCKS_S = 20.0, (1.0, 1.0, 0.0), (10.0, 30.0)
 
@@ -84,7 +86,8 @@ def trial(const, base, t, rovers, sigma_hz, seed):
     out = []
     for name, pos in rovers.items():
         r = simulate_receiver(const, err, pos, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock())
-        cases = [("differential", b), ("differential, base 0.5 s off", b_off)]
+        cases = [("differential", b, r, {}), ("differential, base 0.5 s off", b_off, r, {}),
+                 ("joint", b, r, JOINT)]
         if name == "7.5 km":
             tic = time.perf_counter()
             sat = np.unique(r.sat_id, return_inverse=True)[1]
@@ -96,10 +99,12 @@ def trial(const, base, t, rovers, sigma_hz, seed):
             def short(m):
                 return m.take(np.flatnonzero(m.t_s < SHORT_S - 1e-6))
 
-            cases.append((f"differential, first {SHORT_S:g} s", short(b), short(r)))
-        for label, base_meas, *rover in cases:
+            cases += [(f"differential, first {SHORT_S:g} s", short(b), short(r), {}),
+                      (f"joint, first {SHORT_S:g} s", short(b), short(r), JOINT),
+                      (f"joint, first {SHORT_S:g} s, base 0.5 s off", short(b_off), short(r), JOINT)]
+        for label, base_meas, rover_meas, kw in cases:
             tic = time.perf_counter()
-            fix = solve_differential(rover[0] if rover else r, base_meas, base)
+            fix = solve_differential(rover_meas, base_meas, base, **kw)
             out.append((f"{name} {label}", fix.pos_ecef_m - pos, fix.cov[:, :3, :3], time.perf_counter() - tic))
     t_s = seconds_since(t, t[0])
     start = rovers["7.5 km"]
