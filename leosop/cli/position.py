@@ -317,7 +317,7 @@ def _run_differential(args, rover, constellation, init, alpha):
     base_pos = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     pair = solve_pair(rover, base, base_pos, constellation=constellation, pos0_ecef_m=init, sigma_hz=args.sigma_hz,
                       block_s=None if args.static else args.block_s, motion=args.motion,
-                      clock_degree=1 if args.static else 0, sat_clock_degree=args.sat_clock_degree, alpha=alpha)
+                      sat_clock_degree=args.sat_clock_degree, alpha=alpha)
     f = pair.fix
     solutions = differential_solutions(f, pair.time_utc, pair.t_s)
     if not solutions:

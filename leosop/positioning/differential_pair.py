@@ -2,8 +2,9 @@
 
 What ``leosop position ROVER.csv --base BASE.csv --base-site ...`` does
 before and after :func:`~leosop.positioning.differential.solve_differential`:
-refuse a pair that cannot be differenced (no satellite in common, tables of
-different days, one with time tags and one without), give each table's rows
+refuse a pair that cannot be differenced (no satellite in common, tables
+that do not overlap in time, e.g. of different days, one with time tags and
+one without), give each table's rows
 their satellite states (its columns, else the element sets with light time
 from the receiver: the base's known site, the rover's start) and a sigma,
 and set the fix's block times back on the rows' clock.
@@ -19,6 +20,9 @@ from .differential import DifferentialFix, solve_differential
 from .solve import satellite_states
 
 __all__ = ["DifferentialPair", "solve_pair"]
+
+#: Tables whose starts are further apart than this are called "of different days" in the error [s].
+_DAY_APART_S = 12 * 3600.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,15 +72,18 @@ def _prepared(meas, constellation, pos_rx_ecef_m, sigma_hz):
 
 
 def _check_pair(rover, base):
-    """Refuse tables that cannot be differenced: no common satellite, another day, mixed time tags."""
+    """Refuse tables that cannot be differenced: no common satellite, no common time, mixed time tags."""
     if (rover.time_utc is None) != (base.time_utc is None):
         with_t = base.source if rover.time_utc is None else rover.source
         raise InputError(f"{with_t} has time_utc, the other table only t_s: give both the same time column")
     if rover.time_utc is not None:
-        days = [np.datetime64(m.time_utc.min(), "D") for m in (rover, base)]
-        if days[0] != days[1]:
-            raise InputError(f"{base.source}: the base starts {format_utc(base.time_utc.min())}, the rover "
-                             f"{format_utc(rover.time_utc.min())}: tables of different days share no satellite pass")
+        span_r, span_b = (format_utc(m.time_utc[[np.argmin(m.time_utc), np.argmax(m.time_utc)]])
+                          for m in (rover, base))
+        apart_s = abs(seconds_since(base.time_utc.min(), rover.time_utc.min()))
+        if base.time_utc.max() < rover.time_utc.min() or rover.time_utc.max() < base.time_utc.min():
+            why = "tables of different days" if apart_s > _DAY_APART_S else "tables that do not overlap in time"
+            raise InputError(f"{base.source}: the base spans {span_b[0]} .. {span_b[1]}, the rover {span_r[0]} .. "
+                             f"{span_r[1]}: {why} share no satellite pass")
     common = tuple(np.intersect1d(rover.sat_id, base.sat_id).tolist())
     if not common:
         raise InputError(f"{base.source}: no satellite in common with {rover.source} (rover "
