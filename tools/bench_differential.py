@@ -110,11 +110,12 @@ def trial(const, base, t, rovers, sigma_hz, seed):
     start = rovers["7.5 km"]
     pos, vel = straight_drive(start, CAR_HEADING_ENU, CAR_SPEED_MPS, t_s)
     r = simulate_receiver(const, err, pos, t, rng, sigma_hz=sigma_hz, vel_rx_ecef_mps=vel, mask_deg=10.0, **clock())
-    for block_s in CAR_BLOCKS_S:
+    for (block_s, kw), label in zip([(s, {}) for s in CAR_BLOCKS_S] + [(CAR_BLOCKS_S[0], JOINT)],
+                                    ["", "", ", joint"]):
         tic = time.perf_counter()
-        fix = solve_differential(r, b, base, block_s=block_s, motion="constant_velocity", pos0_ecef_m=start)
+        fix = solve_differential(r, b, base, block_s=block_s, motion="constant_velocity", pos0_ecef_m=start, **kw)
         truth, _ = straight_drive(start, CAR_HEADING_ENU, CAR_SPEED_MPS, fix.t_ref_s)
-        out.append((f"car 20 m/s, {block_s:g} s blocks", fix.pos_ecef_m - truth, fix.cov[:, :3, :3],
+        out.append((f"car 20 m/s, {block_s:g} s blocks{label}", fix.pos_ecef_m - truth, fix.cov[:, :3, :3],
                     (time.perf_counter() - tic) / len(truth)))
     return out
 
