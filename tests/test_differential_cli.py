@@ -78,14 +78,17 @@ def test_static_fix_and_outputs(capsys, tables, tmp_path):
     assert np.linalg.norm([sj["x_m"] - sol["x_m"], sj["y_m"] - sol["y_m"], sj["z_m"] - sol["z_m"]]) < sigma_3d
 
 
-def test_blocks(capsys, tables):
-    """Without --static: one fix per --block-s, rover at rest in each."""
+@pytest.mark.parametrize("extra", [(), ("--motion", "constant_velocity", "--sat-clock-degree", "1")])
+def test_blocks(capsys, tables, extra):
+    """Without --static: one fix per --block-s (at rest, or at a constant velocity: the truth's is zero)."""
     d, rover, _, _ = tables
-    status, doc, _ = _run(capsys, d / "rover.csv", "--base", d / "base.csv", "--base-site", SITE, "--block-s", 15)
+    status, doc, _ = _run(capsys, d / "rover.csv", "--base", d / "base.csv", "--base-site", SITE, "--block-s", 15,
+                          *extra)
     assert status == 0 and doc["mode"] == "blocks" and len(doc["solutions"]) == 2
     for sol in doc["solutions"]:
         assert np.linalg.norm([sol["x_m"] - rover[0], sol["y_m"] - rover[1], sol["z_m"] - rover[2]]) < \
             4 * np.linalg.norm(sol["sigma_enu_m"])
+        assert sol["status"] == "ok"
 
 
 def test_bad_pairs(capsys, tables, tmp_path):
