@@ -22,6 +22,13 @@ and drift are those of the pass nearest the middle). Besides the contract's
 no_redundancy, inconsistent, implausible_height, single_pass, few_passes, ...),
 its redundancy ``dof`` and its residual test's ``chi2_p``.
 
+With ``--base BASE.csv --base-site LAT,LON,ALT`` a base at a known site
+measuring the same satellites corrects the rover (single differences by
+satellite and time, the base interpolated to the rover's rows,
+:mod:`leosop.positioning.differential`): one fix with ``--static``, else one
+per ``--block-s``; the JSON document adds a ``differential`` block (what was
+matched, the model) and each solution's clock is rover minus base.
+
 Rows of several constellations may be mixed: a row's carrier is
 its ``carrier_hz``, else its satellite's family's (the ``--tle`` names, the
 carrier table), else ``--carrier-hz``; each constellation gets its own
@@ -43,6 +50,8 @@ from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from ..geometry.doppler import N_DOPPLER_STATES
 from ..orbits import load_constellation
 from ..positioning.datasets import doptrack_table, read_doptrack, read_fll
+from ..positioning.differential import MOTIONS
+from ..positioning.differential_pair import solve_pair
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
 from ..positioning.quality import STATUSES, fix_status
 from ..positioning.solve import position_snapshots, position_static, position_static_passes
@@ -86,6 +95,18 @@ def register(subparsers):
                    help="sigma of rows without sigma_hz (default: estimated from the residuals)")
     p.add_argument("--alpha", type=float, default=1e-3, metavar="P",
                    help="significance of the chi-square outlier test, 0 to disable (default %(default)g)")
+    d = p.add_argument_group("differential", "a base at a known site measuring the same satellites: single "
+                             "differences by satellite and time (the base interpolated to the rover's rows)")
+    d.add_argument("--base", metavar="BASE.csv", help="the base's measurement table (same columns as MEAS.csv)")
+    d.add_argument("--base-site", metavar="LAT_DEG,LON_DEG,ALT_M", help="the base's known position (with --base)")
+    d.add_argument("--block-s", type=float, default=10.0, metavar="S",
+                   help="without --static: one fix per block of S seconds (default %(default)g)")
+    d.add_argument("--motion", choices=MOTIONS, default="rest",
+                   help="the rover within a block: at rest (default) or at a constant velocity")
+    d.add_argument("--sat-clock-degree", type=int, metavar="D",
+                   help="joint fit of the base's and the rover's rows, each satellite's frequency a polynomial "
+                   "of degree D over a block (1: offset and drift); stronger over short spans, right only while "
+                   "the satellites' oscillators follow it (default: single differences)")
     return p
 
 
@@ -98,6 +119,15 @@ def _check(args):
             raise InputError(f"--{name.replace('_', '-')} {value!r}: expected a positive number")
     if not 0 <= args.alpha < 1:
         raise InputError(f"--alpha {args.alpha!r}: expected a probability in [0, 1)")
+    if (args.base is None) != (args.base_site is None):
+        raise InputError("--base needs --base-site, the base's known position" if args.base else
+                         "--base-site goes with --base, the base's measurement table")
+    if args.base and (args.format != "table" or args.alt_m is not None):
+        raise InputError("--base takes measurement tables (--format table) and no --alt-m")
+    if not args.block_s > 0:
+        raise InputError(f"--block-s {args.block_s!r}: expected a positive number")
+    if args.sat_clock_degree is not None and not 0 <= args.sat_clock_degree <= 3:
+        raise InputError(f"--sat-clock-degree {args.sat_clock_degree!r}: expected 0, 1, 2 or 3")
 
 
 def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iterations, rms, status, cov_pos):
@@ -240,6 +270,8 @@ def run(args):
             constellation = load_constellation(None)
             meas = read_measurements(args.meas, carrier_hz=args.carrier_hz, constellation=constellation)
     alpha = args.alpha or None
+    if args.base:
+        return _run_differential(args, meas, constellation, init, alpha)
     if args.static and meas.pass_id is not None:
         res = position_static_passes(meas, meas.pass_id, constellation=constellation, init_pos_ecef_m=init,
                                      alt_m=args.alt_m, alt_sigma_m=args.alt_sigma_m, sigma_hz=args.sigma_hz,
@@ -276,6 +308,81 @@ def run(args):
     return doc
 
 
+def _run_differential(args, rover, constellation, init, alpha):
+    """The rover's differential fix against ``--base`` (DESIGN 4.1 position keys plus ``differential``)."""
+    base = read_measurements(args.base, carrier_hz=args.carrier_hz, constellation=constellation)
+    if base.pos_sv_ecef_m is None and constellation is None:
+        constellation = load_constellation(None)
+    lat, lon, alt = parse_site(args.base_site, "--base-site")
+    base_pos = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
+    pair = solve_pair(rover, base, base_pos, constellation=constellation, pos0_ecef_m=init, sigma_hz=args.sigma_hz,
+                      block_s=None if args.static else args.block_s, motion=args.motion,
+                      sat_clock_degree=args.sat_clock_degree, alpha=alpha)
+    f = pair.fix
+    solutions = differential_solutions(f, pair.time_utc, pair.t_s)
+    if not solutions:
+        raise InputError(f"{args.meas}: no differential fix ({', '.join(sorted(set(f.status.tolist())))}); "
+                         f"{int((f.block >= 0).sum())} rover row(s) matched a base row")
+    for name, line, reason in pair.rejected:
+        print(f"leosop position: warning: {name}:{line}: {reason}", file=sys.stderr)
+    solved = np.isfinite(f.pos_ecef_m).all(-1)
+    doc = {
+        "solutions": solutions,
+        "mode": "static" if args.static else "blocks",
+        "sv_states": pair.sv_states,
+        "sigma_hz_default": args.sigma_hz,
+        "rejected": [{"file": name, "line": line, "reason": reason} for name, line, reason in pair.rejected],
+        "unsolved": [{"t_s": float(pair.t_s[k]),
+                      "time_utc": None if pair.time_utc is None else format_utc(pair.time_utc[k]),
+                      "reason": str(f.status[k])} for k in np.flatnonzero(~solved)],
+        "differential": {
+            "base": str(args.base), "base_site": [lat, lon, alt],
+            "model": "single_difference" if args.sat_clock_degree is None else "joint",
+            "sat_clock_degree": args.sat_clock_degree, "block_s": None if args.static else args.block_s,
+            "motion": args.motion, "n_common": len(pair.common_sats), "common": list(pair.common_sats),
+            "base_only": list(f.base_only_sats), "rover_only": list(f.rover_only_sats),
+            "n_unmatched_rows": int(f.n_unmatched_rows), "clock": "rover minus base"},
+    }
+    if args.out:
+        residuals = [(int(pair.rover.line[k]), float(pair.rover.t_s[k]), pair.rover.sat_id[k], f.residuals_hz[k],
+                      bool(f.used[k])) for k in range(len(pair.rover.t_s))]
+        with atomic_files([Path(args.out) / name for name in OUT_FILES]) as (doc_path, fixes_path, res_path):
+            write_json(doc_path, doc)
+            write_csv(fixes_path, *fixes_csv_rows(solutions))
+            write_csv(res_path, ["line", "t_s", "sat_id", "residual_hz", "used"], residuals)
+    return doc
+
+
+def differential_solutions(fix, time_utc, t_s):
+    """The solved blocks of a DifferentialFix with the keys of position's solutions (DESIGN 4.1).
+
+    Parameters
+    ----------
+    fix : DifferentialFix
+    time_utc : ndarray of datetime64, (n_b,), or None
+    t_s : ndarray, (n_b,)
+        Each block's reference time.
+
+    Returns
+    -------
+    list of dict
+        ``clock_offset_hz`` (and ``clock_drift_hz_per_s``) are rover minus
+        base; the velocity is the block's (zero at rest).
+    """
+    out = []
+    for k in np.flatnonzero(np.isfinite(fix.pos_ecef_m).all(-1)):
+        res = fix.residuals_hz[(fix.block == k) & fix.used]
+        rms = float(np.sqrt(np.mean(res**2))) if res.size else None
+        vel = np.zeros(3) if fix.vel_ecef_mps is None else fix.vel_ecef_mps[k]
+        sol = _solution(t_s[k], None if time_utc is None else time_utc[k], fix.pos_ecef_m[k], vel,
+                        float(fix.clock_poly_hz[k, 0]), float(fix.gdop[k]), fix.n_sats[k], fix.n_used[k],
+                        fix.iterations[k], rms, (fix.status[k], fix.dof[k], fix.chi2_p[k]), fix.cov[k, :3, :3])
+        if fix.clock_poly_hz.shape[1] > 1:
+            sol["clock_drift_hz_per_s"] = float(fix.clock_poly_hz[k, 1])
+        out.append(sol)
+    return out
+
+
 def format_or_na(value, spec):
     """``value`` formatted with ``spec``, ``n/a`` for None (a JSON null)."""
     return "n/a" if value is None else format(value, spec)
@@ -289,11 +396,16 @@ def summary(doc):
             ("vz_mps", ".3f"), ("clock_offset_hz", ".3f"), ("gdop", ".3g"), ("residual_rms_hz", ".3g"))}
         when = s["time_utc"] or f"t={s['t_s']:.3f} s"
         # A static fix uses rows (measurements) of n_sats satellites; a snapshot fix one row per satellite.
-        used = (f"{s['n_used']} measurements of {s['n_sats']} sats" if doc.get("mode") == "static" else
+        used = (f"{s['n_used']} measurements of {s['n_sats']} sats" if doc.get("mode") != "snapshot" else
                 f"{s['n_used']}/{s['n_sats']} sats")
         lines.append(f"{when}  {f['lat_deg']} {f['lon_deg']} {f['alt_m']} m  "
                      f"v=({f['vx_mps']}, {f['vy_mps']}, {f['vz_mps']}) m/s  clock {f['clock_offset_hz']} Hz  "
                      f"gdop {f['gdop']}  {used}  rms {f['residual_rms_hz']} Hz  {s['status']}")
+    if "differential" in doc:
+        d = doc["differential"]
+        lines.append(f"differential ({d['model'].replace('_', ' ')}) against {d['base']}: {d['n_common']} "
+                     f"satellite(s) in common, base only: {', '.join(d['base_only']) or 'none'}, rover only: "
+                     f"{', '.join(d['rover_only']) or 'none'}; clock offsets are rover minus base")
     lines.append(f"{status_line(doc['solutions'])}, {len(doc['unsolved'])} epoch(s) unsolved, "
                  f"{len(doc['rejected'])} row(s) rejected")
     return "\n".join(lines)

@@ -40,31 +40,47 @@ the baseline: each common satellite's radial / along / cross-track offset is
 a state with a prior, moving its position and, as the RTN frame turns
 (:func:`_rtn_frames`, the orbit plane's turn in ECEF included), its
 velocity. tools/bench_differential.py measures the NEES over the baseline.
+
+Joint fit (``sat_clock_degree``). A single difference sees an offset only
+through the baseline (~1 Hz for 300 m along-track at 7.5 km), where over a
+short span it looks like the rover's position: from 20 s the offsets, not
+the noise, set the fix's sigma (4.9 m against 1.2 m without them). At its
+known site the base sees the offset's whole Doppler (tens of Hz), and that
+curves over the pass where a satellite's oscillator is an offset and a
+drift. Keeping the base's rows instead of differencing them::
+
+    y_base  = D(base)  + G_base d  + s_k(t)
+    y_rover = D(rover) + G_rover d + s_k(t) + (T_rover - T_base)(t)
+
+with ``s_k`` satellite k's frequency as the base sees it (its oscillator
+plus the base clock), a polynomial of ``sat_clock_degree`` per block, and
+``d`` the offsets, the base's rows tell ``d`` apart from the rover's
+position (20 s: sigma 2.3 m, the Cramer-Rao bound of this model). No
+interpolation, every row its own noise. The price is the assumption on the
+oscillators: a curvature the polynomial lacks goes into the fix
+(tools/bench_differential.py). A satellite absent from a block's rows gets a
+prior row that fixes its polynomial (no information, no redundancy).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cholesky_banded, solve_banded
 
 from ..constants import OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..frames import ecef_to_geodetic
 from ..geometry.dop import cofactor
-from ..geometry.doppler import doppler_jacobian
 from ..timebase import seconds_since
+from .differential_base import MAX_GAP_S, TIME_TOL_S, base_corrections, model_hz, sv_states, whitener
 from .quality import fix_status
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
 
-__all__ = ["MAX_GAP_S", "MOTIONS", "DifferentialFix", "base_corrections", "solve_differential"]
+__all__ = ["MOTIONS", "DifferentialFix", "solve_differential"]
 
 #: Default prior standard deviation of an element-set offset, radial / along-track / cross-track [m]:
 #: along-track as tools/bench_static_time_offset.py (300 m); radial and cross-track smaller, as for any
 #: SGP4 fit (assumed, not measured on Starlink).
 ORBIT_SIGMA_RTN_M = (30.0, 300.0, 100.0)
-#: Widest gap between two base rows of a satellite that is interpolated across [s]: a few snapshot periods
-#: (1 s); the satellite's frequency terms are smooth over it, the base's noise is what interpolation adds.
-MAX_GAP_S = 5.0
 #: Convergence threshold of a rover velocity [m/s]: 10 um/s (a 0.1 mm position over 10 s).
 _XTOL_VEL_MPS = 1e-5
 #: Motion models of the rover within a block.
@@ -74,8 +90,6 @@ MOTIONS = ("rest", "constant_velocity")
 _XTOL_CLOCK = (1e-5, 1e-7)
 #: A step shorter than this fraction of the posterior sigma along it ends the iteration (as the static fixes).
 _STEP_SIGMA_TOL = 1e-3
-#: Tolerance on a rover time outside its satellite's base span [s] (rounding of time tags).
-_TIME_TOL_S = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,12 +120,14 @@ class DifferentialFix:
         toolkit vouches for the fix.
     chi2, chi2_p : ndarray, (n_b,)
     dof, n_used, n_sats, iterations : ndarray of int, (n_b,)
-        ``n_sats``: satellites with a used row.
+        ``n_used``: rows used (the base's too in the joint fit); ``n_sats``:
+        satellites with a used rover row.
     block : ndarray of int, (m,)
         Block of each rover row; -1 where the row had no base correction.
     z_hz, sigma_hz, residuals_hz : ndarray, (m,)
         Per rover row: single difference, its sigma (rover and interpolated
-        base), residual (NaN where not used).
+        base), residual (NaN where not used); in the joint fit the rover's
+        Doppler and sigma.
     used : ndarray of bool, (m,)
     rover_only_sats, base_only_sats : tuple of str
         Satellites seen by one receiver only (left out).
@@ -141,13 +157,6 @@ class DifferentialFix:
     rover_only_sats: tuple
     base_only_sats: tuple
     n_unmatched_rows: int
-
-
-def _states(meas, name):
-    """Satellite states and sigmas of a receiver's rows, checked."""
-    if meas.pos_sv_ecef_m is None:
-        raise InputError(f"{meas.source or name}: no satellite states (give them as columns or from element sets)")
-    return np.asarray(meas.pos_sv_ecef_m, float), np.asarray(meas.vel_sv_ecef_mps, float)
 
 
 def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
@@ -181,138 +190,9 @@ def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
     return np.stack([radial, along, normal], axis=-1), np.stack([d_radial, d_along, d_normal], axis=-1)
 
 
-def _model_hz(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=0.0):
-    """Doppler of satellites (..., m, 3) seen from receivers broadcastable to them (one per row or per set).
-
-    Returns predictions (..., m) and Jacobians (..., m, 7) (:func:`doppler_jacobian`); the receivers at rest
-    unless ``vel_rx_ecef_mps`` is given.
-    """
-    r_s, v_s = np.asarray(pos_sv_ecef_m, float), np.asarray(vel_sv_ecef_mps, float)
-    p_rx = np.broadcast_to(np.asarray(pos_rx_ecef_m, float), r_s.shape)
-    v_rx = np.broadcast_to(np.asarray(vel_rx_ecef_mps, float), r_s.shape)
-    H = doppler_jacobian(r_s[..., None, :], v_s[..., None, :], p_rx, v_rx,
-                         np.asarray(carrier_hz, float)[..., None])[..., 0, :]
-    return np.einsum("...mi,...mi->...m", H[..., 3:6], v_rx - v_s), H
-
-
-def base_corrections(base, base_pos_ecef_m, sat_id, t_s, *, t_base_s=None, max_gap_s=MAX_GAP_S):
-    """The base's correction (measurement minus predicted Doppler) interpolated to rover rows.
-
-    Parameters
-    ----------
-    base : Measurements
-        Base rows with satellite states and ``sigma_hz``.
-    base_pos_ecef_m : array_like, (3,)
-    sat_id : array_like of str, (m,)
-        Satellite of each rover row.
-    t_s : array_like, (m,)
-        Rover row times, on the time base of ``t_base_s``.
-    t_base_s : array_like, (n,), optional
-        Base row times; default ``base.t_s``.
-    max_gap_s : float
-
-    Returns
-    -------
-    corr_hz, var_hz2 : ndarray, (m,)
-        Interpolated correction and its variance; NaN where the row has none.
-    base_rows : ndarray of int, (m, 2)
-        The two base rows each correction interpolates (-1 where none).
-    base_weights : ndarray, (m, 2)
-        Their weights (sum 1; 0 where none): rover rows that share a base
-        row share its noise, ``cov = sum w_i w_j var_base``.
-    """
-    pos_sv, vel_sv = _states(base, "base")
-    tb = np.asarray(base.t_s if t_base_s is None else t_base_s, dtype=float)
-    pred, _ = _model_hz(pos_sv, vel_sv, np.asarray(base_pos_ecef_m, float), base.carrier_hz)
-    c_b = base.doppler_hz - pred
-    var_b = np.asarray(base.sigma_hz, float) ** 2
-    ids = np.asarray(sat_id, dtype=str)
-    t = np.asarray(t_s, dtype=float)
-    rows_out, w_out = np.full((len(ids), 2), -1), np.zeros((len(ids), 2))
-    for sid in np.intersect1d(ids, base.sat_id):
-        rows = np.flatnonzero(base.sat_id == sid)
-        rows = rows[np.argsort(tb[rows], kind="stable")]
-        tr, want = tb[rows], np.flatnonzero(ids == sid)
-        j = np.clip(np.searchsorted(tr, t[want] - _TIME_TOL_S), 1, max(len(tr) - 1, 1))
-        lo, hi = np.maximum(j - 1, 0), np.minimum(j, len(tr) - 1)
-        span = tr[hi] - tr[lo]
-        a = np.clip(np.divide(t[want] - tr[lo], span, out=np.zeros(len(want)), where=span > 0), 0.0, 1.0)
-        inside = (t[want] >= tr[0] - _TIME_TOL_S) & (t[want] <= tr[-1] + _TIME_TOL_S) & (span <= max_gap_s)
-        # A single base row (or a rover time on a base row) takes that row's correction alone.
-        near = np.abs(t[want] - tr[lo]) <= _TIME_TOL_S
-        a = np.where(near, 0.0, a)
-        ok = (inside | near)[:, None]
-        rows_out[want] = np.where(ok, np.stack([rows[lo], rows[hi]], axis=-1), -1)
-        w_out[want] = np.where(ok, np.stack([1.0 - a, a], axis=-1), 0.0)
-    has = rows_out[:, 0] >= 0
-    take = np.maximum(rows_out, 0)
-    corr = np.where(has, np.sum(w_out * c_b[take], axis=-1), np.nan)
-    var = np.where(has, np.sum(w_out**2 * var_b[take], axis=-1), np.nan)
-    return corr, var, rows_out, w_out
-
-
-def _whitener(var_rover_hz2, base_rows, base_weights, var_base_hz2, pad):
-    """Whitening of each block's single differences: ``v -> L^-1 v`` with ``L L^T`` their covariance.
-
-    Parameters
-    ----------
-    var_rover_hz2 : ndarray, (n_b, w)
-        Rover noise variance of each block's rows.
-    base_rows, base_weights : ndarray, (n_b, w, 2)
-        The base rows each row interpolates and their weights
-        (:func:`base_corrections`).
-    var_base_hz2 : ndarray, (n,)
-        Noise variance of the base rows.
-    pad : ndarray of bool, (n_b, w)
-        Padding rows (unit variance, uncorrelated).
-
-    Returns
-    -------
-    whiten : callable
-        ``whiten(v, idx)``: ``L^-1 v`` for the blocks ``idx`` (k,), ``v``
-        (k, w) or (k, w, n).
-
-    Notes
-    -----
-    Rows interpolating the same base row share its noise::
-
-        R_ij = var_rover_i [i == j] + sum_pq [b_ip == b_jq] w_ip w_jq var_base(b_ip)
-
-    so a base off the rover's epochs correlates a satellite's neighbouring
-    rows (a base on them leaves ``R`` diagonal and ``L^-1`` the plain
-    weights). Those rows lie a few rows apart (one epoch of satellites), so
-    ``R`` is banded: its Cholesky factor and the triangular solves are banded
-    too (:func:`scipy.linalg.cholesky_banded`).
-    """
-    n_b, width = pad.shape
-    b = np.where(pad[..., None] | (base_weights == 0), -1, base_rows)
-    wv = np.where(b >= 0, base_weights, 0.0) * np.sqrt(var_base_hz2[np.maximum(b, 0)])
-    # Bandwidth: the widest spread of a base row's users within a block.
-    pos = np.broadcast_to(np.arange(width)[None, :, None], b.shape)[b >= 0]
-    key = (np.broadcast_to(np.arange(n_b)[:, None, None], b.shape)[b >= 0] * (var_base_hz2.size + 1)
-           + b[b >= 0])
-    order = np.lexsort((pos, key))
-    key, pos = key[order], pos[order]
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if key.size else np.zeros(0, int)
-    band = int(np.max(np.maximum.reduceat(pos, starts) - np.minimum.reduceat(pos, starts))) if key.size else 0
-    ab = np.zeros((n_b, band + 1, width))  # lower banded form: ab[d, i] = R[i + d, i]
-    for d in range(band + 1):
-        for p in range(2):
-            for q in range(2):
-                same = (b[:, d:, p] == b[:, : width - d, q]) & (b[:, d:, p] >= 0)
-                ab[:, d, : width - d] += np.where(same, wv[:, d:, p] * wv[:, : width - d, q], 0.0)
-    ab[:, 0] += np.where(pad, 1.0, var_rover_hz2)
-    chol = [cholesky_banded(ab[k], lower=True) for k in range(n_b)]
-
-    def whiten(v, idx):
-        return np.stack([solve_banded((band, 0), chol[k], v[j]) for j, k in enumerate(idx)])
-
-    return whiten
-
-
 def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, motion="rest",
-                       clock_degree=1, orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, max_gap_s=MAX_GAP_S, max_iter=200,
-                       alpha=1e-3):
+                       clock_degree=1, sat_clock_degree=None, orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M,
+                       max_gap_s=MAX_GAP_S, max_iter=200, alpha=1e-3):
     """Differential Doppler fix of a rover at rest or moving (per block) against a base at a known site.
 
     Parameters
@@ -336,6 +216,15 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
         block's fix is much weaker than a static one of the same length.
     clock_degree : int
         Degree of the rover-minus-base frequency-offset polynomial of each block.
+    sat_clock_degree : int, optional
+        None (default): single differences with the base interpolated to
+        the rover's rows. An integer: the joint fit (module notes), each
+        satellite's frequency as the base sees it (its oscillator plus the
+        base clock) a polynomial of this degree over each block; the
+        base's rows then also tell the element-set offsets apart from the
+        rover's position. Right only while the satellites' oscillators
+        follow that polynomial (tools/bench_differential.py: degree 1
+        over 20 s).
     orbit_sigma_rtn_m : array_like, (3,), or None
         Prior standard deviation of each common satellite's element-set
         offset, radial / along-track / cross-track [m]: the offsets are
@@ -343,7 +232,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
         covariance carries what the baseline leaves of them. None: no
         offset states (the covariance then ignores them).
     max_gap_s : float
-        Widest gap between base rows interpolated across.
+        Widest gap between base rows interpolated across (single differences only).
     max_iter : int
     alpha : float or None
         Significance of the chi-square and w-tests (outlier exclusion and status).
@@ -356,10 +245,12 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
         raise ValueError(f"{motion=} must be one of {MOTIONS}")
     if clock_degree < 0:
         raise ValueError(f"{clock_degree=} must be >= 0")
+    if sat_clock_degree is not None and sat_clock_degree < 0:
+        raise ValueError(f"{sat_clock_degree=} must be None or >= 0")
     if block_s is not None and not block_s > 0:
         raise ValueError(f"{block_s=} must be > 0")
     base_pos = np.asarray(base_pos_ecef_m, dtype=float).reshape(3)
-    r_s, v_s = _states(rover, "rover")
+    r_s, v_s = sv_states(rover, "rover")
     if rover.time_utc is not None and base.time_utc is not None:
         epoch = min(rover.time_utc.min(), base.time_utc.min())
         t, tb = seconds_since(rover.time_utc, epoch), seconds_since(base.time_utc, epoch)
@@ -371,19 +262,45 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
         if fr.size != 1 or fb.size != 1 or fr[0] != fb[0]:
             raise InputError(f"satellite {sid}: carrier {fr[0]:.10g} Hz at the rover, {fb[0]:.10g} Hz at the base "
                              "(different bands cannot be differenced)")
-    corr, var_b, base_rows, base_w = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb,
-                                                      max_gap_s=max_gap_s)
-    z = rover.doppler_hz - corr
+    m = len(rover.doppler_hz)
     var_r = np.asarray(rover.sigma_hz, float) ** 2
-    sigma = np.sqrt(var_r + var_b)
-    usable = np.isfinite(z) & (sigma > 0) & np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1)
-    n_unmatched = int((np.isin(rover.sat_id, common) & ~usable).sum())
+    states_ok = np.isfinite(r_s).all(-1) & np.isfinite(v_s).all(-1)
+    if sat_clock_degree is None:
+        corr, var_b, base_rows, base_w = base_corrections(base, base_pos, rover.sat_id, t, t_base_s=tb,
+                                                          max_gap_s=max_gap_s)
+        z = rover.doppler_hz - corr
+        sigma = np.sqrt(var_r + var_b)
+        usable = np.isfinite(z) & (sigma > 0) & states_ok
+        y_all, s_all, t_all, sat_all, f_all = z, sigma, t, rover.sat_id, rover.carrier_hz
+        rs_all, vs_all, is_base = r_s, v_s, np.zeros(m, bool)
+    else:
+        # Joint: the base's own rows join the rover's, each satellite's frequency (its oscillator and the
+        # base clock) a polynomial of the block; nothing interpolated, every row's noise its own.
+        z, sigma = np.asarray(rover.doppler_hz, float), np.sqrt(var_r)
+        usable = np.isin(rover.sat_id, common) & np.isfinite(z) & (sigma > 0) & states_ok
+        rb_s, vb_s = sv_states(base, "base")
+        y_all, s_all = np.concatenate([z, base.doppler_hz]), np.concatenate([sigma, base.sigma_hz])
+        t_all, sat_all = np.concatenate([t, tb]), np.concatenate([rover.sat_id, base.sat_id]).astype(str)
+        f_all = np.concatenate([rover.carrier_hz, base.carrier_hz])
+        rs_all, vs_all = np.concatenate([r_s, rb_s]), np.concatenate([v_s, vb_s])
+        is_base = np.arange(len(y_all)) >= m
+        usable = np.concatenate([usable, np.isin(base.sat_id, common) & np.isfinite(base.doppler_hz)
+                                 & (np.asarray(base.sigma_hz, float) > 0) & np.isfinite(rb_s).all(-1)
+                                 & np.isfinite(vb_s).all(-1)])
+    n_unmatched = int((np.isin(rover.sat_id, common) & ~usable[:m]).sum())
 
-    block = np.full(len(z), -1)
-    if usable.any():
-        t0 = t[usable].min()
-        block[usable] = 0 if block_s is None else np.floor((t[usable] - t0) / block_s + _TIME_TOL_S).astype(int)
-        _, block[usable] = np.unique(block[usable], return_inverse=True)
+    # Blocks from the rover's rows; a base row joins the block of its time (joint fit) or is dropped.
+    block = np.full(len(y_all), -1)
+    on_rover = usable & ~is_base
+    if on_rover.any():
+        raw = np.zeros(len(y_all), int) if block_s is None else \
+            np.floor((t_all - t_all[on_rover].min()) / block_s + TIME_TOL_S).astype(int)
+        labels = np.unique(raw[on_rover])
+        j = np.clip(np.searchsorted(labels, raw), 0, len(labels) - 1)
+        usable &= labels[j] == raw
+        block[usable] = j[usable]
+    else:
+        usable[:] = False
     n_b = max(int(block.max()) + 1, 1)
     counts = np.bincount(block[usable], minlength=n_b)
     width = max(int(counts.max()), 1)
@@ -393,61 +310,89 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     slots[block[rows_sorted], slot] = rows_sorted
     pad = slots < 0
     take = np.where(pad, 0, slots)
-    y_b, s_b = np.where(pad, 0.0, z[take]), np.where(pad, 1.0, sigma[take])
-    f_b = np.where(pad, 1.0, rover.carrier_hz[take])
-    rs_b = np.where(pad[..., None], [2e7, 0.0, 0.0], r_s[take])
-    vs_b = np.where(pad[..., None], [0.0, 7e3, 0.0], v_s[take])
-    t_b = t[take]
-    whiten = _whitener(var_r[take], base_rows[take], base_w[take], np.asarray(base.sigma_hz, float) ** 2, pad)
+    base_b = is_base[take] & ~pad
+    rover_b = (~pad & ~base_b).astype(float)
+    y_b, s_b = np.where(pad, 0.0, y_all[take]), np.where(pad, 1.0, s_all[take])
+    f_b = np.where(pad, 1.0, f_all[take])
+    rs_b = np.where(pad[..., None], [2e7, 0.0, 0.0], rs_all[take])
+    vs_b = np.where(pad[..., None], [0.0, 7e3, 0.0], vs_all[take])
+    t_b = t_all[take]
+    if sat_clock_degree is None:
+        whiten = whitener(var_r[take], base_rows[take], base_w[take], np.asarray(base.sigma_hz, float) ** 2, pad)
+    else:
+        def whiten(v, idx):
+            return v / (s_b[idx][..., None] if v.ndim == 3 else s_b[idx])
     empty = pad.all(-1)
-    lo, hi = np.where(pad, np.inf, t_b).min(-1), np.where(pad, -np.inf, t_b).max(-1)
+    at_rover = pad | base_b
+    lo, hi = np.where(at_rover, np.inf, t_b).min(-1), np.where(at_rover, -np.inf, t_b).max(-1)
     t_ref = np.where(empty, 0.0, 0.5 * (np.where(empty, 0.0, lo) + np.where(empty, 0.0, hi)))
     dt = np.where(pad, 0.0, t_b - t_ref[:, None])
     half_span = np.maximum(np.max(np.abs(dt), axis=-1).max(), 1.0)
     powers = dt[..., None] ** np.arange(clock_degree + 1)
     n_vel = 3 if motion == "constant_velocity" else 0
     n_lin = 4 + n_vel + clock_degree
+    sat_b = np.where(pad, "", sat_all[take])
+    sats_all = np.unique(sat_b[~pad])
+    # Joint fit: each satellite's frequency polynomial of each block (a prior row keeps a satellite absent
+    # from a block determined; it is no information and no redundancy).
+    n_poly = 0 if sat_clock_degree is None else sat_clock_degree + 1
+    n_sc = n_poly * len(sats_all)
+    onehot_all = (sat_b[..., None] == sats_all).astype(float)
+    present = np.repeat((onehot_all > 0).any(axis=1), n_poly, axis=-1)  # (n_b, n_sc)
+    sat_powers = (onehot_all[..., :, None] * dt[..., None, None] ** np.arange(n_poly)).reshape(pad.shape + (n_sc,))
     # Element-set offsets: one radial / along / cross-track offset per common satellite, with a prior.
-    sats = np.unique(np.where(pad, "", rover.sat_id[take])[~pad]) if orbit_sigma_rtn_m is not None else []
+    sats = sats_all if orbit_sigma_rtn_m is not None else []
     n_orb = 3 * len(sats)
-    onehot = (np.where(pad, "", rover.sat_id[take])[..., None] == np.asarray(sats, dtype=str)).astype(float)
+    onehot = onehot_all if n_orb else onehot_all[..., :0]
     C_rtn, W_rtn = _rtn_frames(rs_b, vs_b)
-    _, H_base = _model_hz(rs_b, vs_b, base_pos, f_b)
-    n_states = n_lin + n_orb
-    prior_sigma = np.tile(np.asarray(orbit_sigma_rtn_m if n_orb else [], dtype=float), len(sats))
+    # Difference: an offset moves z by rover minus base; joint: each row by its own receiver's view.
+    H_sub = model_hz(rs_b, vs_b, base_pos, f_b)[1] if sat_clock_degree is None else np.zeros(rs_b.shape[:2] + (7,))
+    n_free = n_lin + n_sc
+    n_states = n_free + n_orb
+    prior_sigma = np.concatenate([np.ones(n_sc), np.tile(np.asarray(orbit_sigma_rtn_m if n_orb else [], float),
+                                                         len(sats))])
 
     def model_raw(x, idx):
-        vel = x[:, None, 3:3 + n_vel] if n_vel else 0.0
+        at_base = base_b[idx][..., None]
+        vel = np.where(at_base, 0.0, x[:, None, 3:3 + n_vel]) if n_vel else 0.0
         pos = x[:, None, :3] + (vel * dt[idx][..., None] if n_vel else 0.0)
-        pred, H = _model_hz(rs_b[idx], vs_b[idx], pos, f_b[idx], vel)
-        pred = pred + np.einsum("pmk,pk->pm", powers[idx], x[:, 3 + n_vel:n_lin])
+        pos = np.where(at_base, base_pos, pos)
+        pred, H = model_hz(rs_b[idx], vs_b[idx], pos, f_b[idx], vel)
+        r = rover_b[idx][..., None]
+        pred = pred + np.einsum("pmk,pk->pm", powers[idx] * r, x[:, 3 + n_vel:n_lin])
         d_vel = [H[..., 3:6] + H[..., :3] * dt[idx][..., None]] if n_vel else []
-        J = np.concatenate([H[..., :3], *d_vel, powers[idx]], axis=-1)
+        J = np.concatenate([H[..., :3], *d_vel, powers[idx]], axis=-1) * r
+        pred = pred + np.einsum("pmk,pk->pm", sat_powers[idx], x[:, n_lin:n_free])
+        J = np.concatenate([J, sat_powers[idx]], axis=-1)
         if not n_orb:
-            return pred, J, H
-        # d(z)/d(offset): the satellite moved by C r and its velocity by W r, seen from rover minus base.
-        dH = H - H_base[idx]
+            return pred, J
+        # d(row)/d(offset): the satellite moved by C r and its velocity by W r.
+        dH = H - H_sub[idx]
         g = -(np.einsum("pmi,pmij->pmj", dH[..., :3], C_rtn[idx])
               + np.einsum("pmi,pmij->pmj", dH[..., 3:6], W_rtn[idx]))
         G = (onehot[idx][..., :, None] * g[..., None, :]).reshape(g.shape[:2] + (n_orb,))
-        return pred + np.einsum("pmk,pk->pm", G, x[:, n_lin:]), np.concatenate([J, G], axis=-1), H
+        return pred + np.einsum("pmk,pk->pm", G, x[:, n_free:]), np.concatenate([J, G], axis=-1)
 
     def model(x, idx, w):
-        # Whitened rows (T_w z), then the orbit offsets' prior rows.
-        pred, J, _ = model_raw(x, idx)
+        # Whitened rows, then the prior rows (satellite frequencies, orbit offsets).
+        pred, J = model_raw(x, idx)
         pred = np.concatenate([whiten(pred, idx), x[:, n_lin:]], axis=-1)
         J = np.concatenate([whiten(J, idx),
-                            np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_orb, n_states))], axis=1)
+                            np.broadcast_to(np.eye(n_states)[n_lin:], (len(x), n_states - n_lin, n_states))],
+                           axis=1)
         return pred, J
 
-    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_VEL_MPS] * n_vel, [_XTOL_CLOCK[0]],
-                           _XTOL_CLOCK[1] / half_span ** np.arange(clock_degree), np.full(n_orb, XTOL_POS_M)])
+    clock_tol = np.concatenate([[_XTOL_CLOCK[0]], _XTOL_CLOCK[1] / half_span ** np.arange(max(clock_degree,
+                                                                                               n_poly - 1))])
+    xtol = np.concatenate([[XTOL_POS_M] * 3, [_XTOL_VEL_MPS] * n_vel, clock_tol[:clock_degree + 1],
+                           np.tile(clock_tol[:n_poly], len(sats_all)), np.full(n_orb, XTOL_POS_M)])
     x0 = np.zeros((n_b, n_states))
     x0[:, :3] = base_pos if pos0_ecef_m is None else np.asarray(pos0_ecef_m, float).reshape(3)
-    y_all = np.concatenate([whiten(y_b, np.arange(n_b)), np.zeros((n_b, n_orb))], axis=-1)
-    s_all = np.concatenate([np.ones((n_b, width)), np.broadcast_to(prior_sigma, (n_b, n_orb))], axis=-1)
-    m_all = np.concatenate([~pad, np.ones((n_b, n_orb), bool)], axis=-1)
-    fixed = np.arange(width + n_orb) >= width
+    n_prior = n_sc + n_orb
+    y_all = np.concatenate([whiten(y_b, np.arange(n_b)), np.zeros((n_b, n_prior))], axis=-1)
+    s_all = np.concatenate([np.ones((n_b, width)), np.broadcast_to(prior_sigma, (n_b, n_prior))], axis=-1)
+    m_all = np.concatenate([~pad, ~present, np.ones((n_b, n_orb), bool)], axis=-1)
+    fixed = np.arange(width + n_prior) >= width
     x, res, J, Q, used_all, iterations, chi2, solver_status = solve_robust(
         model, x0, y_all, s_all, m_all, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha, fixed=fixed,
         step_sigma_tol=_STEP_SIGMA_TOL)
@@ -459,17 +404,18 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     w_rel = np.where(used_b, med[:, None] ** 2, 0.0)
     gdop = np.sqrt(np.trace(cofactor(J[:, :width, :n_lin], w_rel), axis1=-2, axis2=-1))
     n_used = used_b.sum(-1)
-    dof = n_used - n_lin
-    sat_b = np.where(pad, "", rover.sat_id[take])
-    n_sats = np.array([np.unique(sat_b[k][used_b[k]]).size for k in range(n_b)])
+    dof = n_used - n_lin - present.sum(-1)
+    n_sats = np.array([np.unique(sat_b[k][used_b[k] & (rover_b[k] > 0)]).size for k in range(n_b)])
     _, _, alt = ecef_to_geodetic(np.nan_to_num(x[:, :3]))
     status, chi2_p = fix_status(solver_status, dof, chi2, np.where(solved, alt, np.nan), n_passes=n_sats, alpha=alpha)
 
     res = np.where(used_b, y_b - model_raw(x, np.arange(n_b))[0], np.nan)
-    used = np.zeros(len(z), bool)
-    residuals = np.full(len(z), np.nan)
-    used[slots[~pad]] = used_b[~pad]
-    residuals[slots[~pad]] = res[~pad]
+    at_r = ~pad & (rover_b > 0)
+    used = np.zeros(m, bool)
+    residuals = np.full(m, np.nan)
+    used[slots[at_r]] = used_b[at_r]
+    residuals[slots[at_r]] = res[at_r]
+    block = block[:m]
     return DifferentialFix(
         pos_ecef_m=x[:, :3], vel_ecef_mps=x[:, 3:6] if n_vel else None, clock_poly_hz=x[:, 3 + n_vel:n_lin],
         t_ref_s=t_ref, cov=Q[:, :n_lin, :n_lin], gdop=gdop, solver_status=solver_status,
