@@ -74,12 +74,13 @@ def test_new_family_flows_through_simulate(monkeypatch, newsat_tle):
     # above the scenario's 40 deg, counted from elevations computed here.
     from leosop.frames import azimuth_elevation_range
     from leosop.orbits.propagate import state_ecef
-    from leosop.simulate import _constellation, run_scenario
+    from leosop.simulate import run_scenario
+    from leosop.simulate.sky import transmitters
 
     monkeypatch.setitem(REGISTRY, "newsat", NEWSAT)
     sc = _short(newsat_tle, ("starlink", "newsat"), 30.0)
     r = run_scenario(sc, level="measurement", seed=0)
-    constellation, family_sat = _constellation(sc.leo.constellations, sc.tle, r.times_utc[[0, -1]])
+    constellation, family_sat = transmitters(sc.leo.constellations, sc.tle, r.times_utc[[0, -1]])
     pos_sv, _, _ = state_ecef(constellation, r.times_utc)
     elev_deg = np.degrees(azimuth_elevation_range(pos_sv, r.truth_pos_ecef_m)[1])
     np.testing.assert_array_equal(r.n_visible_by_family[:, 0], (elev_deg[family_sat == 0] >= 40.0).sum(0))

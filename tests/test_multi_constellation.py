@@ -416,12 +416,13 @@ def test_each_family_tracked_above_its_own_mask():
     # here from the propagated satellites, epoch by epoch.
     from leosop.frames import azimuth_elevation_range
     from leosop.orbits.propagate import state_ecef
-    from leosop.simulate import _constellation, run_scenario
+    from leosop.simulate import run_scenario
+    from leosop.simulate.sky import transmitters
 
     sc = _short("xian-baoji-multi", 120.0, constellations=("starlink", "iridium"), mask_deg_by_family={"iridium": 15})
     sc = dataclasses.replace(sc, start_utc=np.datetime64("2025-01-01T17:28:00", "ns"))
     r = run_scenario(sc, level="measurement", seed=0)
-    constellation, family_sat = _constellation(sc.leo.constellations, None, r.times_utc[[0, -1]])
+    constellation, family_sat = transmitters(sc.leo.constellations, None, r.times_utc[[0, -1]])
     pos_sv, _, _ = state_ecef(constellation, r.times_utc)
     _, elev_rad, _ = azimuth_elevation_range(pos_sv, r.truth_pos_ecef_m)
     elev_deg = np.degrees(elev_rad)  # (n_sats, n_epochs)

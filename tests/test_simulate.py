@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from leosop import frames, simulate
+from leosop.simulate import measure, sky
 from leosop.constants import C_MPS
 from leosop.fusion import aids_fix
 from leosop.fusion.aids import InsView
@@ -38,7 +39,7 @@ def _noise_free_mixed_fixes():
     times = XIAN_BAOJI.start_utc + (truth.t_s * 1e9).astype("timedelta64[ns]")
     C_e_n = frames.C_e_n(truth.lat_rad, truth.lon_rad)
     vel_rx = np.einsum("kij,kj->ki", C_e_n, truth.vel_enu_mps)
-    constellation, family_sat = simulate._constellation(("starlink", "orbcomm", "oneweb"), None, times[[0, -1]])
+    constellation, family_sat = sky.transmitters(("starlink", "orbcomm", "oneweb"), None, times[[0, -1]])
     vis = compute_visibility(constellation, times, truth.pos_ecef_m, 35.0, vel_rx_ecef_mps=vel_rx,
                              show_progress=False)
     fam = family_sat[vis.sat_index]
@@ -61,8 +62,8 @@ def _noise_free_mixed_fixes():
     good = fixes.status == FixStatus.OK
     assert good.sum() >= 35
     assert (vis.n_visible_by_group(family_sat)[good][:, [0, 2]] > 0).all()  # both constellations in every fix
-    model = simulate._fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
-                                      np.full(len(constellation), 5.0), 30.0, "independent")
+    model = measure.fix_error_model(vis, fixes, good, sigma, 0.05, pos_known, f0, fam,
+                                    np.full(len(constellation), 5.0), 30.0, "independent")
     return truth, vel_rx, fixes, good, model, offset_hz, orbit_m
 
 
@@ -142,9 +143,9 @@ def test_imu_made_in_blocks_gives_the_same_run_as_one_block(monkeypatch):
         out.update({"fused." + f.name: getattr(res.fused, f.name) for f in dataclasses.fields(res.fused)})
         return {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
 
-    monkeypatch.setattr(simulate, "IMU_BLOCK_STEPS", 1000)  # one block for the whole run
+    monkeypatch.setattr("leosop.simulate.run.IMU_BLOCK_STEPS", 1000)  # one block for the whole run
     one = arrays(simulate.run_scenario(sc, level="measurement", seed=3))
-    monkeypatch.setattr(simulate, "IMU_BLOCK_STEPS", 7)
+    monkeypatch.setattr("leosop.simulate.run.IMU_BLOCK_STEPS", 7)
     blocks = arrays(simulate.run_scenario(sc, level="measurement", seed=3))
     assert one.keys() == blocks.keys() and "fused.lat_rad" in one
     for k in one:
@@ -168,9 +169,9 @@ def test_fixes_made_in_blocks_give_the_same_run_as_one_block(monkeypatch, conste
         out.update({"fused." + f.name: getattr(res.fused, f.name) for f in dataclasses.fields(res.fused)})
         return {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
 
-    monkeypatch.setattr(simulate, "FIX_BLOCK_EPOCHS", 1000)  # one block for the whole run
+    monkeypatch.setattr(measure, "FIX_BLOCK_EPOCHS", 1000)  # one block for the whole run
     one = arrays(simulate.run_scenario(sc, level="measurement", coupling=coupling, seed=3))
-    monkeypatch.setattr(simulate, "FIX_BLOCK_EPOCHS", 7)
+    monkeypatch.setattr(measure, "FIX_BLOCK_EPOCHS", 7)
     blocks = arrays(simulate.run_scenario(sc, level="measurement", coupling=coupling, seed=3))
     assert one.keys() == blocks.keys() and np.isfinite(one["fix_pos_ecef_m"]).all()
     assert one["fix_cov"].shape[-1] == 6 + len(constellations) - ("orbcomm" in constellations)
@@ -187,14 +188,14 @@ def test_loose_filter_leaves_out_near_singular_fixes_of_the_cn0_imu_outlier():
     spec = load_spec("cn0_imu")
     cell = next(c for c in spec.cells() if c["cn0_dbhz"] == 50 and c["imu_grade"] == "mems")
     scenario, options = apply(spec.scenario, cell, spec.source)
-    captured = []  # one call per block of epochs (simulate.FIX_BLOCK_EPOCHS)
+    captured = []  # one call per block of epochs (measure.FIX_BLOCK_EPOCHS)
 
     def solve(*args, **kwargs):
         captured.append(solve_snapshots(*args, **kwargs))
         return captured[-1]
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(simulate, "solve_snapshots", solve)
+        mp.setattr(measure, "solve_snapshots", solve)
         res = simulate.run_scenario(scenario, seed=1488067860, **options)
     status, n_used, cov, gdop = (np.concatenate([getattr(f, k) for f in captured])
                                  for k in ("status", "n_used", "cov", "gdop"))

@@ -1,6 +1,6 @@
 """Benchmark: the engine's tight coupling alone (``simulate --coupling tight``'s filter), one BLAS thread and two.
 
-The inputs of :func:`leosop.simulate_tight.run` are made once by
+The inputs of :func:`leosop.simulate.tight.run` are made once by
 :func:`leosop.simulate.run_scenario` (measurement level, seed 0; its tight
 filter is intercepted, not run) and pickled to a temporary file; a child
 process per BLAS thread count (``OPENBLAS_NUM_THREADS``, read when numpy
@@ -35,7 +35,8 @@ class _Captured(Exception):
 
 def capture(scenario_name, path):
     """Run the scenario up to its tight filter and pickle the filter's arguments to ``path``."""
-    from leosop import simulate, simulate_tight
+    from leosop import simulate
+    from leosop.simulate import tight
     from leosop.scenarios import load_scenario
 
     def stand_in(*args, **kwargs):
@@ -43,25 +44,25 @@ def capture(scenario_name, path):
             pickle.dump((args, kwargs), f)
         raise _Captured
 
-    real, simulate_tight.run = simulate_tight.run, stand_in
+    real, tight.run = tight.run, stand_in
     try:
         simulate.run_scenario(load_scenario(scenario_name), level="measurement", coupling="tight", seed=0)
     except _Captured:
         pass
     finally:
-        simulate_tight.run = real
+        tight.run = real
 
 
 def time_filter(path, repeat):
     """Best wall time of the tight filter on the pickled inputs, and a digest of its result."""
-    from leosop import simulate_tight
+    from leosop.simulate import tight
 
     with open(path, "rb") as f:
         args, kwargs = pickle.load(f)
     best = np.inf
     for _ in range(repeat):
         tic = time.perf_counter()
-        res = simulate_tight.run(*args, **kwargs)
+        res = tight.run(*args, **kwargs)
         best = min(best, time.perf_counter() - tic)
     pairs = args[3]
     n_dopplers = int(np.count_nonzero((pairs["epoch_index"] > 0) & np.isfinite(pairs["doppler_hz"])))

@@ -156,6 +156,72 @@ def peer(data, anchor, name, length_s, outages):
     return {"max_horiz_err_m": _horiz_errors(t_s - t0, lat, lon, alt, sol, t0, outages), "runtime_s": runtime}
 
 
+def table(args, run, sides, more, ratio, tail):
+    """One row per log and outage length comparing two scored runs; printed line by line, or JSON at the end.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``logs`` and ``json`` of the command line.
+    run : callable
+        ``run(name, length_s) -> (a, b)``: the two runs' scores (dicts of :func:`ours` or :func:`peer`).
+    sides : tuple of (str, str)
+        Column prefix and printed name of ``a`` and of ``b``: each gets ``{prefix}_mean_m`` and
+        ``{prefix}_worst_m`` of its per-outage maxima.
+    more : callable
+        ``more(a, b) -> dict``: the table's further columns, after the means and worsts.
+    ratio : tuple of str
+        Prefixes of the numerator and denominator of ``mean_ratio``.
+    tail : callable
+        ``tail(row) -> str``: the printed line after ``ratio``, from its value on.
+    """
+    (key_a, name_a), (key_b, name_b) = sides
+    rows = []
+    for name in args.logs:
+        for length in OUTAGE_LENGTHS_S:
+            a, b = run(name, length)
+            row = {"log": name, "outage_s": length, "n_outages": len(a["max_horiz_err_m"])}
+            for key, res in ((key_a, a), (key_b, b)):
+                row[f"{key}_mean_m"] = float(np.mean(res["max_horiz_err_m"]))
+                row[f"{key}_worst_m"] = max(res["max_horiz_err_m"])
+            row.update(more(a, b))
+            row["mean_ratio"] = row[f"{ratio[0]}_mean_m"] / row[f"{ratio[1]}_mean_m"]
+            rows.append(row)
+            if not args.json:
+                print(f"{name:5s} {length:4.0f} s x{row['n_outages']:2d}: "
+                      f"{name_a} mean {row[f'{key_a}_mean_m']:6.2f} m worst {row[f'{key_a}_worst_m']:6.2f} m | "
+                      f"{name_b} mean {row[f'{key_b}_mean_m']:6.2f} m worst {row[f'{key_b}_worst_m']:6.2f} m | "
+                      f"ratio {tail(row)}", flush=True)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+
+
+def _peer_columns(a, b):
+    """The peer table's columns beyond the means and worsts: ``a`` ours, ``b`` the peer's."""
+    return {"inside_3sigma": a["inside_3sigma"], "ours_runtime_s": a["runtime_s"], "peer_runtime_s": b["runtime_s"],
+            "log_s": a["log_s"], "ours_max_m": a["max_horiz_err_m"], "peer_max_m": b["max_horiz_err_m"]}
+
+
+def _peer_tail(row):
+    """The peer table's printed line after ``ratio``."""
+    return (f"{row['mean_ratio']:.2f} | inside 3 sigma {100 * row['inside_3sigma']:.0f} % | run "
+            f"{row['ours_runtime_s']:.1f} s ({row['ours_runtime_s'] / row['log_s']:.3f} x log), "
+            f"peer {row['peer_runtime_s']:.1f} s")
+
+
+def _leo_columns(a, b):
+    """The ``--leo-sim`` table's columns beyond the means and worsts: ``a`` GNSS-only, ``b`` with LEO."""
+    return {"gnss_inside_3sigma": a["inside_3sigma"], "leo_inside_3sigma": b["inside_3sigma"],
+            "leo_runtime_s": b["runtime_s"], "log_s": b["log_s"], "leo_max_m": b["max_horiz_err_m"]}
+
+
+def _leo_tail(row):
+    """The ``--leo-sim`` table's printed line after ``ratio``."""
+    return (f"{row['mean_ratio']:.3f} | inside 3 sigma {100 * row['gnss_inside_3sigma']:.0f} % / "
+            f"{100 * row['leo_inside_3sigma']:.0f} % | LEO run {row['leo_runtime_s']:.1f} s "
+            f"({row['leo_runtime_s'] / row['log_s']:.3f} x log)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=ROOT / "shared" / "data" / "gnss-ins")
@@ -166,53 +232,17 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.leo_sim:
-        return leo_rows(args)
-    rows = []
-    for name in args.logs:
-        for length in OUTAGE_LENGTHS_S:
+        def run(name, length):
+            return (ours(args.data, name, length)[0],
+                    ours(args.data, name, length, leo_sim=True, leo_exact=args.leo_exact)[0])
+
+        table(args, run, (("gnss", "GNSS-only"), ("leo", "+LEO sim")), _leo_columns, ("leo", "gnss"), _leo_tail)
+    else:
+        def run(name, length):
             a, outages = ours(args.data, name, length)
-            b = peer(args.data, args.anchor, name, length, outages)
-            row = {"log": name, "outage_s": length, "n_outages": len(a["max_horiz_err_m"]),
-                   "ours_mean_m": float(np.mean(a["max_horiz_err_m"])), "ours_worst_m": max(a["max_horiz_err_m"]),
-                   "peer_mean_m": float(np.mean(b["max_horiz_err_m"])), "peer_worst_m": max(b["max_horiz_err_m"]),
-                   "inside_3sigma": a["inside_3sigma"], "ours_runtime_s": a["runtime_s"],
-                   "peer_runtime_s": b["runtime_s"], "log_s": a["log_s"],
-                   "ours_max_m": a["max_horiz_err_m"], "peer_max_m": b["max_horiz_err_m"]}
-            row["mean_ratio"] = row["ours_mean_m"] / row["peer_mean_m"]
-            rows.append(row)
-            if not args.json:
-                print(f"{name:5s} {length:4.0f} s x{row['n_outages']:2d}: ours mean {row['ours_mean_m']:6.2f} m worst "
-                      f"{row['ours_worst_m']:6.2f} m | peer mean {row['peer_mean_m']:6.2f} m worst "
-                      f"{row['peer_worst_m']:6.2f} m | ratio {row['mean_ratio']:.2f} | inside 3 sigma "
-                      f"{100 * row['inside_3sigma']:.0f} % | run {row['ours_runtime_s']:.1f} s "
-                      f"({row['ours_runtime_s'] / row['log_s']:.3f} x log), peer {row['peer_runtime_s']:.1f} s",
-                      flush=True)
-    if args.json:
-        print(json.dumps(rows, indent=2))
+            return a, peer(args.data, args.anchor, name, length, outages)
 
-
-def leo_rows(args):
-    rows = []
-    for name in args.logs:
-        for length in OUTAGE_LENGTHS_S:
-            a, _ = ours(args.data, name, length)
-            b, _ = ours(args.data, name, length, leo_sim=True, leo_exact=args.leo_exact)
-            row = {"log": name, "outage_s": length, "n_outages": len(a["max_horiz_err_m"]),
-                   "gnss_mean_m": float(np.mean(a["max_horiz_err_m"])), "gnss_worst_m": max(a["max_horiz_err_m"]),
-                   "leo_mean_m": float(np.mean(b["max_horiz_err_m"])), "leo_worst_m": max(b["max_horiz_err_m"]),
-                   "gnss_inside_3sigma": a["inside_3sigma"], "leo_inside_3sigma": b["inside_3sigma"],
-                   "leo_runtime_s": b["runtime_s"], "log_s": b["log_s"], "leo_max_m": b["max_horiz_err_m"]}
-            row["mean_ratio"] = row["leo_mean_m"] / row["gnss_mean_m"]
-            rows.append(row)
-            if not args.json:
-                print(f"{name:5s} {length:4.0f} s x{row['n_outages']:2d}: "
-                      f"GNSS-only mean {row['gnss_mean_m']:6.2f} m worst {row['gnss_worst_m']:6.2f} m | "
-                      f"+LEO sim mean {row['leo_mean_m']:6.2f} m worst {row['leo_worst_m']:6.2f} m | "
-                      f"ratio {row['mean_ratio']:.3f} | inside 3 sigma {100 * row['gnss_inside_3sigma']:.0f} % / "
-                      f"{100 * row['leo_inside_3sigma']:.0f} % | LEO run {row['leo_runtime_s']:.1f} s "
-                      f"({row['leo_runtime_s'] / row['log_s']:.3f} x log)", flush=True)
-    if args.json:
-        print(json.dumps(rows, indent=2))
+        table(args, run, (("ours", "ours"), ("peer", "peer")), _peer_columns, ("ours", "peer"), _peer_tail)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ by the factor ``sin(w / 2) / (w / 2)`` (0.11 m/s at 10 m/s and 30 deg/s,
 RMS 0.04 m/s against a five-point difference of the 4 Hz fixes on the
 drive). That velocity, or an exact Doppler without offsets or noise, does
 not bring the drive's outage errors inside 3 sigma (docs/fusion-real.md). The Doppler then comes from ``simulate``'s own
-measurement level (``leosop.simulate._leo_fixes``, called, not copied) with
+measurement level (``leosop.simulate.measure.leo_fixes``, called, not copied) with
 the satellite offsets, orbit errors, receiver offsets, masks and C/N0 of
 the bundled ``xian-baoji`` scenario and the families asked for.
 """
@@ -105,24 +105,24 @@ def simulate(sol, *, tle=None, constellations=("starlink",), seed=0):
         ``time_utc`` at the reference epochs, satellite states as the
         receiver knows them (with the orbit errors), ``family`` per row.
     """
-    from .. import simulate as sim
+    from ..simulate import measure, sky
 
     leo = dataclasses.replace(XIAN_BAOJI.leo, constellations=tuple(constellations))
     scenario = dataclasses.replace(XIAN_BAOJI, name="fuse --leo-sim", leo=leo)
     t_s, pos, vel, valid = reference_track(sol, leo.fix_rate_hz)
     times_utc = gpst_to_utc(sol.t_gpst_s[0] + t_s)
-    constellation, family_sat = sim._constellation(leo.constellations, tle, times_utc[[0, -1]])
-    models = sim._family_models(leo)
+    constellation, family_sat = sky.transmitters(leo.constellations, tle, times_utc[[0, -1]])
+    models = sky.family_models(leo)
     rng_sat, rng_meas = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     # The scenario's satellite errors, drawn as run_scenario draws them: offsets uniform in [0, max], orbit
     # errors normal per ECEF axis (independent model).
     offset_max = leo.sat_doppler_offset_max_hz * models["clock_scale"][family_sat]
     offset = offset_max * rng_sat.uniform(0.0, 1.0, len(constellation))
     orbit_err = leo.orbit_error_m * rng_sat.standard_normal((len(constellation), 3))
-    _, pairs = sim._leo_fixes(scenario, constellation, family_sat, models, times_utc, t_s, pos, vel, pos, vel, offset,
-                              offset_max, orbit_err, level="measurement", coupling="tight",
-                              orbit_error_m=leo.orbit_error_m, orbit_error_model=leo.orbit_error_model,
-                              rng_meas=rng_meas, progress=None)
+    _, pairs = measure.leo_fixes(scenario, constellation, family_sat, models, times_utc, t_s, pos, vel, pos, vel,
+                                 offset, offset_max, orbit_err, level="measurement", coupling="tight",
+                                 orbit_error_m=leo.orbit_error_m, orbit_error_model=leo.orbit_error_model,
+                                 rng_meas=rng_meas, progress=None)
     ep, sat = pairs["epoch_index"], pairs["sat_index"]
     keep = valid[ep] & np.isfinite(pairs["doppler_hz"])
     ep, sat = ep[keep], sat[keep]
