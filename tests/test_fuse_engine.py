@@ -53,6 +53,7 @@ def _all_aids():
         aids.ZeroRate(0.0, [1e-4, -1e-4, 2e-4], 1e-4),
         aids.NonHolonomic(0.0, 0.1, rotvec_to_dcm([0.01, -0.02, 0.03]), slip_s=0.1, offset_m=0.1),
         aids.Height(0.0, ALT - 1.0, 0.5),
+        aids.WalkingSpeed(0.0, 7.9, 0.2),
     ]
 
 

@@ -13,7 +13,7 @@ the withheld Q = 1 epochs, maximum per outage.
 
 Our filter reads the raw IMU CSV with its ``.tag``, the mounting, lever arm
 and IMU time offset of the peer's configuration files, the ``consumer``
-grade, ``--nhc --zupt`` on the drive and ``--zupt`` on the walk.
+grade, ``--nhc --zupt`` on the drive and ``--zupt --walking-speed`` on the walk.
 
 Usage: ``python tools/bench_fuse.py [--data DIR] [--anchor DIR] [--logs drive walk] [--leo-sim] [--json]``.
 Goals (issue 21): mean <= 0.5 x the peer's, worst no worse, >= 95 % of the
@@ -54,7 +54,7 @@ LOGS = {
     "drive": ("rtklibexplorer_drive_0708", "drive_config", "1934_sf", "imu_1934.csv", (180.0, -6.79, 185.35),
               (0.0, -0.05, 0.0), -0.125, {"nhc": True, "zupt": True}, 40.0, 30.0),
     "walk": ("rtklibexplorer_walk_0827", "walk_config", "1730_sf", "imu_1730.csv", (180.0, 0.0, -90.0),
-             (0.0, -0.05, 0.0), 0.0, {"zupt": True}, 25.0, 45.0),
+             (0.0, -0.05, 0.0), 0.0, {"zupt": True, "walking_speed": True}, 25.0, 45.0),
 }
 OUTAGE_LENGTHS_S = (15.0, 30.0)
 

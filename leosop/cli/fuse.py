@@ -71,6 +71,8 @@ def register(subparsers):
                         "repeatable")
     p.add_argument("--zupt", action="store_true", help="zero-velocity and zero-rate updates when the IMU is at rest")
     p.add_argument("--nhc", action="store_true", help="non-holonomic constraint (a wheeled vehicle)")
+    p.add_argument("--walking-speed", action="store_true",
+                   help="a pedestrian keeps the pace of the last 5 s of GNSS where GNSS is missing (hand-held IMU)")
     p.add_argument("--course-yaw", metavar="MIN_SPEED_MPS,SIGMA_DEG",
                    help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, sigma "
                         "SIGMA_DEG (sideslip, crab), never the yaw bank: e.g. 5,10 for an aircraft handled on the "
@@ -187,6 +189,7 @@ def run(args):
     scale_sigma, cross_sigma = _gyro_error_sigma(args.gyro_error_sigma)
     options = real.FuseOptions(spec=real.imu_spec(args.imu_spec), outages=outages,
                                lever_arm_b_m=(r, f, -d), zupt=args.zupt, nhc=args.nhc,
+                               walking_speed=args.walking_speed,
                                time_offset_sigma_s=_offset_sigma(args.imu_time_offset_sigma_s),
                                course_yaw=_course_yaw(args.course_yaw), scale_sigma=scale_sigma,
                                gyro_cross_sigma=cross_sigma)

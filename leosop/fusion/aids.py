@@ -31,8 +31,8 @@ from ..ins.error_model import DPOS, DV, EPS, PHI
 from ..rotations import skew
 from .common import N_INS, pos_jacobian
 
-__all__ = ["Aid", "GnssPosition", "GnssVelocity", "Height", "InsView", "NonHolonomic", "StateBlock", "ZeroRate",
-           "ZeroVelocity"]
+__all__ = ["Aid", "GnssPosition", "GnssVelocity", "Height", "InsView", "NonHolonomic", "StateBlock", "WalkingSpeed",
+           "ZeroRate", "ZeroVelocity"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -386,6 +386,41 @@ class NonHolonomic(Aid):
         # C_computed^T = C^T (I + [phi x]): the body velocity moves by -C^T [v x] phi.
         H[:, PHI] = -(A @ skew(s.vel_enu_mps))[self._ROWS]
         H[:, DV] = A[self._ROWS]
+        return H
+
+
+class WalkingSpeed(Aid):
+    """A pedestrian's pace: the horizontal speed ``h = |v_EN|`` [m/s] holds near its recent value.
+
+    A walker keeps a cadence and a step length (the premise of pedestrian
+    dead reckoning, Groves 2013, section 16.2), so while walking the speed
+    is known to its scatter about the pace even where its direction is
+    not; in turns that scatter bounds every horizontal direction of the
+    velocity error in turn.
+
+    Parameters
+    ----------
+    t_s : float
+    speed_mps : float
+        The pace (e.g. the recent GNSS speed).
+    sigma_mps : float
+        Scatter of the speed about it.
+    """
+
+    name = "walking_speed"
+
+    def __init__(self, t_s, speed_mps, sigma_mps):
+        super().__init__(t_s)
+        self.measured = np.array([float(speed_mps)])
+        self.R = np.eye(1) * float(sigma_mps) ** 2
+
+    def predict(self, ins):
+        return np.array([math.hypot(*ins.state.vel_enu_mps[:2])])
+
+    def design(self, ins):
+        v = ins.state.vel_enu_mps
+        H = np.zeros((1, N_INS))
+        H[0, DV.start:DV.start + 2] = v[:2] / max(math.hypot(*v[:2]), 1e-6)
         return H
 
 

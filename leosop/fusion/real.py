@@ -58,6 +58,8 @@ _Q_GAIN = {Q_FIX: 1.0, Q_FLOAT: 2.0, Q_SINGLE: 5.0}
 _SUSTAINED_S = 3.0
 #: An output epoch is dead reckoning (Q = 7) when the last GNSS epoch used is older than this [s].
 _DR_AFTER_S = 1.0
+#: A walker's pace is the median GNSS speed over this long [s] before a gap.
+_PACE_S = 5.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,6 +184,8 @@ class FuseOptions:
     ``bridge_gaps``: the increments over gaps in the log bridged by the
     trapezoid rule and their error variance added to the process noise
     (:func:`leosop.ins.gaps.bridge`; a log without gaps is unchanged).
+    ``walking_speed``: a pedestrian's pace where GNSS is missing
+    (:func:`_walking_aids`), ``walking_speed_sigma_mps`` its scatter.
     """
 
     spec: ImuSpec
@@ -204,6 +208,8 @@ class FuseOptions:
     yaw_bank_s: float = 20.0
     course_yaw: tuple | None = None
     bridge_gaps: bool = True
+    walking_speed: bool = False
+    walking_speed_sigma_mps: float = 0.2
 
     def course_alignment(self):
         """The :class:`leosop.fusion.engine.CourseAlignment` of a start whose yaw is not known."""
@@ -256,6 +262,27 @@ def _gnss_aids(sol, t_g, use, lever, vel_floor_mps, vel_accel_sigma_s):
         if sol.vel_enu_mps is not None:
             cov = sol.cov_vel_enu_m2ps2[k] * gain2 + np.eye(3) * vel_floor_mps**2
             out.append(aid_models.GnssVelocity(t_g[k], sol.vel_enu_mps[k], cov, lever, accel_sigma_s=vel_accel_sigma_s))
+    return out
+
+
+def _walking_aids(t_g, vel_enu_mps, t_imu, rest_ends, sigma_mps):
+    """:class:`~leosop.fusion.aids.WalkingSpeed` aids, one a second, where no GNSS epoch came for 1 s.
+
+    The pace is the median horizontal GNSS speed over the last
+    ``_PACE_S`` before the gap (at least 0.5 m/s: walking); none in a window
+    at rest (``rest_ends``, each window's last sample, 1 s long).
+    """
+    t = np.arange(t_imu[0], t_imu[-1], 1.0)
+    last = np.searchsorted(t_g, t, side="right") - 1
+    t_last = t_g[np.maximum(last, 0)]
+    i = np.searchsorted(rest_ends, t)
+    at_rest = (i < rest_ends.size) & (rest_ends[np.minimum(i, rest_ends.size - 1)] - t < 1.0)
+    speed = np.hypot(vel_enu_mps[:, 0], vel_enu_mps[:, 1])
+    out = []
+    for tk, tl, ok in zip(t, t_last, (last >= 0) & ~at_rest):
+        pace = np.median(speed[(t_g > tl - _PACE_S) & (t_g <= tl)])
+        if ok and tk - tl > _DR_AFTER_S and pace >= 0.5:
+            out.append(aid_models.WalkingSpeed(tk, pace, sigma_mps))
     return out
 
 
@@ -374,8 +401,12 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     aid_list = _gnss_aids(sol, t_g, ~withheld & (t_g > t_imu[0] - dt[0]), lever, options.gnss_vel_sigma_floor_mps,
                           options.gnss_vel_accel_sigma_s)
     aid_list += [a for a in extra_aids if a.t_s > t_imu[0] - dt[0]]
-    if options.zupt:
+    if options.zupt or options.walking_speed:
         ends, w = stationary_windows(t_imu, dvl / dt[:, None], dth / dt[:, None])
+    if options.walking_speed and sol.vel_enu_mps is not None:
+        aid_list += _walking_aids(t_g[~withheld], sol.vel_enu_mps[~withheld], t_imu, ends,
+                                  options.walking_speed_sigma_mps)
+    if options.zupt:
         zr_sigma = math.radians(options.zero_rate_sigma_deg_per_s)
         for te, wm in zip(ends, w):
             aid_list += [aid_models.ZeroVelocity(te, options.zupt_sigma_mps), aid_models.ZeroRate(te, wm, zr_sigma)]
