@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExternalError, InputError
-from ..fileio import atomic_files, check_output_file, write_csv, write_json
+from ..fileio import atomic_files, check_input_file, check_output_file, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, write_measurements
@@ -207,7 +207,8 @@ def _run_batch(args):
         open_sigmf(meta, verify=False)  # every file a recording before any work (its checksum when it runs)
         for f in OUT_FILES:
             check_output_file(out / name / f, "--out")
-    load_constellation(args.tle)  # a bad --tle is refused once, not once per recording
+    if args.tle:
+        check_input_file(args.tle, "element-set file")  # refused once, not once per recording
     options = {k: v for k, v in vars(args).items() if not k.startswith("_") and k not in _NOT_IN_KEY}
     if args.tle:
         stat = Path(args.tle).stat()
