@@ -39,7 +39,7 @@ def _json(capsys, argv):
 
 
 def test_batch_gives_each_single_replay_and_resumes(two_recordings, capsys, tmp_path, monkeypatch):
-    opts = ["--init", INIT, "--static"]
+    opts = ["--init", INIT, "--static", "--mask-deg", "40"]  # the generated satellites are all above 40 deg
     singles = [_json(capsys, ["replay", str(p), *opts, "--json"]) for p in two_recordings]
     out = tmp_path / "batch"
     doc = _json(capsys, ["replay", *map(str, two_recordings), *opts, "--scheduler", "serial", "--out", str(out),
@@ -147,3 +147,23 @@ def test_dask_path_writes_what_the_serial_path_writes(tmp_path):
     for name in ("a", "c"):
         for f in ("replay.json", "tracks.csv"):
             assert (tmp_path / "dask" / name / f).read_bytes() == (tmp_path / "serial" / name / f).read_bytes()
+
+
+def test_failed_recordings_are_reported_and_the_exit_says_why(two_recordings, capsys, tmp_path):
+    # Recordings without core:datetime pass the up-front check (they are SigMF) and fail when replayed.
+    copies = []
+    for path in two_recordings:
+        meta = json.loads(path.read_text())
+        for cap in meta["captures"]:
+            cap.pop("core:datetime", None)
+        copy = tmp_path / path.name
+        copy.write_text(json.dumps(meta))
+        copy.with_suffix(".sigmf-data").symlink_to(path.with_suffix(".sigmf-data"))
+        copies.append(copy)
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(["replay", *map(str, copies), "--scheduler", "serial", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "2 of 2 recording(s) failed" in err and "core:datetime" in err and len(err.strip().splitlines()) == 1
+    ledger = json.loads((out / LEDGER).read_text())
+    assert [e["status"] for e in ledger["recordings"]] == ["failed", "failed"] and ledger["n_failed"] == 2
