@@ -26,6 +26,7 @@ import io
 import json
 import logging
 import os
+import resource
 import signal
 import sys
 import tempfile
@@ -38,6 +39,11 @@ from leosop.replay.batch import LEDGER
 
 SITE = "34.342,108.94,400"  # Xi'an, the bundled scenario's start
 INIT = "34.98,109.71,0"  # a prior 100 km off, as the replay tests use
+
+
+def _cpu_s():
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    return use.ru_utime + use.ru_stime
 
 
 def _say(text):
@@ -149,10 +155,14 @@ def main():
         paths = _generate(tmp / "recs", a.n, a.duration_s)
         load0 = os.getloadavg()[0]
         _say("serial batch ...")
+        cpu0 = _cpu_s()
         t_serial, serial = _batch(paths, tmp / "serial", "serial")
+        cpu_serial = _cpu_s() - cpu0
         _say(f"serial: {t_serial:.1f} s; batch on {a.workers} Dask workers ...")
-        with _cluster(a.workers) as (address, _, start_s):
+        with _cluster(a.workers) as (address, client, start_s):
+            cpu0, cpu_client0 = sum(client.run(_cpu_s).values()), _cpu_s()
             t_dask, dask = _batch(paths, tmp / "dask", address)
+            cpu_dask, cpu_client = sum(client.run(_cpu_s).values()) - cpu0, _cpu_s() - cpu_client0
         _say(f"dask: {t_dask:.1f} s; batch with a worker killed ...")
         tic = time.perf_counter()
         (_, killed), died, n_done = _killed_run(paths, tmp / "killed", a.workers)
@@ -161,16 +171,20 @@ def main():
                 "killed": _same(tmp / "killed", tmp / "serial", killed, serial)}
         _say("the serial command again on the killed run's folder ...")
         _, again = _batch(paths, tmp / "killed", "serial")
-        mean_s = sum(e["runtime_s"] for e in serial["recordings"]) / a.n
+        mean_s = {k: sum(e["runtime_s"] for e in d["recordings"]) / a.n for k, d in (("serial", serial),
+                                                                                      ("dask", dask))}
         print(f"{a.n} recordings of {a.duration_s:g} s (10 ms snapshots every 1 s at 1 MS/s); {os.cpu_count()} cores; "
               f"load average {load0:.2f} before, {os.getloadavg()[0]:.2f} after (shared machine)")
-        print(f"{'run':<40}{'wall s':>8}  identical to serial")
-        print(f"{'serial (this process)':<40}{t_serial:8.1f}  -")
-        print(f"{f'local Dask, {a.workers} workers':<40}{t_dask:8.1f}  {same['dask']}")
-        print(f"{f'local Dask, {a.workers} workers, one killed':<40}{t_killed:8.1f}  {same['killed']}  "
+        print(f"{'run':<40}{'wall s':>8}{'CPU s':>8}{'replay s':>10}  identical to serial")
+        print(f"{'serial (this process)':<40}{t_serial:8.1f}{cpu_serial:8.1f}{mean_s['serial']:10.2f}  -")
+        print(f"{f'local Dask, {a.workers} workers':<40}{t_dask:8.1f}{cpu_dask:8.1f}{mean_s['dask']:10.2f}  "
+              f"{same['dask']}")
+        print(f"{f'local Dask, {a.workers} workers, one killed':<40}{t_killed:8.1f}{'':>18}  {same['killed']}  "
               "(incl. cluster start)")
+        print("CPU s: of this process, or summed over the workers (the client's own: "
+              f"{cpu_client:.1f} s); replay s: mean wall time of one recording's replay where it ran")
         print(f"speed-up serial / {a.workers} workers: {t_serial / t_dask:.2f}x (cluster start and worker imports "
-              f"{start_s:.1f} s not included); mean replay {mean_s:.2f} s per recording; identified per recording: "
+              f"{start_s:.1f} s not included); identified per recording: "
               f"{[e['n_identified'] for e in serial['recordings']]}")
         print(f"killed run: worker died and was replaced: {died} ({n_done} recording(s) done at the kill); "
               f"failed {killed['n_failed']}; the serial command again resumed {again['n_resumed']} of {a.n}, "
