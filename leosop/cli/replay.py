@@ -192,7 +192,7 @@ _NOT_IN_KEY = ("command", "json", "out", "recording", "scheduler", "workers")
 
 
 def _run_batch(args):
-    from ..replay.batch import batch_recordings, run_batch
+    from ..replay.batch import LEDGER, batch_recordings, run_batch
 
     _check_options(args)
     if args.base or args.base_site:
@@ -216,11 +216,10 @@ def _run_batch(args):
     one = argparse.Namespace(**{k: v for k, v in vars(args).items() if not k.startswith("_")})
     doc = run_batch(functools.partial(replay_files, one), recordings, out, options=options,
                     scheduler=args.scheduler, n_workers=args.workers)
-    doc["out"] = str(out)
     failed = [e for e in doc["recordings"] if e["status"] == "failed"]
     if failed:
         what = (f"{len(failed)} of {len(recordings)} recording(s) failed, first {failed[0]['recording']}: "
-                f"{failed[0]['error']} (the others are done; see {out / 'batch.json'})")
+                f"{failed[0]['error']} ({len(recordings) - len(failed)} done; see {out / LEDGER})")
         raise InputError(what) if all(e["error_kind"] == "input" for e in failed) else ExternalError(what)
     return doc
 

@@ -155,13 +155,14 @@ def run_batch(run_one, recordings, out_dir, *, options, scheduler=None, n_worker
         (one entry per recording, in the order given), ``n_recordings``,
         ``n_run`` (replayed now), ``n_resumed``, ``n_failed``, ``n_workers``
         (Dask workers at the start; 0 in this process or with nothing to
-        run) and ``elapsed_s`` (this call). Entry keys: ``name``, ``recording``, ``status`` (``done`` or
-        ``failed``), ``runtime_s`` (of the replay where it ran; of the first
-        run when resumed), ``resumed``, ``key``; when done ``n_tracks``,
-        ``n_identified``, ``n_blocks``, ``mode``, ``n_solutions``,
-        ``n_solutions_ok`` and ``fix`` (the static fix's position, status
-        and sigmas, else null); when failed ``error`` and ``error_kind``
-        (``input`` for bad input found in the recording, else ``error``).
+        run), ``elapsed_s`` (this call) and ``out``. Entry keys: ``name``,
+        ``recording``, ``status`` (``done`` or ``failed``), ``runtime_s`` (of
+        the replay where it ran; of the first run when resumed), ``resumed``,
+        ``key``; when done ``n_tracks``, ``n_identified``, ``n_blocks``,
+        ``mode``, ``n_solutions``, ``n_solutions_ok`` and ``fix`` (the static
+        fix's position, status and sigmas, else null); when failed ``error``
+        and ``error_kind`` (``input`` for bad input found in the recording,
+        else ``error``).
     """
     tic = time.perf_counter()
     out_dir = Path(out_dir)
@@ -181,7 +182,7 @@ def run_batch(run_one, recordings, out_dir, *, options, scheduler=None, n_worker
         done = [entries[n] for n in order if n in entries]
         return {"recordings": done, "n_recordings": len(order), "n_run": sum(not e["resumed"] for e in done),
                 "n_resumed": sum(e["resumed"] for e in done), "n_failed": sum(e["status"] == "failed" for e in done),
-                "n_workers": workers, "elapsed_s": time.perf_counter() - tic}
+                "n_workers": workers, "elapsed_s": time.perf_counter() - tic, "out": str(out_dir)}
 
     def finish(meta, name, key, outcome):
         if isinstance(outcome, Exception):
