@@ -65,7 +65,7 @@ def test_batch_gives_each_single_replay_and_resumes(two_recordings, capsys, tmp_
 
 @pytest.mark.parametrize("argv, message", [
     (["--scheduler", "serial"], "--scheduler and --workers run a batch"),
-    (["SECOND", "--scheduler", "serial"], "several recordings need --out DIR"),
+    (["SECOND", "--scheduler", "serial"], "a batch (several recordings, or a folder) needs --out DIR"),
     (["SECOND", "--out", "OUT", "--workers", "0"], "--workers 0: expected an integer >= 1"),
     (["SECOND", "--out", "OUT", "--base", "x.sigmf-meta", "--base-site", "0,0,0"], "take one rover recording"),
 ])

@@ -198,7 +198,8 @@ def _run_batch(args):
     if args.base or args.base_site:
         raise InputError("--base and --base-site take one rover recording, not a batch")
     if args.out is None:
-        raise InputError("several recordings need --out DIR (one folder of results each, and batch.json)")
+        raise InputError("a batch (several recordings, or a folder) needs --out DIR: a folder of results each, "
+                         "and batch.json")
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers {args.workers}: expected an integer >= 1")
     recordings = batch_recordings(args.recording)
@@ -299,8 +300,8 @@ def _write_outputs(out, doc, res, name, start_utc, diff=None):
 def _batch_summary(doc):
     from .position import format_or_na
 
-    where = f"{doc['n_workers']} Dask workers" if doc["n_workers"] else "this process"
-    lines = [f"{doc['out']}: {doc['n_recordings']} recording(s), {doc['n_run']} replayed on {where}, "
+    where = f"on {doc['n_workers']} Dask workers" if doc["n_workers"] else "in this process"
+    lines = [f"{doc['out']}: {doc['n_recordings']} recording(s), {doc['n_run']} replayed {where}, "
              f"{doc['n_resumed']} already done, {doc['n_failed']} failed; {doc['elapsed_s']:.1f} s"]
     for e in doc["recordings"]:
         if e["status"] == "failed":
