@@ -15,15 +15,24 @@ the satellites identified in both give the rover's differential fix
 (:mod:`leosop.replay.differential`): ``solutions`` is that fix,
 ``solutions_alone`` the rover's own, ``differential`` says which satellites
 were matched.
+
+Several recordings (``A B C ...``, or a folder of ``*.sigmf-meta``) are a
+batch (:mod:`leosop.replay.batch`): each recording's files go to
+``DIR/<name>/`` as a single replay would write them, ``DIR/batch.json``
+summarises the batch, recordings already done are skipped, and
+``--scheduler`` runs them on Dask as ``leosop study`` does.
 """
 
+import argparse
+import functools
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..fileio import atomic_files, check_output_file, write_csv, write_json
+from ..errors import ExternalError, InputError
+from ..fileio import atomic_files, check_input_file, check_output_file, write_csv, write_json
 from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, write_measurements
@@ -47,7 +56,8 @@ _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 def register(subparsers):
     p = add_command(subparsers, "replay", sys.modules[__name__], description=_DESCRIPTION,
                     help="find, track and identify the satellites of an IQ recording, then fix the receiver")
-    p.add_argument("recording", metavar="REC.sigmf-meta", help="SigMF recording with core:datetime")
+    p.add_argument("recording", metavar="REC.sigmf-meta", nargs="+",
+                   help="SigMF recording with core:datetime; several, or a folder of them, are a batch (needs --out)")
     p.add_argument("--tle", metavar="FILE", help="TLE or OMM snapshot to identify against "
                    "(default: the bundled Walker set)")
     p.add_argument("--init", metavar="LAT_DEG,LON_DEG,ALT_M",
@@ -66,6 +76,10 @@ def register(subparsers):
     p.add_argument("--base-site", metavar="LAT_DEG,LON_DEG,ALT_M", help="the base's known position")
     p.add_argument("--lo-drift-max-hz-per-s", type=float, default=LO_DRIFT_MAX_HZ_PER_S, metavar="HZ_PER_S",
                    help="largest drift of that offset searched, +- (default %(default)g)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="batch: workers of the local Dask cluster (default: the cores)")
+    p.add_argument("--scheduler", metavar="ADDR", help="batch: Dask scheduler address (default: a local cluster; "
+                                                       "'serial' runs in this process)")
 
 
 def _track_doc(tr):
@@ -86,9 +100,15 @@ def _lo_doc(lo, lo_max, drift_max):
 
 
 def run(args):
-    from ..replay.pipeline import replay
-    from .position import solutions_doc
+    if len(args.recording) > 1 or Path(args.recording[0]).is_dir():
+        return _run_batch(args)
+    if args.scheduler is not None or args.workers is not None:
+        raise InputError("--scheduler and --workers run a batch: give several recordings or a folder")
+    return _run_single(args)
 
+
+def _check_options(args):
+    """The checked numeric options: block length, LO bounds, mask, prior position (ECEF or None)."""
     block_s = positive(args.block_s, "--block-s")
     lo_max = positive(args.lo_offset_max_hz, "--lo-offset-max-hz")
     if lo_max > _LO_OFFSET_LIMIT_HZ:
@@ -97,6 +117,18 @@ def run(args):
     if not (np.isfinite(drift_max) and 0 <= drift_max <= _LO_DRIFT_LIMIT_HZ_PER_S):
         raise InputError(f"--lo-drift-max-hz-per-s {drift_max:g}: expected 0 to {_LO_DRIFT_LIMIT_HZ_PER_S:g}")
     mask = mask_deg(args.mask_deg)
+    init = None
+    if args.init:
+        lat, lon, alt = parse_site(args.init, "--init")
+        init = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
+    return block_s, lo_max, drift_max, mask, init
+
+
+def _run_single(args):
+    from ..replay.pipeline import replay
+    from .position import solutions_doc
+
+    block_s, lo_max, drift_max, mask, init = _check_options(args)
     if (args.base is None) != (args.base_site is None):
         raise InputError("--base needs --base-site, the base's known position" if args.base else
                          "--base-site goes with --base, the base's recording")
@@ -104,13 +136,9 @@ def run(args):
     if args.base_site:
         lat, lon, alt = parse_site(args.base_site, "--base-site")
         base_pos = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
-    init = None
-    if args.init:
-        lat, lon, alt = parse_site(args.init, "--init")
-        init = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     for name in OUT_FILES if args.out else ():
         check_output_file(Path(args.out) / name, "--out")  # before the work, not after
-    path = Path(args.recording)
+    path = Path(args.recording[0])
     rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
     base_rec = None
     if args.base:
@@ -157,6 +185,68 @@ def run(args):
     if args.out:
         _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff)
     return doc
+
+
+#: Options a batch's results do not depend on (left out of the resume key).
+_NOT_IN_KEY = ("command", "json", "out", "recording", "scheduler", "workers")
+
+
+def _run_batch(args):
+    from ..replay.batch import LEDGER, batch_recordings, run_batch
+
+    _check_options(args)
+    if args.base or args.base_site:
+        raise InputError("--base and --base-site take one rover recording, not a batch")
+    if args.out is None:
+        raise InputError("a batch (several recordings, or a folder) needs --out DIR: a folder of results each, "
+                         "and batch.json")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers {args.workers}: expected an integer >= 1")
+    recordings = batch_recordings(args.recording)
+    out = Path(args.out)
+    for meta, name in recordings:
+        open_sigmf(meta, verify=False)  # every file a recording before any work (its checksum when it runs)
+        for f in OUT_FILES:
+            check_output_file(out / name / f, "--out")
+    if args.tle:
+        check_input_file(args.tle, "element-set file")  # refused once, not once per recording
+    options = {k: v for k, v in vars(args).items() if not k.startswith("_") and k not in _NOT_IN_KEY}
+    if args.tle:
+        stat = Path(args.tle).stat()
+        options["tle_file"] = [str(Path(args.tle).resolve()), stat.st_size, stat.st_mtime_ns]
+    one = argparse.Namespace(**{k: v for k, v in vars(args).items() if not k.startswith("_")})
+    doc = run_batch(functools.partial(replay_files, one), recordings, out, options=options,
+                    scheduler=args.scheduler, n_workers=args.workers)
+    failed = [e for e in doc["recordings"] if e["status"] == "failed"]
+    if failed:
+        what = (f"{len(failed)} of {len(recordings)} recording(s) failed, first {failed[0]['recording']}: "
+                f"{failed[0]['error']} ({len(recordings) - len(failed)} done; see {out / LEDGER})")
+        raise InputError(what) if all(e["error_kind"] == "input" for e in failed) else ExternalError(what)
+    return doc
+
+
+def replay_files(args, meta):
+    """One recording of a batch, replayed as ``leosop replay META --out DIR`` would into a private folder.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The batch's options (picklable: no module attributes).
+    meta : Path
+        The recording's ``.sigmf-meta``.
+
+    Returns
+    -------
+    doc : dict
+        The replay document (DESIGN 4.1).
+    files : dict
+        ``{file name: bytes}`` of the output files, in the order of :data:`OUT_FILES`.
+    """
+    with tempfile.TemporaryDirectory(prefix="leosop-replay-") as tmp:
+        doc = _run_single(argparse.Namespace(**{**vars(args), "recording": [str(meta)], "out": tmp,
+                                               "scheduler": None, "workers": None}))
+        files = {n: (Path(tmp) / n).read_bytes() for n in OUT_FILES if (Path(tmp) / n).is_file()}
+    return doc, files
 
 
 def _differential_solutions(diff):
@@ -207,9 +297,30 @@ def _write_outputs(out, doc, res, name, start_utc, diff=None):
                                    f"{doc['mode']} fix")
 
 
+def _batch_summary(doc):
+    from .position import format_or_na
+
+    where = f"on {doc['n_workers']} Dask workers" if doc["n_workers"] else "in this process"
+    lines = [f"{doc['out']}: {doc['n_recordings']} recording(s), {doc['n_run']} replayed {where}, "
+             f"{doc['n_resumed']} already done, {doc['n_failed']} failed; {doc['elapsed_s']:.1f} s"]
+    for e in doc["recordings"]:
+        if e["status"] == "failed":
+            lines.append(f"  {e['name']}: failed: {e['error']}")
+            continue
+        fix = e["fix"]
+        where = (f"fix {format_or_na(fix['lat_deg'], '.6f')} {format_or_na(fix['lon_deg'], '.6f')} "
+                 f"{format_or_na(fix['alt_m'], '.1f')} m {fix['status']}" if fix else
+                 f"{e['n_solutions_ok']} of {e['n_solutions']} fix(es) ok")
+        lines.append(f"  {e['name']}: {e['n_identified']} of {e['n_tracks']} track(s) identified, {where}, "
+                     f"{e['runtime_s']:.1f} s{' (resumed)' if e['resumed'] else ''}")
+    return "\n".join(lines)
+
+
 def summary(doc):
     from .position import format_or_na, status_line
 
+    if "recordings" in doc:
+        return _batch_summary(doc)
     lines = [f"{len(doc['tracks'])} track(s) in {doc['n_blocks']} block(s), {doc['n_identified']} identified"]
     for t in doc["tracks"]:
         rms = "n/a" if t["match_rms_hz"] is None else f"{t['match_rms_hz']:.2f} Hz"
