@@ -166,7 +166,8 @@ def _run_single(args):
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
     diff = None
     if base_rec is not None:
-        from ..replay.differential import BASE_PRIOR_RADIUS_M, differential_fix
+        from ..replay.differential import BASE_PRIOR_RADIUS_M, block_times, differential_fix
+        from .position import differential_solutions
 
         base_res = replay(base_rec, const, block_s=block_s, init_pos_ecef_m=base_pos, static=True, mask_deg=mask,
                           lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True,
@@ -174,7 +175,7 @@ def _run_single(args):
         diff = differential_fix(res, base_res, const, base_pos, carrier_hz=rec.center_hz or DEFAULT_CARRIER_HZ,
                                 static=args.static, block_s=block_s)
         doc["solutions_alone"] = doc["solutions"]
-        doc["solutions"] = _differential_solutions(diff)
+        doc["solutions"] = differential_solutions(diff.fix, *block_times(diff))
         doc["differential"] = {
             "n_common": len(diff.common_sats), "common": list(diff.common_sats),
             "base_only": list(diff.fix.base_only_sats), "rover_only": list(diff.fix.rover_only_sats),
@@ -247,26 +248,6 @@ def replay_files(args, meta):
                                                "scheduler": None, "workers": None}))
         files = {n: (Path(tmp) / n).read_bytes() for n in OUT_FILES if (Path(tmp) / n).is_file()}
     return doc, files
-
-
-def _differential_solutions(diff):
-    """The differential fixes with the keys of replay's solutions (DESIGN 4.1); the clock is rover minus base."""
-    from ..replay.differential import block_times
-    from .position import _solution
-
-    f = diff.fix
-    time_utc, t_s = block_times(diff)
-    out = []
-    for k in np.flatnonzero(np.isfinite(f.pos_ecef_m).all(-1)):
-        res = f.residuals_hz[(f.block == k) & f.used]
-        rms = float(np.sqrt(np.mean(res**2))) if res.size else None
-        sol = _solution(t_s[k], time_utc[k], f.pos_ecef_m[k], np.zeros(3), float(f.clock_poly_hz[k, 0]),
-                        float(f.gdop[k]), f.n_sats[k], f.n_used[k], f.iterations[k], rms,
-                        (f.status[k], f.dof[k], f.chi2_p[k]), f.cov[k, :3, :3])
-        if f.clock_poly_hz.shape[1] > 1:
-            sol["clock_drift_hz_per_s"] = float(f.clock_poly_hz[k, 1])
-        out.append(sol)
-    return out
 
 
 def _write_outputs(out, doc, res, name, start_utc, diff=None):
