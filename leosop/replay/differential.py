@@ -124,7 +124,7 @@ def differential_fix(rover_res, base_res, constellation, base_pos_ecef_m, *, car
     rover = _with_states(rover, constellation, pos0, "rover")
     base = _with_states(base, constellation, base_pos, "base")
     fix = solve_differential(rover, base, base_pos, pos0_ecef_m=pos0, block_s=None if static else block_s,
-                             clock_degree=1 if static else 0)
+                             clock_degree=1)
     epoch = min(rover.time_utc.min(), base.time_utc.min())
     return DifferentialReplay(fix, rover, base, epoch, common)
 
