@@ -20,7 +20,8 @@ ambiguities, m), c_1 .. c_n (time-correlated phase errors, m)]``.
 
 Models (``leosop.gnss.models``): precise orbit and clock interpolation,
 relativistic clock term, Sagnac rotation, Shapiro delay, Saastamoinen
-hydrostatic delay with the [Niell 1996] mapping functions and an estimated
+hydrostatic delay with the [Niell 1996] mapping functions (or [Boehm 2006]'s GMF,
+``mapping="gmf"``) and an estimated
 zenith wet delay (random walk), optionally north and east troposphere
 gradients with [Chen 1997]'s mapping (random walks; ``gradients``, off by
 default), phase wind-up, solid Earth tide, antenna reference point height
@@ -115,6 +116,9 @@ class PppOptions:
     # (docs/ppp.md, "Troposphere: the mapping function and gradients"); 1 mm/sqrt(h) after a 2 mm prior,
     # about a typical mid-latitude gradient.
     gradients: bool = False
+    # Troposphere mapping functions: "niell" [Niell 1996] or "gmf" [Boehm 2006] (docs/ppp.md, "Troposphere: the
+    # mapping function and gradients").
+    mapping: str = "niell"
     grad_rw_m_per_rt_s: float = 1e-3 / 60.0
     init_grad_sigma_m: float = 0.002
     kin_pos_sigma_m: float = 100.0
@@ -242,8 +246,14 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     los_enu = los @ C_e_n(lat0, lon0)
     elev = np.arcsin(np.clip(los_enu[..., 2] / rng, -1, 1))
     m_grad = models.gradient_mapping(elev, np.arctan2(los_enu[..., 0], los_enu[..., 1]))
-    doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
-    m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
+    if opt.mapping == "gmf":
+        mjd = jd_tt - 2400000.5  # TT for UTC: a minute is nothing to an annual term
+        m_dry, m_wet = models.gmf_mapping(elev, lat0, lon0, alt0, mjd[:, None])
+    elif opt.mapping == "niell":
+        doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
+        m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
+    else:
+        raise InputError(f"PppOptions.mapping {opt.mapping!r}: expected 'niell' or 'gmf'")
     zhd = models.saastamoinen_zhd_m(lat0, alt0)
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
     missing, rx_cal = [], False
