@@ -20,8 +20,8 @@ ambiguities, m), c_1 .. c_n (time-correlated phase errors, m)]``.
 
 Models (``leosop.gnss.models``): precise orbit and clock interpolation,
 relativistic clock term, Sagnac rotation, Shapiro delay, Saastamoinen
-hydrostatic delay with the [Niell 1996] mapping functions (or [Boehm 2006]'s GMF,
-``mapping="gmf"``) and an estimated
+hydrostatic delay with [Boehm 2006]'s global mapping functions (GMF; or
+[Niell 1996]'s with ``mapping="niell"``) and an estimated
 zenith wet delay (random walk), optionally north and east troposphere
 gradients with [Chen 1997]'s mapping (random walks; ``gradients``, off by
 default), phase wind-up, solid Earth tide, antenna reference point height
@@ -116,9 +116,13 @@ class PppOptions:
     # (docs/ppp.md, "Troposphere: the mapping function and gradients"); 1 mm/sqrt(h) after a 2 mm prior,
     # about a typical mid-latitude gradient.
     gradients: bool = False
-    # Troposphere mapping functions: "niell" [Niell 1996] or "gmf" [Boehm 2006] (docs/ppp.md, "Troposphere: the
-    # mapping function and gradients").
-    mapping: str = "niell"
+    # Troposphere mapping functions: "gmf" [Boehm 2006] (the IERS 2010 choice without weather-model grids; on
+    # ESBC00DNK 0.7 mm closer in up than NMF) or "niell" [Niell 1996] (docs/ppp.md, "Troposphere: the mapping
+    # function and gradients").
+    mapping: str = "gmf"
+    # Pressure of the a priori hydrostatic zenith delay: "gpt" [Boehm 2007]'s climatology or "standard" (the
+    # standard atmosphere's); no meteorological file is read.
+    zhd_pressure: str = "gpt"
     grad_rw_m_per_rt_s: float = 1e-3 / 60.0
     init_grad_sigma_m: float = 0.002
     kin_pos_sigma_m: float = 100.0
@@ -246,15 +250,20 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     los_enu = los @ C_e_n(lat0, lon0)
     elev = np.arcsin(np.clip(los_enu[..., 2] / rng, -1, 1))
     m_grad = models.gradient_mapping(elev, np.arctan2(los_enu[..., 0], los_enu[..., 1]))
+    mjd = jd_tt - 2400000.5  # TT for UTC in the climatologies: a minute is nothing to an annual term
     if opt.mapping == "gmf":
-        mjd = jd_tt - 2400000.5  # TT for UTC: a minute is nothing to an annual term
         m_dry, m_wet = models.gmf_mapping(elev, lat0, lon0, alt0, mjd[:, None])
     elif opt.mapping == "niell":
         doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
         m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
     else:
         raise InputError(f"PppOptions.mapping {opt.mapping!r}: expected 'niell' or 'gmf'")
-    zhd = models.saastamoinen_zhd_m(lat0, alt0)
+    if opt.zhd_pressure == "gpt":
+        zhd = models.saastamoinen_zhd_m(lat0, alt0, models.gpt_pressure_hpa(lat0, lon0, alt0, mjd[:, None])[0])
+    elif opt.zhd_pressure == "standard":
+        zhd = models.saastamoinen_zhd_m(lat0, alt0)
+    else:
+        raise InputError(f"PppOptions.zhd_pressure {opt.zhd_pressure!r}: expected 'gpt' or 'standard'")
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
     missing, rx_cal = [], False
     if antex is not None:
