@@ -46,7 +46,8 @@ def register(subparsers):
                    "the sigmas carry a larger floor")
     p.add_argument("--static", action="store_true", help="receiver at rest: one position for the whole file")
     p.add_argument("--systems", default="GE", help="GNSS letters to use (default %(default)s)")
-    p.add_argument("--mask-deg", type=float, default=10.0, metavar="D", help="elevation mask (default %(default)g)")
+    p.add_argument("--mask-deg", type=float, default=PppOptions.mask_deg, metavar="D",
+                   help="elevation mask (default %(default)g)")
     p.add_argument("--ar", action="store_true", help="ambiguity resolution: wide-lane, then narrow-lane by LAMBDA "
                    "(needs integer-recovery clocks with wide-lane biases, e.g. CNES/GRG, and --antex)")
     p.add_argument("--imu", metavar="FILE", help="IMU log for tight PPP/INS (see 'leosop reproduce ppp-ins')")
