@@ -109,9 +109,11 @@ class PppOptions:
     static: bool = True
     systems: str = "GE"
     # 7 deg: the satellites between 7 and 10 deg separate the height from the zenith delay and the clock (on
-    # ESBC00DNK 0.5 cm closer in up, static and kinematic); at 5 deg the horizontal loses consistency
-    # (docs/ppp.md, "Models and settings").
+    # ESBC00DNK 0.5 cm closer in up, static and kinematic); at 5 deg the horizontal loses consistency. Without
+    # the receiver antenna's calibration (no ANTEX block) its variations are not modelled and weigh more low
+    # down (static day 1.4 cm further in up at 7 deg): 10 deg (docs/ppp.md, "Models and settings").
     mask_deg: float = 7.0
+    mask_no_antex_deg: float = 10.0
     sigma_code_m: float = 0.9
     sigma_phase_m: float = 0.009
     zwd_rw_m_per_rt_s: float = 1e-4
@@ -279,7 +281,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     corr = corr + C_MPS * DTS - zhd * m_dry - shap  # add to observations: P + c dts - T_dry - shapiro
     Pc = meas["P"] + corr
     Lc = meas["L"] + corr - wind * meas["lam_nl"]
-    ok &= elev > np.radians(opt.mask_deg)
+    ok &= elev > np.radians(opt.mask_deg if rx_cal else opt.mask_no_antex_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
     return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "m_grad": m_grad, "ok": ok,
