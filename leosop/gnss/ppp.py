@@ -54,7 +54,7 @@ effects not modelled) are not a process of the filter: the reported sigma
 adds a floor in quadrature (``floor_enu_m``; with no ANTEX the larger
 ``floor_no_antex_enu_m``, for the unmodelled offsets), outside the gain,
 so it changes no estimate. Figures (``tools/bench_ppp.py``, ESBC00DNK
-24 h, against its ITRF2014 coordinate): with ANTEX, kinematic 3-D RMS
+24 h, against its ITRF2014 coordinate; Niell and 10 deg, before issue 22): with ANTEX, kinematic 3-D RMS
 after 2 h 4.4 cm, 99.0 % of epoch-axis errors within 3 sigma; static
 final 1.5 cm, within 1.9 sigma at 1, 3, 6, 12 and 24 h.
 
