@@ -28,6 +28,41 @@ def test_niell_mapping_limits():
     assert m_wet[2] == pytest.approx(10.7, rel=0.02)
 
 
+def test_gmf_iers_test_vector_and_niell_at_high_elevation():
+    # The IERS Conventions (2010) software's GMF test case (Green Bank, MJD 55055, 16.7 deg elevation):
+    # GMFH = 3.425245519339138678, GMFW = 3.449589116182419257; same formulas and coefficients, so only
+    # rounding separates them (1e-12).
+    m_dry, m_wet = models.gmf_mapping(np.pi / 2 - 1.278564131, 0.6708665767, -1.393397187, 844.715, 55055.0)
+    assert m_dry == pytest.approx(3.425245519339138678, abs=1e-12)
+    assert m_wet == pytest.approx(3.449589116182419257, abs=1e-12)
+    # Both fit the same ray traces' shape: at ESBC00DNK (55.5 N, 8.5 E) on day 177 they agree within 1e-4
+    # relative above 30 deg, where the continued fraction is all but 1/sin(e), and [Boehm 2006] fig. 2's
+    # NMF-GMF differences (a few mm of 2.3 m hydrostatic delay, i.e. ~1e-3) at 5 deg.
+    el = np.radians([90.0, 60.0, 30.0, 5.0])
+    lat, lon, h = np.radians(55.47), np.radians(8.45), 60.0
+    gmf = models.gmf_mapping(el, lat, lon, h, 59025.5)
+    nmf = models.niell_mapping(el, lat, h, 177.5)
+    for g, n in zip(gmf, nmf):
+        assert g[0] == pytest.approx(1.0, abs=1e-12)
+        np.testing.assert_allclose(g[1:3], n[1:3], rtol=1e-4)
+        assert g[3] == pytest.approx(n[3], rel=3e-3)
+        assert g[3] != n[3]  # a second model, not the first under another name
+
+
+def test_gpt_iers_test_vector_and_esbjerg_sea_level():
+    # The IERS Conventions (2010) software's GPT test case as revised on 2011-10-18 (Green Bank, MJD 55055,
+    # 812.546 m ellipsoidal): 918.0710638757363995 hPa, undulation -42.19185643717770517 m; rounding only.
+    p_hpa, undulation_m = models.gpt_pressure_hpa(0.6708665767, -1.393397187, 812.546, 55055.0)
+    assert p_hpa == pytest.approx(918.0710638757363995, abs=1e-9)
+    assert undulation_m == pytest.approx(-42.19185643717770517, abs=1e-9)
+    # ESBC00DNK (55.49 N, 8.46 E, 59.5 m ellipsoidal): the geoid over Denmark is about 40 m (a degree-9 model
+    # keeps it within a few metres), and a North Sea June climatology is 1010-1020 hPa at sea level, the
+    # station ~20 m above it (1 hPa per 8.3 m).
+    p_hpa, undulation_m = models.gpt_pressure_hpa(np.radians(55.4936), np.radians(8.4568), 59.5, 59025.5)
+    assert undulation_m == pytest.approx(40.0, abs=5.0)
+    assert 1007.0 < p_hpa < 1018.0
+
+
 def test_sun_moon_distances():
     sun, moon = models.sun_moon_ecef_m(JD_TT_2020_177)
     r_sun = np.linalg.norm(sun, axis=1)

@@ -318,7 +318,9 @@ def test_galileo_only_static_through_the_sparse_hours(day):
     error is 1.0 cm (3 cm allowed: the floor of the reported sigma plus the unexplained -1.4 cm up bias).
     """
     obs, orb, clk = day
-    opt = PppOptions(static=True, systems="E")
+    # The 10 deg mask the case was found with: at 7 deg (the default since issue 22) E09 does not rise in a
+    # skipped epoch, and the case is not in the data.
+    opt = PppOptions(static=True, systems="E", mask_deg=10.0)
     atx = read_antex(ATX)
     d = prepare(obs, orb, clk, opt, atx)
     j, skipped = obs.sv.index("E09"), d["ok"].sum(axis=1) < 5

@@ -46,7 +46,9 @@ def register(subparsers):
                    "the sigmas carry a larger floor")
     p.add_argument("--static", action="store_true", help="receiver at rest: one position for the whole file")
     p.add_argument("--systems", default="GE", help="GNSS letters to use (default %(default)s)")
-    p.add_argument("--mask-deg", type=float, default=10.0, metavar="D", help="elevation mask (default %(default)g)")
+    p.add_argument("--mask-deg", type=float, metavar="D",
+                   help=f"elevation mask (default {PppOptions.mask_deg:g} with the receiver antenna's calibration "
+                   f"from --antex, {PppOptions.mask_no_antex_deg:g} without)")
     p.add_argument("--ar", action="store_true", help="ambiguity resolution: wide-lane, then narrow-lane by LAMBDA "
                    "(needs integer-recovery clocks with wide-lane biases, e.g. CNES/GRG, and --antex)")
     p.add_argument("--imu", metavar="FILE", help="IMU log for tight PPP/INS (see 'leosop reproduce ppp-ins')")
@@ -62,7 +64,7 @@ def run(args):
                          "PPP/INS filter runs on the simulated vehicle test: leosop reproduce ppp-ins")
     if not set(args.systems) <= {"G", "E"} or not args.systems:
         raise InputError(f"--systems {args.systems!r}: expected letters among G, E")
-    if not 0.0 <= args.mask_deg < 90.0:
+    if args.mask_deg is not None and not 0.0 <= args.mask_deg < 90.0:
         raise InputError(f"--mask-deg {args.mask_deg!r}: expected a value in [0, 90)")
     t0 = time.perf_counter()
     # The small files first: a bad product fails before the observation file is read.
@@ -83,8 +85,8 @@ def run(args):
     notes, no_ar = [], {}
     if antex is not None:
         notes, no_ar = check_antex(antex, obs.antenna_type, obs.sv, day, clocks.pcvs_applied)
-    res = run_ppp(obs, orbits, clocks, PppOptions(static=args.static, systems=args.systems,
-                                                   mask_deg=args.mask_deg), antex=antex,
+    mask = {} if args.mask_deg is None else {"mask_deg": args.mask_deg, "mask_no_antex_deg": args.mask_deg}
+    res = run_ppp(obs, orbits, clocks, PppOptions(static=args.static, systems=args.systems, **mask), antex=antex,
                   ar=ArOptions() if args.ar else None, no_ar=no_ar)
     if res.no_antenna:
         notes.append(f"{args.antex}: no block valid on {day} for {', '.join(res.no_antenna)}: left out of the "

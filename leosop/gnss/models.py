@@ -1,4 +1,4 @@
-"""GNSS measurement models for PPP: troposphere, tides, wind-up, relativity, Sagnac.
+"""GNSS measurement models for PPP: tides, wind-up, relativity, Sagnac; the troposphere's from :mod:`.troposphere`.
 
 Every function is vectorised over leading axes; vectors keep three
 components in the last axis, ECEF (ITRF) metres. Time arguments ``jd_tt`` are
@@ -12,9 +12,12 @@ import numpy as np
 
 from ..constants import C_MPS, DAY_S, GM_M3_PER_S2, JD_J2000, WGS84_A_M
 from ..frames import gmst1982
+from .troposphere import gmf_mapping, gpt_pressure_hpa, gradient_mapping, niell_mapping, saastamoinen_zhd_m
 
 __all__ = [
     "TT_MINUS_GPST_S",
+    "gmf_mapping",
+    "gpt_pressure_hpa",
     "gradient_mapping",
     "niell_mapping",
     "relativistic_clock_s",
@@ -32,102 +35,6 @@ TT_MINUS_GPST_S = 51.184
 GM_SUN_OVER_EARTH = 332_946.0482
 GM_MOON_OVER_EARTH = 0.0123000371
 _ARCSEC = np.pi / (180.0 * 3600.0)
-
-
-def saastamoinen_zhd_m(lat_rad, alt_m, pressure_hpa=None):
-    """Zenith hydrostatic delay [Saastamoinen 1972], formulation of [Davis 1985].
-
-    ``ZHD = 0.0022768 P / (1 - 0.00266 cos 2 lat - 0.28e-6 h)``. Without a
-    pressure the standard atmosphere gives it: ``P = 1013.25 (1 - 2.2557e-5
-    h)^5.2568`` hPa ([Berg 1948]).
-
-    Returns
-    -------
-    ndarray
-        Zenith hydrostatic delay [m]; 2.31 m at sea level, 45 deg.
-    """
-    alt_m = np.asarray(alt_m, float)
-    if pressure_hpa is None:
-        pressure_hpa = 1013.25 * (1.0 - 2.2557e-5 * alt_m) ** 5.2568
-    return 0.0022768 * pressure_hpa / (1.0 - 0.00266 * np.cos(2.0 * lat_rad) - 0.28e-6 * alt_m)
-
-
-# [Niell 1996] mapping function coefficients at latitudes 15, 30, 45, 60, 75 deg.
-_NMF_LAT = np.radians([15.0, 30.0, 45.0, 60.0, 75.0])
-_NMF_H_AVG = np.array([
-    [1.2769934e-3, 1.2683230e-3, 1.2465397e-3, 1.2196049e-3, 1.2045996e-3],
-    [2.9153695e-3, 2.9152299e-3, 2.9288445e-3, 2.9022565e-3, 2.9024912e-3],
-    [62.610505e-3, 62.837393e-3, 63.721774e-3, 63.824265e-3, 64.258455e-3]])
-_NMF_H_AMP = np.array([
-    [0.0, 1.2709626e-5, 2.6523662e-5, 3.4000452e-5, 4.1202191e-5],
-    [0.0, 2.1414979e-5, 3.0160779e-5, 7.2562722e-5, 11.723375e-5],
-    [0.0, 9.0128400e-5, 4.3497037e-5, 84.795348e-5, 170.37206e-5]])
-_NMF_W = np.array([
-    [5.8021897e-4, 5.6794847e-4, 5.8118019e-4, 5.9727542e-4, 6.1641693e-4],
-    [1.4275268e-3, 1.5138625e-3, 1.4572752e-3, 1.5007428e-3, 1.7599082e-3],
-    [4.3472961e-2, 4.6729510e-2, 4.3908931e-2, 4.4626982e-2, 5.4736038e-2]])
-_NMF_HT = (2.53e-5, 5.49e-3, 1.14e-3)
-
-
-def _marini(sin_el, a, b, c):
-    """Continued fraction of [Marini 1972] normalised to 1 at zenith."""
-    return (1.0 + a / (1.0 + b / (1.0 + c))) / (sin_el + a / (sin_el + b / (sin_el + c)))
-
-
-def niell_mapping(elev_rad, lat_rad, alt_m, doy):
-    """Hydrostatic and wet mapping functions of [Niell 1996].
-
-    Parameters
-    ----------
-    elev_rad, lat_rad, alt_m, doy : array_like, broadcastable
-        Elevation, geodetic latitude, height, day of year (UTC, fractional).
-
-    Returns
-    -------
-    m_dry, m_wet : ndarray
-        Both 1 at zenith, about 1/sin(elev) above 15 deg.
-    """
-    elev_rad, lat_rad, alt_m, doy = np.broadcast_arrays(*(np.asarray(v, float) for v in (elev_rad, lat_rad,
-                                                                                          alt_m, doy)))
-    alat = np.abs(lat_rad)
-    phase = 2.0 * np.pi * (doy - 28.0) / 365.25 + np.where(lat_rad < 0, np.pi, 0.0)
-    coef_h = [np.interp(alat, _NMF_LAT, _NMF_H_AVG[i]) - np.interp(alat, _NMF_LAT, _NMF_H_AMP[i]) * np.cos(phase)
-              for i in range(3)]
-    coef_w = [np.interp(alat, _NMF_LAT, _NMF_W[i]) for i in range(3)]
-    s = np.sin(elev_rad)
-    m_dry = _marini(s, *coef_h) + (1.0 / s - _marini(s, *_NMF_HT)) * alt_m * 1e-3
-    m_wet = _marini(s, *coef_w)
-    return m_dry, m_wet
-
-
-#: [Chen 1997]'s gradient mapping constant for the total delay (0.0031 hydrostatic, 0.0007 wet alone).
-CHEN_HERRING_C = 0.0032
-
-
-def gradient_mapping(elev_rad, az_rad):
-    """Partials of the slant delay on the north and east troposphere gradients, [Chen 1997].
-
-    The slant delay's asymmetric part is ``m_g(e) (G_N cos a + G_E sin a)``
-    with ``m_g(e) = 1 / (sin e tan e + C)``, ``C = 0.0032``: for a
-    refractivity varying linearly across the horizon, ``G`` is the
-    height-weighted integral of its horizontal gradient (metres; about a
-    millimetre at mid-latitudes), ``1 / (sin e tan e)`` is the flat-Earth
-    geometry and ``C`` the Earth's curvature, which keeps it finite at the
-    horizon (about 29 at 10 deg, 0 at the zenith).
-
-    Parameters
-    ----------
-    elev_rad, az_rad : array_like, broadcastable
-        Elevation and azimuth (clockwise from north).
-
-    Returns
-    -------
-    ndarray, shape (..., 2)
-        ``d slant / d (G_N, G_E)`` (dimensionless).
-    """
-    elev_rad, az_rad = np.broadcast_arrays(np.asarray(elev_rad, float), np.asarray(az_rad, float))
-    m_g = 1.0 / (np.sin(elev_rad) * np.tan(elev_rad) + CHEN_HERRING_C)
-    return np.stack([m_g * np.cos(az_rad), m_g * np.sin(az_rad)], axis=-1)
 
 
 def _rot_ecl_to_eq(lon_rad, lat_rad, r_m, eps_rad):

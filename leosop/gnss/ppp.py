@@ -20,7 +20,8 @@ ambiguities, m), c_1 .. c_n (time-correlated phase errors, m)]``.
 
 Models (``leosop.gnss.models``): precise orbit and clock interpolation,
 relativistic clock term, Sagnac rotation, Shapiro delay, Saastamoinen
-hydrostatic delay with the [Niell 1996] mapping functions and an estimated
+hydrostatic delay with [Boehm 2006]'s global mapping functions (GMF; or
+[Niell 1996]'s with ``mapping="niell"``) and an estimated
 zenith wet delay (random walk), optionally north and east troposphere
 gradients with [Chen 1997]'s mapping (random walks; ``gradients``, off by
 default), phase wind-up, solid Earth tide, antenna reference point height
@@ -53,7 +54,7 @@ effects not modelled) are not a process of the filter: the reported sigma
 adds a floor in quadrature (``floor_enu_m``; with no ANTEX the larger
 ``floor_no_antex_enu_m``, for the unmodelled offsets), outside the gain,
 so it changes no estimate. Figures (``tools/bench_ppp.py``, ESBC00DNK
-24 h, against its ITRF2014 coordinate): with ANTEX, kinematic 3-D RMS
+24 h, against its ITRF2014 coordinate; Niell and 10 deg, before issue 22): with ANTEX, kinematic 3-D RMS
 after 2 h 4.4 cm, 99.0 % of epoch-axis errors within 3 sigma; static
 final 1.5 cm, within 1.9 sigma at 1, 3, 6, 12 and 24 h.
 
@@ -107,7 +108,12 @@ class PppOptions:
 
     static: bool = True
     systems: str = "GE"
-    mask_deg: float = 10.0
+    # 7 deg: the satellites between 7 and 10 deg separate the height from the zenith delay and the clock (on
+    # ESBC00DNK 0.5 cm closer in up, static and kinematic); at 5 deg the horizontal loses consistency. Without
+    # the receiver antenna's calibration (no ANTEX block) its variations are not modelled and weigh more low
+    # down (static day 1.4 cm further in up at 7 deg): 10 deg (docs/ppp.md, "Models and settings").
+    mask_deg: float = 7.0
+    mask_no_antex_deg: float = 10.0
     sigma_code_m: float = 0.9
     sigma_phase_m: float = 0.009
     zwd_rw_m_per_rt_s: float = 1e-4
@@ -115,6 +121,13 @@ class PppOptions:
     # (docs/ppp.md, "Troposphere: the mapping function and gradients"); 1 mm/sqrt(h) after a 2 mm prior,
     # about a typical mid-latitude gradient.
     gradients: bool = False
+    # Troposphere mapping functions: "gmf" [Boehm 2006] (the IERS 2010 choice without weather-model grids; on
+    # ESBC00DNK 0.7 mm closer in up than NMF) or "niell" [Niell 1996] (docs/ppp.md, "Troposphere: the mapping
+    # function and gradients").
+    mapping: str = "gmf"
+    # Pressure of the a priori hydrostatic zenith delay: "gpt" [Boehm 2007]'s climatology or "standard" (the
+    # standard atmosphere's); no meteorological file is read.
+    zhd_pressure: str = "gpt"
     grad_rw_m_per_rt_s: float = 1e-3 / 60.0
     init_grad_sigma_m: float = 0.002
     kin_pos_sigma_m: float = 100.0
@@ -242,9 +255,20 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     los_enu = los @ C_e_n(lat0, lon0)
     elev = np.arcsin(np.clip(los_enu[..., 2] / rng, -1, 1))
     m_grad = models.gradient_mapping(elev, np.arctan2(los_enu[..., 0], los_enu[..., 1]))
-    doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
-    m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
-    zhd = models.saastamoinen_zhd_m(lat0, alt0)
+    mjd = jd_tt - 2400000.5  # TT for UTC in the climatologies: a minute is nothing to an annual term
+    if opt.mapping == "gmf":
+        m_dry, m_wet = models.gmf_mapping(elev, lat0, lon0, alt0, mjd[:, None])
+    elif opt.mapping == "niell":
+        doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
+        m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
+    else:
+        raise InputError(f"PppOptions.mapping {opt.mapping!r}: expected 'niell' or 'gmf'")
+    if opt.zhd_pressure == "gpt":
+        zhd = models.saastamoinen_zhd_m(lat0, alt0, models.gpt_pressure_hpa(lat0, lon0, alt0, mjd[:, None])[0])
+    elif opt.zhd_pressure == "standard":
+        zhd = models.saastamoinen_zhd_m(lat0, alt0)
+    else:
+        raise InputError(f"PppOptions.zhd_pressure {opt.zhd_pressure!r}: expected 'gpt' or 'standard'")
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
     missing, rx_cal = [], False
     if antex is not None:
@@ -257,7 +281,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     corr = corr + C_MPS * DTS - zhd * m_dry - shap  # add to observations: P + c dts - T_dry - shapiro
     Pc = meas["P"] + corr
     Lc = meas["L"] + corr - wind * meas["lam_nl"]
-    ok &= elev > np.radians(opt.mask_deg)
+    ok &= elev > np.radians(opt.mask_deg if rx_cal else opt.mask_no_antex_deg)
     ok &= np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t_s, meas["MW"], meas["GF"], meas["lli"], ok, opt)
     return {"Pc": Pc, "Lc": Lc, "RS": RS, "elev": elev, "m_wet": m_wet, "m_grad": m_grad, "ok": ok,
