@@ -72,9 +72,10 @@ def register(subparsers):
     p.add_argument("--zupt", action="store_true", help="zero-velocity and zero-rate updates when the IMU is at rest")
     p.add_argument("--nhc", action="store_true", help="non-holonomic constraint (a wheeled vehicle)")
     p.add_argument("--course-yaw", metavar="MIN_SPEED_MPS,SIGMA_DEG",
-                   help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, sigma "
-                        "SIGMA_DEG (sideslip, crab), never the yaw bank: e.g. 5,10 for an aircraft handled on the "
-                        "ground before launch (default: 1 m/s and 10 deg with --nhc, else a bank of yaws at rest)")
+                   help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, its sigma "
+                        "the course's (velocity sigma / speed) and SIGMA_DEG (sideslip, crab) in quadrature, never "
+                        "the yaw bank: e.g. 5,10 for an aircraft handled on the ground before launch (default: 1 m/s "
+                        "and no sideslip with --nhc, else a bank of yaws at rest)")
     p.add_argument("--gyro-error-sigma", metavar="SCALE,CROSS",
                    help="gyro scale-factor (3) and cross-axis (6) errors as filter states with these prior sigmas "
                         "(fractions, e.g. 0.03,0.03 for a MEMS gyro rated +-3 %% scale, +-2 %% cross-axis; the "
