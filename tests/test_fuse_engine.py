@@ -258,3 +258,16 @@ def test_stale_state_block_is_marginalised_exactly():
     f.admit(_Linear(30.5, None, None, None, (kept,)))  # "a" last named at 0 s: stale after 30 s
     assert list(f.blocks.entries) == ["b"] and f.blocks.entries["b"][1] == N_INS
     np.testing.assert_array_equal(f.P, P_keep)
+
+
+def test_course_sigma_is_the_cross_track_velocity_sigma_over_the_speed():
+    # Closed form: a velocity along East sees its course move only with its North error, sigma_N / speed;
+    # and a Monte Carlo of atan2 on a slanted velocity with a full covariance agrees with the first-order sigma.
+    cov = np.diag([0.3**2, 0.1**2, 1.0])
+    assert engine.course_sigma_rad([5.0, 0.0, 0.0], cov) == pytest.approx(0.1 / 5.0, rel=1e-12)
+    v = np.array([3.0, 4.0, 0.2])
+    cov = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.0], [0.0, 0.0, 0.25]])
+    draws = np.random.default_rng(0).multivariate_normal(v, cov * 1e-2, 200_000)  # small: first order holds
+    course = np.arctan2(-draws[:, 0], draws[:, 1])
+    # 200 000 draws: the sample sigma is good to 1/sqrt(2 n) = 0.16 %; 1 % allows the second-order terms.
+    assert engine.course_sigma_rad(v, cov * 1e-2) == pytest.approx(np.std(course), rel=0.01)

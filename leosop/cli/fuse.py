@@ -74,9 +74,10 @@ def register(subparsers):
     p.add_argument("--walking-speed", action="store_true",
                    help="a pedestrian keeps the pace of the last 5 s of GNSS where GNSS is missing (hand-held IMU)")
     p.add_argument("--course-yaw", metavar="MIN_SPEED_MPS,SIGMA_DEG",
-                   help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, sigma "
-                        "SIGMA_DEG (sideslip, crab), never the yaw bank: e.g. 5,10 for an aircraft handled on the "
-                        "ground before launch (default: 1 m/s and 10 deg with --nhc, else a bank of yaws at rest)")
+                   help="yaw from the course over ground at the first GNSS speed of at least MIN_SPEED_MPS, its sigma "
+                        "the course's (velocity sigma / speed) and SIGMA_DEG (sideslip, crab) in quadrature, never "
+                        "the yaw bank: e.g. 5,10 for an aircraft handled on the ground before launch (default: 1 m/s "
+                        "and no sideslip with --nhc, else a bank of yaws at rest)")
     p.add_argument("--gyro-error-sigma", metavar="SCALE,CROSS",
                    help="gyro scale-factor (3) and cross-axis (6) errors as filter states with these prior sigmas "
                         "(fractions, e.g. 0.03,0.03 for a MEMS gyro rated +-3 %% scale, +-2 %% cross-axis; the "

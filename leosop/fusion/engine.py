@@ -37,7 +37,10 @@ Heading: a MEMS IMU cannot find North at rest, so a run may start with the
 yaw unknown (:class:`CourseAlignment`): the first GNSS velocity faster than
 ``min_speed_mps`` sets the yaw to the course over ground (the body's Forward
 axis along the velocity, as a car drives) and the yaw's covariance row to
-``sigma_rad`` alone; aids with ``needs_heading`` wait until then.
+the variance of that course alone (:func:`course_sigma_rad`: the velocity
+aid's covariance across the track over the speed squared, at that instant)
+plus ``sigma_rad**2``, the heading's own departure from the course (sideslip,
+crab); aids with ``needs_heading`` wait until then.
 """
 
 import dataclasses
@@ -57,7 +60,8 @@ from .blocks import Blocks
 from .common import GATE_PROBABILITY, N_INS
 from .record import EngineResult, Recorder
 
-__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "initial_covariance", "run", "state_slices"]
+__all__ = ["CourseAlignment", "EngineResult", "EngineSettings", "course_sigma_rad", "initial_covariance", "run",
+           "state_slices"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,10 +116,28 @@ class EngineSettings:
 
 @dataclasses.dataclass(frozen=True)
 class CourseAlignment:
-    """Set the yaw from the first GNSS velocity of at least ``min_speed_mps``; its sigma then ``sigma_rad``."""
+    """Set the yaw from the first GNSS velocity of at least ``min_speed_mps``.
+
+    The yaw's sigma is then that of the course (:func:`course_sigma_rad` of
+    the velocity and its covariance) and ``sigma_rad`` in quadrature: how far
+    the heading may point off the course (sideslip, wind crab). A car moving
+    off has none to speak of (the drive's lateral body velocity, fitted in
+    :class:`leosop.fusion.real.FuseOptions`, is nil at zero yaw rate), so 0.
+    """
 
     min_speed_mps: float = 1.0
-    sigma_rad: float = math.radians(10.0)
+    sigma_rad: float = 0.0
+
+
+def course_sigma_rad(vel_enu_mps, cov_enu_m2ps2):
+    """Sigma [rad] of the course ``atan2(-v_E, v_N)`` of a velocity (3,) with covariance (3, 3) (first order).
+
+    The course moves by the velocity error across the track over the speed:
+    ``J = [-v_N, v_E, 0] / s^2``, variance ``J cov J^T``.
+    """
+    v = np.asarray(vel_enu_mps, dtype=float)
+    J = np.array([-v[1], v[0], 0.0]) / (v[0] ** 2 + v[1] ** 2)
+    return math.sqrt(float(J @ np.asarray(cov_enu_m2ps2, dtype=float) @ J))
 
 
 #: Slack on comparisons of times [s] (sums of IMU intervals round far below it).
@@ -473,7 +495,8 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
                     if aid.needs_heading:
                         continue
                 else:
-                    f.align_yaw(v, course_alignment.sigma_rad)
+                    _, _, R = aid.matrices(f.view(t_aid, t_now, np.zeros(f.P.shape[0])))
+                    f.align_yaw(v, math.hypot(course_alignment.sigma_rad, course_sigma_rad(v, R)))
                     heading_known, aligned_s = True, aid.t_s
             if f.waits(aid, t_pairs[0]):
                 f.admit(aid)

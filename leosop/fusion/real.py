@@ -177,10 +177,13 @@ class FuseOptions:
     the course over ground, as for a car.
     ``course_yaw``: ``(min_speed_mps, sigma_deg)``: the yaw from the course
     over ground at the first GNSS velocity of at least ``min_speed_mps``,
-    with that sigma, whatever the other options (no yaw bank): a vehicle
-    whose nose points along its motion once fast, up to a sideslip or wind
-    crab, e.g. an aircraft handled on the ground before its launch. None:
-    1 m/s and 10 deg (a car; the yaw bank without NHC).
+    whatever the other options (no yaw bank), its sigma that of the course
+    (the velocity's sigma across the track over the speed, at that epoch)
+    and ``sigma_deg`` in quadrature: a vehicle whose nose points along its
+    motion once fast, up to a sideslip or wind crab of ``sigma_deg``, e.g.
+    an aircraft handled on the ground before its launch. None: 1 m/s and no
+    sideslip (a car, :class:`leosop.fusion.engine.CourseAlignment`; the yaw
+    bank without NHC).
     ``bridge_gaps``: the increments over gaps in the log bridged by the
     trapezoid rule and their error variance added to the process noise
     (:func:`leosop.ins.gaps.bridge`; a log without gaps is unchanged).
@@ -289,8 +292,9 @@ def _walking_aids(t_g, vel_enu_mps, t_imu, rest_ends, sigma_mps):
 def _initial(sol, k, t_g, t_start, f_b_mps2, spec, course):
     """State and covariance at ``t_start`` from GNSS epoch k (moved along its velocity) and levelling.
 
-    The yaw is that of the course when epoch k is at least ``course.min_speed_mps`` fast; else
-    unknown, and ``course`` is returned for the engine to set it later.
+    The yaw is that of the course when epoch k is at least ``course.min_speed_mps`` fast (its sigma
+    that of the course, :func:`leosop.fusion.engine.course_sigma_rad`, and ``course.sigma_rad`` in
+    quadrature); else unknown, and ``course`` is returned for the engine to set it later.
     """
     lat, lon, alt = math.radians(sol.lat_deg[k]), math.radians(sol.lon_deg[k]), float(sol.alt_m[k])
     v = np.zeros(3) if sol.vel_enu_mps is None else sol.vel_enu_mps[k]
@@ -303,9 +307,10 @@ def _initial(sol, k, t_g, t_start, f_b_mps2, spec, course):
     yaw = math.atan2(-v[0], v[1]) if moving else 0.0
     state = NavState.from_dcm(lat, lon, alt, v, euler_to_dcm(pitch, roll, yaw))
     P = np.zeros((N_INS, N_INS))
-    sigma_yaw_rad = course.sigma_rad if moving else math.radians(30.0)
-    P[PHI, PHI] = np.diag([math.radians(2.0), math.radians(2.0), sigma_yaw_rad]) ** 2
     P[DV, DV] = (np.eye(3) * 0.1**2 if sol.cov_vel_enu_m2ps2 is None else sol.cov_vel_enu_m2ps2[k]) + np.eye(3) * 1e-4
+    sigma_yaw_rad = (math.hypot(course.sigma_rad, engine.course_sigma_rad(v, P[DV, DV])) if moving
+                     else math.radians(30.0))
+    P[PHI, PHI] = np.diag([math.radians(2.0), math.radians(2.0), sigma_yaw_rad]) ** 2
     J_inv = np.linalg.inv(pos_jacobian(lat, alt))
     P[DPOS, DPOS] = J_inv @ (sol.cov_enu_m2[k] + np.eye(3) * 0.01) @ J_inv.T
     P[EPS, EPS] = np.eye(3) * math.radians(spec.gyro_bias_sigma_deg_per_s) ** 2
