@@ -93,7 +93,7 @@ def register(subparsers):
                    help="prior sigma of the IMU time offset, estimated by the filter (default 0.1; 0: take T as known)")
     p.add_argument("--imu-spec", default="consumer", metavar="FILE|GRADE",
                    help=f"IMU noise: a grade ({', '.join(real.GRADES)}; default consumer) or a JSON file with "
-                        "the fields of leosop.fusion.real.ImuSpec")
+                        "the fields of leosop.fusion.imu_noise.ImuSpec")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated LEO aids (--leo-sim)")
 
 

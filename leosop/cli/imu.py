@@ -4,7 +4,7 @@ JSON: ``source``, ``format``, ``rate_hz``, ``segment_s`` (start, duration), ``gy
 axis R, F, U: ``tau_s``, ``adev``, ``white_density``, ``bias_instability``, ``tau_min_s``, ``floor_reached``
 (False: the least deviation is at the longest averaging time, the bias instability an upper bound); gyro in deg/h
 and deg/sqrt(h), accelerometer in ug and ug/sqrt(Hz)), ``imu_spec`` (the fields of
-:class:`leosop.fusion.real.ImuSpec`). ``--out``: ``imu_spec.json`` (accepted by ``leosop fuse --imu-spec``),
+:class:`leosop.fusion.imu_noise.ImuSpec`). ``--out``: ``imu_spec.json`` (accepted by ``leosop fuse --imu-spec``),
 ``allan.json`` (this document) and ``allan.png`` (log-log, the read-off slopes marked); all or none.
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from ..earth import normal_gravity_mps2
 from ..errors import InputError
 from ..fileio import atomic_outputs, write_json
-from ..fusion.real import ImuSpec
+from ..fusion.imu_noise import ImuSpec
 from ..ins import allan, imu_io
 from . import add_action, add_command
 from .fuse import IMU_FORMATS, read_imu
