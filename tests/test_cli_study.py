@@ -45,7 +45,7 @@ def test_gdop_map_netcdf_and_figures(tmp_path, capsys):
     (["--scheduler", "tcp://127.0.0.1:9"], 1, "--scheduler tcp://127.0.0.1:9: cannot connect to a Dask scheduler"),
 ])
 def test_bad_input_one_line_and_nothing_written(tmp_path, capsys, monkeypatch, args, code, message):
-    monkeypatch.setattr("leosop.orbits.gridmap._CONNECT_TIMEOUT", "1s")
+    monkeypatch.setattr("leosop.parallel.CONNECT_TIMEOUT", "1s")
     out = tmp_path / "maps"
     assert main(["study", "gdop-map", "--grid-deg", "30", "--duration-s", "60", *args, "--out", str(out)]) == code
     err = capsys.readouterr().err
@@ -114,7 +114,7 @@ def test_montecarlo_interrupted_then_resumed(tmp_path, capsys, monkeypatch):
     ({}, ["--scheduler", "tcp://127.0.0.1:9"], 1, "--scheduler tcp://127.0.0.1:9: cannot connect to a Dask scheduler"),
 ])
 def test_montecarlo_bad_input(tmp_path, capsys, monkeypatch, changes, args, code, message):
-    monkeypatch.setattr("leosop.studies.CONNECT_TIMEOUT", "1s")
+    monkeypatch.setattr("leosop.parallel.CONNECT_TIMEOUT", "1s")
     out = tmp_path / "mc"
     assert main(["study", "montecarlo", str(_spec_file(tmp_path, **changes)), *args, "--out", str(out)]) == code
     err = capsys.readouterr().err

@@ -3,12 +3,19 @@
 import numpy as np
 import pytest
 
+from leosop.parallel import run_tasks
 from leosop.repro.alignment import sweep
 from leosop.studies import chunk_generators, map_chunks
 
 
 def _draw(chunk, rng):
     return chunk * 1000 + rng.normal(size=3)
+
+
+def _square_or_fail(i, fail):
+    if i == fail:
+        raise ValueError(f"bad input {i}")
+    return i * i
 
 
 @pytest.fixture(scope="module")
@@ -43,3 +50,33 @@ def test_alignment_sweep_serial_equals_parallel(client):
     parallel = sweep(**grid, seed=5, scheduler=client)
     assert serial == parallel
     assert serial != sweep(**grid, seed=6, scheduler="serial")
+
+
+@pytest.mark.parametrize("per_worker, window", [(None, 10), (1, 4)])  # 1 x 2 workers is below the floor of 4
+def test_run_tasks_window_bounds_what_is_in_flight(client, per_worker, window):
+    made, results, in_flight = [], {}, []
+
+    def tasks():
+        for i in range(10):
+            made.append(i)
+            yield i, None
+
+    def keep(i, result):
+        in_flight.append(len(made) - len(results))  # made but not yet collected, this one included
+        results[i] = result
+
+    workers = run_tasks(_square_or_fail, tasks(), n_tasks=10, scheduler=client, on_result=keep,
+                        window_per_worker=per_worker)
+    assert workers == 2 and results == {i: i * i for i in range(10)}
+    assert max(in_flight) == window  # tasks are made lazily, one more as each finishes
+
+
+def test_run_tasks_error_names_the_task_or_goes_to_on_error(client):
+    with pytest.raises(ValueError, match="bad input 3") as info:
+        run_tasks(_square_or_fail, [(i, 3) for i in range(6)], scheduler=client, on_result=lambda i, r: None,
+                  label=lambda i: f"chunk {i}")
+    assert "in chunk 3 run on Dask" in info.value.__notes__
+    results, errors = {}, {}
+    run_tasks(_square_or_fail, [(i, 3) for i in range(6)], scheduler=client, on_result=results.__setitem__,
+              on_error=lambda i, exc: errors.setdefault(i, str(exc)))
+    assert errors == {3: "bad input 3"} and results == {i: i * i for i in (0, 1, 2, 4, 5)}

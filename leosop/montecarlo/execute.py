@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 from ..chunkstore import ChunkStore
+from ..parallel import run_tasks
 from ..progress import progress
 from .parameters import apply
 from .runs import METRICS, run_chunk
@@ -100,7 +101,7 @@ def run_study(spec, work_dir, *, scheduler=None, n_workers=None, desc="montecarl
         The study's chunk directory (created if needed, kept: the caller
         removes it once the final output is written).
     scheduler : None, "serial", str or distributed.Client
-        As in :mod:`leosop.studies`: a local cluster (None), this process,
+        As in :mod:`leosop.parallel`: a local cluster (None), this process,
         a scheduler address (unreachable: ExternalError) or a client.
     n_workers : int, optional
         Workers of the local cluster (default: the cores).
@@ -123,7 +124,10 @@ def run_study(spec, work_dir, *, scheduler=None, n_workers=None, desc="montecarl
                 _save(store, i, chunks[i], run_chunk(payload(chunks[i])))
                 bar.update(1)
         elif todo:
-            workers = _run_dask(store, chunks, todo, payload, scheduler, n_workers, bar)
+            workers = run_tasks(run_chunk, ((payload(chunks[i]),) for i in todo), n_tasks=len(todo),
+                                scheduler=scheduler, n_workers=n_workers, window_per_worker=2, bar=bar,
+                                on_result=lambda k, rows: _save(store, todo[k], chunks[todo[k]], rows),
+                                label=lambda k: f"chunk {todo[k]}")
     rows = np.empty((spec.n_runs, len(METRICS)))
     for i, runs in enumerate(chunks):
         done = _load(store, i, runs)
@@ -133,31 +137,3 @@ def run_study(spec, work_dir, *, scheduler=None, n_workers=None, desc="montecarl
     return StudyRun(rows=rows, n_chunks=len(chunks), n_resumed=len(chunks) - len(todo),
                     elapsed_s=time.perf_counter() - tic, n_workers=workers)
 
-
-def _run_dask(store, chunks, todo, payload, scheduler, n_workers, bar):
-    """Submit ``todo`` through a bounded window, saving each chunk as it finishes; returns the worker count."""
-    from distributed import as_completed
-
-    from ..studies import dask_client
-
-    with dask_client(scheduler, len(todo), n_workers) as client:
-        workers = max(len(client.scheduler_info()["workers"]), 1)
-        window = max(2 * workers, 4)
-        queue = iter(todo)
-        index = {}
-
-        def submit(i):
-            future = client.submit(run_chunk, payload(chunks[i]), pure=False)
-            index[future.key] = i
-            return future
-
-        running = as_completed([submit(i) for _, i in zip(range(window), queue)])
-        for future in running:
-            i = index.pop(future.key)
-            _save(store, i, chunks[i], future.result())
-            future.release()
-            bar.update(1)
-            nxt = next(queue, None)
-            if nxt is not None:
-                running.add(submit(nxt))
-    return workers

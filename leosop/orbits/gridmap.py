@@ -1,7 +1,7 @@
 """Visible satellites and Doppler GDOP over a global latitude/longitude grid and time.
 
 The maps of one epoch are :mod:`leosop.orbits.gridcells`'. :func:`gdop_map`
-splits the epochs into tasks run by :mod:`leosop.studies`' Dask client (local
+splits the epochs into tasks run by :mod:`leosop.parallel` on Dask (local
 cluster, existing scheduler, or serial), optionally keeps each finished task
 on disk so that an interrupted map resumes, and returns an ``xarray.Dataset``
 with CF-style attributes (:mod:`leosop.orbits.gridmap_netcdf`);
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ExternalError, InputError
+from ..errors import InputError
 from ..constellations import REGISTRY, carriers_hz
 from .gridcells import (FOOTPRINT_MARGIN_DEG, READABLE_GRID_DEG, Grid, brute_force_epoch, check_grid_deg, epoch_maps,
                         footprint_pairs, make_grid)
@@ -25,10 +25,6 @@ __all__ = [
     "footprint_pairs", "epoch_maps", "brute_force_epoch", "maps_for_times", "gdop_map", "write_netcdf",
     "FOOTPRINT_MARGIN_DEG", "READABLE_GRID_DEG", "GDOP_UNITS",
 ]
-
-# How long to try reaching a scheduler given by address.
-_CONNECT_TIMEOUT = "10s"
-
 
 def satellite_carriers_hz(constellation):
     """Carrier of each satellite from its family; unknown families get Starlink's, (n_sats,)."""
@@ -119,7 +115,7 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
     times_utc : array_like of datetime64, (n_epochs,)
     grid_deg, mask_deg : float
     scheduler : None, "serial", str or distributed.Client
-        As in :mod:`leosop.studies`; an unreachable address raises ExternalError.
+        As in :mod:`leosop.parallel`; an unreachable address raises ExternalError.
     n_workers : int, optional
         Workers of the local cluster (``scheduler=None``); default the cores.
     epochs_per_task : int, optional
@@ -187,32 +183,12 @@ def _resume(store, times, grid, counts, gdops):
     return done
 
 
-def _connect(scheduler):
-    """A ``distributed.Client`` for an address; ExternalError when unreachable."""
-    from distributed import Client
-
-    try:
-        return Client(scheduler, timeout=_CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
-
-
 def _run_dask(source, times, blocks, grid_deg, mask_deg, scheduler, n_workers, keep):
     """Run each block of epoch indices as a task; ``keep(idx, counts, gdops)`` as each finishes."""
-    import contextlib
-
-    from distributed import as_completed
-
+    from ..parallel import run_tasks
     from ..progress import progress
-    from ..studies import dask_client
 
-    with contextlib.ExitStack() as stack:
-        if isinstance(scheduler, str):
-            scheduler = stack.enter_context(_connect(scheduler))
-        client = stack.enter_context(dask_client(scheduler, len(blocks), n_workers))
-        futures = client.map(_task, [(source, times[idx], grid_deg, mask_deg) for idx in blocks], pure=False)
-        where = {f.key: idx for f, idx in zip(futures, blocks)}
-        for future in progress(as_completed(futures), total=len(futures), desc="gdop-map", unit="task"):
-            keep(where[future.key], *future.result())
-            future.release()
+    with progress(total=len(blocks), desc="gdop-map", unit="task") as bar:
+        run_tasks(_task, (((source, times[idx], grid_deg, mask_deg),) for idx in blocks), n_tasks=len(blocks),
+                  scheduler=scheduler, n_workers=n_workers, on_result=lambda k, maps: keep(blocks[k], *maps),
+                  label=lambda k: f"the epochs from {times[blocks[k][0]]}", bar=bar)

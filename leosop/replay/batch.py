@@ -18,7 +18,7 @@ A recording whose ledger entry is ``done`` with the same key and whose
 ``replay.json`` is on disk is not run again: the same command resumes an
 interrupted batch, and a changed option, recording or code reruns it.
 
-Where it runs is ``scheduler`` as in :mod:`leosop.studies`: ``"serial"`` in
+Where it runs is ``scheduler`` as in :mod:`leosop.parallel`: ``"serial"`` in
 this process, None a local cluster of single-threaded worker processes, an
 address or a ``distributed.Client``. A recording depends only on its own
 file and the options, never on where or in which order it runs, so the
@@ -36,6 +36,7 @@ from pathlib import Path
 from ..chunkstore import code_digest
 from ..errors import InputError
 from ..fileio import atomic_files, write_json
+from ..parallel import run_tasks
 from ..progress import progress
 
 __all__ = ["LEDGER", "batch_recordings", "run_batch"]
@@ -195,6 +196,9 @@ def run_batch(run_one, recordings, out_dir, *, options, scheduler=None, n_worker
             entries[name] = _entry(name, meta, key, doc, runtime_s)
         write_json(out_dir / LEDGER, summary(None))  # the ledger so far: what a rerun resumes
 
+    def done(k, outcome):  # a Dask task's result, or its exception: a recording's failure is data
+        finish(*todo[k], outcome)
+
     workers = 0
     with progress(total=len(todo), desc=desc, unit="recording") as bar:
         if scheduler == "serial":
@@ -206,27 +210,10 @@ def run_batch(run_one, recordings, out_dir, *, options, scheduler=None, n_worker
                 finish(meta, name, key, outcome)
                 bar.update(1)
         elif todo:
-            workers = _run_dask(run_one, todo, finish, scheduler, n_workers, bar)
+            workers = run_tasks(_timed, ((run_one, meta) for meta, _, _ in todo), n_tasks=len(todo),
+                                scheduler=scheduler, n_workers=n_workers, bar=bar,
+                                on_result=done, on_error=done)
     doc = summary(workers)
     write_json(out_dir / LEDGER, doc)
     return doc
 
-
-def _run_dask(run_one, todo, finish, scheduler, n_workers, bar):
-    """Submit every recording of ``todo``; ``finish`` each as it completes; returns the worker count."""
-    from distributed import as_completed
-
-    from ..studies import dask_client
-
-    with dask_client(scheduler, len(todo), n_workers) as client:
-        workers = max(len(client.scheduler_info()["workers"]), 1)
-        futures = {client.submit(_timed, run_one, meta, pure=False): (meta, name, key) for meta, name, key in todo}
-        for future in as_completed(futures):
-            try:
-                outcome = future.result()
-            except Exception as exc:  # the replay raised, or its task killed too many workers
-                outcome = exc
-            finish(*futures[future], outcome)
-            future.release()
-            bar.update(1)
-    return workers

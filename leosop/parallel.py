@@ -1,0 +1,149 @@
+"""Where tasks run on Dask: one client connection and one submit-and-collect loop.
+
+Every parallel study (:mod:`leosop.studies`, :mod:`leosop.montecarlo`, the
+GDOP maps of :mod:`leosop.orbits.gridmap`, the replay batch of
+:mod:`leosop.replay.batch`) runs its tasks through :func:`run_tasks`, which
+hands each result to the caller as it finishes, so the caller stores it (and
+a rerun resumes) without waiting for the others.
+
+Where the work runs is chosen by ``scheduler``:
+
+``"serial"``
+    in this process, one task after another (no Dask; the callers' own loop);
+``None``
+    a temporary ``distributed.LocalCluster`` of single-threaded worker
+    processes on this machine (the default of the CLI);
+``"tcp://host:port"``
+    an existing Dask scheduler (unreachable: :class:`leosop.errors.ExternalError`,
+    exit status 1);
+a ``distributed.Client``
+    an existing client (tests use an in-process cluster).
+
+A task's function must be picklable (a module-level function, or a
+``functools.partial`` of one) for worker processes.
+"""
+
+import contextlib
+import itertools
+import logging
+import os
+
+from .errors import ExternalError
+
+__all__ = ["CONNECT_TIMEOUT", "dask_client", "run_tasks"]
+
+#: How long to try reaching a scheduler given by address.
+CONNECT_TIMEOUT = "10s"
+#: glibc settings of the local cluster's worker processes. Dask's default
+#: ``MALLOC_TRIM_THRESHOLD_=65536`` also freezes glibc's mmap threshold at
+#: 128 KiB, so every numpy temporary above it is mapped and unmapped again,
+#: page faults each time: ``study gdop-map`` took 2.3x the CPU time of the
+#: same task in the main process. Temporaries up to 32 MiB (glibc's own
+#: ceiling) come from the heap, which keeps up to 256 MiB free.
+_WORKER_MALLOC = {
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 256 << 20,
+    "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": 32 << 20,
+}
+#: The fewest tasks kept in flight by a bounded window, whatever the worker count.
+_MIN_WINDOW = 4
+
+
+@contextlib.contextmanager
+def dask_client(scheduler, n_tasks, n_workers=None):
+    """A client for ``scheduler``; a local cluster gets ``n_workers`` (default: the cores) but no more than tasks."""
+    from distributed import Client, LocalCluster
+
+    if isinstance(scheduler, Client):
+        yield scheduler
+        return
+    if scheduler is None:
+        import dask
+
+        n_workers = max(1, min(n_workers or os.cpu_count() or 1, n_tasks))
+        with dask.config.set(_WORKER_MALLOC), LocalCluster(
+                n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+            yield client
+        return
+    try:
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
+    with client:
+        yield client
+
+
+def run_tasks(fn, tasks, *, scheduler, on_result, n_tasks=None, n_workers=None, on_error=None, label=None,
+              window_per_worker=None, bar=None):
+    """Run ``fn(*args)`` on Dask for every ``args`` of ``tasks``; ``on_result(i, result)`` as each finishes.
+
+    Parameters
+    ----------
+    fn : callable
+        The task function (picklable).
+    tasks : iterable of tuple
+        Positional arguments of each task, taken lazily: with a window, task
+        ``i`` is made only when it is submitted.
+    scheduler : None, str or distributed.Client
+        Where to run (module docstring); ``"serial"`` is the caller's loop.
+    on_result : callable
+        ``on_result(i, result)``, called in this process in the order the
+        tasks finish; ``i`` is the task's position in ``tasks``.
+    n_tasks : int, optional
+        Number of tasks; default ``len(tasks)``.
+    n_workers : int, optional
+        Workers of a local cluster (default: the cores, at most one per task).
+    on_error : callable, optional
+        ``on_error(i, exc)`` for a task that raised (or killed too many
+        workers); the others go on. Default: the task's exception propagates,
+        with a note naming the task (``label``), and the unfinished tasks are
+        dropped with the client.
+    label : callable, optional
+        ``label(i) -> str``, the task's name in that note; default ``task i``.
+    window_per_worker : int, optional
+        Keep at most ``max(window_per_worker x workers, 4)`` tasks in flight,
+        submitting the next as one finishes, so that the scheduler and the
+        client hold a bounded number of tasks however many there are.
+        Default: submit every task at once.
+    bar : tqdm, optional
+        Progress bar (:func:`leosop.progress.progress`) advanced once per
+        finished task.
+
+    Returns
+    -------
+    int
+        Dask workers at the start (at least 1).
+    """
+    from distributed import as_completed
+
+    n_tasks = len(tasks) if n_tasks is None else n_tasks
+    queue = enumerate(tasks)
+    with dask_client(scheduler, n_tasks, n_workers) as client:
+        workers = max(len(client.scheduler_info()["workers"]), 1)
+        window = n_tasks if window_per_worker is None else max(window_per_worker * workers, _MIN_WINDOW)
+        position = {}
+
+        def submit(i, args):
+            future = client.submit(fn, *args, pure=False)
+            position[future.key] = i
+            return future
+
+        running = as_completed([submit(i, args) for i, args in itertools.islice(queue, window)])
+        for future in running:
+            i = position.pop(future.key)
+            try:
+                result = future.result()
+            except Exception as exc:  # the task raised, or killed too many workers
+                if on_error is None:
+                    exc.add_note(f"in {label(i) if label else f'task {i}'} run on Dask")
+                    raise
+                on_error(i, exc)
+            else:
+                on_result(i, result)
+            future.release()
+            if bar is not None:
+                bar.update(1)
+            for i, args in itertools.islice(queue, 1):
+                running.add(submit(i, args))
+    return workers
