@@ -227,7 +227,8 @@ def _update(x, P, y, r, restart):
     k = np.where(np.isfinite(s)[:, None], P[:, :, 0] / np.where(np.isfinite(s), s, 1.0)[:, None], 0.0)
     x += k * y[:, None]
     ikh = np.eye(3) - k[:, :, None] * np.array([1.0, 0.0, 0.0])[None, None, :]
-    P = ikh @ P @ np.swapaxes(ikh, 1, 2) + np.where(np.isfinite(r), r, 0.0)[:, None, None] * k[:, :, None] * k[:, None, :]
+    r_used = np.where(np.isfinite(r), r, 0.0)[:, None, None]
+    P = ikh @ P @ np.swapaxes(ikh, 1, 2) + r_used * k[:, :, None] * k[:, None, :]
     return x, 0.5 * (P + np.swapaxes(P, 1, 2))
 
 
