@@ -3,7 +3,7 @@
 Each satellite's central tone is followed by a three-state Kalman filter
 (phase [cycles], frequency [Hz], frequency rate [Hz/s] at the block centre;
 white noise on the rate's derivative and on the frequency, the continuous
-third-order model of Brown and Hwang 2012, ch. 9). Every block, each comb is
+third-order model of Brown and Hwang 2012). Every block, each comb is
 correlated coherently with the comb the state predicts: tone k against
 ``exp(-j 2 pi (k spacing t + s_k Phi(t)))`` with ``Phi`` the predicted
 central-tone phase over the block and ``s_k = f_k / f_c`` (the correlation
