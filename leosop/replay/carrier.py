@@ -1,0 +1,272 @@
+"""Carrier phase of the pilot combs across the blocks of a continuous recording: a Kalman tracker.
+
+Each satellite's central tone is followed by a three-state Kalman filter
+(phase [cycles], frequency [Hz], frequency rate [Hz/s] at the block centre;
+white noise on the rate's derivative and on the frequency, the continuous
+third-order model of Brown and Hwang 2012). Every block, each comb is
+correlated coherently with the comb the state predicts: tone k against
+``exp(-j 2 pi (k spacing t + s_k Phi(t)))`` with ``Phi`` the predicted
+central-tone phase over the block and ``s_k = f_k / f_c`` (the correlation
+of :func:`leosop.signal.fine.newton_comb`, at the prediction instead of at
+the optimum). The tones keep unknown phases of their own (Newman phases in
+``leosop generate``, unknown on a real downlink), so the per-tone sums are
+combined against a template, the first locked block's sums: the phase of
+``sum_k Y_k conj(template_k)`` is the phase error at the block centre, its
+noise ``1 / sqrt(2 snr)`` rad from the block's coherent comb SNR. The
+template's own noise is a constant phase: it cancels in phase differences.
+
+Per block and satellite the result gives the accumulated carrier phase (the
+integral of ``doppler_hz``: its change between two blocks is ``-carrier_hz /
+c`` times the change of range, plus the clocks' integral), its sigma, the
+filter's frequency, a lock indicator (the coherent SNR over :data:`LOCK_SNR`)
+and a cycle-slip flag (normalised innovation squared over :data:`SLIP_NIS`:
+a phase jump the prediction cannot explain). The whole cycles are continuous
+within an ``arc``; a slip, or a prediction whose phase sigma exceeds
+:data:`ARC_SIGMA_CYCLES` (a long loss of lock), starts a new one.
+
+What cannot be tracked across snapshot gaps: a snapshot recording (20 ms
+every second, DESIGN 4.2) gives no accumulated phase. Over a gap of a second
+the prediction of a 3-state model carries the Doppler's unmodelled second
+derivative (tens of Hz/s^2 on a LEO pass at 11 GHz, ``T^3 / 6`` cycles per
+Hz/s^2: several cycles) and the receiver oscillator's phase noise, so the
+integer cycle count is lost: each snapshot starts a new arc, and only the
+Doppler of each snapshot survives. The ambiguity of each arc (its constant
+offset) is never resolved here; positioning uses phase differences within an
+arc (:func:`phase_rate_doppler`).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import gamma
+
+from ..errors import InputError
+from ..signal.fine import comb_phasors
+from ..signal.pilot import PilotComb
+
+__all__ = ["CarrierTracks", "track_carrier", "recording_blocks", "phase_rate_doppler", "LOCK_SNR", "SLIP_NIS",
+           "ARC_SIGMA_CYCLES"]
+
+#: Coherent comb SNR (|S|^2 over its noise mean) a block needs to update the
+#: filter: noise alone exceeds it with probability exp(-LOCK_SNR) = 1e-6.
+LOCK_SNR = 13.8
+#: Normalised innovation squared flagged as a cycle slip: chi-square with one
+#: degree of freedom exceeds it with probability 1e-4 (a few false flags per
+#: 10^4 satellite-blocks; a quarter-cycle jump at 1e-2 cycles sigma is 600).
+SLIP_NIS = 15.1
+#: Predicted phase sigma [cycles] beyond which the integer cycle count is
+#: taken as lost: the next locked block starts a new arc.
+ARC_SIGMA_CYCLES = 0.1
+#: Template detection: the tones' incoherent power exceeds this gamma quantile of noise alone with probability 1e-6.
+_TEMPLATE_PFA = 1e-6
+
+
+@dataclass(frozen=True)
+class CarrierTracks:
+    """Carrier tracking of several satellites over the blocks, each array (n_sats, n_blocks) but ``t_s``.
+
+    Attributes
+    ----------
+    t_s : ndarray, (n_blocks,)
+        Block centres [s] on the time base of the blocks' start times.
+    phase_cycles : ndarray
+        Accumulated central-tone carrier phase, the integral of ``doppler_hz``:
+        the filter's prediction plus the block's phase error, the receiver's
+        NCO phase plus its discriminator (NaN where not locked). Continuous
+        within an arc; its offset is arbitrary per arc.
+    phase_sigma_cycles : ndarray
+        Its sigma, ``1 / (2 pi sqrt(2 snr))``: the block's own noise,
+        independent from block to block (the prediction carries no error
+        into it while the phase error stays well within half a cycle).
+    doppler_hz, doppler_sigma_hz, doppler_rate_hz_per_s : ndarray
+        The filter's frequency state (DESIGN 4.2 sign, clocks included), its sigma, its rate.
+    snr : ndarray
+        Coherent comb SNR of the block's correlation (NaN before the template).
+    lock, slip : ndarray of bool
+        ``lock``: the block updated the filter; ``slip``: its innovation failed the test (a new arc begins).
+    arc : ndarray of int
+        Arc number, -1 before the first lock; whole cycles are continuous within an arc.
+    """
+
+    t_s: np.ndarray
+    phase_cycles: np.ndarray
+    phase_sigma_cycles: np.ndarray
+    doppler_hz: np.ndarray
+    doppler_sigma_hz: np.ndarray
+    doppler_rate_hz_per_s: np.ndarray
+    snr: np.ndarray
+    lock: np.ndarray
+    slip: np.ndarray
+    arc: np.ndarray
+
+
+def _transition(dt_s, accel_psd, freq_psd):
+    """Phi (3, 3) and Q (3, 3) of the (phase, frequency, rate) model over ``dt_s``."""
+    Phi = np.array([[1.0, dt_s, 0.5 * dt_s**2], [0.0, 1.0, dt_s], [0.0, 0.0, 1.0]])
+    d = dt_s ** np.arange(6)
+    Q = accel_psd * np.array([[d[5] / 20, d[4] / 8, d[3] / 6], [d[4] / 8, d[3] / 3, d[2] / 2],
+                              [d[3] / 6, d[2] / 2, d[1]]])
+    Q[:2, :2] += freq_psd * np.array([[d[3] / 3, d[2] / 2], [d[2] / 2, d[1]]])
+    return Phi, Q
+
+
+def _correlate(iq, t0_s, fs, x, comb):
+    """Per-tone sums of the block against the predicted comb of each satellite, (n_sats, n_tones)."""
+    n = iq.size
+    t = t0_s + np.arange(n) / fs
+    tau = t - (t0_s + 0.5 * (n - 1) / fs)
+    sp = float(comb.tone_spacing_hz)
+    ratio = sp / float(comb.carrier_hz)
+    dphi = x[:, 1:2] * tau + 0.5 * x[:, 2:3] * tau**2                     # (n_sats, n)
+    a = (x[:, :1] - np.round(x[:, :1])) + dphi
+    b = sp * t + ratio * (x[:, :1] + dphi)
+    phasors = comb_phasors(a.ravel(), b.ravel(), comb.n_tones // 2).reshape(x.shape[0], n, comb.n_tones)
+    return np.einsum("n,snk->sk", iq.astype(complex), phasors)
+
+
+def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=None, doppler0_sigma_hz=1.0,
+                  rate0_sigma_hz_per_s=100.0, accel_psd_hz2_per_s5=1e3, freq_psd_hz2_per_s=1e-2):
+    """Track the carrier phase of several combs over successive blocks.
+
+    Parameters
+    ----------
+    blocks : iterable of (float, ndarray)
+        ``(t0_s, iq)`` per block in time order: the time of its first sample
+        [s] (one time base; the tones' nominal phases refer to its origin)
+        and its samples, complex, shape (n,) (n may change between blocks).
+    sample_rate_hz : float
+    doppler0_hz, rate0_hz_per_s : array_like, (n_sats,)
+        Each comb's central-tone Doppler and rate at the first block's centre
+        (e.g. :func:`~leosop.signal.multicomb.find_combs` on that block).
+    comb : PilotComb, optional
+        The comb as the receiver sees it (:meth:`~.PilotComb.through_lo` for a large LO offset).
+    doppler0_sigma_hz, rate0_sigma_hz_per_s : float
+        Their prior sigmas. The first block's phase error is
+        ``2 pi sigma_f T / sqrt(12)``: a block of T = 20 ms needs sigma_f below ~5 Hz.
+    accel_psd_hz2_per_s5 : float
+        Spectral density of the white noise driving the frequency rate
+        [Hz^2/s^5]: a LEO pass's Doppler changes its rate by up to ~60
+        Hz/s^2 at 11 GHz; the default lets the rate follow that within a
+        fraction of a second.
+    freq_psd_hz2_per_s : float
+        Frequency random walk [Hz^2/s] (receiver and satellite oscillators).
+
+    Returns
+    -------
+    CarrierTracks
+    """
+    comb = comb or PilotComb()
+    fs = float(sample_rate_hz)
+    f0 = np.atleast_1d(np.asarray(doppler0_hz, dtype=float))
+    r0 = np.broadcast_to(np.asarray(rate0_hz_per_s, dtype=float), f0.shape)
+    if f0.ndim != 1 or not np.all(np.isfinite(f0)) or not np.all(np.isfinite(r0)):
+        raise InputError("doppler0_hz and rate0_hz_per_s must be finite, one per satellite")
+    n_sats = f0.size
+    x = np.stack([np.zeros(n_sats), f0, r0], axis=1)
+    P = np.zeros((n_sats, 3, 3))
+    P[:, 0, 0] = 1.0
+    P[:, 1, 1] = doppler0_sigma_hz**2
+    P[:, 2, 2] = rate0_sigma_hz_per_s**2
+    template = np.full((n_sats, comb.n_tones), np.nan + 0j)
+    arc = np.full(n_sats, -1)
+    template_threshold = gamma.isf(_TEMPLATE_PFA, comb.n_tones)
+    rows = []
+    t_prev = None
+    for t0_s, iq in blocks:
+        iq = np.asarray(iq)
+        t_c = float(t0_s) + 0.5 * (iq.size - 1) / fs
+        if t_prev is not None:
+            if not t_c > t_prev:
+                raise InputError(f"blocks out of time order at t0_s={t0_s:g}")
+            Phi, Q = _transition(t_c - t_prev, accel_psd_hz2_per_s5, freq_psd_hz2_per_s)
+            x = x @ Phi.T
+            P = Phi @ P @ Phi.T + Q
+        t_prev = t_c
+        Y = _correlate(iq, float(t0_s), fs, x, comb)
+        noise = _noise(iq, Y)
+        new = np.isnan(template[:, 0]) & (np.sum(np.abs(Y) ** 2, axis=1) / noise > template_threshold)
+        template[new] = Y[new]
+        s = np.sum(Y * np.conj(template), axis=1)
+        snr = np.abs(s) ** 2 / (noise * np.sum(np.abs(template) ** 2, axis=1))
+        lock = snr > LOCK_SNR
+        z = np.angle(s) / (2 * np.pi)
+        r = 1.0 / (2.0 * snr) / (2 * np.pi) ** 2
+        nis = z**2 / (P[:, 0, 0] + r)
+        restart = lock & ((arc < 0) | (P[:, 0, 0] > ARC_SIGMA_CYCLES**2) | (nis > SLIP_NIS))
+        slip = restart & (arc >= 0) & (nis > SLIP_NIS)
+        phase = np.where(lock, x[:, 0] + z, np.nan)
+        x, P = _update(x, P, np.where(lock, z, 0.0), np.where(lock, r, np.inf), restart)
+        arc = np.where(restart, arc + 1, arc)
+        rows.append((t_c, phase, np.where(lock, np.sqrt(r), np.nan), x[:, 1].copy(), np.sqrt(P[:, 1, 1]),
+                     x[:, 2].copy(), snr, lock, slip, arc.copy()))
+    if not rows:
+        raise InputError("no blocks to track")
+    cols = list(zip(*rows))
+    return CarrierTracks(np.array(cols[0]), *(np.stack(c, axis=1) for c in cols[1:]))
+
+
+def _noise(iq, Y):
+    """Noise power of the per-tone sums: n times the block's power less the combs' (tone power ``|Y|^2 / n^2``)."""
+    n = iq.size
+    power = float(np.mean(np.abs(iq) ** 2)) - float(np.sum(np.abs(Y) ** 2)) / n**2
+    return n * max(power, 1e-3 * float(np.mean(np.abs(iq) ** 2)), np.finfo(float).tiny)
+
+
+def _update(x, P, y, r, restart):
+    """Scalar phase update of every satellite (Joseph form); ``restart`` rows take the phase afresh.
+
+    A restarted row keeps its frequency and rate, and its phase becomes the
+    measurement (a new arc: the old phase's integer is gone). ``r`` inf: no update.
+    """
+    x = x.copy()
+    P = P.copy()
+    P[restart, 0, :] = 0.0
+    P[restart, :, 0] = 0.0
+    P[restart, 0, 0] = np.where(np.isfinite(r[restart]), 1e6, 0.0)
+    s = P[:, 0, 0] + r
+    k = np.where(np.isfinite(s)[:, None], P[:, :, 0] / np.where(np.isfinite(s), s, 1.0)[:, None], 0.0)
+    x += k * y[:, None]
+    ikh = np.eye(3) - k[:, :, None] * np.array([1.0, 0.0, 0.0])[None, None, :]
+    r_used = np.where(np.isfinite(r), r, 0.0)[:, None, None]
+    P = ikh @ P @ np.swapaxes(ikh, 1, 2) + r_used * k[:, :, None] * k[:, None, :]
+    return x, 0.5 * (P + np.swapaxes(P, 1, 2))
+
+
+def recording_blocks(rec, block_s):
+    """``(t0_s, iq)`` of every block of a SigMF recording (:func:`~leosop.replay.pipeline.block_plan`), lazily."""
+    from .pipeline import block_plan
+
+    fs = rec.sample_rate_hz
+    for b in block_plan(rec, block_s):
+        yield b.t_s - 0.5 * (b.n_samples - 1) / fs, rec.read(b.start, b.n_samples)
+
+
+def phase_rate_doppler(tracks, window_s=1.0, degree=3):
+    """Doppler at every block from the accumulated phase: the slope of a local polynomial over ``window_s``.
+
+    A polynomial of ``degree`` in time is fitted to the phase of the locked
+    blocks of one arc within ``window_s / 2`` of each block (the arc's
+    unknown offset drops out of the slope); its derivative at the block is
+    the Doppler, with the sigma the fit's covariance gives from the blocks'
+    phase sigmas (independent from block to block, :class:`CarrierTracks`).
+
+    Returns
+    -------
+    doppler_hz, sigma_hz : ndarray, (n_sats, n_blocks)
+        NaN where the window holds fewer than ``2 degree + 1`` locked blocks of the same arc.
+    """
+    t = tracks.t_s
+    dop = np.full(tracks.phase_cycles.shape, np.nan)
+    sig = np.full(tracks.phase_cycles.shape, np.nan)
+    for i, j in zip(*np.nonzero(tracks.lock)):
+        use = tracks.lock[i] & (tracks.arc[i] == tracks.arc[i, j]) & (np.abs(t - t[j]) <= 0.5 * window_s)
+        if use.sum() < 2 * degree + 1:
+            continue
+        tau = t[use] - t[j]
+        A = tau[:, None] ** np.arange(degree + 1)
+        w = 1.0 / tracks.phase_sigma_cycles[i, use]
+        coef, *_ = np.linalg.lstsq(A * w[:, None], (tracks.phase_cycles[i, use] - tracks.phase_cycles[i, j]) * w,
+                                   rcond=None)
+        cov = np.linalg.inv((A * w[:, None]).T @ (A * w[:, None]))
+        dop[i, j], sig[i, j] = coef[1], np.sqrt(cov[1, 1])
+    return dop, sig
