@@ -326,7 +326,10 @@ def test_static_passes_flags_an_outlier_in_one_pass(two_passes):
 
 
 def test_doppler_rate_matches_finite_differences_of_propagated_states():
-    """The time-bias column: d(doppler)/dt from SGP4 states 0.1 s apart, and its gradient by differences."""
+    """The ECEF Doppler rate: d(doppler)/dt from SGP4 states 0.1 s apart, and its gradient by differences.
+
+    (The fix's time-bias column is the inertial one, ``tests/test_geometry_doppler.py``.)
+    """
     f0 = 145.87e6
     const = load_constellation().subset([0])
     station = geodetic_to_ecef(np.radians(52.0), np.radians(4.37), 95.0)
@@ -353,7 +356,7 @@ def test_doppler_rate_matches_finite_differences_of_propagated_states():
 def test_static_passes_recover_an_injected_time_offset_per_pass(two_passes):
     (dop, pos, vel, f0, t_s, pass_id), station, clocks, t_ref = two_passes
     dt_true = np.array([0.8, -1.5])
-    rate, _ = doppler_rate(pos, vel, station, f0)
+    rate, _ = doppler_rate(pos, vel, station, f0, inertial=True)  # the fix's time offset: of the inertial orbit
     biased = dop + dt_true[pass_id] * rate
     # Noise-free, the model's own first-order time offset: recovered exactly (position to the 0.1 mm step
     # threshold; offsets and clocks to what that leaves, ~1e-7 s and ~1e-9 Hz/s^k).
@@ -390,7 +393,7 @@ def starlink_like():
     t_s = np.tile(np.arange(n_ep, dtype=float), 7)
     p, v = pos[sats].reshape(-1, 3), vel[sats].reshape(-1, 3)
     geo = _doppler(p[None], v[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0]
-    rate, _ = doppler_rate(p, v, rx, F0_HZ)
+    rate, _ = doppler_rate(p, v, rx, F0_HZ, inertial=True)  # the fix's time-offset column
     return geo, rate, p, v, t_s, sat, rx
 
 
@@ -434,7 +437,7 @@ def test_common_clock_covariance_is_the_dense_full_state_inverse(starlink_like):
     # Second implementation: all 3 + 2 + 7 + 7 columns written out densely (position derivative at the
     # estimated time offsets, raw time powers), the priors as rows, and (A^T W A)^-1.
     H = doppler_jacobian(p, v, fix.pos_ecef_m, np.zeros(3), F0_HZ)[:, :3]
-    r, grad = doppler_rate(p, v, fix.pos_ecef_m, F0_HZ)
+    r, grad = doppler_rate(p, v, fix.pos_ecef_m, F0_HZ, inertial=True)
     one_hot = (sat[:, None] == np.arange(7)).astype(float)
     A = np.hstack([H + fix.time_bias_s[sat, None] * grad, (t_s - fix.rx_t_ref_s)[:, None] ** np.arange(2), one_hot,
                    one_hot * r[:, None]])
