@@ -109,14 +109,17 @@ def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_
     omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
     a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
            - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
-    # The satellite's state moves along (w, a_s) per second of offset: its ECEF velocity and acceleration,
-    # plus the Earth's turn (omega x r, omega x v) for an inertial offset.
-    w = v_s + np.cross(omega, r_s) if inertial else v_s
-    if inertial:
-        a_s = a_s + np.cross(omega, v_s)
     if vel_rx_ecef_mps is not None:
-        v_s = v_s - np.asarray(vel_rx_ecef_mps, dtype=float)
-        w = w if inertial else v_s
+        v_rel = v_s - np.asarray(vel_rx_ecef_mps, dtype=float)
+    else:
+        v_rel = v_s
+    # Per second of offset the geometry moves along (w, a_s): the relative ECEF velocity and the satellite's
+    # acceleration, or for an inertial offset the satellite's alone plus the Earth's turn (omega x r, omega x v).
+    if inertial:
+        w, a_s = v_s + np.cross(omega, r_s), a_s + np.cross(omega, v_s)
+    else:
+        w = v_rel
+    v_s = v_rel
     dr = r_s - np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :]
     rho = np.linalg.norm(dr, axis=-1, keepdims=True)
     u = dr / rho
