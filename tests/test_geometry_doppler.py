@@ -1,10 +1,11 @@
-"""The Doppler rate of a moving receiver (the simulator's chirp) against differences of SGP4 states."""
+"""The Doppler rate of a moving receiver (the simulator's chirp), and for an inertial time offset of the orbit,
+against differences of SGP4 states."""
 
 import numpy as np
 
 from leosop.constants import C_MPS
 from leosop.constellations import REGISTRY
-from leosop.frames import geodetic_to_ecef, range_rate
+from leosop.frames import geodetic_to_ecef, range_rate, rotate_to_later_ecef
 from leosop.geometry.doppler import doppler_rate
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
@@ -50,3 +51,30 @@ def test_at_rest_is_the_moving_model_with_zero_velocity():
     moving = doppler_rate(pos, vel, rx, F_KU_HZ, np.zeros(3))
     np.testing.assert_array_equal(rest[0], moving[0])
     np.testing.assert_array_equal(rest[1], moving[1])
+
+
+def test_inertial_time_offset_rate_matches_differences_of_rotated_states():
+    # An element set's along-track error: the satellite is where its orbit puts it at t + dt, the Earth
+    # having turned until t only, i.e. SGP4's ECEF states at t + dt expressed in the frame of t.
+    const = load_constellation().subset([0])
+    rx = geodetic_to_ecef(np.radians(48.1), np.radians(11.6), 520.0)
+    t = np.datetime64("2025-01-01T00:00:00") + np.arange(0, 6000, 60).astype("timedelta64[s]")
+    h_s = 0.05
+    dt = np.timedelta64(int(h_s * 1e3), "ms")
+    (pos,), (vel,), _ = state_ecef(const, t)
+    doppler = {}
+    for sign in (1, -1):
+        (p,), (v,), _ = state_ecef(const, t + sign * dt)
+        doppler[sign] = -F_KU_HZ / C_MPS * range_rate(rotate_to_later_ecef(p, -sign * h_s),
+                                                      rotate_to_later_ecef(v, -sign * h_s), rx, np.zeros(3))
+    fd = (doppler[1] - doppler[-1]) / (2 * h_s)
+    rate, grad = doppler_rate(pos, vel, rx, F_KU_HZ, inertial=True)
+    ecef, _ = doppler_rate(pos, vel, rx, F_KU_HZ)
+    # As above: J2 left out (~0.6 Hz/s), the central difference good to 1e-2 Hz/s. The ECEF rate differs by
+    # the Earth's turn, omega |r| / |v| ~ 7 % of the along-track motion: tens of Hz/s on this orbit.
+    np.testing.assert_allclose(rate, fd, atol=1.0)
+    assert np.abs(ecef - fd).max() > 20.0
+    e = np.eye(3)
+    fd_grad = np.stack([(doppler_rate(pos, vel, rx + e[j], F_KU_HZ, inertial=True)[0]
+                         - doppler_rate(pos, vel, rx - e[j], F_KU_HZ, inertial=True)[0]) / 2.0 for j in range(3)], -1)
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-12)

@@ -26,10 +26,14 @@ front end) is always replayed first. Reported per run:
 - the estimated offset and drift minus the truth. The truth offset is the
   receiver's plus the mean of the identified satellites' own offsets (drawn
   in [0, 5] Hz): nothing separates that mean from the receiver's offset
-  (:mod:`leosop.replay.lo`). ``sig_hz`` is the replay's sigma, which includes
-  that inseparable mean; ``sig_sep`` the static fix's sigma of the quantity
-  compared (receiver offset plus the satellites' mean offset), the one the
-  error should be measured against.
+  (:mod:`leosop.replay.lo`). ``sig_hz`` is the replay's sigma of that sum.
+  It includes the element sets' radial and cross-track error at their age
+  (:mod:`leosop.orbits.accuracy`, ~20-25 Hz at 0.8 days), which the
+  recordings lack unless ``--impair`` adds it (``--orbit-error-radial-m``,
+  ``--orbit-error-cross-m``); ``crb_hz`` is the sigma of the same sum from
+  the data alone (the fix solved again without that error and without the
+  passes' disagreement priced in: the Cramer-Rao bound of this geometry),
+  the one the error should be measured against on recordings without it.
 
 ``--impair "OPTIONS"`` (repeatable) adds a run per string of generator
 options at zero offset and drift (an interferer or IQ-imbalance sweep:
@@ -54,6 +58,9 @@ import numpy as np
 from leosop.cli.position import solutions_doc
 from leosop.frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
 from leosop.orbits import load_constellation
+from leosop.positioning.solve import satellite_states
+from leosop.positioning.static_passes import solve_static_passes
+from leosop.replay.lo import common_offset_sigma_hz
 from leosop.replay.pipeline import replay
 from leosop.signal.frontend import PRESETS
 from leosop.signal.iq import open_sigmf
@@ -147,7 +154,7 @@ def main(argv=None):
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
           f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} "
           f"{'x_zero':>6} {'d_off_hz':>8} "
-          f"{'sig_hz':>6} {'sig_sep':>7} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
+          f"{'sig_hz':>6} {'crb_hz':>7} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
         for offset, drift, fe, impair in runs:
@@ -178,22 +185,25 @@ def main(argv=None):
                       f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} "
                       f"{err3d:8.1f} "
                       f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
-                      f"{_separable_sigma_hz(fix):7.2f} {d_drift:8.4f} "
+                      f"{_data_sigma_hz(res, const):7.2f} {d_drift:8.4f} "
                       f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
 
 
-def _separable_sigma_hz(fix):
-    """Sigma of the receiver offset plus the satellites' mean offset from a static fix's covariance (NaN without).
+def _data_sigma_hz(res, const):
+    """Sigma of the common offset from the data alone (NaN without a static fix).
 
-    The covariance is ordered ``[pos (3), receiver polynomial, satellite offsets, time offsets]``.
+    The replay's fix solved again from its solution with neither the element
+    sets' radial and cross-track error nor the passes' disagreement in the
+    covariance: what the Doppler rows, their sigmas and the priors tell.
     """
-    if fix is None or getattr(fix, "rx_clock_poly_hz", None) is None:
+    fix = None if res.position is None else res.position.fixes
+    if fix is None or getattr(fix, "rx_clock_poly_hz", None) is None or not np.isfinite(fix.pos_ecef_m).all():
         return np.nan
-    n_poly, n_sat = len(fix.rx_clock_poly_hz), len(fix.sat_offset_hz)
-    a = np.zeros(len(fix.cov))
-    a[3] = 1.0
-    a[3 + n_poly:3 + n_poly + n_sat] = 1.0 / n_sat
-    return float(np.sqrt(a @ fix.cov @ a))
+    meas = res.measurements
+    pos, vel, reason, _ = satellite_states(meas, const, fix.pos_ecef_m)
+    again = solve_static_passes(meas.doppler_hz, meas.sigma_hz, pos, vel, meas.carrier_hz, meas.t_s, meas.sat_id,
+                                pos0_ecef_m=fix.pos_ecef_m, mask=reason == "", clock="common", pass_offsets=False)
+    return common_offset_sigma_hz(again) if np.isfinite(again.pos_ecef_m).all() else np.nan
 
 
 def _since_start(t_utc):

@@ -70,13 +70,22 @@ def clock_group_rows(H, clock_onehot):
     return np.concatenate([np.concatenate([H[..., :6], onehot], -1), pseudo], -2)
 
 
-def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=None):
+def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=None, *, inertial=False):
     """Rate of the Doppler, and its gradient w.r.t. the receiver position.
 
     The satellite's ECEF acceleration is two-body gravity plus the frame's
     centrifugal and Coriolis terms (J2 changes it by ~0.1 %); the receiver's
     acceleration is neglected. At rest the rate is ``d(doppler)/d(dt)`` for
     a time offset ``dt`` of the satellite states.
+
+    With ``inertial`` the offset is one of the satellite's inertial orbit
+    (an element set's along-track error: the satellite is where its orbit
+    puts it at ``t + dt`` while the Earth has turned only until ``t``): its
+    ECEF states at ``t + dt`` turned east about the Earth's axis by
+    ``omega_e dt``, i.e. the ECEF derivative plus ``(omega x r, omega x v)``.
+    The two differ by ``omega_e |r| / |v|`` ~ 7 % of the along-track shift
+    (25 m east for 380 m, several Hz of Doppler at Ku band); the ECEF rate
+    is the derivative in time of what a receiver at rest sees.
 
     Parameters
     ----------
@@ -85,6 +94,10 @@ def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_
     carrier_hz : float or array_like, (m,)
     vel_rx_ecef_mps : array_like, (..., 3) or (m, 3), optional
         Receiver velocity; default at rest in ECEF.
+    inertial : bool
+        Derivative for a time offset of the satellite's inertial orbit
+        rather than of its ECEF states (the receiver's motion then not
+        included).
 
     Returns
     -------
@@ -97,14 +110,25 @@ def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_
     a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
            - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
     if vel_rx_ecef_mps is not None:
-        v_s = v_s - np.asarray(vel_rx_ecef_mps, dtype=float)
+        v_rel = v_s - np.asarray(vel_rx_ecef_mps, dtype=float)
+    else:
+        v_rel = v_s
+    # Per second of offset the geometry moves along (w, a_s): the relative ECEF velocity and the satellite's
+    # acceleration, or for an inertial offset the satellite's alone plus the Earth's turn (omega x r, omega x v).
+    if inertial:
+        w, a_s = v_s + np.cross(omega, r_s), a_s + np.cross(omega, v_s)
+    else:
+        w = v_rel
+    v_s = v_rel
     dr = r_s - np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :]
     rho = np.linalg.norm(dr, axis=-1, keepdims=True)
     u = dr / rho
     rho_dot = np.sum(u * v_s, axis=-1, keepdims=True)
+    u_w = np.sum(u * w, axis=-1, keepdims=True)
     u_a = np.sum(u * a_s, axis=-1, keepdims=True)
-    v2 = np.sum(v_s * v_s, axis=-1, keepdims=True)
+    v_w = np.sum(v_s * w, axis=-1, keepdims=True)
     k = -np.asarray(carrier_hz, dtype=float)[..., None] / C_MPS
-    rate = k * ((v2 - rho_dot**2) / rho + u_a)
-    grad = k * (2.0 * rho_dot * (v_s - u * rho_dot) / rho**2 + (v2 - rho_dot**2) * u / rho**2 - (a_s - u * u_a) / rho)
+    rate = k * ((v_w - rho_dot * u_w) / rho + u_a)
+    grad = k * ((u_w * (v_s - u * rho_dot) + rho_dot * (w - u * u_w) + (v_w - rho_dot * u_w) * u) / rho**2
+                - (a_s - u * u_a) / rho)
     return rate[..., 0], grad

@@ -218,7 +218,7 @@ class PassesModel:
         A = np.broadcast_to(r.basis, (len(x),) + r.basis.shape)
         grad = None
         if r.time_bias:
-            rate, grad = doppler_rate(r.pos_sv_ecef_m, r.vel_sv_ecef_mps, x, r.carrier_hz)
+            rate, grad = doppler_rate(r.pos_sv_ecef_m, r.vel_sv_ecef_mps, x, r.carrier_hz, inertial=True)
             A = np.concatenate([A, rate[..., None]], -1)
         B_glob, gi = r.B_glob, r.pass_index
         wd = w[:, :n]

@@ -94,8 +94,8 @@ class PassesFix(BatchFit):
         on the rows the fix used.
     mirror_chi2 : float
     time_bias_s : ndarray, (n_pass,), or None
-        Each pass's time offset of the satellite states (first order: an
-        along-track error of its element set) when modelled.
+        Each pass's time offset of the satellite's inertial orbit (first
+        order: an along-track error of its element set) when modelled.
     clock : str
         ``"per_pass"`` or ``"common"``.
     rx_clock_poly_hz : ndarray, (d + 1,), or None
@@ -200,10 +200,11 @@ def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, ca
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has
-    frequency terms and optionally a time offset ``dt_p`` of its satellite
-    states (to first order the along-track error of its element set, or a
-    time-tag offset), entering each row through the Doppler rate
-    (:func:`~leosop.geometry.doppler.doppler_rate`), with a zero-mean prior
+    frequency terms and optionally a time offset ``dt_p`` of its satellite's
+    inertial orbit (to first order the along-track error of its element
+    set), entering each row through the Doppler rate for such an offset
+    (:func:`~leosop.geometry.doppler.doppler_rate` with ``inertial``: the
+    Earth does not turn with it), with a zero-mean prior
     ``time_bias_sigma_s``.
     Clock models:
 

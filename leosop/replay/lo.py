@@ -11,7 +11,7 @@ offset and one drift over the recording.
 What is estimated is the common part of all tracks' frequency offsets: the
 satellites' own offsets (0-5 Hz for Starlink, [Shen 2024] Table 1) have a
 zero-mean prior, so their mean is not separable from the receiver's and
-is in the estimate.
+is in the estimate, and its sigma is that of the sum (:func:`lo_estimate`).
 
 Before identification, a continuous recording's tracking blocks fit the
 tone model through a rough offset, the median Doppler of the first full
@@ -31,7 +31,7 @@ from ..errors import InputError
 from ..signal.coarse import MAX_DOPPLER_HZ
 
 __all__ = ["LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "ROUGH_LO_MIN_COMBS", "ROUGH_LO_MIN_HZ", "LoEstimate",
-           "check_band", "lo_estimate", "rough_lo_hz"]
+           "check_band", "common_offset_sigma_hz", "lo_estimate", "rough_lo_hz"]
 
 #: Default bound of the receiver's common offset searched [Hz]: PLL LNBs are within ~+-25 ppm of
 #: 10.6-10.75 GHz at the worst (+-270 kHz); typical ones within a few ppm (tens of kHz). Free-running
@@ -91,14 +91,38 @@ def lo_estimate(identification, position=None, measurements=None):
     fix = None if position is None else position.fixes
     poly = getattr(fix, "rx_clock_poly_hz", None)
     if poly is not None and len(poly) > 1 and np.all(np.isfinite(poly)) and measurements is not None:
-        sd = np.sqrt(np.diag(fix.cov)[3:5])
         t_ref = measurements.epoch_utc + np.timedelta64(int(round(fix.rx_t_ref_s * 1e9)), "ns")
-        return LoEstimate(float(poly[0]), float(sd[0]), float(poly[1]), float(sd[1]), t_ref, "static fix")
+        return LoEstimate(float(poly[0]), common_offset_sigma_hz(fix), float(poly[1]), float(np.sqrt(fix.cov[4, 4])),
+                          t_ref, "static fix")
     if identification is None or not np.isfinite(identification.lo_offset_hz):
         return None
     ident = identification
     return LoEstimate(ident.lo_offset_hz, ident.lo_offset_sigma_hz, ident.lo_drift_hz_per_s,
                       ident.lo_drift_sigma_hz_per_s, ident.t_ref_utc, "identification")
+
+
+def common_offset_sigma_hz(fix):
+    """Sigma of the common offset a static fix estimates: its receiver offset plus its satellites' mean offset.
+
+    The satellites' offsets have a zero-mean prior, so the fix's receiver
+    offset is that sum (module docstring); its own variance would add the
+    prior's uncertainty of the mean, which is no error of the sum.
+
+    Parameters
+    ----------
+    fix : PassesFix
+        Clock ``"common"``; its covariance is ordered ``[pos (3), receiver
+        polynomials, satellite offsets, time offsets]``.
+
+    Returns
+    -------
+    float
+    """
+    n_rx, n_sat = fix.rx_clock_polys_hz.size, len(fix.sat_offset_hz)
+    a = np.zeros(len(fix.cov))
+    a[3] = 1.0
+    a[3 + n_rx:3 + n_rx + n_sat] = 1.0 / n_sat
+    return float(np.sqrt(a @ fix.cov @ a))
 
 
 def rough_lo_hz(doppler_hz):
