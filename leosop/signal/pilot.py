@@ -14,16 +14,19 @@ change enter exactly.
 """
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
-from ..constellations import DEFAULT_FAMILY, REGISTRY, family
+from ..constellations import DEFAULT_FAMILY, REGISTRY, CombModel, family
 from ..errors import InputError
 
 __all__ = ["PilotComb", "comb_baseband", "add_noise", "noise_sigma"]
 
 #: The comb assumed when none is given: the default family's (Starlink's).
 _DEFAULT = REGISTRY[DEFAULT_FAMILY]
+# The reference family has a comb (the registry is written so); the cast tells mypy.
+_DEFAULT_COMB = cast(CombModel, _DEFAULT.comb)
 
 
 @dataclass(frozen=True)
@@ -39,8 +42,8 @@ class PilotComb:
     """
 
     carrier_hz: float = _DEFAULT.carrier_hz
-    n_tones: int = _DEFAULT.comb.n_tones
-    tone_spacing_hz: float = _DEFAULT.comb.tone_spacing_hz
+    n_tones: int = _DEFAULT_COMB.n_tones
+    tone_spacing_hz: float = _DEFAULT_COMB.tone_spacing_hz
     amplitudes: tuple | None = None
     phases_rad: tuple | None = None
 
