@@ -22,7 +22,7 @@ from .fine import fine_fast, fine_fmlef, fine_ml, start_step_hz
 from .pilot import PilotComb
 from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
-__all__ = ["METHODS", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
+__all__ = ["METHODS", "Method", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
 
 METHODS = ("fast", "fmlef", "ml")
 #: The estimators' names, for type checkers.
