@@ -7,6 +7,7 @@ is East-North-Up (see :mod:`leosop`).
 """
 
 import numpy as np
+import numpy.typing as npt
 
 from .constants import DAY_S, OMEGA_E_RAD_PER_S, WGS84_A_M, WGS84_B_M, WGS84_E2
 from .shapes import as_vec3
@@ -27,7 +28,7 @@ __all__ = [
 ]
 
 
-def geodetic_to_ecef(lat_rad, lon_rad, alt_m):
+def geodetic_to_ecef(lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike, alt_m: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """WGS84 geodetic coordinates to ECEF position.
 
     Parameters
@@ -48,7 +49,8 @@ def geodetic_to_ecef(lat_rad, lon_rad, alt_m):
     )
 
 
-def ecef_to_geodetic(pos_ecef_m):
+def ecef_to_geodetic(pos_ecef_m: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+                                                          npt.NDArray[np.float64]]:
     """ECEF position to WGS84 geodetic coordinates.
 
     Bowring's parametric-latitude iteration; three passes give better than
@@ -78,7 +80,7 @@ def ecef_to_geodetic(pos_ecef_m):
     return lat, lon, alt
 
 
-def C_e_n(lat_rad, lon_rad):
+def C_e_n(lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotation from the local ENU frame to ECEF.
 
     Parameters
@@ -100,7 +102,7 @@ def C_e_n(lat_rad, lon_rad):
     return np.stack([east, north, up], axis=-1)
 
 
-def ecef_to_enu(vec_ecef, lat_rad, lon_rad):
+def ecef_to_enu(vec_ecef: npt.ArrayLike, lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotate ECEF vectors (differences, velocities) into ENU at (lat, lon).
 
     Parameters
@@ -116,25 +118,26 @@ def ecef_to_enu(vec_ecef, lat_rad, lon_rad):
     return np.einsum("...ji,...j->...i", C_e_n(lat_rad, lon_rad), v)
 
 
-def enu_to_ecef(vec_enu, lat_rad, lon_rad):
+def enu_to_ecef(vec_enu: npt.ArrayLike, lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotate ENU vectors at (lat, lon) into ECEF; inverse of :func:`ecef_to_enu`."""
     v = as_vec3(vec_enu, "vec_enu")
     return np.einsum("...ij,...j->...i", C_e_n(lat_rad, lon_rad), v)
 
 
-def enu_to_ned(vec_enu):
+def enu_to_ned(vec_enu: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """ENU components to NED components, shape (..., 3)."""
     v = as_vec3(vec_enu, "vec_enu")
     return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
 
 
-def ned_to_enu(vec_ned):
+def ned_to_enu(vec_ned: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """NED components to ENU components, shape (..., 3)."""
     v = as_vec3(vec_ned, "vec_ned")
     return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
 
 
-def azimuth_elevation_range(pos_sv_ecef_m, pos_rx_ecef_m):
+def azimuth_elevation_range(pos_sv_ecef_m: npt.ArrayLike, pos_rx_ecef_m: npt.ArrayLike
+                            ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Azimuth, elevation and range of satellites seen from a receiver.
 
     Parameters
@@ -163,7 +166,8 @@ def azimuth_elevation_range(pos_sv_ecef_m, pos_rx_ecef_m):
     return az, elev, range_m
 
 
-def range_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_mps=0.0):
+def range_rate(pos_sv_ecef_m: npt.ArrayLike, vel_sv_ecef_mps: npt.ArrayLike, pos_rx_ecef_m: npt.ArrayLike,
+               vel_rx_ecef_mps: npt.ArrayLike = 0.0) -> npt.NDArray[np.float64]:
     """Rate of change of the satellite-receiver range [m/s].
 
     Positive when the range grows (satellite receding). The Doppler of a
@@ -183,7 +187,7 @@ def range_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, vel_rx_ecef_mps=0.
     return np.sum(los * dv, axis=-1) / np.linalg.norm(los, axis=-1)
 
 
-def rotate_to_later_ecef(vec_ecef, dt_s):
+def rotate_to_later_ecef(vec_ecef: npt.ArrayLike, dt_s: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Express ECEF vectors in the ECEF frame ``dt_s`` later.
 
     The Earth turns by ``theta = OMEGA_E * dt_s`` about z in ``dt_s``, so a
@@ -210,7 +214,7 @@ def rotate_to_later_ecef(vec_ecef, dt_s):
     return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], v[..., 2]], axis=-1)
 
 
-def gmst1982(jd_ut1, fr_ut1):
+def gmst1982(jd_ut1: npt.ArrayLike, fr_ut1: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Greenwich mean sidereal angle of the IAU 1982 model and its rate.
 
     This is the angle that defines the TEME frame of SGP4 (Vallado et al.,
@@ -239,7 +243,8 @@ def gmst1982(jd_ut1, fr_ut1):
     return theta, rate_s_per_s * 2.0 * np.pi / DAY_S
 
 
-def teme_to_ecef(pos_teme_m, vel_teme_mps, jd_ut1, fr_ut1):
+def teme_to_ecef(pos_teme_m: npt.ArrayLike, vel_teme_mps: npt.ArrayLike, jd_ut1: npt.ArrayLike,
+                 fr_ut1: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """TEME position and velocity to ECEF (ITRF without polar motion).
 
     The velocity includes the Earth-rotation term ``-omega x r``, which is

@@ -24,6 +24,7 @@ import dataclasses
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from ..constants import OMEGA_E_RAD_PER_S
 from ..earth import earth_rate_enu
@@ -143,6 +144,9 @@ class Aid:
         columns of :meth:`design` after the 15 INS errors are theirs, in order.
     """
 
+    t_s: float
+    measured: npt.NDArray[np.float64]
+    R: npt.NDArray[np.float64]
     name = "aid"
     needs_heading = False
     gated = True
@@ -150,26 +154,28 @@ class Aid:
     screens = False
     states = ()
 
-    def __init__(self, t_s):
+    def __init__(self, t_s: float):
         self.t_s = float(t_s)
 
-    def predict(self, ins):
+    def predict(self, ins: InsView) -> npt.NDArray[np.float64]:
         """The measurement the INS implies, ``h(ins)``, shape (m,)."""
         raise NotImplementedError
 
-    def design(self, ins):
+    def design(self, ins: InsView) -> npt.NDArray[np.float64]:
         """``H = dz / dx``, shape (m, 15 + the sizes of :attr:`states`)."""
         raise NotImplementedError
 
-    def rate(self, ins):
+    def rate(self, ins: InsView) -> npt.NDArray[np.float64]:
         """``dh/dt`` along the INS's motion, shape (m,): the design column of the IMU time offset."""
         raise NotImplementedError
 
-    def matrices(self, ins):
+    def matrices(self, ins: InsView) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+                                              npt.NDArray[np.float64]]:
         """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` as :meth:`design`, ``R`` (m, m)."""
         return self.predict(ins) - self.measured, self.design(ins), self.R
 
-    def screen(self, z, H, R, P):
+    def screen(self, z: npt.NDArray[np.float64], H: npt.NDArray[np.float64], R: npt.NDArray[np.float64],
+               P: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.bool_], list[StateBlock]] | None:
         """Per-row outlier screening before the update (aids with ``screens`` True); None: every row.
 
         An aid that screens returns ``(keep, restart)``: the rows to use

@@ -45,16 +45,20 @@ crab); aids with ``needs_heading`` wait until then.
 
 import itertools
 import math
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import scipy.stats
 
 from .. import earth
 from ..ins import error_model, strapdown
 from ..ins.error_model import DPOS, DV, EPS, NABLA, PHI
+from ..ins.strapdown import NavState
 from ..rotations import dcm_to_euler, euler_to_dcm
 from . import kalman
-from .aids import InsView
+from .aids import Aid, InsView
 from .blocks import Blocks
 from .common import N_INS
 from .record import EngineResult, Recorder
@@ -294,8 +298,13 @@ class _Filter:
         self.pending_var += var2[0] + var2[1]
 
 
-def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, course_alignment=None,
-        time_offset_s=0.0, progress=None, on_aid=None, after_aid=None, increment_var=None):
+def run(state0: NavState, P0: npt.ArrayLike, t_s: npt.ArrayLike, dt_s: npt.ArrayLike,
+        dtheta_b_rad: npt.NDArray[np.float64], dvel_b_mps: npt.NDArray[np.float64], aids: Iterable[Aid],
+        settings: EngineSettings, *, course_alignment: CourseAlignment | None = None, time_offset_s: float = 0.0,
+        progress: Callable[[range], Iterable[int]] | None = None, on_aid: Callable[..., None] | None = None,
+        after_aid: Callable[[Aid, NavState, npt.NDArray[np.float64], dict[str, Any]],
+                            Iterable[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None] | None = None,
+        increment_var: npt.ArrayLike | None = None) -> EngineResult:
     """Run the filter over an IMU log with time-ordered aids.
 
     Parameters
@@ -381,7 +390,7 @@ def run(state0, P0, t_s, dt_s, dtheta_b_rad, dvel_b_mps, aids, settings, *, cour
             t_aid, c = min(due)
             index, aid = queues[c][heads[c]]
             heads[c] += 1
-            if not heading_known:
+            if course_alignment is not None and not heading_known:  # the heading is unknown only with an alignment
                 v = getattr(aid, "vel_enu_mps", None)
                 if v is None or math.hypot(v[0], v[1]) < course_alignment.min_speed_mps:
                     if aid.needs_heading:

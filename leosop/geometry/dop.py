@@ -5,11 +5,13 @@ GDOP ``sqrt(trace((H^T H)^-1))`` of the Doppler rows of :mod:`leosop.geometry.do
 """
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["gdop", "cofactor", "range_dops"]
 
 
-def cofactor(H, weights=None, *, rcond=1e-12):
+def cofactor(H: npt.ArrayLike, weights: npt.ArrayLike | None = None, *, rcond: float = 1e-12
+             ) -> npt.NDArray[np.float64]:
     """``(H^T W H)^-1`` per batch; NaN where fewer rows than columns or singular.
 
     Parameters
@@ -24,10 +26,10 @@ def cofactor(H, weights=None, *, rcond=1e-12):
     -------
     Q : ndarray, (..., n_states, n_states)
     """
-    H = np.nan_to_num(np.asarray(H, dtype=float))
-    w = np.ones(H.shape[:-1]) if weights is None else np.nan_to_num(np.asarray(weights, dtype=float))
-    n_states = H.shape[-1]
-    HtH = np.einsum("...ki,...k,...kj->...ij", H, w, H)
+    Hf = np.nan_to_num(np.asarray(H, dtype=float))
+    w = np.ones(Hf.shape[:-1]) if weights is None else np.nan_to_num(np.asarray(weights, dtype=float))
+    n_states = Hf.shape[-1]
+    HtH = np.einsum("...ki,...k,...kj->...ij", Hf, w, Hf)
     # Columns differ by orders of magnitude (Hz/m against Hz/(m/s)): judge the
     # rank on the equilibrated matrix D HtH D with unit diagonal, then unscale.
     diag = np.einsum("...ii->...i", HtH)
@@ -38,7 +40,7 @@ def cofactor(H, weights=None, *, rcond=1e-12):
     return np.einsum("...ik,...k,...jk->...ij", V, inv_lam, V) * d[..., :, None] * d[..., None, :]
 
 
-def gdop(H, weights=None):
+def gdop(H: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
     """GDOP ``sqrt(trace((H^T W H)^-1))`` ([Shen 2024] eq. 10); NaN when undetermined.
 
     Parameters
@@ -53,7 +55,7 @@ def gdop(H, weights=None):
     return np.sqrt(np.trace(cofactor(H, weights), axis1=-2, axis2=-1))
 
 
-def range_dops(los_enu, weights=None):
+def range_dops(los_enu: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> dict[str, npt.NDArray[np.float64]]:
     """Classic pseudorange DOPs from unit lines of sight in ENU.
 
     Parameters

@@ -72,6 +72,7 @@ time); UTC at the output (GPS - UTC = 18 s from 2017).
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 
@@ -79,8 +80,8 @@ from ..constants import C_MPS, DAY_S
 from ..errors import InputError
 from ..frames import C_e_n, ecef_to_geodetic, rotate_to_later_ecef
 from . import models
-from .antex import antenna_corrections_if
-from .ar import fix_epoch, mw_arc_stats, nl_constants
+from .antex import Antex, antenna_corrections_if
+from .ar import ArOptions, fix_epoch, mw_arc_stats, nl_constants
 from .ppp_obs import SIGNALS, detect_slips, if_observations, spp_position
 from .products import Clocks, Orbits, seconds_gps
 from .rinex import ObsData
@@ -124,10 +125,10 @@ class PppOptions:
     # Troposphere mapping functions: "gmf" [Boehm 2006] (the IERS 2010 choice without weather-model grids; on
     # ESBC00DNK 0.7 mm closer in up than NMF) or "niell" [Niell 1996] (docs/ppp.md, "Troposphere: the mapping
     # function and gradients").
-    mapping: str = "gmf"
+    mapping: Literal["gmf", "niell"] = "gmf"
     # Pressure of the a priori hydrostatic zenith delay: "gpt" [Boehm 2007]'s climatology or "standard" (the
     # standard atmosphere's); no meteorological file is read.
-    zhd_pressure: str = "gpt"
+    zhd_pressure: Literal["gpt", "standard"] = "gpt"
     grad_rw_m_per_rt_s: float = 1e-3 / 60.0
     init_grad_sigma_m: float = 0.002
     kin_pos_sigma_m: float = 100.0
@@ -136,8 +137,8 @@ class PppOptions:
     clk_sigma_m: float = 100.0
     phase_gm_sigma_m: float = 0.005
     phase_gm_tau_s: float = 1800.0
-    floor_enu_m: tuple = (0.005, 0.005, 0.01)
-    floor_no_antex_enu_m: tuple = (0.02, 0.02, 0.05)
+    floor_enu_m: tuple[float, float, float] = (0.005, 0.005, 0.01)
+    floor_no_antex_enu_m: tuple[float, float, float] = (0.02, 0.02, 0.05)
     k_outlier: float = 5.0
     gf_slip_m: float = 0.05
     mw_slip_cycles: float = 4.0
@@ -178,7 +179,8 @@ class PppResult:
     grad_ne_m: np.ndarray
 
 
-def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None):
+def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(),
+            antex: Antex | None = None) -> dict[str, Any]:
     """Corrected IF observations and geometry for every (epoch, satellite).
 
     Returns
@@ -289,8 +291,9 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
             "x0": x0, "t_s": t_s, "lat0": lat0, "lon0": lon0, "MW": meas["MW"]}
 
 
-def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(), antex=None, *,
-            ar=None, no_ar=None):
+def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(),
+            antex: Antex | None = None, *, ar: ArOptions | None = None,
+            no_ar: dict[str, str] | None = None) -> PppResult:
     """PPP over every epoch of ``obs``: float, and with ``ar`` ambiguity-fixed (:mod:`leosop.gnss.ar`).
 
     Parameters

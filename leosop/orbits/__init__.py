@@ -7,6 +7,7 @@ inside the package and linked from the top-level ``tle/``; epoch
 2025-01-01T00:00:00Z, made by ``tools/make_walker_tle.py``).
 """
 
+import os
 from importlib.resources import files
 from pathlib import Path
 
@@ -20,7 +21,7 @@ __all__ = ["DEFAULT_TLE", "Constellation", "load_constellation", "read_tle", "re
 DEFAULT_TLE = Path(str(files("leosop") / "data" / "starlink_walker.tle"))
 
 
-def load_constellation(path=None, *, skip_bad=False):
+def load_constellation(path: str | os.PathLike[str] | None = None, *, skip_bad: bool = False) -> Constellation:
     """Read an element-set file (TLE or OMM by suffix), or the bundled default.
 
     Parameters

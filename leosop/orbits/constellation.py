@@ -8,10 +8,12 @@ propagator takes. Satellites are grouped into the families of
 :meth:`Constellation.select_ids`.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+import numpy.typing as npt
 from sgp4.api import SatrecArray
 
 from ..constellations import family, family_of
@@ -43,20 +45,21 @@ class Constellation:
     epochs_utc: np.ndarray
     source: str = ""
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.satrecs)
 
     @cached_property
-    def satrec_array(self):
+    def satrec_array(self) -> SatrecArray:
         """The vectorised propagator over all satellites."""
         return SatrecArray(list(self.satrecs))
 
     @cached_property
-    def families(self):
+    def families(self) -> npt.NDArray[np.str_]:
         """Family key of each satellite (``""`` when unknown), ndarray of str."""
         return np.array([family_of(n) for n in self.names], dtype=object).astype(str)
 
-    def subset(self, index):
+    def subset(self, index: npt.NDArray[np.integer] | npt.NDArray[np.bool_] | Sequence[int] | slice
+               ) -> "Constellation":
         """Satellites at ``index`` (integer array, slice or boolean mask)."""
         idx = np.arange(len(self))[index]
         return Constellation(
@@ -67,7 +70,7 @@ class Constellation:
             self.source,
         )
 
-    def index_of(self, ids):
+    def index_of(self, ids: npt.ArrayLike) -> npt.NDArray[np.int_]:
         """Indices of catalogue numbers ``ids``; InputError naming unknown ones."""
         lookup = {sid: i for i, sid in enumerate(self.sat_ids)}
         ids = [str(s).strip() for s in np.atleast_1d(ids)]
@@ -77,10 +80,10 @@ class Constellation:
             raise InputError(f"{self.source or 'constellation'}: no element set for satellite id(s) {shown}")
         return np.array([lookup[s] for s in ids], dtype=int)
 
-    def select_ids(self, ids):
+    def select_ids(self, ids: npt.ArrayLike) -> "Constellation":
         """Satellites with the given NORAD catalogue numbers, in that order."""
         return self.subset(self.index_of(ids))
 
-    def family(self, key):
+    def family(self, key: str) -> "Constellation":
         """Satellites of one family (a key of :data:`leosop.constellations.REGISTRY`)."""
         return self.subset(self.families == family(key).key)

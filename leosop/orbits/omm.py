@@ -2,6 +2,7 @@
 
 import csv
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ _DEFAULTS = {"CLASSIFICATION_TYPE": "U", "OBJECT_ID": "", "EPHEMERIS_TYPE": "0",
              "REV_AT_EPOCH": "0"}
 
 
-def read_omm(path):
+def read_omm(path: str | os.PathLike[str]) -> Constellation:
     """Read a CelesTrak OMM file, JSON (``FORMAT=json``) or CSV (``FORMAT=csv``).
 
     Parameters

@@ -11,6 +11,7 @@ or, with ``skip_bad=True``, is skipped with a warning.
 """
 
 import math
+import os
 import warnings
 from pathlib import Path
 
@@ -183,7 +184,7 @@ def _unique(const):
     return const.subset(keep)
 
 
-def read_tle(path, *, skip_bad=False):
+def read_tle(path: str | os.PathLike[str], *, skip_bad: bool = False) -> Constellation:
     """Read a 2-line or 3-line TLE file.
 
     Parameters

@@ -10,6 +10,7 @@ epoch is an independent problem of :func:`~leosop.positioning.robust_ls.solve_ro
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import InputError
 from ..geometry.dop import cofactor
@@ -75,18 +76,21 @@ class SnapshotFixes:
     chi2: np.ndarray
     dof: np.ndarray
     status: np.ndarray
-    clock_offsets_hz: np.ndarray = None
+    clock_offsets_hz: np.ndarray | None = None
     clock_labels: tuple = ()
 
     @property
-    def residual_rms_hz(self):
+    def residual_rms_hz(self) -> npt.NDArray[np.float64]:
         """RMS of the used residuals per epoch, ndarray (n_ep,)."""
         r2 = np.where(self.used, np.nan_to_num(self.residuals_hz) ** 2, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.sqrt(r2.sum(-1) / self.n_used)
 
-def solve_snapshots(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, mask=None, x0=None, *,
-                    max_iter=50, alpha=1e-3, clock_group=None, clock_labels=None):
+def solve_snapshots(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_sv_ecef_m: npt.ArrayLike,
+                    vel_sv_ecef_mps: npt.ArrayLike, carrier_hz: npt.ArrayLike, mask: npt.ArrayLike | None = None,
+                    x0: npt.ArrayLike | None = None, *, max_iter: int = 50, alpha: float | None = 1e-3,
+                    clock_group: npt.ArrayLike | None = None,
+                    clock_labels: npt.ArrayLike | None = None) -> SnapshotFixes:
     """Snapshot Doppler fixes of many epochs at once ([Shen 2024] eq. 4-12).
 
     Parameters

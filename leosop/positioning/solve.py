@@ -19,14 +19,18 @@ Rows that cannot be used and epochs that cannot be solved are reported,
 never silently dropped; the rest is still solved.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import InputError
 from ..geometry.doppler import N_DOPPLER_STATES
 from ..orbits.accuracy import element_set_sigma_rc_m
-from .measurements import clock_groups, sv_states_from_tle
+from ..orbits.constellation import Constellation
+from .measurements import Measurements, clock_groups, sv_states_from_tle
 from .snapshot import solve_snapshots
 from .starts import subpoint_centroid_ecef_m
 from .static import solve_static
@@ -74,19 +78,21 @@ class PositionResult:
 
     fixes: object
     t_s: np.ndarray
-    time_utc: np.ndarray
+    time_utc: np.ndarray | None
     n_sats: np.ndarray
     rows: np.ndarray
     rejected: list
     unsolved: list
     sigma_hz_default: float
     sv_states: str
-    sigma_hz_pass: np.ndarray = None
+    sigma_hz_pass: np.ndarray | None = None
     clock_labels: tuple = ()
-    n_need: np.ndarray = None
+    n_need: np.ndarray | None = None
 
 
-def satellite_states(meas, constellation=None, pos_rx_ecef_m=None):
+def satellite_states(meas: Measurements, constellation: Constellation | None = None,
+                     pos_rx_ecef_m: npt.ArrayLike | None = None
+                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.str_], str]:
     """Satellite states per row: the table's columns, else element sets with light time.
 
     Parameters
@@ -160,7 +166,9 @@ def _rejections(meas, reason):
     return list(meas.rejected) + [(int(meas.line[k]), str(reason[k])) for k in np.flatnonzero(reason != "")]
 
 
-def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_hz=None, alpha=1e-3):
+def position_snapshots(meas: Measurements, *, constellation: Constellation | None = None,
+                       init_pos_ecef_m: npt.ArrayLike | None = None, sigma_hz: float | None = None,
+                       alpha: float | None = 1e-3) -> PositionResult:
     """One snapshot fix per epoch with at least ``6 + k`` usable satellites of k constellations.
 
     Parameters
@@ -238,8 +246,10 @@ def position_snapshots(meas, *, constellation=None, init_pos_ecef_m=None, sigma_
                           sigma_default, source, clock_labels=labels, n_need=n_need)
 
 
-def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
-                    sigma_hz=None, alpha=1e-3, clock_degree=(1, 2, 3), side_clock_degree=1):
+def position_static(meas: Measurements, *, constellation: Constellation | None = None,
+                    init_pos_ecef_m: npt.ArrayLike | None = None, alt_m: float | None = None,
+                    alt_sigma_m: float = 10.0, sigma_hz: float | None = None, alpha: float | None = 1e-3,
+                    clock_degree: int | Sequence[int] = (1, 2, 3), side_clock_degree: int = 1) -> PositionResult:
     """One batch fix of a receiver at rest from all rows.
 
     Parameters
@@ -307,10 +317,12 @@ def position_static(meas, *, constellation=None, init_pos_ecef_m=None, alt_m=Non
                           sigma_default, source, clock_labels=labels)
 
 
-def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m=None, alt_m=None, alt_sigma_m=10.0,
-                           sigma_hz=None, alpha=1e-3, clock="per_pass", clock_degree=None,
-                           sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ, time_bias=True,
-                           time_bias_sigma_s=TIME_OFFSET_SIGMA_S):
+def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, constellation: Constellation | None = None,
+                           init_pos_ecef_m: npt.ArrayLike | None = None, alt_m: float | None = None,
+                           alt_sigma_m: float = 10.0, sigma_hz: float | None = None, alpha: float | None = 1e-3,
+                           clock: Literal["per_pass", "common"] = "per_pass", clock_degree: int | None = None,
+                           sat_offset_sigma_hz: float = SAT_OFFSET_SIGMA_HZ, time_bias: bool = True,
+                           time_bias_sigma_s: float | None = TIME_OFFSET_SIGMA_S) -> PositionResult:
     """One batch fix of a receiver at rest from several passes (satellites), frequency terms per pass.
 
     Rows without ``sigma_hz`` get the caller's sigma, or their own pass's:
@@ -365,11 +377,11 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
         for _ in range(2):
             pilot = solve_static_passes(meas.doppler_hz, sigma_pilot, pos, vel, meas.carrier_hz, meas.t_s, pass_id,
                                         alpha=None, **kw)
-            sigma_pass = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used],
-                                                 n_loc + bool(time_bias))
-                                   for p in pilot.pass_ids])
-            sigma_pass = np.where(np.isfinite(sigma_pass) & (sigma_pass > 0), sigma_pass, 1.0)
-            lookup = dict(zip(pilot.pass_ids.tolist(), sigma_pass))
+            pass_sigmas = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used],
+                                                  n_loc + bool(time_bias))
+                                    for p in pilot.pass_ids])
+            pass_sigmas = np.where(np.isfinite(pass_sigmas) & (pass_sigmas > 0), pass_sigmas, 1.0)
+            lookup = dict(zip(pilot.pass_ids.tolist(), pass_sigmas))
             sigma_rows = np.array([lookup.get(p, np.nan) for p in pass_id.tolist()])
             sigma_pilot = np.where(np.isfinite(meas.sigma_hz), meas.sigma_hz, np.nan_to_num(sigma_rows, nan=1.0))
         if np.isfinite(pilot.pos_ecef_m).all():
@@ -377,6 +389,7 @@ def position_static_passes(meas, pass_id, *, constellation=None, init_pos_ecef_m
             # The pilot searched the starts: the fix starts from its solution and the best other one.
             kw["pos0_ecef_m"] = np.vstack([pilot.pos_ecef_m] + [pilot.mirror_pos_ecef_m] * bool(
                 np.isfinite(pilot.mirror_pos_ecef_m).all()))
+        sigma_pass = pass_sigmas
         sigma_default = float(np.median(sigma_pass)) if sigma_pass.size else np.nan
     else:
         sigma_default = float(sigma_hz) if sigma_hz is not None else np.nan

@@ -9,9 +9,11 @@ Solved by :func:`~leosop.positioning.robust_ls.solve_robust` from several
 starts across the track.
 """
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
@@ -79,14 +81,18 @@ class StaticFix(BatchFit):
     clock_offset_hz: float
     clock_drift_hz_per_s: float
     t_ref_s: float
-    clock_poly_hz: np.ndarray = None
-    clock_polys_hz: np.ndarray = None
+    # Always set by solve_static; keyword-only so that they need no default after BatchFit's defaults.
+    clock_poly_hz: np.ndarray = field(kw_only=True)
+    clock_polys_hz: np.ndarray = field(kw_only=True)
     clock_labels: tuple = ()
 
 
-def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, *, pos0_ecef_m=None,
-                 alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=200, alpha=1e-3, start_offset_m=1.5e6,
-                 ambiguity_m=10e3, clock_degree=1, side_clock_degree=None, clock_group=None):
+def solve_static(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_sv_ecef_m: npt.ArrayLike,
+                 vel_sv_ecef_mps: npt.ArrayLike, carrier_hz: npt.ArrayLike, t_s: npt.ArrayLike, *,
+                 pos0_ecef_m: npt.ArrayLike | None = None, alt_m: float | None = None, alt_sigma_m: float = 10.0,
+                 mask: npt.ArrayLike | None = None, max_iter: int = 200, alpha: float | None = 1e-3,
+                 start_offset_m: float = 1.5e6, ambiguity_m: float = 10e3, clock_degree: int | Sequence[int] = 1,
+                 side_clock_degree: int | None = None, clock_group: npt.ArrayLike | None = None) -> StaticFix:
     """Batch Doppler fix of a receiver at rest in ECEF.
 
     The frequency offset is a polynomial of degree ``clock_degree`` in
@@ -164,7 +170,7 @@ def solve_static(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_h
     gi[m] = g_idx.ravel()
     onehot = (gi[:, None] == np.arange(n_clk)).astype(float)
     has_alt = alt_m is not None
-    if has_alt:
+    if alt_m is not None:
         y = np.append(y, alt_m)
         sigma = np.append(sigma, alt_sigma_m)
         m = np.append(m, True)

@@ -31,14 +31,19 @@ cross-track shift per satellite.
 """
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 from scipy.interpolate import CubicSpline
 
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..frames import rotate_to_later_ecef
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
+
+if TYPE_CHECKING:  # the orbits are imported where used (propagation is not needed to make IQ)
+    from ..orbits.constellation import Constellation
 
 __all__ = ["doppler_blocks", "OrbitError", "light_time_positions", "site_geometry",
            "cn0_geometry_dbhz", "inertial_speed_mps", "CN0_REF_RANGE_M", "SiteChannel"]
@@ -52,8 +57,11 @@ WAVEFORMS = ("tones", "ofdm")
 #: Doppler margin kept inside a narrow recording's band for OFDM subcarriers [Hz].
 _MAX_OFDM_DOPPLER_HZ = 300e3
 
-def doppler_blocks(sample_rate_hz, n_samples, doppler_hz, doppler_rate_hz_per_s=0.0, cn0_dbhz=None, *,
-                   doppler_accel_hz_per_s2=0.0, comb=None, rng=None, dtype=np.complex64):
+def doppler_blocks(sample_rate_hz: float, n_samples: int, doppler_hz: npt.ArrayLike,
+                   doppler_rate_hz_per_s: npt.ArrayLike = 0.0, cn0_dbhz: npt.ArrayLike | None = None, *,
+                   doppler_accel_hz_per_s2: npt.ArrayLike = 0.0,
+                   comb: PilotComb | None = None, rng: np.random.Generator | None = None,
+                   dtype: npt.DTypeLike = np.complex64) -> npt.NDArray[np.complexfloating]:
     """Pilot comb blocks, one per row, with given Doppler at each block centre.
 
     The central tone's frequency over block i is
@@ -200,8 +208,10 @@ def light_time_positions(constellation, pos_rx_ecef_m, times_utc, *, orbit_error
     return p.reshape(n_sats, n, 3), tau.reshape(n_sats, n)
 
 
-def site_geometry(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_step_s=0.1, orbit_error=None,
-                  vel_rx_ecef_mps=None):
+def site_geometry(constellation: "Constellation", pos_rx_ecef_m: npt.ArrayLike, start_utc: np.datetime64 | str,
+                  duration_s: float, *, node_step_s: float = 0.1, orbit_error: "OrbitError | None" = None,
+                  vel_rx_ecef_mps: npt.ArrayLike | None = None
+                  ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Light-time range and elevation of every satellite seen from a receiver, on a node grid.
 
     Parameters
@@ -229,8 +239,8 @@ def site_geometry(constellation, pos_rx_ecef_m, start_utc, duration_s, *, node_s
     from ..frames import azimuth_elevation_range
 
     n_nodes = int(np.ceil(duration_s / node_step_s)) + 3
-    t_nodes = (np.arange(n_nodes) - 1) * node_step_s
-    times = np.datetime64(start_utc, "ns") + np.round(t_nodes * 1e9).astype("timedelta64[ns]")
+    t_nodes = (np.arange(n_nodes, dtype=np.float64) - 1) * node_step_s
+    times = np.asarray(start_utc, dtype="datetime64[ns]") + np.round(t_nodes * 1e9).astype("timedelta64[ns]")
     rx = np.asarray(pos_rx_ecef_m, dtype=float)
     if vel_rx_ecef_mps is not None:
         rx = rx + t_nodes[:, None] * np.asarray(vel_rx_ecef_mps, dtype=float)
@@ -351,13 +361,13 @@ class SiteChannel:
     def n_sats(self):
         return self.range_m.shape[0]
 
-    def doppler_hz(self, t_s):
+    def doppler_hz(self, t_s: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Central-tone Doppler of each satellite, clocks included, (n_sats, n)."""
         t = np.asarray(t_s, dtype=float)
         rr = self._range(t, 1)
         return -rr * self.comb.carrier_hz / C_MPS + self.clock_offset_hz[:, None] + self._drift_hz_per_s()[:, None] * t
 
-    def doppler_rate_hz_per_s(self, t_s):
+    def doppler_rate_hz_per_s(self, t_s: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Rate of the central-tone Doppler, (n_sats, n)."""
         rate = -self._range(np.asarray(t_s, dtype=float), 2) * self.comb.carrier_hz / C_MPS
         return rate + self._drift_hz_per_s()[:, None]
@@ -366,14 +376,14 @@ class SiteChannel:
         """Clock drift in each satellite's Doppler, the receiver's plus the satellite's, (n_sats,)."""
         return self.rx_drift_hz_per_s + self.sat_drift_hz_per_s
 
-    def amplitude(self, t_s):
+    def amplitude(self, t_s: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Tone amplitude of each satellite (1 at the strongest node of all), (n_sats, n)."""
         t = np.atleast_1d(np.asarray(t_s, dtype=float))
         k = np.clip(np.searchsorted(self.t_nodes_s, t, side="right") - 1, 0, self.t_nodes_s.size - 2)
         w = (t - self.t_nodes_s[k]) / (self.t_nodes_s[k + 1] - self.t_nodes_s[k])
         return self._amp[:, k] * (1.0 - w) + self._amp[:, k + 1] * w
 
-    def cn0_at(self, t_s):
+    def cn0_at(self, t_s: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """C/N0 per tone of each satellite [dB-Hz], -inf when silent, (n_sats, n)."""
         with np.errstate(divide="ignore"):
             return self._cn0_ref + 20.0 * np.log10(self.amplitude(t_s))

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import InputError
 from .pilot import PilotComb
@@ -70,8 +71,9 @@ def parabola_vertex(y_minus, y0, y_plus):
     return float(np.clip(0.5 * (y_minus - y_plus) / den, -0.5, 0.5))
 
 
-def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
-               smear_hz=0.0, pfa=PFA, centre_hz=0.0):
+def coarse_fft(spectrum: npt.NDArray[np.complexfloating], sample_rate_hz: float, comb: PilotComb, *,
+               max_doppler_hz: float = MAX_DOPPLER_HZ, smear_hz: float = 0.0, pfa: float = PFA,
+               centre_hz: float = 0.0) -> CoarseEstimate:
     """Find the comb's central tone in one spectrum.
 
     Parameters
@@ -154,8 +156,10 @@ def coarse_fft(spectrum, sample_rate_hz, comb, *, max_doppler_hz=MAX_DOPPLER_HZ,
     return CoarseEstimate(doppler_hz, error_hz, stat > thr, stat, thr, float(margin))
 
 
-def coarse_stft(iq, sample_rate_hz, comb=None, *, nperseg=4096, hop=None,
-                max_doppler_hz=MAX_DOPPLER_HZ, pfa=PFA):
+def coarse_stft(iq: npt.NDArray[np.complexfloating], sample_rate_hz: float, comb: PilotComb | None = None, *,
+                nperseg: int = 4096, hop: int | None = None, max_doppler_hz: float = MAX_DOPPLER_HZ,
+                pfa: float = PFA) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+                                           npt.NDArray[np.float64]]:
     """Short-time Fourier transform and the comb's coarse Doppler track.
 
     Parameters

@@ -10,8 +10,10 @@ nominal frequency (DESIGN 4.2), positive when the satellite approaches.
 """
 
 from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import InputError
 from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, coarse_fft
@@ -20,9 +22,11 @@ from .fine import fine_fast, fine_fmlef, fine_ml, start_step_hz
 from .pilot import PilotComb
 from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
-__all__ = ["METHODS", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
+__all__ = ["METHODS", "Method", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
 
 METHODS = ("fast", "fmlef", "ml")
+#: The estimators' names, for type checkers.
+Method = Literal["fast", "fmlef", "ml"]
 
 
 @dataclass
@@ -37,7 +41,7 @@ class BlockEstimates:
     status: np.ndarray
 
 
-def _check_iq(iq, sample_rate_hz):
+def _check_iq(iq: npt.ArrayLike, sample_rate_hz: float) -> npt.NDArray[np.complexfloating]:
     if not np.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
         raise InputError(f"sample_rate_hz={sample_rate_hz} must be a finite number > 0")
     iq = np.asarray(iq)
@@ -52,7 +56,7 @@ def _check_finite(value):
         raise InputError("IQ samples contain NaN or inf")
 
 
-def ml_grid_points(coarse_error_hz, resolution_hz):
+def ml_grid_points(coarse_error_hz: float, resolution_hz: float) -> int:
     """How many frequencies ``ml`` evaluates per block for a coarse estimate good to ``coarse_error_hz``.
 
     Its grid spans +-10 start steps (:func:`~.fine.fine_ml`) at ``resolution_hz``;
@@ -61,9 +65,11 @@ def ml_grid_points(coarse_error_hz, resolution_hz):
     return 2 * int(round(10.0 * start_step_hz(coarse_error_hz) / resolution_hz)) + 1
 
 
-def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_hz=1e-3,
-                   coarse_hz=None, coarse_error_hz=None, max_doppler_hz=MAX_DOPPLER_HZ,
-                   max_rate_hz_per_s=MAX_RATE_HZ_PER_S, doppler_accel_hz_per_s2=0.0, pfa=PFA):
+def estimate_block(iq: npt.ArrayLike, sample_rate_hz: float, *, method: Method = "fast",
+                   comb: PilotComb | None = None, resolution_hz: float = 1e-3, coarse_hz: float | None = None,
+                   coarse_error_hz: float | None = None, max_doppler_hz: float = MAX_DOPPLER_HZ,
+                   max_rate_hz_per_s: float = MAX_RATE_HZ_PER_S, doppler_accel_hz_per_s2: float = 0.0,
+                   pfa: float = PFA) -> dict[str, float | bool | str]:
     """Doppler of the comb's central tone at the centre of one block.
 
     Parameters
@@ -103,8 +109,8 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     comb = comb or PilotComb()
     iq = _check_iq(iq, sample_rate_hz)
     nan = float("nan")
-    out = dict(doppler_hz=nan, doppler_rate_hz_per_s=nan, cn0_dbhz=nan, sigma_hz=nan, detected=False,
-               status="no pilot detected")
+    out: dict[str, float | bool | str] = dict(doppler_hz=nan, doppler_rate_hz_per_s=nan, cn0_dbhz=nan, sigma_hz=nan,
+                                              detected=False, status="no pilot detected")
     dur = iq.shape[-1] / sample_rate_hz
     if coarse_hz is None:
         smear = max_rate_hz_per_s * dur if method == "fast" else 0.0
@@ -121,7 +127,8 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
         err = coarse_error_hz if coarse_error_hz is not None else sample_rate_hz / iq.shape[-1]
         coarse = CoarseEstimate(float(coarse_hz), float(err), True, nan, nan)
     out["detected"] = True
-    fit_kw = dict(max_rate_hz_per_s=max_rate_hz_per_s, doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa)
+    fit_kw: dict[str, Any] = dict(max_rate_hz_per_s=max_rate_hz_per_s,
+                                  doppler_accel_hz_per_s2=doppler_accel_hz_per_s2, pfa=pfa)
     if method == "fast":
         fit = fine_fast(iq, sample_rate_hz, comb, coarse, **fit_kw)
         out.update(doppler_hz=fit.doppler_hz, doppler_rate_hz_per_s=fit.doppler_rate_hz_per_s,
@@ -152,9 +159,10 @@ def estimate_block(iq, sample_rate_hz, *, method="fast", comb=None, resolution_h
     return out
 
 
-def estimate_blocks(iq_blocks, sample_rate_hz, *, method="fast", comb=None, resolution_hz=1e-3,
-                    max_doppler_hz=MAX_DOPPLER_HZ, max_rate_hz_per_s=MAX_RATE_HZ_PER_S,
-                    doppler_accel_hz_per_s2=0.0, pfa=PFA, show_progress=False):
+def estimate_blocks(iq_blocks: npt.ArrayLike, sample_rate_hz: float, *, method: Method = "fast",
+                    comb: PilotComb | None = None, resolution_hz: float = 1e-3, max_doppler_hz: float = MAX_DOPPLER_HZ,
+                    max_rate_hz_per_s: float = MAX_RATE_HZ_PER_S, doppler_accel_hz_per_s2: npt.ArrayLike = 0.0,
+                    pfa: float = PFA, show_progress: bool = False) -> BlockEstimates:
     """:func:`estimate_block` over the rows of ``iq_blocks`` (n_blocks, n_samples).
 
     ``doppler_accel_hz_per_s2`` may be a scalar or one value per block

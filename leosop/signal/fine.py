@@ -46,10 +46,12 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 
 from .coarse import MAX_RATE_HZ_PER_S, PFA, CoarseEstimate, abs2, detection_threshold, parabola_vertex
 from .crlb import crlb_frequency_hz2
 from .fft import fft
+from .pilot import PilotComb
 from .quality import position_margin_sigma, tone_spread
 
 __all__ = ["CombFit", "periodogram_grid", "fine_ml", "fine_fmlef", "fine_fast", "cubic_bias_hz", "start_step_hz",
@@ -117,14 +119,16 @@ def start_step_hz(error_hz):
     return 10.0 ** np.ceil(np.log10(max(error_hz, 1e-12) / 10.0))
 
 
-def fine_ml(iq, sample_rate_hz, coarse_hz, resolution_hz, span_hz):
+def fine_ml(iq: npt.NDArray[np.complexfloating], sample_rate_hz: float, coarse_hz: float, resolution_hz: float,
+            span_hz: float) -> float:
     """Grid ML (eq. 2): argmax over ``coarse_hz + [-span, span]`` at ``resolution_hz``."""
     m = int(round(span_hz / resolution_hz))
     values = periodogram_grid(iq, sample_rate_hz, coarse_hz - m * resolution_hz, resolution_hz, 2 * m + 1)
     return coarse_hz + (int(np.argmax(values)) - m) * resolution_hz
 
 
-def fine_fmlef(iq, sample_rate_hz, coarse_hz, resolution_hz, start_step_hz):
+def fine_fmlef(iq: npt.NDArray[np.complexfloating], sample_rate_hz: float, coarse_hz: float, resolution_hz: float,
+               start_step_hz: float) -> float:
     """FMLEF ([Shen 2024] section 2.1): decade refinement with 21 points and a parabola per level."""
     step = float(start_step_hz)
     f = float(coarse_hz)
@@ -331,8 +335,9 @@ def _residual_sigma_hz(white, tau, counts, weight):
     return (float(np.sqrt(np.sum(weight * noise_k) / den)) if den > 0 else np.inf), noise_k
 
 
-def fine_fast(iq, sample_rate_hz, comb, coarse, *, max_rate_hz_per_s=MAX_RATE_HZ_PER_S,
-              doppler_accel_hz_per_s2=0.0, pfa=PFA, resolve=True):
+def fine_fast(iq: npt.NDArray[np.complexfloating], sample_rate_hz: float, comb: PilotComb, coarse: CoarseEstimate,
+              *, max_rate_hz_per_s: float = MAX_RATE_HZ_PER_S, doppler_accel_hz_per_s2: float = 0.0,
+              pfa: float = PFA, resolve: bool = True) -> CombFit:
     """Joint comb ML of Doppler and Doppler rate on integrate-and-dump decimated tones.
 
     Parameters

@@ -14,16 +14,20 @@ change enter exactly.
 """
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+import numpy.typing as npt
 
-from ..constellations import DEFAULT_FAMILY, REGISTRY, family
+from ..constellations import DEFAULT_FAMILY, REGISTRY, CombModel, family
 from ..errors import InputError
 
 __all__ = ["PilotComb", "comb_baseband", "add_noise", "noise_sigma"]
 
 #: The comb assumed when none is given: the default family's (Starlink's).
 _DEFAULT = REGISTRY[DEFAULT_FAMILY]
+# The reference family has a comb (the registry is written so); the cast tells mypy.
+_DEFAULT_COMB = cast(CombModel, _DEFAULT.comb)
 
 
 @dataclass(frozen=True)
@@ -39,8 +43,8 @@ class PilotComb:
     """
 
     carrier_hz: float = _DEFAULT.carrier_hz
-    n_tones: int = _DEFAULT.comb.n_tones
-    tone_spacing_hz: float = _DEFAULT.comb.tone_spacing_hz
+    n_tones: int = _DEFAULT_COMB.n_tones
+    tone_spacing_hz: float = _DEFAULT_COMB.tone_spacing_hz
     amplitudes: tuple | None = None
     phases_rad: tuple | None = None
 
@@ -55,14 +59,14 @@ class PilotComb:
                 raise InputError(f"{name} has {len(value)} values, expected n_tones={self.n_tones}")
 
     @classmethod
-    def of(cls, key):
+    def of(cls, key: str) -> "PilotComb":
         """The pilot comb of the registered family ``key``; InputError when it has none."""
         fam = family(key)
         if fam.comb is None:
             raise InputError(f"constellation {key!r} has no pilot comb in the registry (measurement level only)")
         return cls(carrier_hz=fam.carrier_hz, n_tones=fam.comb.n_tones, tone_spacing_hz=fam.comb.tone_spacing_hz)
 
-    def through_lo(self, lo_offset_hz):
+    def through_lo(self, lo_offset_hz: float) -> "PilotComb":
         """The comb as a receiver whose LO is ``lo_offset_hz`` off sees it, for the estimators' tone model.
 
         An LO offset moves every tone alike while Doppler scales with each
@@ -78,28 +82,28 @@ class PilotComb:
                          phases_rad=self.phases_rad)
 
     @property
-    def tone_index(self):
+    def tone_index(self) -> npt.NDArray[np.int_]:
         """Tone numbers k, shape (n_tones,), central tone 0."""
         half = self.n_tones // 2
         return np.arange(-half, half + 1)
 
     @property
-    def offsets_hz(self):
+    def offsets_hz(self) -> npt.NDArray[np.float64]:
         """Nominal baseband frequency of each tone, k * spacing, shape (n_tones,)."""
-        return self.tone_index * float(self.tone_spacing_hz)
+        return self.tone_index * np.float64(self.tone_spacing_hz)
 
     @property
-    def doppler_scale(self):
+    def doppler_scale(self) -> npt.NDArray[np.float64]:
         """s_k = f_k / f_c: tone k's Doppler per unit central-tone Doppler, shape (n_tones,)."""
         return 1.0 + self.offsets_hz / float(self.carrier_hz)
 
     @property
-    def tone_amplitudes(self):
+    def tone_amplitudes(self) -> npt.NDArray[np.float64]:
         """Amplitude of each tone, shape (n_tones,)."""
         return np.ones(self.n_tones) if self.amplitudes is None else np.asarray(self.amplitudes, dtype=float)
 
     @property
-    def tone_phases_rad(self):
+    def tone_phases_rad(self) -> npt.NDArray[np.float64]:
         """Phase of each tone at zero Doppler phase, shape (n_tones,)."""
         if self.phases_rad is None:
             return np.pi * self.tone_index**2 / self.n_tones
@@ -111,7 +115,8 @@ def _frac(cycles):
     return cycles - np.round(cycles)
 
 
-def comb_baseband(comb, t_s, geom_cycles, clock_cycles=0.0, *, phase_rad=0.0):
+def comb_baseband(comb: PilotComb, t_s: npt.ArrayLike, geom_cycles: npt.ArrayLike, clock_cycles: npt.ArrayLike = 0.0, *,
+                  phase_rad: npt.ArrayLike = 0.0) -> npt.NDArray[np.complex128]:
     """Complex baseband samples of the pilot comb.
 
     Parameters
@@ -147,7 +152,7 @@ def comb_baseband(comb, t_s, geom_cycles, clock_cycles=0.0, *, phase_rad=0.0):
     return base * acc * np.conj(z) ** (comb.n_tones // 2)
 
 
-def noise_sigma(cn0_dbhz, sample_rate_hz):
+def noise_sigma(cn0_dbhz: npt.ArrayLike, sample_rate_hz: float) -> npt.NDArray[np.float64]:
     """Standard deviation of complex white noise per sample for a unit-amplitude tone at ``cn0_dbhz``.
 
     A tone of power 1 over noise of one-sided density N0 has C/N0 = 1/N0;
@@ -156,7 +161,8 @@ def noise_sigma(cn0_dbhz, sample_rate_hz):
     return np.sqrt(float(sample_rate_hz) / 10.0 ** (np.asarray(cn0_dbhz, dtype=float) / 10.0))
 
 
-def add_noise(iq, cn0_dbhz, sample_rate_hz, rng):
+def add_noise(iq: npt.NDArray[np.complexfloating], cn0_dbhz: npt.ArrayLike, sample_rate_hz: float,
+              rng: np.random.Generator) -> npt.NDArray[np.complex128]:
     """``iq`` plus circular complex white noise at ``cn0_dbhz`` (per unit-amplitude tone).
 
     Parameters
