@@ -25,7 +25,7 @@ from leosop.rotations import euler_to_dcm
 pytestmark = pytest.mark.skipif(not (ESBC_SP3.exists() and ESBC_CLK.exists()), reason="ESBC data absent")
 OPT = ppp_ins.PppInsOptions()
 T_ORBIT_S = 6 * 3600.0
-DOY = 177.0
+MJD0 = 59025.0  # 2020-06-25
 # Central-difference steps per INS error group: position 1e-8 rad (6 cm; range curvature 1e-10 m) and
 # 1 cm, so that the ranges' float rounding (~4e-9 m of 2e7 m) stays below 1e-6 of the differences.
 # The SD filter's state layout: 15 INS errors, the wet delay, one SD ambiguity slot per satellite.
@@ -48,13 +48,13 @@ def _epoch(orbits):
     """An aid over the satellites above 15 deg at :func:`_state`; measurements the model at a nearby truth."""
     state = _state()
     probe = PppEpoch(0.0, T_ORBIT_S, orbits, np.arange(len(orbits.sv)), *np.zeros((3, len(orbits.sv))),
-                     [], zwd_block(OPT), DOY, OPT)
+                     [], zwd_block(OPT), MJD0, OPT)
     elev = probe.geometry(aids.InsView(state, np.zeros(3), np.zeros(3), np.zeros(3)))[3]
     sv = np.flatnonzero(elev > math.radians(15.0))
     rng = np.random.default_rng(5)
     b0 = rng.normal(size=sv.size) * 3.0
     blocks = [ambiguity_block(orbits.sv[j], T_ORBIT_S, b, OPT.amb_sigma_m, 1.0) for j, b in zip(sv, b0)]
-    aid = PppEpoch(0.0, T_ORBIT_S, orbits, sv, *np.zeros((3, sv.size)), blocks, zwd_block(OPT), DOY, OPT)
+    aid = PppEpoch(0.0, T_ORBIT_S, orbits, sv, *np.zeros((3, sv.size)), blocks, zwd_block(OPT), MJD0, OPT)
     states = {ZWD_KEY: np.array([0.12])} | {b.key: np.array([b.mean0[0]]) for b in blocks}
     return aid, states, b0
 
