@@ -18,14 +18,19 @@ from leosop.fusion.aids_gnss import ZWD_KEY, PppEpoch, ambiguity_block, zwd_bloc
 from leosop.fusion.common import N_INS, pos_jacobian
 from leosop.gnss import ppp_ins, ppp_ins_ar, ppp_ins_study
 from leosop.gnss.products import read_clk, read_sp3
+from leosop.gnss.simulate import SimSettings
 from leosop.ins.error_model import DPOS, DV, PHI
 from leosop.ins.strapdown import NavState
 from leosop.rotations import euler_to_dcm
 
 pytestmark = pytest.mark.skipif(not (ESBC_SP3.exists() and ESBC_CLK.exists()), reason="ESBC data absent")
-OPT = ppp_ins.PppInsOptions()
+# The SD filter's values were recorded with the Niell mapping and the standard atmosphere (its troposphere
+# then); the engine's defaults are PppOptions' GMF and GPT (issue 22). Both are pinned here to the recording's.
+NIELL = {"mapping": "niell", "zhd_pressure": "standard"}
+OPT = ppp_ins.PppInsOptions(**NIELL)
+SIM = SimSettings(**NIELL)
 T_ORBIT_S = 6 * 3600.0
-DOY = 177.0
+MJD0 = 59025.0  # 2020-06-25
 # Central-difference steps per INS error group: position 1e-8 rad (6 cm; range curvature 1e-10 m) and
 # 1 cm, so that the ranges' float rounding (~4e-9 m of 2e7 m) stays below 1e-6 of the differences.
 # The SD filter's state layout: 15 INS errors, the wet delay, one SD ambiguity slot per satellite.
@@ -48,13 +53,13 @@ def _epoch(orbits):
     """An aid over the satellites above 15 deg at :func:`_state`; measurements the model at a nearby truth."""
     state = _state()
     probe = PppEpoch(0.0, T_ORBIT_S, orbits, np.arange(len(orbits.sv)), *np.zeros((3, len(orbits.sv))),
-                     [], zwd_block(OPT), DOY, OPT)
+                     [], zwd_block(OPT), MJD0, OPT)
     elev = probe.geometry(aids.InsView(state, np.zeros(3), np.zeros(3), np.zeros(3)))[3]
     sv = np.flatnonzero(elev > math.radians(15.0))
     rng = np.random.default_rng(5)
     b0 = rng.normal(size=sv.size) * 3.0
     blocks = [ambiguity_block(orbits.sv[j], T_ORBIT_S, b, OPT.amb_sigma_m, 1.0) for j, b in zip(sv, b0)]
-    aid = PppEpoch(0.0, T_ORBIT_S, orbits, sv, *np.zeros((3, sv.size)), blocks, zwd_block(OPT), DOY, OPT)
+    aid = PppEpoch(0.0, T_ORBIT_S, orbits, sv, *np.zeros((3, sv.size)), blocks, zwd_block(OPT), MJD0, OPT)
     states = {ZWD_KEY: np.array([0.12])} | {b.key: np.array([b.mean0[0]]) for b in blocks}
     return aid, states, b0
 
@@ -141,7 +146,8 @@ def test_float_run_matches_the_sd_filter(products):
     # engine applies the first epoch after its first pair of IMU samples (so epoch 0 is left out),
     # evaluates the error model at the end of each step and the range rows at the updated INS. Measured:
     # 6e-4 sigma and sigmas within 5e-6 (bounds 0.01 sigma, 1e-3).
-    truth, res = ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False)
+    truth, res = ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False,
+                                        sim=SIM, options=OPT)
     k = [1, 10, 20, 30]
     err_sd = np.array([[0.206371089, -0.0685214518, 0.266397624], [-0.0833771061, -0.140029451, 0.101565198],
                        [0.173090710, 0.0838758453, 0.845179004], [-0.0402151723, 0.0122218047, 0.597065702]])
@@ -170,7 +176,8 @@ def test_outliers_screened_as_the_sd_filter_did(products, monkeypatch):
         return g
 
     monkeypatch.setattr(ppp_ins_study, "simulate", with_outliers)
-    truth, res = ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False)
+    truth, res = ppp_ins_study.scenario(3, duration_s=30.0, outage_at_s=None, products=products, ar=False,
+                                        sim=SIM, options=OPT)
     err_sd = np.array([[0.25779746, 0.07080471, 0.53847887], [0.15584844, 0.08575542, 0.80788906],
                        [-0.03315894, 0.02591545, 0.65107996]])
     assert res.n_outliers == 2

@@ -141,6 +141,14 @@ def test_antex_strictness(tmp_path):
     p.write_text(_HEAD + _BLOCK.format(name="TRM59800.00     NONE", prn="", code="IGS14_2108").rsplit("\n", 2)[0])
     with pytest.raises(InputError, match=r"a\.atx: line \d+: the antenna block of line 3 has no END OF ANTENNA"):
         read_antex(p)
+    # Blocks valid only after the data's day: one line naming the file, the day and the blocks' validity,
+    # before any filtering (each satellite would otherwise be left out and the run end with too few).
+    later = _BLOCK.format(name="BLOCK IIF", prn="G01", code="IGS14_2108").replace(
+        "SINEX CODE\n", "SINEX CODE\n  2021     1     1     0     0    0.0000000                 VALID FROM\n")
+    p.write_text(_HEAD + later)
+    with pytest.raises(InputError, match=r"a\.atx: no satellite block valid on 2020-06-25 for the 1 observed "
+                                         r"satellites .*valid from 2021-01-01"):
+        check_antex(read_antex(p), "TRM59800.00     NONE", ["G01"], DAY, "igs14_2108.atx")
 
 
 @needs_data

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from leosop.constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
+from leosop.errors import InputError
 from leosop.frames import rotate_to_later_ecef
 from leosop.gnss import models
 
@@ -61,6 +62,26 @@ def test_gpt_iers_test_vector_and_esbjerg_sea_level():
     p_hpa, undulation_m = models.gpt_pressure_hpa(np.radians(55.4936), np.radians(8.4568), 59.5, 59025.5)
     assert undulation_m == pytest.approx(40.0, abs=5.0)
     assert 1007.0 < p_hpa < 1018.0
+
+
+def test_slant_delay_of_each_model_choice():
+    # The one troposphere of the PPP, PPP/INS and simulation code against its parts composed by hand: MJD
+    # 59025.75 is 2020-06-25 18:00, day of year 177.75 for Niell (2020-01-01 is MJD 58849); the IERS test
+    # station's GPT pressure above (918.07 hPa) in Saastamoinen's formula. Exact but for rounding.
+    elev = np.radians([5.0, 30.0, 90.0])
+    lat, lon, alt = 0.6708665767, -1.393397187, 812.546
+    m_dry, m_wet = models.niell_mapping(elev, lat, alt, 177.75)
+    dry, wet = models.slant_hydrostatic_and_wet(elev, lat, lon, alt, 59025.75, mapping="niell",
+                                                 zhd_pressure="standard")
+    np.testing.assert_allclose(dry, models.saastamoinen_zhd_m(lat, alt) * m_dry, rtol=1e-14)
+    np.testing.assert_allclose(wet, m_wet, rtol=1e-14)
+    g_dry, g_wet = models.gmf_mapping(elev, lat, lon, alt, 55055.0)
+    dry, wet = models.slant_hydrostatic_and_wet(elev, lat, lon, alt, 55055.0)
+    np.testing.assert_allclose(dry, models.saastamoinen_zhd_m(lat, alt, 918.0710638757364) * g_dry, rtol=1e-12)
+    np.testing.assert_allclose(wet, g_wet, rtol=1e-14)
+    assert models.mjd(np.datetime64("2020-06-25T18:00")) == 59025.75
+    with pytest.raises(InputError, match="mapping 'vmf1': expected one of gmf, niell"):
+        models.slant_hydrostatic_and_wet(elev, lat, lon, alt, 55055.0, mapping="vmf1")
 
 
 def test_sun_moon_distances():

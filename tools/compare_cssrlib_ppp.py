@@ -248,6 +248,11 @@ def main():
     a = ap.parse_args()
     if a.cssrlib_path:
         sys.path.insert(0, a.cssrlib_path)
+    try:  # before the leosop run, which would be wasted
+        import cssrlib.pppssr  # noqa: F401
+    except ImportError as exc:
+        raise SystemExit(f"compare_cssrlib_ppp: cannot import cssrlib ({exc}); install it (module notes) and give "
+                         "--cssrlib-path") from None
     n0, n = (int(round(h * 3600 / EPOCH_S)) for h in (a.start_h, a.hours))
     static = a.mode == "static"
     t_read, t_run, pos, fixed, header_ecef_m, delta_hen_m, wl_bias_cyc = ours(n0, n, static, a.ar)

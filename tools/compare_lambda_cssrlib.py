@@ -1,14 +1,17 @@
 """Our LAMBDA (leosop.gnss.lambda_) beside cssrlib's MLAMBDA: same candidates, same norms, time per call.
 
-cssrlib is not a dependency of leosop: ``pip install cssrlib bitstruct`` to run this.
+cssrlib is not a dependency of leosop: ``python -m pip install --target /tmp/cssr_site --no-deps cssrlib==1.2.1
+bitstruct`` and ``--cssrlib-path /tmp/cssr_site`` (or ``pip install cssrlib bitstruct``).
 Cases: the published 3-ambiguity example ([Teunissen 1995], [de Jonge 1996]) and random
 well- and ill-conditioned covariances of 4 to 20 ambiguities (float values with a strong
 correlation, as PPP ambiguities are).
 
-Run: ``OPENBLAS_NUM_THREADS=1 python tools/compare_lambda_cssrlib.py``
+Run: ``OPENBLAS_NUM_THREADS=1 python tools/compare_lambda_cssrlib.py [--cssrlib-path DIR]``
 """
 
+import argparse
 import os
+import sys
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -19,7 +22,16 @@ from leosop.gnss.lambda_ import ils  # noqa: E402
 
 
 def main():
-    from cssrlib.mlambda import mlambda
+    ap = argparse.ArgumentParser(description="leosop's LAMBDA beside cssrlib's MLAMBDA (module notes)")
+    ap.add_argument("--cssrlib-path", help="folder cssrlib was installed into (pip install --target)")
+    a = ap.parse_args()
+    if a.cssrlib_path:
+        sys.path.insert(0, a.cssrlib_path)
+    try:
+        from cssrlib.mlambda import mlambda
+    except ImportError as exc:
+        raise SystemExit(f"compare_lambda_cssrlib: cannot import cssrlib ({exc}); install it (module notes) and "
+                         "give --cssrlib-path") from None
 
     rng = np.random.default_rng(0)
     cases = [(np.array([5.45, 3.10, 2.97]),

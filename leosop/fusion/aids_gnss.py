@@ -9,7 +9,9 @@ rate ``r`` with the satellite clock drift added back::
     r_j + c ddt_j      = rho_dot_j                          + c ddt_r       + noise
 
 ``rho`` and ``rho_dot`` at the INS position and velocity (no lever arm),
-``ZHD`` of [Saastamoinen 1972] and the mappings of [Niell 1996] at the INS,
+``m_dry ZHD`` and ``m_wet`` the models of ``options.mapping`` and
+``options.zhd_pressure`` at the INS (those of ``PppOptions``,
+:func:`leosop.gnss.troposphere.slant_hydrostatic_and_wet`),
 the zenith wet delay ``ZWD`` a random-walk state (:func:`zwd_block`) and
 ``B_j`` the undifferenced IF ambiguity [m] of satellite j's arc, one state
 block per arc (:func:`ambiguity_block`, prior the arc's first ``L - P``).
@@ -83,10 +85,11 @@ class PppEpoch(Aid):
         Each satellite's ambiguity block (:func:`ambiguity_block`).
     zwd : StateBlock
         The wet delay (:func:`zwd_block`).
-    doy : float
-        Day of year of ``t_orbit_s = 0`` (for the Niell mapping).
+    mjd0 : float
+        Modified Julian date of ``t_orbit_s = 0`` (for the troposphere's climatologies).
     options : leosop.gnss.ppp_ins.PppInsOptions
-        ``mask_deg`` and the zenith sigmas ``sigma_code_m``, ``sigma_phase_m``, ``sigma_rate_mps``.
+        ``mask_deg``, the zenith sigmas ``sigma_code_m``, ``sigma_phase_m``, ``sigma_rate_mps`` and the
+        troposphere models ``mapping``, ``zhd_pressure``.
 
     Attributes
     ----------
@@ -103,13 +106,13 @@ class PppEpoch(Aid):
     external_clock = True
     screens = True
 
-    def __init__(self, t_s, t_orbit_s, orbits, orb_idx, code_m, phase_m, rate_mps, amb_blocks, zwd, doy, options):
+    def __init__(self, t_s, t_orbit_s, orbits, orb_idx, code_m, phase_m, rate_mps, amb_blocks, zwd, mjd0, options):
         super().__init__(t_s)
         self.t_orbit_s = float(t_orbit_s)
         self.orbits, self.orb_idx = orbits, np.asarray(orb_idx, int)
         self.obs = np.stack([code_m, phase_m, rate_mps]).astype(float)  # (3, m)
         self.states = (zwd, *amb_blocks)
-        self.doy = float(doy)
+        self.mjd0 = float(mjd0)
         self.options = options
         self.sigma_zenith = np.array([options.sigma_code_m, options.sigma_phase_m, options.sigma_rate_mps])
         self.used, self.ref = np.zeros(0, int), -1
@@ -124,14 +127,20 @@ class PppEpoch(Aid):
         elev = np.arcsin(np.clip(los @ C[:, 2], -1.0, 1.0))
         return rho, rate, los, elev, C
 
+    def troposphere(self, elev_rad, state):
+        """Slant hydrostatic delay [m] and wet mapping at ``elev_rad`` (m,) seen from the INS ``state``."""
+        return models.slant_hydrostatic_and_wet(elev_rad, state.lat_rad, state.lon_rad, state.alt_m,
+                                                self.mjd0 + self.t_orbit_s / DAY_S, mapping=self.options.mapping,
+                                                zhd_pressure=self.options.zhd_pressure)
+
     def _rows(self, ins):
         """The epoch's model at ``ins``: undifferenced predictions (3, m), mappings, used satellites, reference."""
         s = ins.state
         rho, rate, los, elev, C = self.geometry(ins)
-        m_dry, m_wet = models.niell_mapping(elev, s.lat_rad, s.alt_m, self.doy + self.t_orbit_s / DAY_S)
+        slant_dry, m_wet = self.troposphere(elev, s)
         zwd = ins.states[ZWD_KEY][0]
         amb = np.array([ins.states[b.key][0] for b in self.states[1:]])
-        rng = rho + models.saastamoinen_zhd_m(s.lat_rad, s.alt_m) * m_dry + m_wet * zwd
+        rng = rho + slant_dry + m_wet * zwd
         used = np.flatnonzero(elev > np.radians(self.options.mask_deg))
         ref = used[int(np.argmax(elev[used]))] if used.size else -1
         return np.stack([rng, rng + amb, rate]), m_wet, los, elev, C, used, ref

@@ -130,7 +130,21 @@ def check_antex(antex, antenna_type, sv, day, pcvs_applied):
         One line each (the caller shows them as warnings).
     no_ar : dict of str -> str
         Satellites whose block is of another frame than the clocks', with the reason.
+
+    Raises
+    ------
+    InputError
+        No observed satellite has a block valid on ``day`` (an ANTEX file of other dates): every satellite
+        would be left out of the solution.
     """
+    if sv and not any(antex.satellite(s, day) is not None for s in sv):
+        blocks = [b for s in sv for b in antex.satellites.get(s, [])]
+        until = max((b.valid_until for b in blocks), default=None)
+        span = (f"its blocks of these satellites are valid from {min(b.valid_from for b in blocks)}"
+                + (f" until {until}" if until < Antenna().valid_until else "") if blocks
+                else "it has no block of these satellites")
+        raise InputError(f"{antex.path}: no satellite block valid on {day} for the {len(sv)} observed satellites "
+                         f"(VALID FROM / VALID UNTIL; {span}): give the ANTEX file of the data's day")
     messages, no_ar = [], {}
     rx = antex.receiver(antenna_type)
     clk_frame = _frame(pcvs_applied)

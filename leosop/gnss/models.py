@@ -12,18 +12,21 @@ import numpy as np
 
 from ..constants import C_MPS, DAY_S, GM_M3_PER_S2, JD_J2000, WGS84_A_M
 from ..frames import gmst1982
-from .troposphere import gmf_mapping, gpt_pressure_hpa, gradient_mapping, niell_mapping, saastamoinen_zhd_m
+from .troposphere import (gmf_mapping, gpt_pressure_hpa, gradient_mapping, mjd, niell_mapping, saastamoinen_zhd_m,
+                          slant_hydrostatic_and_wet)
 
 __all__ = [
     "TT_MINUS_GPST_S",
     "gmf_mapping",
     "gpt_pressure_hpa",
     "gradient_mapping",
+    "mjd",
     "niell_mapping",
     "relativistic_clock_s",
     "saastamoinen_zhd_m",
     "satellite_axes",
     "shapiro_m",
+    "slant_hydrostatic_and_wet",
     "solid_tide_ecef_m",
     "sun_moon_ecef_m",
     "windup_cycles",

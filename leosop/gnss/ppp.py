@@ -258,19 +258,8 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     elev = np.arcsin(np.clip(los_enu[..., 2] / rng, -1, 1))
     m_grad = models.gradient_mapping(elev, np.arctan2(los_enu[..., 0], los_enu[..., 1]))
     mjd = jd_tt - 2400000.5  # TT for UTC in the climatologies: a minute is nothing to an annual term
-    if opt.mapping == "gmf":
-        m_dry, m_wet = models.gmf_mapping(elev, lat0, lon0, alt0, mjd[:, None])
-    elif opt.mapping == "niell":
-        doy = (obs.time_gps[0].astype("datetime64[D]") - obs.time_gps[0].astype("datetime64[Y]")).astype(int) + 1
-        m_dry, m_wet = models.niell_mapping(elev, lat0, alt0, (doy + t_s / DAY_S)[:, None])
-    else:
-        raise InputError(f"PppOptions.mapping {opt.mapping!r}: expected 'niell' or 'gmf'")
-    if opt.zhd_pressure == "gpt":
-        zhd = models.saastamoinen_zhd_m(lat0, alt0, models.gpt_pressure_hpa(lat0, lon0, alt0, mjd[:, None])[0])
-    elif opt.zhd_pressure == "standard":
-        zhd = models.saastamoinen_zhd_m(lat0, alt0)
-    else:
-        raise InputError(f"PppOptions.zhd_pressure {opt.zhd_pressure!r}: expected 'gpt' or 'standard'")
+    slant_dry, m_wet = models.slant_hydrostatic_and_wet(elev, lat0, lon0, alt0, mjd[:, None], mapping=opt.mapping,
+                                                        zhd_pressure=opt.zhd_pressure)
     wind = models.windup_cycles(RS, x0, sun, lat0, lon0)
     missing, rx_cal = [], False
     if antex is not None:
@@ -280,7 +269,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     else:
         corr = 0.0
     shap = models.shapiro_m(RS, x0)
-    corr = corr + C_MPS * DTS - zhd * m_dry - shap  # add to observations: P + c dts - T_dry - shapiro
+    corr = corr + C_MPS * DTS - slant_dry - shap  # add to observations: P + c dts - T_dry - shapiro
     Pc = meas["P"] + corr
     Lc = meas["L"] + corr - wind * meas["lam_nl"]
     ok &= elev > np.radians(opt.mask_deg if rx_cal else opt.mask_no_antex_deg)

@@ -66,6 +66,7 @@ from ..fusion.common import N_INS, initial_covariance
 from .geometry import satellite_at_reception, satellite_clock
 from .ppp import PppOptions
 from .ppp_ins_ar import AfterEpoch
+from .troposphere import mjd
 from .ppp_ins_widelane import BETA_M, KAPPA_WL_PER_GF, LAM_NL_M, LAM_WL_M, if_combinations
 from .ppp_obs import detect_slips, spp_position
 
@@ -100,6 +101,9 @@ class PppInsOptions:
     wl_mw_lags: int = 10
     wl_phase_sigma_cyc: float = 0.015
     wl_success_min: float = 1.0 - 1e-4
+    # The troposphere models of the float and fixed PPP (PppOptions; docs/ppp.md, "Models and settings").
+    mapping: str = PppOptions.mapping
+    zhd_pressure: str = PppOptions.zhd_pressure
 
 
 @dataclass
@@ -248,8 +252,7 @@ def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options, pos_approx
     t = gnss.t_s[:n_ep]
     have = np.isfinite(Pc) & np.isfinite(Lc)
     new_arc = detect_slips(t, MW, GF, gnss.lli[:n_ep], have, PppOptions(max_gap_s=1.5 * step_s))
-    day = np.datetime64(orbits.ref_gps, "D")
-    doy = float((day - day.astype("datetime64[Y]")).astype(int) + 1)
+    mjd0 = mjd(orbits.ref_gps)
     zwd = zwd_block(options)
     n_sv = len(gnss.sv)
     arc = [None] * n_sv
@@ -297,7 +300,7 @@ def ppp_aids(gnss, orbits, clocks, n_ep, t_filter_s, step_s, options, pos_approx
         mw_n[js] += 1
         arcs.append(_Epoch(k, js, fresh, mw_sum.copy(), mw_sq.copy(), mw_n.copy(), clk_m))
         aids.append(PppEpoch(t_filter_s[k], t[k], orbits, gnss.orb_idx[js], Pc[k, js] + clk_m, Lc[k, js] + clk_m,
-                             gnss.rate_mps[k, js] + drift_mps, [arc[j] for j in js], zwd, doy, options))
+                             gnss.rate_mps[k, js] + drift_mps, [arc[j] for j in js], zwd, mjd0, options))
     return aids, arcs, n_slips
 
 

@@ -10,14 +10,12 @@ fixed solution to bridge it from. See :mod:`leosop.gnss.ppp_ins`.
 
 import numpy as np
 
-from ..constants import DAY_S
 from ..frames import geodetic_to_ecef
 from ..fusion import kalman
 from ..fusion.aids import InsView
 from ..fusion.aids_gnss import ZWD_KEY
 from ..fusion.common import N_INS, pos_jacobian
 from ..ins.error_model import DPOS, DV, PHI
-from . import models
 from .lambda_ import partial_fix
 from .ppp import PppOptions
 from .ppp_ins_widelane import BETA_M, LAM_NL_M, LAM_WL_M, InertialWideLane, if_combinations, mw_mean, mw_var_mean
@@ -138,8 +136,7 @@ class AfterEpoch:
         view = InsView(state, np.zeros(3), np.zeros(3), np.zeros(3))
         rho, _, los, elev, C = aid.geometry(view)
         used = aid.used
-        m_dry, m_wet = models.niell_mapping(elev[used], state.lat_rad, state.alt_m, aid.doy + aid.t_orbit_s / DAY_S)
-        zhd = models.saastamoinen_zhd_m(state.lat_rad, state.alt_m) * m_dry
+        zhd, m_wet = aid.troposphere(elev[used], state)
         h_pos = los[used] @ C @ pos_jacobian(state.lat_rad, state.alt_m)
         g = (self.LW[k, sv] + clk_m - zhd - rho[used] - m_wet * zwd_m) / LAM_WL_M
         return h_pos, m_wet, g, np.sin(elev[used])

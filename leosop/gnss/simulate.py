@@ -9,11 +9,13 @@ CLK file's; the receiver follows a :class:`leosop.ins.trajectory.Trajectory`
           + N_i + b_r,i + b_sv,i + mp_i + eps_i                              [cycles]
     rate = d rho/dt + c d(dt_r)/dt - c d(dt_sv)/dt + e_d                  [m/s] (the L1 Doppler times -lambda_1)
 
-``T``: Saastamoinen hydrostatic delay (standard atmosphere) with the Niell
-mapping plus a true zenith wet delay (random walk) with the Niell wet
-mapping; ``I_i``: first-order ionosphere (``40.3 TEC / f^2``, thin shell at
-350 km); ``N_i``: integer ambiguities, new at each arc (rise, cycle slip,
-after an outage); ``b_r,i``: receiver phase biases (fractional, common to
+``T``: the hydrostatic slant delay plus a true zenith wet delay (random
+walk) mapped, both by the models the PPP filters use (``mapping``,
+``zhd_pressure``: [Boehm 2006]'s GMF and [Boehm 2007]'s GPT pressure by
+default, :func:`leosop.gnss.troposphere.slant_hydrostatic_and_wet`);
+``I_i``: first-order ionosphere (``40.3 TEC / f^2``, thin shell at 350 km);
+``N_i``: integer ambiguities, new at each arc (rise, cycle slip, after an
+outage); ``b_r,i``: receiver phase biases (fractional, common to
 all satellites); ``b_sv,i``: satellite phase biases whose ionosphere-free
 combination is zero (it is inside an integer-recovery clock, as the CNES
 products are built) and whose wide-lane part ``b_sv,1 - b_sv,2`` is the
@@ -34,6 +36,8 @@ from ..constants import C_MPS, DAY_S
 from ..frames import C_e_n, ecef_to_geodetic
 from . import models
 from .geometry import range_and_rate, satellite_clock
+from .ppp import PppOptions
+from .troposphere import mjd
 
 __all__ = ["SimSettings", "GnssSim", "simulate", "F1_HZ", "F2_HZ"]
 
@@ -58,6 +62,8 @@ class SimSettings:
     slips_per_hour: float = 6.0
     outage_start_s: float | None = None
     outage_s: float = 60.0
+    mapping: str = PppOptions.mapping
+    zhd_pressure: str = PppOptions.zhd_pressure
 
 
 @dataclass
@@ -158,12 +164,12 @@ def simulate(trajectory, t0_s, orbits, clocks, rng, settings=SimSettings(), *, s
     if s.outage_start_s is not None:
         seen &= ~((truth.t_s >= s.outage_start_s) & (truth.t_s < s.outage_start_s + s.outage_s))[:, None]
     # Troposphere, ionosphere, receiver clock.
-    lat, _, alt = ecef_to_geodetic(pos)
-    day = np.datetime64(orbits.ref_gps, "D")
-    doy = float((day - day.astype("datetime64[Y]")).astype(int) + 1) + t[:, None] / DAY_S
-    m_dry, m_wet = models.niell_mapping(np.where(seen, elev, np.pi / 2), lat[:, None], alt[:, None], doy)
+    lat, lon, alt = ecef_to_geodetic(pos)
+    slant_dry, m_wet = models.slant_hydrostatic_and_wet(
+        np.where(seen, elev, np.pi / 2), lat[:, None], lon[:, None], alt[:, None],
+        mjd(orbits.ref_gps) + t[:, None] / DAY_S, mapping=s.mapping, zhd_pressure=s.zhd_pressure)
     zwd = s.zwd0_m + np.cumsum(np.r_[0.0, rng.normal(size=n_ep - 1)]) * s.zwd_rw_m_per_rt_s * np.sqrt(step_s)
-    trop = models.saastamoinen_zhd_m(lat, alt)[:, None] * m_dry + zwd[:, None] * m_wet
+    trop = slant_dry + zwd[:, None] * m_wet
     shell = 6371e3 / (6371e3 + 350e3)
     iono1 = s.vtec_l1_m / np.sqrt(1.0 - (shell * np.cos(np.where(seen, elev, np.pi / 2))) ** 2)
     iono2 = iono1 * (F1_HZ / F2_HZ) ** 2

@@ -10,8 +10,20 @@ the Condon-Shortley phase; their coefficients are the published ones (also
 
 import numpy as np
 
-__all__ = ["CHEN_HERRING_C", "gmf_mapping", "gpt_pressure_hpa", "gradient_mapping", "niell_mapping",
-           "saastamoinen_zhd_m"]
+from ..errors import InputError
+
+__all__ = ["CHEN_HERRING_C", "MAPPINGS", "ZHD_PRESSURES", "gmf_mapping", "gpt_pressure_hpa", "gradient_mapping",
+           "mjd", "niell_mapping", "saastamoinen_zhd_m", "slant_hydrostatic_and_wet"]
+
+#: Mapping functions and hydrostatic pressures :func:`slant_hydrostatic_and_wet` knows.
+MAPPINGS = ("gmf", "niell")
+ZHD_PRESSURES = ("gpt", "standard")
+_MJD_ZERO = np.datetime64("1858-11-17", "D")
+
+
+def mjd(time):
+    """Modified Julian date (float days) of ``time`` (numpy.datetime64, any unit; array_like); same time scale."""
+    return (np.asarray(time, "datetime64[ns]") - _MJD_ZERO) / np.timedelta64(1, "D")
 
 
 def saastamoinen_zhd_m(lat_rad, alt_m, pressure_hpa=None):
@@ -291,3 +303,43 @@ def gradient_mapping(elev_rad, az_rad):
     elev_rad, az_rad = np.broadcast_arrays(np.asarray(elev_rad, float), np.asarray(az_rad, float))
     m_g = 1.0 / (np.sin(elev_rad) * np.tan(elev_rad) + CHEN_HERRING_C)
     return np.stack([m_g * np.cos(az_rad), m_g * np.sin(az_rad)], axis=-1)
+
+
+def slant_hydrostatic_and_wet(elev_rad, lat_rad, lon_rad, alt_m, mjd, *, mapping="gmf", zhd_pressure="gpt"):
+    """Slant hydrostatic delay and wet mapping of one model choice: the troposphere of every GNSS filter.
+
+    ``mapping`` is ``"gmf"`` (:func:`gmf_mapping`) or ``"niell"`` (:func:`niell_mapping`, with the day of
+    year from ``mjd``); ``zhd_pressure`` is ``"gpt"`` (:func:`gpt_pressure_hpa`) or ``"standard"`` (the
+    standard atmosphere of :func:`saastamoinen_zhd_m`). The PPP filters take both from their options
+    (``PppOptions``, ``PppInsOptions``), so that float, fixed and PPP/INS solutions share one model.
+
+    Parameters
+    ----------
+    elev_rad, lat_rad, lon_rad, alt_m, mjd : array_like, broadcastable
+        Elevation, geodetic latitude, longitude, ellipsoidal height, modified Julian date (fractional).
+    mapping : {"gmf", "niell"}
+    zhd_pressure : {"gpt", "standard"}
+
+    Returns
+    -------
+    slant_dry_m, m_wet : ndarray
+        ``ZHD m_dry`` [m] and the wet mapping (1 at zenith), the broadcast shape.
+
+    Raises
+    ------
+    InputError
+        An unknown ``mapping`` or ``zhd_pressure``.
+    """
+    if mapping not in MAPPINGS:
+        raise InputError(f"mapping {mapping!r}: expected one of {', '.join(MAPPINGS)}")
+    if zhd_pressure not in ZHD_PRESSURES:
+        raise InputError(f"zhd_pressure {zhd_pressure!r}: expected one of {', '.join(ZHD_PRESSURES)}")
+    mjd = np.asarray(mjd, float)
+    if mapping == "gmf":
+        m_dry, m_wet = gmf_mapping(elev_rad, lat_rad, lon_rad, alt_m, mjd)
+    else:
+        year_start = (_MJD_ZERO + np.floor(mjd).astype("timedelta64[D]")).astype("datetime64[Y]")
+        doy = mjd - (year_start - _MJD_ZERO).astype("timedelta64[D]").astype(float) + 1.0
+        m_dry, m_wet = niell_mapping(elev_rad, lat_rad, alt_m, doy)
+    pressure_hpa = gpt_pressure_hpa(lat_rad, lon_rad, alt_m, mjd)[0] if zhd_pressure == "gpt" else None
+    return saastamoinen_zhd_m(lat_rad, alt_m, pressure_hpa) * m_dry, m_wet
