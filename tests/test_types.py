@@ -3,6 +3,9 @@
 mypy checks only the bodies of annotated functions, so a clean run alone would also pass on code with no
 annotations at all; the second test holds the chosen entry points to complete signatures. The modules are
 listed here and, for a plain ``mypy`` run, as ``files`` in pyproject.toml's ``[tool.mypy]`` (checked equal).
+The subpackages' facades (``leosop.positioning``, ``leosop.signal``) are part of it: their ``__all__`` is what
+they import for type checkers, every name resolves to the object of its home module, and importing them loads
+none of the heavy dependencies their names need.
 """
 
 import importlib
@@ -14,6 +17,8 @@ import tomllib
 from pathlib import Path
 
 import pytest
+
+from leosop.lazy import type_checking_imports
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,10 +33,14 @@ PUBLIC = {
                       "ned_to_enu", "azimuth_elevation_range", "range_rate", "rotate_to_later_ecef", "gmst1982",
                       "teme_to_ecef"],
     "leosop.geometry.dop": ["gdop", "cofactor", "range_dops"],
+    "leosop.positioning": ["position_snapshots", "position_static", "position_static_passes", "satellite_states",
+                           "solve_snapshots", "solve_static", "gdop"],
     "leosop.positioning.snapshot": ["solve_snapshots"],
     "leosop.positioning.static": ["solve_static"],
     "leosop.positioning.solve": ["satellite_states", "position_snapshots", "position_static",
                                  "position_static_passes"],
+    "leosop.signal": ["comb_baseband", "noise_sigma", "add_noise", "doppler_blocks", "site_geometry", "coarse_stft",
+                      "estimate_block", "estimate_blocks"],
     "leosop.signal.pilot": ["PilotComb.of", "PilotComb.through_lo", "comb_baseband", "noise_sigma", "add_noise"],
     "leosop.signal.channel": ["doppler_blocks", "site_geometry", "SiteChannel.doppler_hz",
                               "SiteChannel.doppler_rate_hz_per_s", "SiteChannel.amplitude", "SiteChannel.cn0_at"],
@@ -51,6 +60,10 @@ def _module_file(name):
 
 
 FILES = [_module_file(name) for name in PUBLIC]
+#: Packages whose __init__ re-exports their public names lazily (leosop.lazy).
+FACADES = ("leosop.positioning", "leosop.signal")
+#: What importing a facade must not load: each costs a large part of a second (pyfftw imports dask).
+HEAVY = ("pyfftw", "dask", "scipy.stats", "scipy.optimize", "scipy.interpolate", "sigmf")
 
 
 def test_pyproject_lists_the_same_modules():
@@ -77,3 +90,23 @@ def test_mypy_finds_nothing():
                           capture_output=True, text=True, timeout=120)
     if done.returncode != 0:
         pytest.fail(f"mypy {' '.join(FILES)}:\n{done.stdout}{done.stderr}", pytrace=False)
+
+
+@pytest.mark.parametrize("package", FACADES)
+def test_facade_names_resolve_to_their_home(package):
+    facade = importlib.import_module(package)
+    homes = type_checking_imports(ROOT / _module_file(package))
+    assert sorted(facade.__all__) == sorted(homes), f"{package}: __all__ differs from its TYPE_CHECKING imports"
+    for name, (module, attr) in homes.items():
+        assert getattr(facade, name) is getattr(importlib.import_module(module, package), attr), name
+        assert name in dir(facade)
+    with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
+        facade.not_a_name
+
+
+def test_facades_import_light():
+    # A fresh interpreter: this one has loaded everything already.
+    code = f"import sys, {', '.join(FACADES)}; print(' '.join(m for m in {HEAVY!r} if m in sys.modules))"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
+                          check=True)
+    assert done.stdout.split() == [], f"importing {', '.join(FACADES)} loaded {done.stdout.strip()}"
