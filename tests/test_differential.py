@@ -175,8 +175,9 @@ def test_consistent_with_orbit_errors(scene, base_off_ms):
 def test_rtn_frame_rate_is_the_frames_time_derivative(scene):
     """W of the orbit-offset states against a central difference of the RTN axes built from SGP4 states.
 
-    The axes turn at the orbital rate (~1e-3 rad/s) and the cross-track one also at ~1e-4 rad/s with
-    the ECEF orbit plane (Earth rotation), which W once missed (3 cm/s on a 300 m along-track offset).
+    The axes are the inertial orbit's: they turn at the orbital rate (~1e-3 rad/s) and the cross-track
+    one also at the Earth's rate (~7e-5 rad/s, the inertial orbit plane seen from ECEF), which W once
+    missed (2 cm/s on a 300 m along-track offset).
     A 0.5 s central difference is good to (0.5 s)^2 / 6 x (1e-3 rad/s)^3 ~ 4e-11 rad/s; the oblateness
     left out of W turns the plane by at most its acceleration over the speed, 1.5 J2 GM / r^2 ~ 0.012
     m/s^2 over 7.6 km/s = 1.5e-6 rad/s (achieved 8.5e-7): 2e-6 rad/s bounds the difference, against

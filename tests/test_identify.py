@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from leosop.constants import C_MPS, OMEGA_E_RAD_PER_S
 from leosop.errors import InputError
 from leosop.frames import C_e_n, geodetic_to_ecef
 from leosop.orbits import load_constellation
@@ -106,6 +107,47 @@ def test_interpolated_apparent_states_match_sgp4_with_light_time(walker):
     # difference bounds the velocities (sv_states_from_tle differentiates positions): 0.4 Hz at Ku band.
     assert np.max(np.linalg.norm(got_p - want_p, axis=1)) < 0.05
     assert np.max(np.linalg.norm(got_v - want_v, axis=1)) < 0.03
+
+
+def test_time_offset_is_one_of_the_inertial_orbit(walker):
+    """A satellite's time offset moves it along its inertial orbit, the Earth not turning with it.
+
+    Reference: SGP4's TEME state at ``t + shift`` turned into ECEF with the Earth's angle at ``t``
+    (another path than the interpolated ECEF grid rotated by ``omega shift``); the Doppler's rate in the
+    offset against the closed form :func:`leosop.geometry.doppler.doppler_rate` with ``inertial``.
+    """
+    from leosop.frames import teme_to_ecef
+    from leosop.geometry.doppler import doppler_rate
+    from leosop.orbits.propagate import state_teme
+    from leosop.replay.ephemeris import Ephemeris
+    from leosop.timebase import jd_ut1
+
+    rx = geodetic_to_ecef(0.6, 1.9, 300.0)
+    t0 = walker.epochs_utc[0] + np.timedelta64(3, "h")
+    const = walker.subset(np.arange(0, len(walker), 397))
+    eph = Ephemeris(const, t0, 60.0)
+    sats, t_s, shift_s = np.arange(len(const)), 33.0, 0.4  # 0.4 s: a 3 km along-track error
+    t = t0 + np.timedelta64(int(t_s * 1e9), "ns")
+    p_teme, v_teme, _ = state_teme(const, [t + np.timedelta64(int(shift_s * 1e9), "ns")])
+    want_p, want_v = (x[:, 0] for x in teme_to_ecef(p_teme, v_teme, *jd_ut1(np.array([t]))))
+    got_p, got_v = eph.state_shifted(sats, t_s, shift_s)
+    # Hermite interpolation: ~1 cm, ~1 cm/s (test above); GMST's rate vs OMEGA_E over 0.4 s: < 1 um.
+    assert np.max(np.linalg.norm(got_p - want_p, axis=1)) < 0.05
+    assert np.max(np.linalg.norm(got_v - want_v, axis=1)) < 0.03
+    # The Earth-fixed shift (ECEF state at t + shift) is off by the Earth's turn, omega shift times the
+    # distance from the axis (60-200 m here; the interpolation's 5 cm bounds the rest): teeth.
+    off_m = np.linalg.norm(eph.state(sats, t_s + shift_s)[0] - want_p, axis=1)
+    np.testing.assert_allclose(off_m, OMEGA_E_RAD_PER_S * shift_s * np.hypot(*want_p[:, :2].T), atol=0.1)
+    k = 11.325e9 / C_MPS
+    rate = eph.doppler_shift_rate(sats, t_s, 0.0, rx, k)
+    p, v = eph.state(sats, t_s)
+    want_rate, _ = doppler_rate(p, v, rx, 11.325e9, inertial=True)
+    ecef_rate, _ = doppler_rate(p, v, rx, 11.325e9)
+    # The closed form leaves out J2 (~1.5e-2 m/s^2 x 38 Hz/(m/s) ~ 0.6 Hz/s); the central difference
+    # over +-0.5 s errs by (0.5 s)^2 / 6 x the third derivative (~1 Hz/s^3 overhead): 1 Hz/s bounds both,
+    # against inertial-minus-ECEF differences of tens to hundreds of Hz/s.
+    np.testing.assert_allclose(rate, want_rate, atol=1.0)
+    assert np.max(np.abs(ecef_rate - want_rate)) > 20.0
 
 
 def test_unknown_option_is_an_input_error(walker):

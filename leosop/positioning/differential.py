@@ -37,9 +37,9 @@ w-test outlier exclusion) and each block's status is
 
 The element-set error's residual (the differential term above) grows with
 the baseline: each common satellite's radial / along / cross-track offset is
-a state with a prior, moving its position and, as the RTN frame turns
-(:func:`_rtn_frames`, the orbit plane's turn in ECEF included), its
-velocity. tools/bench_differential.py measures the NEES over the baseline.
+a state with a prior in the inertial orbit's RTN frame (an element set's
+error; :func:`_rtn_frames`), moving its position and, as that frame turns in
+ECEF, its velocity. tools/bench_differential.py measures the NEES over the baseline.
 
 Joint fit (``sat_clock_degree``). A single difference sees an offset only
 through the baseline (~1 Hz for 300 m along-track at 7.5 km), where over a
@@ -160,35 +160,35 @@ class DifferentialFix:
 
 
 def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
-    """Radial / along-track / cross-track axes (columns of C, (..., 3, 3)) and their rate W = dC/dt (..., 3, 3).
+    """Radial / along-track / cross-track axes of the inertial orbit (columns of C, (..., 3, 3)) in ECEF
+    axes, and their rate W = dC/dt (..., 3, 3) in the ECEF frame.
 
-    The axes are built from the ECEF state: radial along ``r``, cross-track
-    along ``h = r x v``, along-track ``n x r``. An offset ``C d`` fixed in
-    that frame moves with velocity ``W d``. The radial axis turns with the
-    orbital angular velocity ``r x v / |r|^2``; the cross-track axis turns
-    too, as the ECEF orbit plane does: ``dh/dt = r x a``, and of the ECEF
-    acceleration ``a`` only the Earth's rotation terms (Coriolis ``-2 w x v``
-    and centrifugal ``-w x (w x r)``, ``w`` the Earth's rate) leave the
-    plane, central gravity does not (the Earth's oblateness, ~1e-3 of it,
-    is left out). That turn, ~1e-4 rad/s, moves a 300 m along-track offset
-    by 3 cm/s, ~1 Hz at Ku band, which the rover and the base see the more
-    differently the longer the baseline.
+    An element set's error is an offset of the satellite on its inertial
+    orbit (its along-track part a time offset of that orbit, as the static
+    fix and the generator model it: :func:`~leosop.geometry.doppler.doppler_rate`
+    with ``inertial``): radial along ``r``, cross-track along
+    ``h = r x (v + w x r)`` (the inertial velocity, ``w`` the Earth's rate),
+    along-track ``n x r``, so an along-track offset ``d`` is, to first order, a
+    time offset of ``d / |v + w x r|``. Axes built from the ECEF velocity
+    instead tilt by up to ``w |r| / |v|`` ~ 4 deg, 7 % of an along-track offset
+    put across the track. An offset ``C d`` fixed in that frame moves in ECEF
+    with velocity ``W d``: the radial axis turns with ``r``, the inertial
+    orbit plane (fixed in space but for the oblateness, ~1e-6 rad/s, left out)
+    turns in ECEF at ``-w``: ``dn/dt = -w x n``, ~7e-5 rad/s, which moves a
+    300 m along-track offset by 2 cm/s, ~1 Hz at Ku band, which the rover and
+    the base see the more differently the longer the baseline.
     """
     r, v = np.asarray(pos_sv_ecef_m, float), np.asarray(vel_sv_ecef_mps, float)
+    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
     norm_r = np.linalg.norm(r, axis=-1, keepdims=True)
     radial = r / norm_r
-    h = np.cross(r, v)
-    norm_h = np.linalg.norm(h, axis=-1, keepdims=True)
-    normal = h / norm_h
-    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
-    a_rot = -2.0 * np.cross(omega, v) - np.cross(omega, np.cross(omega, r))
-    h_dot = np.cross(r, a_rot)
-    d_normal = (h_dot - normal * np.sum(normal * h_dot, axis=-1, keepdims=True)) / norm_h
+    h = np.cross(r, v + np.cross(omega, r))
+    normal = h / np.linalg.norm(h, axis=-1, keepdims=True)
+    d_normal = -np.cross(omega, normal)
     d_radial = (v - radial * np.sum(radial * v, axis=-1, keepdims=True)) / norm_r
     along = np.cross(normal, radial)
     d_along = np.cross(d_normal, radial) + np.cross(normal, d_radial)
     return np.stack([radial, along, normal], axis=-1), np.stack([d_radial, d_along, d_normal], axis=-1)
-
 
 def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_s=None, motion="rest",
                        clock_degree=1, sat_clock_degree=None, orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M,

@@ -6,8 +6,8 @@ Each satellite's errors are drawn once (:func:`draw_satellite_errors`) and
 shared by every receiver (:func:`simulate_receiver`):
 
 - an element-set error, a constant offset in the satellite's radial /
-  along-track / cross-track frame (built from its SGP4 position and velocity
-  in ECEF); the true velocity is the time derivative of the offset
+  along-track / cross-track frame of its inertial orbit (built from its SGP4
+  state); the true velocity is the time derivative of the offset
   position, so the rotating frame's velocity (~1 mm/s per metre of offset at
   the orbital rate) is in the truth too;
 - the satellite's oscillator: a frequency offset and drift.
@@ -28,7 +28,7 @@ from ..constants import C_MPS
 from ..frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, range_rate
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import seconds_since
-from .differential import ORBIT_SIGMA_RTN_M
+from .differential import ORBIT_SIGMA_RTN_M, _rtn_frames
 from .measurements import DEFAULT_CARRIER_HZ, Measurements, sv_states_from_tle
 
 __all__ = [
@@ -96,14 +96,13 @@ def draw_satellite_errors(sat_ids, t0_utc, rng, *, orbit_sigma_rtn_m=ORBIT_SIGMA
 
 
 def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
-    """Offset ``orbit_rtn_m`` (m, 3) in ECEF at ``time_utc`` (m,): position (m, 3)."""
-    pos, vel, _ = state_ecef_pairs(constellation, index, time_utc)
-    radial = pos / np.linalg.norm(pos, axis=-1, keepdims=True)
-    normal = np.cross(pos, vel)
-    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-    along = np.cross(normal, radial)
-    return (orbit_rtn_m[:, :1] * radial + orbit_rtn_m[:, 1:2] * along + orbit_rtn_m[:, 2:] * normal)
+    """Offset ``orbit_rtn_m`` (m, 3) in ECEF at ``time_utc`` (m,): position (m, 3).
 
+    In the inertial orbit's RTN frame (:func:`~leosop.positioning.differential._rtn_frames`),
+    where an element set's error stays put.
+    """
+    pos, vel, _ = state_ecef_pairs(constellation, index, time_utc)
+    return np.einsum("mij,mj->mi", _rtn_frames(pos, vel)[0], orbit_rtn_m)
 
 def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
     """A vehicle at constant speed along a straight line of the local horizon.

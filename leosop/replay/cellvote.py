@@ -10,9 +10,9 @@ of position offset, receiver offset and drift. The best cells are split
 
 import numpy as np
 
-from ..constants import WGS84_A_M
+from ..constants import OMEGA_E_RAD_PER_S, WGS84_A_M
 from ..frames import C_e_n, ecef_to_geodetic, geodetic_to_ecef
-from .ephemeris import SPEED_SV_MPS, doppler_hz, doppler_model, dot3
+from .ephemeris import RATE_STEP_S, SPEED_SV_MPS, doppler_hz, doppler_model, dot3
 from .features import FEATURES
 
 __all__ = ["CellSearch", "fibonacci_cells", "grid_around", "TRACK_CHI2_GATE"]
@@ -57,15 +57,18 @@ def grid_around(centre_ecef_m, offsets_m, alt_m):
 
 
 def _range_accel_bound(pos_sv, vel_sv, pos_rx):
-    """Bound of |range rate change| over 1 s centred on the states [m/s], (...).
+    """Bound of |range rate change| over 1 s of the satellite's inertial time offset [m/s], (...).
 
-    d(range rate)/dt = (|v|^2 - range rate^2) / range + u . a <= |v|^2 / range + |a|, with |v| and
-    the range bounded over the +-0.5 s by the acceleration bound.
+    The offset moves the satellite's ECEF state along ``w = v + omega x r`` and ``a + omega x v``
+    (:mod:`~leosop.replay.ephemeris`), so d(range rate) = ((v . w) - range rate (u . w)) / range
+    + u . (a + omega x v) <= |v| |w| / range + |a| + omega |v|, with |v| and the range bounded over
+    the +-0.5 s by the acceleration bound (which also covers omega |v| < 0.6 m/s^2).
     """
     los_m = pos_sv - pos_rx
     speed_max = np.sqrt(dot3(vel_sv, vel_sv)) + 0.5 * _SAT_ACCEL_MAX_MPS2
+    turn_max = OMEGA_E_RAD_PER_S * np.sqrt(dot3(pos_sv, pos_sv))
     rng_min = np.maximum(np.sqrt(dot3(los_m, los_m)) - 0.5 * speed_max, 1e-3)
-    return speed_max**2 / rng_min + _SAT_ACCEL_MAX_MPS2
+    return speed_max * (speed_max + turn_max) / rng_min + _SAT_ACCEL_MAX_MPS2
 
 
 def _morton_order(cells):
@@ -101,15 +104,16 @@ class CellSearch:
             cos_sep = self.unit @ (centre / np.linalg.norm(centre))
             self.half_angle[np.arccos(np.clip(cos_sep, -1, 1)) > self.half_angle + radius_m / WGS84_A_M] = -1.0
         # States of the satellites some track may pair with (all but those no point of the region
-        # sees) at each track's reference times and 0.5 s either side, (n_tracks, n_cand, 3 offsets,
-        # 3 ref times, 3), indexed through ``local``: memory grows with tracks x candidates, ~50 of a
-        # 10,000-satellite snapshot with a prior.
+        # sees) at each track's reference times and with their inertial orbits 0.5 s either side (the
+        # Doppler's rate in an element set's time offset), (n_tracks, n_cand, 3 offsets, 3 ref times, 3),
+        # indexed through ``local``: memory grows with tracks x candidates, ~50 of a 10,000-satellite
+        # snapshot with a prior.
         self.cand_per_track = [np.flatnonzero(h > 0) for h in self.half_angle]
         cand = np.flatnonzero((self.half_angle > 0).any(axis=0))
         self.local = np.full(n_sats, -1)
         self.local[cand] = np.arange(len(cand))
-        t_eval = t_ref[:, None, :] + np.array([0.0, -0.5, 0.5])[:, None]  # (n_tracks, 3, 3)
-        self.ref_pos, self.ref_vel = eph.state(cand[None, :, None, None], t_eval[:, None])
+        shift = np.array([0.0, -RATE_STEP_S, RATE_STEP_S])[:, None]  # (3 offsets, 1)
+        self.ref_pos, self.ref_vel = eph.state_shifted(cand[None, :, None, None], t_ref[:, None, None, :], shift)
 
     def _pairs(self, cells, radius_m):
         """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3).

@@ -5,6 +5,16 @@ and interpolated by cubic Hermite polynomials (position and velocity at the
 nodes); :meth:`Ephemeris.state_received` applies the light time as
 :func:`leosop.positioning.measurements.sv_states_from_tle` does (state at
 the transmit time, rotated into the ECEF frame of the reception time).
+
+A satellite's time offset ``shift_s`` (its element set's along-track error)
+is one of its inertial orbit, as the generator injects it
+(:class:`leosop.signal.channel.OrbitError`) and the static fix models it
+(:func:`leosop.geometry.doppler.doppler_rate` with ``inertial``): the
+satellite is where its orbit puts it at ``t + shift_s`` while the Earth has
+turned only until ``t``, i.e. its ECEF state at ``t + shift_s`` turned east
+by ``omega_e shift_s``. The ECEF state at ``t + shift_s`` alone (a shift
+along the ground track) misplaces it by ``omega_e |r| shift_s``, ~7 % of the
+along-track shift.
 """
 
 import numpy as np
@@ -13,13 +23,15 @@ from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..frames import rotate_to_later_ecef
 from ..orbits.propagate import state_ecef
 
-__all__ = ["Ephemeris", "doppler_model", "doppler_hz", "dot3", "NODE_STEP_S", "SPEED_SV_MPS"]
+__all__ = ["Ephemeris", "doppler_model", "doppler_hz", "dot3", "NODE_STEP_S", "SPEED_SV_MPS", "RATE_STEP_S"]
 
 #: Node spacing of the propagated grid [s]: the cubic Hermite interpolation
 #: of a LEO orbit errs ~1 mm in position and ~0.1 mm/s in velocity at 10 s.
 NODE_STEP_S = 10.0
 #: Satellite speed converting along-track errors to time offsets [m/s] (LEO at ~550 km).
 SPEED_SV_MPS = 7600.0
+#: Half step of the central difference giving the Doppler's rate in a satellite's time offset [s].
+RATE_STEP_S = 0.5
 
 
 class Ephemeris:
@@ -46,15 +58,25 @@ class Ephemeris:
         vel = ((6 * s2 - 6 * s) * (p0 - p1) + (3 * s2 - 4 * s + 1) * v0 + (3 * s2 - 2 * s) * v1) / NODE_STEP_S
         return pos, vel
 
-    def state_received(self, sat, t_s, pos_rx_ecef_m):
+    def state_shifted(self, sat, t_s, shift_s):
+        """Position and velocity (..., 3) at ``t_s`` of satellites ``sat`` whose inertial orbit is
+        ``shift_s`` ahead (broadcast): the ECEF state at ``t_s + shift_s`` in the ECEF frame of ``t_s``."""
+        shift_s = np.asarray(shift_s, float)
+        pos, vel = self.state(sat, np.asarray(t_s, float) + shift_s)
+        return rotate_to_later_ecef(pos, -shift_s), rotate_to_later_ecef(vel, -shift_s)
+
+    def state_received(self, sat, t_s, pos_rx_ecef_m, shift_s=0.0):
         """Apparent state: position at the transmit time in the ECEF frame of the reception time
         ``t_s``, velocity its derivative over reception time (as
-        :func:`~leosop.positioning.measurements.sv_states_from_tle`)."""
-        pos, vel = self.state(sat, t_s)
+        :func:`~leosop.positioning.measurements.sv_states_from_tle`); the inertial orbit
+        ``shift_s`` ahead (broadcast, see :meth:`state_shifted`)."""
+        shift_s = np.asarray(shift_s, float)
+        pos, vel = self.state(sat, t_s + shift_s)
         for _ in range(2):  # each pass gains |range rate| / c ~ 3e-5
             tau = np.linalg.norm(pos - pos_rx_ecef_m, axis=-1) / C_MPS
-            pos, vel = self.state(sat, t_s - tau)
-        pos, vel = rotate_to_later_ecef(pos, tau), rotate_to_later_ecef(vel, tau)
+            pos, vel = self.state(sat, t_s - tau + shift_s)
+        # The transmit-time state of the shifted orbit (frame of t_s - tau + shift_s) in the frame of t_s.
+        pos, vel = rotate_to_later_ecef(pos, tau - shift_s), rotate_to_later_ecef(vel, tau - shift_s)
         # d/dt_rx of R(omega tau) r(t_rx - tau): the light time's rate tau_dot = range rate / c
         # scales the velocity (up to ~6 Hz at Ku band) and turns the frame (< 0.5 Hz).
         los = pos - pos_rx_ecef_m
@@ -62,6 +84,13 @@ class Ephemeris:
         turn = np.stack([pos[..., 1], -pos[..., 0], np.zeros_like(tau)], axis=-1)
         return pos, vel * (1 - tau_dot)[..., None] + (OMEGA_E_RAD_PER_S * tau_dot)[..., None] * turn
 
+    def doppler_shift_rate(self, sat, t_s, shift_s, pos_rx_ecef_m, hz_per_mps):
+        """Derivative of the Doppler (...) [Hz/s] in the satellite's inertial time offset ``shift_s``:
+        a central difference over +-:data:`RATE_STEP_S` of :meth:`state_shifted` (light time left out)."""
+        pa, va = self.state_shifted(sat, t_s, shift_s + RATE_STEP_S)
+        pb, vb = self.state_shifted(sat, t_s, shift_s - RATE_STEP_S)
+        return (doppler_hz(pa, va, pos_rx_ecef_m, hz_per_mps)
+                - doppler_hz(pb, vb, pos_rx_ecef_m, hz_per_mps)) / (2 * RATE_STEP_S)
 
 def doppler_model(pos_sv, vel_sv, pos_rx, hz_per_mps, los=False):
     """Doppler (...) and its gradient (..., 3) in the receiver position [Hz/m].

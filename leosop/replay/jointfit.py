@@ -1,7 +1,9 @@
 """Stage 2 of the identification: joint least squares on one tentative assignment.
 
 Position, receiver offset and drift, a frequency offset and a time offset
-per satellite (with priors), and optionally a constant receiver velocity;
+per satellite (with priors; the time offset is one of the satellite's
+inertial orbit, its element set's along-track error, see
+:mod:`~leosop.replay.ephemeris`), and optionally a constant receiver velocity;
 tracks that do not fit are dropped one by one.
 """
 
@@ -60,11 +62,9 @@ def _gauss_newton(search, pos0, assign, used, clock0, prior_sigma_m, C, up):
         vel_rx = x[5 + 2 * m:] if n_vel else np.zeros(3)
         pos = pos0 + x[:3] + dt[:, None] * vel_rx
         tau = x[5 + m:5 + 2 * m][which]
-        p, v = search.eph.state_received(sat, t + tau, pos)
+        p, v = search.eph.state_received(sat, t, pos, tau)
         dop, grad, u = doppler_model(p, v - vel_rx, pos, search.k, los=True)
-        pa, va = search.eph.state(sat, t + tau + 0.5)
-        pb, vb = search.eph.state(sat, t + tau - 0.5)
-        rate = doppler_model(pa, va, pos, search.k)[0] - doppler_model(pb, vb, pos, search.k)[0]
+        rate = search.eph.doppler_shift_rate(sat, t, tau, pos, search.k)
         model = dop + x[3] + x[4] * dt + x[5:5 + m][which]
         res = (f - model) / sig
         J = np.zeros((len(t), len(x)))

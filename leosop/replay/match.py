@@ -46,7 +46,8 @@ def match(search, sol):
 
     Returns
     -------
-    list of dict per track: sat, chi2, rms_hz, margin, runner_up (sat or -1).
+    list of dict per track: sat, chi2, rms_hz, margin, runner_up (sat or -1), time_offset_s (the best
+    candidate's fitted inertial time offset, :mod:`~leosop.replay.ephemeris`).
     """
     o = search.o
     pos, cov, vel_rx = sol["pos"], sol["cov"], sol["vel"]
@@ -83,11 +84,9 @@ def match(search, sol):
         n_out = int(MAX_OUTLIER_FRACTION * len(t))
         # The time offset enters non-linearly: re-linearise; a third pass with the outliers out.
         for it in range(3 if n_out else 2):
-            p, v = search.eph.state_received(sat, t[None, :] + tau, pos_t)
+            p, v = search.eph.state_received(sat, t[None, :], pos_t, tau)
             dop, grad = doppler_model(p, v - vel_rx, pos_t, search.k)
-            pa, va = search.eph.state(sat, t[None, :] + tau + 0.5)
-            pb, vb = search.eph.state(sat, t[None, :] + tau - 0.5)
-            rate = doppler_model(pa, va, pos_t, search.k)[0] - doppler_model(pb, vb, pos_t, search.k)[0]
+            rate = search.eph.doppler_shift_rate(sat, t[None, :], tau, pos_t, search.k)
             # The fix's own uncertainty inflates the sigma, but only up to a cap: a fix too poor
             # to test a candidate must not make every candidate pass.
             var = sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
@@ -118,7 +117,7 @@ def match(search, sol):
         used = keep[best] > 0
         out.append({"sat": int(cand[best]), "chi2": float(chi2[best]), "n": int(used.sum()),
                     "rms_hz": float(np.sqrt(np.mean(resid[best, used] ** 2))), "margin": float(second - chi2[best]),
-                    "runner_up": int(cand[order[1]]) if len(order) > 1 else -1})
+                    "runner_up": int(cand[order[1]]) if len(order) > 1 else -1, "time_offset_s": float(tau[best, 0])})
     return out
 
 def accept(search, ids):

@@ -10,9 +10,10 @@ import numpy as np
 
 from ..constants import C_MPS
 from ..constellations import DEFAULT_FAMILY, REGISTRY
-from ..frames import azimuth_elevation_range, range_rate
+from ..frames import azimuth_elevation_range, range_rate, rotate_to_later_ecef
 from ..orbits.propagate import state_ecef
 from ..positioning.measurements import sv_states_from_tle
+from ..signal.channel import inertial_speed_mps
 from .tracks import Track
 
 __all__ = ["visible_indices", "simulate_track", "spurious_track"]
@@ -42,7 +43,8 @@ def simulate_track(constellation, sat_index, pos_rx_ecef_m, time_utc, rng, *, cl
     sat_offset_hz : float
         The satellite's own frequency offset.
     along_track_m : float
-        Element-set error: the true satellite is this far ahead of SGP4.
+        Element-set error: the true satellite is this far ahead of SGP4 on its inertial orbit (a time
+        offset of the inertial orbit, as :class:`~leosop.signal.channel.OrbitError` injects it).
     sigma_hz : float
 
     Returns
@@ -51,11 +53,12 @@ def simulate_track(constellation, sat_index, pos_rx_ecef_m, time_utc, rng, *, cl
         ``sat_id`` None (the truth is the caller's).
     """
     t_utc = np.asarray(time_utc, "datetime64[ns]")
-    _, vel, _ = sv_states_from_tle(constellation, [constellation.sat_ids[sat_index]], t_utc[:1])
-    shift_s = along_track_m / np.linalg.norm(vel[0])
-    t_true = t_utc + np.timedelta64(int(round(shift_s * 1e9)), "ns")
+    shift_s = along_track_m / inertial_speed_mps(constellation, t_utc[0])[sat_index]
+    shift_ns = int(round(shift_s * 1e9))
     ids = np.full(len(t_utc), constellation.sat_ids[sat_index])
-    pos, vel, _ = sv_states_from_tle(constellation, ids, t_true, pos_rx_ecef_m)
+    pos, vel, _ = sv_states_from_tle(constellation, ids, t_utc + np.timedelta64(shift_ns, "ns"), pos_rx_ecef_m)
+    # The inertial orbit ahead, the Earth not: the states at t + shift in the ECEF frame of t.
+    pos, vel = rotate_to_later_ecef(pos, -shift_ns * 1e-9), rotate_to_later_ecef(vel, -shift_ns * 1e-9)
     t_s = (t_utc - t_utc[0]) / np.timedelta64(1, "s")
     dop = -range_rate(pos, vel, np.asarray(pos_rx_ecef_m, float)) * carrier_hz / C_MPS
     dop = dop + clock_hz + clock_drift_hz_per_s * t_s + sat_offset_hz + sigma_hz * rng.standard_normal(len(t_s))
