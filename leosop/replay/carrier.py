@@ -44,7 +44,7 @@ from ..errors import InputError
 from ..signal.fine import comb_phasors
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
-from .tracks import Track
+from .tracks import RATE_SIGMA_FACTOR, Track
 
 __all__ = ["CarrierTracks", "track_carrier", "recording_blocks", "phase_rate_doppler", "LOCK_SNR", "SLIP_NIS",
            "ARC_SIGMA_CYCLES", "WINDOW_S", "ReplayCarrier", "check_continuous", "replay_carrier"]
@@ -329,7 +329,9 @@ class ReplayCarrier:
         The static fix's rows: phase-rate Doppler where a satellite has
         some, its block Doppler where it has none; None without ``static``.
     position : PositionResult or None
-        The static fix from them.
+        The static fix from them (None when they are too few for one).
+    fix_note : str or None
+        Why there is no such fix though ``static`` was asked for.
     """
 
     sat_id: tuple
@@ -343,6 +345,7 @@ class ReplayCarrier:
     block_tracks: list
     measurements: object = None
     position: object = None
+    fix_note: str | None = None
 
     CSV_HEADER = ("time_utc", "t_s", "sat_id", "phase_cycles", "phase_sigma_cycles", "doppler_hz",
                   "doppler_sigma_hz", "lock", "slip", "arc", "in_fix")
@@ -377,12 +380,12 @@ class ReplayCarrier:
             sats.append({"sat_id": sat, "start_utc": format_utc(self.time_utc[self.first[k]]),
                          "n_blocks": int(lock.size), "locked_fraction": float(np.mean(lock)),
                          "arcs": int(np.unique(self.tracks.arc[k][self.tracks.arc[k] >= 0]).size),
-                         "slips": int(np.sum(self.tracks.slip[k])), "n_fix_rows": int(np.sum(self.in_fix[k])),
+                         "slips": int(np.sum(self.tracks.slip[k])), "n_phase_rate_rows": int(np.sum(self.in_fix[k])),
                          "phase_rate_sigma_median_hz": float(np.median(sig)) if sig.size else None,
                          "block_sigma_median_hz": float(np.median(np.concatenate([tr.sigma_hz for tr in blocks]))),
                          "phase_rate_vs_block_rms_hz": float(np.sqrt(np.mean(diff**2))) if diff.size else None})
-        return {"window_s": WINDOW_S, "fix_doppler": "phase_rate" if self.position is not None else None,
-                "satellites": sats}
+        return {"window_s": WINDOW_S, "fix_doppler": "phase_rate" if self.position is not None else "block",
+                "fix_note": self.fix_note, "satellites": sats}
 
 
 def _block_index(t_s, t):
@@ -441,16 +444,22 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
         group = np.flatnonzero(first == k)
         rate0 = [tr.doppler_rate_hz_per_s[0] if np.isfinite(tr.doppler_rate_hz_per_s[0]) else
                  (np.gradient(tr.doppler_hz, tr.t_s)[0] if len(tr) > 1 else 0.0) for tr in (starts[g] for g in group)]
+        # Three sigmas of the block's estimates; the rate's (RATE_SIGMA_FACTOR) matters: with the default 100 Hz/s
+        # a 0.1 s block's prediction would spread 0.5 cycles and restart an arc at every block.
+        sigma0 = 3.0 * max(float(starts[g].sigma_hz[0]) for g in group)
         ct = track_carrier(recording_blocks(rec, block_s, factor=factor, first=k), rec.sample_rate_hz / factor,
                            [starts[g].doppler_hz[0] for g in group], rate0, comb=comb.through_lo(lo_hz),
-                           doppler0_sigma_hz=3.0 * max(float(starts[g].sigma_hz[0]) for g in group))
+                           doppler0_sigma_hz=sigma0, rate0_sigma_hz_per_s=RATE_SIGMA_FACTOR * sigma0
+                           * rec.sample_rate_hz / res.blocks[k].n_samples)
         for name, arr in cols.items():
             arr[group, k:] = getattr(ct, name)
     tracks = CarrierTracks(t_s, **cols)
     dop, sig = phase_rate_doppler(tracks, WINDOW_S)
     in_fix = _disjoint_windows(t_s, dop, tracks.arc, tracks.lock, WINDOW_S)
-    meas = position = None
-    if static and sats:
+    meas = position = note = None
+    if static and not in_fix.any():
+        note = "no phase-rate Doppler (no window of locked blocks): the block-Doppler fix stands"
+    elif static:
         rows = []
         for k, sat in enumerate(sats):
             j = np.flatnonzero(in_fix[k])
@@ -459,9 +468,12 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
         meas = track_measurements(rows, comb.carrier_hz)
         # replay's static fix (pipeline.replay), started from its block-Doppler fix
         start = res.identification.pos_ecef_m if res.position is None else res.position.fixes.pos_ecef_m
-        position = position_static_passes(meas, meas.sat_id, constellation=constellation, init_pos_ecef_m=start,
-                                          clock="common")
-    return ReplayCarrier(sats, time_utc, first, last, tracks, dop, sig, in_fix, ident, meas, position)
+        try:
+            position = position_static_passes(meas, meas.sat_id, constellation=constellation,
+                                              init_pos_ecef_m=start, clock="common")
+        except InputError as exc:  # too few rows (a recording of a few windows): the block-Doppler fix stands
+            meas, note = None, str(exc)
+    return ReplayCarrier(sats, time_utc, first, last, tracks, dop, sig, in_fix, ident, meas, position, note)
 
 
 def _disjoint_windows(t_s, doppler_hz, arc, lock, window_s):
