@@ -442,15 +442,13 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
     cols.update(lock=np.zeros(shape, bool), slip=np.zeros(shape, bool), arc=np.full(shape, -1))
     for k in np.unique(first):
         group = np.flatnonzero(first == k)
-        rate0 = [tr.doppler_rate_hz_per_s[0] if np.isfinite(tr.doppler_rate_hz_per_s[0]) else
-                 (np.gradient(tr.doppler_hz, tr.t_s)[0] if len(tr) > 1 else 0.0) for tr in (starts[g] for g in group)]
-        # Three sigmas of the block's estimates; the rate's (RATE_SIGMA_FACTOR) matters: with the default 100 Hz/s
-        # a 0.1 s block's prediction would spread 0.5 cycles and restart an arc at every block.
-        sigma0 = 3.0 * max(float(starts[g].sigma_hz[0]) for g in group)
-        ct = track_carrier(recording_blocks(rec, block_s, factor=factor, first=k), rec.sample_rate_hz / factor,
-                           [starts[g].doppler_hz[0] for g in group], rate0, comb=comb.through_lo(lo_hz),
-                           doppler0_sigma_hz=sigma0, rate0_sigma_hz_per_s=RATE_SIGMA_FACTOR * sigma0
-                           * rec.sample_rate_hz / res.blocks[k].n_samples)
+        f0, r0, f0_sigma, r0_sigma = np.array([_start(starts[g], res.blocks[k].n_samples / rec.sample_rate_hz)
+                                               for g in group]).T
+        # Priors of three sigmas. The rate's matters: the prediction to the next block must stay well within
+        # ARC_SIGMA_CYCLES, or every block restarts an arc and the filter never learns the rate.
+        ct = track_carrier(recording_blocks(rec, block_s, factor=factor, first=k), rec.sample_rate_hz / factor, f0, r0,
+                           comb=comb.through_lo(lo_hz), doppler0_sigma_hz=3.0 * np.max(f0_sigma),
+                           rate0_sigma_hz_per_s=3.0 * np.max(r0_sigma))
         for name, arr in cols.items():
             arr[group, k:] = getattr(ct, name)
     tracks = CarrierTracks(t_s, **cols)
@@ -474,6 +472,25 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
         except InputError as exc:  # too few rows (a recording of a few windows): the block-Doppler fix stands
             meas, note = None, str(exc)
     return ReplayCarrier(sats, time_utc, first, last, tracks, dop, sig, in_fix, ident, meas, position, note)
+
+
+def _start(track, block_s):
+    """Doppler, rate and their sigmas at a track's first block: a quadratic fitted to its first :data:`WINDOW_S`.
+
+    The track's blocks know the rate far better than one block does (its
+    sigma ``RATE_SIGMA_FACTOR sigma_hz / block_s``, ~130 Hz/s for a 20 ms
+    block at 42 dB-Hz; a second of 0.1 s blocks: a few tenths of Hz/s).
+    A track with fewer than four blocks in the window gives its first block's own estimates.
+    """
+    use = (track.t_s - track.t_s[0] <= WINDOW_S) & np.isfinite(track.sigma_hz) & np.isfinite(track.doppler_hz)
+    if use.sum() < 4:
+        rate = track.doppler_rate_hz_per_s[0]
+        return (track.doppler_hz[0], rate if np.isfinite(rate) else 0.0, track.sigma_hz[0],
+                RATE_SIGMA_FACTOR * track.sigma_hz[0] / block_s)
+    Aw = ((track.t_s[use] - track.t_s[0])[:, None] ** np.arange(3)) / track.sigma_hz[use, None]
+    coef, *_ = np.linalg.lstsq(Aw, track.doppler_hz[use] / track.sigma_hz[use], rcond=None)
+    cov = np.linalg.inv(Aw.T @ Aw)
+    return coef[0], coef[1], np.sqrt(cov[0, 0]), np.sqrt(cov[1, 1])
 
 
 def _disjoint_windows(t_s, doppler_hz, arc, lock, window_s):
