@@ -397,8 +397,9 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
     """Carrier tracking of a replay's identified satellites over a continuous recording, and its static fix.
 
     Each satellite's tracker starts at the first block of its earliest
-    identified track from that block's Doppler and rate (satellites starting
-    at the same block share one pass over the recording). The blocks are
+    identified track, from the Doppler and rate the track gives there
+    (:func:`_start`; satellites starting at the same block share one pass
+    over the recording). The blocks are
     replay's (``block_s``, narrowed as replay narrows them); the comb is seen
     through the receiver's LO offset at its reference time (its drift over a
     recording moves the edge tones by ~1e-5 of the change: negligible). With
