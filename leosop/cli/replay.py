@@ -47,8 +47,9 @@ from .options import mask_deg, parse_site, positive
 _LO_OFFSET_LIMIT_HZ = 50e6
 _LO_DRIFT_LIMIT_HZ_PER_S = 1e3
 #: The files ``--out`` may hold, written all or none (measurements, fixes and the spectrogram when there are any;
-#: the base's measurements with ``--base``).
-OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png", "base_measurements.csv")
+#: the base's measurements with ``--base``, the carrier tracks with ``--carrier``).
+OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png", "base_measurements.csv",
+             "carrier.csv")
 
 _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 
@@ -76,6 +77,9 @@ def register(subparsers):
     p.add_argument("--base-site", metavar="LAT_DEG,LON_DEG,ALT_M", help="the base's known position")
     p.add_argument("--lo-drift-max-hz-per-s", type=float, default=LO_DRIFT_MAX_HZ_PER_S, metavar="HZ_PER_S",
                    help="largest drift of that offset searched, +- (default %(default)g)")
+    p.add_argument("--carrier", action="store_true",
+                   help="continuous recordings: track each identified satellite's carrier phase (carrier.csv); "
+                        "with --static the fix takes its phase-rate Doppler in place of the block Doppler")
     p.add_argument("--workers", type=int, metavar="N",
                    help="batch: workers of the local Dask cluster (default: the cores)")
     p.add_argument("--scheduler", metavar="ADDR", help="batch: Dask scheduler address (default: a local cluster; "
@@ -140,6 +144,13 @@ def _run_single(args):
         check_output_file(Path(args.out) / name, "--out")  # before the work, not after
     path = Path(args.recording[0])
     rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
+    if args.carrier:
+        from ..replay.carrier import check_continuous
+
+        if args.base:
+            raise InputError("--carrier with --base: the differential fix takes block Doppler; differential "
+                             "carrier phase is not implemented")
+        check_continuous(rec)
     base_rec = None
     if args.base:
         from ..replay.differential import check_pair
@@ -149,13 +160,23 @@ def _run_single(args):
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
                  lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True)
-    solutions, passes, _ = ([], None, None) if res.position is None else solutions_doc(res.position,
-                                                                                        res.measurements)
+    carrier = None
+    if args.carrier:
+        from ..replay.carrier import replay_carrier
+
+        carrier = replay_carrier(rec, res, const, block_s=block_s, lo_offset_max_hz=lo_max, static=args.static)
+    position, meas = (res.position, res.measurements) if carrier is None or carrier.position is None else \
+        (carrier.position, carrier.measurements)
+    solutions, passes, _ = ([], None, None) if position is None else solutions_doc(position, meas)
     extra = {} if passes is None else {"passes": passes}
     doc = {"tracks": [_track_doc(tr) for tr in res.tracks], "solutions": solutions,
            "recording": str(path), "n_blocks": len(res.blocks),
            "n_identified": sum(tr.sat_id is not None for tr in res.tracks),
            "mode": "static" if args.static else "snapshot", **_lo_doc(res.lo, lo_max, drift_max), **extra}
+    if carrier is not None:
+        doc["carrier"] = carrier.doc()
+        if carrier.position is not None and res.position is not None:
+            doc["solutions_block_doppler"] = solutions_doc(res.position, res.measurements)[0]
     if res.pss is not None:
         acq, cap_utc = res.pss
         doc["pss"] = {"detected": bool(acq.detected), "metric": float(acq.metric),
@@ -184,7 +205,7 @@ def _run_single(args):
             "base_tracks": [_track_doc(tr) for tr in base_res.tracks],
             "base_n_identified": sum(tr.sat_id is not None for tr in base_res.tracks)}
     if args.out:
-        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff)
+        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff, carrier)
     return doc
 
 
@@ -250,13 +271,14 @@ def replay_files(args, meta):
     return doc, files
 
 
-def _write_outputs(out, doc, res, name, start_utc, diff=None):
+def _write_outputs(out, doc, res, name, start_utc, diff=None, carrier=None):
     from ..plots.spectra import plot_spectrogram
     from .position import fixes_csv_rows
 
     # The files this run makes, all or none (a directory in the place of one leaves no other behind).
     names = [n for n, made in zip(OUT_FILES, (True, True, res.measurements is not None, bool(doc["solutions"]),
-                                              res.spectrum.shape[1] > 0, diff is not None)) if made]
+                                              res.spectrum.shape[1] > 0, diff is not None, carrier is not None))
+             if made]
     with atomic_files([out / n for n in names]) as tmps:
         path = dict(zip(names, tmps))
         write_json(path["replay.json"], doc)
@@ -269,6 +291,8 @@ def _write_outputs(out, doc, res, name, start_utc, diff=None):
             write_csv(path["fixes.csv"], *fixes_csv_rows(doc["solutions"]))
         if "base_measurements.csv" in path:
             write_measurements(path["base_measurements.csv"], diff.base)
+        if "carrier.csv" in path:
+            write_csv(path["carrier.csv"], carrier.CSV_HEADER, carrier.csv_rows())
         if "spectrogram.png" in path:
             labelled = [(tr.t_s, tr.doppler_hz, tr.sat_id or "unidentified") for tr in res.tracks]
             plot_spectrogram(path["spectrogram.png"], res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,
@@ -335,6 +359,15 @@ def summary(doc):
         for s in doc["solutions_alone"][:1]:
             lines.append(f"rover alone: {format_or_na(s['lat_deg'], '.6f')} {format_or_na(s['lon_deg'], '.6f')} "
                          f"{format_or_na(s['alt_m'], '.1f')} m  {s['status']}")
+    for c in doc.get("carrier", {}).get("satellites", []):
+        rms = "n/a" if c["phase_rate_vs_block_rms_hz"] is None else f"{c['phase_rate_vs_block_rms_hz']:.3f} Hz"
+        lines.append(f"carrier {c['sat_id']}: {c['arcs']} arc(s), {c['slips']} slip(s), locked "
+                     f"{100 * c['locked_fraction']:.0f} %, phase-rate vs block Doppler rms {rms}")
+    if "solutions_block_doppler" in doc:
+        lines.append("the fix above takes the phase-rate Doppler; from the block Doppler: "
+                     + "; ".join(f"{format_or_na(s['lat_deg'], '.6f')} {format_or_na(s['lon_deg'], '.6f')} "
+                                 f"{format_or_na(s['alt_m'], '.1f')} m {s['status']}"
+                                 for s in doc["solutions_block_doppler"]))
     if len(doc["solutions"]) > 10:
         lines.append(f"... {len(doc['solutions']) - 10} more fixes (use --json or --out)")
     if doc["solutions"]:
