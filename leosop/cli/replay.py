@@ -145,7 +145,7 @@ def _run_single(args):
     path = Path(args.recording[0])
     rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
     if args.carrier:
-        from ..replay.carrier import check_continuous
+        from ..replay.carrier_replay import check_continuous
 
         if args.base:
             raise InputError("--carrier with --base: the differential fix takes block Doppler; differential "
@@ -162,7 +162,7 @@ def _run_single(args):
                  lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True)
     carrier = None
     if args.carrier:
-        from ..replay.carrier import replay_carrier
+        from ..replay.carrier_replay import replay_carrier
 
         carrier = replay_carrier(rec, res, const, block_s=block_s, lo_offset_max_hz=lo_max, static=args.static)
     position, meas = (res.position, res.measurements) if carrier is None or carrier.position is None else \
