@@ -24,6 +24,7 @@ from .quality import DISAGREE_SIGMA, constant_tone_sigma_hz, fit_status
 
 __all__ = ["METHODS", "Method", "BlockEstimates", "estimate_block", "estimate_blocks", "ml_grid_points"]
 
+#: The fine estimators ``estimate_block`` and ``estimate_blocks`` accept as ``method``.
 METHODS = ("fast", "fmlef", "ml")
 #: The estimators' names, for type checkers.
 Method = Literal["fast", "fmlef", "ml"]
