@@ -32,6 +32,17 @@ update; the fixes: at each block's mid-time), the median 3-D sigma and the
 mean position NEES (3 when consistent; the epochs of a run are not
 independent, the 95 % interval of the seeds' means is wider than
 chi2(3 n) / n).
+
+Measured (8 seeds, ~20 s each on the shared 2-core machine), RMS 3-D over
+the drive / from 30 s / at the end, median sigma, NEES: block fixes 15.7 /
+16.2 / 24.8 m, sigma 16.2 m, NEES 2.77; joint 12.8 / 12.7 / 24.8 m, 2.89;
+INS + differential Doppler 7.3 / 4.5 / 2.2 m, sigma 5.8 m, NEES 2.13; the
+same with NHC 6.9 / 4.0 / 2.2 m, NEES 1.83; without the orbit states 15.6
+/ 15.5 / 19.6 m at sigma 0.8 m, NEES 1022: at 7.5 km what the base leaves
+of a 300 m along-track offset (~0.4 Hz) is far above the noise (0.26 Hz)
+and must be a state. The issue's 2 m RMS is not reached with Doppler alone
+(carrier phase is the next step); the filter is somewhat conservative
+(the truth's IMU has no bias walk, the filter's does).
 """
 
 import argparse
