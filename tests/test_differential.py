@@ -10,7 +10,7 @@ from leosop.errors import InputError
 from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
-from leosop.positioning.differential import _rtn_frames, solve_differential
+from leosop.positioning.differential import rtn_frames, solve_differential
 from leosop.positioning.differential_base import base_corrections, whitener
 from leosop.positioning.differential_sim import (
     draw_satellite_errors,
@@ -188,8 +188,8 @@ def test_rtn_frame_rate_is_the_frames_time_derivative(scene):
     h = np.timedelta64(500, "ms")
     (p, v, _), (p1, v1, _), (p0, v0, _) = (state_ecef(const.subset(idx), t[[0, -1]] + dt)
                                             for dt in (np.timedelta64(0, "ms"), h, -h))
-    _, W = _rtn_frames(p, v)
-    W_num = (_rtn_frames(p1, v1)[0] - _rtn_frames(p0, v0)[0]) / 1.0
+    _, W = rtn_frames(p, v)
+    W_num = (rtn_frames(p1, v1)[0] - rtn_frames(p0, v0)[0]) / 1.0
     np.testing.assert_allclose(W, W_num, rtol=0, atol=2e-6)
     assert np.abs(W_num[..., 2]).max() > 1e-5  # the cross-track axis does turn: the test has teeth
 

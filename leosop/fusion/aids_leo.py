@@ -105,15 +105,15 @@ class LeoDoppler(Aid):
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
         self.states = (clock, sat) if orbit is None else (clock, sat, orbit)
 
-    def _sv_ecef_m(self, ins):
-        """The satellite position less the estimated orbit error, (3,)."""
+    def _sv_state(self, ins):
+        """The satellite as believed: position less the estimated orbit error and velocity (ECEF), (3,) each."""
         if len(self.states) == 2:
-            return self.pos_sv_ecef_m
-        return self.pos_sv_ecef_m - ins.states[self.states[2].key]
+            return self.pos_sv_ecef_m, self.vel_sv_ecef_mps
+        return self.pos_sv_ecef_m - ins.states[self.states[2].key], self.vel_sv_ecef_mps
 
     def _geometry(self, ins):
         """``C_e_n``, ``C_n_b``, lever arm and its rotation velocity (ENU), antenna position and velocity,
-        satellite position (ECEF), as a tuple; the lever terms are None without a lever arm."""
+        satellite position and velocity (ECEF), as a tuple; the lever terms are None without a lever arm."""
         s = ins.state
         C = frames.C_e_n(s.lat_rad, s.lon_rad)
         r = frames.geodetic_to_ecef(s.lat_rad, s.lon_rad, s.alt_m)
@@ -124,18 +124,18 @@ class LeoDoppler(Aid):
             l_n = C_n_b @ self.lever_arm_b_m
             w_n = C_n_b @ np.cross(ins.omega_ib_b_rad_per_s, self.lever_arm_b_m)
             r, v_n = r + C @ l_n, v_n + w_n
-        return C, C_n_b, l_n, w_n, r, C @ v_n, self._sv_ecef_m(ins)
+        return (C, C_n_b, l_n, w_n, r, C @ v_n, *self._sv_state(ins))
 
     def _clock_hz(self, ins):
         return ins.states[self.states[0].key][0] + ins.states[self.states[1].key][0]
 
     def _predict(self, ins, g):
-        rate = frames.range_rate(g[6], self.vel_sv_ecef_mps, g[4], g[5])
+        rate = frames.range_rate(g[6], g[7], g[4], g[5])
         return np.array([-float(rate) * self.carrier_hz / C_MPS + self._clock_hz(ins)])
 
     def _jacobian(self, g):
         """``dh/dr_a`` and ``dh/dv_a`` (ECEF), (3,) each."""
-        J = doppler_jacobian(g[6][None], self.vel_sv_ecef_mps[None], g[4], g[5], self.carrier_hz)[0]
+        J = doppler_jacobian(g[6][None], g[7][None], g[4], g[5], self.carrier_hz)[0]
         return J[:3], J[3:6]
 
     def predict(self, ins):
@@ -153,7 +153,8 @@ class LeoDoppler(Aid):
         g = self._geometry(ins)
         return self._predict(ins, g) - self.measured, self._design(ins, g), self.R
 
-    def _design(self, ins, g):
+    def _ins_row(self, ins, g):
+        """The INS columns of ``H`` (N_INS,) from ``dh/dr_a``, ``dh/dv_a``, and those two, (3,) each (ECEF)."""
         s = ins.state
         C, C_n_b, l_n, w_n = g[:4]
         J_r, J_v = self._jacobian(g)
@@ -162,14 +163,19 @@ class LeoDoppler(Aid):
         # C_e_n x moves by -C_e_n [x x] M dpos for any ENU vector x (the velocity, the lever arm).
         M = np.zeros((3, 3))
         M[0, 0], M[1, 1], M[2, 1] = -1.0, np.cos(s.lat_rad), np.sin(s.lat_rad)
+        row = np.zeros(N_INS)
+        row[DV] = JC_v
+        row[DPOS] = JC_r @ pos_jacobian(s.lat_rad, s.alt_m) - JC_v @ skew(s.vel_enu_mps) @ M
+        if l_n is not None:
+            row[PHI] = JC_r @ skew(l_n) + JC_v @ skew(w_n)
+            row[DPOS] -= (JC_r @ skew(l_n) + JC_v @ skew(w_n)) @ M
+            row[EPS] = -JC_v @ C_n_b @ skew(self.lever_arm_b_m)
+        return row, J_r, J_v
+
+    def _design(self, ins, g):
         c = N_INS + self.states[0].size  # the satellite's columns
         H = np.zeros((1, c + sum(b.size for b in self.states[1:])))
-        H[0, DV] = JC_v
-        H[0, DPOS] = JC_r @ pos_jacobian(s.lat_rad, s.alt_m) - JC_v @ skew(s.vel_enu_mps) @ M
-        if l_n is not None:
-            H[0, PHI] = JC_r @ skew(l_n) + JC_v @ skew(w_n)
-            H[0, DPOS] -= (JC_r @ skew(l_n) + JC_v @ skew(w_n)) @ M
-            H[0, EPS] = -JC_v @ C_n_b @ skew(self.lever_arm_b_m)
+        H[0, :N_INS], J_r, _ = self._ins_row(ins, g)
         H[0, N_INS] = 1.0  # receiver offset (a drift enters through the block's transition)
         H[0, c] = 1.0  # satellite offset
         if len(self.states) == 3:

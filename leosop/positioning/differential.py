@@ -38,7 +38,7 @@ w-test outlier exclusion) and each block's status is
 The element-set error's residual (the differential term above) grows with
 the baseline: each common satellite's radial / along / cross-track offset is
 a state with a prior in the inertial orbit's RTN frame (an element set's
-error; :func:`_rtn_frames`), moving its position and, as that frame turns in
+error; :func:`rtn_frames`), moving its position and, as that frame turns in
 ECEF, its velocity. tools/bench_differential.py measures the NEES over the baseline.
 
 Joint fit (``sat_clock_degree``). A single difference sees an offset only
@@ -75,7 +75,7 @@ from .differential_base import MAX_GAP_S, TIME_TOL_S, base_corrections, model_hz
 from .quality import fix_status
 from .robust_ls import XTOL_POS_M, FixStatus, solve_robust
 
-__all__ = ["MOTIONS", "DifferentialFix", "solve_differential"]
+__all__ = ["MOTIONS", "ORBIT_SIGMA_RTN_M", "DifferentialFix", "rtn_frames", "solve_differential"]
 
 #: Default prior standard deviation of an element-set offset, radial / along-track / cross-track [m]:
 #: along-track as tools/bench_static_time_offset.py (300 m); radial and cross-track smaller, as for any
@@ -159,7 +159,7 @@ class DifferentialFix:
     n_unmatched_rows: int
 
 
-def _rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
+def rtn_frames(pos_sv_ecef_m, vel_sv_ecef_mps):
     """Radial / along-track / cross-track axes of the inertial orbit (columns of C, (..., 3, 3)) in ECEF
     axes, and their rate W = dC/dt (..., 3, 3) in the ECEF frame.
 
@@ -344,7 +344,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     sats = sats_all if orbit_sigma_rtn_m is not None else []
     n_orb = 3 * len(sats)
     onehot = onehot_all if n_orb else onehot_all[..., :0]
-    C_rtn, W_rtn = _rtn_frames(rs_b, vs_b)
+    C_rtn, W_rtn = rtn_frames(rs_b, vs_b)
     # Difference: an offset moves z by rover minus base; joint: each row by its own receiver's view.
     H_sub = model_hz(rs_b, vs_b, base_pos, f_b)[1] if sat_clock_degree is None else np.zeros(rs_b.shape[:2] + (7,))
     n_free = n_lin + n_sc

@@ -28,7 +28,7 @@ from ..constants import C_MPS
 from ..frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, range_rate
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import seconds_since
-from .differential import ORBIT_SIGMA_RTN_M, _rtn_frames
+from .differential import ORBIT_SIGMA_RTN_M, rtn_frames
 from .measurements import DEFAULT_CARRIER_HZ, Measurements, sv_states_from_tle
 
 __all__ = [
@@ -98,11 +98,11 @@ def draw_satellite_errors(sat_ids, t0_utc, rng, *, orbit_sigma_rtn_m=ORBIT_SIGMA
 def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
     """Offset ``orbit_rtn_m`` (m, 3) in ECEF at ``time_utc`` (m,): position (m, 3).
 
-    In the inertial orbit's RTN frame (:func:`~leosop.positioning.differential._rtn_frames`),
+    In the inertial orbit's RTN frame (:func:`~leosop.positioning.differential.rtn_frames`),
     where an element set's error stays put.
     """
     pos, vel, _ = state_ecef_pairs(constellation, index, time_utc)
-    return np.einsum("mij,mj->mi", _rtn_frames(pos, vel)[0], orbit_rtn_m)
+    return np.einsum("mij,mj->mi", rtn_frames(pos, vel)[0], orbit_rtn_m)
 
 def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
     """A vehicle at constant speed along a straight line of the local horizon.

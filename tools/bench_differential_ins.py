@@ -1,0 +1,215 @@
+"""A car with a consumer IMU aided by differential LEO Doppler (tight), against the block-wise differential fixes.
+
+    python tools/bench_differential_ins.py [--seeds 5] [--tle FILE]
+
+The car of tools/bench_differential.py: from the 7.5 km site, 20 m/s
+north-east on the horizon for 150 s (3 km), the 150 epochs of its scene
+(seven real Starlink satellites, 1 s, sigma the comb's CRLB for 20 ms at
+45 dB-Hz), base and rover Doppler from
+:mod:`leosop.positioning.differential_sim` with the same satellite errors
+(element-set offsets N(0, 30 / 300 / 100 m) RTN, satellite offsets U(+-5)
+Hz, drifts N(0, 0.01 Hz/s); each receiver's clock N(0, 2 kHz), N(0, 1
+Hz/s)). The car reaches 20 m/s in a 10 s run-up before the first epoch
+(:func:`leosop.ins.trajectory.from_segments`; the IMU needs a trajectory
+with its attitude and specific force). GNSS absent.
+
+IMU: the ``consumer`` grade of :data:`leosop.fusion.imu_noise.GRADES`, the
+truth drawn from the figures the filter assumes (turn-on biases N(0, 0.5
+deg/s) and N(0, 0.2 m/s^2) per axis, white noise 6 deg/sqrt(h) and 3000
+ug/sqrt(Hz); no bias walk in the truth, so the filter's is conservative),
+100 Hz. The filter starts from the truth plus an error drawn from its
+prior: position 20 m per axis, velocity 0.5 m/s, roll and pitch 1 deg, yaw
+5 deg. Aids: :func:`leosop.fusion.aids_differential.differential_aids`
+(every rover Doppler less the base's correction; with the element-set
+offsets as states, or without), optionally the non-holonomic constraint
+of a car (``NHC_SIGMA_MPS``) at every epoch.
+
+Against: :func:`leosop.positioning.differential.solve_differential` on the
+same rover and base, 10 s blocks with a constant velocity (alone and the
+joint fit), as tools/bench_differential.py. Prints the RMS 3-D and
+horizontal error over every epoch (the fused filter: after each epoch's
+update; the fixes: at each block's mid-time), the median 3-D sigma and the
+mean position NEES (3 when consistent; the epochs of a run are not
+independent, the 95 % interval of the seeds' means is wider than
+chi2(3 n) / n).
+
+Measured (8 seeds, ~20 s each on the shared 2-core machine), RMS 3-D over
+the drive / from 30 s / at the end, median sigma, NEES: block fixes 15.7 /
+16.2 / 24.8 m, sigma 16.2 m, NEES 2.77; joint 12.8 / 12.7 / 24.8 m, 2.89;
+INS + differential Doppler 7.3 / 4.5 / 2.2 m, sigma 5.8 m, NEES 2.13; the
+same with NHC 6.9 / 4.0 / 2.2 m, NEES 1.83; without the orbit states 15.6
+/ 15.5 / 19.6 m at sigma 0.8 m, NEES 1022: at 7.5 km what the base leaves
+of a 300 m along-track offset (~0.4 Hz) is far above the noise (0.26 Hz)
+and must be a state. The issue's 2 m RMS is not reached with Doppler alone
+(carrier phase is the next step); the filter is somewhat conservative
+(the truth's IMU has no bias walk, the filter's does).
+"""
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_differential import CAR_HEADING_ENU, CAR_SPEED_MPS, JOINT, ROVERS_ENU_M
+from bench_static_time_offset import BLOCK_S, CN0_DBHZ, LAT_DEG, LON_DEG, TLE, scene
+
+from leosop import frames
+from leosop.fusion import engine
+from leosop.fusion.aids import NonHolonomic
+from leosop.fusion.aids_differential import DifferentialOptions, differential_aids
+from leosop.fusion.common import FilterSettings, initial_covariance
+from leosop.fusion.imu_noise import GRADES
+from leosop.ins.error_model import DPOS, DV, PHI
+from leosop.ins.imu import ImuErrors, corrupt
+from leosop.ins.strapdown import NavState
+from leosop.ins.trajectory import Segment, from_segments
+from leosop.positioning.differential import solve_differential
+from leosop.positioning.differential_sim import draw_satellite_errors, simulate_receiver
+from leosop.signal.error_model import doppler_sigma_hz
+from leosop.timebase import seconds_since
+
+#: The run-up to the car's speed before the first epoch [s].
+RUN_UP_S = 10.0
+IMU_RATE_HZ = 100.0
+#: The filter's prior about the truth: position per axis [m] (a coarse start: a first block fix is ~15 m),
+#: velocity per axis [m/s], attitude E / N / U [deg] (levelled; heading from a map or the last drive).
+POS_SIGMA_M, VEL_SIGMA_MPS, ATT_SIGMA_DEG = 20.0, 0.5, (1.0, 1.0, 5.0)
+#: Sideways and vertical speed a car on a road allows [m/s] (the non-holonomic constraint).
+NHC_SIGMA_MPS = 0.1
+BLOCK_FIX_S = 10.0
+#: The column ``rms_3d_after``: epochs (or block mid-times) from this time on [s], past the 20 m start.
+SETTLED_S = 30.0
+
+
+def drive(start_ecef_m, duration_s):
+    """The car's trajectory at the IMU rate, from rest at ``start_ecef_m``; the drive starts at ``RUN_UP_S``."""
+    lat, lon, alt = frames.ecef_to_geodetic(start_ecef_m)
+    heading = np.degrees(np.arctan2(CAR_HEADING_ENU[0], CAR_HEADING_ENU[1]))
+    return from_segments(np.degrees(lat), np.degrees(lon), alt, heading,
+                         [Segment(RUN_UP_S, speed_mps=CAR_SPEED_MPS), Segment(duration_s, speed_mps=CAR_SPEED_MPS)],
+                         rate_hz=IMU_RATE_HZ)
+
+
+def consumer_imu(rng):
+    """IMU errors drawn from the ``consumer`` grade's figures, and the filter's settings of that grade."""
+    spec = GRADES["consumer"]
+    errors = ImuErrors.from_quoted(
+        gyro_bias_deg_per_h=rng.normal(0.0, spec.gyro_bias_sigma_deg_per_s, 3) * 3600.0,
+        gyro_arw_deg_per_rt_h=spec.gyro_arw_deg_per_rt_h,
+        accel_bias_g=rng.normal(0.0, spec.accel_bias_sigma_mps2, 3) / 9.80665,
+        accel_vrw_g_per_rt_hz=spec.accel_vrw_ug_per_rt_hz * 1e-6)
+    return errors, spec
+
+
+def fused(traj, k0, n_ep, r, b, base, rng, options, nhc):
+    """The engine over the drive: errors (n_ep, 3) ENU, position covariances (n_ep, 3, 3), times (n_ep,)."""
+    per_ep = int(round(IMU_RATE_HZ))
+    k1 = k0 + (n_ep - 1) * per_ep
+    errors, spec = consumer_imu(rng)
+    dth, dvl = corrupt(traj.dtheta_b_rad[k0:k1], traj.dvel_b_mps[k0:k1], traj.dt_s, errors, rng)
+    t_imu = traj.t_s[k0 + 1:k1 + 1] - traj.t_s[k0]
+    prior = FilterSettings(pos_sigma_m=(POS_SIGMA_M,) * 3, vel_sigma_mps=(VEL_SIGMA_MPS,) * 3,
+                           att_sigma_rad=tuple(np.radians(ATT_SIGMA_DEG)),
+                           gyro_bias_sigma_rad_per_s=np.radians(spec.gyro_bias_sigma_deg_per_s),
+                           accel_bias_sigma_mps2=spec.accel_bias_sigma_mps2, gyro_arw_rad_per_rt_s=0.0,
+                           accel_vrw_mps2_per_rt_hz=0.0)
+    truth0 = traj.at(traj.t_s[k0])
+    P0 = initial_covariance(prior, truth0.lat_rad[0], truth0.alt_m[0])
+    dx = np.linalg.cholesky(P0[:9, :9]) @ rng.standard_normal(9)  # attitude, velocity, position (computed - true)
+    state0 = NavState.from_dcm(truth0.lat_rad[0], truth0.lon_rad[0], truth0.alt_m[0], truth0.vel_enu_mps[0],
+                                      truth0.C_n_b[0]).corrected(-dx[PHI], -dx[DV], -dx[DPOS])
+    aids = differential_aids(r, b, base, np.zeros(3), options)
+    if nhc:
+        aids += [NonHolonomic(t, NHC_SIGMA_MPS) for t in np.unique(r.t_s)]
+        aids.sort(key=lambda a: a.t_s)
+    settings = dataclasses.replace(spec.settings(), record_every=per_ep // 2)
+    res = engine.run(state0, P0, t_imu, np.full(t_imu.size, traj.dt_s), dth, dvl, aids, settings)
+    truth = traj.at(traj.t_s[k0] + res.t_s)
+    e_ecef = (frames.geodetic_to_ecef(res.lat_rad, res.lon_rad, res.alt_m) - truth.pos_ecef_m)
+    e_enu = np.einsum("kji,kj->ki", frames.C_e_n(truth.lat_rad, truth.lon_rad), e_ecef)
+    return e_enu, res.cov_pos_enu_m2, res.t_s
+
+
+def block_fixes(traj, k0, r, b, base, kw):
+    """Block-wise differential fixes: errors (n_b, 3) and covariances (n_b, 3, 3) in ENU, times (n_b,)."""
+    fix = solve_differential(r, b, base, block_s=BLOCK_FIX_S, motion="constant_velocity",
+                             pos0_ecef_m=traj.at(traj.t_s[k0]).pos_ecef_m[0], **kw)
+    k = k0 + np.rint(fix.t_ref_s * IMU_RATE_HZ).astype(int)
+    t_true = traj.t_s[k]
+    truth = traj.at(t_true)
+    # The fix is at t_ref_s, the truth on the IMU grid within 5 ms of it: move it along the car's velocity.
+    vel_ecef = np.einsum("kij,kj->ki", frames.C_e_n(truth.lat_rad, truth.lon_rad), truth.vel_enu_mps)
+    true_ecef = truth.pos_ecef_m + vel_ecef * (fix.t_ref_s - (t_true - traj.t_s[k0]))[:, None]
+    C = frames.C_e_n(truth.lat_rad, truth.lon_rad)
+    e = np.einsum("kji,kj->ki", C, fix.pos_ecef_m - true_ecef)
+    return e, np.einsum("kji,kjl,klm->kim", C, fix.cov[:, :3, :3], C), fix.t_ref_s
+
+
+def trial(const, base, t, start, sigma_hz, seed, cases):
+    """One seed: (errors, covariances, times) per case."""
+    rng = np.random.default_rng(seed)
+    err = draw_satellite_errors(const.sat_ids, t[0], rng)
+
+    def clock():
+        return {"clock_offset_hz": rng.normal(0.0, 2e3), "clock_drift_hz_per_s": rng.normal(0.0, 1.0)}
+
+    t_s = seconds_since(t, t[0])
+    traj = drive(start, t_s[-1])
+    k0 = int(round(RUN_UP_S * IMU_RATE_HZ))
+    track = traj.at(traj.t_s[k0] + t_s)
+    vel = np.einsum("kij,kj->ki", frames.C_e_n(track.lat_rad, track.lon_rad), track.vel_enu_mps)
+    b = simulate_receiver(const, err, base, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock())
+    r = simulate_receiver(const, err, track.pos_ecef_m, t, rng, sigma_hz=sigma_hz, vel_rx_ecef_mps=vel,
+                          mask_deg=10.0, **clock())
+    out = {}
+    for name, (kind, arg) in cases.items():
+        if kind == "fixes":
+            out[name] = block_fixes(traj, k0, r, b, base, arg)
+        else:
+            out[name] = fused(traj, k0, len(t), r, b, base, np.random.default_rng([seed, 1]), *arg)
+    return out
+
+
+CASES = {
+    f"differential fixes, {BLOCK_FIX_S:g} s blocks": ("fixes", {}),
+    f"differential fixes, {BLOCK_FIX_S:g} s blocks, joint": ("fixes", JOINT),
+    "INS + differential Doppler": ("fused", (DifferentialOptions(), False)),
+    "INS + differential Doppler, no orbit states": ("fused", (DifferentialOptions(orbit_sigma_rtn_m=None), False)),
+    "INS + differential Doppler + NHC": ("fused", (DifferentialOptions(), True)),
+}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--tle", type=Path, default=TLE)
+    args = parser.parse_args()
+    const, base, t = scene(args.tle)
+    C = frames.C_e_n(np.radians(LAT_DEG), np.radians(LON_DEG))
+    start = base + C @ np.array(ROVERS_ENU_M["7.5 km"])
+    sigma_hz = float(doppler_sigma_hz(CN0_DBHZ, BLOCK_S))
+    print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz; car {CAR_SPEED_MPS:g} m/s; "
+          f"{args.seeds} seeds")
+    runs = [trial(const, base, t, start, sigma_hz, seed, CASES) for seed in range(args.seeds)]
+    print(f"{'case':48s} {'rms_3d_m':>9s} {'rms_h_m':>8s} {'rms_3d_after':>12s} {'end_3d_m':>9s} {'sig_3d_m':>9s} "
+          f"{'NEES':>6s}")
+    for name in CASES:
+        e, P, t_s = (np.concatenate([run[name][i] for run in runs]) for i in range(3))
+        end = np.array([np.linalg.norm(run[name][0][-1]) for run in runs])
+        nees = np.einsum("si,sij,sj->s", e, np.linalg.inv(P), e)
+        sig3 = np.sqrt(np.trace(P, axis1=-2, axis2=-1))
+        e3 = np.sum(e**2, -1)
+        print(f"{name:48s} {np.sqrt(np.mean(e3)):9.2f} {np.sqrt(np.mean(np.sum(e[:, :2]**2, -1))):8.2f} "
+              f"{np.sqrt(np.mean(e3[t_s >= SETTLED_S])):12.2f} {np.sqrt(np.mean(end**2)):9.2f} {np.median(sig3):9.2f} "
+              f"{np.mean(nees):6.2f}")
+    lo, hi = chi2.ppf([0.025, 0.975], 3 * args.seeds) / args.seeds
+    print(f"NEES: mean of e^T P^-1 e over epochs and seeds (3 when consistent; [{lo:.2f}, {hi:.2f}] would be the "
+          "95 % interval of independent samples, one per seed)")
+
+
+if __name__ == "__main__":
+    main()
