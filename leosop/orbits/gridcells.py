@@ -59,6 +59,8 @@ _BATCH_PAIRS = 100_000
 #: zero [m] get the reference test :func:`_visible`: the table form of
 #: :func:`_visible_segments` differs from it by rounding, ~1e-8 m at LEO ranges.
 _EXACT_BAND_M = 1e-3
+# Cells whose GDOP is computed at once: ~60 temporaries of this many floats stay in cache (~1.4x faster than all).
+_GDOP_CELLS = 16_384
 # Cells x satellites per brute-force block.
 _BRUTE_BLOCK = 2_000_000
 _IU, _JU = np.triu_indices(N_DOPPLER_STATES)
@@ -195,12 +197,11 @@ def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
     # One entry per (satellite, latitude row).
     row_sat = np.repeat(np.arange(len(k)), n_rows)
     row_i = np.repeat(i0, n_rows) + np.arange(n_rows.sum()) - np.repeat(np.cumsum(n_rows) - n_rows, n_rows)
-    phi = np.radians(grid.lat_deg[row_i])
-    phi_s = np.radians(lat_s[row_sat])
-    cap_r = np.radians(cap[row_sat])
-    den = np.cos(phi) * np.cos(phi_s)
+    # Spherical law of cosines, with the row's trigonometry from the grid's tables and the satellite's per satellite.
+    cos_lat_s, sin_lat_s = np.hypot(pos[k, 0], pos[k, 1]) / r, pos[k, 2] / r
+    den = grid.cos_lat[row_i] * cos_lat_s[row_sat]
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos_dlon = (np.cos(cap_r) - np.sin(phi) * np.sin(phi_s)) / den
+        cos_dlon = (np.cos(np.radians(cap))[row_sat] - grid.sin_lat[row_i] * sin_lat_s[row_sat]) / den
     full = (den < 1e-12) | (cos_dlon <= -1.0)
     dlon = np.degrees(np.arccos(np.clip(np.nan_to_num(cos_dlon, nan=1.0), -1.0, 1.0)))
     centre = lon_s[row_sat] + 180.0
@@ -211,7 +212,7 @@ def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
     # Row by row, so that a batch of segments covers a narrow band of cells
     # and the scatter-adds of :func:`epoch_maps` stay in cache.
     keep = np.flatnonzero(n_cols > 0)
-    keep = keep[np.argsort(row_i[keep], kind="stable")]
+    keep = keep[np.argsort(row_i[keep].astype(np.int16), kind="stable")]  # radix sort
     return k[row_sat[keep]], row_i[keep], j0[keep], n_cols[keep]
 
 
@@ -418,8 +419,8 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     normal[-1] = count
     gdop = np.full(n_cells, np.nan)
     fix = np.flatnonzero(count >= N_DOPPLER_STATES)
-    if fix.size:
-        gdop[fix] = _normal_gdop(normal[:, fix])
+    for a in range(0, fix.size, _GDOP_CELLS):
+        gdop[fix[a:a + _GDOP_CELLS]] = _normal_gdop(normal[:, fix[a:a + _GDOP_CELLS]])
     return count.reshape(grid.shape), gdop.reshape(grid.shape)
 
 
