@@ -357,10 +357,10 @@ def _visible_segments(pos_sv_ecef_m, grid, sat, row, seg, lon, sin_mask):
     rho, z = grid.rho_row_m[row], grid.z_row_m[row]
     offset = sin_lat * p[:, 2] - (rho * cos_lat + z * sin_lat)
     r2_row = np.einsum("si,si->s", p, p) - 2.0 * z * p[:, 2] + (rho * rho + z * z)
-    cos_lon, sin_lon = grid.cos_lon[lon], grid.sin_lon[lon]
-    w = p[:, 0][seg] * cos_lon + p[:, 1][seg] * sin_lon
-    rng = np.sqrt(r2_row[seg] - 2.0 * rho[seg] * w)
-    margin = cos_lat[seg] * w + offset[seg] - sin_mask * rng
+    take = np.take  # per pair: ~30% faster than fancy indexing
+    w = take(p[:, 0], seg) * take(grid.cos_lon, lon) + take(p[:, 1], seg) * take(grid.sin_lon, lon)
+    rng = np.sqrt(take(r2_row, seg) - 2.0 * take(rho, seg) * w)
+    margin = take(cos_lat, seg) * w + take(offset, seg) - sin_mask * rng
     vis = margin > 0.0
     near = np.flatnonzero(np.abs(margin) <= _EXACT_BAND_M)
     if near.size:
@@ -397,20 +397,20 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     h_buf = np.empty((N_DOPPLER_STATES, _BATCH_PAIRS + n_lon))
     pos_x, pos_y, pos_z = np.array(pos_sv_ecef_m, dtype=float).T.copy()
     vel_x, vel_y, vel_z = np.array(vel_sv_ecef_mps, dtype=float).T.copy()
+    take = np.take  # per pair: ~30% faster than fancy indexing
     for a, b in segment_batches(n_cols):
         seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
         vis, rng = _visible_segments(pos_sv_ecef_m, grid, sat[a:b], row[a:b], seg, lon, sin_mask)
         keep = np.flatnonzero(vis)
-        seg, lon, rng = seg[keep], lon[keep], rng[keep]
+        seg, lon, rng = take(seg, keep), take(lon, keep), take(rng, keep)
         s, rows = sat[a:b], row[a:b]
-        rho = grid.rho_row_m[rows][seg]
-        los = (pos_x[s][seg] - rho * grid.cos_lon[lon], pos_y[s][seg] - rho * grid.sin_lon[lon],
-               (pos_z[s] - grid.z_row_m[rows])[seg])
-        H = _jacobian_static(los, rng, (vel_x[s][seg], vel_y[s][seg], vel_z[s][seg]), carrier_hz[s][seg],
-                             h_buf[:, :len(keep)])
-        rows = rows[seg]
+        rho = take(grid.rho_row_m[rows], seg)
+        los = (take(pos_x[s], seg) - rho * take(grid.cos_lon, lon),
+               take(pos_y[s], seg) - rho * take(grid.sin_lon, lon), take(pos_z[s] - grid.z_row_m[rows], seg))
+        H = _jacobian_static(los, rng, (take(vel_x[s], seg), take(vel_y[s], seg), take(vel_z[s], seg)),
+                             take(carrier_hz[s], seg), h_buf[:, :len(keep)])
         c0, c1 = row[a] * n_lon, (row[b - 1] + 1) * n_lon
-        cell = rows * n_lon + cell_of_lon[lon] - c0
+        cell = take(rows * n_lon - c0, seg) + take(cell_of_lon, lon)
         count[c0:c1] += np.bincount(cell, minlength=c1 - c0)
         p = prod[:len(keep)]
         for q, (i, j) in enumerate(zip(_IU[:-1], _JU[:-1])):  # H^T H summed over each cell's pairs
