@@ -33,6 +33,7 @@ from leosop.orbits.gridmap import (
     satellite_carriers_hz,
 )
 from leosop.orbits.propagate import state_ecef
+from conftest import data_path
 
 # Cholesky of the normal matrix against the eigen-decomposition of dop.cofactor:
 # both exact to rounding, conditioned geometries amplify it to ~1e-7.
@@ -61,6 +62,22 @@ def test_footprints_match_brute_force(walker_states, grid_deg, mask_deg):
         assert n_b.max() >= 7 and np.isfinite(g_b).any()
         if mask_deg >= 40:  # the sparse Walker set leaves cells without a fix
             assert np.isnan(g_b).any()
+
+
+def test_footprints_match_brute_force_on_the_real_snapshot():
+    """The 10,138-satellite Starlink snapshot (all its shells, polar ones included), 10 deg grid, one epoch.
+
+    Counts identical cell by cell; GDOP to :data:`GDOP_RTOL` where both have a fix.
+    """
+    const = load_constellation(data_path("tle", "starlink_3le_2026-04-08_Bochika.txt"))
+    pos, vel, _ = state_ecef(const, np.datetime64("2026-04-08T12:00:00", "ns"))
+    carrier, grid = satellite_carriers_hz(const), make_grid(10.0)
+    n_f, g_f = epoch_maps(pos[:, 0], vel[:, 0], carrier, grid, 40.0)
+    n_b, g_b = brute_force_epoch(pos[:, 0], vel[:, 0], carrier, grid, 40.0)
+    np.testing.assert_array_equal(n_f.ravel(), n_b)
+    np.testing.assert_array_equal(np.isfinite(g_f.ravel()), np.isfinite(g_b))
+    np.testing.assert_allclose(g_f.ravel(), g_b, rtol=GDOP_RTOL)
+    assert n_b.max() > 20 and np.isfinite(g_b).mean() > 0.5  # a dense constellation, most cells with a fix
 
 
 def test_candidates_are_a_tight_superset(walker_states):

@@ -10,24 +10,31 @@
    epochs of each task) plus the elevation tests of the (satellite, cell) pairs
    that pass the footprint screen (the table form the map uses; the screen
    itself is not counted). Prints the number of pairs per epoch.
-3. ``--full``: the whole map (default 1 deg, 24 h at 60 s, 40 deg mask) in one
-   process (``--scheduler serial``, the default) or on a Dask scheduler;
-   ``--dask-workers 1 2`` also runs it on local clusters of that many
-   single-threaded workers and checks that every run's maps are identical to
-   the first (SHA-256 of the arrays). Written to NetCDF in a temporary folder.
+3. ``--full``: the whole map (default 1 deg, 24 h at 60 s, 40 deg mask), each
+   run in a child process of its own: this tree (``--scheduler``, serial by
+   default), the baseline ``--baseline-ref`` (default ``main``, exported with
+   ``git archive``; ``none`` skips it) the same way, and with
+   ``--dask-workers 1 2`` this tree on local clusters of that many
+   single-threaded workers. Each prints its wall time and CPU time (user +
+   system of the child and its workers, ``os.wait4``: robust to other load on
+   the machine), its CPU time over the floor's (with ``--floor``), and whether
+   its counts are identical to this tree's first run and how far its GDOP is.
 
     OPENBLAS_NUM_THREADS=1 python tools/bench_gdop_map.py \
         --tle ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt [--floor] [--full] [--dask-workers 1 2]
 """
 
 import argparse
-import hashlib
 import math
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from baseline_tree import REPO, export_package
 
 from leosop.orbits.gridcells import (
     _footprint_segments,
@@ -39,10 +46,8 @@ from leosop.orbits.gridmap import (
     ConstellationSource,
     brute_force_epoch,
     epoch_maps,
-    gdop_map,
     make_grid,
     satellite_carriers_hz,
-    write_netcdf,
 )
 from leosop.orbits.propagate import state_ecef
 from leosop.timebase import jd_utc
@@ -66,9 +71,11 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--floor", action="store_true", help="measure the floor over the whole span")
     ap.add_argument("--full", action="store_true", help="also run the whole map")
-    ap.add_argument("--scheduler", default="serial", help="of the --full run: serial, or a Dask address")
+    ap.add_argument("--scheduler", default="serial",
+                    help="of the --full run: serial, local (a local cluster) or a Dask address")
     ap.add_argument("--dask-workers", type=int, nargs="*", default=(),
                     help="--full also on local Dask clusters of these many workers")
+    ap.add_argument("--baseline-ref", default="main", help="git ref of the code --full compares with ('none': skip)")
     a = ap.parse_args()
 
     source = ConstellationSource(a.tle, tuple(a.constellation))
@@ -87,12 +94,12 @@ def main():
     t_brute = t_fast = 0.0
     same_counts, worst_rel, nan_mismatch = True, 0.0, 0
     for j in range(len(sample_t)):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         n_b, g_b = brute_force_epoch(pos[:, j], vel[:, j], carrier, grid, a.mask_deg, cells=cells)
-        t_brute += time.perf_counter() - t0
-        t0 = time.perf_counter()
+        t_brute += time.process_time() - t0
+        t0 = time.process_time()
         n_f, g_f = epoch_maps(pos[:, j], vel[:, j], carrier, grid, a.mask_deg)
-        t_fast += time.perf_counter() - t0
+        t_fast += time.process_time() - t0
         n_f, g_f = n_f.ravel()[cells], g_f.ravel()[cells]
         same_counts &= bool(np.array_equal(n_f, n_b))
         both = np.isfinite(g_b) & np.isfinite(g_f)
@@ -103,62 +110,114 @@ def main():
     fast_epoch_s = t_fast / len(sample_t)
     print(f"sample: {len(cells)} cells x {len(sample_t)} epochs: counts identical: {same_counts}; "
           f"GDOP NaN mismatches {nan_mismatch}, worst relative difference {worst_rel:.2e} (tolerance {GDOP_RTOL:g})")
-    print(f"brute force (every satellite x every cell), extrapolated: {brute_epoch_s:.2f} s per epoch, "
+    print(f"brute force (every satellite x every cell), extrapolated: {brute_epoch_s:.2f} CPU s per epoch, "
           f"{brute_epoch_s * n_epochs / 3600:.1f} h for {n_epochs} epochs (one core)")
-    print(f"footprints: {fast_epoch_s:.3f} s per epoch, {fast_epoch_s * n_epochs / 60:.1f} min for "
+    print(f"footprints: {fast_epoch_s:.3f} CPU s per epoch, {fast_epoch_s * n_epochs / 60:.1f} min for "
           f"{n_epochs} epochs (one core)")
     print(f"speed-up: {brute_epoch_s / fast_epoch_s:.0f}x")
 
-    if a.floor:
-        floor(const, grid, times, a.mask_deg)
+    floor_s = floor(const, grid, times, a.mask_deg) if a.floor else None
     if a.full:
-        runs = [(a.scheduler, None)] + [(None, n) for n in a.dask_workers]
-        first = None
-        for scheduler, n_workers in runs:
-            label = f"{n_workers} local Dask worker(s)" if n_workers else f"scheduler {scheduler}"
-            digest, t_map = full_map(source, times, a, scheduler, n_workers)
-            first = first or (digest, t_map)
-            print(f"full map, {label}: {t_map:.1f} s, speed-up {first[1] / t_map:.2f}x over the first run, "
-                  f"maps identical to it: {digest == first[0]}")
-
+        full_maps(a, floor_s)
 
 def floor(const, grid, times, mask_deg):
-    """Time of SGP4 alone over all satellites and epochs, and of the elevation tests of the screened pairs."""
+    """CPU time of SGP4 alone over all satellites and epochs plus the elevation tests of the screened pairs [s].
+
+    Also prints, apart, the CPU time of the scatter-adds that any per-cell normal matrix needs: one ``bincount``
+    per entry of ``H^T H`` (27 besides the count) over the visible pairs.
+    """
     sin_mask = math.sin(math.radians(mask_deg))
-    t_sgp4 = t_elev = 0.0
-    n_pairs = []
+    t_sgp4 = t_elev = t_scatter = 0.0
+    n_pairs, n_visible = [], []
+    n_lon = grid.shape[1]
     for a in range(0, len(times), EPOCHS_PER_BLOCK):
         block = times[a:a + EPOCHS_PER_BLOCK]
         jd, fr = jd_utc(block)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         const.satrec_array.sgp4(jd, fr)
-        t_sgp4 += time.perf_counter() - t0
+        t_sgp4 += time.process_time() - t0
         pos, _, _ = state_ecef(const, block)
         for j in range(len(block)):
             sat, row, j0, n_cols = _footprint_segments(pos[:, j], grid, mask_deg)
+            n_vis = 0
             for b0, b1 in segment_batches(n_cols):  # the map's batches
                 seg, lon = _segment_pairs(j0[b0:b1], n_cols[b0:b1])
-                t0 = time.perf_counter()
-                _visible_segments(pos[:, j], grid, sat[b0:b1], row[b0:b1], seg, lon, sin_mask)
-                t_elev += time.perf_counter() - t0
+                t0 = time.process_time()
+                vis, rng = _visible_segments(pos[:, j], grid, sat[b0:b1], row[b0:b1], seg, lon, sin_mask)
+                t_elev += time.process_time() - t0
+                keep = np.flatnonzero(vis)
+                cell = (row[b0:b1][seg[keep]] - row[b0]) * n_lon + lon[keep] % n_lon
+                weights = rng[keep]
+                t0 = time.process_time()
+                for _ in range(27):
+                    np.bincount(cell, weights=weights, minlength=(row[b1 - 1] - row[b0] + 1) * n_lon)
+                t_scatter += time.process_time() - t0
+                n_vis += len(keep)
             n_pairs.append(n_cols.sum())
-    print(f"floor: SGP4 (SatrecArray) {t_sgp4:.1f} s for {len(const)} x {len(times)} satellite-epochs; "
+            n_visible.append(n_vis)
+    print(f"floor (CPU): SGP4 (SatrecArray) {t_sgp4:.1f} s for {len(const)} x {len(times)} satellite-epochs; "
           f"{np.mean(n_pairs) / 1e6:.2f} M pairs per epoch pass the footprint screen "
           f"({np.mean(n_pairs) / grid.n_cells:.1f} per cell), their elevation tests {t_elev:.1f} s; "
-          f"floor {t_sgp4 + t_elev:.1f} s")
+          f"floor {t_sgp4 + t_elev:.1f} s", flush=True)
+    print(f"not in the floor: the 27 scatter-adds of H^T H over the {np.mean(n_visible) / 1e6:.2f} M visible pairs "
+          f"per epoch (bincount) {t_scatter:.1f} s CPU", flush=True)
+    return t_sgp4 + t_elev
 
 
-def full_map(source, times, a, scheduler, n_workers):
-    """SHA-256 of the maps and the wall time of one whole run (NetCDF included)."""
+# A child process's whole map: argv = tle, constellations (comma-separated), start, duration, step, grid, mask,
+# scheduler ("local" for a local cluster), workers (0: the default), output .npz.
+_CHILD = """
+import sys
+import numpy as np
+from leosop.orbits.gridmap import ConstellationSource, gdop_map
+tle, fams, start, duration, step, grid, mask, scheduler, workers, out = sys.argv[1:]
+n = int(np.floor(float(duration) / float(step) + 1e-9)) + 1
+times = np.datetime64(start, "ns") + (np.arange(n) * float(step) * 1e9).astype("timedelta64[ns]")
+ds = gdop_map(ConstellationSource(tle, tuple(f for f in fams.split(",") if f)), times, float(grid), float(mask),
+              scheduler=None if scheduler == "local" else scheduler, n_workers=int(workers) or None)
+np.savez(out, n_visible=ds["n_visible"].values, gdop=ds["gdop"].values)
+"""
+
+
+def run_map(code_dir, a, scheduler, n_workers, out):
+    """Wall and CPU time [s] of one whole map computed in a child process importing ``code_dir``'s leosop."""
+    env = dict(os.environ, PYTHONPATH=str(code_dir), OPENBLAS_NUM_THREADS="1")
+    argv = [a.tle, ",".join(a.constellation), a.start, str(a.duration_s), str(a.step_s), str(a.grid_deg),
+            str(a.mask_deg), scheduler, str(n_workers or 0), str(out)]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-c", _CHILD, *argv], cwd=code_dir, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    stderr = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        sys.exit(f"{code_dir}: the map failed: {stderr.decode().strip()[-2000:]}")
+    return time.perf_counter() - t0, usage.ru_utime + usage.ru_stime
+
+
+def full_maps(a, floor_s):
+    """This tree, the baseline and the Dask runs, each in a child process; times, ratios and identical maps."""
     with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        ds = gdop_map(source, times, a.grid_deg, a.mask_deg, scheduler=scheduler, n_workers=n_workers)
-        write_netcdf(ds, Path(tmp) / "gdop_map.nc")
-        t_all = time.perf_counter() - t0
-    fix = np.isfinite(ds["gdop"].values)
-    print(f"  mean visible {float(ds['n_visible'].mean()):.2f}, cell-epochs with a fix {fix.mean():.2%}")
-    digest = hashlib.sha256(ds["n_visible"].values.tobytes() + ds["gdop"].values.tobytes()).hexdigest()
-    return digest, t_all
+        tmp = Path(tmp)
+        runs = [(f"this tree, {a.scheduler}", REPO, a.scheduler, None)]
+        if a.baseline_ref != "none":
+            export_package(a.baseline_ref, tmp)
+            runs.append((f"{a.baseline_ref}, serial", tmp, "serial", None))
+        runs += [(f"this tree, {n} local Dask worker(s)", REPO, "local", n) for n in a.dask_workers]
+        print(f"{'full map':>36} {'wall s':>7} {'CPU s':>7} {'CPU/floor':>9} | identical counts, max GDOP rel. diff"
+              " to the first", flush=True)
+        first = None
+        for k, (label, code_dir, scheduler, n_workers) in enumerate(runs):
+            wall, cpu = run_map(code_dir, a, scheduler, n_workers, tmp / f"map{k}.npz")
+            maps = np.load(tmp / f"map{k}.npz")
+            first = first or (maps, wall)
+            same = np.array_equal(maps["n_visible"], first[0]["n_visible"])
+            g0, g = first[0]["gdop"].astype(float), maps["gdop"].astype(float)
+            same_nan = np.array_equal(np.isnan(g), np.isnan(g0))
+            rel = float(np.nanmax(np.abs(g / g0 - 1), initial=0.0)) if same_nan else math.inf
+            ratio = f"{cpu / floor_s:>8.1f}x" if floor_s else f"{'-':>9}"
+            print(f"{label:>36} {wall:>7.1f} {cpu:>7.1f} {ratio} | {same}, {rel:.1e} "
+                  f"(wall speed-up over the first {first[1] / wall:.2f}x)", flush=True)
+
 
 if __name__ == "__main__":
     main()

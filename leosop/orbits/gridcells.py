@@ -59,6 +59,8 @@ _BATCH_PAIRS = 100_000
 #: zero [m] get the reference test :func:`_visible`: the table form of
 #: :func:`_visible_segments` differs from it by rounding, ~1e-8 m at LEO ranges.
 _EXACT_BAND_M = 1e-3
+# Cells whose GDOP is computed at once: ~60 temporaries of this many floats stay in cache (~1.4x faster than all).
+_GDOP_CELLS = 16_384
 # Cells x satellites per brute-force block.
 _BRUTE_BLOCK = 2_000_000
 _IU, _JU = np.triu_indices(N_DOPPLER_STATES)
@@ -195,12 +197,11 @@ def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
     # One entry per (satellite, latitude row).
     row_sat = np.repeat(np.arange(len(k)), n_rows)
     row_i = np.repeat(i0, n_rows) + np.arange(n_rows.sum()) - np.repeat(np.cumsum(n_rows) - n_rows, n_rows)
-    phi = np.radians(grid.lat_deg[row_i])
-    phi_s = np.radians(lat_s[row_sat])
-    cap_r = np.radians(cap[row_sat])
-    den = np.cos(phi) * np.cos(phi_s)
+    # Spherical law of cosines, with the row's trigonometry from the grid's tables and the satellite's per satellite.
+    cos_lat_s, sin_lat_s = np.hypot(pos[k, 0], pos[k, 1]) / r, pos[k, 2] / r
+    den = grid.cos_lat[row_i] * cos_lat_s[row_sat]
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos_dlon = (np.cos(cap_r) - np.sin(phi) * np.sin(phi_s)) / den
+        cos_dlon = (np.cos(np.radians(cap))[row_sat] - grid.sin_lat[row_i] * sin_lat_s[row_sat]) / den
     full = (den < 1e-12) | (cos_dlon <= -1.0)
     dlon = np.degrees(np.arccos(np.clip(np.nan_to_num(cos_dlon, nan=1.0), -1.0, 1.0)))
     centre = lon_s[row_sat] + 180.0
@@ -211,7 +212,7 @@ def _footprint_segments(pos_sv_ecef_m, grid, mask_deg):
     # Row by row, so that a batch of segments covers a narrow band of cells
     # and the scatter-adds of :func:`epoch_maps` stay in cache.
     keep = np.flatnonzero(n_cols > 0)
-    keep = keep[np.argsort(row_i[keep], kind="stable")]
+    keep = keep[np.argsort(row_i[keep].astype(np.int16), kind="stable")]  # radix sort
     return k[row_sat[keep]], row_i[keep], j0[keep], n_cols[keep]
 
 
@@ -356,10 +357,10 @@ def _visible_segments(pos_sv_ecef_m, grid, sat, row, seg, lon, sin_mask):
     rho, z = grid.rho_row_m[row], grid.z_row_m[row]
     offset = sin_lat * p[:, 2] - (rho * cos_lat + z * sin_lat)
     r2_row = np.einsum("si,si->s", p, p) - 2.0 * z * p[:, 2] + (rho * rho + z * z)
-    cos_lon, sin_lon = grid.cos_lon[lon], grid.sin_lon[lon]
-    w = p[:, 0][seg] * cos_lon + p[:, 1][seg] * sin_lon
-    rng = np.sqrt(r2_row[seg] - 2.0 * rho[seg] * w)
-    margin = cos_lat[seg] * w + offset[seg] - sin_mask * rng
+    take = np.take  # per pair: ~30% faster than fancy indexing
+    w = take(p[:, 0], seg) * take(grid.cos_lon, lon) + take(p[:, 1], seg) * take(grid.sin_lon, lon)
+    rng = np.sqrt(take(r2_row, seg) - 2.0 * take(rho, seg) * w)
+    margin = take(cos_lat, seg) * w + take(offset, seg) - sin_mask * rng
     vis = margin > 0.0
     near = np.flatnonzero(np.abs(margin) <= _EXACT_BAND_M)
     if near.size:
@@ -396,20 +397,20 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     h_buf = np.empty((N_DOPPLER_STATES, _BATCH_PAIRS + n_lon))
     pos_x, pos_y, pos_z = np.array(pos_sv_ecef_m, dtype=float).T.copy()
     vel_x, vel_y, vel_z = np.array(vel_sv_ecef_mps, dtype=float).T.copy()
+    take = np.take  # per pair: ~30% faster than fancy indexing
     for a, b in segment_batches(n_cols):
         seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
         vis, rng = _visible_segments(pos_sv_ecef_m, grid, sat[a:b], row[a:b], seg, lon, sin_mask)
         keep = np.flatnonzero(vis)
-        seg, lon, rng = seg[keep], lon[keep], rng[keep]
+        seg, lon, rng = take(seg, keep), take(lon, keep), take(rng, keep)
         s, rows = sat[a:b], row[a:b]
-        rho = grid.rho_row_m[rows][seg]
-        los = (pos_x[s][seg] - rho * grid.cos_lon[lon], pos_y[s][seg] - rho * grid.sin_lon[lon],
-               (pos_z[s] - grid.z_row_m[rows])[seg])
-        H = _jacobian_static(los, rng, (vel_x[s][seg], vel_y[s][seg], vel_z[s][seg]), carrier_hz[s][seg],
-                             h_buf[:, :len(keep)])
-        rows = rows[seg]
+        rho = take(grid.rho_row_m[rows], seg)
+        los = (take(pos_x[s], seg) - rho * take(grid.cos_lon, lon),
+               take(pos_y[s], seg) - rho * take(grid.sin_lon, lon), take(pos_z[s] - grid.z_row_m[rows], seg))
+        H = _jacobian_static(los, rng, (take(vel_x[s], seg), take(vel_y[s], seg), take(vel_z[s], seg)),
+                             take(carrier_hz[s], seg), h_buf[:, :len(keep)])
         c0, c1 = row[a] * n_lon, (row[b - 1] + 1) * n_lon
-        cell = rows * n_lon + cell_of_lon[lon] - c0
+        cell = take(rows * n_lon - c0, seg) + take(cell_of_lon, lon)
         count[c0:c1] += np.bincount(cell, minlength=c1 - c0)
         p = prod[:len(keep)]
         for q, (i, j) in enumerate(zip(_IU[:-1], _JU[:-1])):  # H^T H summed over each cell's pairs
@@ -418,8 +419,8 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     normal[-1] = count
     gdop = np.full(n_cells, np.nan)
     fix = np.flatnonzero(count >= N_DOPPLER_STATES)
-    if fix.size:
-        gdop[fix] = _normal_gdop(normal[:, fix])
+    for a in range(0, fix.size, _GDOP_CELLS):
+        gdop[fix[a:a + _GDOP_CELLS]] = _normal_gdop(normal[:, fix[a:a + _GDOP_CELLS]])
     return count.reshape(grid.shape), gdop.reshape(grid.shape)
 
 
