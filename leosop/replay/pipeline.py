@@ -9,7 +9,10 @@ and solves a static batch fix or per-block snapshot fixes from the identified
 tracks' Doppler (:mod:`leosop.positioning.solve`).
 
 Blocks never straddle a capture: a snapshot recording (DESIGN 4.2) gives one
-block per capture when the capture is shorter than the block length.
+block per capture when the capture is shorter than the block length. With
+``threads`` > 1 the next blocks are read and cleaned on worker threads
+(:mod:`~leosop.replay.stream`) while this one is searched; the result is the
+same.
 
 Wide recordings (a whole 240 MHz OFDM channel) are narrowed block by block
 to :data:`WORK_RATE_HZ` around the pilot comb (an exact band-limited
