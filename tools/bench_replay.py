@@ -169,6 +169,32 @@ def _prepare_cpu_s(rec):
     return time.process_time() - t0
 
 
+def _count(n):
+    """A pure-Python loop of ``n`` steps (holds its own process's GIL throughout)."""
+    s = 0
+    for i in range(n):
+        s += i
+    return s
+
+
+def _cores_available(workers, n=20_000_000):
+    """Elapsed time of ``n`` loop steps in one process over the same split across ``workers`` processes.
+
+    What the machine gives this benchmark's extra threads right now: ~``workers`` on idle cores, ~1
+    when other sessions take them (Linux shares the CPU between sessions, not threads).
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers) as pool:
+        list(pool.map(_count, [1] * workers))  # started
+        elapsed = []
+        for k in (1, workers):
+            t0 = time.perf_counter()
+            list(pool.map(_count, [n // k] * k))
+            elapsed.append(time.perf_counter() - t0)
+    return elapsed[0] / elapsed[1]
+
+
 def bench_threads(rec, const, seconds, threads, repeats=3):
     """One thread against ``threads`` on the same recording, alternating; best elapsed time of each."""
     wall = {1: [], threads: []}
@@ -189,6 +215,7 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
     (b1, e1), (bn, en) = (min(wall[n]) for n in wall)
     prep = _prepare_cpu_s(rec)
     serial_cpu = min(cpu[1])
+    control = _cores_available(threads)
     print(f"threads: {seconds:g} s recording, best of {repeats} alternating (load average "
           f"{', '.join(f'{v:.1f}' for v in os.getloadavg())} on {os.cpu_count()} cores): streaming 1 thread "
           f"{b1:.2f} s = {seconds / b1:.1f}x real time, {threads} threads {bn:.2f} s = {seconds / bn:.1f}x, "
@@ -197,7 +224,8 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
           f"{serial_cpu:.2f} s (1 thread), {min(cpu[threads]):.2f} s ({threads}); reading and cleaning {prep:.2f} s, "
           f"search and tracking {serial_cpu - prep:.2f} s: on idle cores at most "
           f"{serial_cpu / max(prep, serial_cpu - prep):.2f}x the serial speed, "
-          f"{seconds / max(prep, serial_cpu - prep):.1f}x real time")
+          f"{seconds / max(prep, serial_cpu - prep):.1f}x real time. Control: a pure-Python loop split across "
+          f"{threads} processes ran {control:.2f}x as fast as in one (the cores this run was given)")
 
 
 def _peak_rss_mb(argv):
