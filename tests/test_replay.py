@@ -171,7 +171,7 @@ def test_truncated_recording_is_refused_without_outputs(snapshot_recording, tmp_
 
 
 def test_nan_samples_are_refused_naming_the_file_and_samples(snapshot_recording, tmp_path, capsys):
-    # replay reads without a pass over the samples for NaN/inf: the block's FFT shows them.
+    # replay reads without a pass over the samples for NaN/inf: one sum of the block shows them.
     path, _ = snapshot_recording
     raw = np.fromfile(path.with_suffix(".sigmf-data"), dtype=np.float32)
     raw[2 * 123_456 + 1] = np.nan  # the imaginary part of sample 123,456 (the third snapshot)
@@ -189,7 +189,7 @@ def test_nan_samples_are_refused_naming_the_file_and_samples(snapshot_recording,
 
 
 def test_narrow_keeps_each_tone_with_its_phase_at_the_decimated_times():
-    from leosop.replay.pipeline import narrow
+    from leosop.replay.stream import narrow
 
     fs, factor, n = 240e6, 96, 96 * 4000
     t = np.arange(n) / fs
@@ -255,7 +255,7 @@ def test_continuous_recording_in_tracking_mode_identifies_every_satellite(tmp_pa
     assert sorted(tr.sat_id for tr in res.tracks if tr.sat_id) == sats
 
 
-def test_continuous_recording_600_khz_off_keeps_every_comb_in_tracking_mode(tmp_path):
+def test_continuous_recording_600_khz_off_keeps_every_comb_in_tracking_mode(tmp_path, capsys):
     """Tracking blocks fit the tone model through a rough LO offset (the first search's median Doppler).
 
     600 kHz off, the Doppler-only model puts the comb's edge tones 9.3 Hz off, most of a cycle over a
@@ -263,20 +263,28 @@ def test_continuous_recording_600_khz_off_keeps_every_comb_in_tracking_mode(tmp_
     8 and 9 of 10 blocks, none identified, measured) and the refit through the LO cannot bring back a
     detection the first pass did not make. Now 10, 9 and 9 (the first block, a full search before any
     offset is known, uses the Doppler-only model), all identified.
-    """
-    from leosop.orbits import load_constellation
-    from leosop.replay import pipeline
-    from leosop.signal.iq import open_sigmf
 
+    With ``--threads`` the blocks are read and cleaned on worker threads, in the first pass and in the
+    refit through the LO offset (which this recording needs): the JSON is the same, key for key and
+    bit for bit, with one thread and with three (two workers finishing blocks out of order).
+    """
     path = tmp_path / "cont_lo.sigmf-meta"
     sats = ["70002", "70524", "71563"]
     # 1 s: 10 blocks of 0.1 s, one full search and nine tracking blocks; a drifting LO as an LNB's.
     _generate(path, "--duration-s", "1", "--sat", *sats, "--cn0-model", "constant", "--cn0-dbhz", "36",
               "--rx-offset-hz", "600e3", "--rx-drift-hz-per-s", "50")
-    res = pipeline.replay(open_sigmf(path), load_constellation(), init_pos_ecef_m=geodetic_to_ecef(
-        np.radians(34.98), np.radians(109.71), 0.0), static=True, lo_offset_max_hz=1e6)
-    assert sorted(tr.sat_id for tr in res.tracks) == sats
-    assert all(len(tr) >= 9 for tr in res.tracks)
+    docs = []
+    for threads in ("1", "3"):
+        code, doc, err = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static", "--lo-offset-max-hz",
+                                 "1e6", "--threads", threads)
+        assert code == 0, err
+        docs.append(doc)
+    assert sorted(t["sat_id"] for t in docs[0]["tracks"]) == sats
+    assert all(t["n_blocks"] >= 9 for t in docs[0]["tracks"])
+    # The refit ran: 600 kHz puts the edge tones (176 kHz out) 0.9 cycles off over a block, beyond
+    # pipeline.LO_REFIT_CYCLES (0.01).
+    assert abs(docs[0]["lo_offset_hz"] - 600e3) < 1e3
+    assert docs[0] == docs[1]
 
 
 def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording, tmp_path, capsys):

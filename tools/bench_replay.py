@@ -15,7 +15,14 @@
    real-time factor is recording length over processor time (one thread),
    for the streaming stage (read, search, track: what grows with the
    recording) and end to end (identification and fix run once per
-   recording, a few seconds).
+   recording, a few seconds). Then one thread against ``--threads``
+   (default 2) in the same run, alternating, best of the repeats: recording
+   length over elapsed time of the streaming stage, their ratio, the load
+   average beside them (on a shared machine other processes take the
+   cores: Linux shares the CPU between sessions, so a second thread gains
+   only what the others leave idle), and the bound two idle cores allow: the
+   larger of the two threads' shares of the serial processor time (reading
+   and cleaning the blocks, ``leosop.replay.stream``; search and tracking).
 3. Memory: peak RSS of ``leosop replay`` on a large continuous recording
    (``--memory-gb``, generated whole), beside the peak
    RSS on the short one: bounded by the block, not the file.
@@ -38,8 +45,11 @@ from leosop.cli import main  # noqa: E402
 from leosop.frames import geodetic_to_ecef  # noqa: E402
 from leosop.orbits import load_constellation  # noqa: E402
 from leosop.positioning.solve import position_static_passes  # noqa: E402
-from leosop.replay.pipeline import replay, track_measurements  # noqa: E402
+from leosop.replay.lo import LO_OFFSET_MAX_HZ  # noqa: E402
+from leosop.replay.pipeline import block_plan, replay, search_band, track_measurements  # noqa: E402
+from leosop.replay.stream import prepared_blocks  # noqa: E402
 from leosop.signal.iq import open_sigmf  # noqa: E402
+from leosop.signal.pilot import PilotComb  # noqa: E402
 
 SITE = (34.342, 108.940, 400.0)
 START = "2025-01-01T19:40:00Z"
@@ -145,7 +155,77 @@ def bench_throughput(tmp, seconds, n_sats, repeats=3):
           f"identification {cpu['identify']:.1f} s and fix {cpu['fix']:.1f} s once per recording; end to end "
           f"{seconds / total_s:.1f}x ({len(res.tracks)} tracks, {sum(t.sat_id is not None for t in res.tracks)} "
           "identified)")
-    return path
+    return path, rec, const
+
+
+def _prepare_cpu_s(rec):
+    """Processor time of reading, narrowing and cleaning every 0.1 s block in one thread (the workers' share)."""
+    comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
+                     tone_spacing_hz=rec.tone_spacing_hz)
+    factor = search_band(rec.sample_rate_hz, comb, LO_OFFSET_MAX_HZ)[0]
+    t0 = time.process_time()
+    for _ in prepared_blocks(rec, block_plan(rec, 0.1), factor, comb):
+        pass
+    return time.process_time() - t0
+
+
+def _count(n):
+    """A pure-Python loop of ``n`` steps (holds its own process's GIL throughout)."""
+    s = 0
+    for i in range(n):
+        s += i
+    return s
+
+
+def _cores_available(workers, n=20_000_000):
+    """Elapsed time of ``n`` loop steps in one process over the same split across ``workers`` processes.
+
+    What the machine gives this benchmark's extra threads right now: ~``workers`` on idle cores, ~1
+    when other sessions take them (Linux shares the CPU between sessions, not threads).
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers) as pool:
+        list(pool.map(_count, [1] * workers))  # started
+        elapsed = []
+        for k in (1, workers):
+            t0 = time.perf_counter()
+            list(pool.map(_count, [n // k] * k))
+            elapsed.append(time.perf_counter() - t0)
+    return elapsed[0] / elapsed[1]
+
+
+def bench_threads(rec, const, seconds, threads, repeats=3):
+    """One thread against ``threads`` on the same recording, alternating; best elapsed time of each."""
+    wall = {1: [], threads: []}
+    cpu = {1: [], threads: []}
+    results = {}
+    for _ in range(repeats):
+        for n in wall:
+            t0 = time.perf_counter()
+            res = replay(rec, const, block_s=0.1, init_pos_ecef_m=INIT_ECEF, static=True, threads=n)
+            wall[n].append((res.wall_s["blocks"], time.perf_counter() - t0))
+            cpu[n].append(res.cpu_s["blocks"])
+            results[n] = res
+    same = all(np.array_equal(getattr(a, c), getattr(b, c)) and a.sat_id == b.sat_id
+               for a, b in zip(results[1].tracks, results[threads].tracks)
+               for c in ("t_s", "doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz"))
+    same = same and len(results[1].tracks) == len(results[threads].tracks) and np.array_equal(
+        results[1].position.fixes.pos_ecef_m, results[threads].position.fixes.pos_ecef_m)
+    (b1, e1), (bn, en) = (min(wall[n]) for n in wall)
+    prep = _prepare_cpu_s(rec)
+    serial_cpu = min(cpu[1])
+    control = _cores_available(threads)
+    print(f"threads: {seconds:g} s recording, best of {repeats} alternating (load average "
+          f"{', '.join(f'{v:.1f}' for v in os.getloadavg())} on {os.cpu_count()} cores): streaming 1 thread "
+          f"{b1:.2f} s = {seconds / b1:.1f}x real time, {threads} threads {bn:.2f} s = {seconds / bn:.1f}x, "
+          f"ratio {b1 / bn:.2f}; end to end {seconds / e1:.1f}x and {seconds / en:.1f}x, ratio {e1 / en:.2f}; "
+          f"results {'identical' if same else 'DIFFERENT'}. Processor time of the streaming stage "
+          f"{serial_cpu:.2f} s (1 thread), {min(cpu[threads]):.2f} s ({threads}); reading and cleaning {prep:.2f} s, "
+          f"search and tracking {serial_cpu - prep:.2f} s: on idle cores at most "
+          f"{serial_cpu / max(prep, serial_cpu - prep):.2f}x the serial speed, "
+          f"{seconds / max(prep, serial_cpu - prep):.1f}x real time. Control: a pure-Python loop split across "
+          f"{threads} processes ran {control:.2f}x as fast as in one (the cores this run was given)")
 
 
 def _peak_rss_mb(argv):
@@ -186,15 +266,19 @@ if __name__ == "__main__":
     ap.add_argument("--tle", help="element sets to draw the satellites from and identify against (default the "
                     "bundled Walker set), e.g. ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt")
     ap.add_argument("--start", default=START, help=f"UTC start of the recordings (default {START})")
-    ap.add_argument("--parts", default="fix,throughput,memory", help="which benchmarks, comma-separated "
-                    "(default fix,throughput,memory)")
+    ap.add_argument("--parts", default="fix,throughput,threads,memory", help="which benchmarks, comma-separated "
+                    "(default fix,throughput,threads,memory)")
+    ap.add_argument("--threads", type=int, default=2, help="threads compared with one (default 2)")
     a = ap.parse_args()
     parts = set(a.parts.split(","))
     SKY.update(tle=a.tle, start=a.start)
     with tempfile.TemporaryDirectory() as tmp:
         if "fix" in parts:
             bench_fix(tmp, range(2) if a.quick else range(10), a.sats)
-        if parts & {"throughput", "memory"}:
-            small = bench_throughput(tmp, 5.0 if a.quick else 20.0, a.sats)
+        seconds = 5.0 if a.quick else 20.0
+        if parts & {"throughput", "threads", "memory"}:
+            small, rec, const = bench_throughput(tmp, seconds, a.sats)
+        if "threads" in parts:
+            bench_threads(rec, const, seconds, a.threads)
         if "memory" in parts and a.memory_gb > 0:
             bench_memory(tmp, small, a.memory_gb, a.sats)

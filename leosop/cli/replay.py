@@ -25,6 +25,7 @@ summarises the batch, recordings already done are skipped, and
 
 import argparse
 import functools
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -80,6 +81,10 @@ def register(subparsers):
     p.add_argument("--carrier", action="store_true",
                    help="continuous recordings: track each identified satellite's carrier phase (carrier.csv); "
                         "with --static the fix takes its phase-rate Doppler in place of the block Doppler")
+    p.add_argument("--threads", type=int, metavar="N", default=1,
+                   help="threads for one recording's blocks (N-1 read and clean blocks ahead of the search), "
+                        f"the same result whatever N (default 1; {len(os.sched_getaffinity(0))} cores here)")
+
     p.add_argument("--workers", type=int, metavar="N",
                    help="batch: workers of the local Dask cluster (default: the cores)")
     p.add_argument("--scheduler", metavar="ADDR", help="batch: Dask scheduler address (default: a local cluster; "
@@ -133,6 +138,9 @@ def _run_single(args):
     from .position import solutions_doc
 
     block_s, lo_max, drift_max, mask, init = _check_options(args)
+    threads = args.threads
+    if threads < 1:
+        raise InputError(f"--threads {threads}: expected an integer >= 1")
     if (args.base is None) != (args.base_site is None):
         raise InputError("--base needs --base-site, the base's known position" if args.base else
                          "--base-site goes with --base, the base's recording")
@@ -159,7 +167,7 @@ def _run_single(args):
         check_pair(rec, base_rec)
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
-                 lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True)
+                 lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True, threads=threads)
     carrier = None
     if args.carrier:
         from ..replay.carrier_replay import replay_carrier
@@ -168,6 +176,7 @@ def _run_single(args):
     position, meas = (res.position, res.measurements) if carrier is None or carrier.position is None else \
         (carrier.position, carrier.measurements)
     solutions, passes, _ = ([], None, None) if position is None else solutions_doc(position, meas)
+
     extra = {} if passes is None else {"passes": passes}
     doc = {"tracks": [_track_doc(tr) for tr in res.tracks], "solutions": solutions,
            "recording": str(path), "n_blocks": len(res.blocks),
@@ -192,7 +201,7 @@ def _run_single(args):
 
         base_res = replay(base_rec, const, block_s=block_s, init_pos_ecef_m=base_pos, static=True, mask_deg=mask,
                           lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True,
-                          prior_radius_m=BASE_PRIOR_RADIUS_M)
+                          prior_radius_m=BASE_PRIOR_RADIUS_M, threads=threads)
         diff = differential_fix(res, base_res, const, base_pos, carrier_hz=rec.center_hz or DEFAULT_CARRIER_HZ,
                                 static=args.static, block_s=block_s)
         doc["solutions_alone"] = doc["solutions"]
@@ -210,7 +219,7 @@ def _run_single(args):
 
 
 #: Options a batch's results do not depend on (left out of the resume key).
-_NOT_IN_KEY = ("command", "json", "out", "recording", "scheduler", "workers")
+_NOT_IN_KEY = ("command", "json", "out", "recording", "scheduler", "workers", "threads")
 
 
 def _run_batch(args):
@@ -219,6 +228,9 @@ def _run_batch(args):
     _check_options(args)
     if args.base or args.base_site:
         raise InputError("--base and --base-site take one rover recording, not a batch")
+    if args.threads != 1:
+        raise InputError("--threads runs one recording's blocks in parallel; a batch runs its recordings in "
+                         "parallel (--workers)")
     if args.out is None:
         raise InputError("a batch (several recordings, or a folder) needs --out DIR: a folder of results each, "
                          "and batch.json")
@@ -266,7 +278,7 @@ def replay_files(args, meta):
     """
     with tempfile.TemporaryDirectory(prefix="leosop-replay-") as tmp:
         doc = _run_single(argparse.Namespace(**{**vars(args), "recording": [str(meta)], "out": tmp,
-                                               "scheduler": None, "workers": None}))
+                                               "scheduler": None, "workers": None, "threads": 1}))
         files = {n: (Path(tmp) / n).read_bytes() for n in OUT_FILES if (Path(tmp) / n).is_file()}
     return doc, files
 

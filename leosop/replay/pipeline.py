@@ -9,7 +9,10 @@ and solves a static batch fix or per-block snapshot fixes from the identified
 tracks' Doppler (:mod:`leosop.positioning.solve`).
 
 Blocks never straddle a capture: a snapshot recording (DESIGN 4.2) gives one
-block per capture when the capture is shorter than the block length.
+block per capture when the capture is shorter than the block length. With
+``threads`` > 1 the next blocks are read and cleaned on worker threads
+(:mod:`~leosop.replay.stream`) while this one is searched; the result is the
+same.
 
 Wide recordings (a whole 240 MHz OFDM channel) are narrowed block by block
 to :data:`WORK_RATE_HZ` around the pilot comb (an exact band-limited
@@ -28,11 +31,12 @@ from ..errors import InputError
 from ..positioning.measurements import Measurements
 from ..signal.coarse import MAX_DOPPLER_HZ
 from ..signal.fine import cubic_bias_hz
-from ..signal.multicomb import NonFiniteSamples, find_combs
+from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .elements import check_snapshot_age
 from .identify import identify_tracks
 from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, rough_lo_hz
+from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, prepared_blocks
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -71,9 +75,6 @@ REFIT_PRIOR_RADIUS_M = 20e3
 PRIOR_RADIUS_M = 150e3
 #: Longest gap between two tracks of one comb that are joined [s].
 JOIN_GAP_S = 10.0
-#: Columns of the spectrogram kept for the figure, and its frequency bins.
-SPECTRUM_COLUMNS = 600
-SPECTRUM_BINS = 1024
 
 
 @dataclass(frozen=True)
@@ -140,30 +141,6 @@ def search_band(sample_rate_hz, comb, lo_offset_max_hz):
     return factor, min(MAX_DOPPLER_HZ + lo_offset_max_hz, (0.5 - BAND_MARGIN) * fs - half_comb)
 
 
-def narrow(iq, factor):
-    """Band-limited decimation by an integer ``factor``: the central 1/factor of the spectrum.
-
-    Output sample k is input sample ``k * factor`` of the band-limited
-    signal, so times and phases carry over exactly.
-
-    Parameters
-    ----------
-    iq : ndarray of complex, (n,)
-    factor : int
-
-    Returns
-    -------
-    ndarray of complex64, (n // factor,)
-    """
-    if factor == 1:
-        return iq
-    n = iq.size // factor * factor
-    m = n // factor
-    spec = np.fft.fft(iq[:n])
-    keep = np.concatenate([spec[: m - m // 2], spec[n - m // 2:]])
-    return (np.fft.ifft(keep) * (m / n)).astype(np.complex64)
-
-
 def _pss(rec):
     """PSS acquisition on the first 10 ms of the first capture of a full-channel recording, or None."""
     from ..signal.ofdm import FRAME_SAMPLES, FS_HZ, acquire_pss
@@ -175,17 +152,6 @@ def _pss(rec):
     if n < 2 * FRAME_SAMPLES:
         return None
     return acquire_pss(rec.read(cap.sample_start, n), FS_HZ), cap.start_utc
-
-
-#: Periodograms averaged per spectrogram column (a figure needs no more).
-SPECTRUM_AVERAGES = 16
-
-
-def _spectrum(iq):
-    """Mean periodogram of (up to SPECTRUM_AVERAGES segments of) ``iq`` in SPECTRUM_BINS bins, DC in the middle."""
-    m = min(SPECTRUM_AVERAGES, max(1, iq.size // SPECTRUM_BINS))
-    seg = np.resize(iq, (m, SPECTRUM_BINS)) if iq.size < SPECTRUM_BINS else iq[: m * SPECTRUM_BINS].reshape(m, -1)
-    return np.fft.fftshift(np.mean(np.abs(np.fft.fft(seg, axis=1)) ** 2, axis=0))
 
 
 def _correct_rate_change(track, n_samples, fs):
@@ -202,7 +168,7 @@ def _correct_rate_change(track, n_samples, fs):
     track.doppler_hz = track.doppler_hz - cubic_bias_hz(accel, n_samples, fs)
 
 
-def refit_through_lo(rec, tracks, blocks, factor, comb, lo):
+def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, threads=1):
     """The tracks' blocks fitted again with the tone model through the receiver's LO offset.
 
     The first pass models the whole common offset as Doppler, scaled with
@@ -225,6 +191,8 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo):
         Narrowing factor of the first pass (:func:`search_band`).
     comb : PilotComb
     lo : LoEstimate
+    threads : int
+        Threads reading and cleaning blocks (:func:`~leosop.replay.stream.prepared_blocks`).
 
     Returns
     -------
@@ -240,15 +208,16 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo):
             members.setdefault(index[t], []).append((i, j))
     cols = ("doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz")
     new = [{c: getattr(tr, c).copy() for c in cols} | {"keep": np.zeros(len(tr), bool)} for tr in tracks]
-    for k, rows in sorted(members.items()):
-        b = blocks[k]
-        iq = narrow(rec.read(b.start, b.n_samples, check_finite=False), factor)
+    members = sorted(members.items())
+    for (k, rows), block in zip(members, prepared_blocks(rec, [blocks[k] for k, _ in members], factor, comb,
+                                                         threads=threads)):
         pred = np.array([tracks[i].doppler_hz[j] for i, j in rows])
         rate = np.array([tracks[i].doppler_rate_hz_per_s[j] for i, j in rows])
         lo_hz = lo.offset_hz + lo.drift_hz_per_s * float((tracks[rows[0][0]].time_utc[rows[0][1]] - lo.t_ref_utc)
                                                          / np.timedelta64(1, "s"))
-        found = find_combs(iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
-                           search=False, gate_hz=TRACK_GATE_HZ, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz)
+        found = find_combs(block.iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
+                           search=False, gate_hz=TRACK_GATE_HZ, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz,
+                           clean=False)
         for m, p in enumerate(found.predicted_index):
             i, j = rows[p]
             for c, v in zip(cols, (found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)):
@@ -289,9 +258,11 @@ class ReplayResult:
         and tracking), ``identify``, ``refit`` (the tracked blocks fitted
         again through the LO offset and identified again,
         :func:`refit_through_lo`; 0 when the offset is too small to matter),
-        ``fix``.
+        ``fix``; with several threads the sum of their times.
     lo : LoEstimate or None
         The receiver's common offset and drift (:mod:`leosop.replay.lo`).
+    wall_s : dict
+        Elapsed (wall-clock) time of the same stages [s].
     """
 
     tracks: list
@@ -305,6 +276,7 @@ class ReplayResult:
     pss: object = None
     cpu_s: dict = None
     lo: LoEstimate | None = None
+    wall_s: dict = None
 
 
 #: Sigma of a satellite's own frequency offset about the constellation's
@@ -351,7 +323,7 @@ def track_measurements(tracks, carrier_hz, model_sigma_hz=0.0):
 
 def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True, mask_deg=10.0,
            max_gap_s=None, lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
-           show_progress=False, prior_radius_m=PRIOR_RADIUS_M):
+           show_progress=False, prior_radius_m=PRIOR_RADIUS_M, threads=1):
     """Find, track and identify the combs of a recording, then fix the receiver.
 
     Parameters
@@ -379,6 +351,11 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     prior_radius_m : float
         How far from ``init_pos_ecef_m`` identification searches [m]: a
         known site (a differential base) needs only a few km, and is fast.
+    threads : int
+        Threads for the blocks: N > 1 reads and cleans the next blocks on
+        N - 1 worker threads while this one searches and tracks
+        (:func:`~leosop.replay.stream.prepared_blocks`); the result is the
+        same whatever N.
 
     Returns
     -------
@@ -401,17 +378,17 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         max_gap_s = 5.0 * max(spacing, block_s)
     tracker = Tracker(max_gap_s=max_gap_s, max_gap_tentative_s=max(2.5, 2.5 * max_gap_s / 5.0))
     every = max(1, int(np.ceil(len(blocks) / SPECTRUM_COLUMNS)))
-    t0 = time.process_time()
+    t0, wall0 = time.process_time(), time.perf_counter()
     spec_t, spec = [], []
     block_len = {}
     n_last = 0  # combs found in the last block
     lo_rough = None  # the tracking blocks' tone-model LO offset, from the first full search (rough_lo_hz)
     # Central tones within the band (BAND_MARGIN off its edges), as search_band's.
     band_hz = (0.5 - BAND_MARGIN) * fs - float(np.max(np.abs(comb.offsets_hz)))
-    for k, b in enumerate(progress(blocks, desc="replay", unit="block") if show_progress else blocks):
-        # NaN/inf samples: find_combs sees them in the block's FFT (every bin turns NaN), which
-        # spares read() a pass over the samples (~5 % of the streaming time).
-        iq = narrow(rec.read(b.start, b.n_samples, check_finite=False), factor)
+    prepared = prepared_blocks(rec, blocks, factor, comb, threads=threads, spectrum_every=every)
+    for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")
+                                       if show_progress else prepared)):
+        iq = block.iq  # narrowed and cleaned
         # Tracking mode between full searches, where blocks follow each other.
         # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
         contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
@@ -420,24 +397,21 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         # search centred on it as far either side as the band allows (snapshots: the refit does it).
         lo = (lo_rough or 0.0) if contiguous else 0.0
         span = min(max_doppler, band_hz - abs(lo))
-        try:
-            if pred is None:
-                # After a birth the combs of the last block are searched for again, with as many new.
-                n_known = n_last if contiguous else 0
-                found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
-                                   lo_offset_hz=lo)
-                if lo_rough is None:
-                    lo_rough = rough_lo_hz(found.doppler_hz)
-            else:
-                # Every SEARCH_EVERY-th block also searches the spectrum for new
-                # combs, with the tracked ones fitted first and removed.
-                search = k % SEARCH_EVERY == 0
-                found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
-                                   max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE)
-        except NonFiniteSamples:
-            raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or "
-                             "inf") from None
+        if pred is None:
+            # After a birth the combs of the last block are searched for again, with as many new.
+            n_known = n_last if contiguous else 0
+            found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
+                               lo_offset_hz=lo, clean=False)
+            if lo_rough is None:
+                lo_rough = rough_lo_hz(found.doppler_hz)
+        else:
+            # Every SEARCH_EVERY-th block also searches the spectrum for new
+            # combs, with the tracked ones fitted first and removed.
+            search = k % SEARCH_EVERY == 0
+            found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
+                               search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
+                               max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
+                               clean=False)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         n_last = len(det)
         # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
@@ -445,10 +419,11 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         tracker.update(b.t_s - shift_s, b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns"), det,
                        block_s=iq.size / fs)
         block_len[b.t_s - shift_s] = iq.size
-        if k % every == 0:
+        if block.spectrum is not None:
             spec_t.append(b.t_s)
-            spec.append(_spectrum(iq))
+            spec.append(block.spectrum)
     cpu_s = {"blocks": time.process_time() - t0}
+    wall_s = {"blocks": time.perf_counter() - wall0}
     raw = [remove_outliers(tr) for tr in join_fragments(tracker.finish(), max(JOIN_GAP_S, 2.0 * max_gap_s))]
 
     def identify(raw, init, radius_m):
@@ -463,14 +438,16 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
 
     tracks, ident = identify(raw, init_pos_ecef_m, prior_radius_m)
     cpu_s["identify"] = time.process_time() - t0 - cpu_s["blocks"]
+    wall_s["identify"] = time.perf_counter() - wall0 - wall_s["blocks"]
     lo = lo_estimate(ident)
     # The edge tones' misfit over the longest block [cycles] under the Doppler-only tone model.
     misfit = (0 if lo is None else abs(lo.offset_hz) * np.max(np.abs(comb.offsets_hz)) / comb.carrier_hz
               * max(block_len.values()) / fs)
     if misfit > LO_REFIT_CYCLES:
-        raw = [remove_outliers(tr) for tr in refit_through_lo(rec, raw, blocks, factor, comb, lo)]
+        raw = [remove_outliers(tr) for tr in refit_through_lo(rec, raw, blocks, factor, comb, lo, threads=threads)]
         tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
     cpu_s["refit"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
+    wall_s["refit"] = time.perf_counter() - wall0 - wall_s["blocks"] - wall_s["identify"]
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     position = None
     if meas is not None:
@@ -484,7 +461,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         else:
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
     cpu_s["fix"] = time.process_time() - t0 - sum(cpu_s.values())
+    wall_s["fix"] = time.perf_counter() - wall0 - sum(wall_s.values())
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
                         np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s,
-                        lo_estimate(ident, position if static else None, meas))
+                        lo_estimate(ident, position if static else None, meas), wall_s)
