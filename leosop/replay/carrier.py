@@ -236,11 +236,12 @@ def recording_blocks(rec, block_s, *, factor=1, first=0):
     """``(t0_s, iq)`` of the blocks of a SigMF recording (:func:`~leosop.replay.pipeline.block_plan`), lazily.
 
     From block ``first`` on, narrowed by ``factor`` as replay narrows them
-    (:func:`~leosop.replay.pipeline.narrow`: sample k of a block is input
+    (:func:`~leosop.replay.stream.narrow`: sample k of a block is input
     sample ``k factor``, so ``t0_s`` is unchanged and the rate is
     ``sample_rate_hz / factor``).
     """
-    from .pipeline import block_plan, narrow
+    from .pipeline import block_plan
+    from .stream import narrow
 
     fs = rec.sample_rate_hz
     for b in block_plan(rec, block_s)[first:]:
