@@ -102,8 +102,8 @@ def _antenna(ins, lever_arm_b_m):
 
 
 def _frame_turn(lat_rad):
-    """``M`` (3, 3): a position change [dlat, dlon, dalt] turns the ENU frame by ``M dpos`` = (-dlat, dlon cos lat,
-    dlon sin lat), so ``C_e_n x`` moves by ``-C_e_n [x x] M dpos`` for any ENU vector x (the velocity, the lever arm)."""
+    """``M`` (3, 3): a position change [dlat, dlon, dalt] turns the ENU frame by ``M dpos`` = (-dlat, dlon cos
+    lat, dlon sin lat), so ``C_e_n x`` moves by ``-C_e_n [x x] M dpos`` for any ENU vector x (velocity, lever arm)."""
     M = np.zeros((3, 3))
     M[0, 0], M[1, 1], M[2, 1] = -1.0, np.cos(lat_rad), np.sin(lat_rad)
     return M
