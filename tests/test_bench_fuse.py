@@ -21,8 +21,8 @@ def fake_runs(monkeypatch):
     """One outage length; ``ours`` scores BETTER with LEO, ``score["gnss_only"]`` without; the peer WORSE."""
     monkeypatch.setattr(bench_fuse, "OUTAGE_LENGTHS_S", (15.0,))
     score = {"gnss_only": BETTER}
-    monkeypatch.setattr(bench_fuse, "ours", lambda data, name, length_s, leo_sim=False, leo_exact=False: (
-        BETTER if leo_sim else score["gnss_only"], ((0.0, length_s),)))
+    monkeypatch.setattr(bench_fuse, "ours", lambda data, name, length_s, leo_sim=False, leo_exact=False,
+                        leo_window_s=None: (BETTER if leo_sim else score["gnss_only"], ((0.0, length_s),)))
     monkeypatch.setattr(bench_fuse, "peer", lambda data, anchor, name, length_s, outages: WORSE)
     return score
 

@@ -92,6 +92,8 @@ def test_walking_pace_only_in_gnss_gaps_and_never_at_rest():
     (["--leo-sim", "--leo", "x.csv"], "--leo and --leo-sim exclude each other"),
     (["--constellation", "starlink"], "--constellation goes with --leo-sim"),
     (["--tle", "x.tle"], "--tle goes with --leo or --leo-sim"),
+    (["--leo-window-s", "1"], "--leo-window-s goes with --leo or --leo-sim"),
+    (["--leo-sim", "--leo-window-s", "0"], "--leo-window-s 0.0: expected a positive integration time"),
     (["--outage", "10"], "--outage '10': expected START_S,DURATION_S"),
     (["--outage", "10,-5"], "DURATION_S > 0"),
     (["--mount-rpy-deg", "1,2"], "--mount-rpy-deg '1,2': expected three numbers"),

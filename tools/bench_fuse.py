@@ -25,7 +25,10 @@ seed 0, bundled Starlink-like sky, tight), same outages; goal: the LEO
 run's outage errors <= 0.5 x the GNSS-only run's, >= 95 % inside 3 sigma.
 ``--leo-exact`` (with ``--leo-sim``): the simulated rows' Doppler replaced by
 the exact one of the reference track (no noise, offsets or orbit errors;
-sigmas kept), to tell the measurement errors from the rest.
+sigmas kept), to tell the measurement errors from the rest. ``--leo-window S``
+(with ``--leo-sim``): the LEO aids model each Doppler as the mean velocity
+over an integration of S seconds (``LeoOptions.window_s``; the simulation's
+chord is 1 s), not the velocity at its time.
 """
 
 import argparse
@@ -44,6 +47,7 @@ import numpy as np
 from leosop import frames
 from leosop.constants import C_MPS
 from leosop.fusion import leo_input, real
+from leosop.fusion.aids_leo import LeoOptions
 from leosop.gnss.rtklib_pos import read_pos
 from leosop.ins import imu_io
 
@@ -92,7 +96,7 @@ def _exact(meas, sol):
     return dataclasses.replace(meas, doppler_hz=-rate * meas.carrier_hz / C_MPS)
 
 
-def ours(data, name, length_s, leo_sim=False, leo_exact=False):
+def ours(data, name, length_s, leo_sim=False, leo_exact=False, leo_window_s=None):
     folder, _, _, imu, mount, (f, r, d), offset, aids, start, end = LOGS[name]
     sol = read_pos(data / folder / f"gnss_{LOGS[name][2]}.pos")
     log = imu_io.read_rtklib_csv(data / folder / imu, C_b_s=imu_io.mount_C_b_s(*mount))
@@ -102,7 +106,8 @@ def ours(data, name, length_s, leo_sim=False, leo_exact=False):
     extra = ()
     if leo_sim:
         meas = leo_input.simulate(sol, seed=0)
-        extra = leo_input.to_aids(_exact(meas, sol) if leo_exact else meas, sol, opts.lever_arm_b_m)[0]
+        extra = leo_input.to_aids(_exact(meas, sol) if leo_exact else meas, sol, opts.lever_arm_b_m,
+                                  LeoOptions(window_s=leo_window_s))[0]
     run = real.fuse(log, sol, opts, imu_time_offset_s=offset, extra_aids=extra)
     errs, _ = real.outage_errors(run, sol, opts)
     runtime = time.perf_counter() - t
@@ -229,12 +234,14 @@ def main(argv=None):
     ap.add_argument("--logs", nargs="+", choices=tuple(LOGS), default=tuple(LOGS))
     ap.add_argument("--leo-sim", action="store_true", help="GNSS-only against GNSS + simulated LEO Doppler")
     ap.add_argument("--leo-exact", action="store_true", help="with --leo-sim: the exact Doppler, no errors")
+    ap.add_argument("--leo-window", type=float, metavar="S", help="with --leo-sim: the Doppler as an S s mean")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.leo_sim:
         def run(name, length):
             return (ours(args.data, name, length)[0],
-                    ours(args.data, name, length, leo_sim=True, leo_exact=args.leo_exact)[0])
+                    ours(args.data, name, length, leo_sim=True, leo_exact=args.leo_exact,
+                         leo_window_s=args.leo_window)[0])
 
         table(args, run, (("gnss", "GNSS-only"), ("leo", "+LEO sim")), _leo_columns, ("leo", "gnss"), _leo_tail)
     else:

@@ -25,6 +25,7 @@ from ..errors import InputError
 from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
 from ..fusion import leo_input, real
+from ..fusion.aids_leo import LeoOptions
 from ..gnss import rtklib_pos
 from ..ins import flight_mat, imu_io
 from ..positioning.measurements import write_measurements
@@ -64,6 +65,9 @@ def register(subparsers):
                         "--leo-sim (default the bundled one)")
     p.add_argument("--constellation", nargs="+", metavar="NAME", choices=tuple(REGISTRY),
                    help="transmitting families of --leo-sim (default starlink)")
+    p.add_argument("--leo-window-s", type=float, metavar="S",
+                   help="model each LEO Doppler as the antenna's mean velocity over an integration of S seconds "
+                        "centred on its time (--leo-sim's is 1 s); default the velocity at its time")
     p.add_argument("--coupling", choices=("loose", "tight"), default="tight",
                    help="LEO coupling: tight (each Doppler an aid, default); loose is not yet supported")
     p.add_argument("--outage", action="append", default=[], metavar="START_S,DURATION_S",
@@ -178,6 +182,10 @@ def run(args):
         raise InputError("--tle goes with --leo or --leo-sim")
     if args.constellation and not args.leo_sim:
         raise InputError("--constellation goes with --leo-sim")
+    if args.leo_window_s is not None and not (args.leo or args.leo_sim):
+        raise InputError("--leo-window-s goes with --leo or --leo-sim")
+    if args.leo_window_s is not None and not args.leo_window_s > 0.0:
+        raise InputError(f"--leo-window-s {args.leo_window_s}: expected a positive integration time [s]")
     if args.coupling == "loose" and (args.leo or args.leo_sim):
         raise InputError("--coupling loose (LEO snapshot fixes as aids) is not yet supported; use tight")
     if not args.gnss and args.imu_format != "flight-mat":
@@ -206,7 +214,8 @@ def run(args):
     elif args.leo_sim:
         leo = leo_input.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
                                  seed=args.seed)
-    leo_aids = leo_input.to_aids(leo, sol, options.lever_arm_b_m)[0] if leo is not None else []
+    leo_aids = [] if leo is None else leo_input.to_aids(leo, sol, options.lever_arm_b_m,
+                                                        LeoOptions(window_s=args.leo_window_s))[0]
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s, extra_aids=leo_aids,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))
     outages, reference = real.outage_errors(fused, sol, options)

@@ -55,6 +55,10 @@ class StateBlock:
     integrated : bool
         State 0 is the integral of state 1 (a frequency offset and its drift; k = 2).
     drop_after_s : float or None
+    cloned : bool
+        A clone of INS quantities made by an aid with :attr:`Aid.clones` (its
+        ``mean0`` and ``sigma0`` are not used): never added from a prior, an
+        aid naming it before it was made (or after it was dropped) is skipped.
     """
 
     key: str
@@ -63,6 +67,7 @@ class StateBlock:
     psd: tuple
     integrated: bool = False
     drop_after_s: float | None = None
+    cloned: bool = False
 
     @property
     def size(self):
@@ -142,6 +147,10 @@ class Aid:
     states : tuple of StateBlock
         Blocks of states beside the INS errors the aid depends on; the
         columns of :meth:`design` after the 15 INS errors are theirs, in order.
+    clones : bool
+        It has no rows: at its time the filter makes its one (cloned) block
+        from :meth:`clone_rows` (stochastic cloning, e.g. the antenna position
+        at the start of a LEO Doppler's integration window).
     """
 
     t_s: float
@@ -152,6 +161,7 @@ class Aid:
     gated = True
     external_clock = False
     screens = False
+    clones = False
     states = ()
 
     def __init__(self, t_s: float):
@@ -173,6 +183,11 @@ class Aid:
                                               npt.NDArray[np.float64]]:
         """``(z, H, R)``: innovation ``h(ins) - measured`` (m,), ``H`` as :meth:`design`, ``R`` (m, m)."""
         return self.predict(ins) - self.measured, self.design(ins), self.R
+
+    def clone_rows(self, ins: InsView) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """For an aid with :attr:`clones`: the cloned quantity's estimate (k,) and its derivative over the 15
+        INS errors (k, 15); the filter copies the INS errors' covariance through it (error = estimate minus truth)."""
+        raise NotImplementedError
 
     def screen(self, z: npt.NDArray[np.float64], H: npt.NDArray[np.float64], R: npt.NDArray[np.float64],
                P: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.bool_], list[StateBlock]] | None:

@@ -27,17 +27,7 @@ class Blocks:
         ndarray, (n_x', n_x')
             ``P`` (n_x, n_x) without the dropped blocks and with the added ones.
         """
-        stale = [k for k, (b, _, _, last) in self.entries.items()
-                 if b.drop_after_s is not None and aid.t_s - last > b.drop_after_s]
-        if stale:
-            keep = np.ones(P.shape[0], dtype=bool)
-            for k in stale:
-                b, i = self.entries.pop(k)[:2]
-                keep[i:i + b.size] = False
-            P = P[np.ix_(keep, keep)]
-            first = np.cumsum(keep) - 1
-            for entry in self.entries.values():
-                entry[1] = int(first[entry[1]])
+        P = self.drop_stale(P, aid.t_s)
         for b in aid.states:
             if b.key not in self.entries:
                 n = P.shape[0]
@@ -48,6 +38,40 @@ class Blocks:
                 self.entries[b.key] = [b, n, np.array(b.mean0, dtype=float), aid.t_s]
             self.entries[b.key][3] = aid.t_s
         return P
+
+    def drop_stale(self, P, t_s):
+        """``P`` (n_x, n_x) without the blocks stale at ``t_s`` (marginalised), the others' indices moved."""
+        stale = [k for k, (b, _, _, last) in self.entries.items()
+                 if b.drop_after_s is not None and t_s - last > b.drop_after_s]
+        if stale:
+            keep = np.ones(P.shape[0], dtype=bool)
+            for k in stale:
+                b, i = self.entries.pop(k)[:2]
+                keep[i:i + b.size] = False
+            P = P[np.ix_(keep, keep)]
+            first = np.cumsum(keep) - 1
+            for entry in self.entries.values():
+                entry[1] = int(first[entry[1]])
+        return P
+
+    def clone(self, P, block, estimate, G, t_s):
+        """Add ``block`` as a clone of ``G dx_ins`` (stochastic cloning): its estimate (k,), its rows ``G P_ins,:``.
+
+        ``G`` (k, 15) maps the INS errors to the clone's; returns ``P`` (n_x + k, n_x + k).
+        """
+        n = P.shape[0]
+        rows = G @ P[:N_INS]
+        grown = np.zeros((n + block.size, n + block.size))
+        grown[:n, :n] = P
+        grown[n:, :n] = rows
+        grown[:n, n:] = rows.T
+        grown[n:, n:] = rows[:, :N_INS] @ G.T
+        self.entries[block.key] = [block, n, np.array(estimate, dtype=float), t_s]
+        return grown
+
+    def alive(self, blocks):
+        """Whether every cloned block of ``blocks`` is in the filter (the others are added when named)."""
+        return all(b.key in self.entries for b in blocks if b.cloned)
 
     def restart(self, P, blocks):
         """Re-initialise alive ``blocks`` at their ``mean0``, ``sigma0`` in ``P`` (n_x, n_x, in place): uncorrelated."""

@@ -28,7 +28,9 @@ States of the aids (:class:`leosop.fusion.aids.StateBlock`, e.g. a LEO
 receiver's clock per constellation and each satellite's offset) come after
 those: a block is added with its prior when the first aid naming it is due,
 propagated by its own transition (no coupling to the INS errors) and
-dropped (marginalised) once stale (:class:`leosop.fusion.blocks.Blocks`); its
+dropped (marginalised) once stale (:class:`leosop.fusion.blocks.Blocks`), or
+made by an aid that clones (stochastic cloning: a copy of INS quantities at
+its time, with their cross-covariance, for an aid due later); its
 estimate is kept beside ``P`` and corrected by every update (error =
 estimate minus truth, as the time offset). The result is an
 :class:`leosop.fusion.record.EngineResult`.
@@ -173,6 +175,12 @@ class _Filter:
     def admit(self, aid):
         """Drop the stale state blocks, add those ``aid`` names for the first time, mark its blocks named now."""
         self.P = self.blocks.admit(self.P, aid)
+
+    def clone(self, aid, t_aid_s, t_now_s):
+        """Make the cloned block of ``aid`` (:attr:`leosop.fusion.aids.Aid.clones`) from the INS at its time."""
+        self.P = self.blocks.drop_stale(self.P, aid.t_s)
+        estimate, G = aid.clone_rows(self.view(t_aid_s, t_now_s, np.zeros(self.P.shape[0])))
+        self.P = self.blocks.clone(self.P, aid.states[0], estimate, G, aid.t_s)
 
     def innovation(self, aid, ins):
         """``(z, H, R)`` of ``aid`` over the full state (the time-offset column for aids on the aids' clock)."""
@@ -399,13 +407,19 @@ def run(state0: NavState, P0: npt.ArrayLike, t_s: npt.ArrayLike, dt_s: npt.Array
                     _, _, R = aid.matrices(f.view(t_aid, t_now, np.zeros(f.P.shape[0])))
                     f.align_yaw(v, math.hypot(course_alignment.sigma_rad, course_sigma_rad(v, R)))
                     heading_known, aligned_s = True, aid.t_s
+            if aid.clones:
+                f.propagate()
+                f.clone(aid, t_aid, t_now)
+                continue
+            if not f.blocks.alive(aid.states):  # its clone's time came before the run's start
+                continue
             if f.waits(aid, t_pairs[0]):
                 f.admit(aid)
                 continue
             group = [(index, aid)]
             joins = stack and heading_known and not aid.screens and not (aid.external_clock and f.TD is not None)
             while joins and heads[c] < len(queues[c]) and f.due_s(queues[c][heads[c]][1]) == t_aid \
-                    and not queues[c][heads[c]][1].screens:
+                    and not queues[c][heads[c]][1].screens and not queues[c][heads[c]][1].clones:
                 group.append(queues[c][heads[c]])
                 heads[c] += 1
             f.propagate()

@@ -176,7 +176,7 @@ def to_aids(meas, sol, lever_arm_b_m, options=None):
 
     Returns
     -------
-    aids : list of leosop.fusion.aids_leo.LeoDoppler
+    aids : list of leosop.fusion.aids_leo.LeoDoppler (and LeoWindowStart with ``options.window_s``)
     clock_labels : tuple of str
     """
     options = options or LeoOptions()
