@@ -93,7 +93,7 @@ def test_walking_pace_only_in_gnss_gaps_and_never_at_rest():
     (["--constellation", "starlink"], "--constellation goes with --leo-sim"),
     (["--tle", "x.tle"], "--tle goes with --leo or --leo-sim"),
     (["--leo-window-s", "1"], "--leo-window-s goes with --leo or --leo-sim"),
-    (["--leo-sim", "--leo-window-s", "0"], "--leo-window-s 0.0: expected a positive integration time"),
+    (["--leo-sim", "--leo-window-s", "-1"], "--leo-window-s -1.0: expected an integration time >= 0"),
     (["--outage", "10"], "--outage '10': expected START_S,DURATION_S"),
     (["--outage", "10,-5"], "DURATION_S > 0"),
     (["--mount-rpy-deg", "1,2"], "--mount-rpy-deg '1,2': expected three numbers"),
@@ -139,7 +139,8 @@ def test_help_lists_fuse():
 
 
 def test_leo_sim_round_trip_through_its_csv_and_beats_gnss_alone(tmp_path, capsys):
-    """``--leo-sim --out`` writes the simulated Doppler as a DESIGN 4.3 table; ``--leo`` on it is the same run.
+    """``--leo-sim --out`` writes the simulated Doppler as a DESIGN 4.3 table; ``--leo`` on it (with the
+    simulation's 1 s integration window, ``--leo-sim``'s default) is the same run.
 
     And the simulated LEO Doppler (tight) holds the walk through a 30 s GNSS outage: the GNSS-only filter
     reaches ~18 m there (docs/fusion-real.md), LEO Doppler at 0.7 Hz (~0.02 m/s per satellite) keeps it
@@ -152,7 +153,7 @@ def test_leo_sim_round_trip_through_its_csv_and_beats_gnss_alone(tmp_path, capsy
     assert "leo_measurements.csv" in {p.name for p in out.iterdir()}
     assert sim["aids"]["leo_doppler"] > 500 and sim["leo"]["n_sats"] >= 5 and sim["leo"]["coupling"] == "tight"
     assert set(sim["leo"]["clocks"]) == {"starlink"}
-    assert main(["fuse", *common, "--leo", str(out / "leo_measurements.csv")]) == 0
+    assert main(["fuse", *common, "--leo", str(out / "leo_measurements.csv"), "--leo-window-s", "1"]) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["aids"] == sim["aids"] and again["leo"]["n_rows"] == sim["leo"]["n_rows"]
     # The table keeps times to the microsecond and numbers by repr: the same run to 1 mm.

@@ -27,8 +27,9 @@ run's outage errors <= 0.5 x the GNSS-only run's, >= 95 % inside 3 sigma.
 the exact one of the reference track (no noise, offsets or orbit errors;
 sigmas kept), to tell the measurement errors from the rest. ``--leo-window S``
 (with ``--leo-sim``): the LEO aids model each Doppler as the mean velocity
-over an integration of S seconds (``LeoOptions.window_s``; the simulation's
-chord is 1 s), not the velocity at its time.
+over an integration of S seconds (``LeoOptions.window_s``; default the
+simulation's own, ``leo_input.SIM_WINDOW_S`` = 1 s, as ``leosop fuse
+--leo-sim``); 0: the velocity at its time.
 """
 
 import argparse
@@ -107,7 +108,7 @@ def ours(data, name, length_s, leo_sim=False, leo_exact=False, leo_window_s=None
     if leo_sim:
         meas = leo_input.simulate(sol, seed=0)
         extra = leo_input.to_aids(_exact(meas, sol) if leo_exact else meas, sol, opts.lever_arm_b_m,
-                                  LeoOptions(window_s=leo_window_s))[0]
+                                  LeoOptions(window_s=leo_window_s or None))[0]
     run = real.fuse(log, sol, opts, imu_time_offset_s=offset, extra_aids=extra)
     errs, _ = real.outage_errors(run, sol, opts)
     runtime = time.perf_counter() - t
@@ -234,7 +235,8 @@ def main(argv=None):
     ap.add_argument("--logs", nargs="+", choices=tuple(LOGS), default=tuple(LOGS))
     ap.add_argument("--leo-sim", action="store_true", help="GNSS-only against GNSS + simulated LEO Doppler")
     ap.add_argument("--leo-exact", action="store_true", help="with --leo-sim: the exact Doppler, no errors")
-    ap.add_argument("--leo-window", type=float, metavar="S", help="with --leo-sim: the Doppler as an S s mean")
+    ap.add_argument("--leo-window", type=float, metavar="S", default=leo_input.SIM_WINDOW_S,
+                    help="with --leo-sim: the Doppler as an S s mean (default %(default)s; 0: instantaneous)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.leo_sim:

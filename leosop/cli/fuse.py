@@ -67,7 +67,8 @@ def register(subparsers):
                    help="transmitting families of --leo-sim (default starlink)")
     p.add_argument("--leo-window-s", type=float, metavar="S",
                    help="model each LEO Doppler as the antenna's mean velocity over an integration of S seconds "
-                        "centred on its time (--leo-sim's is 1 s); default the velocity at its time")
+                        "centred on its time (0: the velocity at its time); default 0 for --leo, and for --leo-sim "
+                        f"its rows' own integration, {leo_input.SIM_WINDOW_S:g} s")
     p.add_argument("--coupling", choices=("loose", "tight"), default="tight",
                    help="LEO coupling: tight (each Doppler an aid, default); loose is not yet supported")
     p.add_argument("--outage", action="append", default=[], metavar="START_S,DURATION_S",
@@ -184,8 +185,8 @@ def run(args):
         raise InputError("--constellation goes with --leo-sim")
     if args.leo_window_s is not None and not (args.leo or args.leo_sim):
         raise InputError("--leo-window-s goes with --leo or --leo-sim")
-    if args.leo_window_s is not None and not args.leo_window_s > 0.0:
-        raise InputError(f"--leo-window-s {args.leo_window_s}: expected a positive integration time [s]")
+    if args.leo_window_s is not None and not args.leo_window_s >= 0.0:
+        raise InputError(f"--leo-window-s {args.leo_window_s}: expected an integration time >= 0 [s]")
     if args.coupling == "loose" and (args.leo or args.leo_sim):
         raise InputError("--coupling loose (LEO snapshot fixes as aids) is not yet supported; use tight")
     if not args.gnss and args.imu_format != "flight-mat":
@@ -214,8 +215,9 @@ def run(args):
     elif args.leo_sim:
         leo = leo_input.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
                                  seed=args.seed)
+    window_s = args.leo_window_s if args.leo_window_s is not None else leo_input.SIM_WINDOW_S if args.leo_sim else 0
     leo_aids = [] if leo is None else leo_input.to_aids(leo, sol, options.lever_arm_b_m,
-                                                        LeoOptions(window_s=args.leo_window_s))[0]
+                                                        LeoOptions(window_s=window_s or None))[0]
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s, extra_aids=leo_aids,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))
     outages, reference = real.outage_errors(fused, sol, options)

@@ -38,7 +38,8 @@ from ..positioning import measurements as pm
 from ..scenarios import XIAN_BAOJI
 from .aids_leo import LeoOptions, leo_aids
 
-__all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "gpst_to_utc", "read", "reference_track", "simulate", "to_aids"]
+__all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "SIM_WINDOW_S", "gpst_to_utc", "read", "reference_track", "simulate",
+           "to_aids"]
 
 #: A reference epoch needs a Q = 1 fix at most this far before and after it [s].
 MAX_GAP_S = 1.0
@@ -46,6 +47,9 @@ MAX_GAP_S = 1.0
 #: Doppler innovations' RMS over their predicted sigma is 1 while the GNSS aids are on (the drive: 1.43
 #: without it, 1.02 with 0.025 m/s; tools/bench_fuse.py --leo-sim), not on the outage errors.
 REF_VEL_SIGMA_MPS = 0.025
+#: The simulated Doppler's integration time [s]: its velocity is the chord over [t - 0.5, t + 0.5] s, so the
+#: aids that fit it model the mean velocity over this window (``LeoOptions.window_s``).
+SIM_WINDOW_S = 1.0
 
 
 def gpst_to_utc(t_gpst_s):
@@ -82,8 +86,8 @@ def reference_track(sol, rate_hz=1.0):
         return pos, (t - tf[k - 1] <= MAX_GAP_S) & (tf[k] - t <= MAX_GAP_S)
 
     pos, ok = at(t_s)
-    (before, ok_b), (after, ok_a) = at(t_s - 0.5), at(t_s + 0.5)
-    return t_s, pos, after - before, ok & ok_b & ok_a
+    (before, ok_b), (after, ok_a) = at(t_s - 0.5 * SIM_WINDOW_S), at(t_s + 0.5 * SIM_WINDOW_S)
+    return t_s, pos, (after - before) / SIM_WINDOW_S, ok & ok_b & ok_a
 
 
 def simulate(sol, *, tle=None, constellations=("starlink",), seed=0):
