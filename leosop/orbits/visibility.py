@@ -30,7 +30,7 @@ _MIN_CURVATURE_RADIUS_M = 6.33e6
 _CHUNK_POINTS = 4_000_000
 #: Screening grid steps [s], coarse to fine: every satellite is propagated on
 #: the first, then only the stretches that can hold a visible epoch.
-SCREEN_STEPS_S = (600.0, 60.0)
+SCREEN_STEPS_S = (600.0, 60.0, 10.0)
 # Rounding allowance of the screening windows' bounds [epochs] (the margins themselves hold ~10 % slack).
 _EPOCH_SLACK = 1e-6
 
@@ -502,7 +502,8 @@ def _screen(constellation, e0, e1, n_t, strides, geometry, rates):
     chunk = max(1, _CHUNK_POINTS // len(ce))
     tau = np.empty((len(constellation), len(ce)))
     for c0 in range(0, len(constellation), chunk):
-        sub = constellation.subset(slice(c0, c0 + chunk))
+        # The whole constellation's propagator is built once and kept; a part's, for each block.
+        sub = constellation if chunk >= len(constellation) else constellation.subset(slice(c0, c0 + chunk))
         err, r_km, v_kmps = sub.satrec_array.sgp4(jd[ce], fr[ce])
         _, _, up, rng = _visible(r_km, v_kmps, err, ce, geometry)
         tau[c0:c0 + chunk] = _climb_epochs(up - sin_mask * rng, rng, speed_sv[c0:c0 + chunk, None], speed_rx,
