@@ -57,8 +57,9 @@ def run_cli(code_dir, out_dir, args):
     ``code_dir``."""
     env = dict(os.environ, PYTHONPATH=str(code_dir))
     t0 = time.perf_counter()
+    # cwd too: ``python -m`` puts the working directory before PYTHONPATH on sys.path.
     proc = subprocess.Popen([sys.executable, "-m", "leosop", "visibility", *args, "--out", str(out_dir)], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                            cwd=code_dir, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     stderr = proc.stderr.read()
     _, status, usage = os.wait4(proc.pid, 0)
     if os.waitstatus_to_exitcode(status) != 0:
@@ -82,7 +83,7 @@ def bench_spans(args):
               f"{'MB':>5} | {'CPU ratio':>9} {'MB ratio':>8} | same files | load")
         cpu = {"new": {}, "old": {}}
         for hours in args.spans:
-            cli = ["--tle", args.tle, "--site", args.site, "--start", args.start, "--duration-s",
+            cli = ["--tle", str(Path(args.tle).resolve()), "--site", args.site, "--start", args.start, "--duration-s",
                    f"{hours * 3600:g}", "--step-s", f"{args.step_s:g}", "--mask-deg", f"{args.mask_deg:g}"]
             c_new, t_new, m_new = run_cli(REPO, tmp / f"new{hours}", cli)
             cpu["new"][hours] = c_new
@@ -140,7 +141,7 @@ def main():
     parser.add_argument("--site", default="51.9989,4.3733585,95")
     parser.add_argument("--spans", type=float, nargs="+", metavar="HOURS",
                         help="time and peak memory of leosop visibility --out for these spans, against the baseline")
-    parser.add_argument("--baseline-ref", default="main", help="git ref of the whole-span code (default main)")
+    parser.add_argument("--baseline-ref", default="main", help="git ref of the baseline code (default main)")
     parser.add_argument("--baseline-max-hours", type=float, default=24.0,
                         help="longest span run with the baseline (default 24)")
     parser.add_argument("--floor", action="store_true",
