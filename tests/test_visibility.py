@@ -9,7 +9,8 @@ from conftest import data_path
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation, read_tle
 from leosop.frames import C_e_n, teme_to_ecef
-from leosop.orbits.visibility import _climb_epochs, _speed_bound_mps, compute_visibility
+from leosop.orbits.visibility import compute_visibility
+from leosop.orbits.visibility_screen import climb_epochs, speed_bound_mps
 from leosop.timebase import jd_ut1, jd_utc
 from leosop.geometry.doppler import doppler_jacobian
 
@@ -132,7 +133,7 @@ def test_speed_bound_holds_for_every_satellite_of_the_active_catalogue():
     err, r_km, v_kmps = const.satrec_array.sgp4(*jd_utc(times))
     _, vel = teme_to_ecef(r_km * 1e3, v_kmps * 1e3, *jd_ut1(times))
     speed = np.where(err == 0, np.linalg.norm(vel, axis=-1), 0.0).max(axis=1)
-    bound = _speed_bound_mps(const)
+    bound = speed_bound_mps(const)
     assert (err == 0).mean() > 0.99
     assert np.all(bound >= speed), const.sat_ids[np.argmin(bound - speed)]
     starlink = const.families == "starlink"
@@ -156,11 +157,11 @@ def test_climb_time_bounds_the_elevation_test_on_real_orbits(real_subset, speed_
     rng = np.linalg.norm(los, axis=-1)
     f = np.sum(los * up_e, axis=-1) - sin_mask * rng
     assert np.all(err == 0)
-    speed_sv = _speed_bound_mps(real_subset)[:, None]
+    speed_sv = speed_bound_mps(real_subset)[:, None]
     speed_rx = 1.001 * speed_rx_mps  # the bound on the receiver's speed (the track's own is a hair above)
     for gap in (1, 10, 60, 200, 600, 1199):
         for a, b in ((slice(None, -gap), slice(gap, None)), (slice(gap, None), slice(None, -gap))):
             rise = f[:, b] - f[:, a]  # from sample a to epoch b, gap epochs away
-            climb = _climb_epochs(-rise, rng[:, a], speed_sv, speed_rx, sin_mask, 1.0)
+            climb = climb_epochs(-rise, rng[:, a], speed_sv, speed_rx, sin_mask, 1.0)
             assert climb.max() <= gap
             assert climb.max() > 0.2 * gap  # and the bound is not vacuous
