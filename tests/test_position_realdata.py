@@ -87,9 +87,10 @@ def test_doptrack_passes_in_one_fix_resolve_the_side():
 def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma():
     # A fix is ok only when the toolkit can vouch for it: here, that its sigma covers its error. The fixes
     # of the archive's first four days (light time at each day's first fix): 3 passes on 04-01, 04-03 and
-    # 04-04 are ok with the station at 0.87, 1.17 and 1.23 sqrt(trace) of the position covariance (at most
-    # 1.53 sigma along an axis); 04-02's two passes are few_passes (over all 30 days, three of the five
-    # two-pass days are 3.8-7.5 sigma off along one axis, docs/positioning.md).
+    # 04-04 are ok with the station at 0.87, 1.11 and 1.20 sqrt(trace) of the position covariance (0.87, 1.17
+    # and 1.23 with Earth-fixed time offsets; at most 1.53 sigma along an axis); 04-02's two passes are
+    # few_passes (over all 30 days, three of the five two-pass days are 3.8-7.5 sigma off along one axis,
+    # docs/positioning.md).
     passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))
     days = {}
     for p in passes:

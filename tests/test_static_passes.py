@@ -3,12 +3,16 @@ pass offsets.
 
 The two simulated VHF passes of ``test_doppler_ls.two_passes`` (one satellite, 2 s rows above 10 deg,
 a cubic clock per pass) with white or AR(1) Doppler noise; for the pass offsets, the 7 Starlink-like
-satellites of ``test_doppler_ls.starlink_like`` (one receiver clock) with each satellite's states offset.
+satellites of ``test_doppler_ls.starlink_like`` (one receiver clock) with each satellite's states offset
+or its time shifted (along its inertial orbit, or with the Earth: a time tag).
 """
 
 import numpy as np
 import pytest
 
+from leosop.frames import rotate_to_later_ecef
+from leosop.orbits import load_constellation
+from leosop.orbits.propagate import state_ecef, state_ecef_pairs
 from leosop.positioning.passes_noise import integrated_autocorrelation
 from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.static_passes import _sees, solve_static_passes
@@ -170,3 +174,42 @@ def test_element_set_sigma_floors_the_offsets_variance(starlink_like):  # noqa: 
                 off.pos_ecef_m
             added += np.outer(d, d)
     np.testing.assert_allclose(on.cov[:3, :3] - off.cov[:3, :3], added, atol=1e-3 * np.abs(added).max())
+
+
+def test_each_time_offset_model_fits_its_own_shift_and_not_the_other(starlink_like):  # noqa: F811
+    """A time-tag error (ECEF states at t + dt, the Earth turned with them) against an element set's along-track
+    error (inertial orbit at t + dt, the Earth not turned: the same states rotated east by omega_e dt).
+
+    The Doppler is built from SGP4 states at the shifted times (no first-order column involved); each model
+    fits its own shift to second order and leaves the other's east shift, ~7 % of the along-track one, in the
+    residuals and the position.
+    """
+    geo, rate, p, v, t_s, sat, rx = starlink_like
+    const = load_constellation()
+    t0 = np.datetime64("2025-01-01T04:00:00", "ns")  # the fixture's epoch
+    pos0, _, _ = state_ecef(const, [t0])
+    sat_index = np.argmin(np.linalg.norm(pos0[:, 0][None] - p[t_s == 0][:, None], axis=-1), axis=1)
+    dt_s = np.random.default_rng(5).normal(0.0, 0.01, 7)[sat]  # 75 m along-track, 5 m east
+    t_shift = t0 + np.round((t_s + dt_s) * 1e9).astype("timedelta64[ns]")
+    p_tag, v_tag, _ = state_ecef_pairs(const, sat_index[sat], t_shift)
+    shifted = {"earth_fixed": (p_tag, v_tag),
+               "inertial": (rotate_to_later_ecef(p_tag, -dt_s), rotate_to_later_ecef(v_tag, -dt_s))}
+    clock_hz = 1.5e3 - 0.7 * (t_s - 29.5)
+    sigma_hz = 1e-3
+    for truth, (p_true, v_true) in shifted.items():
+        y = _doppler(p_true[None], v_true[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + clock_hz
+        fits = {model: solve_static_passes(y, sigma_hz, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx,
+                                           time_bias_sigma_s=None, alpha=None, decorrelate=False, pass_offsets=False,
+                                           time_offset_model=model) for model in ("earth_fixed", "inertial")}
+        right, wrong = fits[truth], fits["inertial" if truth == "earth_fixed" else "earth_fixed"]
+        assert right.status == wrong.status == FixStatus.OK and right.time_offset_model == truth
+        # Its own model: left over is the second-order term dt^2 / 2 x the Doppler's acceleration (~1e-4 Hz
+        # at 0.01 s). Achieved rms 5e-5 Hz (chi2/dof 0.003), 2 cm, offsets to 3 us. Bounds: chi2/dof 0.01,
+        # 10 cm, 20 us.
+        assert right.chi2 / right.dof < 0.01 and np.linalg.norm(right.pos_ecef_m - rx) < 0.1
+        np.testing.assert_allclose(right.time_bias_s, dt_s[t_s == 0], rtol=0, atol=2e-5)
+        # The other model leaves the east shift omega_e |r| dt (up to 5 m here) partly in the position, partly
+        # in residuals of ~3 mHz. Achieved chi2/dof 8.8 and 10.2 (3,000x its own model's), 3.9 and 4.1 m.
+        # Bounds: chi2/dof 3 and 300x, 1 m.
+        assert wrong.chi2 / wrong.dof > max(3.0, 300 * right.chi2 / right.dof)
+        assert np.linalg.norm(wrong.pos_ecef_m - rx) > 1.0

@@ -1,6 +1,7 @@
 """Doppler positioning on the real data sets in ../shared/data, with the errors against their truth.
 
     python tools/real_doppler_position.py [--data DIR] [--export DIR] [--windows 2,3,5] [--no-single]
+        [--time-offset-model inertial|earth_fixed|both] [--no-all] [--doptrack-only]
 
 DopTrack (Delfi-C3, 98 passes): one static fix per pass with the station
 height known, no start given (the solver's own starts); error per pass and
@@ -9,9 +10,11 @@ polynomial per pass, position shared): all 98 passes, each day's passes, and
 sliding windows of N consecutive passes; errors against the station, the
 posterior sigma and their ratio; without the per-pass time offsets of the
 satellite states (along-track errors of the element sets), then with them
-(the default, prior TIME_OFFSET_SIGMA_S). ``--windows ''`` and
-``--no-single`` shorten the run (the full one takes ~10 min). FOX-1D: the
-trimmed pass with each candidate catalogue number.
+(the default, prior TIME_OFFSET_SIGMA_S), shifting each pass's satellite
+along its inertial orbit or with the Earth (``--time-offset-model``; ``both``
+runs the two in turn). ``--windows ''``, ``--no-single``, ``--no-all`` (no
+98-pass fix, itself > 10 min on a shared machine) and ``--doptrack-only``
+shorten the run. FOX-1D: the trimmed pass with each candidate catalogue number.
 GSDC: snapshot velocity, clock drift and position, and a static fix.
 ``--export DIR`` also writes each data set as a DESIGN 4.3 table (plus the
 element sets) so that ``leosop position`` can be run on them.
@@ -34,13 +37,14 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FOX_SITE = (37.229976, -80.439627, 610.0)
 
 
-def doptrack(data, export, windows=(2, 3, 5), single=True):
+def doptrack(data, export, windows=(2, 3, 5), single=True, models=("inertial",), all_passes=True):
     passes = read_doptrack(data / "leo-doppler" / "doptrack_delfi-c3_2020-04")
     if single:
         doptrack_single(passes, export)
-    doptrack_passes(passes, windows, time_bias=False)
-    # A time offset per pass (along-track error of its element set), the default.
-    doptrack_passes(passes, windows)
+    doptrack_passes(passes, windows, all_passes, time_bias=False)
+    # A time offset per pass (along-track error of its element set, or a time-tag error), the default.
+    for model in models:
+        doptrack_passes(passes, windows, all_passes, time_offset_model=model)
 
 
 def doptrack_single(passes, export):
@@ -105,36 +109,51 @@ def _horizontal(fix, p):
     return float(np.hypot(d[0], d[1])), float(np.sqrt(cov_enu[0, 0] + cov_enu[1, 1]))
 
 
-def doptrack_passes(passes, windows=(2, 3, 5), **kw):
+def _nees_h(fix, p):
+    """Horizontal normalised error squared against the station (chi-square with 2 dof when consistent)."""
+    lat, lon = np.radians(p.station_lat_deg), np.radians(p.station_lon_deg)
+    d = ecef_to_enu(fix.pos_ecef_m - p.station_pos_ecef_m, lat, lon)[:2]
+    C = C_e_n(lat, lon)
+    cov_en = (C.T @ fix.cov[:3, :3] @ C)[:2, :2]
+    return float(d @ np.linalg.solve(cov_en, d)) if np.isfinite(cov_en).all() and np.isfinite(d).all() else np.nan
+
+
+def doptrack_passes(passes, windows=(2, 3, 5), all_passes=True, **kw):
     """Multi-pass fixes of all passes, each day's and sliding windows; ``kw`` to position_static_passes."""
     print("\nDopTrack, several passes in one fix: a cubic transmitter frequency per pass, position shared, height\n"
           "known, starts on a grid around the sub-satellite centroid (no truth); sigma per pass from the\n"
           "residuals of a first joint fit. err_h: horizontal error, sig_h: posterior horizontal sigma. "
           f"Options: {kw or 'none'}")
     p0 = passes[0]
-    fix = fix_passes(passes, **kw)
-    err, sig = _horizontal(fix, p0)
-    err_3d = np.linalg.norm(fix.pos_ecef_m - p0.station_pos_ecef_m)
-    print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {err_3d:.0f} m, sig_h {sig:.1f} m, "
-          f"err/sig {err / sig:.1f}, {fix.status.name}, {fix.n_used}/{len(fix.used)} rows, ambiguous {fix.ambiguous}")
-    if fix.time_bias_s is not None:
-        q1, q2, q3 = np.percentile(fix.time_bias_s, [25, 50, 75])
-        print(f"  time offsets per pass: median {q2:+.2f} s, quartiles {q1:+.2f}, {q3:+.2f} s")
+    if all_passes:
+        fix = fix_passes(passes, **kw)
+        err, sig = _horizontal(fix, p0)
+        err_3d = np.linalg.norm(fix.pos_ecef_m - p0.station_pos_ecef_m)
+        print(f"all {len(passes)} passes: err_h {err:.0f} m, 3-D {err_3d:.0f} m, sig_h {sig:.1f} m, "
+              f"err/sig {err / sig:.1f}, NEES_h {_nees_h(fix, p0):.2f}, chi2/dof {fix.chi2 / fix.dof:.3f}, "
+              f"{fix.status.name}, {fix.n_used}/{len(fix.used)} rows, ambiguous {fix.ambiguous}")
+        if fix.time_bias_s is not None:
+            q1, q2, q3 = np.percentile(fix.time_bias_s, [25, 50, 75])
+            print(f"  time offsets per pass: median {q2:+.2f} s, quartiles {q1:+.2f}, {q3:+.2f} s")
     days = np.array([str(p.meas.time_utc[0])[:10] for p in passes])
     by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
     sets = [("each day", by_day)] + [(f"{n} in a row", [passes[k:k + n] for k in range(len(passes) - n + 1)])
                                      for n in windows]
     print(f"{'set':>12s} {'fixes':>5s} {'failed':>6s} {'passes':>6s} {'median_err_h':>12s} {'<10km':>6s} {'<5km':>5s} "
-          f"{'median_sig_h':>12s} {'median_err/sig':>14s} {'err/sig<3':>9s} {'ambiguous':>9s}")
+          f"{'median_sig_h':>12s} {'median_err/sig':>14s} {'err/sig<3':>9s} {'ambiguous':>9s} {'mean_NEES_h':>11s} "
+          f"{'median_chi2/dof':>15s} {'median_|dt|_s':>13s}")
     for name, subsets in sets:
-        stats = np.array([(*_horizontal(f, p0), f.ambiguous)
-                          for f in (fix_passes(s, **kw) for s in progress(subsets, desc=name))])
-        e, sg, amb = stats.T
+        fixes = [fix_passes(s, **kw) for s in progress(subsets, desc=name)]
+        stats = np.array([(*_horizontal(f, p0), f.ambiguous, _nees_h(f, p0), f.chi2 / max(f.dof, 1),
+                           np.median(np.abs(f.time_bias_s)) if f.time_bias_s is not None else np.nan)
+                          for f in fixes])
+        e, sg, amb, nees, chi2_dof, dt_abs = stats.T
         r = e / sg
         n_pass = np.array([len(x) for x in subsets])
         print(f"{name:>12s} {len(subsets):5d} {np.isnan(e).sum():6d} {n_pass.mean():6.1f} {np.nanmedian(e):12.0f} "
               f"{(e < 10e3).sum():6d} {(e < 5e3).sum():5d} {np.nanmedian(sg):12.1f} {np.nanmedian(r):14.1f} "
-              f"{(r < 3).sum():9d} {int(amb.sum()):9d}")
+              f"{(r < 3).sum():9d} {int(amb.sum()):9d} {np.nanmean(nees):11.2f} {np.nanmedian(chi2_dof):15.3f} "
+              f"{np.nanmedian(dt_abs):13.2f}")
         if name == "each day":
             for k in np.unique(n_pass):
                 day = n_pass == k
@@ -204,11 +223,18 @@ def main():
     parser.add_argument("--export", type=Path, help="write DESIGN 4.3 tables here (outside the repository)")
     parser.add_argument("--windows", default="2,3,5", help="sliding windows of N passes (comma list, '' none)")
     parser.add_argument("--no-single", action="store_true", help="skip the single-pass DopTrack fixes")
+    parser.add_argument("--no-all", action="store_true", help="skip the 98-pass DopTrack fixes")
+    parser.add_argument("--time-offset-model", choices=("inertial", "earth_fixed", "both"), default="inertial",
+                        help="what each pass's time offset shifts: the satellite along its inertial orbit (default), "
+                             "with the Earth (a time tag), or both in turn")
+    parser.add_argument("--doptrack-only", action="store_true", help="skip FOX-1D and GSDC")
     args = parser.parse_args()
     windows = tuple(int(w) for w in args.windows.split(",") if w.strip())
-    doptrack(args.data, args.export, windows, not args.no_single)
-    fox1d(args.data, args.export)
-    gsdc(args.data, args.export)
+    models = ("inertial", "earth_fixed") if args.time_offset_model == "both" else (args.time_offset_model,)
+    doptrack(args.data, args.export, windows, not args.no_single, models, not args.no_all)
+    if not args.doptrack_only:
+        fox1d(args.data, args.export)
+        gsdc(args.data, args.export)
 
 
 if __name__ == "__main__":

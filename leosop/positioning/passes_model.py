@@ -64,6 +64,8 @@ class PassRows:
     prior_cols : ndarray of int
     n, n_pass, n_clk, n_glob, n_loc, deg, time_bias : int
     common, has_alt : bool
+    time_offset_model : {"inertial", "earth_fixed"}
+        What a pass's time offset shifts (:data:`~leosop.positioning.static_passes.TIME_OFFSET_MODELS`).
     """
 
     y: np.ndarray
@@ -99,6 +101,7 @@ class PassRows:
     time_bias: int
     common: bool
     has_alt: bool
+    time_offset_model: str = "inertial"
 
     @property
     def n_states(self):
@@ -141,7 +144,8 @@ def _in_pass_order(rows, pass_id, clock_group, n_min, common):
 
 
 def pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *, mask, common, deg,
-              time_bias, sat_offset_sigma_hz, time_bias_sigma_s, clock_group, alt_m, alt_sigma_m):
+              time_bias, sat_offset_sigma_hz, time_bias_sigma_s, clock_group, alt_m, alt_sigma_m,
+              time_offset_model="inertial"):
     """The rows of a multi-pass fix in pass order and the layout of its linear terms.
 
     Arguments as :func:`~leosop.positioning.static_passes.solve_static_passes`'s
@@ -195,7 +199,8 @@ def pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, 
         vel_sv_ecef_mps=v_s, fixed=fixed, groups=groups, order=order, labels=labels, clock_labels=clock_labels,
         pass_clock=pass_clk, seg=seg, t_ref_s=t_ref, half_span_s=half_span_s, rx_t_ref_s=t_rx, half_rx_s=half_rx_s,
         B_glob=B_glob, basis=basis, prior=prior, prior_cols=prior_cols, n=n, n_pass=n_pass, n_clk=n_clk,
-        n_glob=n_glob, n_loc=n_loc, deg=deg, time_bias=tb, common=common, has_alt=has_alt)
+        n_glob=n_glob, n_loc=n_loc, deg=deg, time_bias=tb, common=common, has_alt=has_alt,
+        time_offset_model=time_offset_model)
 
 
 class PassesModel:
@@ -218,7 +223,8 @@ class PassesModel:
         A = np.broadcast_to(r.basis, (len(x),) + r.basis.shape)
         grad = None
         if r.time_bias:
-            rate, grad = doppler_rate(r.pos_sv_ecef_m, r.vel_sv_ecef_mps, x, r.carrier_hz, inertial=True)
+            rate, grad = doppler_rate(r.pos_sv_ecef_m, r.vel_sv_ecef_mps, x, r.carrier_hz,
+                                      inertial=r.time_offset_model == "inertial")
             A = np.concatenate([A, rate[..., None]], -1)
         B_glob, gi = r.B_glob, r.pass_index
         wd = w[:, :n]

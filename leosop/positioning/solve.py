@@ -322,7 +322,8 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
                            alt_sigma_m: float = 10.0, sigma_hz: float | None = None, alpha: float | None = 1e-3,
                            clock: Literal["per_pass", "common"] = "per_pass", clock_degree: int | None = None,
                            sat_offset_sigma_hz: float = SAT_OFFSET_SIGMA_HZ, time_bias: bool = True,
-                           time_bias_sigma_s: float | None = TIME_OFFSET_SIGMA_S) -> PositionResult:
+                           time_bias_sigma_s: float | None = TIME_OFFSET_SIGMA_S,
+                           time_offset_model: Literal["inertial", "earth_fixed"] = "inertial") -> PositionResult:
     """One batch fix of a receiver at rest from several passes (satellites), frequency terms per pass.
 
     Rows without ``sigma_hz`` get the caller's sigma, or their own pass's:
@@ -351,6 +352,11 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
         States from element sets also put their radial and cross-track
         error at each one's age (:func:`~leosop.orbits.accuracy.element_set_sigma_rc_m`)
         into the covariance, which no residual of one receiver shows.
+    time_offset_model : {"inertial", "earth_fixed"}
+        What each pass's time offset shifts: the satellite along its inertial
+        orbit (an element set's along-track error) or its ECEF states (a
+        receiver's time-tag error); see
+        :func:`~leosop.positioning.static_passes.solve_static_passes`.
 
     Returns
     -------
@@ -368,7 +374,8 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
         labels = ()
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable, clock=clock,
               clock_degree=clock_degree, sat_offset_sigma_hz=sat_offset_sigma_hz, time_bias=time_bias,
-              time_bias_sigma_s=time_bias_sigma_s, clock_group=group if len(labels) > 1 else None,
+              time_bias_sigma_s=time_bias_sigma_s, time_offset_model=time_offset_model,
+              clock_group=group if len(labels) > 1 else None,
               orbit_sigma_rc_m=_element_set_sigma_rc_m(meas, constellation, usable) if source == "tle" else None)
     pos_lt = init_pos_ecef_m
     sigma_pass = None
