@@ -29,7 +29,8 @@ import numba
 import numpy as np
 
 from ..constants import C_MPS
-from .gridcells import _BATCH_PAIRS, _EXACT_BAND_M, _IU, _JU, _exact_visible, _segment_tables, segment_batches
+from ..geometry.doppler import N_DOPPLER_STATES
+from .gridcells import _BATCH_PAIRS, _EXACT_BAND_M, _IU, _exact_visible, _segment_tables, segment_batches
 
 __all__ = ["accumulate_normals", "elevation_margins", "epoch_normals", "normal_gdop"]
 
@@ -62,7 +63,7 @@ def epoch_normals(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, sat, row, j0
             part = np.empty((c1 - c0, len(_IU) - 1))
         accumulate_normals(vis, rng_m, j0[a:b], n_cols[a:b], x_sv, y_sv, pos_sv_ecef_m[s, 2] - grid.z_row_m[rows],
                            rho, vel_sv_ecef_mps[s], k_per_m[s], rows * n_lon - c0, grid.cos_lon, grid.sin_lon, n_lon,
-                           _IU, _JU, part, normal[:, c0:c1], count[c0:c1])
+                           part, normal[:, c0:c1], count[c0:c1])
     normal[-1] = count
     return count, normal
 
@@ -111,7 +112,7 @@ def elevation_margins(x_sv, y_sv, cos_lat, offset, r2_row, rho, j0, n_cols, cos_
 
 @_jit
 def accumulate_normals(vis, rng_m, j0, n_cols, x_sv, y_sv, dz, rho, vel_sv_ecef_mps, k_per_m, cell0, cos_lon,
-                       sin_lon, n_lon, iu, ju, part, normal, count):
+                       sin_lon, n_lon, part, normal, count):
     """Add the visible pairs of a batch to the per-cell ``H^T H`` (upper triangle) and counts.
 
     Parameters
@@ -129,45 +130,40 @@ def accumulate_normals(vis, rng_m, j0, n_cols, x_sv, y_sv, dz, rho, vel_sv_ecef_
         Row start of each segment's cells relative to the batch's first cell.
     cos_lon, sin_lon : ndarray, (2 n_lon,)
     n_lon : int
-    iu, ju : ndarray of int, (n_triu,)
-        Upper-triangle entries of ``H^T H``; the last is the clock-clock entry (the count).
     part : ndarray, (>= n_batch_cells, n_triu - 1)
-        Scratch: this batch's sums, cell-major.
+        Scratch: this batch's sums, cell-major (a pair's sums side by side).
     normal : ndarray, (n_triu, n_batch_cells)
         Running sums of the batch's cells (a view), added to.
     count : ndarray of int, (n_batch_cells,)
         Visible satellites per cell, added to.
     """
-    n_q = len(iu) - 1
-    last = 6  # the clock column of H is 1
     n_cells = normal.shape[1]
     part[:n_cells] = 0.0
-    h = np.empty(7)
     m = 0
     for s in range(len(n_cols)):
-        vx, vy, vz = vel_sv_ecef_mps[s, 0], vel_sv_ecef_mps[s, 1], vel_sv_ecef_mps[s, 2]
+        vx, vy, vz, k = vel_sv_ecef_mps[s, 0], vel_sv_ecef_mps[s, 1], vel_sv_ecef_mps[s, 2], k_per_m[s]
         for lon in range(j0[s], j0[s] + n_cols[s]):
             if vis[m]:
-                r = rng_m[m]
-                e0 = (x_sv[s] - rho[s] * cos_lon[lon]) / r
-                e1 = (y_sv[s] - rho[s] * sin_lon[lon]) / r
-                e2 = dz[s] / r
+                rng = rng_m[m]
+                e0 = (x_sv[s] - rho[s] * cos_lon[lon]) / rng
+                e1 = (y_sv[s] - rho[s] * sin_lon[lon]) / rng
+                e2 = dz[s] / rng
                 e_dot_v = e0 * vx + e1 * vy + e2 * vz
-                k_over_rng = k_per_m[s] / r
-                h[0] = (vx - e0 * e_dot_v) * k_over_rng
-                h[1] = (vy - e1 * e_dot_v) * k_over_rng
-                h[2] = (vz - e2 * e_dot_v) * k_over_rng
-                h[3] = e0 * k_per_m[s]
-                h[4] = e1 * k_per_m[s]
-                h[5] = e2 * k_per_m[s]
-                c = cell0[s] + lon % n_lon
+                k_over_rng = k / rng
+                # One row of H; its clock column is 1 (and h_i * 1 is h_i exactly).
+                h = ((vx - e0 * e_dot_v) * k_over_rng, (vy - e1 * e_dot_v) * k_over_rng,
+                     (vz - e2 * e_dot_v) * k_over_rng, e0 * k, e1 * k, e2 * k, 1.0)
+                c = cell0[s] + (lon - n_lon if lon >= n_lon else lon)
                 count[c] += 1
-                for q in range(n_q):
-                    i, j = iu[q], ju[q]
-                    part[c, q] += h[i] * h[j] if j < last else h[i]
+                # Entries (i, j), i <= j, row by row as numpy.triu_indices; (clock, clock) is the count.
+                q = 0
+                for i in range(N_DOPPLER_STATES - 1):
+                    for j in range(i, N_DOPPLER_STATES):
+                        part[c, q + j - i] += h[i] * h[j]
+                    q += N_DOPPLER_STATES - i
             m += 1
     for c in range(n_cells):
-        for q in range(n_q):
+        for q in range(part.shape[1]):
             normal[q, c] += part[c, q]
 
 
@@ -180,11 +176,11 @@ def normal_gdop(normal, cells, q_of, gdop):
     normal : ndarray, (n_triu, n_cells)
         Upper triangles, entry ``(i, j)`` in row ``q_of[i, j]``.
     cells : ndarray of int, (k,)
-    q_of : ndarray of int, (7, 7)
+    q_of : ndarray of int, (N_DOPPLER_STATES, N_DOPPLER_STATES)
     gdop : ndarray, (n_cells,)
         Out, at ``cells``.
     """
-    n = q_of.shape[0]
+    n = N_DOPPLER_STATES
     d = np.empty(n)
     L = np.empty((n, n))
     x = np.empty(n)
