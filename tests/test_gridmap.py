@@ -153,7 +153,7 @@ def test_numba_kernels_are_bit_identical_to_numpy(walker_states, monkeypatch):
         np.testing.assert_array_equal(n_numba, n_numpy)
         np.testing.assert_array_equal(g_numba, g_numpy)  # NaN where NaN, every other value to the bit
         assert np.isfinite(g_numpy).sum() > 100
-    with pytest.raises(InputError, match="kernel 'fortran'"):
+    with pytest.raises(ValueError, match="kernel 'fortran'"):
         epoch_maps(*case, kernel="fortran")
 
 

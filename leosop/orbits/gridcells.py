@@ -19,8 +19,10 @@ The Doppler GDOP per cell (Shen 2024 eq. 10; 7 states, static receiver, see
 of the visible satellites' Jacobian rows are scatter-added to their cells
 (``numpy.bincount``, segments in row order so that a batch touches a narrow
 band of cells), then inverted in one batch. NaN where fewer than 7
-satellites are visible or the geometry is singular. The maps over time are
-:func:`leosop.orbits.gridmap.gdop_map`'s.
+satellites are visible or the geometry is singular. With numba installed
+(``leosop[fast]``) the per-pair work runs compiled instead
+(:mod:`leosop.orbits.gridkernels`, bit-identical, ~2x faster). The maps over
+time are :func:`leosop.orbits.gridmap.gdop_map`'s.
 """
 
 import functools
@@ -435,30 +437,18 @@ def _compiled():
 
 
 def _kernels(kernel):
-    if kernel not in (None, "numba", "numpy"):
-        raise InputError(f"kernel {kernel!r}: expected 'numba' or 'numpy'")
-    if kernel == "numba" and _compiled() is None:
-        raise InputError("kernel 'numba': numba is not installed (pip install leosop[fast])")
+    """The compiled kernels for ``kernel`` "numba" (None: when installed), None for "numpy"."""
+    if kernel not in (None, "numba", "numpy") or (kernel == "numba" and _compiled() is None):
+        raise ValueError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
     return None if kernel == "numpy" else _compiled()
 
 
 def _epoch_normals(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, sat, row, j0, n_cols, sin_mask):
-    """Visible count and upper triangle of ``H^T H`` of every cell from the footprint segments, numpy.
+    """Visible count (n_cells,) and upper triangle of ``H^T H`` (n_triu, n_cells) of every cell, numpy.
 
-    Parameters
-    ----------
-    pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n_sats, 3)
-    carrier_hz : ndarray, (n_sats,)
-    grid : Grid
-    sat, row, j0, n_cols : ndarray of int, (n_segments,)
-        :func:`_footprint_segments`.
-    sin_mask : float
-
-    Returns
-    -------
-    count : ndarray of int, (n_cells,)
-    normal : ndarray, (n_triu, n_cells)
-        Row ``q`` holds entry ``(_IU[q], _JU[q])``; the last (clock, clock) is the count.
+    ``sat, row, j0, n_cols`` are :func:`_footprint_segments`'; row ``q`` of the triangle holds entry
+    ``(_IU[q], _JU[q])``, the last (clock, clock) the count. The reference of the compiled
+    :func:`leosop.orbits.gridkernels.epoch_normals`.
     """
     n_cells, n_lon = grid.n_cells, grid.shape[1]
     count = np.zeros(n_cells, dtype=np.int64)
