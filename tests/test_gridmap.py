@@ -14,11 +14,14 @@ from leosop.orbits.gridcells import (
     _EXACT_BAND_M,
     _IU,
     _JU,
+    _Q_OF,
+    _compiled,
     _footprint_segments,
     _normal_gdop,
     _segment_pairs,
     _visible,
     _visible_segments,
+    segment_batches,
 )
 from leosop.orbits.gridmap import (
     FOOTPRINT_MARGIN_DEG,
@@ -90,20 +93,29 @@ def test_candidates_are_a_tight_superset(walker_states):
     assert n_b.sum() <= len(sat) < 2.0 * n_b.sum()
 
 
-def test_table_elevation_test_is_the_reference_test(walker_states):
-    """The map's elevation test decides every candidate pair as :func:`_visible` does, at the mask too."""
-    _, _, pos, _, _ = walker_states
-    grid, mask_deg = make_grid(6.0), 10.0
+def _edge_satellites(grid, mask_deg):
+    """Satellites 1000 km from cells (lat 0, 48, 84) at exactly the mask elevation, towards north and east.
+
+    Their margins are rounding-sized, inside the band where the reference test decides.
+    Returns the cells (3,) and the satellite positions (6, 3).
+    """
     sin_mask, cos_mask = math.sin(math.radians(mask_deg)), math.cos(math.radians(mask_deg))
-    # Satellites 1000 km from cells (lat 0, 48, 84) at exactly the mask elevation, towards north and east:
-    # their margins are rounding-sized, inside the band where the reference test decides.
     n_lon = grid.shape[1]
     cells = [(np.searchsorted(grid.lat_deg, lat) * n_lon + n_lon // 2) for lat in (0.0, 48.0, 84.0)]
     up = grid.up_ecef[cells]
     east = np.cross([0.0, 0.0, 1.0], up)
     east /= np.linalg.norm(east, axis=1, keepdims=True)
     north = np.cross(up, east)
-    edge = np.concatenate([grid.pos_ecef_m[cells] + 1e6 * (cos_mask * h + sin_mask * up) for h in (north, east)])
+    return cells, np.concatenate([grid.pos_ecef_m[cells] + 1e6 * (cos_mask * h + sin_mask * up) for h in (north, east)])
+
+
+def test_table_elevation_test_is_the_reference_test(walker_states):
+    """The map's elevation test decides every candidate pair as :func:`_visible` does, at the mask too."""
+    _, _, pos, _, _ = walker_states
+    grid, mask_deg = make_grid(6.0), 10.0
+    sin_mask = math.sin(math.radians(mask_deg))
+    n_lon = grid.shape[1]
+    cells, edge = _edge_satellites(grid, mask_deg)
     pos_sv = np.concatenate([pos[:, 0], edge])
     sat, row, j0, n_cols = _footprint_segments(pos_sv, grid, mask_deg)
     seg, lon = _segment_pairs(j0, n_cols)
@@ -115,6 +127,34 @@ def test_table_elevation_test_is_the_reference_test(walker_states):
     margin = np.einsum("mi,mi->m", los, grid.up_ecef[cell]) - sin_mask * ref_rng
     on_edge = np.isin(sat[seg], len(pos) + np.arange(len(edge))) & np.isin(cell, cells)
     assert on_edge.sum() == len(edge) and np.all(np.abs(margin[on_edge]) < _EXACT_BAND_M)
+
+
+@pytest.mark.skipif(_compiled() is None, reason="numba is not installed")
+def test_numba_kernels_are_bit_identical_to_numpy(walker_states, monkeypatch):
+    """The compiled per-pair work repeats numpy's operations in numpy's order: identical counts and GDOP bits.
+
+    The real snapshot on a 4 deg grid in small batches (running sums over many batches, as on a fine grid), and
+    the Walker set with satellites on the mask edge (pairs decided by the reference test).
+    """
+    monkeypatch.setattr("leosop.orbits.gridcells._BATCH_PAIRS", 3_000)
+    const = load_constellation(data_path("tle", "starlink_3le_2026-04-08_Bochika.txt"))
+    pos, vel, _ = state_ecef(const, np.datetime64("2026-04-08T12:00:00", "ns"))
+    grid = make_grid(4.0)
+    assert len(segment_batches(_footprint_segments(pos[:, 0], grid, 40.0)[3])) > 10
+    cases = [(pos[:, 0], vel[:, 0], satellite_carriers_hz(const), grid, 40.0)]
+    _, _, pos, vel, carrier = walker_states
+    grid = make_grid(6.0)
+    _, edge = _edge_satellites(grid, 10.0)
+    cases.append((np.concatenate([pos[:, 0], edge]), np.concatenate([vel[:, 0], np.full(edge.shape, 7e3)]),
+                  np.r_[carrier, np.full(len(edge), carrier[0])], grid, 10.0))
+    for case in cases:
+        n_numpy, g_numpy = epoch_maps(*case, kernel="numpy")
+        n_numba, g_numba = epoch_maps(*case, kernel="numba")
+        np.testing.assert_array_equal(n_numba, n_numpy)
+        np.testing.assert_array_equal(g_numba, g_numpy)  # NaN where NaN, every other value to the bit
+        assert np.isfinite(g_numpy).sum() > 100
+    with pytest.raises(ValueError, match="kernel 'fortran'"):
+        epoch_maps(*case, kernel="fortran")
 
 
 def test_footprint_over_the_pole_and_dateline():
@@ -138,6 +178,10 @@ def test_normal_gdop_matches_dop_and_flags_singular():
     np.testing.assert_allclose(_normal_gdop(normal), gdop(H), rtol=1e-9)
     normal[_JU == 6, 0] = 0.0  # no clock information: singular
     assert np.isnan(_normal_gdop(normal)[0]) and np.isfinite(_normal_gdop(normal)[1:]).all()
+    if _compiled():  # the compiled GDOP: the same bits, the same singular cell
+        out = np.full(50, -1.0)
+        _compiled().normal_gdop(normal, np.arange(50), _Q_OF, out)
+        np.testing.assert_array_equal(out, _normal_gdop(normal))
 
 
 @pytest.mark.parametrize("grid_deg", [1.0, 0.5, 2.5, 4.0, 7.5, 90.0])

@@ -8,11 +8,15 @@
 2. ``--floor``: the floor over the whole span, one core: one SGP4 propagation
    per satellite and epoch (sgp4's ``SatrecArray`` over all satellites and the
    epochs of each task) plus the elevation tests of the (satellite, cell) pairs
-   that pass the footprint screen (the table form the map uses; the screen
-   itself is not counted). Prints the number of pairs per epoch.
+   that pass the footprint screen (the table form of the numpy path; the screen
+   itself is not counted). Prints the number of pairs per epoch, and, when
+   numba is installed, the same tests compiled (the floor with them apart).
 3. ``--full``: the whole map (default 1 deg, 24 h at 60 s, 40 deg mask), each
    run in a child process of its own: this tree (``--scheduler``, serial by
-   default), the baseline ``--baseline-ref`` (default ``main``, exported with
+   default) with each of ``--kernel`` (default ``numba numpy``: numba twice,
+   first with an empty ``NUMBA_CACHE_DIR`` so that its JIT compilation is
+   counted, then with the cache it wrote; numpy with numba blocked in the
+   child, as if it were not installed), the baseline ``--baseline-ref`` (default ``main``, exported with
    ``git archive``; ``none`` skips it) the same way, and with
    ``--dask-workers 1 2`` this tree on local clusters of that many
    single-threaded workers. Each prints its wall time and CPU time (user +
@@ -37,7 +41,10 @@ import numpy as np
 from baseline_tree import REPO, export_package
 
 from leosop.orbits.gridcells import (
+    _EXACT_BAND_M,
+    _compiled,
     _footprint_segments,
+    _segment_tables,
     _segment_pairs,
     _visible_segments,
     segment_batches,
@@ -75,6 +82,8 @@ def main():
                     help="of the --full run: serial, local (a local cluster) or a Dask address")
     ap.add_argument("--dask-workers", type=int, nargs="*", default=(),
                     help="--full also on local Dask clusters of these many workers")
+    ap.add_argument("--kernel", nargs="+", choices=("numba", "numpy"), default=("numba", "numpy"),
+                    help="per-pair kernels of this tree's --full runs")
     ap.add_argument("--baseline-ref", default="main", help="git ref of the code --full compares with ('none': skip)")
     a = ap.parse_args()
 
@@ -127,7 +136,8 @@ def floor(const, grid, times, mask_deg):
     per entry of ``H^T H`` (27 besides the count) over the visible pairs.
     """
     sin_mask = math.sin(math.radians(mask_deg))
-    t_sgp4 = t_elev = t_scatter = 0.0
+    kernels = _compiled()
+    t_sgp4 = t_elev = t_scatter = t_compiled = 0.0
     n_pairs, n_visible = [], []
     n_lon = grid.shape[1]
     for a in range(0, len(times), EPOCHS_PER_BLOCK):
@@ -145,6 +155,9 @@ def floor(const, grid, times, mask_deg):
                 t0 = time.process_time()
                 vis, rng = _visible_segments(pos[:, j], grid, sat[b0:b1], row[b0:b1], seg, lon, sin_mask)
                 t_elev += time.process_time() - t0
+                if kernels:
+                    t_compiled += compiled_elevation(kernels, pos[:, j], grid, sat[b0:b1], row[b0:b1], j0[b0:b1],
+                                                     n_cols[b0:b1], sin_mask, vis)
                 keep = np.flatnonzero(vis)
                 cell = (row[b0:b1][seg[keep]] - row[b0]) * n_lon + lon[keep] % n_lon
                 weights = rng[keep]
@@ -159,18 +172,42 @@ def floor(const, grid, times, mask_deg):
           f"{np.mean(n_pairs) / 1e6:.2f} M pairs per epoch pass the footprint screen "
           f"({np.mean(n_pairs) / grid.n_cells:.1f} per cell), their elevation tests {t_elev:.1f} s; "
           f"floor {t_sgp4 + t_elev:.1f} s", flush=True)
+    if kernels:
+        print(f"the elevation tests compiled (numba): {t_compiled:.1f} s; floor with them {t_sgp4 + t_compiled:.1f} s",
+              flush=True)
     print(f"not in the floor: the 27 scatter-adds of H^T H over the {np.mean(n_visible) / 1e6:.2f} M visible pairs "
           f"per epoch (bincount) {t_scatter:.1f} s CPU", flush=True)
     return t_sgp4 + t_elev
 
 
+def compiled_elevation(kernels, pos_sv_ecef_m, grid, sat, row, j0, n_cols, sin_mask, vis_ref):
+    """CPU time [s] of the compiled table elevation test of a batch of segments (its verdicts checked)."""
+    n = int(n_cols.sum())
+    vis, rng = np.empty(n, dtype=bool), np.empty(n)
+    near_seg, near_lon = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    t0 = time.process_time()
+    tables = _segment_tables(pos_sv_ecef_m, grid, sat, row)
+    n_near = kernels.elevation_margins(*tables, j0, n_cols, grid.cos_lon, grid.sin_lon, sin_mask, _EXACT_BAND_M,
+                                       vis, rng, near_seg, near_lon)
+    cpu = time.process_time() - t0
+    if n_near == 0 and not np.array_equal(vis, vis_ref):
+        sys.exit("the compiled elevation test differs from numpy's")
+    return cpu
+
+
 # A child process's whole map: argv = tle, constellations (comma-separated), start, duration, step, grid, mask,
-# scheduler ("local" for a local cluster), workers (0: the default), output .npz.
+# scheduler ("local" for a local cluster), workers (0: the default), kernel ("numpy": numba blocked, "numba":
+# required, "": the default), output .npz.
 _CHILD = """
 import sys
+tle, fams, start, duration, step, grid, mask, scheduler, workers, kernel, out = sys.argv[1:]
+if kernel == "numpy":
+    sys.modules["numba"] = None  # as if numba were not installed
 import numpy as np
 from leosop.orbits.gridmap import ConstellationSource, gdop_map
-tle, fams, start, duration, step, grid, mask, scheduler, workers, out = sys.argv[1:]
+if kernel == "numba":
+    from leosop.orbits.gridcells import _compiled
+    assert _compiled() is not None, "numba is not installed"
 n = int(np.floor(float(duration) / float(step) + 1e-9)) + 1
 times = np.datetime64(start, "ns") + (np.arange(n) * float(step) * 1e9).astype("timedelta64[ns]")
 ds = gdop_map(ConstellationSource(tle, tuple(f for f in fams.split(",") if f)), times, float(grid), float(mask),
@@ -179,11 +216,11 @@ np.savez(out, n_visible=ds["n_visible"].values, gdop=ds["gdop"].values)
 """
 
 
-def run_map(code_dir, a, scheduler, n_workers, out):
+def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out):
     """Wall and CPU time [s] of one whole map computed in a child process importing ``code_dir``'s leosop."""
-    env = dict(os.environ, PYTHONPATH=str(code_dir), OPENBLAS_NUM_THREADS="1")
+    env = dict(os.environ, PYTHONPATH=str(code_dir), OPENBLAS_NUM_THREADS="1", NUMBA_CACHE_DIR=str(numba_cache))
     argv = [a.tle, ",".join(a.constellation), a.start, str(a.duration_s), str(a.step_s), str(a.grid_deg),
-            str(a.mask_deg), scheduler, str(n_workers or 0), str(out)]
+            str(a.mask_deg), scheduler, str(n_workers or 0), kernel, str(out)]
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-c", _CHILD, *argv], cwd=code_dir, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -198,16 +235,23 @@ def full_maps(a, floor_s):
     """This tree, the baseline and the Dask runs, each in a child process; times, ratios and identical maps."""
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        runs = [(f"this tree, {a.scheduler}", REPO, a.scheduler, None)]
+        numba_cache = tmp / "numba-cache"  # empty: the first numba run compiles
+        runs = []
+        for kernel in a.kernel:
+            if kernel == "numba":
+                runs += [(f"this tree, {a.scheduler}, numba (compiles)", REPO, a.scheduler, None, kernel),
+                         (f"this tree, {a.scheduler}, numba (cached)", REPO, a.scheduler, None, kernel)]
+            else:
+                runs.append((f"this tree, {a.scheduler}, {kernel}", REPO, a.scheduler, None, kernel))
         if a.baseline_ref != "none":
             export_package(a.baseline_ref, tmp)
-            runs.append((f"{a.baseline_ref}, serial", tmp, "serial", None))
-        runs += [(f"this tree, {n} local Dask worker(s)", REPO, "local", n) for n in a.dask_workers]
-        print(f"{'full map':>36} {'wall s':>7} {'CPU s':>7} {'CPU/floor':>9} | identical counts, max GDOP rel. diff"
-              " to the first", flush=True)
+            runs.append((f"{a.baseline_ref}, serial", tmp, "serial", None, ""))
+        runs += [(f"this tree, {n} local Dask worker(s)", REPO, "local", n, "") for n in a.dask_workers]
+        print(f"{'full map':>44} {'wall s':>7} {'CPU s':>7} {'CPU/floor':>9} | identical counts, max GDOP rel. diff"
+              " (float32 maps) to the first", flush=True)
         first = None
-        for k, (label, code_dir, scheduler, n_workers) in enumerate(runs):
-            wall, cpu = run_map(code_dir, a, scheduler, n_workers, tmp / f"map{k}.npz")
+        for k, (label, code_dir, scheduler, n_workers, kernel) in enumerate(runs):
+            wall, cpu = run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, tmp / f"map{k}.npz")
             maps = np.load(tmp / f"map{k}.npz")
             first = first or (maps, wall)
             same = np.array_equal(maps["n_visible"], first[0]["n_visible"])
@@ -215,7 +259,8 @@ def full_maps(a, floor_s):
             same_nan = np.array_equal(np.isnan(g), np.isnan(g0))
             rel = float(np.nanmax(np.abs(g / g0 - 1), initial=0.0)) if same_nan else math.inf
             ratio = f"{cpu / floor_s:>8.1f}x" if floor_s else f"{'-':>9}"
-            print(f"{label:>36} {wall:>7.1f} {cpu:>7.1f} {ratio} | {same}, {rel:.1e} "
+            bits = "bit-identical" if np.array_equal(g, g0, equal_nan=True) else f"{rel:.1e}"
+            print(f"{label:>44} {wall:>7.1f} {cpu:>7.1f} {ratio} | {same}, {bits} "
                   f"(wall speed-up over the first {first[1] / wall:.2f}x)", flush=True)
 
 

@@ -19,8 +19,10 @@ The Doppler GDOP per cell (Shen 2024 eq. 10; 7 states, static receiver, see
 of the visible satellites' Jacobian rows are scatter-added to their cells
 (``numpy.bincount``, segments in row order so that a batch touches a narrow
 band of cells), then inverted in one batch. NaN where fewer than 7
-satellites are visible or the geometry is singular. The maps over time are
-:func:`leosop.orbits.gridmap.gdop_map`'s.
+satellites are visible or the geometry is singular. With numba installed
+(``leosop[fast]``) the per-pair work runs compiled instead
+(:mod:`leosop.orbits.gridkernels`, bit-identical, ~2x faster). The maps over
+time are :func:`leosop.orbits.gridmap.gdop_map`'s.
 """
 
 import functools
@@ -64,6 +66,8 @@ _GDOP_CELLS = 16_384
 # Cells x satellites per brute-force block.
 _BRUTE_BLOCK = 2_000_000
 _IU, _JU = np.triu_indices(N_DOPPLER_STATES)
+_Q_OF = np.zeros((N_DOPPLER_STATES, N_DOPPLER_STATES), dtype=np.int64)  # row of entry (i, j), i <= j
+_Q_OF[_IU, _JU] = np.arange(len(_IU))
 
 
 @dataclass(frozen=True)
@@ -352,25 +356,43 @@ def _visible_segments(pos_sv_ecef_m, grid, sat, row, seg, lon, sin_mask):
     vis : ndarray of bool, (m,)
     range_m : ndarray, (m,)
     """
-    p = pos_sv_ecef_m[sat]
-    cos_lat, sin_lat = grid.cos_lat[row], grid.sin_lat[row]
-    rho, z = grid.rho_row_m[row], grid.z_row_m[row]
-    offset = sin_lat * p[:, 2] - (rho * cos_lat + z * sin_lat)
-    r2_row = np.einsum("si,si->s", p, p) - 2.0 * z * p[:, 2] + (rho * rho + z * z)
+    x_sv, y_sv, cos_lat, offset, r2_row, rho = _segment_tables(pos_sv_ecef_m, grid, sat, row)
     take = np.take  # per pair: ~30% faster than fancy indexing
-    w = take(p[:, 0], seg) * take(grid.cos_lon, lon) + take(p[:, 1], seg) * take(grid.sin_lon, lon)
+    w = take(x_sv, seg) * take(grid.cos_lon, lon) + take(y_sv, seg) * take(grid.sin_lon, lon)
     rng = np.sqrt(take(r2_row, seg) - 2.0 * take(rho, seg) * w)
     margin = take(cos_lat, seg) * w + take(offset, seg) - sin_mask * rng
     vis = margin > 0.0
     near = np.flatnonzero(np.abs(margin) <= _EXACT_BAND_M)
     if near.size:
-        n_lon = grid.shape[1]
-        cell = row[seg[near]] * n_lon + lon[near] % n_lon
-        vis[near], _, _ = _visible(pos_sv_ecef_m[sat[seg[near]]], grid.pos_ecef_m[cell], grid.up_ecef[cell], sin_mask)
+        vis[near] = _exact_visible(pos_sv_ecef_m, grid, sat[seg[near]], row[seg[near]], lon[near], sin_mask)
     return vis, rng
 
 
-def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
+def _segment_tables(pos_sv_ecef_m, grid, sat, row):
+    """Per-segment terms of the table elevation test of :func:`_visible_segments`.
+
+    Returns
+    -------
+    x_sv, y_sv, cos_lat, offset, r2_row, rho : ndarray, (n_segments,)
+        Satellite x and y; the row's cos(lat); ``sin(lat) z_sv - pos.up``;
+        ``|pos_sv|^2 - 2 z_row z_sv + |pos|^2``; the row's distance from the polar axis.
+    """
+    p = pos_sv_ecef_m[sat]
+    cos_lat, sin_lat = grid.cos_lat[row], grid.sin_lat[row]
+    rho, z = grid.rho_row_m[row], grid.z_row_m[row]
+    offset = sin_lat * p[:, 2] - (rho * cos_lat + z * sin_lat)
+    r2_row = np.einsum("si,si->s", p, p) - 2.0 * z * p[:, 2] + (rho * rho + z * z)
+    return p[:, 0].copy(), p[:, 1].copy(), cos_lat, offset, r2_row, rho
+
+
+def _exact_visible(pos_sv_ecef_m, grid, sat, row, lon, sin_mask):
+    """The reference test :func:`_visible` of pairs given by satellite, row and unwrapped longitude, (m,) each."""
+    n_lon = grid.shape[1]
+    cell = row * n_lon + lon % n_lon
+    return _visible(pos_sv_ecef_m[sat], grid.pos_ecef_m[cell], grid.up_ecef[cell], sin_mask)[0]
+
+
+def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg, *, kernel=None):
     """Visible count and Doppler GDOP of every cell at one epoch, by footprints.
 
     Parameters
@@ -379,6 +401,9 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     carrier_hz : ndarray, (n_sats,)
     grid : Grid
     mask_deg : float
+    kernel : {None, "numba", "numpy"}
+        The per-pair work compiled (:mod:`leosop.orbits.gridkernels`, bit-identical results) or in numpy;
+        None: numba when it is installed.
 
     Returns
     -------
@@ -386,8 +411,45 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     gdop : ndarray, (n_lat, n_lon)
         NaN below 7 visible satellites or for a singular geometry.
     """
+    kernels = _kernels(kernel)
     sat, row, j0, n_cols = _footprint_segments(pos_sv_ecef_m, grid, mask_deg)
-    sin_mask = math.sin(math.radians(mask_deg))
+    args = (np.asarray(pos_sv_ecef_m, dtype=float), np.asarray(vel_sv_ecef_mps, dtype=float),
+            np.asarray(carrier_hz, dtype=float), grid, sat, row, j0, n_cols, math.sin(math.radians(mask_deg)))
+    count, normal = kernels.epoch_normals(*args) if kernels else _epoch_normals(*args)
+    gdop = np.full(grid.n_cells, np.nan)
+    fix = np.flatnonzero(count >= N_DOPPLER_STATES)
+    if kernels:
+        kernels.normal_gdop(normal, fix, _Q_OF, gdop)
+    else:
+        for a in range(0, fix.size, _GDOP_CELLS):
+            gdop[fix[a:a + _GDOP_CELLS]] = _normal_gdop(normal[:, fix[a:a + _GDOP_CELLS]])
+    return count.reshape(grid.shape), gdop.reshape(grid.shape)
+
+
+@functools.cache
+def _compiled():
+    """:mod:`leosop.orbits.gridkernels`, or None when numba is not installed."""
+    try:
+        from . import gridkernels
+    except ImportError:
+        return None
+    return gridkernels
+
+
+def _kernels(kernel):
+    """The compiled kernels for ``kernel`` "numba" (None: when installed), None for "numpy"."""
+    if kernel not in (None, "numba", "numpy") or (kernel == "numba" and _compiled() is None):
+        raise ValueError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
+    return None if kernel == "numpy" else _compiled()
+
+
+def _epoch_normals(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, sat, row, j0, n_cols, sin_mask):
+    """Visible count (n_cells,) and upper triangle of ``H^T H`` (n_triu, n_cells) of every cell, numpy.
+
+    ``sat, row, j0, n_cols`` are :func:`_footprint_segments`'; row ``q`` of the triangle holds entry
+    ``(_IU[q], _JU[q])``, the last (clock, clock) the count. The reference of the compiled
+    :func:`leosop.orbits.gridkernels.epoch_normals`.
+    """
     n_cells, n_lon = grid.n_cells, grid.shape[1]
     count = np.zeros(n_cells, dtype=np.int64)
     normal = np.zeros((len(_IU), n_cells))
@@ -395,8 +457,8 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
     cell_of_lon = np.tile(np.arange(n_lon), 2)
     prod = np.empty(_BATCH_PAIRS + n_lon)
     h_buf = np.empty((N_DOPPLER_STATES, _BATCH_PAIRS + n_lon))
-    pos_x, pos_y, pos_z = np.array(pos_sv_ecef_m, dtype=float).T.copy()
-    vel_x, vel_y, vel_z = np.array(vel_sv_ecef_mps, dtype=float).T.copy()
+    pos_x, pos_y, pos_z = pos_sv_ecef_m.T.copy()
+    vel_x, vel_y, vel_z = vel_sv_ecef_mps.T.copy()
     take = np.take  # per pair: ~30% faster than fancy indexing
     for a, b in segment_batches(n_cols):
         seg, lon = _segment_pairs(j0[a:b], n_cols[a:b])
@@ -417,11 +479,7 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg):
             normal[q, c0:c1] += np.bincount(cell, weights=np.multiply(H[i], H[j], out=p) if j < last else H[i],
                                             minlength=c1 - c0)
     normal[-1] = count
-    gdop = np.full(n_cells, np.nan)
-    fix = np.flatnonzero(count >= N_DOPPLER_STATES)
-    for a in range(0, fix.size, _GDOP_CELLS):
-        gdop[fix[a:a + _GDOP_CELLS]] = _normal_gdop(normal[:, fix[a:a + _GDOP_CELLS]])
-    return count.reshape(grid.shape), gdop.reshape(grid.shape)
+    return count, normal
 
 
 def brute_force_epoch(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg, cells=None):
