@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from leosop import fileio
-from leosop.cli import main, tle
+from leosop.cli import COMMANDS, build_parser, main, tle
 
 
 #: A small recording: 10 ms of one satellite at 1 MS/s.
@@ -68,8 +68,6 @@ def test_unknown_options_name_the_subcommand_and_the_nearest_option(capsys, argv
 
 def test_action_groups_show_only_options_that_work(capsys):
     """`study --out` was listed and ignored; `tle/study --json ACTION` was overwritten by the action's default."""
-    from leosop.cli import build_parser
-
     parser = build_parser()
     with pytest.raises(SystemExit):
         parser.parse_args(["study", "--help"])
@@ -77,6 +75,26 @@ def test_action_groups_show_only_options_that_work(capsys):
     assert parser.parse_args(["study", "--json", "gdop-map", "--out", "d"]).json is True
     assert parser.parse_args(["study", "gdop-map", "--out", "d"]).json is False
     assert parser.parse_args(["tle", "--json", "info", "f"]).json is True
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_command_alone_parses_as_in_the_full_parser(capsys, command):
+    """`leosop CMD` registers only CMD's module (issue 24): its --help must be the full parser's, byte for byte."""
+    helps = []
+    for parser in (build_parser(), build_parser(command)):
+        with pytest.raises(SystemExit):
+            parser.parse_args([command, "--help"])
+        helps.append(capsys.readouterr().out)
+    assert helps[0] == helps[1] and f"usage: leosop {command}" in helps[0]
+
+
+def test_visibility_loads_none_of_the_other_commands_dependencies():
+    """The other commands' scipy.stats, pyfftw and dask cost ~1.2 s of CPU at every start (issue 24)."""
+    code = ("import sys; from leosop.cli import main\n"
+            "try: main(['visibility', '--help'])\nexcept SystemExit: pass\n"
+            "print(sorted({'scipy.stats', 'pyfftw', 'dask', 'leosop.cli.position'} & set(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.splitlines()[-1] == "[]"
 
 
 def test_negative_numbers_are_option_values(capsys):
