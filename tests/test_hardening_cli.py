@@ -4,6 +4,7 @@ output paths, signals, warnings and all-or-nothing outputs."""
 import errno
 import http.server
 import json
+import math
 import os
 import signal
 import subprocess
@@ -215,6 +216,25 @@ def test_json_files_are_strict(tmp_path):
     expected = {"a": None, "b": [1.0, None, None], "c": [None, 2.5], "d": 3}
     for name in ("x.json", "y.json"):
         assert _strict((tmp_path / name).read_text()) == expected
+
+
+def _ready_reference(obj):
+    """`fileio.json_ready` element by element, without its fast paths for flat lists."""
+    if isinstance(obj, dict):
+        return {str(k): _ready_reference(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_ready_reference(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _ready_reference(obj.tolist())
+    return None if isinstance(obj, float) and not math.isfinite(obj) else obj
+
+
+def test_json_ready_fast_paths_give_the_element_by_element_bytes():
+    """Flat lists skip the per-element walk (issue 24); every mix of types must still come out the same."""
+    doc = {"ids": ["44713", "STARLINK-1007"], "tuple": ("a", 1, True, None), "floats": [0.1, float("nan"), -0.0],
+           "mixed": [1, 2.5, float("inf")], "numpy": [np.float64(np.nan), np.int64(7), "x"], "empty": [],
+           "nested": [[float("-inf"), 1e300], ["a"], (np.array([1.5, np.nan]),)], 3: [False, 10 ** 400]}
+    assert json.dumps(fileio.json_ready(doc), allow_nan=False) == json.dumps(_ready_reference(doc), allow_nan=False)
 
 
 def test_staged_output_errors_name_the_file_in_out_dir(tmp_path):
