@@ -253,6 +253,10 @@ def _clear(stage):
         stage.rmdir()
 
 
+#: Exact types `json_ready` passes through unchanged (a subclass such as ``numpy.float64`` is not one).
+_PLAIN = frozenset({str, int, bool, type(None)})
+
+
 def json_ready(obj):
     """JSON-ready copy: NaN/inf become null, numpy arrays and scalars become Python values.
 
@@ -263,6 +267,12 @@ def json_ready(obj):
     if isinstance(obj, dict):
         return {str(k): json_ready(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
+        # Fast paths for flat lists (visibility's 2.3 M satellite ids): one pass over the types in C.
+        kinds = set(map(type, obj))
+        if kinds <= _PLAIN:
+            return list(obj)
+        if kinds == {float}:
+            return [v if math.isfinite(v) else None for v in obj]
         return [json_ready(v) for v in obj]
     if hasattr(obj, "tolist"):
         return json_ready(obj.tolist())

@@ -4,7 +4,7 @@ import numpy as np
 
 from leosop.constants import C_MPS
 from leosop.constellations import REGISTRY
-from leosop.geometry.dop import cofactor, gdop, range_dops
+from leosop.geometry.dop import cofactor, cofactor_diagonal, gdop, range_dops
 from leosop.geometry.doppler import doppler_jacobian
 
 F0 = REGISTRY["starlink"].carrier_hz
@@ -44,6 +44,8 @@ def test_gdop_equals_direct_inverse_and_masks_drop_rows():
     Hs = np.repeat(H[2:3, :2], 5, axis=1)
     assert np.isnan(gdop(Hs)).all()
     np.testing.assert_allclose(cofactor(H[3]), np.linalg.inv(H[3].T @ H[3]), rtol=1e-9, atol=1e-12)
+    # The DOPs' diagonal-only path must give cofactor's diagonal bit for bit: visibility.json prints it in full.
+    np.testing.assert_array_equal(cofactor_diagonal(H, w), np.diagonal(cofactor(H, w), axis1=-2, axis2=-1))
 
 
 def test_range_dops_closed_form():

@@ -4,6 +4,7 @@ output paths, signals, warnings and all-or-nothing outputs."""
 import errno
 import http.server
 import json
+import math
 import os
 import signal
 import subprocess
@@ -16,7 +17,7 @@ import numpy as np
 import pytest
 
 from leosop import fileio
-from leosop.cli import main, tle
+from leosop.cli import COMMANDS, build_parser, main, tle
 
 
 #: A small recording: 10 ms of one satellite at 1 MS/s.
@@ -68,8 +69,6 @@ def test_unknown_options_name_the_subcommand_and_the_nearest_option(capsys, argv
 
 def test_action_groups_show_only_options_that_work(capsys):
     """`study --out` was listed and ignored; `tle/study --json ACTION` was overwritten by the action's default."""
-    from leosop.cli import build_parser
-
     parser = build_parser()
     with pytest.raises(SystemExit):
         parser.parse_args(["study", "--help"])
@@ -77,6 +76,26 @@ def test_action_groups_show_only_options_that_work(capsys):
     assert parser.parse_args(["study", "--json", "gdop-map", "--out", "d"]).json is True
     assert parser.parse_args(["study", "gdop-map", "--out", "d"]).json is False
     assert parser.parse_args(["tle", "--json", "info", "f"]).json is True
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_command_alone_parses_as_in_the_full_parser(capsys, command):
+    """`leosop CMD` registers only CMD's module (issue 24): its --help must be the full parser's, byte for byte."""
+    helps = []
+    for parser in (build_parser(), build_parser(command)):
+        with pytest.raises(SystemExit):
+            parser.parse_args([command, "--help"])
+        helps.append(capsys.readouterr().out)
+    assert helps[0] == helps[1] and f"usage: leosop {command}" in helps[0]
+
+
+def test_visibility_loads_none_of_the_other_commands_dependencies():
+    """The other commands' scipy.stats, pyfftw and dask cost ~1.2 s of CPU at every start (issue 24)."""
+    code = ("import sys; from leosop.cli import main\n"
+            "try: main(['visibility', '--help'])\nexcept SystemExit: pass\n"
+            "print(sorted({'scipy.stats', 'pyfftw', 'dask', 'leosop.cli.position'} & set(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.splitlines()[-1] == "[]"
 
 
 def test_negative_numbers_are_option_values(capsys):
@@ -197,6 +216,25 @@ def test_json_files_are_strict(tmp_path):
     expected = {"a": None, "b": [1.0, None, None], "c": [None, 2.5], "d": 3}
     for name in ("x.json", "y.json"):
         assert _strict((tmp_path / name).read_text()) == expected
+
+
+def _ready_reference(obj):
+    """`fileio.json_ready` element by element, without its fast paths for flat lists."""
+    if isinstance(obj, dict):
+        return {str(k): _ready_reference(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_ready_reference(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _ready_reference(obj.tolist())
+    return None if isinstance(obj, float) and not math.isfinite(obj) else obj
+
+
+def test_json_ready_fast_paths_give_the_element_by_element_bytes():
+    """Flat lists skip the per-element walk (issue 24); every mix of types must still come out the same."""
+    doc = {"ids": ["44713", "STARLINK-1007"], "tuple": ("a", 1, True, None), "floats": [0.1, float("nan"), -0.0],
+           "mixed": [1, 2.5, float("inf")], "numpy": [np.float64(np.nan), np.int64(7), "x"], "empty": [],
+           "nested": [[float("-inf"), 1e300], ["a"], (np.array([1.5, np.nan]),)], 3: [False, 10 ** 400]}
+    assert json.dumps(fileio.json_ready(doc), allow_nan=False) == json.dumps(_ready_reference(doc), allow_nan=False)
 
 
 def test_staged_output_errors_name_the_file_in_out_dir(tmp_path):

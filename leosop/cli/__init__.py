@@ -107,8 +107,15 @@ def add_action(actions, name, *, help, description=None):
     return parser
 
 
-def build_parser():
-    """The ``leosop`` argument parser with every subcommand."""
+def build_parser(command=None):
+    """The ``leosop`` argument parser with every subcommand, or with only ``command``'s.
+
+    Each command module imports what its work needs (scipy, pyfftw, dask, ...,
+    ~1.2 s together): ``command`` registers only that module, the others
+    become bare names (still valid choices, absent from ``--help``), so
+    ``leosop visibility ...`` loads what ``visibility`` needs. The parser of
+    ``command`` is then the same as in the full parser.
+    """
     from .. import __version__
 
     parser = _Parser(
@@ -117,7 +124,10 @@ def build_parser():
     parser.add_argument("--version", action="version", version=f"leosop {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        importlib.import_module(f"{__name__}.{name}").register(subparsers)
+        if command is None or name == command:
+            importlib.import_module(f"{__name__}.{name}").register(subparsers)
+        else:
+            subparsers.add_parser(name)
     return parser
 
 
@@ -164,7 +174,9 @@ def _sigterm_as_interrupt():
 
 def main(argv=None):
     """Entry point; returns the exit status."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # Only a command in first place is known before parsing; anything else (--help, a typo) needs every command.
+    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
     args = parser.parse_args(argv)
     if args.command is None:
         print(f"leosop: error: give a command: {', '.join(COMMANDS)} (see leosop --help)", file=sys.stderr)

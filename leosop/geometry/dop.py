@@ -7,7 +7,7 @@ GDOP ``sqrt(trace((H^T H)^-1))`` of the Doppler rows of :mod:`leosop.geometry.do
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["gdop", "cofactor", "range_dops"]
+__all__ = ["gdop", "cofactor", "cofactor_diagonal", "range_dops"]
 
 
 def cofactor(H: npt.ArrayLike, weights: npt.ArrayLike | None = None, *, rcond: float = 1e-12
@@ -26,6 +26,31 @@ def cofactor(H: npt.ArrayLike, weights: npt.ArrayLike | None = None, *, rcond: f
     -------
     Q : ndarray, (..., n_states, n_states)
     """
+    V, inv_lam, d = _eigen(H, weights, rcond)
+    return np.einsum("...ik,...k,...jk->...ij", V, inv_lam, V) * d[..., :, None] * d[..., None, :]
+
+
+def cofactor_diagonal(H: npt.ArrayLike, weights: npt.ArrayLike | None = None, *, rcond: float = 1e-12
+                      ) -> npt.NDArray[np.float64]:
+    """The diagonal of :func:`cofactor` (the same bits), without the off-diagonal terms DOPs do not use.
+
+    Parameters
+    ----------
+    H : array_like, (..., n_rows, n_states)
+    weights : array_like, (..., n_rows), optional
+    rcond : float
+
+    Returns
+    -------
+    q : ndarray, (..., n_states)
+    """
+    V, inv_lam, d = _eigen(H, weights, rcond)
+    return np.einsum("...ik,...k,...ik->...i", V, inv_lam, V) * d * d
+
+
+def _eigen(H, weights, rcond):
+    """Eigenvectors ``V`` (..., n, n), inverse eigenvalues (..., n; NaN if rejected) and scales ``d`` (..., n) of
+    ``D H^T W H D`` with unit diagonal, so that ``(H^T W H)^-1 = D V diag(inv_lam) V^T D``."""
     Hf = np.nan_to_num(np.asarray(H, dtype=float))
     w = np.ones(Hf.shape[:-1]) if weights is None else np.nan_to_num(np.asarray(weights, dtype=float))
     n_states = Hf.shape[-1]
@@ -37,7 +62,7 @@ def cofactor(H: npt.ArrayLike, weights: npt.ArrayLike | None = None, *, rcond: f
     lam, V = np.linalg.eigh(HtH * d[..., :, None] * d[..., None, :])
     ok = (lam[..., 0] > rcond * np.abs(lam[..., -1])) & (np.count_nonzero(w, axis=-1) >= n_states) & (diag > 0).all(-1)
     inv_lam = np.where(ok[..., None], 1.0 / np.where(ok[..., None], lam, 1.0), np.nan)
-    return np.einsum("...ik,...k,...jk->...ij", V, inv_lam, V) * d[..., :, None] * d[..., None, :]
+    return V, inv_lam, d
 
 
 def gdop(H: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
@@ -52,7 +77,7 @@ def gdop(H: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> npt.NDArray[
     -------
     gdop : ndarray, (...)
     """
-    return np.sqrt(np.trace(cofactor(H, weights), axis1=-2, axis2=-1))
+    return np.sqrt(cofactor_diagonal(H, weights).sum(-1))
 
 
 def range_dops(los_enu: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> dict[str, npt.NDArray[np.float64]]:
@@ -72,7 +97,7 @@ def range_dops(los_enu: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> 
     """
     u = np.asarray(los_enu, dtype=float)
     G = np.concatenate([-u, np.ones(u.shape[:-1] + (1,))], axis=-1)
-    d = np.diagonal(cofactor(G, weights), axis1=-2, axis2=-1)
+    d = cofactor_diagonal(G, weights)
     return {
         "gdop": np.sqrt(d.sum(-1)),
         "pdop": np.sqrt(d[..., :3].sum(-1)),
