@@ -211,9 +211,9 @@ def _run(args):
     return 0
 
 
-#: Library parameters whose option is not ``--`` and the name with ``-`` for ``_``.
-PARAM_OPTIONS = {"name_or_path": "--scenario", "out_dir": "--out", "data_dir": "--data", "families": "--constellation",
-                 "fmt": "--format", "spec": "--imu-spec"}
+#: Library parameters whose option is not ``--`` and the name with ``-`` for ``_`` (as the usage writes it).
+PARAM_OPTIONS = {"name_or_path": "--scenario", "out_dir": "--out", "data_dir": "--data DIR",
+                 "families": "--constellation", "fmt": "--format", "spec": "--imu-spec"}
 
 
 def param_option(param):
@@ -224,12 +224,14 @@ def param_option(param):
 def option_message(exc):
     """The message of an :class:`InputError` or :class:`ExternalError` with its parameters as options.
 
-    Each name in ``exc.params`` is replaced where it stands as a whole word,
-    not as part of a path or file name (``/x/block_s``, ``block_s.json``).
+    The first whole-word occurrence of each name in ``exc.params`` is
+    replaced (the message names the parameter first, then may use the word in
+    prose: "scheduler ADDR: cannot connect to a Dask scheduler"); a name
+    inside a path or file name (``/x/block_s``, ``block_s.json``) is not a word.
     """
     text = str(exc)
     for param in exc.params:
-        text = re.sub(rf"(?<![\w./\\-]){re.escape(param)}(?![\w/\\-]|\.\w)", param_option(param), text)
+        text = re.sub(rf"(?<![\w./\\-]){re.escape(param)}(?![\w/\\-]|\.\w)", param_option(param), text, count=1)
     return text
 
 
