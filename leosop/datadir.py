@@ -63,10 +63,11 @@ def resolve_data_ref(name, *, data_dir=None, needed_by):
     relative = name[len(PREFIX):]
     folder = data_folder(data_dir)
     if folder is None:
-        raise InputError(f"{needed_by} needs {name}: give the data folder with --data DIR or set {ENV_VAR} "
-                         f"(the folder holding {relative})")
+        raise InputError(f"{needed_by} needs {name}: give the data folder with data_dir or set {ENV_VAR} "
+                         f"(the folder holding {relative})", param="data_dir")
     path = folder / relative
     if not path.is_file():
-        source = "--data" if data_dir is not None else ENV_VAR
-        raise InputError(f"{path}: not found ({needed_by} needs {name}; data folder {folder} from {source})")
+        source = "data_dir" if data_dir is not None else ENV_VAR
+        raise InputError(f"{path}: not found ({needed_by} needs {name}; data folder {folder} from {source})",
+                         param="data_dir")
     return path

@@ -91,31 +91,36 @@ def check_output_file(path, option):
     """
     text = str(path)
     if not text.strip():
-        raise InputError(f"{option} {text!r}: empty path, expected a file name")
+        raise InputError(f"{option} {text!r}: empty path, expected a file name", param=_param(option))
     path = Path(text)
     if path.exists() and not path.is_file():
-        raise InputError(f"{option} {path}: exists and is not a regular file")
+        raise InputError(f"{option} {path}: exists and is not a regular file", param=_param(option))
     _check_parent(path, path.parent, option)
 
 
-def check_output_dir(path, option="--out"):
+def check_output_dir(path, option="out_dir"):
     """Refuse an output directory path that is empty, a file, a device or below a file."""
     text = str(path)
     if not text.strip():
-        raise InputError(f"{option} {text!r}: empty path, expected a directory")
+        raise InputError(f"{option} {text!r}: empty path, expected a directory", param=_param(option))
     path = Path(text)
     if path.exists() and not path.is_dir():
-        raise InputError(f"{option} {path}: exists and is not a directory")
+        raise InputError(f"{option} {path}: exists and is not a directory", param=_param(option))
     _check_parent(path, path, option)
+
+
+def _param(option):
+    """``option`` as the parameter an InputError names: a library name (``out_dir``), not a CLI option (``-o``)."""
+    return option if option.isidentifier() else ()
 
 
 def _check_parent(path, directory, option):
     for d in (directory, *directory.parents):
         if d.exists():
             if not d.is_dir():
-                raise InputError(f"{option} {path}: {d} is not a directory")
+                raise InputError(f"{option} {path}: {d} is not a directory", param=_param(option))
             if not os.access(d, os.W_OK | os.X_OK):
-                raise InputError(f"{option} {path}: no permission to write in {d}")
+                raise InputError(f"{option} {path}: no permission to write in {d}", param=_param(option))
             return
 
 

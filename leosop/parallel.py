@@ -69,7 +69,8 @@ def dask_client(scheduler, n_tasks, n_workers=None):
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ExternalError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({first})") from None
+        raise ExternalError(f"scheduler {scheduler}: cannot connect to a Dask scheduler ({first})",
+                            param="scheduler") from None
     with client:
         yield client
 

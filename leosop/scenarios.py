@@ -384,12 +384,12 @@ def load_scenario(name_or_path):
     if not path.exists():
         path = Path(key)
         if not path.suffix == ".json" and not path.exists():
-            raise InputError(f"--scenario: {key!r} is neither a built-in scenario ({', '.join(bundled_names())}) "
-                             "nor a JSON file")
+            raise InputError(f"name_or_path: {key!r} is neither a built-in scenario ({', '.join(bundled_names())}) "
+                             "nor a JSON file", param="name_or_path")
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise InputError(f"--scenario: cannot read {path}: {exc.strerror}") from None
+        raise InputError(f"name_or_path: cannot read {path}: {exc.strerror}", param="name_or_path") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); "
                          "a scenario file is JSON") from None

@@ -48,12 +48,12 @@ def test_without_the_data_folder_a_scenario_needing_it_stops_with_one_line(no_da
         scenario_tle(s)
     msg = str(exc.value)
     assert len(msg.splitlines()) == 1
-    assert "high-latitude" in msg and "--data" in msg and ENV_VAR in msg and HIGH_LATITUDE_TLE[1] in msg
+    assert "high-latitude" in msg and "data_dir" in msg and ENV_VAR in msg and HIGH_LATITUDE_TLE[1] in msg
     assert multi.available("urban-canyon") is None and multi.available("high-latitude") == msg
 
 
 def test_a_data_folder_without_the_file_is_named(tmp_path, no_data_folder):
-    with pytest.raises(InputError, match=f"{tmp_path}.*not found.*from --data"):
+    with pytest.raises(InputError, match=f"{tmp_path}.*not found.*from data_dir"):
         resolve_data_ref(PREFIX + "tle/x.tle", data_dir=tmp_path, needed_by="test")
 
 

@@ -79,7 +79,7 @@ def test_gqrx_name(tmp_path):
     # Options win over the name.
     assert open_raw(path, sample_rate_hz=1e6).sample_rate_hz == 1e6
     assert name_metadata(tmp_path / "capture.raw") == {}
-    with pytest.raises(InputError, match="needs --dtype"):
+    with pytest.raises(InputError, match="needs dtype and sample_rate_hz"):
         open_raw(tmp_path / "capture.raw")
 
 
@@ -101,7 +101,7 @@ def test_wrong_8bit_sign_is_named(tmp_path, capsys, written, declared):
     assert status == 2 and err.count("\n") == 1 and f"the file is {written}" in err
     raw = tmp_path / "x.bin"
     raw.write_bytes(meta.with_suffix(".sigmf-data").read_bytes())
-    with pytest.raises(InputError, match=f"--dtype {declared}: .* the file is {written}"):
+    with pytest.raises(InputError, match=f"dtype {declared}: .* the file is {written}"):
         open_raw(raw, dtype=declared, sample_rate_hz=FS)
 
 

@@ -200,7 +200,7 @@ def test_valid_grid_steps(grid_deg):
     (120.0, "must be in (0, 90]"),
 ])
 def test_bad_grid_steps(grid_deg, message):
-    with pytest.raises(InputError, match=r"--grid-deg") as err:
+    with pytest.raises(InputError, match=r"^grid_deg ") as err:
         check_grid_deg(grid_deg)
     assert message in str(err.value)
 

@@ -198,13 +198,13 @@ def _run(args):
         else:
             text = module.summary(doc) + "\n" if hasattr(module, "summary") else ""
     except InputError as exc:
-        return _fail(args, f"error: {exc}", 2)
+        return _fail(args, f"error: {option_message(exc)}", 2)
     except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError, FileExistsError) as exc:
         return _fail(args, f"error: {exc.filename}: {exc.strerror}", 2)
     except UnicodeDecodeError as exc:
         return _fail(args, f"error: an input file is not UTF-8 text ({exc.reason} at byte {exc.start})", 2)
     except ExternalError as exc:
-        return _fail(args, f"error: {exc}", 1)
+        return _fail(args, f"error: {option_message(exc)}", 1)
     except OSError as exc:
         if exc.filename is None:
             return _fail(args, f"error: {exc.strerror or exc}", 1)
@@ -221,6 +221,30 @@ def _run(args):
     except BrokenPipeError:  # e.g. piped into `head`: the reader left, not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
+
+
+#: Library parameters whose option is not ``--`` and the name with ``-`` for ``_`` (as the usage writes it).
+PARAM_OPTIONS = {"name_or_path": "--scenario", "out_dir": "--out", "data_dir": "--data DIR",
+                 "families": "--constellation", "fmt": "--format", "spec": "--imu-spec"}
+
+
+def param_option(param):
+    """The command-line option of a library parameter: ``block_s`` -> ``--block-s``."""
+    return PARAM_OPTIONS.get(param, "--" + param.replace("_", "-"))
+
+
+def option_message(exc):
+    """The message of an :class:`InputError` or :class:`ExternalError` with its parameters as options.
+
+    The first whole-word occurrence of each name in ``exc.params`` is
+    replaced (the message names the parameter first, then may use the word in
+    prose: "scheduler ADDR: cannot connect to a Dask scheduler"); a name
+    inside a path or file name (``/x/block_s``, ``block_s.json``) is not a word.
+    """
+    text = str(exc)
+    for param in exc.params:
+        text = re.sub(rf"(?<![\w./\\-]){re.escape(param)}(?![\w/\\-]|\.\w)", param_option(param), text, count=1)
+    return text
 
 
 def _fail(args, message, status):

@@ -77,22 +77,28 @@ GRADES = {
 }
 
 
-def imu_spec(text):
-    """An :class:`ImuSpec` from a grade name of :data:`GRADES` or a JSON file with its fields."""
-    if text in GRADES:
-        return GRADES[text]
-    path = Path(text)
+def imu_spec(spec):
+    """An :class:`ImuSpec` from a grade name of :data:`GRADES` or a JSON file with its fields.
+
+    Parameters
+    ----------
+    spec : str or path-like
+        A key of :data:`GRADES` or the path of a JSON object with the fields of :class:`ImuSpec`.
+    """
+    if spec in GRADES:
+        return GRADES[spec]
+    path = Path(spec)
     if not path.is_file():
-        raise InputError(f"--imu-spec {text}: neither a grade ({', '.join(GRADES)}) nor a JSON file")
+        raise InputError(f"spec {spec}: neither a grade ({', '.join(GRADES)}) nor a JSON file", param="spec")
     try:
         doc = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"--imu-spec {path}: not readable JSON ({exc})") from None
+        raise InputError(f"spec {path}: not readable JSON ({exc})", param="spec") from None
     fields = [f.name for f in dataclasses.fields(ImuSpec)]
     if not isinstance(doc, dict) or set(doc) != set(fields):
-        raise InputError(f"--imu-spec {path}: expected an object with exactly the keys {', '.join(fields)}")
+        raise InputError(f"spec {path}: expected an object with exactly the keys {', '.join(fields)}", param="spec")
     bad = [k for k in fields if isinstance(doc[k], bool) or not isinstance(doc[k], (int, float))
            or not math.isfinite(doc[k]) or doc[k] <= 0]
     if bad:
-        raise InputError(f"--imu-spec {path}: {bad[0]} must be a positive number, got {doc[bad[0]]!r}")
+        raise InputError(f"spec {path}: {bad[0]} must be a positive number, got {doc[bad[0]]!r}", param="spec")
     return ImuSpec(**{k: float(doc[k]) for k in fields})

@@ -153,8 +153,8 @@ def read(path, sol, *, tle=None):
     if meas.pos_sv_ecef_m is not None:
         return meas
     if constellation is None or meas.time_utc is None:
-        raise InputError(f"{path}: no satellite state columns ({', '.join(pm.SV_STATE_COLUMNS)}); give --tle and "
-                         "a time_utc column")
+        raise InputError(f"{path}: no satellite state columns ({', '.join(pm.SV_STATE_COLUMNS)}); give tle and "
+                         "a time_utc column", param="tle")
     t = _run_seconds(meas.time_utc, sol)
     t_g = sol.t_gpst_s - sol.t_gpst_s[0]
     p = frames.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.alt_m)

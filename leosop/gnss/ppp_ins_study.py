@@ -89,8 +89,8 @@ def _products(data_dir=None):
                 break
     if found is None:
         where = f"not in {root} nor {Path(root) / DAY_SUBDIR}" if root else "no folder given"
-        raise InputError(f"--data DIR / {ENV_VAR}: the GRG products of 2020-06-25 ({SP3_NAME}, {CLK_NAME}) are "
-                         f"needed for this simulation; {where}")
+        raise InputError(f"data_dir / {ENV_VAR}: the GRG products of 2020-06-25 ({SP3_NAME}, {CLK_NAME}) are "
+                         f"needed for this simulation; {where}", param="data_dir")
     day = np.datetime64("2020-06-25", "ns")
     return (read_sp3(found / SP3_NAME, systems="G", ref_gps=day),
             read_clk(found / CLK_NAME, systems="G", ref_gps=day))

@@ -42,7 +42,7 @@ def fetch_group(group, out_path, *, fmt="tle", base_url=None, timeout_s=30.0):
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", group or ""):
         raise InputError(f"GROUP {group!r}: expected a CelesTrak group name such as starlink or active")
     if fmt not in _FORMATS:
-        raise InputError(f"--format {fmt!r}: expected one of {', '.join(_FORMATS)}")
+        raise InputError(f"fmt {fmt!r}: expected one of {', '.join(_FORMATS)}", param="fmt")
     base = base_url or os.environ.get("LEOSOP_CELESTRAK_URL") or CELESTRAK_GP_URL
     url = f"{base}?{urllib.parse.urlencode({'GROUP': group, 'FORMAT': _FORMATS[fmt]})}"
     try:

@@ -67,7 +67,7 @@ class Grid:
 READABLE_GRID_DEG = np.arange(10, 9_001)[18_000 % np.arange(10, 9_001) == 0] / 100.0
 
 
-def check_grid_deg(grid_deg, option="--grid-deg"):
+def check_grid_deg(grid_deg):
     """``grid_deg`` if it divides 180 (hence 360) into whole steps, else InputError with readable ones near it.
 
     The grid is lat = -90, -90 + G, ..., 90 and lon = -180, ..., < 180, so
@@ -75,15 +75,17 @@ def check_grid_deg(grid_deg, option="--grid-deg"):
     nearest of :data:`READABLE_GRID_DEG` below and above.
     """
     if not (math.isfinite(grid_deg) and 0.0 < grid_deg <= 90.0):
-        raise InputError(f"{option} {grid_deg:g}: must be in (0, 90] deg")
+        raise InputError(f"grid_deg {grid_deg:g}: must be in (0, 90] deg", param="grid_deg")
     n = 180.0 / grid_deg
     if abs(n - round(n)) > 1e-9 * n:
         below = READABLE_GRID_DEG[READABLE_GRID_DEG < grid_deg]
         above = READABLE_GRID_DEG[READABLE_GRID_DEG > grid_deg]
         near = " or ".join(f"{g:g}" for g in (*below[-1:], *above[:1]))
-        raise InputError(f"{option} {grid_deg:g}: must divide 180 and 360 into whole steps; nearest valid: {near}")
+        raise InputError(f"grid_deg {grid_deg:g}: must divide 180 and 360 into whole steps; nearest valid: {near}",
+                         param="grid_deg")
     if grid_deg < 0.1:
-        raise InputError(f"{option} {grid_deg:g}: at least 0.1 deg (a finer grid does not fit in memory)")
+        raise InputError(f"grid_deg {grid_deg:g}: at least 0.1 deg (a finer grid does not fit in memory)",
+                         param="grid_deg")
     return 180.0 / round(n)
 
 

@@ -55,11 +55,11 @@ def _load_cached(source):
     if source.families:
         for key in source.families:
             if key not in REGISTRY:
-                raise InputError(f"--constellation {key}: unknown; expected one of {', '.join(REGISTRY)}")
+                raise InputError(f"families {key}: unknown; expected one of {', '.join(REGISTRY)}", param="families")
         const = const.subset(np.isin(const.families, list(source.families)))
     if len(const) == 0:
         what = "/".join(source.families) if source.families else "any"
-        raise InputError(f"--constellation: no {what} satellites in {const.source or 'the TLE file'}")
+        raise InputError(f"families: no {what} satellites in {const.source or 'the TLE file'}", param="families")
     return const
 
 

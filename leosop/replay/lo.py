@@ -189,4 +189,4 @@ def check_band(rec, half_comb_hz, lo_offset_max_hz):
             f"{rec.data_path}: its band ({rec.center_hz / 1e6:.4f} MHz +- {0.5e-6 * rec.sample_rate_hz:g} MHz, "
             f"{rec.sample_rate_hz / 1e6:g} MS/s) does not contain the pilot combs: at the channel "
             f"{channel_hz / 1e6:.4f} MHz they would be at {at_hz / 1e6:+.4f} MHz +- {reach_hz / 1e6:.4f} MHz "
-            f"(Doppler, comb span and --lo-offset-max-hz {lo_offset_max_hz:g})")
+            f"(Doppler, comb span and lo_offset_max_hz {lo_offset_max_hz:g})", param="lo_offset_max_hz")

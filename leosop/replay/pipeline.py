@@ -107,7 +107,7 @@ def block_plan(rec, block_s):
     fs = rec.sample_rate_hz
     block_len = int(round(block_s * fs))
     if block_len < 64:
-        raise InputError(f"--block-s {block_s:g}: {block_len} samples at {fs:g} Hz; need at least 64")
+        raise InputError(f"block_s {block_s:g}: {block_len} samples at {fs:g} Hz; need at least 64", param="block_s")
     blocks = []
     for cap in rec.captures:
         n = min(block_len, cap.n_samples)

@@ -168,13 +168,13 @@ class Recording:
             yield start, self.read(start, block_len)
 
 
-def _check_rate(sample_rate_hz, where):
+def _check_rate(sample_rate_hz, where, param=()):
     try:
         fs = float(sample_rate_hz)
     except (TypeError, ValueError):
-        raise InputError(f"{where}: sample rate {sample_rate_hz!r} is not a number") from None
+        raise InputError(f"{where}: sample rate {sample_rate_hz!r} is not a number", param=param) from None
     if not np.isfinite(fs) or fs <= 0:
-        raise InputError(f"{where}: sample rate {sample_rate_hz!r} must be a finite number > 0 Hz")
+        raise InputError(f"{where}: sample rate {sample_rate_hz!r} must be a finite number > 0 Hz", param=param)
     return fs
 
 
@@ -388,17 +388,18 @@ def open_raw(path, *, dtype=None, sample_rate_hz=None, center_hz=None, start=Non
     center_hz = center_hz if center_hz is not None else named.get("center_hz")
     start = start if start is not None else named.get("start_utc")
     if dtype is None or sample_rate_hz is None:
-        raise InputError(f"{path}: a raw file needs --dtype and --sample-rate-hz (its name says neither)")
+        raise InputError(f"{path}: a raw file needs dtype and sample_rate_hz (its name says neither)",
+                         param=("dtype", "sample_rate_hz"))
     datatype = _RAW_NAMES.get(dtype, dtype)
     if datatype not in DATATYPES:
-        raise InputError(f"--dtype {dtype!r}: expected one of {', '.join(_RAW_NAMES)}")
-    fs = _check_rate(sample_rate_hz, "--sample-rate-hz")
+        raise InputError(f"dtype {dtype!r}: expected one of {', '.join(_RAW_NAMES)}", param="dtype")
+    fs = _check_rate(sample_rate_hz, "sample_rate_hz", param="sample_rate_hz")
     check_input_file(path, "raw IQ file")
     try:
-        start_utc = parse_utc(start, name="--start") if start is not None else None
+        start_utc = parse_utc(start, name="start") if start is not None else None
     except ValueError as exc:
-        raise InputError(str(exc)) from None
+        raise InputError(str(exc), param="start") from None
     n = _count_samples(path, datatype, offset_bytes, str(path))
     rec = Recording(path, datatype, fs, center_hz, start_utc, int(n), offset_bytes=int(offset_bytes))
-    check_8bit_sign(rec, f"{path}: --dtype")
+    check_8bit_sign(rec, f"{path}: dtype", param="dtype")
     return rec

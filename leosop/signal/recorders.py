@@ -23,7 +23,7 @@ _SIGN_CHECK_SAMPLES = 1 << 16
 _GQRX_NAME = re.compile(r"gqrx_(\d{8})_(\d{6})_(\d+)_(\d+)_fc\.raw$")
 
 
-def check_8bit_sign(rec, where):
+def check_8bit_sign(rec, where, *, param=()):
     """Refuse an 8-bit recording read with the wrong sign convention (cu8 declared ci8 or the reverse).
 
     The first :data:`_SIGN_CHECK_SAMPLES` samples' bytes are read as signed
@@ -39,6 +39,8 @@ def check_8bit_sign(rec, where):
     rec : Recording
     where : str
         Names the file and field in the message.
+    param : str or tuple of str, optional
+        The parameter ``where`` names, for the error (:class:`~leosop.errors.InputError`).
     """
     if rec.datatype not in ("ci8", "cu8"):
         return
@@ -55,7 +57,8 @@ def check_8bit_sign(rec, where):
         what = ("sit around 127.5 (unsigned 8-bit, as RTL-SDR writes)" if right == "cu8"
                 else "sit around 0 (signed 8-bit, as HackRF writes)")
         raise InputError(f"{where} {rec.datatype}: the samples {what}, an RMS of {np.sqrt(var_declared):.0f} "
-                         f"read as {rec.datatype} against {np.sqrt(var_other):.1f} as {right}: the file is {right}")
+                         f"read as {rec.datatype} against {np.sqrt(var_other):.1f} as {right}: the file is {right}",
+                         param=param)
 
 
 def name_metadata(path):

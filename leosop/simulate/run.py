@@ -32,13 +32,14 @@ IMU_BLOCK_STEPS = 100
 
 def _check_options(level, coupling, correction_period_s, orbit_error_m):
     if level not in LEVELS:
-        raise InputError(f"--level {level!r}: expected one of {', '.join(LEVELS)}")
+        raise InputError(f"level {level!r}: expected one of {', '.join(LEVELS)}", param="level")
     if coupling not in COUPLINGS:
-        raise InputError(f"--coupling {coupling!r}: expected one of {', '.join(COUPLINGS)}")
+        raise InputError(f"coupling {coupling!r}: expected one of {', '.join(COUPLINGS)}", param="coupling")
     if not (np.isfinite(correction_period_s) and correction_period_s > 0):
-        raise InputError(f"--correction-period-s {correction_period_s:g}: must be a positive number of seconds")
+        raise InputError(f"correction_period_s {correction_period_s:g}: must be a positive number of seconds",
+                         param="correction_period_s")
     if orbit_error_m is not None and not (np.isfinite(orbit_error_m) and orbit_error_m >= 0):
-        raise InputError(f"--orbit-error-m {orbit_error_m:g}: must be a number >= 0")
+        raise InputError(f"orbit_error_m {orbit_error_m:g}: must be a number >= 0", param="orbit_error_m")
 
 
 def _imu_errors(spec, rng):
