@@ -213,8 +213,11 @@ def run(args):
     if args.leo:
         leo = leo_input.read(args.leo, sol, tle=args.tle)
     elif args.leo_sim:
-        leo = leo_input.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
-                                 seed=args.seed)
+        try:
+            leo = leo_input.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
+                                     seed=args.seed)
+        except InputError as exc:  # the library's message does not know its aids are --leo-sim's
+            raise InputError(f"--leo-sim: {exc}", param=exc.params) from exc
     window_s = args.leo_window_s if args.leo_window_s is not None else leo_input.SIM_WINDOW_S if args.leo_sim else 0
     leo_aids = [] if leo is None else leo_input.to_aids(leo, sol, options.lever_arm_b_m,
                                                         LeoOptions(window_s=window_s or None))[0]

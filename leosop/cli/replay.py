@@ -158,7 +158,10 @@ def _run_single(args):
         if args.base:
             raise InputError("--carrier with --base: the differential fix takes block Doppler; differential "
                              "carrier phase is not implemented")
-        check_continuous(rec)
+        try:
+            check_continuous(rec)
+        except InputError as exc:
+            raise InputError(f"{exc}; replay it without --carrier") from exc
     base_rec = None
     if args.base:
         from ..replay.differential import check_pair

@@ -75,7 +75,7 @@ def reference_track(sol, rate_hz=1.0):
     """
     fix = np.flatnonzero(sol.q == Q_FIX)
     if fix.size < 2:
-        raise InputError(f"{sol.source}: --leo-sim needs Q = 1 fixes for its reference trajectory, found {fix.size}")
+        raise InputError(f"{sol.source}: a reference trajectory needs at least 2 Q = 1 fixes, found {fix.size}")
     tf = sol.t_gpst_s[fix] - sol.t_gpst_s[0]
     pf = frames.geodetic_to_ecef(np.radians(sol.lat_deg[fix]), np.radians(sol.lon_deg[fix]), sol.alt_m[fix])
     t_s = np.arange(tf[0] + 0.5, tf[-1] - 0.5, 1.0 / rate_hz)

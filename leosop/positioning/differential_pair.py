@@ -64,8 +64,8 @@ def _prepared(meas, constellation, pos_rx_ecef_m, sigma_hz):
         sigma = np.where(np.isfinite(sigma), sigma, sigma_hz)
     elif not np.isfinite(sigma).all():
         line = int(meas.line[np.flatnonzero(~np.isfinite(sigma))[0]])
-        raise InputError(f"{meas.source}:{line}: no sigma_hz (a differential fix weighs the two receivers' rows by "
-                         "it); give the column or --sigma-hz")
+        raise InputError(f"{meas.source}:{line}: give sigma_hz or a sigma_hz column: a differential fix weighs "
+                         "the two receivers' rows by it, and this row has none", param="sigma_hz")
     meas = replace(meas, pos_sv_ecef_m=pos, vel_sv_ecef_mps=vel, sigma_hz=sigma)
     rejected = list(meas.rejected) + [(int(meas.line[k]), str(reason[k])) for k in np.flatnonzero(reason != "")]
     return meas.take(np.flatnonzero(reason == "")), rejected, source

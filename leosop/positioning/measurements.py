@@ -253,9 +253,10 @@ def _fill_carriers(path, carrier, blank, family, carrier_hz, lines, sat_id, reas
     if known.size > 1 or (known.size == 1 and known[0] != DEFAULT_CARRIER_HZ):
         k = np.flatnonzero(rest)[0]
         shown = ", ".join(f"{f:g}" for f in known[:4]) + (" ..." if known.size > 4 else "")
-        raise InputError(f"{path}:{lines[k]}: carrier of satellite {sat_id[k]} cannot be determined (no carrier_hz, "
-                         f"no known constellation in the element sets, and the file has carriers {shown} Hz); "
-                         "give carrier_hz, --tle with its family, or --carrier-hz")
+        raise InputError(f"{path}:{lines[k]}: carrier of satellite {sat_id[k]} cannot be determined: give "
+                         "carrier_hz, constellation (element sets naming its family), or a carrier_hz value on the "
+                         f"row (it has none, no known family in the element sets, and the file has carriers {shown} "
+                         "Hz)", param=("carrier_hz", "constellation"))
     carrier[blank & ~fam] = DEFAULT_CARRIER_HZ
     return carrier
 

@@ -116,9 +116,10 @@ def satellite_states(meas: Measurements, constellation: Constellation | None = N
         return meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, reason, "csv"
     if constellation is None:
         raise InputError(f"{meas.source}: no satellite state columns ({', '.join(('x_sv_m', '...'))}); "
-                         "give element sets with --tle")
+                         "give element sets as constellation", param="constellation")
     if meas.time_utc is None:
-        raise InputError(f"{meas.source}: satellite states from --tle need a time_utc column (the table has t_s)")
+        raise InputError(f"{meas.source}: satellite states from constellation need a time_utc column "
+                         "(the table has t_s)", param="constellation")
     pos, vel, reason = sv_states_from_tle(constellation, meas.sat_id, meas.time_utc, pos_rx_ecef_m)
     return pos, vel, reason, "tle"
 

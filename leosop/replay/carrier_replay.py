@@ -39,9 +39,9 @@ def check_continuous(rec):
     gap_s = np.array([float((b.start_utc - a.start_utc) / np.timedelta64(1, "ns")) * 1e-9
                       - a.n_samples / rec.sample_rate_hz for a, b in zip(caps[:-1], caps[1:])])
     if gap_s.size and np.max(np.abs(gap_s)) > 1e-6 + 1.0 / rec.sample_rate_hz:
-        raise InputError(f"{rec.data_path}: --carrier needs a continuous recording, and this one is {len(caps)} "
-                         f"captures with gaps of up to {np.max(gap_s):.3g} s: carrier phase coherence is lost "
-                         "across a gap (each snapshot would start a new arc); replay it without --carrier")
+        raise InputError(f"{rec.data_path}: carrier tracking needs a continuous recording, and this one is "
+                         f"{len(caps)} captures with gaps of up to {np.max(gap_s):.3g} s: carrier phase coherence is "
+                         "lost across a gap (each snapshot would start a new arc)")
 
 
 @dataclass(frozen=True)
