@@ -157,5 +157,6 @@ def test_replay_carrier_refuses_a_snapshot_recording(tmp_path, capsys):
     assert main(["replay", str(snap), "--carrier"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "continuous recording" in err and "coherence is lost across a gap" in err
+    assert err.endswith("; replay it without --carrier")  # the CLI's advice, not the library's
     assert main(["replay", str(snap), "--carrier", "--base", str(snap), "--base-site", SITE]) == 2
     assert "differential carrier phase is not implemented" in capsys.readouterr().err

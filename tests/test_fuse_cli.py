@@ -122,6 +122,13 @@ def test_bad_files_are_one_line_exit_2(tmp_path, capsys):
     args[1] = str(tmp_path / "missing.csv")
     assert main(["fuse", *args]) == 2
     assert "missing.csv: no such IMU log" in capsys.readouterr().err
+    # no Q = 1 fix to simulate LEO aids along: the library's message, with the option the CLI adds
+    bad.write_text("2025/08/28 17:30:39.749 40.1 -105.1 1601.4 2 25 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0\n")
+    args = _walk()
+    args[3] = str(bad)
+    assert main(["fuse", *args, "--leo-sim"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"leosop fuse: error: --leo-sim: {bad}: a reference trajectory needs at least 2 Q = 1 fixes, found 0\n"
 
 
 def test_imu_spec_file(tmp_path, capsys):

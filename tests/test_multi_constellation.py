@@ -286,6 +286,7 @@ def test_cli_position_undeterminable_carrier_is_exit_2(capsys, tmp_path):
     _state_table(path, (y, r, v), carriers)
     status, _, err = _cli(capsys, "position", path)
     assert status == 2 and f"{path}:5: carrier of satellite 3 cannot be determined" in err
+    assert "give --carrier-hz, --tle (element sets naming its family), or a carrier_hz value" in err
     assert len(err.strip().splitlines()) == 1
     # --carrier-hz settles it (the row then belongs to that carrier's clock).
     status, doc, err = _cli(capsys, "position", path, "--carrier-hz", FAMILIES[0][0])
