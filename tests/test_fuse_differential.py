@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import central_difference_jacobian, leo_geometry
 from test_fuse_engine import STEP, _computed, _true_view
 from test_fuse_leo import CARRIER_HZ
 
@@ -38,14 +39,7 @@ SIGMA_HZ = 0.26
 
 def _aid(lever=(0.3, -0.8, 1.2)):
     """A satellite 550 km up and ~900 km away from the test's INS, a base 7.5 km from it."""
-    state = _computed()[0]
-    r_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
-    up = r_rx / np.linalg.norm(r_rx)
-    east = np.cross([0.0, 0.0, 1.0], up)
-    east /= np.linalg.norm(east)
-    north = np.cross(up, east)
-    r_sv = r_rx + 550e3 * up + 700e3 * east
-    v_sv = 7.6e3 * north + 100.0 * up
+    r_rx, r_sv, v_sv, east, north = leo_geometry(_computed()[0])
     base = r_rx - 6e3 * east - 4.5e3 * north
     return aids_differential.DifferentialDoppler(0.0, 310.0, 0.3, CARRIER_HZ, r_sv, v_sv, base, lever, CLOCK, ORBIT)
 
@@ -63,12 +57,7 @@ def test_design_matrix_matches_finite_differences():
     # As test_fuse_leo: 100x the engine tests' INS steps (Doppler round-off), 1 m steps of the orbit offsets
     # (their second-order terms: 1 m over ~1e6 m ranges, 1e-6 relative).
     step = np.r_[100 * STEP, 1e-3, 1e-4, 1.0, 1.0, 1.0]
-    H_fd = np.empty_like(H)
-    for i in range(H.shape[1]):
-        e = np.zeros(H.shape[1])
-        e[i] = step[i]
-        plus, minus = _with_blocks(_true_view(e[:N_INS]), e[N_INS:]), _with_blocks(_true_view(-e[:N_INS]), -e[N_INS:])
-        H_fd[:, i] = (aid.predict(minus) - aid.predict(plus)) / (2 * step[i])
+    H_fd = central_difference_jacobian(lambda e: -aid.predict(_with_blocks(_true_view(e[:N_INS]), e[N_INS:])), step)
     assert H[0, N_INS + 1] == 0.0 == H_fd[0, N_INS + 1]  # the drift reaches z through the transition only
     # The orbit columns are the small difference of two receivers' sensitivities (~1e-3 Hz/m at 7.5 km):
     # they must not vanish, or the test would check nothing there.

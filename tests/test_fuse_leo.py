@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import central_difference_jacobian, leo_geometry
 from test_fuse_engine import STEP, _computed, _true_view
 
 from leosop import frames
@@ -33,13 +34,7 @@ X_BLOCKS = {CLOCK.key: np.array([123.4, 0.05]), SAT.key: np.array([-1.7])}
 
 def _aid(lever=(0.3, -0.8, 1.2)):
     """A satellite 550 km up and ~900 km away, moving at 7.6 km/s, as seen from the test's INS."""
-    state = _computed()[0]
-    r_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
-    up = r_rx / np.linalg.norm(r_rx)
-    east = np.cross([0.0, 0.0, 1.0], up)
-    east /= np.linalg.norm(east)
-    r_sv = r_rx + 550e3 * up + 700e3 * east
-    v_sv = 7.6e3 * np.cross(up, east) + 100.0 * up
+    _, r_sv, v_sv, _, _ = leo_geometry(_computed()[0])
     return aids_leo.LeoDoppler(0.0, -25e3, 3.0, CARRIER_HZ, r_sv, v_sv, lever, CLOCK, SAT)
 
 
@@ -58,13 +53,8 @@ def test_design_matrix_matches_finite_differences():
     # (3e-10 Hz), which 1e-10 rad steps would divide into errors of 1e-5; at 100x the second-order terms are
     # still below 1e-6 relative (checked: 1e-7 at 1000x).
     step = np.r_[100 * STEP, 1e-3, 1e-4, 1e-3]
-    H_fd = np.empty_like(H)
-    for i in range(H.shape[1]):
-        e = np.zeros(H.shape[1])
-        e[i] = step[i]
-        plus = _with_blocks(_true_view(e[:N_INS]), e[N_INS:N_INS + 2], e[N_INS + 2:])
-        minus = _with_blocks(_true_view(-e[:N_INS]), -e[N_INS:N_INS + 2], -e[N_INS + 2:])
-        H_fd[:, i] = (aid.predict(minus) - aid.predict(plus)) / (2 * step[i])
+    H_fd = central_difference_jacobian(
+        lambda e: -aid.predict(_with_blocks(_true_view(e[:N_INS]), e[N_INS:N_INS + 2], e[N_INS + 2:])), step)
     # z(dx) = h(computed) - h(truth(dx)): its derivative at 0 is H. The drift column is zero in H (the drift
     # reaches the measurement through the block's transition), and so in the model.
     assert H[0, N_INS + 1] == 0.0 == H_fd[0, N_INS + 1]
@@ -123,11 +113,7 @@ def test_orbit_error_columns_match_finite_differences(lever):
     _, H, _ = aid.matrices(view(np.zeros(N_INS + 5)))
     assert H.shape == (1, N_INS + 5)
     step = np.r_[100 * STEP, 1e-3, 1e-3, np.full(3, 1e-2)]  # 1 cm of orbit: the Doppler is linear to 1e-8 there
-    H_fd = np.empty_like(H)
-    for i in range(H.shape[1]):
-        e = np.zeros(H.shape[1])
-        e[i] = step[i]
-        H_fd[:, i] = (aid.predict(view(-e)) - aid.predict(view(e))) / (2 * step[i])
+    H_fd = central_difference_jacobian(lambda e: -aid.predict(view(e)), step)
     # As test_design_matrix_matches_finite_differences; the orbit columns are dD/dr_rx, ~1e-2 Hz/m at Ku.
     scale = np.maximum(np.abs(H_fd), 1e-3)
     np.testing.assert_array_less(np.abs(H - H_fd), 1e-6 * scale + 1e-9 * np.abs(H).max())
@@ -161,11 +147,7 @@ def test_window_aid_columns_and_clone_rows_match_finite_differences(lever):
     ins_step = 100 * STEP
     ins_step[DPOS] *= 10
     step = np.r_[ins_step, 1e-3, 1e-4, 1e-3, np.full(3, 1e-3)]
-    H_fd = np.empty_like(H)
-    for i in range(H.shape[1]):
-        e = np.zeros(H.shape[1])
-        e[i] = step[i]
-        H_fd[:, i] = (aid.predict(view(-e)) - aid.predict(view(e))) / (2 * step[i])
+    H_fd = central_difference_jacobian(lambda e: -aid.predict(view(e)), step)
     # As test_design_matrix_matches_finite_differences: central differences exact to O(step^2).
     scale = np.maximum(np.abs(H_fd), 1e-3)
     np.testing.assert_array_less(np.abs(H - H_fd), 1e-6 * scale + 1e-9 * np.abs(H).max())
@@ -177,11 +159,7 @@ def test_window_aid_columns_and_clone_rows_match_finite_differences(lever):
     expected = -los @ (aid.vel_sv_ecef_mps - v_mean) * CARRIER_HZ / C_MPS + 123.4 - 1.7
     assert aid.predict(view(np.zeros(N_INS + 6)))[0] == pytest.approx(expected, abs=1e-6)
     # The clone's rows: the antenna position over the INS errors, by central differences of clone_rows itself.
-    G_fd = np.empty_like(G)
-    for i in range(N_INS):
-        e = np.zeros(N_INS)
-        e[i] = ins_step[i]
-        G_fd[:, i] = (start.clone_rows(_true_view(-e))[0] - start.clone_rows(_true_view(e))[0]) / (2 * e[i])
+    G_fd = central_difference_jacobian(lambda e: -start.clone_rows(_true_view(e))[0], ins_step)
     # m per unit error: position columns ~6e6 m/rad, their differences rounded at 1e-9 m / 2e-7 rad = 5e-3 m/rad.
     np.testing.assert_allclose(G, G_fd, rtol=1e-6, atol=2e-2)
     assert np.abs(G[:, PHI]).max() >= 0.5 * np.linalg.norm(lever)  # the lever's rotation is in the clone
