@@ -128,7 +128,8 @@ def test_bad_files_are_one_line_exit_2(tmp_path, capsys):
     args[3] = str(bad)
     assert main(["fuse", *args, "--leo-sim"]) == 2
     err = capsys.readouterr().err
-    assert err == f"leosop fuse: error: --leo-sim: {bad}: a reference trajectory needs at least 2 Q = 1 fixes, found 0\n"
+    assert err == f"leosop fuse: error: --leo-sim: {bad}: a reference trajectory needs at least 2 Q = 1 fixes, " \
+                  "found 0\n"
 
 
 def test_imu_spec_file(tmp_path, capsys):
