@@ -7,6 +7,7 @@ margin; the data are fixed, so the bounds guard against regressions rather than 
 import csv
 
 import numpy as np
+import pytest
 
 from conftest import data_path
 from leosop.cli.position import solutions_doc
@@ -17,14 +18,27 @@ from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.solve import position_snapshots, position_static, position_static_passes
 
 
+@pytest.fixture(scope="module")
+def doptrack():
+    """DopTrack's 98 passes (2020-04), read once for the module: the tests only read them."""
+    return read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))
+
+
+@pytest.fixture(scope="module")
+def first_day_fix(doptrack):
+    """2020-04-01's three passes and their joint fix from the default start grid, shared by two tests."""
+    passes = doptrack[:3]
+    return passes, _passes_fix(passes)
+
+
 def _status(res, meas):
     """The fix's status label as the CLI reports it (leosop.positioning.quality)."""
     (sol,), _, _ = solutions_doc(res, meas)
     return sol["status"]
 
 
-def test_doptrack_single_pass_static_fixes():
-    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:20]
+def test_doptrack_single_pass_static_fixes(doptrack):
+    passes = doptrack[:20]
     results = [position_static(p.meas, constellation=p.constellation, alt_m=p.station_alt_m) for p in passes]
     fixes = [r.fixes for r in results]
     # Every one passes the residual test (sigmas from its own residuals) and none is ok: one pass rests on
@@ -55,8 +69,8 @@ def _passes_fix(passes, pos_rx_ecef_m=None, **kw):
                                   **kw).fixes
 
 
-def test_doptrack_passes_in_one_fix_resolve_the_side():
-    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:20]
+def test_doptrack_passes_in_one_fix_resolve_the_side(doptrack):
+    passes = doptrack[:20]
     truth = passes[0].station_pos_ecef_m
     fix = _passes_fix(passes, time_bias=False)  # no start given: a grid around the sub-satellite centroid
     fix = _passes_fix(passes, fix.pos_ecef_m, time_bias=False)  # light time at the first fix
@@ -84,21 +98,23 @@ def test_doptrack_passes_in_one_fix_resolve_the_side():
     assert 500 < sigma < 900 and 1 < err / sigma < 3.5
 
 
-def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma():
+def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma(doptrack, first_day_fix):
     # A fix is ok only when the toolkit can vouch for it: here, that its sigma covers its error. The fixes
     # of the archive's first four days (light time at each day's first fix): 3 passes on 04-01, 04-03 and
     # 04-04 are ok with the station at 0.87, 1.11 and 1.20 sqrt(trace) of the position covariance (0.87, 1.17
     # and 1.23 with Earth-fixed time offsets; at most 1.53 sigma along an axis); 04-02's two passes are
     # few_passes (over all 30 days, three of the five two-pass days are 3.8-7.5 sigma off along one axis,
     # docs/positioning.md).
-    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))
+    passes = doptrack
     days = {}
     for p in passes:
         days.setdefault(str(p.meas.time_utc[0])[:10], []).append(p)
     truth = passes[0].station_pos_ecef_m
     C = C_e_n(np.radians(passes[0].station_lat_deg), np.radians(passes[0].station_lon_deg))
     for ps in list(days.values())[:4]:
-        first = _passes_fix(ps)
+        # 2020-04-01's first fix is the one the one-day test checks: shared, not solved twice.
+        same = len(ps) == len(first_day_fix[0]) and all(a is b for a, b in zip(ps, first_day_fix[0]))
+        first = first_day_fix[1] if same else _passes_fix(ps)
         meas = doptrack_table(ps, first.pos_ecef_m)
         res = position_static_passes(meas, meas.pass_id, alt_m=ps[0].station_alt_m, init_pos_ecef_m=first.pos_ecef_m)
         assert _status(res, meas) == ("ok" if len(ps) >= 3 else "few_passes")
@@ -108,8 +124,8 @@ def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma():
             assert np.all(np.abs(C.T @ d) < 3.0 * np.sqrt(np.diag(C.T @ res.fixes.cov[:3, :3] @ C)))
 
 
-def test_doptrack_time_bias_per_pass_on_20_passes():
-    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:20]
+def test_doptrack_time_bias_per_pass_on_20_passes(doptrack):
+    passes = doptrack[:20]
     truth = passes[0].station_pos_ecef_m
     fix = _passes_fix(passes, truth, time_bias=True, time_bias_sigma_s=1.0)  # light time at the station
     err = np.linalg.norm(fix.pos_ecef_m - truth)
@@ -139,10 +155,9 @@ def test_doptrack_time_bias_per_pass_on_20_passes():
     assert np.abs(fix.time_bias_s[good]).max() < 3.0 and np.median(np.abs(fix.time_bias_s[good])) < 1.5
 
 
-def test_doptrack_one_day_with_time_offsets_converges():
-    passes = read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))[:3]  # 2020-04-01's passes
+def test_doptrack_one_day_with_time_offsets_converges(first_day_fix):
+    passes, fix = first_day_fix  # 2020-04-01's passes
     assert {str(p.meas.time_utc[0])[:10] for p in passes} == {"2020-04-01"}
-    fix = _passes_fix(passes)
     # With time offsets this day's fix used to end NOT_CONVERGED: the pilot (unit weights) chose a
     # solution 2,500 km off whose residuals set the sigmas, and each outlier round then crept along the
     # weakly determined along-track direction with 0.1 mm steps until the 200-iteration cap. Now: a
@@ -152,8 +167,8 @@ def test_doptrack_one_day_with_time_offsets_converges():
     assert np.linalg.norm(fix.pos_ecef_m - passes[0].station_pos_ecef_m) < 10e3
 
 
-def test_doptrack_short_pass_fix_and_mirror_fit_alike_and_the_sigma_says_so():
-    passes = [p for p in read_doptrack(data_path("leo-doppler", "doptrack_delfi-c3_2020-04"))
+def test_doptrack_short_pass_fix_and_mirror_fit_alike_and_the_sigma_says_so(doptrack):
+    passes = [p for p in doptrack
               if p.name.endswith("202004051935")]  # 7 deg high, 215 rows: a third of a pass
     fix = _passes_fix(passes)
     truth = passes[0].station_pos_ecef_m
