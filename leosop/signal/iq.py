@@ -282,7 +282,8 @@ def _check_types(obj, types, where):
         value = obj[key]
         ok = isinstance(value, allowed) and not isinstance(value, bool)
         if ok and isinstance(value, (int, float)):
-            ok = np.isfinite(value) and (allowed != (int,) or value >= 0)
+            # A JSON integer is finite however large (np.isfinite refuses those beyond int64).
+            ok = (isinstance(value, int) or np.isfinite(value)) and (allowed != (int,) or value >= 0)
         if not ok:
             raise InputError(f"{where}: {key} {value!r} must be {expected}")
 
