@@ -36,7 +36,7 @@ from ..signal.pilot import PilotComb
 from .elements import check_snapshot_age
 from .identify import identify_tracks
 from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, rough_lo_hz
-from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, prepared_blocks
+from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, narrowed_shift_s, prepared_blocks
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
@@ -200,7 +200,7 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, threads=1):
         New tracks, raw; tracks left with no detection are dropped.
     """
     fs = rec.sample_rate_hz / factor
-    shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz
+    shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
     members = {}  # block index -> [(track, row)]
     index = {b.t_s - shift_s: k for k, b in enumerate(blocks)}
     for i, tr in enumerate(tracks):
@@ -414,8 +414,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
                                clean=False)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         n_last = len(det)
-        # The narrowed block's centre is (factor - 1) / 2 input samples before the block's.
-        shift_s = 0.5 * (factor - 1) / rec.sample_rate_hz
+        shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
         tracker.update(b.t_s - shift_s, b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns"), det,
                        block_s=iq.size / fs)
         block_len[b.t_s - shift_s] = iq.size

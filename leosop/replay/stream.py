@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import InputError
 from ..signal.frontend import clean_block
 
-__all__ = ["PreparedBlock", "narrow", "prepared_blocks", "spectrum_column"]
+__all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column"]
 
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
 SPECTRUM_COLUMNS = 600
@@ -61,6 +61,11 @@ def narrow(iq, factor):
     spec = np.fft.fft(iq[:n])
     keep = np.concatenate([spec[: m - m // 2], spec[n - m // 2:]])
     return (np.fft.ifft(keep) * (m / n)).astype(np.complex64)
+
+
+def narrowed_shift_s(factor, sample_rate_hz):
+    """How far before a block's centre its :func:`narrow` output's centre lies [s]: ``(factor - 1) / 2`` samples."""
+    return 0.5 * (factor - 1) / sample_rate_hz
 
 
 def spectrum_column(iq):
