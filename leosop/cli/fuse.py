@@ -218,7 +218,9 @@ def run(args):
                                      seed=args.seed)
         except InputError as exc:  # the library's message does not know its aids are --leo-sim's
             raise InputError(f"--leo-sim: {exc}", param=exc.params) from exc
-    window_s = args.leo_window_s if args.leo_window_s is not None else leo_input.SIM_WINDOW_S if args.leo_sim else 0
+    window_s = args.leo_window_s
+    if window_s is None:  # --leo-sim's rows are means over its chord; a table's are taken as instantaneous
+        window_s = leo_input.SIM_WINDOW_S if args.leo_sim else 0.0
     leo_aids = [] if leo is None else leo_input.to_aids(leo, sol, options.lever_arm_b_m,
                                                         LeoOptions(window_s=window_s or None))[0]
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s, extra_aids=leo_aids,
