@@ -151,6 +151,25 @@ def test_windup_is_continuous_and_symmetric_overhead():
     assert np.all(np.abs(np.diff(w[:, 0])) < 0.5)  # unwrapped: no cycle jumps between steps
 
 
+def test_etrf2000_is_the_published_similarity():
+    """PROJ's EPSG:8405 against the 14 parameters of [Altamimi 2018] table 5 written out here (first order in
+    the rotations; the second-order terms are ~1e-13 of a coordinate): a wrong pair of EPSG codes or a sign
+    convention (position vector vs coordinate frame) would differ by centimetres, so 1e-6 m."""
+    from leosop.gnss.etrf import itrf2014_to_etrf2000
+
+    mas = np.pi / (180 * 3600e3)
+    for epoch in (2010.0, 2020.48, 2031.2):
+        dt = epoch - 2010.0
+        T = (np.array([54.7, 52.2, -74.1]) + np.array([0.1, 0.1, -1.9]) * dt) * 1e-3
+        D = (2.12 + 0.11 * dt) * 1e-9
+        R = (np.array([1.701, 10.290, -16.632]) + np.array([0.081, 0.490, -0.792]) * dt) * mas
+        expected = ESBC_ECEF_M + T + D * ESBC_ECEF_M + np.cross(R, ESBC_ECEF_M)
+        np.testing.assert_allclose(itrf2014_to_etrf2000(ESBC_ECEF_M, epoch), expected, rtol=0, atol=1e-6)
+    # Arrays of points and epochs keep their shape.
+    pts = ESBC_ECEF_M + np.arange(12.0).reshape(2, 2, 3) * 1e3
+    assert itrf2014_to_etrf2000(pts, np.full((2, 2), 2020.5)).shape == (2, 2, 3)
+
+
 def test_etrf2000_drift_is_eurasian_plate_motion():
     from leosop.gnss.etrf import etrf2000_to_itrf2014, itrf2014_to_etrf2000
 
