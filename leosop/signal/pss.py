@@ -44,14 +44,55 @@ class PssAcquisition:
     detected: bool
 
 
-def _window_sums(cum, starts, runs):
-    """sum of sign * values over consecutive runs from each start, from a leading-zero cumsum."""
-    total = 0.0
+def _run_sums(cum, n_out, runs):
+    """Sums over consecutive runs ``(length, sign +-1)`` from each of ``n_out`` starts, from a leading-zero cumsum.
+
+    Returns shape (n_out,).
+
+    Slices of ``cum`` (views, no gather), accumulated in place.
+    """
+    total = np.zeros(n_out, dtype=cum.dtype)
     offset = 0
     for n, s in runs:
-        total = total + s * (cum[starts + offset + n] - cum[starts + offset])
+        hi, lo = cum[offset + n:offset + n + n_out], cum[offset:offset + n_out]
+        if s > 0:
+            total += hi
+            total -= lo
+        else:
+            total -= hi
+            total += lo
         offset += n
     return total
+
+
+#: Metric values computed per block: the block's temporaries stay in cache (2**15 complex128: 512 kB).
+_METRIC_BLOCK = 1 << 15
+
+
+def _lag_metric(x, n_metric):
+    """``M(tau)`` and the normalised metric ``|M| / e`` for tau = 0 .. n_metric - 1, ((n_metric,), (n_metric,)).
+
+    Block by block, each from its own leading-zero cumsums of the lag-128
+    products and of the power (complex128 / float64): the same window sums
+    as one cumsum over the snippet, with smaller partial sums.
+    """
+    lag, span = PSS_SEGMENT_LEN, _PSS_PRODUCT_LEN
+    m_tau = np.empty(n_metric, dtype=np.complex128)
+    rho = np.empty(n_metric)
+    prod = np.zeros(_METRIC_BLOCK + span, dtype=np.complex128)
+    energy = np.zeros(_METRIC_BLOCK + lag + span)
+    for a in range(0, n_metric, _METRIC_BLOCK):
+        n = min(_METRIC_BLOCK, n_metric - a)
+        seg = x[a:a + n + lag + span - 1]
+        np.cumsum(seg[lag:] * np.conj(seg[:-lag]), out=prod[1:n + span])
+        np.cumsum(np.abs(seg).astype(np.float64) ** 2, out=energy[1:n + lag + span])
+        m = _run_sums(prod, n, _PSS_PRODUCT_RUNS)
+        e = _run_sums(energy, n, ((span, 1.0),))
+        e += _run_sums(energy[lag:], n, ((span, 1.0),))
+        e *= 0.5
+        m_tau[a:a + n] = m
+        rho[a:a + n] = np.abs(m) / np.maximum(e, np.finfo(float).tiny)
+    return m_tau, rho
 
 
 #: Zero-padded length of the PSS periodograms of the frequency refinement.
@@ -123,16 +164,7 @@ def acquire_pss(iq, sample_rate_hz=FS_HZ, *, center_offset_hz=OFDM_CENTER_OFFSET
         raise InputError(f"acquire_pss needs at least {FRAME_SAMPLES + lag + _PSS_PRODUCT_LEN - 1} samples, "
                          f"got {x.size}")
     x = x.astype(np.complex64, copy=False)
-    prod = np.empty(x.size - lag + 1, dtype=np.complex128)
-    prod[0] = 0.0
-    np.cumsum(x[lag:] * np.conj(x[:-lag]), out=prod[1:])
-    power = np.abs(x).astype(np.float64) ** 2
-    energy = np.concatenate(([0.0], np.cumsum(power)))
-    starts = np.arange(n_metric)
-    m_tau = _window_sums(prod, starts, _PSS_PRODUCT_RUNS)
-    e_tau = 0.5 * ((energy[starts + _PSS_PRODUCT_LEN] - energy[starts])
-                   + (energy[starts + lag + _PSS_PRODUCT_LEN] - energy[starts + lag]))
-    rho = np.abs(m_tau) / np.maximum(e_tau, np.finfo(float).tiny)
+    m_tau, rho = _lag_metric(x, n_metric)
     n_fold = n_metric // FRAME_SAMPLES
     folded = rho[:n_fold * FRAME_SAMPLES].reshape(n_fold, FRAME_SAMPLES).mean(axis=0)
     tau = [int(np.argmax(folded))]
