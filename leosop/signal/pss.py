@@ -95,10 +95,16 @@ def _useful_correlations(seg):
 
     The periodic autocorrelation of :func:`_peak_table` holds for the useful
     part (1024 samples); its negated prefix would bias the fraction. Returns
-    shape (..., 3).
+    shape (..., 3). (Products and sums, not a matrix product: no BLAS threads.)
     """
-    useful = np.conj(np.sqrt(N_FFT) * pss_time()[N_CP:])
-    return np.stack([seg[..., N_CP + j:N_CP + j + N_FFT] @ useful for j in range(3)], axis=-1)
+    useful = _useful_reference()
+    return np.stack([np.sum(seg[..., N_CP + j:N_CP + j + N_FFT] * useful, axis=-1) for j in range(3)], axis=-1)
+
+
+@lru_cache(maxsize=1)
+def _useful_reference():
+    """Conjugate of the PSS's useful part in the frame's scale (modulus 32), complex64 (1024,)."""
+    return np.conj(np.sqrt(N_FFT) * pss_time()[N_CP:]).astype(np.complex64)
 
 
 def subsample_peak(c):

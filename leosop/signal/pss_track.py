@@ -44,14 +44,15 @@ import scipy.fft
 from ..constellations import REGISTRY
 from ..errors import InputError
 from .ofdm_frame import FRAME_SAMPLES, FS_HZ, N_CP, N_FFT, N_SYMBOL, OFDM_CENTER_OFFSET_HZ, pss_time
-from .pss import _useful_correlations, acquire_pss, subsample_peak
+from .pss import _useful_correlations, _useful_reference, acquire_pss, subsample_peak
 
 __all__ = ["PssTrack", "track_pss", "TRACK_THRESHOLD", "TRACK_WINDOW_SAMPLES", "REACQUIRE_SAMPLES",
            "JUMP_THRESHOLD_S"]
 
-#: Half-width of the search about each predicted start [samples]: within a batch the prediction
-#: errs by well under a sample (a 5 kHz/s Doppler rate moves frames by 0.1 sample over 64 frames).
-TRACK_WINDOW_SAMPLES = 16
+#: Half-width of the search about each predicted start [samples]: the prediction errs by under a
+#: sample (at 5 kHz/s of Doppler rate the period changes by 2e-4 samples per frame: ~0.8 sample at the
+#: end of a batch of 64 predicted from a period fitted over the last 75 frames).
+TRACK_WINDOW_SAMPLES = 8
 #: Half-width of the search after a suspected jump [samples] (17 us: > 40 sigma of a 400 ns step).
 REACQUIRE_SAMPLES = 4096
 #: Detection threshold on the per-frame metric: noise alone exceeds it in one of the 8193 cells of a
@@ -96,7 +97,12 @@ class PssTrack:
 
 
 class _Correlator:
-    """The PSS correlated with windows of ``2 half + N_SYMBOL`` samples at lags 0 .. 2 half, one FFT plan."""
+    """The PSS correlated with windows of ``2 half + N_SYMBOL`` samples at lags 0 .. 2 half, by FFT.
+
+    The FFT (pocketfft, no BLAS: matrix products would start BLAS threads,
+    which a loaded machine makes erratic) has its length and the reference's
+    spectrum fixed at construction.
+    """
 
     def __init__(self, half):
         self.half = half
@@ -123,7 +129,7 @@ class _Correlator:
         energy = np.sum(np.abs(windows[rows[:, None], k[:, None] + np.arange(N_SYMBOL)]) ** 2, axis=-1)
         metric = np.abs(corr[rows, k]) ** 2 / np.maximum(N_FFT * N_SYMBOL * energy, np.finfo(float).tiny)
         # Residual frequency: the PSS wiped off its useful part, phase between its halves (512 samples apart).
-        useful = span[:, 1 + N_CP:1 + N_CP + N_FFT] * np.conj(pss_time()[N_CP:]).astype(np.complex64)
+        useful = span[:, 1 + N_CP:1 + N_CP + N_FFT] * _useful_reference()
         half = N_FFT // 2
         rot = np.sum(useful[:, half:], axis=-1) * np.conj(np.sum(useful[:, :half], axis=-1))
         return k, c, metric, np.angle(rot) * FS_HZ / (2.0 * np.pi * half)
@@ -236,8 +242,8 @@ class _Loop:
         self.start, self.carrier_hz = float(starts[-1]), float(carrier_hz)
         recent = np.array(self.segment[-_PERIOD_FRAMES:])
         if recent.size > 1:
-            m = np.arange(recent.size)
-            self.period = float(np.polyfit(m, recent - recent[0], 1)[0])
+            m = np.arange(recent.size) - 0.5 * (recent.size - 1)
+            self.period = float(np.dot(m, recent - recent[0]) / np.dot(m, m))
         self.batch = 1 if self.learning else min(2 * self.batch, _MAX_BATCH)
 
     @property
