@@ -64,6 +64,8 @@ JUMP_THRESHOLD_S = 4e-9
 #: Frames in the least-squares period of the prediction, and most frames per batch.
 _PERIOD_FRAMES = 75
 _MAX_BATCH = 64
+#: Frames whose mean residual frequency moves the carrier fully (fewer move it in proportion).
+_CARRIER_FRAMES = 16
 #: Samples read before the first frame by the default acquisition (10 ms: 7 frames).
 _ACQUIRE_SAMPLES = 2_400_000
 
@@ -164,7 +166,11 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
     Returns
     -------
     PssTrack
-        Empty (no frames) when the acquisition did not detect a PSS.
+        Tracked from the acquisition's first frame even when it reports
+        ``detected`` False: its threshold (0.15, for one snippet's lag-128
+        metric) is passed only above ~-8 dB per sample, while each frame's
+        matched-filter metric here detects the PSS to ~-17 dB; frames not
+        found are NaN.
     """
     if sample_rate_hz != FS_HZ:
         raise InputError(f"track_pss: sample_rate_hz={sample_rate_hz} must be {FS_HZ:g} (the full channel)")
@@ -176,10 +182,6 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
         raise InputError(f"code_window={code_window} must be at least 3 frames")
     n = len(iq)
     acq = acquisition if acquisition is not None else acquire_pss(np.asarray(iq[:min(n, _ACQUIRE_SAMPLES)]))
-    if not acq.detected:
-        empty = np.zeros(0)
-        return PssTrack(np.zeros(0, dtype=np.int64), empty, empty, empty, empty, np.zeros(0, dtype=bool), empty,
-                        np.zeros(0, dtype=np.int64))
     period = (acq.frame_period_s * FS_HZ if np.isfinite(acq.frame_period_s)
               else FRAME_SAMPLES / (1.0 + acq.doppler_hz / channel_hz))
     state = _Loop(acq.frame_start_s[0] * FS_HZ - period, period, acq.doppler_hz + center_offset_hz)
@@ -205,7 +207,7 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
             good = int(np.argmax(bad)) if bad.any() else count
             for j in range(good):
                 rows.append((start[j], metric[j], state.carrier_hz + df_hz[j], np.nan, False))
-            state.accept(start[:good], state.carrier_hz + np.mean(df_hz[:good]) if good else state.carrier_hz)
+            state.accept(start[:good], df_hz[:good])
             if good == count:
                 continue
             pred, lo = pred[good:good + 1], lo[good:good + 1]
@@ -215,14 +217,14 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
             break
         k, c, metric, df_hz = wide(_read_windows(iq, [lo_w], wide.length), state.carrier_hz)
         start = lo_w + k[0] + float(subsample_peak(c[0]))
-        if metric[0] < TRACK_THRESHOLD:
+        if metric[0] < TRACK_THRESHOLD or k[0] in (0, 2 * wide.half):  # (at an edge: the recording's)
             rows.append((np.nan, np.nan, np.nan, np.nan, False))
             state.lose(pred[0])
             continue
         step = start - pred[0]
         jumped = abs(step) > jump_samples and not state.learning
         rows.append((start, metric[0], state.carrier_hz + df_hz[0], step if jumped else 0.0, jumped))
-        state.found(start, state.carrier_hz + df_hz[0], new_segment=jumped)
+        state.found(start, df_hz[:1], new_segment=jumped)
     return _track(np.array(rows).reshape(-1, 5), acq, channel_hz, center_offset_hz, int(code_window))
 
 
@@ -232,14 +234,23 @@ class _Loop:
     def __init__(self, start, period, carrier_hz):
         self.start, self.period, self.carrier_hz = start, period, carrier_hz
         self.segment = []  # starts of the current segment, consecutive frames
-        self.batch = 1  # frames predicted at once: doubles while the period is being learnt
-        self.searching = False
+        self.batch = 1  # frames predicted at once: doubles once the period is the segment's own
+        # The first frame is searched wide: the PSS's eight 128-sample segments give the acquisition's
+        # lag-128 metric (and the correlation) sidelobes 128 samples apart, which a weak snippet can pick.
+        self.searching = True
 
-    def accept(self, starts, carrier_hz):
+    def accept(self, starts, df_hz):
+        """Frames found at ``starts`` [samples] with residual frequencies ``df_hz`` (n,).
+
+        The carrier moves by their mean times n / _CARRIER_FRAMES (at most 1):
+        one frame's residual (~6 kHz rms at -5 dB per sample, and wild when
+        the PSS sits at a window's edge) moves it little.
+        """
         if starts.size == 0:
             return
         self.segment.extend(starts.tolist())
-        self.start, self.carrier_hz = float(starts[-1]), float(carrier_hz)
+        self.start = float(starts[-1])
+        self.carrier_hz += float(np.mean(df_hz)) * min(1.0, starts.size / _CARRIER_FRAMES)
         recent = np.array(self.segment[-_PERIOD_FRAMES:])
         if recent.size > 1:
             m = np.arange(recent.size) - 0.5 * (recent.size - 1)
@@ -251,11 +262,11 @@ class _Loop:
         """Fewer than two frames in the segment: the period is not its own yet (no jump is told from it)."""
         return len(self.segment) < 2
 
-    def found(self, start, carrier_hz, *, new_segment):
+    def found(self, start, df_hz, *, new_segment):
         if new_segment:
             self.segment, self.batch = [], 1
         self.searching = False
-        self.accept(np.array([start]), carrier_hz)
+        self.accept(np.array([start]), df_hz)
 
     def lose(self, predicted):
         self.start, self.segment, self.batch, self.searching = predicted, [], 1, True
