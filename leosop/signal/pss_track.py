@@ -182,12 +182,14 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
         raise InputError(f"code_window={code_window} must be at least 3 frames")
     n = len(iq)
     acq = acquisition if acquisition is not None else acquire_pss(np.asarray(iq[:min(n, _ACQUIRE_SAMPLES)]))
+    if acq.frame_start_s.size == 0:  # (no frame whole in the snippet)
+        return _track(np.zeros((0, 5)), channel_hz, center_offset_hz, int(code_window))
     period = (acq.frame_period_s * FS_HZ if np.isfinite(acq.frame_period_s)
               else FRAME_SAMPLES / (1.0 + acq.doppler_hz / channel_hz))
     state = _Loop(acq.frame_start_s[0] * FS_HZ - period, period, acq.doppler_hz + center_offset_hz)
     narrow, wide = _Correlator(TRACK_WINDOW_SAMPLES), _Correlator(REACQUIRE_SAMPLES)
     jump_samples = jump_threshold_s * FS_HZ
-    rows = []  # (start [samples], metric, carrier [Hz], jump [samples] or nan, new segment)
+    rows = []  # (start [samples], metric, carrier [Hz], step [samples], jump) per frame
     while True:
         count = min(_MAX_BATCH, state.batch)
         pred = state.start + state.period * np.arange(1, count + 1)
@@ -196,7 +198,7 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
         if count == 0:
             break
         pred, lo = pred[:count], lo[:count]
-        if state.searching:
+        if state.searching or lo[0] < 0:
             count = 1
         else:
             k, c, metric, df_hz = narrow(_read_windows(iq, lo, narrow.length), state.carrier_hz)
@@ -225,7 +227,7 @@ def track_pss(iq, acquisition=None, *, sample_rate_hz=FS_HZ, channel_hz=REGISTRY
         jumped = abs(step) > jump_samples and not state.learning
         rows.append((start, metric[0], state.carrier_hz + df_hz[0], step if jumped else 0.0, jumped))
         state.found(start, df_hz[:1], new_segment=jumped)
-    return _track(np.array(rows).reshape(-1, 5), acq, channel_hz, center_offset_hz, int(code_window))
+    return _track(np.array(rows).reshape(-1, 5), channel_hz, center_offset_hz, int(code_window))
 
 
 class _Loop:
@@ -272,7 +274,7 @@ class _Loop:
         self.start, self.segment, self.batch, self.searching = predicted, [], 1, True
 
 
-def _track(rows, acq, channel_hz, center_offset_hz, code_window):
+def _track(rows, channel_hz, center_offset_hz, code_window):
     """The :class:`PssTrack` from the tracker's rows (n, 5)."""
     start, metric, carrier, step, new = rows.T
     new = new.astype(bool)
