@@ -217,11 +217,16 @@ def _jumping_recording(n_frames, jumps, snr_db, seed):
     return iq, truth_s
 
 
-def test_tracking_flags_frame_timing_jumps_and_keeps_the_doppler():
-    # Steps every 3.9 ms (seed 1: +160 ns before frame 3, -360 ns before frame 6, Qin et al. 2025's size),
-    # 7 frames at -5 dB per sample.
+@pytest.fixture(scope="module")
+def jumping():
+    """Steps every 3.9 ms (seed 1: +160 ns before frame 3, -360 ns before frame 6, Qin et al. 2025's size),
+    7 frames at -5 dB per sample: the jumps, the samples and the truth starts [s]."""
     jumps = ofdm.FrameTimingJumps(300e-9, period_s=3.9e-3, seed=(1,))
-    iq, truth_s = _jumping_recording(7, jumps, -5.0, 21)
+    return (jumps, *_jumping_recording(7, jumps, -5.0, 21))
+
+
+def test_tracking_flags_frame_timing_jumps_and_keeps_the_doppler(jumping):
+    jumps, iq, truth_s = jumping
     track = ofdm.track_pss(iq, channel_hz=CH_HZ)
     assert track.frame_number.tolist() == list(range(7)) and track.found.all()
     assert np.flatnonzero(track.jump).tolist() == [3, 6]
@@ -246,3 +251,20 @@ def test_tracking_bad_input():
         ofdm.track_pss(np.zeros(400_000, complex), sample_rate_hz=2.5e6)
     with pytest.raises(InputError, match="jump_threshold_s"):
         ofdm.track_pss(np.zeros(400_000, complex), jump_threshold_s=0.0)
+
+
+def test_replay_tracks_the_first_capture_from_the_file(jumping, tmp_path):
+    # The replay's PSS stage reads the recording window by window (SigMF, cf32): the same track as
+    # from the array.
+    from leosop.replay.pipeline import _pss
+    from leosop.signal.iq import open_sigmf
+    from leosop.signal.iq_write import write_sigmf
+
+    _, iq, _ = jumping
+    meta = tmp_path / "ofdm.sigmf-meta"
+    write_sigmf(meta, [iq], sample_rate_hz=ofdm.FS_HZ, center_hz=CH_HZ,
+                start_utc=np.datetime64("2025-01-01T19:40:00", "ns"))
+    acq, _, track = _pss(open_sigmf(meta))
+    assert np.flatnonzero(track.jump).tolist() == [3, 6]
+    direct = ofdm.track_pss(iq, acq, channel_hz=CH_HZ)
+    assert np.array_equal(track.frame_start_s, direct.frame_start_s)
