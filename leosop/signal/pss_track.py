@@ -33,7 +33,11 @@ prediction. Found there more than the threshold away, it is flagged
 Doppler is fitted within segments, so a step never enters it (across one it
 would add ~f_ch step / window, kHz). Not found, the frame is reported with
 NaN and the prediction runs on; every later frame is searched wide until
-the PSS is found again.
+the PSS is found again. The first frame is always searched wide (the PSS's
+eight 128-sample segments give 128-sample sidelobes that a weak acquisition
+can start on), and the first two frames of a segment set its period rather
+than being judged by it: a jump is told only from a segment's own period.
+The carrier follows the residuals, a batch's mean weighted by its frames.
 """
 
 from dataclasses import dataclass
@@ -80,7 +84,7 @@ class PssTrack:
     ``code_doppler_hz`` as in the module docstring (NaN where not found;
     code Doppler also NaN on segments of fewer than 3 frames); ``jump`` flags
     the first frame after a frame-timing jump and ``jump_s`` holds its step
-    (0 elsewhere); ``segment`` numbers the spans between jumps.
+    (0 elsewhere); ``segment`` numbers the spans between jumps and lost frames.
     """
 
     frame_number: np.ndarray
@@ -237,9 +241,7 @@ class _Loop:
         self.start, self.period, self.carrier_hz = start, period, carrier_hz
         self.segment = []  # starts of the current segment, consecutive frames
         self.batch = 1  # frames predicted at once: doubles once the period is the segment's own
-        # The first frame is searched wide: the PSS's eight 128-sample segments give the acquisition's
-        # lag-128 metric (and the correlation) sidelobes 128 samples apart, which a weak snippet can pick.
-        self.searching = True
+        self.searching = True  # the first frame is searched wide (module docstring)
 
     def accept(self, starts, df_hz):
         """Frames found at ``starts`` [samples] with residual frequencies ``df_hz`` (n,).
