@@ -220,6 +220,9 @@ def test_per_satellite_cn0_and_orbit_error(tmp_path, capsys):
     (["--snapshot-s", "2", "--period-s", "1"], "longer than --period-s"),
     (["--cn0-dbhz", "40", "41"], "--cn0-dbhz: 2 values"),
     (["--orbit-error-radial-m", "-1"], "--orbit-error-radial-m"),
+    (["--frame-jump-sigma-s", "3e-7"], "need --waveform ofdm"),
+    (["--frame-jump-period-s", "1"], "give --frame-jump-sigma-s"),
+    (["--waveform", "ofdm", "--frame-jump-sigma-s", "-1e-9"], "--frame-jump-sigma-s"),
 ])
 def test_generate_bad_options(tmp_path, capsys, argv, match):
     meta = tmp_path / "x.sigmf-meta"
@@ -227,3 +230,20 @@ def test_generate_bad_options(tmp_path, capsys, argv, match):
                                      "--out", str(tmp_path / "out")] + argv)
     assert status == 2 and out == "" and err.count("\n") == 1 and match in err
     assert list(tmp_path.iterdir()) == []  # no recording, no output folder
+
+
+def test_frame_timing_jumps_in_the_truth(tmp_path, capsys):
+    from leosop.signal.ofdm import FrameTimingJumps
+
+    meta = tmp_path / "jumps.sigmf-meta"
+    status, out, _ = _run(capsys, ["generate", "-o", str(meta), "--sat", SAT, "--duration-s", "0.25",
+                                   "--truth-step-s", "0.05", "--waveform", "ofdm", "--frame-jump-sigma-s", "3e-7",
+                                   "--frame-jump-period-s", "0.1", "--seed", "5", "--json"])
+    assert status == 0
+    doc = json.loads(out)
+    jumps = doc["satellites"][0]["frame_jumps"]
+    assert jumps == json.loads(meta.read_text())["global"]["leosop:satellites"][0]["frame_jumps"]
+    # The steps are satellite 0's of the seed; each at the receive time of frame-clock 0.1 s, 0.2 s: later
+    # by the range's change over it / c (< 7.6 km/s x 0.2 s / c = 5 us).
+    assert [j["jump_s"] for j in jumps] == FrameTimingJumps(3e-7, 0.1, (5, 0)).steps_s(2).tolist()
+    assert np.allclose([j["t_s"] for j in jumps], [0.1, 0.2], rtol=0, atol=5e-6)

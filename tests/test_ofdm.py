@@ -1,4 +1,4 @@
-"""Starlink OFDM frame, its reception and PSS acquisition (leosop.signal.ofdm).
+"""Starlink OFDM frame, its reception, PSS acquisition and tracking (leosop.signal.ofdm).
 
 References: [Humphreys 2023] for the frame layout and PSS construction;
 m-sequence properties (balance, two-valued autocorrelation) are textbook
@@ -10,6 +10,7 @@ import pytest
 
 from leosop.errors import InputError
 from leosop.signal import ofdm
+from leosop.signal.pss_track import REACQUIRE_SAMPLES
 from leosop.signal.doppler import estimate_block
 from leosop.signal.error_model import doppler_sigma_hz
 from leosop.signal.pilot import PilotComb, add_noise
@@ -131,6 +132,12 @@ def test_comb_doppler_recovered_on_ofdm_recording():
     assert np.sqrt(np.mean(np.square(errors))) < 1.6 * sigma
 
 
+def _frame_starts_s(frame_time_s, doppler_hz, rate_hz_per_s):
+    """Receive time where t + g(t)/f_ch reaches ``frame_time_s``, g = d t + r t^2 / 2 (the stable root)."""
+    a, b = 0.5 * rate_hz_per_s / CH_HZ, 1 + doppler_hz / CH_HZ
+    return 2 * frame_time_s / (b + np.sqrt(b * b + 4 * a * frame_time_s))
+
+
 @pytest.fixture(scope="module")
 def snippet():
     """4 ms at 240 MS/s (3 frames): +300 kHz Doppler and -2 kHz/s, +30 kHz receiver offset."""
@@ -148,11 +155,11 @@ def test_acquisition_recovers_timing_and_doppler(snippet, snr_db):
     iq = (clean + sigma * (rng.standard_normal(t.size) + 1j * rng.standard_normal(t.size))).astype(np.complex64)
     res = ofdm.acquire_pss(iq)
     assert res.detected and res.frame_number.tolist() == [0, 1, 2]
-    # Truth: frame m starts where t + g(t)/f_ch = offset + m Tf (root of the quadratic).
-    a, b = 0.5 * -2e3 / CH_HZ, 1 + 3e5 / CH_HZ
-    c = -(link.frame_offset_s + res.frame_number * ofdm.FRAME_PERIOD_S)
-    truth_s = (-b + np.sqrt(b * b - 4 * a * c)) / (2 * a)
-    assert np.all(np.abs(res.frame_start_s - truth_s) * ofdm.FS_HZ < 1.0)  # to a sample
+    truth_s = _frame_starts_s(link.frame_offset_s + res.frame_number * ofdm.FRAME_PERIOD_S, 3e5, -2e3)
+    # Measured: within 0.02 samples at 30 dB (0.013 of it the PSS's code-Doppler stretch, 544 samples
+    # times 2.6e-5), within 0.15 at -5 dB over 3 offsets x 3 frames; a parabola through |c|^2
+    # was off by up to 0.33 samples.
+    assert np.all(np.abs(res.frame_start_s - truth_s) * ofdm.FS_HZ < 0.25)
     # Doppler of the OFDM centre at the snippet's middle (a 2 ms mean of the chirp):
     truth_hz = (3e5 - 2e3 * 2e-3) * (1 + ofdm.OFDM_CENTER_OFFSET_HZ / CH_HZ) + 3e4
     # Measured rms error 1.9 kHz at 0 dB and 3.4 kHz at -5 dB over 10 seeds (3 frames):
@@ -176,3 +183,88 @@ def test_bad_input():
         ofdm.OfdmDownlink(2.5e6, channel_hz=11.3e9)
     with pytest.raises(InputError, match="comb"):
         ofdm.OfdmDownlink(2.5e6, channel_hz=11.575e9, comb=PilotComb())
+
+
+def test_frame_timing_jumps_are_seeded_per_step_and_cumulative():
+    jumps = ofdm.FrameTimingJumps(300e-9, period_s=0.5, seed=(7, 2))
+    steps = jumps.steps_s(3)
+    assert np.array_equal(steps[:2], jumps.steps_s(2))  # step j depends on j alone
+    assert np.array_equal(jumps.offset_s([-1.0, 0.2, 0.5, 1.2, 1.6]), [0, 0, steps[0], steps[:2].sum(), steps.sum()])
+    with pytest.raises(InputError, match="sigma_s"):
+        ofdm.FrameTimingJumps(-1e-9)
+
+
+def _jumping_recording(n_frames, jumps, snr_db, seed):
+    """+300 kHz, -2 kHz/s, +30 kHz receiver offset at 240 MS/s with frame-timing jumps; truth starts [s].
+
+    Samples are synthesised within REACQUIRE_SAMPLES + 64 of each PSS, noise
+    elsewhere: the tracker reads nothing else, and the acquisition's lag-128
+    metric sees no coherence in data symbols, as in noise (synthesising the
+    frames whole would take ~0.4 s each).
+    """
+    link = ofdm.OfdmDownlink(ofdm.FS_HZ, seed=4, frame_offset_s=0.41e-3, timing_jumps=jumps)
+    frame_time_s = link.frame_offset_s + np.arange(n_frames) * ofdm.FRAME_PERIOD_S
+    truth_s = _frame_starts_s(frame_time_s + jumps.offset_s(frame_time_s - link.frame_offset_s), 3e5, -2e3)
+    n = int(round((truth_s[-1] + ofdm.FRAME_PERIOD_S) * ofdm.FS_HZ))
+    rng = np.random.default_rng(seed)
+    sigma = np.sqrt(1020 / 10 ** (snr_db / 10) / 2)
+    iq = (sigma * (rng.standard_normal(n) + 1j * rng.standard_normal(n))).astype(np.complex64)
+    margin = REACQUIRE_SAMPLES + 64
+    near = np.unique(np.concatenate([np.arange(max(int(s * ofdm.FS_HZ) - margin, 0),
+                                               min(int(s * ofdm.FS_HZ) + margin + ofdm.N_SYMBOL, n)) for s in truth_s]))
+    t = near / ofdm.FS_HZ
+    iq[near] += link.samples(t, _geometry(t, 3e5, -2e3), 3e4 * t).astype(np.complex64)
+    return iq, truth_s
+
+
+@pytest.fixture(scope="module")
+def jumping():
+    """Steps every 3.9 ms (seed 1: +160 ns before frame 3, -360 ns before frame 6, Qin et al. 2025's size),
+    7 frames at -5 dB per sample: the jumps, the samples and the truth starts [s]."""
+    jumps = ofdm.FrameTimingJumps(300e-9, period_s=3.9e-3, seed=(1,))
+    return (jumps, *_jumping_recording(7, jumps, -5.0, 21))
+
+
+def test_tracking_flags_frame_timing_jumps_and_keeps_the_doppler(jumping):
+    jumps, iq, truth_s = jumping
+    track = ofdm.track_pss(iq, channel_hz=CH_HZ)
+    assert track.frame_number.tolist() == list(range(7)) and track.found.all()
+    assert np.flatnonzero(track.jump).tolist() == [3, 6]
+    # Steps measured as the start minus its prediction: timing noise ~0.05 sample (0.2 ns) rms each.
+    assert np.allclose(track.jump_s[[3, 6]], jumps.steps_s(2), rtol=0, atol=1e-9)
+    # Measured within 0.04 samples; 0.25 as for the acquisition.
+    assert np.all(np.abs(track.frame_start_s - truth_s) * ofdm.FS_HZ < 0.25)
+    # Code Doppler of the 3-frame segments: LS slope of 3 starts, sigma ~0.03 sample per frame = 1 kHz;
+    # 4 kHz. Across a jump the same fit errs by f_ch x 160 ns / 2 frames, ~700 kHz.
+    geometric_hz = 3e5 - 2e3 * track.frame_start_s
+    assert np.all(np.abs(track.code_doppler_hz[:6] - geometric_hz[:6]) < 4e3)
+    across = np.polyfit(np.arange(6), track.frame_start_s[:6], 1)[0]
+    assert abs(CH_HZ * (ofdm.FRAME_PERIOD_S / across - 1) - geometric_hz[3]) > 1e5
+    assert track.segment.tolist() == [0, 0, 0, 1, 1, 1, 2] and np.isnan(track.code_doppler_hz[6])
+    # Carrier per frame from one PSS: the phase of its halves, sigma ~6 kHz at -5 dB; 25 kHz is > 4 sigma.
+    carrier_hz = geometric_hz * (1 + ofdm.OFDM_CENTER_OFFSET_HZ / CH_HZ) + 3e4
+    assert np.all(np.abs(track.doppler_hz - carrier_hz) < 25e3)
+
+
+def test_tracking_bad_input():
+    with pytest.raises(InputError, match="sample_rate_hz"):
+        ofdm.track_pss(np.zeros(400_000, complex), sample_rate_hz=2.5e6)
+    with pytest.raises(InputError, match="jump_threshold_s"):
+        ofdm.track_pss(np.zeros(400_000, complex), jump_threshold_s=0.0)
+
+
+def test_replay_tracks_the_first_capture_from_the_file(jumping, tmp_path):
+    # The replay's PSS stage reads the recording window by window (SigMF, cf32): the same track as
+    # from the array.
+    from leosop.replay.pipeline import _pss
+    from leosop.signal.iq import open_sigmf
+    from leosop.signal.iq_write import write_sigmf
+
+    _, iq, _ = jumping
+    meta = tmp_path / "ofdm.sigmf-meta"
+    write_sigmf(meta, [iq], sample_rate_hz=ofdm.FS_HZ, center_hz=CH_HZ,
+                start_utc=np.datetime64("2025-01-01T19:40:00", "ns"))
+    acq, _, track = _pss(open_sigmf(meta))
+    assert np.flatnonzero(track.jump).tolist() == [3, 6]
+    direct = ofdm.track_pss(iq, acq, channel_hz=CH_HZ)
+    assert np.array_equal(track.frame_start_s, direct.frame_start_s)

@@ -14,7 +14,12 @@ sample (:mod:`leosop.signal.channel`, DESIGN 4.2), with
   drift ``--rx-drift-hz-per-s`` (an LNB's LO, common to all satellites:
   truth in ``leosop:rx_offset_hz`` and ``leosop:rx_drift_hz_per_s``);
 - optionally an orbit error (truth differs from the TLE the receiver will
-  use): along-track, radial and cross-track errors drawn per satellite.
+  use): along-track, radial and cross-track errors drawn per satellite;
+- with ``--waveform ofdm``, optionally frame-timing jumps
+  (``--frame-jump-sigma-s``, Qin et al. 2025: the frame start of each
+  satellite steps by N(0, sigma) every ``--frame-jump-period-s``; their own
+  stream of ``--seed``, so the rest of the recording is unchanged), each
+  satellite's in the truth (``frame_jumps``: receive time and step).
 
 ``--snapshot-s S --period-s P`` records only S seconds every P seconds, one
 SigMF capture per snapshot; the signal's phase runs on through the gaps.
@@ -48,6 +53,7 @@ from ..scenarios import XIAN_BAOJI
 from ..signal.channel import WAVEFORMS, OrbitError, inertial_speed_mps
 from ..signal.frontend import BITS_DATATYPE, PRESETS, FrontEnd
 from ..signal.iq_write import write_sigmf_files
+from ..signal.ofdm_downlink import FrameTimingJumps
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
 from . import add_command
@@ -66,6 +72,8 @@ _MAX_SAT_DRIFT_HZ_PER_S = 100.0
 _BASE_OFFSET_SPREAD_HZ = 5.0
 #: Largest shift of the base's captures against the rover's [s]: beyond it the pair shares little time.
 _MAX_BASE_OFFSET_S = 60.0
+#: Largest frame-timing jump sigma [s]: 10 us is 2400 samples at 240 MS/s, beyond any measured step.
+_MAX_FRAME_JUMP_SIGMA_S = 1e-5
 
 
 def register(subparsers):
@@ -114,6 +122,12 @@ def register(subparsers):
                    help="tones: the pilot comb alone; ofdm: the published OFDM downlink frame (240 MHz, "
                         "N = 1024, PSS/SSS/data) with the comb at its centre, limited to the recording's band "
                         "(default tones)")
+    p.add_argument("--frame-jump-sigma-s", type=float, default=0.0, metavar="SIGMA",
+                   help="with --waveform ofdm: each satellite's frame timing steps by N(0, SIGMA) every "
+                        "--frame-jump-period-s (Qin et al. 2025 measured hundreds of ns about once per second on "
+                        "Starlink v1.x; default 0: no jumps)")
+    p.add_argument("--frame-jump-period-s", type=float, metavar="P",
+                   help="time between frame-timing jumps (default 1, with --frame-jump-sigma-s)")
     p.add_argument("--snapshot-s", type=float, metavar="S",
                    help="record only S seconds every --period-s (one SigMF capture each)")
     p.add_argument("--period-s", type=float, metavar="P", help="snapshot period (with --snapshot-s)")
@@ -235,6 +249,21 @@ def _select(const, pos_rx, start, duration_s, ids, mask):
     return const.subset(np.flatnonzero(keep))
 
 
+def _frame_jumps(args):
+    """The frame-timing jumps of the options (seeded by --seed), or None."""
+    sigma, period = args.frame_jump_sigma_s, args.frame_jump_period_s
+    if not 0 <= sigma <= _MAX_FRAME_JUMP_SIGMA_S:
+        raise InputError(f"--frame-jump-sigma-s {sigma:g}: must be a standard deviation in "
+                         f"[0, {_MAX_FRAME_JUMP_SIGMA_S:g}] s")
+    if sigma == 0:
+        if period is not None:
+            raise InputError("--frame-jump-period-s describes frame-timing jumps: give --frame-jump-sigma-s too")
+        return None
+    if args.waveform != "ofdm":
+        raise InputError("--frame-jump-sigma-s: frame-timing jumps need --waveform ofdm (the tones have no frames)")
+    return FrameTimingJumps(sigma, positive(1.0 if period is None else period, "--frame-jump-period-s"), (args.seed,))
+
+
 def _captures(args, n, fs):
     """Sample index on the signal's timeline and length of each capture, ((n_cap,), (n_cap,))."""
     if (args.snapshot_s is None) != (args.period_s is None):
@@ -268,6 +297,7 @@ class _Settings:
     rx: tuple
     sigma_orbit_m: dict
     sat_drift_sigma: float
+    frame_jumps: FrameTimingJumps | None
     out: Path
     base: tuple
     base_out: Path
@@ -313,6 +343,7 @@ def _settings(args):
     if not 0 <= sat_drift_sigma <= _MAX_SAT_DRIFT_HZ_PER_S:
         raise InputError(f"--sat-drift-sigma-hz-per-s {sat_drift_sigma:g}: must be a standard deviation in "
                          f"[0, {_MAX_SAT_DRIFT_HZ_PER_S:g}] Hz/s")
+    frame_jumps = _frame_jumps(args)
     out = Path(args.output)
     if out.suffix != ".sigmf-meta":
         raise InputError(f"-o {out}: the output must end in .sigmf-meta")
@@ -327,7 +358,7 @@ def _settings(args):
     signal_starts, lengths = _captures(args, n, fs)
     file_starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
     return _Settings((lat, lon, alt), vel_enu, start, duration, fs, mask, (rx_offset, rx_drift, fe, datatype),
-                     sigma_orbit_m, sat_drift_sigma, out, base, base_out, base_offset_s, n, n_step, comb,
+                     sigma_orbit_m, sat_drift_sigma, frame_jumps, out, base, base_out, base_offset_s, n, n_step, comb,
                      signal_starts, lengths, file_starts)
 
 
@@ -361,7 +392,7 @@ def _recordings(args, s):
     plan = (s.file_starts, s.signal_starts, s.lengths, s.n_step)
     recs = [site_recording(args, const, sats, plan, site=(lat, lon, alt), vel_enu=s.vel_enu, start=start,
                            t0_s=0.0, rx=(rx_offset, rx_drift, fe, datatype), cn0_dbhz=args.cn0_dbhz,
-                           phase_rad=phase, rng=rng, n=n, fs=fs, comb=s.comb)]
+                           phase_rad=phase, rng=rng, n=n, fs=fs, comb=s.comb, frame_jumps=s.frame_jumps)]
     if s.base is None:
         return recs, None
     brng = np.random.default_rng([args.seed, 1])  # the base's own stream: its clock, phases, noise
@@ -375,7 +406,7 @@ def _recordings(args, s):
                                t0_s=s.base_offset_s, rx=(b_offset, b_drift, b_fe, datatype),
                                cn0_dbhz=args.cn0_dbhz if args.base_cn0_dbhz is None else [args.base_cn0_dbhz],
                                phase_rad=brng.uniform(0.0, 2.0 * np.pi, len(const)), rng=brng, n=n, fs=fs,
-                               comb=s.comb, what="base"))
+                               comb=s.comb, frame_jumps=s.frame_jumps, what="base"))
     return recs, b_start
 
 

@@ -51,7 +51,7 @@ class SiteRecording:
 
 
 def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, cn0_dbhz, phase_rad, rng, n, fs,
-                    comb, what="rover"):
+                    comb, frame_jumps=None, what="rover"):
     """One receiver's recording of the shared satellites.
 
     ``start`` is its first sample, ``t0_s`` seconds after the satellite
@@ -73,7 +73,8 @@ def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, c
         raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
                          f"({what}) during the recording from {format_utc(start)}")
     channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb, phase_rad=phase_rad,
-                          waveform=args.waveform, rx_drift_hz_per_s=rx_drift, sat_drift_hz_per_s=sats.drift_hz_per_s)
+                          waveform=args.waveform, rx_drift_hz_per_s=rx_drift, sat_drift_hz_per_s=sats.drift_hz_per_s,
+                          frame_jumps=frame_jumps)
     blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
     t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
     dop, rate, cn0 = channel.doppler_hz(t_c), channel.doppler_rate_hz_per_s(t_c), channel.cn0_at(t_c)
@@ -95,6 +96,10 @@ def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, c
          "orbit_error_radial_m": float(err.radial_m[i]), "orbit_error_cross_m": float(err.cross_m[i])}
         for i, sid in enumerate(const.sat_ids)
     ]
+    if frame_jumps is not None:
+        for i, sat in enumerate(satellites):
+            t_s, step_s = channel.frame_jumps_truth(i, n / fs)
+            sat["frame_jumps"] = [{"t_s": float(t), "jump_s": float(d)} for t, d in zip(t_s, step_s)]
     # Full scale for ci16: tones add to at most sum of amplitudes; OFDM
     # subcarriers and noise are Gaussian-like. Four sigmas above the comb's
     # peak keeps clipping ~1e-7.

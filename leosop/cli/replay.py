@@ -190,11 +190,18 @@ def _run_single(args):
         if carrier.position is not None and res.position is not None:
             doc["solutions_block_doppler"] = solutions_doc(res.position, res.measurements)[0]
     if res.pss is not None:
-        acq, cap_utc = res.pss
+        acq, cap_utc, track = res.pss
+
+        def utc(t_s):
+            return format_utc(cap_utc + np.timedelta64(int(round(t_s * 1e9)), "ns"))
+
         doc["pss"] = {"detected": bool(acq.detected), "metric": float(acq.metric),
                       "doppler_hz": float(acq.doppler_hz), "frame_period_s": float(acq.frame_period_s),
-                      "frame_start_utc": [format_utc(cap_utc + np.timedelta64(int(round(t * 1e9)), "ns"))
-                                          for t in acq.frame_start_s]}
+                      "frame_start_utc": [utc(t) for t in acq.frame_start_s],
+                      "track": {"n_frames": int(track.frame_number.size), "n_found": int(track.found.sum()),
+                                "frame_jumps": [{"frame": int(m), "time_utc": utc(track.frame_start_s[m]),
+                                                 "jump_s": float(track.jump_s[m])}
+                                                for m in np.flatnonzero(track.jump)]}}
     if not res.tracks:
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
     diff = None
@@ -366,6 +373,10 @@ def summary(doc):
         lines.append(f"PSS: {'detected' if p['detected'] else 'not detected'} (metric {p['metric']:.2f}), "
                      f"{len(p['frame_start_utc'])} frames from {first}, "
                      f"OFDM centre offset {p['doppler_hz']:+.0f} Hz")
+        tr = p["track"]
+        jumps = ", ".join(f"{j['jump_s'] * 1e9:+.0f} ns at {j['time_utc']}" for j in tr["frame_jumps"])
+        lines.append(f"PSS track over the first capture: {tr['n_found']} of {tr['n_frames']} frames, "
+                     f"{len(tr['frame_jumps'])} frame-timing jump(s){': ' + jumps if jumps else ''}")
     if "differential" in doc:
         d = doc["differential"]
         lines.append(f"differential against {d['base_recording']}: {d['n_common']} satellite(s) in common, "

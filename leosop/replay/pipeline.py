@@ -19,7 +19,9 @@ to :data:`WORK_RATE_HZ` around the pilot comb (an exact band-limited
 decimation by an integer factor, in the frequency domain) before the comb
 search; at the full channel rate the frame timing and the OFDM centre's
 Doppler also come from the PSS of the first capture
-(:func:`~leosop.signal.ofdm.acquire_pss`).
+(:func:`~leosop.signal.ofdm.acquire_pss`), and its frames are tracked over
+that capture (:func:`~leosop.signal.ofdm.track_pss`: timing, code Doppler,
+frame-timing jumps).
 """
 
 import time
@@ -141,9 +143,27 @@ def search_band(sample_rate_hz, comb, lo_offset_max_hz):
     return factor, min(MAX_DOPPLER_HZ + lo_offset_max_hz, (0.5 - BAND_MARGIN) * fs - half_comb)
 
 
+class _CaptureSamples:
+    """One capture's samples as a 1-D complex64 array to slice: each slice one read of the file."""
+
+    ndim = 1
+    dtype = np.dtype(np.complex64)
+
+    def __init__(self, rec, cap):
+        self.rec, self.cap = rec, cap
+
+    def __len__(self):
+        return self.cap.n_samples
+
+    def __getitem__(self, index):
+        start, stop, _ = index.indices(self.cap.n_samples)
+        return self.rec.read(self.cap.sample_start + start, max(stop - start, 0))
+
+
 def _pss(rec):
-    """PSS acquisition on the first 10 ms of the first capture of a full-channel recording, or None."""
-    from ..signal.ofdm import FRAME_SAMPLES, FS_HZ, acquire_pss
+    """PSS acquisition on the first 10 ms of the first capture of a full-channel recording, the capture's
+    start and the frames tracked over it: (PssAcquisition, datetime64, PssTrack), or None."""
+    from ..signal.ofdm import FRAME_SAMPLES, FS_HZ, acquire_pss, track_pss
 
     if rec.sample_rate_hz != FS_HZ:
         return None
@@ -151,7 +171,10 @@ def _pss(rec):
     n = min(cap.n_samples, int(round(0.01 * FS_HZ)))
     if n < 2 * FRAME_SAMPLES:
         return None
-    return acquire_pss(rec.read(cap.sample_start, n), FS_HZ), cap.start_utc
+    samples = _CaptureSamples(rec, cap)
+    acq = acquire_pss(samples[:n], FS_HZ)
+    track = track_pss(samples, acq, channel_hz=rec.center_hz) if rec.center_hz else track_pss(samples, acq)
+    return acq, cap.start_utc, track
 
 
 def _correct_rate_change(track, n_samples, fs):
@@ -250,9 +273,9 @@ class ReplayResult:
     spectrum_f_hz : ndarray, (SPECTRUM_BINS,)
     spectrum : ndarray, (SPECTRUM_BINS, n_cols)
         Mean periodograms of a subset of the blocks (after narrowing), for the figure.
-    pss : (PssAcquisition, datetime64) or None
+    pss : (PssAcquisition, datetime64, PssTrack) or None
         Full-channel OFDM recordings: the PSS acquisition on the first
-        capture and that capture's start time.
+        capture, that capture's start time and its frames tracked over it.
     cpu_s : dict
         Processor time of each stage [s]: ``blocks`` (reading, comb search
         and tracking), ``identify``, ``refit`` (the tracked blocks fitted

@@ -36,7 +36,7 @@ Left in their modules: the coarse and fine stages behind
 ``estimate_block`` (:mod:`.coarse`, :mod:`.fine`, with :mod:`.quality` for
 the status), the multi-comb machinery (:mod:`.comb_grid`, :mod:`.comb_fit`),
 the OFDM downlink (:mod:`.ofdm`, its own facade over :mod:`.ofdm_frame`,
-:mod:`.ofdm_downlink`, :mod:`.pss`), front-end cleaning and the recording
+:mod:`.ofdm_downlink`, :mod:`.pss`, :mod:`.pss_track`), front-end cleaning and the recording
 survey of ``leosop doctor`` (:mod:`.frontend`, :mod:`.survey`), recorder
 conventions (:mod:`.recorders`) and the FFTW plans (:mod:`.fft`). The
 spectrogram figure is in :mod:`leosop.plots.spectra`.

@@ -30,7 +30,7 @@ the receiver will use: an along-track time offset and a constant radial /
 cross-track shift per satellite.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -44,6 +44,7 @@ from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
 if TYPE_CHECKING:  # the orbits are imported where used (propagation is not needed to make IQ)
     from ..orbits.constellation import Constellation
+    from .ofdm import FrameTimingJumps
 
 __all__ = ["doppler_blocks", "OrbitError", "light_time_positions", "site_geometry",
            "cn0_geometry_dbhz", "inertial_speed_mps", "CN0_REF_RANGE_M", "SiteChannel"]
@@ -310,6 +311,9 @@ class SiteChannel:
         Each satellite oscillator's frequency drift: its offset at t is its
         part of ``clock_offset_hz`` plus this times t (None: no drift).
         Receivers of a base/rover pair share it, as they share the orbit.
+    frame_jumps : FrameTimingJumps, optional
+        OFDM only: frame-timing jumps, satellite i's drawn with seed
+        ``(*frame_jumps.seed, i)`` (:class:`~leosop.signal.ofdm.FrameTimingJumps`).
     """
 
     t_nodes_s: np.ndarray
@@ -322,6 +326,7 @@ class SiteChannel:
     waveform: str = "tones"
     rx_drift_hz_per_s: float = 0.0
     sat_drift_hz_per_s: np.ndarray | None = None
+    frame_jumps: "FrameTimingJumps | None" = None
 
     def __post_init__(self):
         if not np.all(np.isfinite(self.range_m)):
@@ -344,13 +349,39 @@ class SiteChannel:
         if self.waveform not in WAVEFORMS:
             raise InputError(f"waveform={self.waveform!r} must be one of {', '.join(WAVEFORMS)}")
         self._ofdm = None
+        if self.frame_jumps is not None and self.waveform != "ofdm":
+            raise InputError("frame-timing jumps need waveform='ofdm' (the tones have no frames)")
         if self.waveform == "ofdm":
             from .ofdm import OfdmDownlink
 
             band = self.sample_rate_hz - 2.0 * _MAX_OFDM_DOPPLER_HZ
             band = band if band > 0 else self.sample_rate_hz
             self._ofdm = [OfdmDownlink(self.sample_rate_hz, channel_hz=self.comb.carrier_hz, seed=i, comb=self.comb,
-                                       band_hz=band) for i in range(n_sats)]
+                                       band_hz=band, timing_jumps=self._jumps(i)) for i in range(n_sats)]
+
+    def _jumps(self, i):
+        """Satellite i's frame-timing jumps, or None."""
+        if self.frame_jumps is None:
+            return None
+        return replace(self.frame_jumps, seed=(*np.atleast_1d(self.frame_jumps.seed).tolist(), i))
+
+    def frame_jumps_truth(self, i, duration_s):
+        """Satellite i's frame-timing jumps within ``duration_s``: receive times [s] and steps [s], ((n,), (n,)).
+
+        The receive time is where the frame clock (transmit time) reaches
+        the jump: ``t - (range(t) - range(0)) / c``, solved by iteration
+        (each step divides the error by c / range rate, ~4e4).
+        """
+        link = self._ofdm[i] if self._ofdm is not None else None
+        if link is None or link.timing_jumps is None:
+            return np.zeros(0), np.zeros(0)
+        jumps = link.timing_jumps
+        tau = jumps.period_s * np.arange(1, int(np.floor(duration_s / jumps.period_s)) + 2)
+        t = tau.copy()
+        for _ in range(3):
+            t = tau + link.frame_offset_s + (self._range(t)[i] - self._range0[i]) / C_MPS
+        keep = (t >= 0) & (t < duration_s)
+        return t[keep], jumps.steps_s(tau.size)[keep]
 
     @property
     def n_subcarriers(self):

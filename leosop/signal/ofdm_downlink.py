@@ -13,6 +13,12 @@ subcarriers), as an ideal anti-alias filter at the band edge would leave them.
 Sidelobes of the rectangular symbol windows of subcarriers outside the band
 are left out. Samples are evaluated at any instants, so chunks continue
 exactly (frame data is seeded per frame index).
+
+Frame-timing jumps (:class:`FrameTimingJumps`): Qin et al. (2025) measured
+steps of hundreds of ns in the frame timing of Starlink v1.x satellites,
+about once per second. Here a step delays the frame envelope (the samples
+about the OFDM centre) from then on; the carrier runs on unchanged (the
+measurement is of timing; a jump of the carrier phase is not modelled).
 """
 
 from dataclasses import dataclass, field
@@ -38,7 +44,7 @@ from .ofdm_frame import (
 )
 from .pilot import PilotComb, comb_baseband
 
-__all__ = ["OfdmDownlink", "ofdm_baseband"]
+__all__ = ["OfdmDownlink", "FrameTimingJumps", "ofdm_baseband"]
 
 #: Frame indices are shifted by this before seeding (SeedSequence takes non-negative integers).
 _FRAME_SEED_SHIFT = 2**40
@@ -47,6 +53,46 @@ _FRAME_SEED_SHIFT = 2**40
 _N_TAYLOR = 16
 #: Up to this many subcarriers in band, samples are summed directly (Horner's rule).
 _MAX_DIRECT = 48
+
+
+@dataclass(frozen=True)
+class FrameTimingJumps:
+    """Steps of a satellite's frame timing: at frame-clock time ``j * period_s`` (j = 1, 2, ...) a N(0, sigma_s) step.
+
+    The frame clock is the transmit time from the start of frame 0
+    (:class:`OfdmDownlink`'s ``pos / FS_HZ``); a positive step delays every
+    later frame. Step j is drawn from ``default_rng((*seed, j))``, so any
+    span of the signal can be evaluated alone.
+
+    Attributes
+    ----------
+    sigma_s : float
+        Standard deviation of a step [s] (Qin et al. 2025: hundreds of ns).
+    period_s : float
+        Time between steps [s] (about 1 s in that measurement).
+    seed : tuple of int
+    """
+
+    sigma_s: float
+    period_s: float = 1.0
+    seed: tuple = (0,)
+
+    def __post_init__(self):
+        if not (np.isfinite(self.sigma_s) and self.sigma_s >= 0):
+            raise InputError(f"frame-jump sigma_s={self.sigma_s} must be a finite number >= 0")
+        if not (np.isfinite(self.period_s) and self.period_s > 0):
+            raise InputError(f"frame-jump period_s={self.period_s} must be a finite number > 0")
+
+    def steps_s(self, n):
+        """The first ``n`` steps [s], (n,)."""
+        seed = tuple(int(v) for v in np.atleast_1d(self.seed))
+        return np.array([np.random.default_rng((*seed, j)).normal(0.0, self.sigma_s) for j in range(1, int(n) + 1)])
+
+    def offset_s(self, frame_time_s):
+        """Total delay of the frames [s] at frame-clock times ``frame_time_s``, shape of the input."""
+        j = np.maximum(np.floor(np.asarray(frame_time_s, dtype=float) / self.period_s), 0).astype(np.int64)
+        n = int(j.max(initial=0))
+        return np.concatenate(([0.0], np.cumsum(self.steps_s(n))))[j]
 
 
 @dataclass(frozen=True)
@@ -73,6 +119,8 @@ class OfdmDownlink:
         (default ``sample_rate_hz``). Doppler can carry an edge subcarrier
         past +-fs/2, where it wraps as in any complex sampler: take
         ``band_hz < sample_rate_hz - 2 max|Doppler|`` to avoid that.
+    timing_jumps : FrameTimingJumps or None
+        Steps of the frame timing (None: none).
     """
 
     sample_rate_hz: float
@@ -82,6 +130,7 @@ class OfdmDownlink:
     subcarrier_amplitude: float = 1.0
     comb: PilotComb | None = field(default_factory=PilotComb)
     band_hz: float | None = None
+    timing_jumps: FrameTimingJumps | None = None
 
     def __post_init__(self):
         if not (np.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
@@ -145,7 +194,12 @@ class OfdmDownlink:
         clock = np.broadcast_to(np.asarray(clock_cycles, dtype=float), t.shape)
         # Transmit time in samples of FS_HZ from the start of frame 0.
         pos = (t - self.frame_offset_s) * FS_HZ + g * (FS_HZ / self.channel_hz)
+        # OFDM centre at +F/2 on the carrier's clock: F/2 * FRAME_SAMPLES / FS_HZ = 156.25 cycles per frame.
         frame_idx = np.floor(pos / FRAME_SAMPLES).astype(np.int64)
+        centre_cycles = 0.25 * np.mod(frame_idx, 4) + (pos - frame_idx * FRAME_SAMPLES) / (2.0 * N_FFT)
+        if self.timing_jumps is not None:  # the envelope moves, the carrier does not
+            pos = pos - FS_HZ * self.timing_jumps.offset_s(pos / FS_HZ)
+            frame_idx = np.floor(pos / FRAME_SAMPLES).astype(np.int64)
         p = pos - frame_idx * FRAME_SAMPLES
         sym = np.minimum(np.floor(p / N_SYMBOL).astype(np.int64), N_SYMBOLS_PER_FRAME)
         u = p - sym * N_SYMBOL - N_CP
@@ -156,8 +210,6 @@ class OfdmDownlink:
             body = self._direct(frame_idx, sym, u, live, k)
         else:
             body = self._taylor(frame_idx, sym, u, live, k)
-        # OFDM centre at +F/2: F/2 * FRAME_SAMPLES / FS_HZ = 156.25 cycles per frame.
-        centre_cycles = 0.25 * np.mod(frame_idx, 4) + p / (2.0 * N_FFT)
         cycles = centre_cycles + g + clock
         iq = self.subcarrier_amplitude * sign * body * np.exp(2j * np.pi * (cycles - np.round(cycles)) + 1j * phase_rad)
         if self.comb is not None:
@@ -211,11 +263,13 @@ class OfdmDownlink:
 
 
 def ofdm_baseband(t_s, geom_cycles, clock_cycles=0.0, *, sample_rate_hz, channel_hz=REGISTRY["starlink"].carrier_hz,
-                  frame_offset_s=0.0, seed=0, subcarrier_amplitude=1.0, comb=None, band_hz=None, phase_rad=0.0):
+                  frame_offset_s=0.0, seed=0, subcarrier_amplitude=1.0, comb=None, band_hz=None, timing_jumps=None,
+                  phase_rad=0.0):
     """Received OFDM downlink (plus the pilot comb if ``comb`` is given) at sample times ``t_s``.
 
     The functional form of :class:`OfdmDownlink` (see it for the parameters),
     beside :func:`.pilot.comb_baseband`. Returns complex128, shape (n,).
     """
-    link = OfdmDownlink(sample_rate_hz, channel_hz, frame_offset_s, seed, subcarrier_amplitude, comb, band_hz)
+    link = OfdmDownlink(sample_rate_hz, channel_hz, frame_offset_s, seed, subcarrier_amplitude, comb, band_hz,
+                        timing_jumps)
     return link.samples(t_s, geom_cycles, clock_cycles, phase_rad=phase_rad)
