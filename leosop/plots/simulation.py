@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..frames import ecef_to_enu, ecef_to_geodetic
-from ..scenarios import mask_label
+from ..apps.scenarios import mask_label
 from ..timebase import format_utc
 from .core import pyplot, save_png
 

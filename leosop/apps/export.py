@@ -31,8 +31,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from .errors import InputError
-from .timebase import format_utc
+from ..errors import InputError
+from ..timebase import format_utc
 
 __all__ = ["Layer", "to_geojson", "to_kml", "nmea_checksum", "nmea_sentence", "nmea_gga", "nmea_rmc",
            "MPS_TO_KNOTS", "KML_NS"]

@@ -5,13 +5,13 @@ import warnings
 
 import numpy as np
 
-from .. import earth, frames
-from ..constants import DAY_S
-from ..errors import InputError
-from ..fusion import aids_fix, common
-from ..ins import imu, strapdown, trajectory
+from ... import earth, frames
+from ...constants import DAY_S
+from ...errors import InputError
+from ...fusion import aids_fix, common
+from ...ins import imu, strapdown, trajectory
 from ..scenarios import scenario_tle
-from ..timebase import format_utc, seconds_since
+from ...timebase import format_utc, seconds_since
 from . import measure, sky, tight
 from .result import SimulationResult
 
@@ -78,7 +78,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
 
     Parameters
     ----------
-    scenario : leosop.scenarios.Scenario
+    scenario : leosop.apps.scenarios.Scenario
     level : {"signal", "measurement"}
     correction_period_s : float
         Seconds between EKF corrections of the INS (Table 5: 1, 30, 60, 100).
@@ -89,7 +89,7 @@ def run_scenario(scenario, *, level="signal", correction_period_s=1.0, orbit_err
         Default the scenario's (``leo.orbit_error_model``).
     seed : int
     tle : path, optional
-        Element-set file; default the scenario's (:func:`leosop.scenarios.scenario_tle`:
+        Element-set file; default the scenario's (:func:`leosop.apps.scenarios.scenario_tle`:
         a file of the data folder from ``$LEOSOP_DATA``), else the bundled constellation.
     coupling : {"loose", "tight"}
         Loose: the EKF on the snapshot fixes; tight: on each Doppler.

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .constants import DAY_S
-from .datadir import is_data_ref, resolve_data_ref
-from .constellations import REGISTRY, family
-from .errors import InputError
-from .timebase import format_utc, parse_utc
+from ..constants import DAY_S
+from ..datadir import is_data_ref, resolve_data_ref
+from ..constellations import REGISTRY, family
+from ..errors import InputError
+from ..timebase import format_utc, parse_utc
 
 __all__ = ["ImuSpec", "LeoSpec", "InitError", "Scenario", "XIAN_BAOJI", "BUILTIN", "load_scenario",
            "scenario_from_dict", "to_dict", "bundled_names", "BUNDLED_DIR", "family_masks_deg", "mask_label",
