@@ -9,6 +9,8 @@ file, its line and what it imported.
 """
 
 import ast
+import importlib
+import sys
 from pathlib import Path
 
 import pytest
@@ -19,7 +21,7 @@ PACKAGE = Path(leosop.__file__).parent
 #: The layers above the library: no library module may import them.
 UPPER = ("leosop.apps", "leosop.plots", "leosop.cli", "leosop.__main__")
 #: Deprecated aliases of moved application modules (documented import paths of 0.1.0), outside the rules.
-ALIASES = set()
+ALIASES = {"leosop.scenarios", "leosop.simulate", "leosop.export"}
 
 
 def _module(path):
@@ -96,3 +98,13 @@ def test_dependencies_point_downward(rule):
     bad = [f"{where} imports {target}" for source, where, target in EDGES if RULES[rule](source, target)]
     assert not bad, f"{rule}:\n" + "\n".join(bad)
 
+
+@pytest.mark.parametrize("alias", sorted(ALIASES))
+def test_alias_warns_and_gives_the_moved_objects(alias):
+    home = importlib.import_module(alias.replace("leosop.", "leosop.apps.", 1))
+    sys.modules.pop(alias, None)
+    with pytest.warns(DeprecationWarning, match=f"{alias} moved to {home.__name__}"):
+        module = importlib.import_module(alias)
+    assert module.__all__ == home.__all__
+    for name in home.__all__:
+        assert getattr(module, name) is getattr(home, name), name
