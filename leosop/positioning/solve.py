@@ -110,7 +110,7 @@ def satellite_states(meas: Measurements, constellation: Constellation | None = N
     source : str
         ``"csv"`` or ``"tle"``.
     """
-    if meas.pos_sv_ecef_m is not None:
+    if meas.pos_sv_ecef_m is not None and meas.vel_sv_ecef_mps is not None:  # the state columns come together
         ok = np.isfinite(meas.pos_sv_ecef_m).all(-1) & np.isfinite(meas.vel_sv_ecef_mps).all(-1)
         reason = np.where(ok, "", "satellite state column is empty or not a number")
         return meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, reason, "csv"
