@@ -32,11 +32,11 @@ import numpy as np
 from .. import frames
 from ..constants import C_MPS
 from ..errors import InputError
+from ..fusion.aids_leo import LeoOptions, leo_aids
 from ..gnss.ppp import gps_to_utc
 from ..gnss.rtklib_pos import Q_FIX
 from ..positioning import measurements as pm
 from .scenarios import XIAN_BAOJI
-from ..fusion.aids_leo import LeoOptions, leo_aids
 
 __all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "SIM_WINDOW_S", "gpst_to_utc", "read", "reference_track", "simulate",
            "to_aids"]

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps import fuse_leo
+from ..apps.export import Layer, to_geojson
 from ..constellations import REGISTRY
 from ..errors import InputError
-from ..apps.export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
-from ..apps import fuse_leo
 from ..fusion import real
 from ..fusion.aids_leo import LeoOptions
 from ..gnss import rtklib_pos

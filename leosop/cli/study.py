@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps.montecarlo import bundled_specs
+from ..apps.montecarlo.parameters import PARAMETERS
 from ..chunkstore import ChunkStore, code_digest
 from ..constellations import REGISTRY
 from ..errors import InputError
-from ..apps.montecarlo import bundled_specs
-from ..apps.montecarlo.parameters import PARAMETERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
 from ..timebase import format_utc, utc_from_seconds
 from . import add_action, add_command

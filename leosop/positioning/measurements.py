@@ -26,7 +26,6 @@ frame of the reception time (the Earth turns ``omega_e * tau`` meanwhile).
 """
 
 import csv
-import dataclasses
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -68,8 +67,8 @@ class Measurements:
         ``sigma_hz`` is NaN where not given.
     pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n, 3), or None
         From the state columns, None without them.
-    line : ndarray of int, (n,)
-        Line number of each row in the file.
+    line : ndarray of int, (n,), or None
+        Line number of each row in the file; None for a table made in code.
     pass_id : ndarray of str, (n,), or None
         From the optional ``pass_id`` column (empty fields read as ``""``).
     family : ndarray of str, (n,), or None
@@ -88,7 +87,7 @@ class Measurements:
     carrier_hz: np.ndarray
     pos_sv_ecef_m: np.ndarray | None = None
     vel_sv_ecef_mps: np.ndarray | None = None
-    line: np.ndarray = dataclasses.field(kw_only=True)  # every maker gives it; after defaulted fields
+    line: np.ndarray | None = None
     rejected: tuple = ()
     source: str = ""
     pass_id: np.ndarray | None = None

@@ -288,7 +288,7 @@ def position_static(meas: Measurements, *, constellation: Constellation | None =
     if usable.sum() < n_need:
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {n_need}"
                          + (f" (first problem: line {meas.line[~usable][0]}: {reason[~usable][0]})"
-                            if (~usable).any() else ""))
+                            if (~usable).any() and meas.line is not None else ""))
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
               clock_degree=clock_degree, side_clock_degree=side_clock_degree,
               clock_group=group if len(labels) > 1 else None)

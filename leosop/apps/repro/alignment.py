@@ -20,10 +20,10 @@ import numpy as np
 from ...constants import G0_MPS2, OMEGA_E_RAD_PER_S
 from ...earth import normal_gravity_mps2
 from ...fileio import write_csv
+from ...ins.alignment import align
 from ...plots import pyplot, save_png
 from ...rotations import euler_to_dcm
 from ..studies import map_chunks
-from ...ins.alignment import align
 
 __all__ = ["attitude_errors", "sweep", "fig2", "table1"]
 

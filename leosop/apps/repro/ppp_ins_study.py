@@ -24,12 +24,12 @@ from ...constants import G0_MPS2
 from ...datadir import ENV_VAR, data_folder
 from ...errors import InputError
 from ...fusion.common import FilterSettings, pos_jacobian
-from ...ins import error_model, strapdown
-from ...ins.imu import ImuErrors, corrupt
-from ...ins.trajectory import Segment, from_segments
 from ...gnss import ppp_ins
 from ...gnss.products import read_clk, read_sp3
 from ...gnss.simulate import SimSettings, simulate
+from ...ins import error_model, strapdown
+from ...ins.imu import ImuErrors, corrupt
+from ...ins.trajectory import Segment, from_segments
 
 __all__ = ["PAPER", "GRADES", "BUDGET_GROUPS", "filter_settings", "scenario", "outage_budget", "statistics",
            "ppp_ins_table", "format_table"]

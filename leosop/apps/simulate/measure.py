@@ -16,10 +16,10 @@ from ...geometry.doppler import doppler_jacobian, doppler_rate
 from ...orbits.visibility import compute_visibility
 from ...positioning.robust_ls import FixStatus
 from ...positioning.snapshot import solve_snapshots
-from ..scenarios import family_masks_deg, mask_label
 from ...signal.doppler import estimate_block
 from ...signal.error_model import doppler_sigma_hz
 from ...signal.pilot import add_noise, comb_baseband
+from ..scenarios import family_masks_deg, mask_label
 from .sky import above_family_masks, tracked
 
 __all__ = ["BLOCK_S", "FIX_BLOCK_EPOCHS", "SAMPLE_RATE_HZ", "SEARCH_HZ", "fix_error_model", "leo_fixes"]
