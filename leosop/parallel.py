@@ -1,6 +1,6 @@
 """Where tasks run on Dask: one client connection and one submit-and-collect loop.
 
-Every parallel study (:mod:`leosop.studies`, :mod:`leosop.montecarlo`, the
+Every parallel study (:mod:`leosop.apps.studies`, :mod:`leosop.apps.montecarlo`, the
 GDOP maps of :mod:`leosop.orbits.gridmap`, the replay batch of
 :mod:`leosop.replay.batch`) runs its tasks through :func:`run_tasks`, which
 hands each result to the caller as it finishes, so the caller stores it (and

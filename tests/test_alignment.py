@@ -9,7 +9,7 @@ from leosop.constants import G0_MPS2, OMEGA_E_RAD_PER_S
 from leosop.earth import normal_gravity_mps2
 from leosop.errors import InputError
 from leosop.ins import alignment as al
-from leosop.repro.alignment import attitude_errors, sweep
+from leosop.apps.repro.alignment import attitude_errors, sweep
 from leosop.rotations import euler_to_dcm, heading_from_yaw
 
 from conftest import data_path

@@ -18,8 +18,8 @@ import pytest
 
 from leosop.datadir import ENV_VAR, PREFIX, resolve_data_ref
 from leosop.errors import InputError
-from leosop.repro import multi
-from leosop.scenarios import BUNDLED_DIR, bundled_names, load_scenario, scenario_tle
+from leosop.apps.repro import multi
+from leosop.apps.scenarios import BUNDLED_DIR, bundled_names, load_scenario, scenario_tle
 
 from conftest import DATA_DIR, data_path
 

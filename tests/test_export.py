@@ -1,4 +1,4 @@
-"""GeoJSON, KML and NMEA writers (leosop.export) and ``leosop export``.
+"""GeoJSON, KML and NMEA writers (leosop.apps.export) and ``leosop export``.
 
 NMEA checksums are checked against published example sentences and against
 an independent XOR in this file; map files are parsed back with the standard
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
-from leosop.export import KML_NS, MPS_TO_KNOTS, Layer, nmea_checksum, nmea_gga, nmea_rmc, to_geojson, to_kml
+from leosop.apps.export import KML_NS, MPS_TO_KNOTS, Layer, nmea_checksum, nmea_gga, nmea_rmc, to_geojson, to_kml
 from leosop.frames import geodetic_to_ecef
 
 #: Printed positions keep 1e-6 arc minutes (NMEA) or 1e-9 deg (maps): 2e-8 deg covers both.
@@ -142,8 +142,8 @@ def _run(argv, capsys):
 def solution_csv(tmp_path_factory):
     """The solution.csv ``leosop simulate --out`` writes (same table), of a 30 s flight, without its figures."""
     from leosop.fileio import write_csv
-    from leosop.scenarios import scenario_from_dict
-    from leosop.simulate import run_scenario, solution_table
+    from leosop.apps.scenarios import scenario_from_dict
+    from leosop.apps.simulate import run_scenario, solution_table
 
     path = tmp_path_factory.mktemp("sim") / "solution.csv"
     result = run_scenario(scenario_from_dict({"name": "short", "duration_s": 30}), level="measurement")

@@ -17,7 +17,8 @@ from test_fuse_engine import STEP, _computed, _true_view
 
 from leosop import frames
 from leosop.constants import C_MPS
-from leosop.fusion import aids_leo, engine, leo_input
+from leosop.apps import fuse_leo
+from leosop.fusion import aids_leo, engine
 from leosop.fusion.aids import StateBlock
 from leosop.fusion.blocks import Blocks
 from leosop.fusion.common import N_INS
@@ -242,7 +243,7 @@ def test_reference_track_velocity_in_a_turn_is_the_chord_closed_form():
     n = t.size
     sol = PosSolution(1.75e9 + t, np.degrees(lat), np.degrees(lon), alt, np.ones(n, dtype=int), np.full(n, 20),
                       np.tile(np.eye(3) * 1e-4, (n, 1, 1)), None, None, "circle.pos")
-    t_s, pos, vel, valid = leo_input.reference_track(sol)
+    t_s, pos, vel, valid = fuse_leo.reference_track(sol)
     assert valid.all() and t_s[0] == 0.5 and t_s[-1] == 18.5
     np.testing.assert_allclose(pos, circle_ecef_m(t_s), rtol=0, atol=1e-6)
     a, half = rate_rad_per_s * t_s, 0.5 * rate_rad_per_s

@@ -16,7 +16,8 @@ from conftest import ESBC_CLK, ESBC_SP3
 from leosop.fusion import aids, kalman
 from leosop.fusion.aids_gnss import ZWD_KEY, PppEpoch, ambiguity_block, zwd_block
 from leosop.fusion.common import N_INS, pos_jacobian
-from leosop.gnss import ppp_ins, ppp_ins_ar, ppp_ins_study
+from leosop.apps.repro import ppp_ins_study
+from leosop.gnss import ppp_ins, ppp_ins_ar
 from leosop.gnss.products import read_clk, read_sp3
 from leosop.gnss.simulate import SimSettings
 from leosop.ins.error_model import DPOS, DV, PHI

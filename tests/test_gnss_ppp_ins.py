@@ -7,7 +7,8 @@ from conftest import ESBC_CLK, ESBC_DAY, ESBC_OBS, ESBC_SP3
 from leosop.constants import C_MPS
 from leosop.datadir import ENV_VAR
 from leosop.errors import InputError
-from leosop.gnss import ppp_ins, ppp_ins_study, ppp_ins_widelane
+from leosop.apps.repro import ppp_ins_study
+from leosop.gnss import ppp_ins, ppp_ins_widelane
 from leosop.gnss.geometry import range_and_rate
 from leosop.gnss.ppp import PppOptions, prepare
 from leosop.gnss.products import read_clk, read_sp3, read_wl_biases

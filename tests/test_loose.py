@@ -22,8 +22,8 @@ from leosop.fusion import aids_fix, common, kalman
 from leosop.fusion.aids import InsView
 from leosop.ins import imu, strapdown, trajectory
 from leosop.ins.error_model import DPOS, DV, NABLA
-from leosop.scenarios import XIAN_BAOJI
-from leosop.simulate import run_scenario
+from leosop.apps.scenarios import XIAN_BAOJI
+from leosop.apps.simulate import run_scenario
 
 ARW = np.radians(0.01) / 60.0  # 0.01 deg/sqrt(h) in rad/sqrt(s)
 VRW = 1e-5 * G0_MPS2  # 1e-5 g/sqrt(Hz) in m/s^2/sqrt(Hz)

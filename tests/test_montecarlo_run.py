@@ -13,8 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from leosop.montecarlo import METRICS, REPRODUCIBLE, chunk_runs, run_study, spec_from_dict
-from leosop.montecarlo import execute
+from leosop.apps.montecarlo import METRICS, REPRODUCIBLE, chunk_runs, run_study, spec_from_dict
+from leosop.apps.montecarlo import execute
 
 COLS = [list(METRICS).index(k) for k in REPRODUCIBLE]
 

@@ -7,12 +7,12 @@ import pytest
 
 from leosop.chunkstore import PACKAGE_DIR, code_digest
 from leosop.errors import InputError
-from leosop.montecarlo import IMU_GRADES, METRICS, bundled_specs, load_spec, run_seeds, spec_from_dict, to_dataset
-from leosop.montecarlo import spec as spec_module
-from leosop.montecarlo.parameters import apply
+from leosop.apps.montecarlo import IMU_GRADES, METRICS, bundled_specs, load_spec, run_seeds, spec_from_dict, to_dataset
+from leosop.apps.montecarlo import spec as spec_module
+from leosop.apps.montecarlo.parameters import apply
 from leosop.constellations import REGISTRY
-from leosop.scenarios import XIAN_BAOJI, load_scenario
-from leosop.repro.fusion_tables import PAPER_TABLE5, PAPER_TABLE6
+from leosop.apps.scenarios import XIAN_BAOJI, load_scenario
+from leosop.apps.repro.fusion_tables import PAPER_TABLE5, PAPER_TABLE6
 
 GOOD = {"fixed": {"level": "measurement"}, "parameters": {"correction_period_s": [1, 30]}, "n_seeds": 2}
 

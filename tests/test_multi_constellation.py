@@ -366,7 +366,7 @@ def test_cli_position_sgp4_starlink_oneweb_from_family_carriers(capsys, tmp_path
 # --- simulation with several families (issue 10) ---------------------------------------------------------------
 
 def _short(name, duration_s, **leo):
-    from leosop.scenarios import load_scenario
+    from leosop.apps.scenarios import load_scenario
 
     sc = load_scenario(name)
     return dataclasses.replace(sc, duration_s=duration_s, leo=dataclasses.replace(sc.leo, **leo))
@@ -417,8 +417,8 @@ def test_each_family_tracked_above_its_own_mask():
     # here from the propagated satellites, epoch by epoch.
     from leosop.frames import azimuth_elevation_range
     from leosop.orbits.propagate import state_ecef
-    from leosop.simulate import run_scenario
-    from leosop.simulate.sky import transmitters
+    from leosop.apps.simulate import run_scenario
+    from leosop.apps.simulate.sky import transmitters
 
     sc = _short("xian-baoji-multi", 120.0, constellations=("starlink", "iridium"), mask_deg_by_family={"iridium": 15})
     sc = dataclasses.replace(sc, start_utc=np.datetime64("2025-01-01T17:28:00", "ns"))
@@ -453,7 +453,7 @@ def test_loose_fixes_follow_the_mixed_rank_rule():
     # [Shen 2024] Fig. 9) with OneWeb added: a fix needs 6 + k satellites of
     # k families, not 7 Starlink. Where Starlink alone has 6 and OneWeb adds
     # some, a fix must exist; everywhere the fix exists only if the rule holds.
-    from leosop.simulate import run_scenario
+    from leosop.apps.simulate import run_scenario
 
     r = run_scenario(_short("xian-baoji-multi", 440.0, constellations=("starlink", "oneweb")),
                      level="measurement", seed=0)
@@ -471,7 +471,7 @@ def test_tight_updates_where_loose_has_no_fix():
     # is in view and must beat the INS by far: measured 4.6 m against 834 m
     # over 782 s; over 200 s the INS drifts ~60 m and tight stays within a
     # few metres, so a 5x margin holds for any seed.
-    from leosop.simulate import run_scenario
+    from leosop.apps.simulate import run_scenario
 
     sc = _short("urban-canyon", 200.0)
     loose = run_scenario(sc, level="measurement", seed=1, coupling="loose")
@@ -486,7 +486,7 @@ def test_tight_updates_where_loose_has_no_fix():
 def test_outage_keeps_the_highest_satellite_and_tight_updates_with_it():
     # One satellite tracked for a minute: no fix, but a tight update at every
     # epoch with its single Doppler.
-    from leosop.simulate import run_scenario
+    from leosop.apps.simulate import run_scenario
 
     sc = _short("outage", 320.0, outage_s=(200.0, 260.0), outage_max_sats=1)
     r = run_scenario(sc, level="measurement", seed=0, coupling="tight")
@@ -502,8 +502,8 @@ def test_tight_mixed_families_filter_is_consistent():
     # alone (tools/multi_constellation_goals.py runs 20 full flights).
     from consistency import assert_filter_consistent
 
-    from leosop.repro.multi import lag_pairs
-    from leosop.simulate import run_scenario
+    from leosop.apps.repro.multi import lag_pairs
+    from leosop.apps.simulate import run_scenario
 
     sc = _short("xian-baoji-multi", 100.0)
     runs = [run_scenario(sc, level="measurement", seed=s, coupling="tight") for s in range(6)]
@@ -513,7 +513,7 @@ def test_tight_mixed_families_filter_is_consistent():
 
 
 def test_simulate_mixed_scenario_names_the_fusion_and_draws_the_families(capsys, tmp_path):
-    from leosop.scenarios import BUNDLED_DIR
+    from leosop.apps.scenarios import BUNDLED_DIR
 
     doc = json.loads((BUNDLED_DIR / "xian-baoji-multi.json").read_text())
     doc["duration_s"] = 120

@@ -17,8 +17,8 @@ import pytest
 
 from leosop import fileio
 from leosop.cli import main
-from leosop.repro import doppler_tables, fusion_tables, run_target
-from leosop.scenarios import XIAN_BAOJI
+from leosop.apps.repro import doppler_tables, fusion_tables, run_target
+from leosop.apps.scenarios import XIAN_BAOJI
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from leosop.errors import InputError
 from leosop.orbits import read_omm
-from leosop.scenarios import load_scenario
+from leosop.apps.scenarios import load_scenario
 from leosop.signal.iq import open_sigmf
 
 MANY = settings(max_examples=100, deadline=None, database=None,

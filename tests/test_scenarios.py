@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from leosop.errors import InputError
-from leosop.scenarios import XIAN_BAOJI, load_scenario, scenario_from_dict, to_dict
+from leosop.apps.scenarios import XIAN_BAOJI, load_scenario, scenario_from_dict, to_dict
 
 
 def test_xian_baoji_carries_shen2024_table1_and_section_4_1():
@@ -111,7 +111,7 @@ def test_bad_multi_constellation_keys_name_the_field(leo, words):
 
 
 def test_family_masks_default_to_the_scenario_mask():
-    from leosop.scenarios import family_masks_deg, mask_label
+    from leosop.apps.scenarios import family_masks_deg, mask_label
 
     s = scenario_from_dict({"mask_deg": 35, "leo": {"constellations": ["starlink", "iridium", "orbcomm"],
                                                     "mask_deg_by_family": {"iridium": 15, "orbcomm": 10.5}}})
@@ -123,7 +123,7 @@ def test_family_masks_default_to_the_scenario_mask():
 
 
 def test_bundled_scenarios_load_by_name_and_resolve_their_tle():
-    from leosop.scenarios import bundled_names
+    from leosop.apps.scenarios import bundled_names
 
     assert {"xian-baoji", "xian-baoji-multi", "high-latitude", "urban-canyon", "outage"} <= set(bundled_names())
     s = load_scenario("high-latitude")

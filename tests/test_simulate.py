@@ -3,22 +3,23 @@
 import numpy as np
 import pytest
 
-from leosop import frames, simulate
-from leosop.simulate import measure, sky
+from leosop import frames
+from leosop.apps import simulate
+from leosop.apps.simulate import measure, sky
 from leosop.constants import C_MPS
 from leosop.fusion import aids_fix
 from leosop.fusion.aids import InsView
 from leosop.fusion.common import N_INS
 from leosop.ins import strapdown
 from leosop.ins import trajectory
-from leosop.montecarlo.parameters import apply
-from leosop.montecarlo.spec import load_spec
+from leosop.apps.montecarlo.parameters import apply
+from leosop.apps.montecarlo.spec import load_spec
 from leosop.constellations import REGISTRY
 from leosop.orbits.visibility import compute_visibility
 from leosop.geometry.doppler import doppler_jacobian
 from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.snapshot import solve_snapshots
-from leosop.scenarios import XIAN_BAOJI
+from leosop.apps.scenarios import XIAN_BAOJI
 
 
 #: Receiver offsets of the case below by family (Starlink, Orbcomm, OneWeb) [Hz]; Orbcomm never rises.
@@ -143,9 +144,9 @@ def test_imu_made_in_blocks_gives_the_same_run_as_one_block(monkeypatch):
         out.update({"fused." + f.name: getattr(res.fused, f.name) for f in dataclasses.fields(res.fused)})
         return {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
 
-    monkeypatch.setattr("leosop.simulate.run.IMU_BLOCK_STEPS", 1000)  # one block for the whole run
+    monkeypatch.setattr("leosop.apps.simulate.run.IMU_BLOCK_STEPS", 1000)  # one block for the whole run
     one = arrays(simulate.run_scenario(sc, level="measurement", seed=3))
-    monkeypatch.setattr("leosop.simulate.run.IMU_BLOCK_STEPS", 7)
+    monkeypatch.setattr("leosop.apps.simulate.run.IMU_BLOCK_STEPS", 7)
     blocks = arrays(simulate.run_scenario(sc, level="measurement", seed=3))
     assert one.keys() == blocks.keys() and "fused.lat_rad" in one
     for k in one:

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from leosop.parallel import run_tasks
-from leosop.repro.alignment import sweep
-from leosop.studies import chunk_generators, map_chunks
+from leosop.apps.repro.alignment import sweep
+from leosop.apps.studies import chunk_generators, map_chunks
 
 
 def _draw(chunk, rng):

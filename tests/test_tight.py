@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from consistency import assert_filter_consistent
-from leosop.scenarios import XIAN_BAOJI
-from leosop.simulate import run_scenario
+from leosop.apps.scenarios import XIAN_BAOJI
+from leosop.apps.simulate import run_scenario
 
 # The tight filter's own loop (fusion/tight.run, until issue 21) on these runs, seed 0, measurement level:
 # mean, max and last 3D position error [m], mean velocity error [m/s], NIS sum, its dof, updates and

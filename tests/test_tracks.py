@@ -10,7 +10,7 @@ from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.replay.tracks import Detections, Tracker
 from leosop.signal.channel import SiteChannel, site_geometry
-from leosop.scenarios import XIAN_BAOJI
+from leosop.apps.scenarios import XIAN_BAOJI
 
 
 def _passes(n_sats, duration_s, step_s):

@@ -36,7 +36,7 @@ def test_bundled_families_are_the_published_walker_stars():
     # Published plane spacing (Iridium: 31.6 deg, 22 deg across the seam; OneWeb: 15.225 deg,
     # 12.525 deg across the seam): the node of plane p is p times the spacing, so the
     # northbound half of the last plane and the southbound half of the first are the seam apart.
-    from leosop.simulate.sky import FAMILIES_TLE
+    from leosop.apps.simulate.sky import FAMILIES_TLE
 
     const = load_constellation(FAMILIES_TLE)
     for family, n_planes, spacing_deg, seam_deg in (("iridium", 6, 31.6, 22.0), ("oneweb", 12, 15.225, 12.525)):

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from leosop.ins.alignment import align
-from leosop.repro.alignment import _grid, sweep
+from leosop.apps.repro.alignment import _grid, sweep
 
 
 def _per_shot_loop(n_shots, rng):

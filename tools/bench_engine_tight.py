@@ -1,7 +1,7 @@
 """Benchmark: the engine's tight coupling alone (``simulate --coupling tight``'s filter), one BLAS thread and two.
 
-The inputs of :func:`leosop.simulate.tight.run` are made once by
-:func:`leosop.simulate.run_scenario` (measurement level, seed 0; its tight
+The inputs of :func:`leosop.apps.simulate.tight.run` are made once by
+:func:`leosop.apps.simulate.run_scenario` (measurement level, seed 0; its tight
 filter is intercepted, not run) and pickled to a temporary file; a child
 process per BLAS thread count (``OPENBLAS_NUM_THREADS``, read when numpy
 loads) then times the filter alone, best of ``--repeat`` runs, and prints
@@ -35,9 +35,9 @@ class _Captured(Exception):
 
 def capture(scenario_name, path):
     """Run the scenario up to its tight filter and pickle the filter's arguments to ``path``."""
-    from leosop import simulate
-    from leosop.simulate import tight
-    from leosop.scenarios import load_scenario
+    from leosop.apps import simulate
+    from leosop.apps.simulate import tight
+    from leosop.apps.scenarios import load_scenario
 
     def stand_in(*args, **kwargs):
         with open(path, "wb") as f:
@@ -55,7 +55,7 @@ def capture(scenario_name, path):
 
 def time_filter(path, repeat):
     """Best wall time of the tight filter on the pickled inputs, and a digest of its result."""
-    from leosop.simulate import tight
+    from leosop.apps.simulate import tight
 
     with open(path, "rb") as f:
         args, kwargs = pickle.load(f)

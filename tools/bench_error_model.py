@@ -13,7 +13,7 @@ import numpy as np
 import scipy.linalg
 
 from leosop.ins import error_model as em
-from leosop.repro.error_model import _chu2009_rolling
+from leosop.apps.repro.error_model import _chu2009_rolling
 
 
 def main():

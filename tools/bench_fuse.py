@@ -28,7 +28,7 @@ the exact one of the reference track (no noise, offsets or orbit errors;
 sigmas kept), to tell the measurement errors from the rest. ``--leo-window S``
 (with ``--leo-sim``): the LEO aids model each Doppler as the mean velocity
 over an integration of S seconds (``LeoOptions.window_s``; default the
-simulation's own, ``leo_input.SIM_WINDOW_S`` = 1 s, as ``leosop fuse
+simulation's own, ``fuse_leo.SIM_WINDOW_S`` = 1 s, as ``leosop fuse
 --leo-sim``); 0: the velocity at its time.
 """
 
@@ -47,7 +47,8 @@ import numpy as np
 
 from leosop import frames
 from leosop.constants import C_MPS
-from leosop.fusion import leo_input, real
+from leosop.apps import fuse_leo
+from leosop.fusion import real
 from leosop.fusion.aids_leo import LeoOptions
 from leosop.gnss.rtklib_pos import read_pos
 from leosop.ins import imu_io
@@ -90,8 +91,8 @@ def _horiz_errors(t_s, lat_deg, lon_deg, alt_m, sol, t0, outages):
 
 
 def _exact(meas, sol):
-    """``meas`` with the Doppler of :func:`leo_input.reference_track` at its rows, no errors."""
-    t_s, pos, vel, _ = leo_input.reference_track(sol)
+    """``meas`` with the Doppler of :func:`fuse_leo.reference_track` at its rows, no errors."""
+    t_s, pos, vel, _ = fuse_leo.reference_track(sol)
     k = np.searchsorted(t_s, meas.t_s)
     rate = frames.range_rate(meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, pos[k], vel[k])
     return dataclasses.replace(meas, doppler_hz=-rate * meas.carrier_hz / C_MPS)
@@ -106,8 +107,8 @@ def ours(data, name, length_s, leo_sim=False, leo_exact=False, leo_window_s=None
     t = time.perf_counter()
     extra = ()
     if leo_sim:
-        meas = leo_input.simulate(sol, seed=0)
-        extra = leo_input.to_aids(_exact(meas, sol) if leo_exact else meas, sol, opts.lever_arm_b_m,
+        meas = fuse_leo.simulate(sol, seed=0)
+        extra = fuse_leo.to_aids(_exact(meas, sol) if leo_exact else meas, sol, opts.lever_arm_b_m,
                                   LeoOptions(window_s=leo_window_s or None))[0]
     run = real.fuse(log, sol, opts, imu_time_offset_s=offset, extra_aids=extra)
     errs, _ = real.outage_errors(run, sol, opts)
@@ -235,7 +236,7 @@ def main(argv=None):
     ap.add_argument("--logs", nargs="+", choices=tuple(LOGS), default=tuple(LOGS))
     ap.add_argument("--leo-sim", action="store_true", help="GNSS-only against GNSS + simulated LEO Doppler")
     ap.add_argument("--leo-exact", action="store_true", help="with --leo-sim: the exact Doppler, no errors")
-    ap.add_argument("--leo-window", type=float, metavar="S", default=leo_input.SIM_WINDOW_S,
+    ap.add_argument("--leo-window", type=float, metavar="S", default=fuse_leo.SIM_WINDOW_S,
                     help="with --leo-sim: the Doppler as an S s mean (default %(default)s; 0: instantaneous)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)

@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from leosop.montecarlo import REPRODUCIBLE, METRICS, load_spec, run_study, spec_from_dict
-from leosop.scenarios import to_dict
+from leosop.apps.montecarlo import REPRODUCIBLE, METRICS, load_spec, run_study, spec_from_dict
+from leosop.apps.scenarios import to_dict
 
 
 def _peak_rss_mb():

@@ -1,6 +1,6 @@
 """Tight PPP/INS on the simulated car over many seeds: NEES of the float position, fixed/float RMS, first fix, outage.
 
-For each seed: one run of ``leosop.gnss.ppp_ins_study.scenario`` (real GRG orbits/clocks, 1 Hz GPS,
+For each seed: one run of ``leosop.apps.repro.ppp_ins_study.scenario`` (real GRG orbits/clocks, 1 Hz GPS,
 fog-grade IMU by default). Float-position NEES (3 dof, ENU) averaged over the seeds at every epoch after
 the first 5 min; a consistent filter gives 3, and the 95% band of the mean of N seeds is
 chi2(3N)/N. Baseline in the same run: the INS alone (no GNSS after the first epoch) is not printed here
@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from leosop.frames import C_e_n, ecef_to_geodetic  # noqa: E402
-from leosop.gnss import ppp_ins_study  # noqa: E402
+from leosop.apps.repro import ppp_ins_study  # noqa: E402
 
 
 def main():

@@ -1,6 +1,6 @@
 """Tight PPP/INS through a 60 s GNSS outage on the simulated car: drift, wide-lane and narrow-lane re-fix.
 
-For each seed and IMU grade: one run of ``leosop.gnss.ppp_ins_study.scenario`` (real GRG orbits/clocks,
+For each seed and IMU grade: one run of ``leosop.apps.repro.ppp_ins_study.scenario`` (real GRG orbits/clocks,
 1 Hz GPS, every arc restarts after the outage, so all ambiguities are new floats) with the default options
 (changed by ``--set``) and, as the baseline in the same run, with ``--baseline`` (default: no wide-lane from
 the INS geometry after the outage, ``wl_inertial=False``). Printed per run and as median / worst over the
@@ -21,7 +21,7 @@ Beside them, the closed form of the horizontal drift from gyro angle random walk
 
 With ``--budget``, the error budget of the first seed's outage (main options): the filter's INS-error
 covariance at the first outage epoch (``PppInsResult.cov_ins``) propagated to the last one along the true
-trajectory (:func:`leosop.gnss.ppp_ins_study.outage_budget`), the 1-sigma ENU drift each group of initial
+trajectory (:func:`leosop.apps.repro.ppp_ins_study.outage_budget`), the 1-sigma ENU drift each group of initial
 errors and each sensor's noise would give alone, the total (correlations included) and the filter's own
 sigma there. Tilt and horizontal accelerometer bias are anti-correlated after the GNSS aiding (what the
 position sees is their sum), so they are shown together and alone.
@@ -42,7 +42,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from leosop.constants import G0_MPS2  # noqa: E402
-from leosop.gnss import ppp_ins, ppp_ins_study  # noqa: E402
+from leosop.apps.repro import ppp_ins_study  # noqa: E402
+from leosop.gnss import ppp_ins  # noqa: E402
 
 OUTAGE_S = 60.0
 

@@ -5,7 +5,7 @@ leg flown on beyond Baoji), run at measurement level as a child process
 ``python -m leosop simulate --scenario FILE --level measurement --json``;
 its peak resident set size from ``os.wait4``'s rusage (``ru_maxrss``, kB
 on Linux). Printed beside it: what a run needs to keep, the bytes of the
-numpy arrays held by its :class:`leosop.simulate.SimulationResult` (1 Hz
+numpy arrays held by its :class:`leosop.apps.simulate.SimulationResult` (1 Hz
 outputs), in all and per fix epoch; the 100 Hz truth and IMU, and the
 Doppler and snapshot fixes, are made and consumed a block at a time, so a
 flat memory means the peak grows by no more than that. ``peak_ratio`` is
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from leosop.scenarios import XIAN_BAOJI
+from leosop.apps.scenarios import XIAN_BAOJI
 
 
 def peak_rss_kb(scenario_file):
@@ -58,7 +58,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--durations-s", type=float, nargs="+", default=[3600.0, 21600.0])
     a = ap.parse_args()
-    from leosop.simulate import run_scenario
+    from leosop.apps.simulate import run_scenario
 
     print(f"{'duration_s':>10} {'peak_rss_MB':>11} {'peak_ratio':>10} {'result_MB':>9} {'result_B_per_epoch':>18} "
           f"{'runtime_s':>9}")

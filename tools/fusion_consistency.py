@@ -1,7 +1,7 @@
 """Filter consistency of the simulate pipeline over many seeds (issue 6 goal).
 
 Runs the default xian-baoji flight at measurement level for N seeds with
-both couplings (Dask-parallel through leosop.studies) and prints, per
+both couplings (Dask-parallel through leosop.apps.studies) and prints, per
 coupling: mean fused errors, mean NEES of position and velocity per
 dimension (goal: within [0.5, 2]), NIS per degree of freedom with its 99 %
 interval, and the lag-1 correlation of the whitened innovations (loose: the
@@ -23,9 +23,9 @@ import dataclasses
 import numpy as np
 from scipy import stats
 
-from leosop.scenarios import XIAN_BAOJI
-from leosop.simulate import metrics, run_scenario
-from leosop.studies import map_chunks
+from leosop.apps.scenarios import XIAN_BAOJI
+from leosop.apps.simulate import metrics, run_scenario
+from leosop.apps.studies import map_chunks
 
 
 def one(chunk, rng):

@@ -144,7 +144,7 @@ def _measurements(tmp, data):
 
 
 def _scenario(tmp, data):
-    from leosop.scenarios import load_scenario
+    from leosop.apps.scenarios import load_scenario
 
     load_scenario(_write(tmp, "scenario.json", data))
 
@@ -251,7 +251,8 @@ def main():
 
     with atheris.instrument_imports(include=["leosop", "sigmf"]):
         for module in ("leosop.gnss.products", "leosop.gnss.rinex", "leosop.ins.imu_io", "leosop.orbits",
-                       "leosop.positioning.measurements", "leosop.scenarios", "leosop.signal.iq", "sigmf.sigmffile"):
+                       "leosop.positioning.measurements", "leosop.apps.scenarios", "leosop.signal.iq",
+                       "sigmf.sigmffile"):
             importlib.import_module(module)
     out = CORPUS / target
     # One scratch directory per target, emptied at start (libFuzzer exits without Python's clean-up).

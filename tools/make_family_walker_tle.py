@@ -29,7 +29,7 @@ import numpy as np
 
 from leosop.fileio import atomic_path
 from leosop.orbits.walker import Shell, format_tle, walker_delta
-from leosop.simulate.sky import FAMILIES_TLE
+from leosop.apps.simulate.sky import FAMILIES_TLE
 
 EPOCH_UTC = np.datetime64("2025-01-01T00:00:00")
 FAMILIES = (

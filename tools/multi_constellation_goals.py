@@ -2,8 +2,8 @@
 
 Runs the bundled degraded-sky scenarios (leosop/data/scenarios) at
 measurement level, N seeds each, loose and tight, with every family and with
-Starlink alone (leosop.repro.multi.run_case; Dask-parallel through
-leosop.studies), and prints
+Starlink alone (leosop.apps.repro.multi.run_case; Dask-parallel through
+leosop.apps.studies), and prints
 
 - high latitude (68 N, 25 deg mask, real 2021-08-06 snapshot; skipped when
   the data folder, $LEOSOP_DATA, lacks it): fused mean errors, availability, INS alone
@@ -26,9 +26,9 @@ import argparse
 import numpy as np
 from scipy import stats
 
-from leosop.repro.multi import available, run_case
-from leosop.scenarios import load_scenario, scenario_tle
-from leosop.studies import map_chunks
+from leosop.apps.repro.multi import available, run_case
+from leosop.apps.scenarios import load_scenario, scenario_tle
+from leosop.apps.studies import map_chunks
 
 COUPLINGS = ("loose", "tight")
 NAMES = ("high-latitude", "xian-baoji-multi", "outage", "urban-canyon")

@@ -13,7 +13,7 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from leosop.repro.doppler_tables import format_table, table2, table3  # noqa: E402
+from leosop.apps.repro.doppler_tables import format_table, table2, table3  # noqa: E402
 
 
 def main():

@@ -17,7 +17,7 @@ import numpy as np
 from leosop.frames import azimuth_elevation_range, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
-from leosop.scenarios import XIAN_BAOJI
+from leosop.apps.scenarios import XIAN_BAOJI
 
 
 def flight_ecef_m(scenario, n_epochs):

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps.export import Layer, nmea_gga, nmea_rmc, to_geojson, to_kml
 from ..errors import InputError
-from ..export import Layer, nmea_gga, nmea_rmc, to_geojson, to_kml
 from ..fileio import atomic_files, json_text
 from ..frames import ecef_to_geodetic
 from ..orbits import load_constellation

@@ -20,11 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps import fuse_leo
+from ..apps.export import Layer, to_geojson
 from ..constellations import REGISTRY
 from ..errors import InputError
-from ..export import Layer, to_geojson
 from ..fileio import atomic_outputs, check_input_file, write_csv, write_json
-from ..fusion import leo_input, real
+from ..fusion import real
 from ..fusion.aids_leo import LeoOptions
 from ..gnss import rtklib_pos
 from ..ins import flight_mat, imu_io
@@ -68,7 +69,7 @@ def register(subparsers):
     p.add_argument("--leo-window-s", type=float, metavar="S",
                    help="model each LEO Doppler as the antenna's mean velocity over an integration of S seconds "
                         "centred on its time (0: the velocity at its time); default 0 for --leo, and for --leo-sim "
-                        f"its rows' own integration, {leo_input.SIM_WINDOW_S:g} s")
+                        f"its rows' own integration, {fuse_leo.SIM_WINDOW_S:g} s")
     p.add_argument("--coupling", choices=("loose", "tight"), default="tight",
                    help="LEO coupling: tight (each Doppler an aid, default); loose is not yet supported")
     p.add_argument("--outage", action="append", default=[], metavar="START_S,DURATION_S",
@@ -211,17 +212,17 @@ def run(args):
     t_start = time.perf_counter()
     leo = None
     if args.leo:
-        leo = leo_input.read(args.leo, sol, tle=args.tle)
+        leo = fuse_leo.read(args.leo, sol, tle=args.tle)
     elif args.leo_sim:
         try:
-            leo = leo_input.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
+            leo = fuse_leo.simulate(sol, tle=args.tle, constellations=tuple(args.constellation or ("starlink",)),
                                      seed=args.seed)
         except InputError as exc:  # the library's message does not know its aids are --leo-sim's
             raise InputError(f"--leo-sim: {exc}", param=exc.params) from exc
     window_s = args.leo_window_s
     if window_s is None:  # --leo-sim's rows are means over its chord; a table's are taken as instantaneous
-        window_s = leo_input.SIM_WINDOW_S if args.leo_sim else 0.0
-    leo_aids = [] if leo is None else leo_input.to_aids(leo, sol, options.lever_arm_b_m,
+        window_s = fuse_leo.SIM_WINDOW_S if args.leo_sim else 0.0
+    leo_aids = [] if leo is None else fuse_leo.to_aids(leo, sol, options.lever_arm_b_m,
                                                         LeoOptions(window_s=window_s or None))[0]
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s, extra_aids=leo_aids,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))

@@ -44,12 +44,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps.scenarios import XIAN_BAOJI
 from ..constellations import DEFAULT_FAMILY
 from ..errors import InputError
 from ..fileio import atomic_files, json_text
 from ..frames import azimuth_elevation_range, geodetic_to_ecef
 from ..orbits import load_constellation
-from ..scenarios import XIAN_BAOJI
 from ..signal.channel import WAVEFORMS, OrbitError, inertial_speed_mps
 from ..signal.frontend import BITS_DATATYPE, PRESETS, FrontEnd
 from ..signal.iq_write import write_sigmf_files

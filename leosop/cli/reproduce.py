@@ -1,7 +1,7 @@
 """``leosop reproduce TARGET``: a table or figure of the seed papers, ours beside theirs.
 
 The targets, their papers and functions are the registry
-:data:`leosop.repro.TARGETS`. Without ``--json`` the document is printed as
+:data:`leosop.apps.repro.TARGETS`. Without ``--json`` the document is printed as
 text: by the target module's ``format_table(doc)`` when it has one, else as a
 flat table of its ``rows``.
 """
@@ -9,7 +9,7 @@ flat table of its ``rows``.
 import argparse
 import sys
 
-from ..repro import TARGETS, flat_row, run_target, target_module
+from ..apps.repro import TARGETS, flat_row, run_target, target_module
 from . import add_command
 
 
@@ -33,7 +33,7 @@ def register(subparsers):
 
 
 def run(args):
-    # --out: NAME.json, NAME.csv and the target's figures, all or nothing (leosop.repro.run_target).
+    # --out: NAME.json, NAME.csv and the target's figures, all or nothing (leosop.apps.repro.run_target).
     return run_target(args.target, out_dir=args.out, seed=args.seed, scheduler=args.scheduler, full=args.full,
                       data_dir=args.data)
 

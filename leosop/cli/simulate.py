@@ -3,10 +3,10 @@
 import sys
 import warnings
 
-from ..fileio import atomic_outputs, write_csv, write_json
+from ..apps.scenarios import load_scenario, scenario_tle
+from ..apps.simulate import COUPLINGS, LEVELS, fusion_label, metrics, run_scenario, solution_table
 from ..datadir import ENV_VAR
-from ..scenarios import load_scenario, scenario_tle
-from ..simulate import COUPLINGS, LEVELS, fusion_label, metrics, run_scenario, solution_table
+from ..fileio import atomic_outputs, write_csv, write_json
 from . import add_command
 
 

@@ -2,7 +2,7 @@
 
 ``gdop-map``: visible count and Doppler GDOP over a global grid and time,
 ``DIR/gdop_map.nc`` and map figures. ``montecarlo SPEC``: a grid of scenario
-parameters x seeds of the ``simulate`` flight (:mod:`leosop.montecarlo`),
+parameters x seeds of the ``simulate`` flight (:mod:`leosop.apps.montecarlo`),
 ``DIR/montecarlo.nc`` and error-vs-parameter figures. Finished chunks wait in
 ``DIR/montecarlo-chunks-<digest>/`` (``DIR/gdop-map-chunks-<digest>/``) until
 the output is written, so the same command resumes an interrupted study.
@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps.montecarlo import bundled_specs
+from ..apps.montecarlo.parameters import PARAMETERS
 from ..chunkstore import ChunkStore, code_digest
 from ..constellations import REGISTRY
 from ..errors import InputError
-from ..montecarlo import bundled_specs
-from ..montecarlo.parameters import PARAMETERS
 from ..orbits.gridmap import ConstellationSource, check_grid_deg, gdop_map, write_netcdf
 from ..timebase import format_utc, utc_from_seconds
 from . import add_action, add_command
@@ -166,7 +166,7 @@ def _check_workers(n_workers):
 
 def _run_montecarlo(args):
     from ..fileio import atomic_outputs
-    from ..montecarlo import cell_table, load_spec, run_study, to_dataset, write_netcdf
+    from ..apps.montecarlo import cell_table, load_spec, run_study, to_dataset, write_netcdf
     from ..plots.montecarlo import plot_study
 
     _check_workers(args.workers)

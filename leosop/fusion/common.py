@@ -3,7 +3,7 @@
 :class:`FilterSettings` (priors and noise of the 15 INS errors of
 :mod:`leosop.ins.error_model`) with :func:`initial_covariance`, the output
 :class:`FusionResult` of simulate's loose (:func:`leosop.fusion.aids_fix.fuse`)
-and tight (:mod:`leosop.simulate.tight`) couplings, :func:`pos_jacobian`
+and tight (:mod:`leosop.apps.simulate.tight`) couplings, :func:`pos_jacobian`
 (``[dlat, dlon, dalt]`` to ENU metres), the gate and the satellites' error
 models of the LEO aids.
 """

@@ -291,7 +291,7 @@ def fuse(log, sol, options, *, imu_time_offset_s=0.0, extra_aids=(), progress=No
     imu_time_offset_s : float
         Added to the IMU time tags.
     extra_aids : sequence of leosop.fusion.aids.Aid
-        More aids on the run's clock, e.g. LEO Doppler (:mod:`leosop.fusion.leo_input`);
+        More aids on the run's clock, e.g. LEO Doppler (:mod:`leosop.apps.fuse_leo`);
         not withheld in the outages.
     progress : callable, optional
         Wraps the iterator over INS updates.

@@ -12,7 +12,7 @@ The rule: figures depend on the domain packages, never the reverse. A domain
 function that writes a figure imports its module inside the function, so
 importing a domain package never imports this one or matplotlib; matplotlib
 itself is imported only when a figure is drawn. A reproduction's figure stays
-with its target in :mod:`leosop.repro`.
+with its target in :mod:`leosop.apps.repro`.
 """
 
 from .core import pyplot, save_png

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps.scenarios import mask_label
 from ..frames import ecef_to_enu, ecef_to_geodetic
-from ..scenarios import mask_label
 from ..timebase import format_utc
 from .core import pyplot, save_png
 

@@ -11,12 +11,16 @@ and set the fix's block times back on the rows' clock.
 """
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import InputError
+from ..orbits.constellation import Constellation
 from ..timebase import format_utc, seconds_since
 from .differential import DifferentialFix, solve_differential
+from .measurements import Measurements
 from .solve import satellite_states
 
 __all__ = ["DifferentialPair", "solve_pair"]
@@ -91,7 +95,9 @@ def _check_pair(rover, base):
     return common
 
 
-def solve_pair(rover, base, base_pos_ecef_m, *, constellation=None, pos0_ecef_m=None, sigma_hz=None, **kwargs):
+def solve_pair(rover: Measurements, base: Measurements, base_pos_ecef_m: npt.ArrayLike, *,
+               constellation: Constellation | None = None, pos0_ecef_m: npt.ArrayLike | None = None,
+               sigma_hz: float | None = None, **kwargs: Any) -> DifferentialPair:
     """The rover's differential fix from two measurement tables.
 
     Parameters
@@ -121,7 +127,7 @@ def solve_pair(rover, base, base_pos_ecef_m, *, constellation=None, pos0_ecef_m=
     base, rej_b, _ = _prepared(base, constellation, base_pos, sigma_hz)
     common = _check_pair(rover, base)
     fix = solve_differential(rover, base, base_pos, pos0_ecef_m=pos0, **kwargs)
-    if rover.time_utc is not None:
+    if rover.time_utc is not None and base.time_utc is not None:  # both or neither (_check_pair)
         epoch = min(rover.time_utc.min(), base.time_utc.min())
         time_utc = epoch + np.round(np.nan_to_num(fix.t_ref_s) * 1e9).astype("timedelta64[ns]")
         t_s = seconds_since(time_utc, rover.time_utc.min())

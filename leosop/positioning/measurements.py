@@ -26,6 +26,7 @@ frame of the reception time (the Earth turns ``omega_e * tau`` meanwhile).
 """
 
 import csv
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -36,6 +37,7 @@ from ..constellations import DEFAULT_FAMILY, REGISTRY, carriers_hz
 from ..errors import InputError
 from ..fileio import check_input_file, write_csv
 from ..frames import rotate_to_later_ecef
+from ..orbits.constellation import Constellation
 from ..orbits.propagate import state_ecef_pairs
 from ..timebase import format_utc, seconds_since
 
@@ -65,8 +67,8 @@ class Measurements:
         ``sigma_hz`` is NaN where not given.
     pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n, 3), or None
         From the state columns, None without them.
-    line : ndarray of int, (n,)
-        Line number of each row in the file.
+    line : ndarray of int, (n,), or None
+        Line number of each row in the file; None for a table made in code.
     pass_id : ndarray of str, (n,), or None
         From the optional ``pass_id`` column (empty fields read as ``""``).
     family : ndarray of str, (n,), or None
@@ -78,18 +80,18 @@ class Measurements:
     """
 
     t_s: np.ndarray
-    time_utc: np.ndarray
+    time_utc: np.ndarray | None
     sat_id: np.ndarray
     doppler_hz: np.ndarray
     sigma_hz: np.ndarray
     carrier_hz: np.ndarray
-    pos_sv_ecef_m: np.ndarray = None
-    vel_sv_ecef_mps: np.ndarray = None
-    line: np.ndarray = None
+    pos_sv_ecef_m: np.ndarray | None = None
+    vel_sv_ecef_mps: np.ndarray | None = None
+    line: np.ndarray | None = None
     rejected: tuple = ()
     source: str = ""
-    pass_id: np.ndarray = None
-    family: np.ndarray = None
+    pass_id: np.ndarray | None = None
+    family: np.ndarray | None = None
 
     def __len__(self):
         return len(self.doppler_hz)
@@ -120,7 +122,8 @@ def _floats(values):
     return out, ~np.isfinite(out)
 
 
-def read_measurements(path, *, carrier_hz=None, constellation=None):
+def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None = None,
+                      constellation: Constellation | None = None) -> Measurements:
     """Read a Doppler measurement CSV (DESIGN 4.3).
 
     Parameters
@@ -186,14 +189,14 @@ def read_measurements(path, *, carrier_hz=None, constellation=None):
     if "time_utc" in col:
         text = field("time_utc")
         time_utc = np.full(len(body), np.datetime64("NaT"), dtype="datetime64[ns]")
-        for k, s in enumerate(text):
+        for i, s in enumerate(text):
             s = s[:-1] if s.endswith("Z") else s[:-6] if s.endswith("+00:00") else s
             try:
-                time_utc[k] = np.datetime64(s, "ns")
+                time_utc[i] = np.datetime64(s, "ns")
             except ValueError:
                 pass
-            if np.isnat(time_utc[k]) and reason[k] == "":
-                reason[k] = f"time_utc is {text[k]!r}, expected ISO 8601 UTC (e.g. 2024-01-02T03:04:05Z)"
+            if np.isnat(time_utc[i]) and reason[i] == "":
+                reason[i] = f"time_utc is {text[i]!r}, expected ISO 8601 UTC (e.g. 2024-01-02T03:04:05Z)"
         t_s = np.zeros(len(body))
     else:
         t_s = number("t_s")
@@ -215,13 +218,13 @@ def read_measurements(path, *, carrier_hz=None, constellation=None):
 
     # Duplicates: the same satellite at the same time; the first row is kept.
     key_time = time_utc.astype(np.int64) if time_utc is not None else t_s
-    first = {}
+    first: dict[tuple, int] = {}  # (time, sat_id) -> index of its first row
     for k in np.flatnonzero(reason == ""):
         key = (key_time[k], sat_id[k])
         if key in first:
             reason[k] = f"duplicate of line {lines[first[key]]} (same sat_id and time)"
         else:
-            first[key] = k
+            first[key] = int(k)
     ok = reason == ""
     rejected = tuple((int(lines[k]), str(reason[k])) for k in np.flatnonzero(~ok))
     if not ok.any():

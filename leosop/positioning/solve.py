@@ -110,7 +110,7 @@ def satellite_states(meas: Measurements, constellation: Constellation | None = N
     source : str
         ``"csv"`` or ``"tle"``.
     """
-    if meas.pos_sv_ecef_m is not None:
+    if meas.pos_sv_ecef_m is not None and meas.vel_sv_ecef_mps is not None:  # the state columns come together
         ok = np.isfinite(meas.pos_sv_ecef_m).all(-1) & np.isfinite(meas.vel_sv_ecef_mps).all(-1)
         reason = np.where(ok, "", "satellite state column is empty or not a number")
         return meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, reason, "csv"
@@ -288,7 +288,7 @@ def position_static(meas: Measurements, *, constellation: Constellation | None =
     if usable.sum() < n_need:
         raise InputError(f"{meas.source}: {usable.sum()} usable measurements, a static fix needs {n_need}"
                          + (f" (first problem: line {meas.line[~usable][0]}: {reason[~usable][0]})"
-                            if (~usable).any() else ""))
+                            if (~usable).any() and meas.line is not None else ""))
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable,
               clock_degree=clock_degree, side_clock_degree=side_clock_degree,
               clock_group=group if len(labels) > 1 else None)

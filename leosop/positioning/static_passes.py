@@ -24,8 +24,10 @@ Three safeguards for real passes (DopTrack, design note):
 
 from dataclasses import dataclass
 from math import comb
+from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.dop import cofactor
@@ -145,21 +147,21 @@ class PassesFix(BatchFit):
     pass_ids: np.ndarray
     t_ref_s: np.ndarray
     clock_poly_hz: np.ndarray
-    time_bias_s: np.ndarray = None
+    time_bias_s: np.ndarray | None = None
     time_offset_model: str = "inertial"
     clock: str = "per_pass"
-    rx_clock_poly_hz: np.ndarray = None
+    rx_clock_poly_hz: np.ndarray | None = None
     rx_t_ref_s: float = np.nan
-    sat_offset_hz: np.ndarray = None
-    rx_clock_polys_hz: np.ndarray = None
+    sat_offset_hz: np.ndarray | None = None
+    rx_clock_polys_hz: np.ndarray | None = None
     clock_labels: tuple = ()
-    pass_clock: np.ndarray = None
-    tau: np.ndarray = None
-    sigma_scale: np.ndarray = None
-    pass_offset_sigma_m: float = None
-    pass_offset_chi2: float = None
-    pass_offset_dof: int = None
-    pass_variance_factor: float = None
+    pass_clock: np.ndarray | None = None
+    tau: np.ndarray | None = None
+    sigma_scale: np.ndarray | None = None
+    pass_offset_sigma_m: float | None = None
+    pass_offset_chi2: float | None = None
+    pass_offset_dof: int | None = None
+    pass_variance_factor: float | None = None
 
     @property
     def clock_offset_hz(self):
@@ -200,12 +202,18 @@ def _sees(pos_ecef_m, pos_sv_ecef_m, used):
     return ~((sin_el < np.sin(np.radians(-HORIZON_TOL_DEG))) & used).any(axis=1)
 
 
-def solve_static_passes(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *,
-                        pos0_ecef_m=None, alt_m=None, alt_sigma_m=10.0, mask=None, max_iter=4000, alpha=1e-3,
-                        clock="per_pass", clock_degree=None, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ,
-                        time_bias=True, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, start_offset_m=1.0e6,
-                        ambiguity_m=10e3, clock_group=None, decorrelate=True, pass_offsets=True,
-                        orbit_sigma_rc_m=None, time_offset_model="inertial"):
+def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_sv_ecef_m: npt.ArrayLike,
+                        vel_sv_ecef_mps: npt.ArrayLike, carrier_hz: npt.ArrayLike, t_s: npt.ArrayLike,
+                        pass_id: npt.ArrayLike, *, pos0_ecef_m: npt.ArrayLike | None = None,
+                        alt_m: float | None = None, alt_sigma_m: float = 10.0, mask: npt.ArrayLike | None = None,
+                        max_iter: int = 4000, alpha: float | None = 1e-3,
+                        clock: Literal["per_pass", "common"] = "per_pass", clock_degree: int | None = None,
+                        sat_offset_sigma_hz: float = SAT_OFFSET_SIGMA_HZ, time_bias: bool = True,
+                        time_bias_sigma_s: float | None = TIME_OFFSET_SIGMA_S, start_offset_m: float = 1.0e6,
+                        ambiguity_m: float = 10e3, clock_group: npt.ArrayLike | None = None,
+                        decorrelate: bool = True, pass_offsets: bool = True,
+                        orbit_sigma_rc_m: npt.ArrayLike | None = None,
+                        time_offset_model: Literal["inertial", "earth_fixed"] = "inertial") -> PassesFix:
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has

@@ -16,13 +16,16 @@ frequency and the sample rate (:func:`~.recorders.name_metadata`).
 
 import hashlib
 import json
+import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
+import numpy.typing as npt
 
-from ..constellations import DEFAULT_FAMILY, REGISTRY
+from ..constellations import DEFAULT_FAMILY, REGISTRY, CombModel
 from ..errors import InputError
 from ..fileio import check_input_file
 from ..timebase import format_utc, parse_utc
@@ -41,6 +44,8 @@ _RAW_NAMES = {"cf32": "cf32_le", "ci16": "ci16_le", "ci8": "ci8", "cu8": "cu8"}
 CLIP_WARN_FRACTION = 1e-4
 #: Slack of the capture overlap check: writers may round core:datetime to the microsecond.
 _OVERLAP_TOL_S = 1e-6
+#: A recording's comb unless its metadata say otherwise: the default family's (Starlink's, which has one).
+_DEFAULT_COMB = cast(CombModel, REGISTRY[DEFAULT_FAMILY].comb)
 
 
 @dataclass(frozen=True)
@@ -95,8 +100,8 @@ class Recording:
     center_hz: float | None
     start_utc: np.datetime64 | None
     n_samples: int
-    n_tones: int = REGISTRY[DEFAULT_FAMILY].comb.n_tones
-    tone_spacing_hz: float = REGISTRY[DEFAULT_FAMILY].comb.tone_spacing_hz
+    n_tones: int = _DEFAULT_COMB.n_tones
+    tone_spacing_hz: float = _DEFAULT_COMB.tone_spacing_hz
     annotations: list = field(default_factory=list)
     offset_bytes: int = 0
     captures: list = field(default_factory=list)
@@ -111,7 +116,7 @@ class Recording:
     def duration_s(self):
         return self.n_samples / self.sample_rate_hz
 
-    def read(self, start, count, check_finite=True):
+    def read(self, start: int, count: int, check_finite: bool = True) -> npt.NDArray[np.complex64]:
         """Samples ``start .. start+count-1`` as complex64, shape (count,).
 
         Raises InputError if the range leaves the recording or (with
@@ -196,7 +201,7 @@ def sha512_hex(path):
     return h.hexdigest()
 
 
-def open_sigmf(meta_path, *, verify=True):
+def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Recording:
     """Open a SigMF recording (``.sigmf-meta`` beside its ``.sigmf-data``).
 
     Parameters
@@ -365,7 +370,9 @@ def _captures(raw_caps, n_samples, sample_rate_hz, meta_path):
     return out, (None if freqs[0] is None else float(freqs[0]))
 
 
-def open_raw(path, *, dtype=None, sample_rate_hz=None, center_hz=None, start=None, offset_bytes=0):
+def open_raw(path: str | os.PathLike[str], *, dtype: str | None = None, sample_rate_hz: float | None = None,
+             center_hz: float | None = None, start: str | np.datetime64 | None = None,
+             offset_bytes: int = 0) -> Recording:
     """Open a headerless interleaved I/Q file with explicit parameters.
 
     Parameters not given are taken from the file name when a recorder's

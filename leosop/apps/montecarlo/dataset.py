@@ -1,9 +1,9 @@
 """A study's results as an ``xarray.Dataset`` (parameter axes x seed) and its NetCDF file.
 
-Every metric of :data:`leosop.montecarlo.runs.METRICS` is a variable over
+Every metric of :data:`leosop.apps.montecarlo.runs.METRICS` is a variable over
 ``(axis_1, ..., axis_k, seed)`` with CF-style ``units`` and ``long_name``;
 each parameter axis is a coordinate (numbers with units, names, or lists of
-names joined by ``+``: :func:`leosop.montecarlo.parameters.label`), ``seed``
+names joined by ``+``: :func:`leosop.apps.montecarlo.parameters.label`), ``seed``
 counts 0..n-1 and ``run_seed(seed)`` is the integer each run was given. The
 normalised spec and the fixed parameters are global attributes, so a file
 says how to reproduce itself.
@@ -13,8 +13,8 @@ import json
 
 import numpy as np
 
-from .. import __version__
-from ..fileio import atomic_path
+from ... import __version__
+from ...fileio import atomic_path
 from .parameters import PARAMETERS, label
 from .runs import METRICS
 from .spec import run_seeds
@@ -27,9 +27,9 @@ def to_dataset(spec, rows):
 
     Parameters
     ----------
-    spec : leosop.montecarlo.spec.StudySpec
+    spec : leosop.apps.montecarlo.spec.StudySpec
     rows : ndarray, (n_runs, n_metrics)
-        :attr:`leosop.montecarlo.execute.StudyRun.rows`.
+        :attr:`leosop.apps.montecarlo.execute.StudyRun.rows`.
 
     Returns
     -------
@@ -42,7 +42,7 @@ def to_dataset(spec, rows):
     variables = {name: (dims, data[..., j], {"units": units, "long_name": long_name})
                  for j, (name, (units, long_name)) in enumerate(METRICS.items())}
     variables["run_seed"] = (("seed",), run_seeds(spec), {
-        "long_name": "seed given to leosop.simulate.run_scenario (child k of numpy SeedSequence(seed_root))",
+        "long_name": "seed given to leosop.apps.simulate.run_scenario (child k of numpy SeedSequence(seed_root))",
         "units": "1"})
     coords = {"seed": ("seed", np.arange(spec.n_seeds), {"long_name": "seed index", "units": "1"})}
     for name, values in spec.axes.items():

@@ -19,12 +19,12 @@ Modules: :mod:`.doppler_tables` ([Shen 2024] Tables 2-3, estimator run
 time), :mod:`.fusion_tables` ([Shen 2024] Tables 4-6, Starlink/INS),
 :mod:`.multi` (multi-constellation LEO/INS in thin skies), :mod:`.alignment`
 ([Qu 2024], coarse alignment), :mod:`.error_model` ([Chu 2009], short-time
-INS error models). [Liu 2016]'s PPP/INS study stays in
-:mod:`leosop.gnss.ppp_ins_study` and is registered here.
+INS error models), :mod:`.ppp_ins_study` ([Liu 2016], tight PPP/INS,
+simulated).
 
-Dependencies point downward only: this package imports the domain packages
-(signal, ins, fusion, gnss, ...); no domain package imports ``repro`` or
-``cli``. Target functions are imported when a target runs, so listing the
+Dependencies point downward only: this package imports the library
+(signal, ins, fusion, gnss, ...) and the other applications; only ``cli``
+imports it (tests/test_layers.py). Target functions are imported when a target runs, so listing the
 targets costs nothing.
 
 Figures: a reproduction's live in its module here, every other in
@@ -36,8 +36,8 @@ import dataclasses
 import importlib
 import inspect
 
-from ..errors import InputError
-from ..fileio import atomic_outputs, write_csv, write_json
+from ...errors import InputError
+from ...fileio import atomic_outputs, write_csv, write_json
 
 __all__ = ["Target", "TARGETS", "target_function", "target_module", "run_target", "flat_row"]
 
@@ -72,27 +72,27 @@ class Target:
 #: Registry of reproducible targets (names are part of the CLI contract).
 TARGETS = {
     "align-fig2": Target("[Qu 2024]", "Fig. 1-2", "max alignment errors vs pitch, all attitudes",
-                         "leosop.repro.alignment:fig2"),
+                         "leosop.apps.repro.alignment:fig2"),
     "align-table1": Target("[Qu 2024]", "Table 1", "turntable alignment at 80 deg pitch",
-                           "leosop.repro.alignment:table1"),
+                           "leosop.apps.repro.alignment:table1"),
     "errmodel-table3": Target("[Chu 2009]", "Table 3", "150 s errors of the 9-state error model",
-                              "leosop.repro.error_model:table3"),
+                              "leosop.apps.repro.error_model:table3"),
     "errmodel-validate": Target("[Chu 2009]", "sec. 3", "short-time error models vs strapdown",
-                                "leosop.repro.error_model:validate"),
+                                "leosop.apps.repro.error_model:validate"),
     "table2": Target("[Shen 2024]", "Table 2", "grid ML vs FMLEF (and fast) run time, N = 3e5",
-                     "leosop.repro.doppler_tables:table2"),
+                     "leosop.apps.repro.doppler_tables:table2"),
     "table3": Target("[Shen 2024]", "Table 3", "grid ML vs FMLEF (and fast) run time per block length",
-                     "leosop.repro.doppler_tables:table3"),
+                     "leosop.apps.repro.doppler_tables:table3"),
     "table4": Target("[Shen 2024]", "Table 4", "INS alone vs Starlink/INS, Xi'an-Baoji flight",
-                     "leosop.repro.fusion_tables:table4"),
+                     "leosop.apps.repro.fusion_tables:table4"),
     "table5": Target("[Shen 2024]", "Table 5", "Starlink/INS errors vs correction period",
-                     "leosop.repro.fusion_tables:table5"),
+                     "leosop.apps.repro.fusion_tables:table5"),
     "table6": Target("[Shen 2024]", "Table 6", "Starlink/INS errors vs orbit error",
-                     "leosop.repro.fusion_tables:table6"),
+                     "leosop.apps.repro.fusion_tables:table6"),
     "ppp-ins": Target("[Liu 2016]", "sec. 4", "vehicle test, simulated: float vs fixed PPP/INS",
-                      "leosop.gnss.ppp_ins_study:ppp_ins_table"),
+                      "leosop.apps.repro.ppp_ins_study:ppp_ins_table"),
     "multi": Target("[Shen 2024]", "extension", "multi-constellation LEO/INS in thin skies: loose vs tight, "
-                    "Starlink vs all", "leosop.repro.multi:multi"),
+                    "Starlink vs all", "leosop.apps.repro.multi:multi"),
 }
 
 

@@ -1,6 +1,6 @@
 """The scenario parameters a Monte Carlo study can sweep, and how each reaches a run.
 
-A parameter is either an option of :func:`leosop.simulate.run_scenario`
+A parameter is either an option of :func:`leosop.apps.simulate.run_scenario`
 (``correction_period_s``, ``orbit_error_m``, ``orbit_error_model``,
 ``coupling``, ``level``), a field of the scenario (``mask_deg``,
 ``cn0_dbhz``, the IMU figures, ... named as in the scenario file without
@@ -9,7 +9,7 @@ error figures (:data:`IMU_GRADES`). ``constellations`` is the LEO family mix
 (``leo.constellations``): each value a list of family names, e.g.
 ``[["starlink"], ["starlink", "oneweb", "iridium", "orbcomm"]]``, labelled
 ``starlink+oneweb+...`` in results (:func:`label`). Scenario fields are
-checked by :func:`leosop.scenarios.scenario_from_dict`, so a study accepts
+checked by :func:`leosop.apps.scenarios.scenario_from_dict`, so a study accepts
 exactly the values a scenario file accepts.
 """
 
@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constellations import REGISTRY
-from ..errors import InputError
-from ..fusion.common import ORBIT_MODELS
+from ...constellations import REGISTRY
+from ...errors import InputError
+from ...fusion.common import ORBIT_MODELS
 from ..scenarios import scenario_from_dict
 from ..simulate import COUPLINGS, LEVELS
 
@@ -91,7 +91,7 @@ def _params():
         Parameter("accel_bias_g", "imu", "g", "accelerometer constant bias"),
         Parameter("accel_vrw_g_per_rt_hz", "imu", "g Hz-1/2", "accelerometer velocity random walk"),
         Parameter("rate_hz", "imu", "Hz", "IMU sample rate"),
-        Parameter("imu_grade", "imu_grade", "", "IMU grade (error figures of leosop.montecarlo.IMU_GRADES)",
+        Parameter("imu_grade", "imu_grade", "", "IMU grade (error figures of leosop.apps.montecarlo.IMU_GRADES)",
                   tuple(IMU_GRADES)),
     ]
     return {q.name: q for q in p}
@@ -138,7 +138,7 @@ def apply(base, values, where):
 
     Parameters
     ----------
-    base : leosop.scenarios.Scenario
+    base : leosop.apps.scenarios.Scenario
     values : dict
         Parameter name -> checked value (:func:`check_value`).
     where : str
@@ -146,7 +146,7 @@ def apply(base, values, where):
 
     Returns
     -------
-    scenario : leosop.scenarios.Scenario
+    scenario : leosop.apps.scenarios.Scenario
     options : dict
         Keyword arguments of ``run_scenario`` (without ``seed``).
     """

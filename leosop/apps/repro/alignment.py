@@ -17,13 +17,13 @@ where the authors' institute is.
 
 import numpy as np
 
-from ..constants import G0_MPS2, OMEGA_E_RAD_PER_S
-from ..earth import normal_gravity_mps2
-from ..fileio import write_csv
-from ..plots import pyplot, save_png
-from ..rotations import euler_to_dcm
+from ...constants import G0_MPS2, OMEGA_E_RAD_PER_S
+from ...earth import normal_gravity_mps2
+from ...fileio import write_csv
+from ...ins.alignment import align
+from ...plots import pyplot, save_png
+from ...rotations import euler_to_dcm
 from ..studies import map_chunks
-from ..ins.alignment import align
 
 __all__ = ["attitude_errors", "sweep", "fig2", "table1"]
 
@@ -130,7 +130,7 @@ def sweep(pitch_deg, yaw_deg, roll_deg, *, n_shots=100, accel_sigma_mps2=1e-3 * 
     accel_sigma_mps2, gyro_sigma_rad_per_s : float
     lat_rad : float
     seed : int
-    scheduler : see :func:`leosop.studies.map_chunks`
+    scheduler : see :func:`leosop.apps.studies.map_chunks`
 
     Returns
     -------
@@ -200,7 +200,7 @@ def fig2(*, seed=0, scheduler=None, full=False, out_dir=None):
     """[Qu 2024] Fig. 1-2: maximum alignment errors versus pitch (JSON document).
 
     ``out_dir``: ``align_fig2.csv`` (one row per pitch) and the two figures
-    (the JSON document is written by :func:`leosop.repro.run_target`).
+    (the JSON document is written by :func:`leosop.apps.repro.run_target`).
 
     The default grid (14 pitches, yaw and roll every 15 deg, 100 shots) runs
     in seconds; ``full`` uses every degree of pitch and 5 deg yaw/roll steps.
@@ -235,7 +235,7 @@ def table1(*, seed=0, full=False, out_dir=None):
     with gyro 1 deg/h and accelerometer 0.1 mg errors (1 sigma per axis),
     each trial one IMU whose errors are fixed in the body frame while the
     turntable visits the 12 attitudes. ``out_dir``: ``align_table1.csv``, one
-    row per attitude (the JSON document is written by :func:`leosop.repro.run_target`).
+    row per attitude (the JSON document is written by :func:`leosop.apps.repro.run_target`).
     """
     n_shots = 10000 if full else 1000
     lat_rad = np.radians(31.5)

@@ -20,16 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import G0_MPS2
-from ..datadir import ENV_VAR, data_folder
-from ..errors import InputError
-from ..fusion.common import FilterSettings, pos_jacobian
-from ..ins import error_model, strapdown
-from ..ins.imu import ImuErrors, corrupt
-from ..ins.trajectory import Segment, from_segments
-from . import ppp_ins
-from .products import read_clk, read_sp3
-from .simulate import SimSettings, simulate
+from ...constants import G0_MPS2
+from ...datadir import ENV_VAR, data_folder
+from ...errors import InputError
+from ...fusion.common import FilterSettings, pos_jacobian
+from ...gnss import ppp_ins
+from ...gnss.products import read_clk, read_sp3
+from ...gnss.simulate import SimSettings, simulate
+from ...ins import error_model, strapdown
+from ...ins.imu import ImuErrors, corrupt
+from ...ins.trajectory import Segment, from_segments
 
 __all__ = ["PAPER", "GRADES", "BUDGET_GROUPS", "filter_settings", "scenario", "outage_budget", "statistics",
            "ppp_ins_table", "format_table"]
@@ -231,7 +231,7 @@ def ppp_ins_table(*, seed=0, full=False, out_dir=None, data_dir=None):
 
 
 def _figure(truth, res, path, seed):
-    from ..plots.ppp import ppp_ins_figure  # figures depend on gnss, not the reverse
+    from ...plots.ppp import ppp_ins_figure  # figures depend on gnss, not the reverse
 
     path.parent.mkdir(parents=True, exist_ok=True)
     t = res.t_s - res.t_s[0]

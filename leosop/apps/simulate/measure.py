@@ -9,17 +9,17 @@ import warnings
 
 import numpy as np
 
-from .. import frames
-from ..constants import C_MPS
-from ..fusion import aids_fix
-from ..geometry.doppler import doppler_jacobian, doppler_rate
-from ..orbits.visibility import compute_visibility
-from ..positioning.robust_ls import FixStatus
-from ..positioning.snapshot import solve_snapshots
+from ... import frames
+from ...constants import C_MPS
+from ...fusion import aids_fix
+from ...geometry.doppler import doppler_jacobian, doppler_rate
+from ...orbits.visibility import compute_visibility
+from ...positioning.robust_ls import FixStatus
+from ...positioning.snapshot import solve_snapshots
+from ...signal.doppler import estimate_block
+from ...signal.error_model import doppler_sigma_hz
+from ...signal.pilot import add_noise, comb_baseband
 from ..scenarios import family_masks_deg, mask_label
-from ..signal.doppler import estimate_block
-from ..signal.error_model import doppler_sigma_hz
-from ..signal.pilot import add_noise, comb_baseband
 from .sky import above_family_masks, tracked
 
 __all__ = ["BLOCK_S", "FIX_BLOCK_EPOCHS", "SAMPLE_RATE_HZ", "SEARCH_HZ", "fix_error_model", "leo_fixes"]
@@ -120,7 +120,7 @@ def fix_error_model(vis, fixes, good, sigma_hz, sigma_est_hz, pos_sv_known, carr
 def leo_fixes(scenario, constellation, family_sat, models, times_utc, t_s, pos_rx_ecef_m, vel_rx_ecef_mps,
                ins_pos_ecef_m, ins_vel_ecef_mps, sat_offset_hz, offset_max_sat_hz, orbit_err_ecef_m, *, level, coupling,
                orbit_error_m, orbit_error_model, rng_meas, progress):
-    """Steps 2-4 of :mod:`leosop.simulate`: the tracked satellites, their Doppler and the snapshot fixes.
+    """Steps 2-4 of :mod:`leosop.apps.simulate`: the tracked satellites, their Doppler and the snapshot fixes.
 
     The visible pairs are found for the whole run; the Doppler, the padded
     per-epoch arrays and the fixes are made :data:`FIX_BLOCK_EPOCHS` epochs
@@ -198,7 +198,7 @@ def _measure_and_solve(vis, epoch0, ins_pos_ecef_m, ins_vel_ecef_mps, family_sat
     per_pair : dict of ndarray, (m_b, ...)
         Loose coupling: the :class:`leosop.fusion.aids_fix.FixErrorModel` rows
         (:data:`leosop.fusion.aids_fix.PAIR_FIELDS`); tight: the
-        :data:`leosop.simulate.tight.PAIR_FIELDS`.
+        :data:`leosop.apps.simulate.tight.PAIR_FIELDS`.
     """
     pos_rx, vel_rx = vis.pos_rx_ecef_m, vis.vel_rx_ecef_mps
     n_ep = len(vis.times_utc)

@@ -18,7 +18,7 @@ A spec is a JSON object::
       "runs_per_chunk": 10                     runs per Dask task and chunk file (optional, 10)
     }
 
-Parameter names are those of :data:`leosop.montecarlo.parameters.PARAMETERS`.
+Parameter names are those of :data:`leosop.apps.montecarlo.parameters.PARAMETERS`.
 Every error is one line naming the file and the field.
 """
 
@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..chunkstore import code_digest
-from ..errors import InputError
+from ...chunkstore import code_digest
+from ...errors import InputError
 from ..scenarios import load_scenario, scenario_from_dict, to_dict
 from .parameters import PARAMETERS, apply, check_value, label
 
@@ -51,7 +51,7 @@ class StudySpec:
     Attributes
     ----------
     name, description : str
-    scenario : leosop.scenarios.Scenario
+    scenario : leosop.apps.scenarios.Scenario
         The base scenario (before ``fixed`` and the grid).
     tle : str or None
         Element-set file (absolute), None for the bundled one.

@@ -24,9 +24,9 @@ import time
 
 import numpy as np
 
-from ..chunkstore import ChunkStore
-from ..parallel import run_tasks
-from ..progress import progress
+from ...chunkstore import ChunkStore
+from ...parallel import run_tasks
+from ...progress import progress
 from .parameters import apply
 from .runs import METRICS, run_chunk
 from .spec import run_seeds
@@ -41,7 +41,7 @@ class StudyRun:
     Attributes
     ----------
     rows : ndarray, (n_runs, n_metrics)
-        One row of :data:`leosop.montecarlo.runs.METRICS` per run, C order over ``spec.shape``.
+        One row of :data:`leosop.apps.montecarlo.runs.METRICS` per run, C order over ``spec.shape``.
     n_chunks, n_resumed : int
         Chunks in the study, and those found finished in the work directory.
     elapsed_s : float
@@ -96,7 +96,7 @@ def run_study(spec, work_dir, *, scheduler=None, n_workers=None, desc="montecarl
 
     Parameters
     ----------
-    spec : leosop.montecarlo.spec.StudySpec
+    spec : leosop.apps.montecarlo.spec.StudySpec
     work_dir : path-like
         The study's chunk directory (created if needed, kept: the caller
         removes it once the final output is written).

@@ -21,9 +21,9 @@ one constellation is enough for an update, where a fix needs 6 + k.
 
 import numpy as np
 
-from ..fusion import common, engine
-from ..fusion.aids_leo import LeoOptions, leo_aids
-from ..rotations import quat_to_dcm
+from ...fusion import common, engine
+from ...fusion.aids_leo import LeoOptions, leo_aids
+from ...rotations import quat_to_dcm
 
 __all__ = ["PAIR_FIELDS", "run"]
 

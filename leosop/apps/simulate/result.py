@@ -4,9 +4,9 @@ import dataclasses
 
 import numpy as np
 
-from .. import frames
-from ..fusion import common, kalman
-from ..timebase import format_utc
+from ... import frames
+from ...fusion import common, kalman
+from ...timebase import format_utc
 
 __all__ = ["SimulationResult", "aided", "fusion_label", "metrics", "solution_table"]
 
@@ -17,7 +17,7 @@ class SimulationResult:
 
     Attributes
     ----------
-    scenario : leosop.scenarios.Scenario
+    scenario : leosop.apps.scenarios.Scenario
     level, coupling : str
     correction_period_s, orbit_error_m : float
     seed : int

@@ -1,7 +1,7 @@
 """One study run: a ``simulate`` run reduced to a row of numbers (:data:`METRICS`).
 
 Worker tasks call :func:`run_chunk` on a list of runs; everything in a run is
-plain data (a frozen :class:`leosop.scenarios.Scenario`, keyword options, an
+plain data (a frozen :class:`leosop.apps.scenarios.Scenario`, keyword options, an
 element-set path, an integer seed), so chunks pickle to any worker.
 """
 
@@ -9,13 +9,13 @@ import warnings
 
 import numpy as np
 
-from ..orbits.gridmap import GDOP_UNITS
+from ...orbits.gridmap import GDOP_UNITS
 from ..simulate import metrics, run_scenario
 
 __all__ = ["METRICS", "REPRODUCIBLE", "run_one", "run_chunk"]
 
 #: Recorded per run: name -> (units, long name). Errors are the 3D means of
-#: :func:`leosop.simulate.metrics` over the 1 Hz epochs.
+#: :func:`leosop.apps.simulate.metrics` over the 1 Hz epochs.
 METRICS = {
     "fused_pos_err_mean_m": ("m", "mean 3D position error of the fused (LEO/INS) solution"),
     "fused_vel_err_mean_mps": ("m s-1", "mean 3D velocity error of the fused solution"),

@@ -20,7 +20,7 @@ by the factor ``sin(w / 2) / (w / 2)`` (0.11 m/s at 10 m/s and 30 deg/s,
 RMS 0.04 m/s against a five-point difference of the 4 Hz fixes on the
 drive). That velocity, or an exact Doppler without offsets or noise, does
 not bring the drive's outage errors inside 3 sigma (docs/fusion-real.md). The Doppler then comes from ``simulate``'s own
-measurement level (``leosop.simulate.measure.leo_fixes``, called, not copied) with
+measurement level (``leosop.apps.simulate.measure.leo_fixes``, called, not copied) with
 the satellite offsets, orbit errors, receiver offsets, masks and C/N0 of
 the bundled ``xian-baoji`` scenario and the families asked for.
 """
@@ -32,11 +32,11 @@ import numpy as np
 from .. import frames
 from ..constants import C_MPS
 from ..errors import InputError
+from ..fusion.aids_leo import LeoOptions, leo_aids
 from ..gnss.ppp import gps_to_utc
 from ..gnss.rtklib_pos import Q_FIX
 from ..positioning import measurements as pm
-from ..scenarios import XIAN_BAOJI
-from .aids_leo import LeoOptions, leo_aids
+from .scenarios import XIAN_BAOJI
 
 __all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "SIM_WINDOW_S", "gpst_to_utc", "read", "reference_track", "simulate",
            "to_aids"]
@@ -109,7 +109,7 @@ def simulate(sol, *, tle=None, constellations=("starlink",), seed=0):
         ``time_utc`` at the reference epochs, satellite states as the
         receiver knows them (with the orbit errors), ``family`` per row.
     """
-    from ..simulate import measure, sky
+    from .simulate import measure, sky
 
     leo = dataclasses.replace(XIAN_BAOJI.leo, constellations=tuple(constellations))
     scenario = dataclasses.replace(XIAN_BAOJI, name="fuse --leo-sim", leo=leo)

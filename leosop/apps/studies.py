@@ -15,8 +15,8 @@ module-level function, or a ``functools.partial`` of one) for worker processes.
 
 import numpy as np
 
-from .parallel import run_tasks
-from .progress import progress
+from ..parallel import run_tasks
+from ..progress import progress
 
 __all__ = ["chunk_generators", "map_chunks"]
 

@@ -21,12 +21,12 @@ import time
 
 import numpy as np
 
-from ..signal.channel import doppler_blocks
-from ..signal.coarse import coarse_fft
-from ..signal.doppler import estimate_block
-from ..signal.fine import fine_fmlef, fine_ml, periodogram_grid
-from ..signal.fft import fft
-from ..signal.pilot import PilotComb
+from ...signal.channel import doppler_blocks
+from ...signal.coarse import coarse_fft
+from ...signal.doppler import estimate_block
+from ...signal.fine import fine_fmlef, fine_ml, periodogram_grid
+from ...signal.fft import fft
+from ...signal.pilot import PilotComb
 
 __all__ = ["table2", "table3", "PAPER_TABLE2", "PAPER_TABLE3"]
 

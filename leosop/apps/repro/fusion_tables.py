@@ -1,10 +1,10 @@
 """[Shen 2024] Tables 4-6 reproduced: the xian-baoji flight over several seeds, ours beside the paper's.
 
 Every table row is the mean over seeds of the mean 3D errors of
-:func:`leosop.simulate.metrics`, for both couplings (the paper's loose one and
+:func:`leosop.apps.simulate.metrics`, for both couplings (the paper's loose one and
 our tight one), at measurement level (the ``fast`` estimator's error model;
 Table 4 adds one signal-level run per coupling). Runs are independent chunks
-on :func:`leosop.studies.map_chunks` (Dask-parallel, identical serially); a
+on :func:`leosop.apps.studies.map_chunks` (Dask-parallel, identical serially); a
 seed gives the same IMU and satellite errors in every row, so rows differ
 only by what the table varies.
 
@@ -129,7 +129,7 @@ def table4(*, seed=0, scheduler=None, full=False, out_dir=None):
 
 def _plot_table4(path, series, seed):
     """INS alone and Starlink/INS (loose, tight) 3D errors against time, log scale, the paper's means marked."""
-    from ..plots import pyplot, save_png
+    from ...plots import pyplot, save_png
 
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constellations import DEFAULT_FAMILY, clock_scale, family, tone_sigma_hz
-from ..errors import InputError
-from ..orbits import Constellation, load_constellation
-from ..orbits.propagate import drop_failing
-from ..signal.pilot import PilotComb
+from ...constellations import DEFAULT_FAMILY, clock_scale, family, tone_sigma_hz
+from ...errors import InputError
+from ...orbits import Constellation, load_constellation
+from ...orbits.propagate import drop_failing
+from ...signal.pilot import PilotComb
 
 __all__ = ["FAMILIES_TLE", "above_family_masks", "family_models", "tracked", "transmitters"]
 

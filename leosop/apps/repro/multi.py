@@ -23,7 +23,7 @@ import warnings
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 from ..scenarios import load_scenario, scenario_tle
 from ..simulate import metrics, run_scenario
 from ..studies import map_chunks
@@ -52,7 +52,7 @@ def _scenario(name, sky, outage=True):
 def run_case(chunk, rng=None):
     """One run: ``chunk = (scenario name, sky, coupling, seed, outage, tle)``; ``rng`` unused (the seed is in it).
 
-    ``tle`` is the scenario's element-set file (:func:`leosop.scenarios.scenario_tle`), None for the bundled sky.
+    ``tle`` is the scenario's element-set file (:func:`leosop.apps.scenarios.scenario_tle`), None for the bundled sky.
 
     Returns
     -------

@@ -20,11 +20,11 @@ at the end ([Chu 2009] eq. 22), next to the 15-state model's.
 
 import numpy as np
 
-from ..constants import G0_MPS2
-from ..earth import radii_m
-from ..rotations import euler_to_dcm
-from ..ins import error_model as em
-from ..ins import strapdown, trajectory
+from ...constants import G0_MPS2
+from ...earth import radii_m
+from ...rotations import euler_to_dcm
+from ...ins import error_model as em
+from ...ins import strapdown, trajectory
 
 __all__ = ["table3", "validate"]
 
@@ -175,8 +175,8 @@ def validate(*, rate_hz=100.0, out_dir=None):
 
 def _write_validation(out_dir, doc, t_strapdown_s, err_strapdown, t_model_s, err9, err15):
     """``errmodel_validate.csv`` and ``.png``; errors ``[dv_enu, dpos_enu]`` (n, 6), m/s and m, per time (n,)."""
-    from ..fileio import write_csv
-    from ..plots import pyplot, save_png
+    from ...fileio import write_csv
+    from ...plots import pyplot, save_png
 
     rows = []
     quantities = (("attitude_deg", "att_err_deg"), ("velocity_mps", "vel_err_mps"), ("position_m", "pos_err_m"))
