@@ -22,8 +22,8 @@ ambiguities against it. Weighted least squares, Gauss-Newton in ``x``.
 
 Integer fixing (``integer=True``): the float double-difference ambiguities
 and their covariance go to LAMBDA
-(:func:`~leosop.gnss.lambda_.partial_fix`, ratio test of [Euler 1991],
-partial fixing) and the position is conditioned on the accepted integers.
+(:func:`~leosop.gnss.lambda_.partial_fix`: ratio test of [Euler 1991] and the
+bootstrapped success rate of [Teunissen 1998], partial fixing) and the position is conditioned on the accepted integers.
 The double differences are integers only when each receiver's phase is the
 received carrier phase up to whole cycles and a clock common to its
 satellites; a tracker whose phase starts from an arbitrary offset per
@@ -46,10 +46,13 @@ from ..errors import InputError
 from ..gnss.lambda_ import partial_fix
 from .differential import ORBIT_SIGMA_RTN_M, rtn_frames
 
-__all__ = ["CarrierFix", "RATIO_MIN", "solve_differential_carrier"]
+__all__ = ["CarrierFix", "RATIO_MIN", "SUCCESS_MIN", "solve_differential_carrier"]
 
 #: Ratio test threshold of the integer fix (second-best over best squared norm, [Euler 1991]; as the PPP-AR).
 RATIO_MIN = 3.0
+#: Least bootstrapped success rate of a fixed subset, beside the ratio test ([Teunissen 1998]; measured in
+#: tools/bench_differential_carrier.py).
+SUCCESS_MIN = 0.999
 #: Gauss-Newton stops when the position step is below this [m] (0.1 mm, far inside any sigma here).
 _XTOL_M = 1e-4
 _MAX_ITER = 10
@@ -130,7 +133,8 @@ def _check(name, a, shape):
 def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover, phase_base_cycles,
                                sigma_base_cycles, arc_base, pos_sv_rover_ecef_m, pos_sv_base_ecef_m,
                                vel_sv_ecef_mps, base_pos_ecef_m, pos0_ecef_m, *, carrier_hz,
-                               orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, integer=True, ratio_min=RATIO_MIN):
+                               orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, integer=True, ratio_min=RATIO_MIN,
+                               success_min=SUCCESS_MIN):
     """Static rover position from between-receiver carrier-phase differences.
 
     Parameters
@@ -153,7 +157,9 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
         Prior sigmas of each satellite's element-set offset (zeros: no offset states).
     integer : bool
         Try integer fixing (only when the double differences are integers, see the module).
-    ratio_min : float
+    ratio_min, success_min : float
+        Ratio test threshold and least bootstrapped success rate of a fixed subset
+        (:func:`~leosop.gnss.lambda_.partial_fix`).
 
     Returns
     -------
@@ -206,9 +212,8 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
     has_orbit = bool(np.any(prior > 0))
     n_orb = 3 * n_sats if has_orbit else 0
     n_par = 3 + n_orb + n_amb
-    C_rtn = rtn_frames(p_b, v_sv)[0]                                   # (n_sats, n_ep, 3, 3)
+    C_rtn = np.nan_to_num(rtn_frames(p_b, v_sv)[0])                    # (n_sats, n_ep, 3, 3)
     rho_b = np.linalg.norm(p_b - base, axis=-1)
-    u_b = (p_b - base) / rho_b[..., None]
     prior_w = np.zeros(n_par)
     if has_orbit:  # an axis of sigma 0 is held at zero (1 um)
         prior_w[3:3 + n_orb] = np.tile(1.0 / np.maximum(prior, 1e-6) ** 2, n_sats)
@@ -220,19 +225,24 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
     r_first -= (np.sum(w * r_first, axis=0) / np.where(sw > 0, sw, 1.0))[None, :]
     n0 = np.round(np.bincount(amb[use], weights=r_first[use], minlength=len(keys)) / counts / lam)
     y = np.where(use, y - lam * n0[np.maximum(amb, 0)], 0.0)
-    dx = np.zeros(n_par)  # offsets and ambiguities enter linearly: solved afresh each iteration
+    d = np.zeros((n_sats, 3))      # element-set offsets, relinearised (their square over the range: 0.1 mm here)
+    p_r0, rho_r0 = p_r, np.linalg.norm(p_r - x, axis=-1)
+    i_row, k_row = np.nonzero(use)
+    cols = col_of_amb[amb[i_row, k_row]]
+    real = cols >= 0
     for it in range(1, _MAX_ITER + 1):
-        rho_r = np.linalg.norm(p_r - x, axis=-1)
-        u_r = (p_r - x) / rho_r[..., None]
+        # the rover's light time from the current position, not the first guess (30 m: 0.8 mm of satellite motion)
+        off = np.einsum("skij,sj->ski", C_rtn, d)
+        q_r = p_r0 + off - v_sv * ((np.linalg.norm(p_r0 - x, axis=-1) - rho_r0) / C_MPS)[..., None]
+        q_b = p_b + off
+        rho_r, rho_b = np.linalg.norm(q_r - x, axis=-1), np.linalg.norm(q_b - base, axis=-1)
+        u_r, u_b = (q_r - x) / rho_r[..., None], (q_b - base) / rho_b[..., None]
         A = np.zeros(shape + (n_par,))
         A[..., :3] = np.where(use[..., None], -u_r, 0.0)
         if has_orbit:
             g = np.where(use[..., None], np.einsum("ski,skij->skj", u_r - u_b, C_rtn), 0.0)  # (n_sats, n_ep, 3)
             idx = 3 + 3 * np.arange(n_sats)[:, None] + np.arange(3)[None, :]
             A[np.arange(n_sats)[:, None, None], np.arange(n_ep)[None, :, None], idx[:, None, :]] = g
-        i_row, k_row = np.nonzero(use)
-        cols = col_of_amb[amb[i_row, k_row]]
-        real = cols >= 0
         A[i_row[real], k_row[real], 3 + n_orb + cols[real]] = lam
         r0 = np.where(use, y - (rho_r - rho_b), 0.0)
         # per-epoch clock eliminated: subtract each epoch's weighted mean of the rows (and of the partials)
@@ -240,17 +250,17 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
         rp = r0 - (np.sum(w * r0, axis=0) / np.where(sw > 0, sw, 1.0))[None, :]
         N = np.einsum("sk,skp,skq->pq", w, Ap, Ap) + np.diag(prior_w)
         b = np.einsum("sk,skp,sk->p", w, Ap, rp)
+        b[3:3 + n_orb] -= prior_w[3:3 + n_orb] * d.ravel()[:n_orb]
         cov = _inverse(N)
         if cov is None:
             raise InputError("the carrier-phase fix is singular: too few satellites or epochs")
-        sol = cov @ b
-        step = sol[:3]
-        x = x + step
-        dx = sol
-        if np.linalg.norm(step) < _XTOL_M:
+        dx = cov @ b                # position and offset steps, ambiguities whole
+        x = x + dx[:3]
+        d = d + dx[3:3 + n_orb].reshape(d.shape) if has_orbit else d
+        if np.linalg.norm(dx[:3]) < _XTOL_M:
             break
     res = np.where(use, rp - np.einsum("skp,p->sk", Ap, dx), np.nan)
-    chi2 = float(np.nansum(w * res**2) + np.sum(prior_w[3:3 + n_orb] * dx[3:3 + n_orb] ** 2))
+    chi2 = float(np.nansum(w * res**2) + np.sum(prior_w[3:3 + n_orb] * d.ravel()[:n_orb] ** 2))
     n_epochs = int(np.sum(np.any(use, axis=0)))
     dof = int(np.sum(use) - n_epochs - 3 - n_amb)
     a_hat = dx[3 + n_orb:]
@@ -258,7 +268,7 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
     Q_a = cov[3 + n_orb:, 3 + n_orb:]
     pos, P, status, ratio, n_fixed = x, cov[:3, :3], "float", float("nan"), 0
     if integer and n_amb > 0:
-        fixed, a_fix, ratio = partial_fix(a_hat, Q_a, ratio_min=ratio_min, min_fixed=1)
+        fixed, a_fix, ratio = partial_fix(a_hat, Q_a, ratio_min=ratio_min, min_fixed=1, success_min=success_min)
         n_fixed = int(fixed.sum())
         if n_fixed:
             f = 3 + n_orb + np.flatnonzero(fixed)
@@ -266,7 +276,7 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
             pos = x - K @ (a_hat[fixed] - a_fix[fixed])
             P = cov[:3, :3] - K @ cov[f, :3]
             status = "fixed" if n_fixed == n_amb else "partial"
-    orb = dx[3:3 + n_orb].reshape(-1, 3) if has_orbit else np.zeros((n_sats, 3))
+    orb = d
     orb_sig = np.sqrt(np.diag(cov)[3:3 + n_orb]).reshape(-1, 3) if has_orbit else np.zeros((n_sats, 3))
     return CarrierFix(
         pos_ecef_m=pos, cov=0.5 * (P + P.T), pos_float_ecef_m=x, cov_float=cov[:3, :3], status=status, ratio=ratio,
