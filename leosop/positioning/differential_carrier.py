@@ -39,6 +39,7 @@ which the per-epoch clock elimination does not model.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solve_triangular
 from scipy.stats import chi2 as chi2_dist
 
 from ..constants import C_MPS
@@ -113,14 +114,28 @@ class CarrierFix:
     iterations: int
 
 
-def _inverse(N):
-    """Inverse of the normal matrix N (p, p), scaled to a unit diagonal first (its columns span 1e-5 to 1e7); None
-    when it is singular to working precision."""
-    d = 1.0 / np.sqrt(np.diag(N))
-    Ns = N * d[:, None] * d[None, :]
-    if np.linalg.cond(Ns) > 1e12:
-        return None
-    return np.linalg.inv(Ns) * d[:, None] * d[None, :]
+def _solve(Aw, rw):
+    """Least squares of the whitened rows Aw (m, p), rw (m,) by QR (the normal matrix would square a condition
+    number of ~1e7: prior-only directions beside mm-level phase): the solution (p,) and its covariance (p, p).
+
+    Raises
+    ------
+    InputError
+        A singular design (too few satellites or epochs).
+    """
+    d = 1.0 / np.maximum(np.linalg.norm(Aw, axis=0), np.finfo(float).tiny)
+    Q, R = np.linalg.qr(Aw * d)
+    r = np.abs(np.diag(R))
+    if not r.min() > 1e-10 * r.max():
+        raise InputError("the carrier-phase fix is singular: too few satellites or epochs")
+    Rinv = solve_triangular(R, np.eye(R.shape[0]))
+    return d * (Rinv @ (Q.T @ rw)), (d[:, None] * Rinv) @ (d[:, None] * Rinv).T
+
+
+def _whole_cycles(n0, dd_keys, joint):
+    """The whole cycles taken out of each double-difference ambiguity, (n_dd,)."""
+    sd = n0[dd_keys[:, 0]] - (n0[dd_keys[:, 1]] if joint else 0.0)
+    return sd[:-1] - sd[-1]
 
 
 def _check(name, a, shape):
@@ -130,31 +145,39 @@ def _check(name, a, shape):
     return a
 
 
-def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover, phase_base_cycles,
+def solve_differential_carrier(t_s, phase_rover_cycles, sigma_rover_cycles, arc_rover, phase_base_cycles,
                                sigma_base_cycles, arc_base, pos_sv_rover_ecef_m, pos_sv_base_ecef_m,
                                vel_sv_ecef_mps, base_pos_ecef_m, pos0_ecef_m, *, carrier_hz,
-                               orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, integer=True, ratio_min=RATIO_MIN,
-                               success_min=SUCCESS_MIN):
+                               orbit_sigma_rtn_m=ORBIT_SIGMA_RTN_M, sat_clock_degree=None, integer=True,
+                               ratio_min=RATIO_MIN, success_min=SUCCESS_MIN):
     """Static rover position from between-receiver carrier-phase differences.
 
     Parameters
     ----------
+    t_s : array_like, (n_epochs,)
+        The common epochs [s], increasing.
     phase_rover_cycles, sigma_rover_cycles : array_like, (n_sats, n_epochs)
-        The rover's accumulated phase and its sigma (NaN: no phase), on common epochs.
+        The rover's accumulated phase and its sigma (NaN: no phase).
     arc_rover : array_like of int, (n_sats, n_epochs)
         Arc numbers (whole cycles continuous within an arc; negative: none).
     phase_base_cycles, sigma_base_cycles, arc_base : array_like, (n_sats, n_epochs)
         The base's, on the same epochs.
     pos_sv_rover_ecef_m, pos_sv_base_ecef_m : array_like, (n_sats, n_epochs, 3)
-        Satellite positions with each receiver's light time (rover's from ``pos0_ecef_m``).
+        Satellite positions with each receiver's light time (the rover's from ``pos0_ecef_m``).
     vel_sv_ecef_mps : array_like, (n_sats, n_epochs, 3)
-        Satellite velocities (the orbit frames).
+        Satellite velocities (orbit frames, light time).
     base_pos_ecef_m, pos0_ecef_m : array_like, (3,)
         The base's known site; the rover's first guess (within km).
     carrier_hz : float
         The phase's carrier frequency.
     orbit_sigma_rtn_m : array_like, (3,)
         Prior sigmas of each satellite's element-set offset (zeros: no offset states).
+    sat_clock_degree : int, optional
+        None: single differences. An int: the joint fit, each receiver's own
+        phase kept (its clock per epoch) and each satellite's frequency a
+        polynomial of this degree in time (so its phase one degree more;
+        one satellite's is the datum): the base at its known site sees the
+        offsets' whole range, not only their difference.
     integer : bool
         Try integer fixing (only when the double differences are integers, see the module).
     ratio_min, success_min : float
@@ -176,60 +199,69 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
                          param="phase_rover_cycles")
     shape = phr.shape
     n_sats, n_ep = shape
+    t = _check("t_s", t_s, (n_ep,))
+    if not np.all(np.diff(t) > 0):
+        raise InputError("t_s: the epochs must increase", param="t_s")
     sr = _check("sigma_rover_cycles", sigma_rover_cycles, shape)
     phb = _check("phase_base_cycles", phase_base_cycles, shape)
     sb = _check("sigma_base_cycles", sigma_base_cycles, shape)
     ar = _check("arc_rover", arc_rover, shape).astype(int)
     ab = _check("arc_base", arc_base, shape).astype(int)
-    p_r = _check("pos_sv_rover_ecef_m", pos_sv_rover_ecef_m, shape + (3,))
+    p_r0 = _check("pos_sv_rover_ecef_m", pos_sv_rover_ecef_m, shape + (3,))
     p_b = _check("pos_sv_base_ecef_m", pos_sv_base_ecef_m, shape + (3,))
     v_sv = _check("vel_sv_ecef_mps", vel_sv_ecef_mps, shape + (3,))
     base = _check("base_pos_ecef_m", base_pos_ecef_m, (3,))
     x = _check("pos0_ecef_m", pos0_ecef_m, (3,)).copy()
     lam = C_MPS / float(carrier_hz)
-
-    use = (np.isfinite(phr) & np.isfinite(phb) & (sr > 0) & (sb > 0) & (ar >= 0) & (ab >= 0)
-           & np.all(np.isfinite(p_r) & np.isfinite(p_b) & np.isfinite(v_sv), axis=-1))
-    use &= np.sum(use, axis=0)[None, :] >= 2          # an epoch's clock takes one row: two satellites needed
-    if np.sum(np.any(use, axis=0)) < 2:
+    states = np.all(np.isfinite(p_r0) & np.isfinite(p_b) & np.isfinite(v_sv), axis=-1)
+    ok_r = np.isfinite(phr) & (sr > 0) & (ar >= 0) & states
+    ok_b = np.isfinite(phb) & (sb > 0) & (ab >= 0) & states
+    both = ok_r & ok_b
+    both &= np.sum(both, axis=0)[None, :] >= 2          # an epoch's clock takes one row: two satellites needed
+    if np.sum(np.any(both, axis=0)) < 2:
         raise InputError("no double difference: fewer than two satellites with phase from both the rover and "
                          "the base at two or more epochs (no satellite in common?)")
-    sat_used = np.any(use, axis=1)
-    w = np.where(use, 1.0 / (lam**2 * (np.where(use, sr, 1.0) ** 2 + np.where(use, sb, 1.0) ** 2)), 0.0)
-    y = np.where(use, -lam * (phr - phb), 0.0)
-
-    # ambiguities: one per satellite and pair of arcs; the one with most rows is the datum
-    key = np.stack([np.broadcast_to(np.arange(n_sats)[:, None], shape), ar, ab], axis=-1)[use]
-    keys, amb_of_row, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    amb = np.full(shape, -1)
-    amb[use] = amb_of_row.ravel()
-    datum = int(np.argmax(counts))
-    n_amb = len(keys) - 1
-    col_of_amb = np.where(np.arange(len(keys)) < datum, np.arange(len(keys)), np.arange(len(keys)) - 1)
-    col_of_amb[datum] = -1
-
+    rows = _rows(lam, phr, sr, ar, phb, sb, ab, ok_r, ok_b, both, joint=sat_clock_degree is not None)
+    use, y, w, key, col, combos, dd_keys, datum_sat = rows
+    n_amb = combos.shape[1]
+    cr, cb = (np.array([1.0]), np.array([-1.0])) if sat_clock_degree is None else (np.eye(2)[0], np.eye(2)[1])
     prior = np.asarray(orbit_sigma_rtn_m, dtype=float).reshape(3)
-    has_orbit = bool(np.any(prior > 0))
-    n_orb = 3 * n_sats if has_orbit else 0
-    n_par = 3 + n_orb + n_amb
-    C_rtn = np.nan_to_num(rtn_frames(p_b, v_sv)[0])                    # (n_sats, n_ep, 3, 3)
-    rho_b = np.linalg.norm(p_b - base, axis=-1)
+    n_orb = 3 * n_sats if np.any(prior > 0) else 0
+    deg = -1 if sat_clock_degree is None else int(sat_clock_degree)
+    clk_sats = np.delete(np.arange(n_sats), datum_sat) if deg >= 0 else np.zeros(0, int)
+    n_terms = deg + 2 if deg >= 0 else 0                                # phase constant, frequency polynomial
+    n_clk = clk_sats.size * n_terms
+    o_clk, o_amb = 3 + n_orb, 3 + n_orb + n_clk
+    n_par = o_amb + n_amb
     prior_w = np.zeros(n_par)
-    if has_orbit:  # an axis of sigma 0 is held at zero (1 um)
-        prior_w[3:3 + n_orb] = np.tile(1.0 / np.maximum(prior, 1e-6) ** 2, n_sats)
-    # Whole cycles taken out of each ambiguity first (from the first guess: its single differences less their
-    # epoch's weighted mean): the ambiguities left are small, so the solve keeps its precision (a float ambiguity
-    # of 1e6 cycles is 26 km, and the solve's conditioning would turn its rounding into metres).
-    r_first = np.where(use, y - (np.linalg.norm(p_r - x, axis=-1) - rho_b), 0.0)
-    sw = np.sum(w, axis=0)
-    r_first -= (np.sum(w * r_first, axis=0) / np.where(sw > 0, sw, 1.0))[None, :]
-    n0 = np.round(np.bincount(amb[use], weights=r_first[use], minlength=len(keys)) / counts / lam)
-    y = np.where(use, y - lam * n0[np.maximum(amb, 0)], 0.0)
+    prior_w[3:o_clk] = np.tile(1.0 / np.maximum(prior, 1e-6) ** 2, n_sats) if n_orb else 0.0  # sigma 0: held (1 um)
+    C_rtn = np.nan_to_num(rtn_frames(p_b, v_sv)[0])                    # (n_sats, n_ep, 3, 3)
+    tau = (t - 0.5 * (t[0] + t[-1]))[None, :] ** np.arange(n_terms)[:, None]  # phase terms (n_terms, n_ep)
+
+    base_design = np.zeros(use.shape + (n_par + 1,))                    # the last column: datums, dropped below
+    gi, si, ki = np.nonzero(use)
+    base_design[gi, si, ki, np.where(col[key[gi, si, ki]] >= 0, o_amb + col[key[gi, si, ki]], n_par)] = lam
+    for j, sat in enumerate(clk_sats):
+        base_design[:, sat, :, o_clk + j * n_terms: o_clk + (j + 1) * n_terms] = lam * tau.T[None]
+    base_design *= use[..., None]
+    sw = np.sum(w, axis=1)                                               # (G, n_ep)
+    sw = np.where(sw > 0, sw, 1.0)
+
+    def project(a):
+        """Each (receiver, epoch) group's weighted mean removed: its clock eliminated, (G, n_sats, n_ep, ...)."""
+        wa = np.einsum("gsk,gsk...->gk...", w, a) / sw.reshape(sw.shape + (1,) * (a.ndim - 3))
+        return a - wa[:, None]
+
+    # Whole cycles taken out of each ambiguity first (from the first guess): the ambiguities left are small, so
+    # the solve keeps its precision (1e6 cycles is 26 km, which the solve's conditioning turns into metres).
+    rho_r0 = np.linalg.norm(p_r0 - x, axis=-1)
+    r_first = project(np.where(use, y - (cr[:, None, None] * rho_r0 + cb[:, None, None]
+                                         * np.linalg.norm(p_b - base, axis=-1)), 0.0))
+    n0 = np.round(np.bincount(key[use], weights=r_first[use], minlength=col.size)
+                  / np.maximum(np.bincount(key[use], minlength=col.size), 1) / lam)   # (n_keys,)
+    y = np.where(use, y - lam * n0[np.maximum(key, 0)], 0.0)
+    base_design = base_design[..., :-1]                                  # the datums' column: held at zero
     d = np.zeros((n_sats, 3))      # element-set offsets, relinearised (their square over the range: 0.1 mm here)
-    p_r0, rho_r0 = p_r, np.linalg.norm(p_r - x, axis=-1)
-    i_row, k_row = np.nonzero(use)
-    cols = col_of_amb[amb[i_row, k_row]]
-    real = cols >= 0
     for it in range(1, _MAX_ITER + 1):
         # the rover's light time from the current position, not the first guess (30 m: 0.8 mm of satellite motion)
         off = np.einsum("skij,sj->ski", C_rtn, d)
@@ -237,51 +269,119 @@ def solve_differential_carrier(phase_rover_cycles, sigma_rover_cycles, arc_rover
         q_b = p_b + off
         rho_r, rho_b = np.linalg.norm(q_r - x, axis=-1), np.linalg.norm(q_b - base, axis=-1)
         u_r, u_b = (q_r - x) / rho_r[..., None], (q_b - base) / rho_b[..., None]
-        A = np.zeros(shape + (n_par,))
-        A[..., :3] = np.where(use[..., None], -u_r, 0.0)
-        if has_orbit:
-            g = np.where(use[..., None], np.einsum("ski,skij->skj", u_r - u_b, C_rtn), 0.0)  # (n_sats, n_ep, 3)
-            idx = 3 + 3 * np.arange(n_sats)[:, None] + np.arange(3)[None, :]
-            A[np.arange(n_sats)[:, None, None], np.arange(n_ep)[None, :, None], idx[:, None, :]] = g
-        A[i_row[real], k_row[real], 3 + n_orb + cols[real]] = lam
-        r0 = np.where(use, y - (rho_r - rho_b), 0.0)
-        # per-epoch clock eliminated: subtract each epoch's weighted mean of the rows (and of the partials)
-        Ap = A - (np.einsum("sk,skp->kp", w, A) / np.where(sw > 0, sw, 1.0)[:, None])[None]
-        rp = r0 - (np.sum(w * r0, axis=0) / np.where(sw > 0, sw, 1.0))[None, :]
-        N = np.einsum("sk,skp,skq->pq", w, Ap, Ap) + np.diag(prior_w)
-        b = np.einsum("sk,skp,sk->p", w, Ap, rp)
-        b[3:3 + n_orb] -= prior_w[3:3 + n_orb] * d.ravel()[:n_orb]
-        cov = _inverse(N)
-        if cov is None:
-            raise InputError("the carrier-phase fix is singular: too few satellites or epochs")
-        dx = cov @ b                # position and offset steps, ambiguities whole
+        A = base_design.copy()
+        A[..., :3] = -cr[:, None, None, None] * u_r[None] * use[..., None]
+        if n_orb:
+            u = cr[:, None, None, None] * u_r[None] + cb[:, None, None, None] * u_b[None]
+            g = np.einsum("gski,skij->gskj", u, C_rtn) * use[..., None]
+            for sat in range(n_sats):
+                A[:, sat, :, 3 + 3 * sat: 6 + 3 * sat] = g[:, sat]
+        r0 = np.where(use, y - (cr[:, None, None] * rho_r + cb[:, None, None] * rho_b), 0.0)
+        Ap, rp = project(A), project(r0)
+        sq = np.sqrt(w[use])[:, None]
+        prior_rows = np.flatnonzero(prior_w)
+        Aw = np.concatenate([sq * Ap[use], np.sqrt(prior_w[prior_rows])[:, None] * np.eye(n_par)[prior_rows]])
+        rw = np.concatenate([sq[:, 0] * rp[use], -np.sqrt(prior_w[prior_rows]) * d.ravel()[prior_rows - 3]])
+        dx, cov = _solve(Aw, rw)    # position and offset steps; clock terms and ambiguities whole
         x = x + dx[:3]
-        d = d + dx[3:3 + n_orb].reshape(d.shape) if has_orbit else d
+        d = d + dx[3:o_clk].reshape(d.shape) if n_orb else d
         if np.linalg.norm(dx[:3]) < _XTOL_M:
             break
-    res = np.where(use, rp - np.einsum("skp,p->sk", Ap, dx), np.nan)
-    chi2 = float(np.nansum(w * res**2) + np.sum(prior_w[3:3 + n_orb] * d.ravel()[:n_orb] ** 2))
-    n_epochs = int(np.sum(np.any(use, axis=0)))
-    dof = int(np.sum(use) - n_epochs - 3 - n_amb)
-    a_hat = dx[3 + n_orb:]
-    n0_dd = np.delete(n0 - n0[datum], datum)
-    Q_a = cov[3 + n_orb:, 3 + n_orb:]
+    res = np.where(use, rp - np.einsum("gskp,p->gsk", Ap, dx), np.nan)
+    chi2 = float(np.nansum(w * res**2) + np.sum(prior_w[3:o_clk] * d.ravel()[:n_orb] ** 2))
+    n_groups = int(np.sum(np.any(use, axis=1)))
+    dof = int(np.sum(use) - n_groups - (n_par - n_orb))
+    # the double-difference ambiguities: rover-minus-base single differences of each satellite and pair of arcs,
+    # less the datum's (whose columns are zero)
+    M = combos
+    a_hat = M @ dx[o_amb:]
+    Q_a = M @ cov[o_amb:, o_amb:] @ M.T
     pos, P, status, ratio, n_fixed = x, cov[:3, :3], "float", float("nan"), 0
-    if integer and n_amb > 0:
+    if integer and a_hat.size:
         fixed, a_fix, ratio = partial_fix(a_hat, Q_a, ratio_min=ratio_min, min_fixed=1, success_min=success_min)
         n_fixed = int(fixed.sum())
         if n_fixed:
-            f = 3 + n_orb + np.flatnonzero(fixed)
-            K = cov[:3, f] @ np.linalg.inv(cov[np.ix_(f, f)])
+            Mf = M[fixed]
+            K = cov[:3, o_amb:] @ Mf.T @ np.linalg.inv(Mf @ cov[o_amb:, o_amb:] @ Mf.T)
             pos = x - K @ (a_hat[fixed] - a_fix[fixed])
-            P = cov[:3, :3] - K @ cov[f, :3]
-            status = "fixed" if n_fixed == n_amb else "partial"
-    orb = d
-    orb_sig = np.sqrt(np.diag(cov)[3:3 + n_orb]).reshape(-1, 3) if has_orbit else np.zeros((n_sats, 3))
+            P = cov[:3, :3] - K @ Mf @ cov[o_amb:, :3]
+            status = "fixed" if n_fixed == a_hat.size else "partial"
+    orb_sig = np.sqrt(np.diag(cov)[3:o_clk]).reshape(-1, 3) if n_orb else np.zeros((n_sats, 3))
     return CarrierFix(
         pos_ecef_m=pos, cov=0.5 * (P + P.T), pos_float_ecef_m=x, cov_float=cov[:3, :3], status=status, ratio=ratio,
-        n_ambiguities=n_amb, n_fixed=n_fixed, ambiguity_cycles=a_hat + n0_dd,
-        ambiguity_sigma_cycles=np.sqrt(np.diag(Q_a)),
-        orbit_rtn_m=orb, orbit_sigma_rtn_m=orb_sig, chi2=chi2,
-        chi2_p=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"), dof=dof, n_rows=int(np.sum(use)),
-        n_epochs=n_epochs, n_sats=int(np.sum(sat_used)), residuals_m=res, iterations=it)
+        n_ambiguities=int(a_hat.size), n_fixed=n_fixed,
+        ambiguity_cycles=a_hat + _whole_cycles(n0, dd_keys, use.shape[0] == 2),
+        ambiguity_sigma_cycles=np.sqrt(np.diag(Q_a)), orbit_rtn_m=d, orbit_sigma_rtn_m=orb_sig, chi2=chi2,
+        chi2_p=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"), dof=dof,
+        n_rows=int(np.sum(both)), n_epochs=int(np.sum(np.any(both, axis=0))), n_sats=int(np.sum(np.any(both, axis=1))),
+        residuals_m=res[0] if sat_clock_degree is None else res[0] - res[1], iterations=it)
+
+
+def _rows(lam, phr, sr, ar, phb, sb, ab, ok_r, ok_b, both, *, joint):
+    """The rows of the fit, their ambiguities and the double-difference combinations.
+
+    Each row belongs to a key, a satellite and arc (of both receivers in a
+    single difference, of one receiver in the joint fit). Datums, held at
+    zero: the single difference with most rows (its rover arc in the joint
+    fit), and in the joint fit each satellite's base arc with most rows (its
+    phase constant takes it; the datum satellite's is the base clock's).
+
+    Returns
+    -------
+    use : ndarray of bool, (G, n_sats, n_ep)
+        G = 1: single differences; G = 2: the rover's and the base's own rows (common satellites only).
+    y, w : ndarray, (G, n_sats, n_ep)
+        ``-lambda phase`` [m] and its weight [1/m^2] (0 where unused).
+    key : ndarray of int, (G, n_sats, n_ep)
+        Each row's key (-1 unused).
+    col : ndarray of int, (n_keys,)
+        Each key's ambiguity column, -1 for a datum.
+    combos : ndarray, (n_dd, n_amb)
+        The double-difference ambiguities (each single difference but the datum's) in the columns.
+    dd_keys : ndarray of int, (n_dd + 1, 2)
+        The rover's and the base's key of each single difference (joint), or its key twice; the datum's last.
+    datum_sat : int
+    """
+    n_sats = phr.shape[0]
+    n_arcs = int(max(ar.max(), ab.max())) + 1
+    sat = np.broadcast_to(np.arange(n_sats)[:, None], phr.shape)
+    sd_keys, sd_counts = np.unique(np.stack([sat, ar, ab], axis=-1)[both], axis=0, return_counts=True)
+    dat = int(np.argmax(sd_counts))
+    datum_sat = int(sd_keys[dat, 0])
+    sd_keys = np.concatenate([np.delete(sd_keys, dat, axis=0), sd_keys[dat:dat + 1]])   # the datum last
+    if not joint:
+        use = both[None]
+        y, var = -lam * (phr - phb)[None], lam**2 * (sr**2 + sb**2)[None]
+        code = (sat * n_arcs + ar) * n_arcs + ab
+        sd_code = (sd_keys[:, 0] * n_arcs + sd_keys[:, 1]) * n_arcs + sd_keys[:, 2]
+        key = np.where(use, np.searchsorted(np.sort(sd_code), code[None]), -1)
+        order = np.argsort(sd_code)
+        dd = order.argsort()                     # key (sorted code) of each single difference
+        col = np.full(len(sd_keys), -1)
+        col[dd[:-1]] = np.arange(len(sd_keys) - 1)
+        combos = np.eye(len(sd_keys) - 1)
+        dd_keys = np.stack([dd, dd], axis=1)
+    else:
+        common = np.any(both, axis=1)[:, None]
+        use = np.stack([ok_r & common, ok_b & common])
+        use &= np.sum(use, axis=1)[:, None, :] >= 2
+        y, var = -lam * np.stack([phr, phb]), lam**2 * np.stack([sr, sb]) ** 2
+        key = np.where(use, (np.arange(2)[:, None, None] * n_sats + sat[None]) * n_arcs + np.stack([ar, ab]), -1)
+        col = np.full(2 * n_sats * n_arcs, -1)
+        n_b = [np.bincount(np.where(use[1][s_], ab[s_], n_arcs), minlength=n_arcs + 1)[:n_arcs] for s_ in range(n_sats)]
+        datums = {(0 * n_sats + datum_sat) * n_arcs + sd_keys[-1, 1]}
+        datums |= {(n_sats + s_) * n_arcs + (sd_keys[-1, 2] if s_ == datum_sat else int(np.argmax(n_b[s_])))
+                   for s_ in range(n_sats)}
+        present = np.unique(key[use])
+        free = np.array([k for k in present if k not in datums], dtype=int)
+        col[free] = np.arange(free.size)
+        dd_keys = np.stack([sd_keys[:, 0] * n_arcs + sd_keys[:, 1], (n_sats + sd_keys[:, 0]) * n_arcs + sd_keys[:, 2]],
+                           axis=1)
+        combos = np.zeros((len(sd_keys) - 1, free.size))
+        for row, (k_r, k_b) in enumerate(dd_keys[:-1]):
+            if col[k_r] >= 0:
+                combos[row, col[k_r]] += 1.0
+            if col[k_b] >= 0:
+                combos[row, col[k_b]] -= 1.0
+    w = np.where(use, 1.0 / np.where(use, var, 1.0), 0.0)
+    return use, np.where(use, y, 0.0), w, key, col, combos, dd_keys, datum_sat
