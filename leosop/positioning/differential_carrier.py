@@ -18,12 +18,32 @@ The clocks are eliminated epoch by epoch (the weighted projection that
 removes each epoch's weighted mean, which gives the estimate of the double
 differences with their correct, correlated covariance); one ambiguity, the
 one with most rows, is the datum, so the others are double-difference
-ambiguities against it. Weighted least squares, Gauss-Newton in ``x``.
+ambiguities against it. Weighted least squares by QR, Gauss-Newton in ``x``
+and ``d`` (relinearised: ``|d|^2 / rho`` is a tenth of a millimetre, which
+150 s of phase see).
+
+Joint fit (``sat_clock_degree``), as the Doppler one of
+:mod:`~leosop.positioning.differential`. A single difference sees an
+element-set offset only through the baseline (~1/100 of it at 7.5 km);
+over 20 s that part looks like the rover's position, and the fix's sigma is
+a metre. At its known site the base sees the offset's whole range, which
+curves over the pass. Keeping each receiver's own phase::
+
+    y_r = rho_r(x) + u_r^T C d_i + s_i(t) + c_r,k + lambda N_r
+    y_b = rho_b    + u_b^T C d_i + s_i(t) + c_b,k + lambda N_b
+
+with ``s_i`` satellite i's phase as both see it (a constant and the
+integral of a frequency polynomial of ``sat_clock_degree``; one
+satellite's is the datum of the receivers' clocks) tells ``d`` apart from
+the rover's position (20 s: 0.18 m median, tools/bench_differential_carrier.py).
+The price is the assumption on the satellites' oscillators, as for the
+Doppler joint fit.
 
 Integer fixing (``integer=True``): the float double-difference ambiguities
 and their covariance go to LAMBDA
 (:func:`~leosop.gnss.lambda_.partial_fix`: ratio test of [Euler 1991] and the
-bootstrapped success rate of [Teunissen 1998], partial fixing) and the position is conditioned on the accepted integers.
+bootstrapped success rate of [Teunissen 1998], partial fixing) and the
+position is conditioned on the accepted integers.
 The double differences are integers only when each receiver's phase is the
 received carrier phase up to whole cycles and a clock common to its
 satellites; a tracker whose phase starts from an arbitrary offset per
@@ -88,7 +108,8 @@ class CarrierFix:
     n_rows, n_epochs, n_sats : int
         Single differences used, epochs with at least two satellites, satellites with a used row.
     residuals_m : ndarray, (n_sats, n_epochs)
-        Float solution's residual of each single difference after its epoch's clock (NaN where unused).
+        Float solution's residual of each single difference after its epoch's clock, in the joint fit the
+        rover's residual less the base's (NaN where unused).
     iterations : int
     """
 
@@ -298,7 +319,10 @@ def solve_differential_carrier(t_s, phase_rover_cycles, sigma_rover_cycles, arc_
     Q_a = M @ cov[o_amb:, o_amb:] @ M.T
     pos, P, status, ratio, n_fixed = x, cov[:3, :3], "float", float("nan"), 0
     if integer and a_hat.size:
-        fixed, a_fix, ratio = partial_fix(a_hat, Q_a, ratio_min=ratio_min, min_fixed=1, success_min=success_min)
+        try:
+            fixed, a_fix, ratio = partial_fix(a_hat, Q_a, ratio_min=ratio_min, min_fixed=1, success_min=success_min)
+        except ValueError:  # dependent combinations (arcs that cross): not fixed
+            fixed = np.zeros(a_hat.size, bool)
         n_fixed = int(fixed.sum())
         if n_fixed:
             Mf = M[fixed]
