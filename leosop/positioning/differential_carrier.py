@@ -67,13 +67,16 @@ from ..errors import InputError
 from ..gnss.lambda_ import partial_fix
 from .differential import ORBIT_SIGMA_RTN_M, rtn_frames
 
-__all__ = ["CarrierFix", "RATIO_MIN", "SUCCESS_MIN", "solve_differential_carrier"]
+__all__ = ["CHI2_ALPHA", "CarrierFix", "RATIO_MIN", "SUCCESS_MIN", "solve_differential_carrier"]
 
 #: Ratio test threshold of the integer fix (second-best over best squared norm, [Euler 1991]; as the PPP-AR).
 RATIO_MIN = 3.0
 #: Least bootstrapped success rate of a fixed subset, beside the ratio test ([Teunissen 1998]; measured in
 #: tools/bench_differential_carrier.py).
 SUCCESS_MIN = 0.999
+#: Residuals whose chi-square has an upper-tail probability below this fail their test: the covariance is
+#: scaled by chi2 / dof (the phase noise larger than its stated sigma; as :mod:`~leosop.positioning.robust_ls`).
+CHI2_ALPHA = 1e-3
 #: Gauss-Newton stops when the position step is below this [m] (0.1 mm, far inside any sigma here).
 _XTOL_M = 1e-4
 _MAX_ITER = 10
@@ -105,6 +108,8 @@ class CarrierFix:
     chi2, chi2_p : float
         Weighted residual sum of squares of the float solution (priors included) and its upper-tail probability.
     dof : int
+    variance_factor : float
+        ``chi2 / dof`` when ``chi2_p`` is below :data:`CHI2_ALPHA` (every covariance here is scaled by it), else 1.
     n_rows, n_epochs, n_sats : int
         Single differences used, epochs with at least two satellites, satellites with a used row.
     residuals_m : ndarray, (n_sats, n_epochs)
@@ -128,6 +133,7 @@ class CarrierFix:
     chi2: float
     chi2_p: float
     dof: int
+    variance_factor: float
     n_rows: int
     n_epochs: int
     n_sats: int
@@ -312,6 +318,9 @@ def solve_differential_carrier(t_s, phase_rover_cycles, sigma_rover_cycles, arc_
     chi2 = float(np.nansum(w * res**2) + np.sum(prior_w[3:o_clk] * d.ravel()[:n_orb] ** 2))
     n_groups = int(np.sum(np.any(use, axis=1)))
     dof = int(np.sum(use) - n_groups - (n_par - n_orb))
+    chi2_p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan")
+    variance_factor = chi2 / dof if chi2_p < CHI2_ALPHA else 1.0
+    cov = cov * variance_factor
     # the double-difference ambiguities: rover-minus-base single differences of each satellite and pair of arcs,
     # less the datum's (whose columns are zero)
     M = combos
@@ -336,7 +345,7 @@ def solve_differential_carrier(t_s, phase_rover_cycles, sigma_rover_cycles, arc_
         n_ambiguities=int(a_hat.size), n_fixed=n_fixed,
         ambiguity_cycles=a_hat + _whole_cycles(n0, dd_keys, use.shape[0] == 2),
         ambiguity_sigma_cycles=np.sqrt(np.diag(Q_a)), orbit_rtn_m=d, orbit_sigma_rtn_m=orb_sig, chi2=chi2,
-        chi2_p=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"), dof=dof,
+        chi2_p=chi2_p, dof=dof, variance_factor=variance_factor,
         n_rows=int(np.sum(both)), n_epochs=int(np.sum(np.any(both, axis=0))), n_sats=int(np.sum(np.any(both, axis=1))),
         residuals_m=res[0] if sat_clock_degree is None else res[0] - res[1], iterations=it)
 
