@@ -1,6 +1,8 @@
 """Differential carrier-phase fix against the pair simulator (truth: the light-time range from SGP4 states moved by
 the drawn offsets, :func:`~leosop.positioning.differential_sim.simulate_phase`, not the solver's linear model)."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
 from leosop.positioning.differential_carrier import solve_differential_carrier
 from leosop.positioning.differential_sim import draw_satellite_errors, simulate_phase
+from leosop.replay.differential_carrier import differential_carrier_fix
 from leosop.timebase import seconds_since
 
 #: Noise-free fixes: 1e-5 cycles of noise is 0.3 um of range; what is left is the model's approximations (the
@@ -111,3 +114,40 @@ def test_bad_input(scene):
         solve_differential_carrier(seconds_since(t, t[0])[::-1], r.phase_cycles, r.sigma_cycles, r.arc,
                                    b.phase_cycles, b.sigma_cycles, b.arc, r.pos_sv_ecef_m, b.pos_sv_ecef_m,
                                    b.vel_sv_ecef_mps, base, pos0, carrier_hz=CARRIER_HZ)
+
+
+def _carrier(phase, sat_id, time_utc, rows=slice(None), cols=slice(None)):
+    """What :func:`~leosop.replay.differential_carrier.differential_carrier_fix` reads of a ReplayCarrier: the
+    satellites ``rows`` (named ``sat_id``) at the epochs ``cols`` (at ``time_utc``)."""
+    tracks = SimpleNamespace(**{k: getattr(phase, v)[rows][:, cols] for k, v in (
+        ("phase_cycles", "phase_cycles"), ("phase_sigma_cycles", "sigma_cycles"), ("arc", "arc"))})
+    return SimpleNamespace(sat_id=tuple(sat_id), time_utc=time_utc, tracks=tracks)
+
+
+def test_replay_pair_matches_satellites_and_blocks(scene):
+    """The base's satellites in another order, one the rover lacks, its blocks starting earlier: matched by id
+    and instant, the joint fix is within its sigma and its JSON says float ambiguities and the model."""
+    const, base, rover, t, ids = scene
+    r, b, pos0 = pair(scene, 6, sigma_cycles=0.001)
+    rover_c = _carrier(r, ids[:4], t[5:], slice(0, 4), slice(5, None))
+    order = np.array([4, 2, 0, 1, 3])
+    base_c = _carrier(b, ids[order], t, order)
+    got = differential_carrier_fix(rover_c, base_c, const, base, pos0, carrier_hz=CARRIER_HZ)
+    assert got.sat_id == tuple(sorted(ids[:4])) and got.time_utc.size == t.size - 5
+    e = got.joint.pos_ecef_m - rover
+    assert e @ np.linalg.solve(got.joint.cov, e) < 16.3
+    doc = got.doc()
+    assert (doc["model"], doc["ambiguities"], doc["single_difference"]["ambiguities"]) == ("joint", "float", "float")
+    assert doc["n_sats"] == 4 and doc["n_epochs"] == t.size - 5
+
+
+def test_replay_pair_refused(scene):
+    const, base, rover, t, ids = scene
+    r, b, pos0 = pair(scene, 7, sigma_cycles=0.001)
+    rover_c = _carrier(r, ids, t)
+    with pytest.raises(InputError, match="^the base's blocks are not at the rover's instants"):
+        differential_carrier_fix(rover_c, _carrier(b, ids, t + np.timedelta64(50, "ms")), const, base,
+                                 pos0, carrier_hz=CARRIER_HZ)
+    with pytest.raises(InputError, match="^no satellite tracked in carrier phase by both"):
+        differential_carrier_fix(rover_c, _carrier(b, [f"9{s}" for s in ids], t), const, base,
+                                 pos0, carrier_hz=CARRIER_HZ)
