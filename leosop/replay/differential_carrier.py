@@ -25,17 +25,15 @@ import numpy as np
 from ..errors import InputError
 from ..frames import C_e_n, ecef_to_geodetic
 from ..positioning.differential_base import TIME_TOL_S
-from ..positioning.differential_carrier import solve_differential_carrier
+from ..positioning.differential_carrier import CHI2_ALPHA, solve_differential_carrier
 from ..positioning.measurements import sv_states_from_tle
 from ..timebase import format_utc, seconds_since
 
-__all__ = ["CHI2_ALPHA", "SAT_CLOCK_DEGREE", "CarrierPair", "differential_carrier_fix"]
+__all__ = ["INTEGER_NOTE", "SAT_CLOCK_DEGREE", "CarrierPair", "differential_carrier_fix"]
 
 #: Degree of each satellite's frequency polynomial in the joint fit (offset and drift, as
 #: :mod:`~leosop.positioning.differential_sim` and ``leosop generate`` model the oscillators).
 SAT_CLOCK_DEGREE = 1
-#: A fix whose residuals' chi-square has an upper-tail probability below this is ``inconsistent``.
-CHI2_ALPHA = 1e-3
 #: Why the replay's ambiguities stay float (the JSON says it).
 INTEGER_NOTE = ("float ambiguities: the carrier tracker references each satellite's phase to its own first block, "
                 "so the double differences are not whole cycles")
@@ -70,6 +68,8 @@ class CarrierPair:
 
 
 def _fix_doc(fix):
+    """A fix's JSON keys: ``status`` ``ok`` when its residuals pass their chi-square test (else
+    ``inconsistent``, its sigmas scaled by ``variance_factor``), the position, sigmas and counts."""
     lat, lon, alt = ecef_to_geodetic(fix.pos_ecef_m)
     C = C_e_n(lat, lon)
     sig = np.sqrt(np.diag(C.T @ fix.cov @ C))
@@ -78,6 +78,7 @@ def _fix_doc(fix):
             "x_m": float(fix.pos_ecef_m[0]), "y_m": float(fix.pos_ecef_m[1]), "z_m": float(fix.pos_ecef_m[2]),
             "lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)), "alt_m": float(alt),
             "sigma_enu_m": [float(v) for v in sig], "chi2": fix.chi2, "dof": fix.dof,
+            "variance_factor": fix.variance_factor,
             "chi2_p": fix.chi2_p, "n_rows": fix.n_rows, "n_epochs": fix.n_epochs, "n_sats": fix.n_sats,
             "n_ambiguities": fix.n_ambiguities, "n_fixed": fix.n_fixed,
             "residual_rms_m": float(np.sqrt(np.nanmean(fix.residuals_m**2)))}
