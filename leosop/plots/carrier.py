@@ -25,7 +25,7 @@ def plot_carrier_residuals(path, t_s, residuals_m, sat_ids, *, title=""):
     res_mm = 1e3 * np.asarray(residuals_m, dtype=float)
     for sat, r in zip(sat_ids, res_mm):
         rms = np.sqrt(np.nanmean(r**2)) if np.any(np.isfinite(r)) else np.nan
-        ax.plot(t_s, r, lw=0.8, label=f"{sat} (rms {rms:.1f} mm)")
+        ax.plot(t_s, r, lw=0.8, label=f"{sat} (rms {rms:.3f} mm)")
     ax.axhline(0.0, color="k", lw=0.5)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("residual [mm]")
