@@ -159,4 +159,6 @@ def test_replay_carrier_refuses_a_snapshot_recording(tmp_path, capsys):
     assert "\n" not in err and "continuous recording" in err and "coherence is lost across a gap" in err
     assert err.endswith("; replay it without --carrier")  # the CLI's advice, not the library's
     assert main(["replay", str(snap), "--carrier", "--base", str(snap), "--base-site", SITE]) == 2
-    assert "differential carrier phase is not implemented" in capsys.readouterr().err
+    assert "the differential carrier-phase fix is of a rover at rest: add --static" in capsys.readouterr().err
+    assert main(["replay", str(snap), "--carrier", "--static", "--base", str(snap), "--base-site", SITE]) == 2
+    assert "continuous recording" in capsys.readouterr().err

@@ -39,7 +39,7 @@ from ..orbits import load_constellation
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, write_measurements
 from ..replay.lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ
 from ..signal.iq import open_sigmf
-from ..timebase import format_utc
+from ..timebase import format_utc, seconds_since
 from . import add_command
 from .options import mask_deg, parse_site, positive
 
@@ -50,7 +50,7 @@ _LO_DRIFT_LIMIT_HZ_PER_S = 1e3
 #: The files ``--out`` may hold, written all or none (measurements, fixes and the spectrogram when there are any;
 #: the base's measurements with ``--base``, the carrier tracks with ``--carrier``).
 OUT_FILES = ("replay.json", "tracks.csv", "measurements.csv", "fixes.csv", "spectrogram.png", "base_measurements.csv",
-             "carrier.csv")
+             "carrier.csv", "carrier_residuals.png")
 
 _DESCRIPTION = __doc__.split("\n\n")[1].replace("\n", " ")
 
@@ -155,9 +155,9 @@ def _run_single(args):
     if args.carrier:
         from ..replay.carrier_replay import check_continuous
 
-        if args.base:
-            raise InputError("--carrier with --base: the differential fix takes block Doppler; differential "
-                             "carrier phase is not implemented")
+        if args.base and not args.static:
+            raise InputError("--carrier with --base: the differential carrier-phase fix is of a rover at rest: "
+                             "add --static")
         try:
             check_continuous(rec)
         except InputError as exc:
@@ -168,6 +168,11 @@ def _run_single(args):
 
         base_rec = open_sigmf(Path(args.base))
         check_pair(rec, base_rec)
+        if args.carrier:
+            try:
+                check_continuous(base_rec)
+            except InputError as exc:
+                raise InputError(f"{exc}; replay it without --carrier") from exc
     const = load_constellation(args.tle)
     res = replay(rec, const, block_s=block_s, init_pos_ecef_m=init, static=args.static, mask_deg=mask,
                  lo_offset_max_hz=lo_max, lo_drift_max_hz_per_s=drift_max, show_progress=True, threads=threads)
@@ -204,7 +209,7 @@ def _run_single(args):
                                                 for m in np.flatnonzero(track.jump)]}}
     if not res.tracks:
         print(f"leosop replay: no pilot comb detected in {len(res.blocks)} block(s) of {path}", file=sys.stderr)
-    diff = None
+    diff = carrier_pair = None
     if base_rec is not None:
         from ..replay.differential import BASE_PRIOR_RADIUS_M, block_times, differential_fix
         from .position import differential_solutions
@@ -223,9 +228,25 @@ def _run_single(args):
             "base_site": list(parse_site(args.base_site, "--base-site")),
             "base_tracks": [_track_doc(tr) for tr in base_res.tracks],
             "base_n_identified": sum(tr.sat_id is not None for tr in base_res.tracks)}
+        if carrier is not None:
+            carrier_pair = _carrier_pair(rec, base_rec, base_res, const, base_pos, carrier, diff, block_s, lo_max)
+            doc["differential_carrier"] = carrier_pair.doc()
     if args.out:
-        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff, carrier)
+        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff, carrier, carrier_pair)
     return doc
+
+
+def _carrier_pair(rec, base_rec, base_res, const, base_pos, carrier, diff, block_s, lo_max):
+    """The differential carrier-phase fixes: the base tracked as the rover was, from the differential Doppler fix."""
+    from ..replay.carrier_replay import replay_carrier
+    from ..replay.differential_carrier import differential_carrier_fix
+
+    base_carrier = replay_carrier(base_rec, base_res, const, block_s=block_s, lo_offset_max_hz=lo_max, static=False)
+    pos0 = diff.fix.pos_ecef_m[0]
+    if not np.all(np.isfinite(pos0)):
+        raise InputError("no differential Doppler fix to start the carrier-phase fix from")
+    return differential_carrier_fix(carrier, base_carrier, const, base_pos, pos0,
+                                    carrier_hz=rec.center_hz or DEFAULT_CARRIER_HZ)
 
 
 #: Options a batch's results do not depend on (left out of the resume key).
@@ -293,13 +314,15 @@ def replay_files(args, meta):
     return doc, files
 
 
-def _write_outputs(out, doc, res, name, start_utc, diff=None, carrier=None):
+def _write_outputs(out, doc, res, name, start_utc, diff=None, carrier=None, carrier_pair=None):
+    from ..plots.carrier import plot_carrier_residuals
     from ..plots.spectra import plot_spectrogram
     from .position import fixes_csv_rows
 
     # The files this run makes, all or none (a directory in the place of one leaves no other behind).
     names = [n for n, made in zip(OUT_FILES, (True, True, res.measurements is not None, bool(doc["solutions"]),
-                                              res.spectrum.shape[1] > 0, diff is not None, carrier is not None))
+                                              res.spectrum.shape[1] > 0, diff is not None, carrier is not None,
+                                              carrier_pair is not None))
              if made]
     with atomic_files([out / n for n in names]) as tmps:
         path = dict(zip(names, tmps))
@@ -315,6 +338,12 @@ def _write_outputs(out, doc, res, name, start_utc, diff=None, carrier=None):
             write_measurements(path["base_measurements.csv"], diff.base)
         if "carrier.csv" in path:
             write_csv(path["carrier.csv"], carrier.CSV_HEADER, carrier.csv_rows())
+        if "carrier_residuals.png" in path:
+            d = doc["differential_carrier"]
+            plot_carrier_residuals(path["carrier_residuals.png"], seconds_since(carrier_pair.time_utc, start_utc),
+                                   carrier_pair.joint.residuals_m, carrier_pair.sat_id,
+                                   title=f"{name}: differential carrier phase ({d['model']} fit), rover minus base "
+                                         f"residuals; fix {d['status']}, ambiguities {d['ambiguities']}")
         if "spectrogram.png" in path:
             labelled = [(tr.t_s, tr.doppler_hz, tr.sat_id or "unidentified") for tr in res.tracks]
             plot_spectrogram(path["spectrogram.png"], res.spectrum_t_s, res.spectrum_f_hz, res.spectrum,
@@ -385,6 +414,12 @@ def summary(doc):
         for s in doc["solutions_alone"][:1]:
             lines.append(f"rover alone: {format_or_na(s['lat_deg'], '.6f')} {format_or_na(s['lon_deg'], '.6f')} "
                          f"{format_or_na(s['alt_m'], '.1f')} m  {s['status']}")
+    if "differential_carrier" in doc:
+        d = doc["differential_carrier"]
+        lines.append(f"differential carrier phase ({d['model']} fit, {d['n_sats']} satellites, {d['n_epochs']} "
+                     f"blocks): {d['lat_deg']:.7f} {d['lon_deg']:.7f} {d['alt_m']:.2f} m  sigma E/N/U "
+                     + "/".join(f"{v:.2f}" for v in d["sigma_enu_m"]) + f" m  {d['status']}, ambiguities "
+                     f"{d['ambiguities']}")
     for c in doc.get("carrier", {}).get("satellites", []):
         rms = "n/a" if c["phase_rate_vs_block_rms_hz"] is None else f"{c['phase_rate_vs_block_rms_hz']:.3f} Hz"
         lines.append(f"carrier {c['sat_id']}: {c['arcs']} arc(s), {c['slips']} slip(s), locked "

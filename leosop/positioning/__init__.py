@@ -29,10 +29,12 @@ Solvers on arrays:
     ``solve_static``           static batch fix (and a single pass's mirror solution)
     ``solve_static_passes``    static fix from several passes, linear terms eliminated
     ``solve_differential``     rover fix from single differences against a known base
+    ``solve_differential_carrier`` static rover from carrier phase against a known base (float/fixed)
     ``SnapshotFixes``          snapshot solver output: positions, velocities, clocks, DOPs
     ``StaticFix``              static solver output
     ``PassesFix``              multi-pass solver output, with the passes' disagreement
     ``DifferentialFix``        differential solver output, one fix per block
+    ``CarrierFix``             differential carrier-phase solver output
     ``FixStatus``              how the numerics ended (``OK``, ``SINGULAR``, ...)
     ``STATUSES``               the fix labels a user filters on (``ok`` only when vouched for)
     ``gdop``                   geometric dilution of precision of a design matrix
@@ -54,13 +56,14 @@ __all__ = [
     "position_snapshots", "position_static", "position_static_passes", "solve_pair", "satellite_states",
     "PositionResult", "DifferentialPair",
     "solve_snapshots", "solve_static", "solve_static_passes", "solve_differential", "SnapshotFixes", "StaticFix",
-    "PassesFix", "DifferentialFix", "FixStatus", "STATUSES", "gdop",
+    "PassesFix", "DifferentialFix", "FixStatus", "STATUSES", "gdop", "solve_differential_carrier", "CarrierFix",
 ]
 
 if TYPE_CHECKING:
     from ..geometry.dop import gdop
     from .datasets import DopTrackPass, GsdcEpochs, read_doptrack, read_fll, read_gsdc
     from .differential import DifferentialFix, solve_differential
+    from .differential_carrier import CarrierFix, solve_differential_carrier
     from .differential_pair import DifferentialPair, solve_pair
     from .measurements import Measurements, read_measurements, sv_states_from_tle, write_measurements
     from .quality import STATUSES

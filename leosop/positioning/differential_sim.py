@@ -34,8 +34,10 @@ from .measurements import DEFAULT_CARRIER_HZ, Measurements, sv_states_from_tle
 __all__ = [
     "SAT_DRIFT_SIGMA_HZ_PER_S",
     "SAT_OFFSET_MAX_HZ",
+    "PhaseTracks",
     "SatelliteErrors",
     "draw_satellite_errors",
+    "simulate_phase",
     "simulate_receiver",
     "straight_drive",
 ]
@@ -196,3 +198,76 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
     return Measurements(t_s=t_s, time_utc=t_rows, sat_id=ids, doppler_hz=doppler, sigma_hz=np.full(n, float(sigma_hz)),
                         carrier_hz=np.full(n, float(carrier_hz)), pos_sv_ecef_m=pos_sv, vel_sv_ecef_mps=vel_sv,
                         line=np.arange(2, n + 2), source=source)
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseTracks:
+    """Accumulated carrier phase of the satellites of ``errors`` at one receiver, each array (n_sats, n_epochs).
+
+    Attributes
+    ----------
+    phase_cycles, sigma_cycles : ndarray
+        The phase (NaN below the mask) and its sigma.
+    arc : ndarray of int
+        0 where the satellite is above the mask (one arc, no slip), -1 elsewhere.
+    pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n_sats, n_epochs, 3)
+        The element-set states with this receiver's light time (the model's, not the truth's).
+    """
+
+    phase_cycles: np.ndarray
+    sigma_cycles: np.ndarray
+    arc: np.ndarray
+    pos_sv_ecef_m: np.ndarray
+    vel_sv_ecef_mps: np.ndarray
+
+
+def simulate_phase(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_cycles, pos_light_ecef_m=None,
+                   clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ):
+    """Accumulated carrier phase of a static receiver, the integral of :func:`simulate_receiver`'s Doppler.
+
+    ``phase = -carrier_hz rho / c`` (``rho`` the true light-time range, the
+    element set plus the offset of ``errors``) plus the satellite's and the
+    receiver's clock phases (the integrals of their offsets and drifts from
+    ``errors.t0_utc``), a receiver phase common to its satellites (uniform in
+    a cycle), a whole number of cycles per satellite (uniform in +-1e6) and
+    white noise of ``sigma_cycles``: the double differences of two receivers
+    are whole cycles. The satellite's transmit times at the two receivers
+    differ by ~baseline / c; its clock phase is taken at the reception time
+    (5 Hz over 30 us: 1e-4 cycles).
+
+    Parameters
+    ----------
+    constellation : Constellation
+    errors : SatelliteErrors
+    pos_rx_ecef_m : array_like, (3,)
+    time_utc : array_like of datetime64, (n_epochs,)
+    rng : numpy.random.Generator
+    sigma_cycles : float
+    pos_light_ecef_m : array_like, (3,), optional
+        Where the returned model states take their light time from (default the receiver: a rover's first guess).
+    clock_offset_hz, clock_drift_hz_per_s, mask_deg, carrier_hz : float
+
+    Returns
+    -------
+    PhaseTracks
+    """
+    t_ep = np.asarray(time_utc, dtype="datetime64[ns]")
+    rx = np.asarray(pos_rx_ecef_m, dtype=float).reshape(3)
+    light = rx if pos_light_ecef_m is None else np.asarray(pos_light_ecef_m, dtype=float).reshape(3)
+    lookup = {s: i for i, s in enumerate(constellation.sat_ids.tolist())}
+    index = np.array([lookup[s] for s in errors.sat_ids.tolist()], dtype=int)
+    k, n = len(index), len(t_ep)
+    ids, t_rows = np.repeat(errors.sat_ids, n), np.tile(t_ep, k)
+    pos_sv, vel_sv, reason = sv_states_from_tle(constellation, ids, t_rows, rx)
+    model_pos, model_vel, _ = sv_states_from_tle(constellation, ids, t_rows, light)
+    _, elev, _ = azimuth_elevation_range(pos_sv, rx)
+    keep = ((reason == "") & (np.nan_to_num(elev, nan=-1.0) >= np.radians(mask_deg))).reshape(k, n)
+    off = _rtn_offset(constellation, np.repeat(index, n), t_rows, np.repeat(errors.orbit_rtn_m, n, axis=0))
+    rho = np.linalg.norm(pos_sv + off - rx, axis=-1).reshape(k, n)
+    t_s = seconds_since(t_ep, errors.t0_utc)[None, :]
+    clock = ((errors.offset_hz[:, None] + clock_offset_hz) * t_s
+             + 0.5 * (errors.drift_hz_per_s[:, None] + clock_drift_hz_per_s) * t_s**2)
+    phase = (-rho * carrier_hz / C_MPS + clock + rng.uniform() + rng.integers(-10**6, 10**6, (k, 1))
+             + sigma_cycles * rng.standard_normal((k, n)))
+    return PhaseTracks(np.where(keep, phase, np.nan), np.full((k, n), float(sigma_cycles)), np.where(keep, 0, -1),
+                       model_pos.reshape(k, n, 3), model_vel.reshape(k, n, 3))
