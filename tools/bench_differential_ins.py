@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
+from scipy.stats import t as student_t
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_differential import CAR_HEADING_ENU, CAR_SPEED_MPS, JOINT, ROVERS_ENU_M
@@ -83,6 +84,12 @@ NHC_SIGMA_MPS = 0.1
 BLOCK_FIX_S = 10.0
 #: The column ``rms_3d_after``: epochs (or block mid-times) from this time on [s], past the 20 m start.
 SETTLED_S = 30.0
+#: Phase noise of each receiver [cycles] (2.6 mm at 11.325 GHz; replay's tracker, 42-44 dB-Hz: ~0.01 cycles).
+PHASE_SIGMA_CYCLES = 0.1
+#: Probability of a cycle slip at each row (a satellite slips about every 100 s).
+SLIP_PROBABILITY = 0.01
+#: The cases with a gap: the LEO aids withheld over this span of the drive [s] (a tunnel, an underpass).
+GAP_S = (80.0, 95.0)
 
 
 def drive(start_ecef_m, duration_s):
@@ -105,8 +112,11 @@ def consumer_imu(rng):
     return errors, spec
 
 
-def fused(traj, k0, n_ep, r, b, base, rng, options, nhc):
-    """The engine over the drive: errors (n_ep, 3) ENU, position covariances (n_ep, 3, 3), times (n_ep,)."""
+def fused(traj, k0, n_ep, r, b, base, rng, options, nhc, gap):
+    """The engine over the drive: errors (n_ep, 3) ENU, position covariances (n_ep, 3, 3), times (n_ep,).
+
+    ``gap``: the LEO aids withheld over ``GAP_S`` (the IMU and NHC alone), or not.
+    """
     per_ep = int(round(IMU_RATE_HZ))
     k1 = k0 + (n_ep - 1) * per_ep
     errors, spec = consumer_imu(rng)
@@ -123,6 +133,8 @@ def fused(traj, k0, n_ep, r, b, base, rng, options, nhc):
     state0 = NavState.from_dcm(truth0.lat_rad[0], truth0.lon_rad[0], truth0.alt_m[0], truth0.vel_enu_mps[0],
                                       truth0.C_n_b[0]).corrected(-dx[PHI], -dx[DV], -dx[DPOS])
     aids = differential_aids(r, b, base, np.zeros(3), options)
+    if gap:
+        aids = [a for a in aids if not GAP_S[0] <= a.t_s < GAP_S[1]]
     if nhc:
         aids += [NonHolonomic(t, NHC_SIGMA_MPS) for t in np.unique(r.t_s)]
         aids.sort(key=lambda a: a.t_s)
@@ -149,7 +161,7 @@ def block_fixes(traj, k0, r, b, base, kw):
     return e, np.einsum("kji,kjl,klm->kim", C, fix.cov[:, :3, :3], C), fix.t_ref_s
 
 
-def trial(const, base, t, start, sigma_hz, seed, cases):
+def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability):
     """One seed: (errors, covariances, times) per case."""
     rng = np.random.default_rng(seed)
     err = draw_satellite_errors(const.sat_ids, t[0], rng)
@@ -162,9 +174,10 @@ def trial(const, base, t, start, sigma_hz, seed, cases):
     k0 = int(round(RUN_UP_S * IMU_RATE_HZ))
     track = traj.at(traj.t_s[k0] + t_s)
     vel = np.einsum("kij,kj->ki", frames.C_e_n(track.lat_rad, track.lon_rad), track.vel_enu_mps)
-    b = simulate_receiver(const, err, base, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock())
+    phase = {"phase_sigma_cycles": PHASE_SIGMA_CYCLES, "slip_probability": slip_probability}
+    b = simulate_receiver(const, err, base, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase)
     r = simulate_receiver(const, err, track.pos_ecef_m, t, rng, sigma_hz=sigma_hz, vel_rx_ecef_mps=vel,
-                          mask_deg=10.0, **clock())
+                          mask_deg=10.0, **clock(), **phase)
     out = {}
     for name, (kind, arg) in cases.items():
         if kind == "fixes":
@@ -174,12 +187,18 @@ def trial(const, base, t, start, sigma_hz, seed, cases):
     return out
 
 
+DOPPLER_ONLY = DifferentialOptions(carrier=False)
 CASES = {
     f"differential fixes, {BLOCK_FIX_S:g} s blocks": ("fixes", {}),
     f"differential fixes, {BLOCK_FIX_S:g} s blocks, joint": ("fixes", JOINT),
-    "INS + differential Doppler": ("fused", (DifferentialOptions(), False)),
-    "INS + differential Doppler, no orbit states": ("fused", (DifferentialOptions(orbit_sigma_rtn_m=None), False)),
-    "INS + differential Doppler + NHC": ("fused", (DifferentialOptions(), True)),
+    "INS + differential Doppler": ("fused", (DOPPLER_ONLY, False, False)),
+    "INS + differential Doppler, no orbit states": ("fused", (dataclasses.replace(DOPPLER_ONLY, orbit_sigma_rtn_m=None),
+                                                             False, False)),
+    "INS + differential Doppler + NHC": ("fused", (DOPPLER_ONLY, True, False)),
+    "INS + differential Doppler + carrier": ("fused", (DifferentialOptions(), False, False)),
+    "INS + differential Doppler + carrier + NHC": ("fused", (DifferentialOptions(), True, False)),
+    "INS + Doppler + carrier, LEO gap": ("fused", (DifferentialOptions(), False, True)),
+    "INS + Doppler + carrier + NHC, LEO gap": ("fused", (DifferentialOptions(), True, True)),
 }
 
 
@@ -187,28 +206,40 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--tle", type=Path, default=TLE)
+    parser.add_argument("--slip-probability", type=float, default=SLIP_PROBABILITY)
+    parser.add_argument("--cases", nargs="*", default=None, help="substrings of the case names to run (default all)")
     args = parser.parse_args()
+    cases = {k: v for k, v in CASES.items() if args.cases is None or any(c in k for c in args.cases)}
     const, base, t = scene(args.tle)
     C = frames.C_e_n(np.radians(LAT_DEG), np.radians(LON_DEG))
     start = base + C @ np.array(ROVERS_ENU_M["7.5 km"])
     sigma_hz = float(doppler_sigma_hz(CN0_DBHZ, BLOCK_S))
-    print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz; car {CAR_SPEED_MPS:g} m/s; "
-          f"{args.seeds} seeds")
-    runs = [trial(const, base, t, start, sigma_hz, seed, CASES) for seed in range(args.seeds)]
-    print(f"{'case':48s} {'rms_3d_m':>9s} {'rms_h_m':>8s} {'rms_3d_after':>12s} {'end_3d_m':>9s} {'sig_3d_m':>9s} "
-          f"{'NEES':>6s}")
-    for name in CASES:
+    print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz, phase {PHASE_SIGMA_CYCLES:g} "
+          f"cycles, slips {args.slip_probability:g} per row; car {CAR_SPEED_MPS:g} m/s; {args.seeds} seeds; "
+          f"gap {GAP_S[0]:g}-{GAP_S[1]:g} s")
+    runs = [trial(const, base, t, start, sigma_hz, seed, cases, args.slip_probability) for seed in range(args.seeds)]
+    print(f"{'case':46s} {'rms_3d_m':>8s} {'rms_h_m':>7s} {'rms_3d_after':>12s} {'end_3d_m':>8s} {'sig_3d_m':>8s} "
+          f"{'NEES [95 %]':>18s} {'gap_rms_m':>9s} {'gap_end_m':>9s}")
+    for name in cases:
         e, P, t_s = (np.concatenate([run[name][i] for run in runs]) for i in range(3))
         end = np.array([np.linalg.norm(run[name][0][-1]) for run in runs])
         nees = np.einsum("si,sij,sj->s", e, np.linalg.inv(P), e)
+        # Each seed's mean NEES, and the 95 % interval of their mean from their spread (Student's t).
+        per_seed = np.array([np.mean(np.einsum("si,sij,sj->s", run[name][0], np.linalg.inv(run[name][1]),
+                                               run[name][0])) for run in runs])
+        half = student_t.ppf(0.975, len(runs) - 1) * per_seed.std(ddof=1) / np.sqrt(len(runs))
         sig3 = np.sqrt(np.trace(P, axis1=-2, axis2=-1))
         e3 = np.sum(e**2, -1)
-        print(f"{name:48s} {np.sqrt(np.mean(e3)):9.2f} {np.sqrt(np.mean(np.sum(e[:, :2]**2, -1))):8.2f} "
-              f"{np.sqrt(np.mean(e3[t_s >= SETTLED_S])):12.2f} {np.sqrt(np.mean(end**2)):9.2f} {np.median(sig3):9.2f} "
-              f"{np.mean(nees):6.2f}")
+        in_gap = (t_s >= GAP_S[0]) & (t_s < GAP_S[1])
+        gap_end = [np.linalg.norm(run[name][0][np.searchsorted(run[name][2], GAP_S[1]) - 1]) for run in runs]
+        print(f"{name:46s} {np.sqrt(np.mean(e3)):8.2f} {np.sqrt(np.mean(np.sum(e[:, :2]**2, -1))):7.2f} "
+              f"{np.sqrt(np.mean(e3[t_s >= SETTLED_S])):12.2f} {np.sqrt(np.mean(end**2)):8.2f} {np.median(sig3):8.2f} "
+              f"{np.mean(nees):6.2f} [{np.mean(per_seed) - half:4.2f}, {np.mean(per_seed) + half:4.2f}] "
+              f"{np.sqrt(np.mean(e3[in_gap])):9.2f} {np.sqrt(np.mean(np.square(gap_end))):9.2f}")
     lo, hi = chi2.ppf([0.025, 0.975], 3 * args.seeds) / args.seeds
-    print(f"NEES: mean of e^T P^-1 e over epochs and seeds (3 when consistent; [{lo:.2f}, {hi:.2f}] would be the "
-          "95 % interval of independent samples, one per seed)")
+    print("NEES: mean of e^T P^-1 e over epochs and seeds (3 when consistent), in brackets the 95 % interval of the "
+          f"seeds' mean NEES from their spread; [{lo:.2f}, {hi:.2f}] would be that of independent samples, one per "
+          "seed. gap_rms_m: RMS 3-D over the gap's epochs; gap_end_m: RMS over seeds at its last epoch")
 
 
 if __name__ == "__main__":
