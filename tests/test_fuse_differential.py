@@ -1,4 +1,5 @@
-"""Differential LEO Doppler aids: H against finite differences, the model against the pair simulator's truth.
+"""Differential LEO Doppler and carrier aids: H against finite differences, the models against the pair simulator's
+truth.
 
 References: central differences of the aid's own nonlinear model (as
 test_fuse_leo.py does for the single-receiver aid); the measurements of
@@ -18,6 +19,7 @@ from test_fuse_leo import CARRIER_HZ
 from leosop import frames
 from leosop.fusion import aids_differential, engine
 from leosop.fusion.aids import InsView, StateBlock
+from leosop.fusion.aids_carrier import DifferentialCarrier
 from leosop.fusion.common import N_INS
 from leosop.fusion.imu_noise import GRADES
 from leosop.ins.strapdown import NavState
@@ -35,6 +37,10 @@ X_BLOCKS = {CLOCK.key: np.array([-812.3, 0.4]), ORBIT.key: np.array([12.0, -250.
 TEN_MHZ = 1e-2
 #: Rover and base noise of the drive: the comb's CRLB for 20 ms at 45 dB-Hz (tools/bench_differential.py).
 SIGMA_HZ = 0.26
+#: Noise-free pair, carrier: what the differences leave of the rover's and base's light times over 2 s and the
+#: orbit offsets' second-order terms, measured 1e-4 cycles (3 um); 1e-3 cycles (26 um) bounds them, far below a
+#: phase's noise (0.1 cycles).
+MILLI_CYCLE = 1e-3
 
 
 def _aid(lever=(0.3, -0.8, 1.2)):
@@ -83,9 +89,9 @@ def pair():
     p, v = straight_drive(start, (1.0, 1.0, 0.0), 20.0, t_s)
     clocks = {"base": (1.2e3, 0.5), "rover": (-2e3, -0.2)}
     b = simulate_receiver(const, err, base, t, rng, sigma_hz=0.0, clock_offset_hz=clocks["base"][0],
-                          clock_drift_hz_per_s=clocks["base"][1])
+                          clock_drift_hz_per_s=clocks["base"][1], phase_sigma_cycles=0.0)
     r = simulate_receiver(const, err, p, t, rng, sigma_hz=0.0, vel_rx_ecef_mps=v, clock_offset_hz=clocks["rover"][0],
-                          clock_drift_hz_per_s=clocks["rover"][1])
+                          clock_drift_hz_per_s=clocks["rover"][1], phase_sigma_cycles=0.0)
     return base, r, b, err, p, v, t_s, np.subtract(clocks["rover"], clocks["base"])
 
 
@@ -102,7 +108,8 @@ def _truth_view(aid, pair, orbit_rtn_m):
 def test_innovation_at_the_truth_is_zero(pair):
     """With the INS, clock and orbit states at the truth, each aid predicts the simulated difference."""
     base, r, b, err = pair[:4]
-    aids = aids_differential.differential_aids(r, b, base, np.zeros(3))
+    aids = aids_differential.differential_aids(r, b, base, np.zeros(3), aids_differential.DifferentialOptions(
+        carrier=False))
     assert len(aids) == r.t_s.size  # base on the rover's epochs: every row has a correction
     sat = [list(err.sat_ids).index(aid.states[1].key.removeprefix("diff_orbit:")) for aid in aids]
     z = [aid.matrices(_truth_view(aid, pair, err.orbit_rtn_m[j]))[0][0] for aid, j in zip(aids, sat)]
@@ -157,3 +164,96 @@ def test_engine_converges_on_a_drive():
     # Pulled in from ~18 m, and inside the covariance it reports (chi-square, 3 dof, 0.999: 16.3).
     assert np.linalg.norm(e) < 6.0
     assert e @ np.linalg.solve(P, e) < 16.3
+
+
+def _carrier_aid(lever=(0.3, -0.8, 1.2)):
+    """Three satellites seen from the test's INS at ``t2`` and 1 s before, a base 7.5 km away, orbit states."""
+    r_rx, r_sv, v_sv, east, north = leo_geometry(_computed()[0])
+    base = r_rx - 6e3 * east - 4.5e3 * north
+    sv2 = np.stack([r_sv, r_sv + 4e5 * north - 2e5 * east, r_sv - 5e5 * east + 3e5 * north])
+    vel = np.stack([v_sv, v_sv + 3e3 * east, v_sv - 2e3 * north])
+    sv = np.stack([sv2 - vel, sv2])
+    orbits = tuple(StateBlock(f"diff_orbit:{j}", (0.0,) * 3, (30.0, 300.0, 100.0), (0.0,) * 3) for j in range(3))
+    clone = StateBlock("diff_carrier_start:1.0", (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, cloned=True)
+    # The antenna 1 s before: ~20 m back along the INS's velocity (its own estimate; any point will do for H).
+    start = r_rx - 14.0 * north + 12.0 * east
+    x = {**{b.key: np.array([12.0, -250.0, 40.0]) * (j + 1) / 2 for j, b in enumerate(orbits)}, clone.key: start}
+    aid = DifferentialCarrier(2.0, [1.5e5, -2e4, 3e4], [0.02, 0.03, 0.02], np.full(3, CARRIER_HZ), sv,
+                              np.stack([vel, vel]), base, lever, clone, orbits)
+    return aid, x
+
+
+def test_carrier_design_matrix_matches_finite_differences():
+    """Every column of the carrier aid's H (INS, the three orbit blocks, the clone) against central differences."""
+    aid, x = _carrier_aid()
+    keys = [b.key for b in aid.states]
+
+    def view(e):
+        d = np.split(e[N_INS:], 4)
+        return dataclasses.replace(_true_view(e[:N_INS]), states={k: x[k] - dk for k, dk in zip(keys, d)})
+
+    z, H, R = aid.matrices(view(np.zeros(N_INS + 12)))
+    assert H.shape == (2, N_INS + 12) and R.shape == (2, 2) and z.shape == (2,)
+    np.testing.assert_allclose(R, [[0.05, 0.02], [0.02, 0.04]])  # the first satellite's variance in both rows
+    # The engine tests' INS steps times 10 (cycles of ~1e5 round to 1e-11), 1 mm clone and 1 m orbit steps (the
+    # second-order terms: 1 m over ~1e6 m ranges).
+    step = np.r_[10 * STEP, np.full(9, 1.0), np.full(3, 1e-3)]
+    H_fd = central_difference_jacobian(lambda e: -aid.predict(view(e)), step)
+    # A delta-range does not see the velocity; the orbit columns (what 1 s changes of the baseline's share of an
+    # offset, ~1e-3 cycles per metre) must not vanish, or the test would check nothing there.
+    assert np.all(H[:, 3:6] == 0.0) and np.all(np.abs(H[:, N_INS:N_INS + 9]).max(axis=0) > 1e-4)
+    scale = np.maximum(np.abs(H_fd), 1e-3)
+    np.testing.assert_array_less(np.abs(H - H_fd), 1e-6 * scale + 1e-9 * np.abs(H).max())
+
+
+def test_carrier_innovation_at_the_truth_is_zero_and_a_slip_drops_its_interval(pair):
+    """Noise-free phases: with the INS, the clone and the orbit states at the truth each interval's
+    differences are the simulated ones; an arc that changes between two epochs leaves that satellite out there."""
+    base, r, b, err, p = pair[:5]
+    t_s = pair[6]
+
+    def carrier(rover):
+        return [a for a in aids_differential.differential_aids(rover, b, base, np.zeros(3))
+                if isinstance(a, DifferentialCarrier)]
+
+    def innovation(aid, orbit_scale):
+        k = int(np.searchsorted(t_s, aid.t_s))
+        states = {o.key: orbit_scale * err.orbit_rtn_m[list(err.sat_ids).index(o.key.split(":")[1])]
+                  for o in aid.orbits}
+        states[aid.states[-1].key] = p[k - 1]  # the antenna at the previous epoch
+        view = _truth_view(aid, pair, np.zeros(3))
+        return aid.matrices(dataclasses.replace(view, states=states))[0]
+
+    aids = carrier(r)
+    assert [a.t_s for a in aids] == list(t_s[1:])  # one aid per interval, every satellite in each
+    assert all(a.measured.size == np.unique(r.sat_id).size - 1 for a in aids)
+    assert np.max(np.abs(np.concatenate([innovation(a, 1.0) for a in aids]))) < MILLI_CYCLE
+    # The orbit states matter: at zero offsets a cycle or so is left over 2 s.
+    assert np.max(np.abs(np.concatenate([innovation(a, 0.0) for a in aids]))) > 100 * MILLI_CYCLE
+    # A slip on the first satellite at the fourth epoch: a new arc, a new ambiguity.
+    slipped = (r.sat_id == r.sat_id[0]) & (r.t_s >= t_s[3])
+    r2 = dataclasses.replace(r, arc=np.where(slipped, "1", r.arc), phase_cycles=r.phase_cycles + 1234.0 * slipped)
+    aids2 = carrier(r2)
+    sizes = {a.t_s: a.measured.size for a in aids2}
+    assert sizes[t_s[3]] == aids[0].measured.size - 1 and sizes[t_s[4]] == aids[0].measured.size
+    assert np.max(np.abs(np.concatenate([innovation(a, 1.0) for a in aids2]))) < MILLI_CYCLE
+
+
+def test_simulated_phase_rate_is_the_doppler():
+    """The pair simulator's phase against its own Doppler: the phase change over 0.1 s less the mean of the two
+    Doppler values (the trapezoid's error there: 0.1^2 / 12 times a Doppler's second derivative of up to ~30
+    Hz/s^2, 0.03 mHz); 0.05 Hz bounds what the simulator's light time and central-difference velocity leave
+    (measured 0.02-0.03 Hz), a fifth of a Doppler's noise."""
+    const = read_tle(DEFAULT_TLE)
+    site = frames.geodetic_to_ecef(np.radians(34.3), np.radians(108.9), 400.0)
+    t = const.epochs_utc.max() + (np.arange(0, 100) * 100).astype("timedelta64[ms]")
+    pos, _, _ = state_ecef(const, t[[0, -1]])
+    _, el, _ = frames.azimuth_elevation_range(pos, site)
+    ids = const.sat_ids[np.flatnonzero(el.min(-1) > np.radians(25.0))[:3]]
+    rng = np.random.default_rng(4)
+    m = simulate_receiver(const, draw_satellite_errors(ids, t[0], rng), site, t, rng, sigma_hz=0.0,
+                          clock_offset_hz=900.0, clock_drift_hz_per_s=0.7, phase_sigma_cycles=0.0)
+    for j in ids:
+        k = np.flatnonzero(m.sat_id == j)
+        rate = np.diff(m.phase_cycles[k]) / np.diff(m.t_s[k])
+        assert np.max(np.abs(rate - 0.5 * (m.doppler_hz[k][1:] + m.doppler_hz[k][:-1]))) < 0.05
