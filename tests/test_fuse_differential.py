@@ -17,7 +17,8 @@ from test_fuse_engine import STEP, _computed, _true_view
 from test_fuse_leo import CARRIER_HZ
 
 from leosop import frames
-from leosop.fusion import aids_differential, engine
+from leosop.errors import InputError
+from leosop.fusion import aids_differential, engine, leo_input
 from leosop.fusion.aids import InsView, StateBlock
 from leosop.fusion.aids_carrier import DifferentialCarrier
 from leosop.fusion.common import N_INS
@@ -27,6 +28,7 @@ from leosop.ins.trajectory import Segment, from_segments
 from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
 from leosop.positioning.differential_sim import draw_satellite_errors, simulate_receiver, straight_drive
+from leosop.positioning.measurements import read_measurements, write_measurements
 
 CLOCK = StateBlock("diff_clock", (0.0, 0.0), (3e3, 1.5), (1e-6, 1e-6), integrated=True)
 ORBIT = StateBlock("diff_orbit:44713", (0.0,) * 3, (30.0, 300.0, 100.0), (0.0,) * 3, drop_after_s=30.0)
@@ -257,3 +259,29 @@ def test_simulated_phase_rate_is_the_doppler():
         k = np.flatnonzero(m.sat_id == j)
         rate = np.diff(m.phase_cycles[k]) / np.diff(m.t_s[k])
         assert np.max(np.abs(rate - 0.5 * (m.doppler_hz[k][1:] + m.doppler_hz[k][:-1]))) < 0.05
+
+
+def test_tables_round_trip_to_the_same_aids(pair, tmp_path):
+    """The pair written as DESIGN 4.3 tables (with phase_cycles, phase_sigma_cycles, arc; on a t_s clock) and read
+    back gives ``fuse --leo-base``'s aids: the in-memory pair's, to the tables' repr digits; a base of other
+    satellites is one line naming the tables."""
+    base = pair[0]
+    r, b = (dataclasses.replace(m, time_utc=None, sigma_hz=np.full(len(m), SIGMA_HZ),
+                                phase_sigma_cycles=np.full(len(m), 0.1)) for m in pair[1:3])
+    paths = []
+    for name, m in (("rover", r), ("base", b)):
+        paths.append(tmp_path / f"{name}.csv")
+        write_measurements(paths[-1], m)
+    rover2, base2 = (read_measurements(p_) for p_ in paths)
+    np.testing.assert_array_equal(rover2.phase_cycles, r.phase_cycles)
+    np.testing.assert_array_equal(rover2.arc, r.arc)
+    made = leo_input.to_differential_aids(rover2, base2, None, base, np.zeros(3))
+    ref = aids_differential.differential_aids(r, b, base, np.zeros(3))
+    assert [type(a) for a in made] == [type(a) for a in ref] and [a.t_s for a in made] == [a.t_s for a in ref]
+    for a, a_ref in zip(made, ref):
+        if not a.clones:
+            np.testing.assert_allclose(a.measured, a_ref.measured, rtol=0, atol=1e-9)
+    other = base2.take(np.flatnonzero(base2.sat_id != base2.sat_id[0]))
+    other = dataclasses.replace(other, sat_id=np.char.add(other.sat_id, "9"))
+    with pytest.raises(InputError, match=f"{paths[1]}: no row of {paths[0]} has a base correction"):
+        leo_input.to_differential_aids(rover2, other, None, base, np.zeros(3))

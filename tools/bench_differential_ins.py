@@ -197,6 +197,12 @@ CASES = {
     "INS + differential Doppler + NHC": ("fused", (DOPPLER_ONLY, True, False)),
     "INS + differential Doppler + carrier": ("fused", (DifferentialOptions(), False, False)),
     "INS + differential Doppler + carrier + NHC": ("fused", (DifferentialOptions(), True, False)),
+    "INS + differential Doppler + carrier 5 s + NHC": ("fused", (DifferentialOptions(carrier_interval_s=5.0), True,
+                                                                   False)),
+    "INS + differential Doppler + carrier 10 s + NHC": ("fused", (DifferentialOptions(carrier_interval_s=10.0), True,
+                                                                    False)),
+    "INS + differential Doppler + carrier 30 s + NHC": ("fused", (DifferentialOptions(carrier_interval_s=30.0), True,
+                                                                    False)),
     "INS + Doppler + carrier, LEO gap": ("fused", (DifferentialOptions(), False, True)),
     "INS + Doppler + carrier + NHC, LEO gap": ("fused", (DifferentialOptions(), True, True)),
 }

@@ -149,9 +149,9 @@ def _arcs(sat_rows, slip, rng):
     for j in np.unique(sat_rows):
         rows = np.flatnonzero(sat_rows == j)
         arc[rows] = np.cumsum(slip[rows] & (np.arange(rows.size) > 0))
-    key = sat_rows * (arc.max() + 1) + arc
+    key = sat_rows * (arc.max(initial=0) + 1) + arc
     _, first = np.unique(key, return_inverse=True)
-    return arc, rng.integers(-10**6, 10**6, first.max() + 1)[first].astype(float)
+    return arc, rng.integers(-10**6, 10**6, first.max(initial=-1) + 1)[first].astype(float)
 
 
 def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, vel_rx_ecef_mps=None,
