@@ -122,7 +122,8 @@ def test_innovation_at_the_truth_is_zero(pair):
 
 
 def test_engine_converges_on_a_drive():
-    """Ideal IMU, 20 m off at the start: the engine with the aids pulls the car in, inside its own covariance.
+    """Ideal IMU, 20 m off at the start: the engine with the aids (Doppler and carrier) pulls the car in, inside its
+    own covariance.
 
     A short drive (20 s, 20 Hz IMU) on the bundled constellation; the reference is the truth of the trajectory
     the IMU and the pair simulator both follow.
@@ -144,10 +145,12 @@ def test_engine_converges_on_a_drive():
     ids = const.sat_ids[np.flatnonzero(el.min(-1) > np.radians(25.0))[:6]]
     rng = np.random.default_rng(5)
     err = draw_satellite_errors(ids, t[0], rng)
-    b = simulate_receiver(const, err, base, t, rng, sigma_hz=SIGMA_HZ, clock_offset_hz=700.0)
+    b = simulate_receiver(const, err, base, t, rng, sigma_hz=SIGMA_HZ, clock_offset_hz=700.0, phase_sigma_cycles=0.1)
     r = simulate_receiver(const, err, track.pos_ecef_m, t, rng, sigma_hz=SIGMA_HZ, vel_rx_ecef_mps=vel,
-                          clock_offset_hz=-1.1e3, clock_drift_hz_per_s=0.3)
+                          clock_offset_hz=-1.1e3, clock_drift_hz_per_s=0.3, phase_sigma_cycles=0.1)
     aids = aids_differential.differential_aids(r, b, base, np.zeros(3))
+    n_carrier = sum(isinstance(a, DifferentialCarrier) for a in aids)
+    assert n_carrier == n_ep - 1  # one per interval, and a clone at each epoch before the last
     k1 = k0 + (n_ep - 1) * per_ep
     settings = dataclasses.replace(GRADES["consumer"].settings(), record_every=per_ep // 2)
     prior = np.diag(np.r_[np.radians([1.0, 1.0, 5.0]), [0.5] * 3, [20.0 / 6.4e6] * 2, 20.0, [1e-4] * 3,
@@ -162,7 +165,8 @@ def test_engine_converges_on_a_drive():
     C = frames.C_e_n(truth.lat_rad[0], truth.lon_rad[0])
     e = C.T @ (frames.geodetic_to_ecef(res.lat_rad[-1], res.lon_rad[-1], res.alt_m[-1]) - truth.pos_ecef_m[0])
     P = res.cov_pos_enu_m2[-1]
-    assert res.aids["differential_doppler"][0] > 0.9 * len(aids)
+    assert res.aids["differential_doppler"][0] > 0.9 * (len(aids) - 2 * n_carrier)
+    assert res.aids["differential_carrier"][0] > 0.9 * n_carrier
     # Pulled in from ~18 m, and inside the covariance it reports (chi-square, 3 dof, 0.999: 16.3).
     assert np.linalg.norm(e) < 6.0
     assert e @ np.linalg.solve(P, e) < 16.3

@@ -45,9 +45,6 @@ from .common import N_INS
 
 __all__ = ["DifferentialCarrier", "carrier_aids"]
 
-#: Slack on the chain's interval [s] (time tags rounded to the microsecond).
-_TIME_TOL_S = 1e-6
-
 
 def _unit(pos_sv_ecef_m, pos_rx_ecef_m):
     """Ranges (k,) and unit vectors (k, 3) from receivers to satellites."""
@@ -152,7 +149,7 @@ class DifferentialCarrier(Aid):
 
 
 def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_weights, orbits, *,
-                 default_sigma_cycles, interval_s=None):
+                 default_sigma_cycles):
     """A :class:`DifferentialCarrier` per pair of consecutive rover epochs, and the clones they need.
 
     Parameters
@@ -171,11 +168,6 @@ def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_we
         satellite of the rover's rows; shared with the Doppler aids), or
         None: no orbit states.
     default_sigma_cycles : float
-    interval_s : float, optional
-        The intervals' length: the epochs joined are a chain, each the
-        first at least ``interval_s`` after the one before (intervals of
-        more than twice that, across a gap, are left out). None: every
-        rover epoch to the next.
 
     Returns
     -------
@@ -198,15 +190,12 @@ def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_we
     one_base_arc = (base_rows[:, 0] >= 0) & ((base_weights[:, 1] == 0) | (arc_b[take[:, 0]] == arc_b[take[:, 1]]))
     ok = np.isfinite(y) & np.isfinite(var) & one_base_arc
     arc = np.char.add(np.char.add(arc_r.astype(str), "|"), arc_b[take[:, 0]].astype(str))
-    epochs, ep = _nodes(rover.t_s, interval_s)
-    ok &= ep >= 0
+    epochs, ep = np.unique(rover.t_s, return_inverse=True)
     # Per satellite, rows in epoch order; an interval joins a row to the row before it.
     order = np.lexsort((ep, rover.sat_id))
     prev, cur = order[:-1], order[1:]
     pair = ((rover.sat_id[prev] == rover.sat_id[cur]) & (ep[cur] == ep[prev] + 1) & ok[prev] & ok[cur]
             & (arc[prev] == arc[cur]))
-    if interval_s is not None:  # not across a gap in the rover's epochs
-        pair &= rover.t_s[cur] - rover.t_s[prev] <= 2.0 * interval_s
     prev, cur = prev[pair], cur[pair]
     aids, clones = [], {}
     for e in np.unique(ep[cur]):
@@ -225,24 +214,6 @@ def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_we
             np.stack([rover.vel_sv_ecef_mps[p], rover.vel_sv_ecef_mps[q]]), b, lever_arm_b_m, clones[e - 1], blocks))
     starts = [LeoWindowStart(float(epochs[e]), lever_arm_b_m, block) for e, block in clones.items()]
     return sorted(aids + starts, key=lambda a: (a.t_s, a.clones))
-
-
-def _nodes(t_s, interval_s):
-    """The epochs the intervals join, (n,), and each row's index among them, (m,) (-1: a row between them).
-
-    Every distinct time of ``t_s`` (m,), or (``interval_s``) a chain from the first: each the first time at
-    least ``interval_s`` after the one before.
-    """
-    epochs, ep = np.unique(t_s, return_inverse=True)
-    if interval_s is None:
-        return epochs, ep
-    chosen = [0]
-    for k in range(1, epochs.size):
-        if epochs[k] >= epochs[chosen[-1]] + interval_s - _TIME_TOL_S:
-            chosen.append(k)
-    index = np.full(epochs.size, -1)
-    index[chosen] = np.arange(len(chosen))
-    return epochs[chosen], index[ep]
 
 
 def _sigma(meas, default):

@@ -77,7 +77,6 @@ class DifferentialOptions:
     orbit_sigma_rtn_m: tuple | None = ORBIT_SIGMA_RTN_M
     carrier: bool = True
     default_phase_sigma_cycles: float = 0.1
-    carrier_interval_s: float | None = None
 
 
 class DifferentialDoppler(LeoDoppler):
@@ -189,5 +188,5 @@ def differential_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, options=None,
            for k in np.flatnonzero(ok)]
     if o.carrier:
         out += carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, rows, weights, orbits,
-                            default_sigma_cycles=o.default_phase_sigma_cycles, interval_s=o.carrier_interval_s)
+                            default_sigma_cycles=o.default_phase_sigma_cycles)
     return sorted(out, key=lambda a: a.t_s)
