@@ -161,7 +161,7 @@ def block_fixes(traj, k0, r, b, base, kw):
     return e, np.einsum("kji,kjl,klm->kim", C, fix.cov[:, :3, :3], C), fix.t_ref_s
 
 
-def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability, orbit_scale):
+def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability, orbit_scale, phase_sigma_cycles):
     """One seed: (errors, covariances, times) per case; the element-set offsets ``orbit_scale`` times the usual
     (the truth's and the filter's prior)."""
     rng = np.random.default_rng(seed)
@@ -176,7 +176,7 @@ def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability, orbit_
     k0 = int(round(RUN_UP_S * IMU_RATE_HZ))
     track = traj.at(traj.t_s[k0] + t_s)
     vel = np.einsum("kij,kj->ki", frames.C_e_n(track.lat_rad, track.lon_rad), track.vel_enu_mps)
-    phase = {"phase_sigma_cycles": PHASE_SIGMA_CYCLES, "slip_probability": slip_probability}
+    phase = {"phase_sigma_cycles": phase_sigma_cycles, "slip_probability": slip_probability}
     b = simulate_receiver(const, err, base, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase)
     r = simulate_receiver(const, err, track.pos_ecef_m, t, rng, sigma_hz=sigma_hz, vel_rx_ecef_mps=vel,
                           mask_deg=10.0, **clock(), **phase)
@@ -212,6 +212,9 @@ def main():
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--tle", type=Path, default=TLE)
     parser.add_argument("--slip-probability", type=float, default=SLIP_PROBABILITY)
+    parser.add_argument("--phase-sigma-cycles", type=float, default=PHASE_SIGMA_CYCLES)
+    parser.add_argument("--baseline-km", type=float, default=7.5,
+                        help="the car's start from the base, along tools/bench_differential.py's 7.5 km rover")
     parser.add_argument("--orbit-scale", type=float, default=1.0,
                         help="element-set offsets (truth and prior) this many times N(0, 30 / 300 / 100 m) RTN")
     parser.add_argument("--cases", nargs="*", default=None, help="substrings of the case names to run (default all)")
@@ -219,13 +222,14 @@ def main():
     cases = {k: v for k, v in CASES.items() if args.cases is None or any(c in k for c in args.cases)}
     const, base, t = scene(args.tle)
     C = frames.C_e_n(np.radians(LAT_DEG), np.radians(LON_DEG))
-    start = base + C @ np.array(ROVERS_ENU_M["7.5 km"])
+    start = base + C @ np.array(ROVERS_ENU_M["7.5 km"]) * args.baseline_km / 7.5
     sigma_hz = float(doppler_sigma_hz(CN0_DBHZ, BLOCK_S))
-    print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz, phase {PHASE_SIGMA_CYCLES:g} "
-          f"cycles, slips {args.slip_probability:g} per row; car {CAR_SPEED_MPS:g} m/s; {args.seeds} seeds; "
-          f"gap {GAP_S[0]:g}-{GAP_S[1]:g} s; orbit offsets x{args.orbit_scale:g}")
-    runs = [trial(const, base, t, start, sigma_hz, seed, cases, args.slip_probability, args.orbit_scale)
-            for seed in range(args.seeds)]
+    print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz, phase "
+          f"{args.phase_sigma_cycles:g} cycles, slips {args.slip_probability:g} per row; car {CAR_SPEED_MPS:g} m/s; "
+          f"{args.seeds} seeds; gap {GAP_S[0]:g}-{GAP_S[1]:g} s; orbit offsets x{args.orbit_scale:g}; "
+          f"baseline {args.baseline_km:g} km")
+    runs = [trial(const, base, t, start, sigma_hz, seed, cases, args.slip_probability, args.orbit_scale,
+                  args.phase_sigma_cycles) for seed in range(args.seeds)]
     print(f"{'case':46s} {'rms_3d_m':>8s} {'rms_h_m':>7s} {'rms_3d_after':>12s} {'end_3d_m':>8s} {'sig_3d_m':>8s} "
           f"{'NEES [95 %]':>18s} {'gap_rms_m':>9s} {'gap_end_m':>9s}")
     for name in cases:
