@@ -289,3 +289,25 @@ def test_tables_round_trip_to_the_same_aids(pair, tmp_path):
     other = dataclasses.replace(other, sat_id=np.char.add(other.sat_id, "9"))
     with pytest.raises(InputError, match=f"{paths[1]}: no row of {paths[0]} has a base correction"):
         leo_input.to_differential_aids(rover2, other, None, base, np.zeros(3))
+
+
+def test_carrier_rate_moves_both_ends_of_the_interval():
+    """``rate`` (the IMU time offset's column) against a central difference of the prediction with the antenna at
+    both ends moved along the INS's velocity (no lever arm: the antenna is the INS)."""
+    aid, x = _carrier_aid(lever=(0.0, 0.0, 0.0))
+    state = _computed()[0]
+    r0 = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
+    v_ecef = frames.C_e_n(state.lat_rad, state.lon_rad) @ state.vel_enu_mps
+
+    def h(dt):
+        lat, lon, alt = frames.ecef_to_geodetic(r0 + v_ecef * dt)
+        moved = NavState.from_dcm(lat, lon, alt, state.vel_enu_mps, state.C_n_b)
+        states = {**x, aid.states[-1].key: x[aid.states[-1].key] + v_ecef * dt}
+        return aid.predict(InsView(moved, np.zeros(3), np.zeros(3), np.zeros(3), states=states))
+
+    ins = InsView(state, np.zeros(3), np.zeros(3), np.zeros(3), states=x)
+    # 4 m of motion either side: the geodetic round trip's ~1e-8 m then costs ~1e-7 cycles/s, and the central
+    # difference's error (the third derivative along a line, ~v^3 / rho^2 per metre) is far below it.
+    dt = 0.5
+    np.testing.assert_allclose(aid.rate(ins), (h(dt) - h(-dt)) / (2 * dt), rtol=1e-6, atol=1e-6)
+    assert np.all(np.abs(aid.rate(ins)) > 1e-3)  # not a vanishing check

@@ -126,10 +126,11 @@ class DifferentialCarrier(Aid):
         return self.D @ (-self.per_m * self._dy_m(a1, a2, sv)[0])
 
     def rate(self, ins):
-        # The antenna moving at t2; the satellites' states are those of the rows' times.
+        # An IMU time offset moves both ends of the interval (the clone was made at t1 on the IMU clock too), the
+        # antenna at the velocity of t2 at both; the satellites' states are those of the rows' times.
         a1, a2, sv, _, _, v2 = self._geometry(ins)
         u_a = self._dy_m(a1, a2, sv)[1]
-        return self.D @ (self.per_m * (u_a[1] @ v2))
+        return self.D @ (self.per_m * ((u_a[1] - u_a[0]) @ v2))
 
     def design(self, ins):
         a1, a2, sv, C, l_n, _ = self._geometry(ins)
