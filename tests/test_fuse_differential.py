@@ -285,6 +285,14 @@ def test_tables_round_trip_to_the_same_aids(pair, tmp_path):
     for a, a_ref in zip(made, ref):
         if not a.clones:
             np.testing.assert_allclose(a.measured, a_ref.measured, rtol=0, atol=1e-9)
+    # A bad phase sigma sets its row aside with the reason, as the table's other columns do.
+    text = paths[0].read_text().splitlines()
+    header = text[0].split(",")
+    row = text[1].split(",")
+    row[header.index("phase_sigma_cycles")] = "-0.1"
+    paths[0].write_text("\n".join([text[0], ",".join(row), *text[2:]]) + "\n")
+    assert read_measurements(paths[0]).rejected == ((2, "phase_sigma_cycles is -0.1, expected a positive number or "
+                                                        "an empty field"),)
     other = base2.take(np.flatnonzero(base2.sat_id != base2.sat_id[0]))
     other = dataclasses.replace(other, sat_id=np.char.add(other.sat_id, "9"))
     with pytest.raises(InputError, match=f"{paths[1]}: no row of {paths[0]} has a base correction"):
