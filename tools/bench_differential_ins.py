@@ -84,10 +84,6 @@ NHC_SIGMA_MPS = 0.1
 BLOCK_FIX_S = 10.0
 #: The column ``rms_3d_after``: epochs (or block mid-times) from this time on [s], past the 20 m start.
 SETTLED_S = 30.0
-#: Phase noise of each receiver [cycles] (2.6 mm at 11.325 GHz; replay's tracker, 42-44 dB-Hz: ~0.01 cycles).
-PHASE_SIGMA_CYCLES = 0.1
-#: Probability of a cycle slip at each row (a satellite slips about every 100 s).
-SLIP_PROBABILITY = 0.01
 #: The cases with a gap: the LEO aids withheld over this span of the drive [s] (a tunnel, an underpass).
 GAP_S = (80.0, 95.0)
 
@@ -101,9 +97,22 @@ def drive(start_ecef_m, duration_s):
                          rate_hz=IMU_RATE_HZ)
 
 
-def consumer_imu(rng):
-    """IMU errors drawn from the ``consumer`` grade's figures, and the filter's settings of that grade."""
-    spec = GRADES["consumer"]
+@dataclasses.dataclass(frozen=True)
+class Setup:
+    """What the command line varies: the IMU grade (truth and filter), the phase noise of each receiver
+    [cycles] (0.1: 2.6 mm at 11.325 GHz; replay's tracker reaches ~0.01 at 42-44 dB-Hz), the probability of a
+    cycle slip at each row (0.01: a satellite slips about every 100 s), and the element-set offsets' scale
+    (truth and the filter's prior)."""
+
+    imu_grade: str = "consumer"
+    phase_sigma_cycles: float = 0.1
+    slip_probability: float = 0.01
+    orbit_scale: float = 1.0
+
+
+def grade_imu(rng, grade):
+    """IMU errors drawn from the figures of ``grade`` (:data:`GRADES`), and the filter's settings of that grade."""
+    spec = GRADES[grade]
     errors = ImuErrors.from_quoted(
         gyro_bias_deg_per_h=rng.normal(0.0, spec.gyro_bias_sigma_deg_per_s, 3) * 3600.0,
         gyro_arw_deg_per_rt_h=spec.gyro_arw_deg_per_rt_h,
@@ -112,14 +121,14 @@ def consumer_imu(rng):
     return errors, spec
 
 
-def fused(traj, k0, n_ep, r, b, base, rng, options, nhc, gap):
+def fused(traj, k0, n_ep, r, b, base, rng, grade, options, nhc, gap):
     """The engine over the drive: errors (n_ep, 3) ENU, position covariances (n_ep, 3, 3), times (n_ep,).
 
     ``gap``: the LEO aids withheld over ``GAP_S`` (the IMU and NHC alone), or not.
     """
     per_ep = int(round(IMU_RATE_HZ))
     k1 = k0 + (n_ep - 1) * per_ep
-    errors, spec = consumer_imu(rng)
+    errors, spec = grade_imu(rng, grade)
     dth, dvl = corrupt(traj.dtheta_b_rad[k0:k1], traj.dvel_b_mps[k0:k1], traj.dt_s, errors, rng)
     t_imu = traj.t_s[k0 + 1:k1 + 1] - traj.t_s[k0]
     prior = FilterSettings(pos_sigma_m=(POS_SIGMA_M,) * 3, vel_sigma_mps=(VEL_SIGMA_MPS,) * 3,
@@ -161,11 +170,10 @@ def block_fixes(traj, k0, r, b, base, kw):
     return e, np.einsum("kji,kjl,klm->kim", C, fix.cov[:, :3, :3], C), fix.t_ref_s
 
 
-def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability, orbit_scale, phase_sigma_cycles):
-    """One seed: (errors, covariances, times) per case; the element-set offsets ``orbit_scale`` times the usual
-    (the truth's and the filter's prior)."""
+def trial(const, base, t, start, sigma_hz, seed, cases, setup):
+    """One seed: (errors, covariances, times) per case, under ``setup`` (a :class:`Setup`)."""
     rng = np.random.default_rng(seed)
-    orbit_sigma = tuple(orbit_scale * np.asarray(ORBIT_SIGMA_RTN_M))
+    orbit_sigma = tuple(setup.orbit_scale * np.asarray(ORBIT_SIGMA_RTN_M))
     err = draw_satellite_errors(const.sat_ids, t[0], rng, orbit_sigma_rtn_m=orbit_sigma)
 
     def clock():
@@ -176,7 +184,7 @@ def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability, orbit_
     k0 = int(round(RUN_UP_S * IMU_RATE_HZ))
     track = traj.at(traj.t_s[k0] + t_s)
     vel = np.einsum("kij,kj->ki", frames.C_e_n(track.lat_rad, track.lon_rad), track.vel_enu_mps)
-    phase = {"phase_sigma_cycles": phase_sigma_cycles, "slip_probability": slip_probability}
+    phase = {"phase_sigma_cycles": setup.phase_sigma_cycles, "slip_probability": setup.slip_probability}
     b = simulate_receiver(const, err, base, t, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase)
     r = simulate_receiver(const, err, track.pos_ecef_m, t, rng, sigma_hz=sigma_hz, vel_rx_ecef_mps=vel,
                           mask_deg=10.0, **clock(), **phase)
@@ -188,7 +196,8 @@ def trial(const, base, t, start, sigma_hz, seed, cases, slip_probability, orbit_
             options = arg[0]
             if options.orbit_sigma_rtn_m is not None:
                 options = dataclasses.replace(options, orbit_sigma_rtn_m=orbit_sigma)
-            out[name] = fused(traj, k0, len(t), r, b, base, np.random.default_rng([seed, 1]), options, *arg[1:])
+            out[name] = fused(traj, k0, len(t), r, b, base, np.random.default_rng([seed, 1]), setup.imu_grade,
+                              options, *arg[1:])
     return out
 
 
@@ -211,11 +220,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--tle", type=Path, default=TLE)
-    parser.add_argument("--slip-probability", type=float, default=SLIP_PROBABILITY)
-    parser.add_argument("--phase-sigma-cycles", type=float, default=PHASE_SIGMA_CYCLES)
+    parser.add_argument("--slip-probability", type=float, default=Setup.slip_probability)
+    parser.add_argument("--phase-sigma-cycles", type=float, default=Setup.phase_sigma_cycles)
+    parser.add_argument("--imu-grade", choices=tuple(GRADES), default=Setup.imu_grade)
     parser.add_argument("--baseline-km", type=float, default=7.5,
                         help="the car's start from the base, along tools/bench_differential.py's 7.5 km rover")
-    parser.add_argument("--orbit-scale", type=float, default=1.0,
+    parser.add_argument("--orbit-scale", type=float, default=Setup.orbit_scale,
                         help="element-set offsets (truth and prior) this many times N(0, 30 / 300 / 100 m) RTN")
     parser.add_argument("--cases", nargs="*", default=None, help="substrings of the case names to run (default all)")
     args = parser.parse_args()
@@ -227,9 +237,9 @@ def main():
     print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz, phase "
           f"{args.phase_sigma_cycles:g} cycles, slips {args.slip_probability:g} per row; car {CAR_SPEED_MPS:g} m/s; "
           f"{args.seeds} seeds; gap {GAP_S[0]:g}-{GAP_S[1]:g} s; orbit offsets x{args.orbit_scale:g}; "
-          f"baseline {args.baseline_km:g} km")
-    runs = [trial(const, base, t, start, sigma_hz, seed, cases, args.slip_probability, args.orbit_scale,
-                  args.phase_sigma_cycles) for seed in range(args.seeds)]
+          f"baseline {args.baseline_km:g} km; IMU {args.imu_grade}")
+    setup = Setup(args.imu_grade, args.phase_sigma_cycles, args.slip_probability, args.orbit_scale)
+    runs = [trial(const, base, t, start, sigma_hz, seed, cases, setup) for seed in range(args.seeds)]
     print(f"{'case':46s} {'rms_3d_m':>8s} {'rms_h_m':>7s} {'rms_3d_after':>12s} {'end_3d_m':>8s} {'sig_3d_m':>8s} "
           f"{'NEES [95 %]':>18s} {'gap_rms_m':>9s} {'gap_end_m':>9s}")
     for name in cases:
