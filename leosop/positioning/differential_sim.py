@@ -117,7 +117,6 @@ def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
     return np.einsum("mij,mj->mi", rtn_frames(pos, vel)[0], orbit_rtn_m)
 
 
-
 def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
     """A vehicle at constant speed along a straight line of the local horizon.
 
