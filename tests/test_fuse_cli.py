@@ -103,6 +103,15 @@ def test_walking_pace_only_in_gnss_gaps_and_never_at_rest():
     (["--course-yaw", "5,0"], "SIGMA_DEG in (0, 180]"),
     (["--gyro-error-sigma", "0.03"], "--gyro-error-sigma '0.03': expected SCALE,CROSS"),
     (["--gyro-error-sigma", "3,2"], "SCALE and CROSS must be fractions in (0, 1)"),
+    (["--leo", "x.csv", "--leo-base", "b.csv"], "--leo-base needs --base-site, the base's known position"),
+    (["--base-site", "40,-105,1600"], "--base-site goes with --leo-base"),
+    (["--leo-sim", "--leo-base", "b.csv", "--base-site", "40,-105,1600"], "--leo-base goes with --leo, the rover's"),
+    (["--leo", "x.csv", "--leo-base", "b.csv", "--base-site", "40,-105,1600", "--leo-window-s", "1"],
+     "--leo-window-s does not go with --leo-base"),
+    (["--leo", "x.csv", "--leo-base", "b.csv", "--base-site", "40,-105"], "--base-site '40,-105': expected LAT_DEG"),
+    (["--leo", "x.csv", "--leo-base", "b.csv", "--base-site", "91,-105,1600"], "latitude 91 deg is outside"),
+    (["--leo", "x.csv", "--leo-base", "missing-base.csv", "--base-site", "40,-105,1600"],
+     "missing-base.csv: no such base measurement file (--leo-base)"),
 ])
 def test_bad_options_are_one_line_exit_2(extra, message, capsys):
     assert main(["fuse", *_walk(), *extra]) == 2

@@ -3,7 +3,9 @@
 Both give a :class:`leosop.positioning.measurements.Measurements` (with
 satellite states and UTC times) and :func:`to_aids` turns it into the
 engine's :class:`leosop.fusion.aids_leo.LeoDoppler` aids on the run's clock
-(seconds after the first epoch of the ``--gnss`` file, GPST).
+(seconds after the first epoch of the ``--gnss`` file, GPST); with a base's
+table (``--leo-base``) :func:`to_differential_aids` makes the differential
+aids of :mod:`leosop.fusion.aids_differential` instead.
 
 Simulation (:func:`simulate`): the reference trajectory is the ``Q = 1``
 epochs of the GNSS file, linearly interpolated to the scenario's fix rate
@@ -32,6 +34,7 @@ import numpy as np
 from .. import frames
 from ..constants import C_MPS
 from ..errors import InputError
+from ..fusion.aids_differential import differential_aids
 from ..fusion.aids_leo import LeoOptions, leo_aids
 from ..gnss.ppp import gps_to_utc
 from ..gnss.rtklib_pos import Q_FIX
@@ -39,7 +42,7 @@ from ..positioning import measurements as pm
 from .scenarios import XIAN_BAOJI
 
 __all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "SIM_WINDOW_S", "gpst_to_utc", "read", "reference_track", "simulate",
-           "to_aids"]
+           "to_aids", "to_differential_aids"]
 
 #: A reference epoch needs a Q = 1 fix at most this far before and after it [s].
 MAX_GAP_S = 1.0
@@ -139,12 +142,12 @@ def simulate(sol, *, tle=None, constellations=("starlink",), seed=0):
         family=np.asarray(leo.constellations)[pairs["clock_index"][keep]])
 
 
-def read(path, sol, *, tle=None):
+def read(path, sol, *, tle=None, site_ecef_m=None):
     """A DESIGN 4.3 table for ``fuse``: satellite states from its columns, else from ``tle`` (needs ``time_utc``).
 
     A table with ``t_s`` only is taken on the run's clock (seconds after the
-    first GNSS epoch). Light time of TLE states: to the GNSS antenna
-    interpolated at each row.
+    first GNSS epoch). Light time of TLE states: to ``site_ecef_m`` (3,) (a
+    base at rest), else to the GNSS antenna interpolated at each row.
     """
     from ..orbits import load_constellation
 
@@ -155,10 +158,13 @@ def read(path, sol, *, tle=None):
     if constellation is None or meas.time_utc is None:
         raise InputError(f"{path}: no satellite state columns ({', '.join(pm.SV_STATE_COLUMNS)}); give tle and "
                          "a time_utc column", param="tle")
-    t = _run_seconds(meas.time_utc, sol)
-    t_g = sol.t_gpst_s - sol.t_gpst_s[0]
-    p = frames.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.alt_m)
-    rx = np.stack([np.interp(t, t_g, p[:, c]) for c in range(3)], axis=-1)
+    if site_ecef_m is not None:
+        rx = np.broadcast_to(np.asarray(site_ecef_m, dtype=float), (len(meas), 3))
+    else:
+        t = _run_seconds(meas.time_utc, sol)
+        t_g = sol.t_gpst_s - sol.t_gpst_s[0]
+        p = frames.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.alt_m)
+        rx = np.stack([np.interp(t, t_g, p[:, c]) for c in range(3)], axis=-1)
     pos, vel, reason = pm.sv_states_from_tle(constellation, meas.sat_id, meas.time_utc, rx)
     ok = reason == ""
     if not ok.any():
@@ -190,3 +196,41 @@ def to_aids(meas, sol, lever_arm_b_m, options=None):
                     meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, lever_arm_b_m, options)
     aids.sort(key=lambda a: a.t_s)
     return aids, labels
+
+
+def to_differential_aids(rover, base, sol, site_ecef_m, lever_arm_b_m, options=None):
+    """A rover's and a base's tables as differential aids on the run's clock (Doppler, and carrier with phases).
+
+    Parameters
+    ----------
+    rover, base : Measurements
+        With satellite states; one receiver clock each (one constellation).
+    sol : leosop.gnss.rtklib_pos.PosSolution
+        Its first epoch is the run's time origin.
+    site_ecef_m : array_like, (3,)
+        The base's known position.
+    lever_arm_b_m : array_like, (3,)
+    options : leosop.fusion.aids_differential.DifferentialOptions, optional
+
+    Returns
+    -------
+    list of Aid
+        :func:`leosop.fusion.aids_differential.differential_aids`, sorted by ``t_s``.
+
+    Raises
+    ------
+    InputError
+        A table with several receiver clocks, or no rover row with a base correction.
+    """
+    for meas in (rover, base):
+        labels = pm.clock_groups(meas)[1]
+        if len(labels) > 1:
+            raise InputError(f"{meas.source}: rows of several receiver clocks ({', '.join(labels)}); a differential "
+                             "table has one constellation")
+    on_clock = [dataclasses.replace(m, t_s=m.t_s if m.time_utc is None else _run_seconds(m.time_utc, sol))
+                for m in (rover, base)]
+    aids = differential_aids(*on_clock, site_ecef_m, lever_arm_b_m, options)
+    if not aids:
+        raise InputError(f"{base.source}: no row of {rover.source} has a base correction (no satellite in common "
+                         "within the base's time span)")
+    return aids

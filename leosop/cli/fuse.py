@@ -6,7 +6,9 @@ JSON (all present): ``n_epochs``, ``duration_s``, ``aids`` (used per kind),
 ``aids_rejected``, ``reference`` (``"Q=1"`` or ``"all withheld"``), ``mean_max_horiz_err_m``,
 ``worst_max_horiz_err_m``, ``inside_3sigma_fraction``, ``yaw_aligned_s``, ``imu``, ``gnss``, and with
 ``--leo``/``--leo-sim`` ``leo`` (``source``, ``n_rows``, ``n_sats``, ``coupling``, per receiver clock the final
-``offset_hz``, ``drift_hz_per_s``, ``offset_sigma_hz``).
+``offset_hz``, ``drift_hz_per_s``, ``offset_sigma_hz``); with ``--leo-base`` ``leo`` also has ``base``
+(``source``, ``n_rows``, ``n_sats``, ``site``: lat, lon [deg], alt [m]) and ``carrier`` (the rover's and the
+base's tables both have ``phase_cycles``), its ``clocks`` the rover-minus-base offset ``rover-base``.
 ``--out``: ``solution.pos`` (RTKLIB, the antenna at every INS update: half the
 IMU rate), ``solution.csv``, ``solution.geojson`` (the track at 10 Hz at most,
 its dead-reckoning stretches, the withheld fixes), ``fuse.json``, ``track.png``, ``outage_errors.png``
@@ -20,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import frames
 from ..apps import fuse_leo
 from ..apps.export import Layer, to_geojson
 from ..constellations import REGISTRY
@@ -33,7 +36,7 @@ from ..positioning.measurements import write_measurements
 from ..progress import progress
 from ..rotations import dcm_to_euler, heading_from_yaw, quat_to_dcm
 from . import add_command
-from .options import parse_span
+from .options import parse_site, parse_span
 
 IMU_FORMATS = ("rtklib-csv", "rtklib-sf-csv", "csv", "psins", "flight-mat")
 #: The GeoJSON track keeps at most this many epochs per second (the INS updates are at half the IMU rate).
@@ -61,6 +64,11 @@ def register(subparsers):
     p.add_argument("--leo-sim", action="store_true",
                    help="LEO Doppler simulated along the Q=1 epochs of --gnss (simulate's measurement level), "
                         "continuing through the outages")
+    p.add_argument("--leo-base", metavar="BASE.csv",
+                   help="a base station's table of the same satellites (DESIGN 4.3, e.g. replay --base's "
+                        "base_measurements.csv; with --base-site): --leo's rows less the base's corrections as "
+                        "differential aids, and with phase_cycles in both tables the differential carrier aid")
+    p.add_argument("--base-site", metavar="LAT_DEG,LON_DEG,ALT_M", help="the base's known position (with --leo-base)")
     p.add_argument("--tle", metavar="FILE",
                    help="element sets: the satellite states of a --leo table without state columns, or the sky of "
                         "--leo-sim (default the bundled one)")
@@ -184,6 +192,14 @@ def run(args):
         raise InputError("--tle goes with --leo or --leo-sim")
     if args.constellation and not args.leo_sim:
         raise InputError("--constellation goes with --leo-sim")
+    if (args.leo_base is None) != (args.base_site is None):
+        raise InputError("--leo-base needs --base-site, the base's known position" if args.leo_base else
+                         "--base-site goes with --leo-base, the base's measurement table")
+    if args.leo_base and not args.leo:
+        raise InputError("--leo-base goes with --leo, the rover's measurement table")
+    if args.leo_base and args.leo_window_s:
+        raise InputError("--leo-window-s does not go with --leo-base (the differential aids take each Doppler at its "
+                         "time)")
     if args.leo_window_s is not None and not (args.leo or args.leo_sim):
         raise InputError("--leo-window-s goes with --leo or --leo-sim")
     if args.leo_window_s is not None and not args.leo_window_s >= 0.0:
@@ -194,6 +210,9 @@ def run(args):
         raise InputError("--gnss FILE.pos is required (the only aid source so far; flight-mat carries its GPS)")
     if args.imu_columns and args.imu_format != "csv":
         raise InputError("--imu-columns goes with --imu-format csv")
+    if args.leo_base:
+        site = parse_site(args.base_site, "--base-site")
+        check_input_file(Path(args.leo_base), "base measurement file (--leo-base)")
     mount = _triple(args.mount_rpy_deg, "--mount-rpy-deg")
     f, r, d = _triple(args.lever_arm_m, "--lever-arm-m")
     outages = tuple(parse_span(t, "--outage") for t in args.outage)
@@ -210,7 +229,7 @@ def run(args):
     log, gps = read_imu(args.imu, args.imu_format, args.imu_columns, imu_io.mount_C_b_s(*mount))
     sol = sol or gps
     t_start = time.perf_counter()
-    leo = None
+    leo = base = None
     if args.leo:
         leo = fuse_leo.read(args.leo, sol, tle=args.tle)
     elif args.leo_sim:
@@ -222,8 +241,13 @@ def run(args):
     window_s = args.leo_window_s
     if window_s is None:  # --leo-sim's rows are means over its chord; a table's are taken as instantaneous
         window_s = fuse_leo.SIM_WINDOW_S if args.leo_sim else 0.0
-    leo_aids = [] if leo is None else fuse_leo.to_aids(leo, sol, options.lever_arm_b_m,
-                                                        LeoOptions(window_s=window_s or None))[0]
+    if args.leo_base:
+        site_ecef_m = frames.geodetic_to_ecef(np.radians(site[0]), np.radians(site[1]), site[2])
+        base = fuse_leo.read(args.leo_base, sol, tle=args.tle, site_ecef_m=site_ecef_m)
+        leo_aids = fuse_leo.to_differential_aids(leo, base, sol, site_ecef_m, options.lever_arm_b_m)
+    else:
+        leo_aids = [] if leo is None else fuse_leo.to_aids(leo, sol, options.lever_arm_b_m,
+                                                            LeoOptions(window_s=window_s or None))[0]
     fused = real.fuse(log, sol, options, imu_time_offset_s=args.imu_time_offset_s, extra_aids=leo_aids,
                       progress=lambda it: progress(it, desc="fuse", unit="update"))
     outages, reference = real.outage_errors(fused, sol, options)
@@ -231,6 +255,10 @@ def run(args):
     doc = _document(fused, sol, log, outages, reference, runtime, args)
     if leo is not None:
         doc["leo"] = _leo_summary(leo, fused.result, args)
+    if base is not None:
+        doc["leo"]["base"] = {"source": base.source, "n_rows": len(base), "n_sats": int(np.unique(base.sat_id).size),
+                              "site": list(site)}
+        doc["leo"]["carrier"] = leo.phase_cycles is not None and base.phase_cycles is not None
     if args.out:
         _write(args.out, fused, sol, outages, doc, leo if args.leo_sim else None)
     return doc
@@ -240,6 +268,10 @@ def _leo_summary(leo, res, args):
     clocks = {k.partition(":")[2]: {"offset_hz": float(x[0]), "drift_hz_per_s": float(x[1]),
                                     "offset_sigma_hz": float(sd[0])}
               for k, (x, sd) in res.states.items() if k.startswith("leo_clock:")}
+    if "diff_clock" in res.states:
+        x, sd = res.states["diff_clock"]
+        clocks["rover-base"] = {"offset_hz": float(x[0]), "drift_hz_per_s": float(x[1]),
+                                "offset_sigma_hz": float(sd[0])}
     return {"source": leo.source, "n_rows": len(leo), "n_sats": int(np.unique(leo.sat_id).size),
             "coupling": args.coupling, "clocks": clocks}
 

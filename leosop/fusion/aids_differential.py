@@ -29,6 +29,10 @@ interpolated base's; rover rows that interpolate one base row share its
 noise, which the filter takes as independent (exact when the base is on the
 rover's epochs). ``tests/test_fuse_differential.py`` checks ``H`` against
 finite differences of this model.
+
+With the accumulated carrier phase in both tables (``phase_cycles``),
+:func:`differential_aids` adds the delta-range aids of
+:mod:`~leosop.fusion.aids_carrier`, sharing the orbit states.
 """
 
 import dataclasses
@@ -41,6 +45,7 @@ from ..geometry.doppler import doppler_jacobian
 from ..positioning.differential import ORBIT_SIGMA_RTN_M, rtn_frames
 from ..positioning.differential_base import MAX_GAP_S, base_corrections, sv_states
 from .aids import StateBlock
+from .aids_carrier import carrier_aids
 from .aids_leo import SAT_DROP_AFTER_S, LeoDoppler
 from .common import N_INS
 
@@ -58,7 +63,10 @@ class DifferentialOptions:
     their random walks; ``default_sigma_hz`` the noise of a rover row
     without ``sigma_hz``; ``orbit_sigma_rtn_m`` the prior of each
     satellite's element-set offset, radial / along-track / cross-track [m]
-    (None: no orbit states, the residual orbit error left out of the model).
+    (None: no orbit states, the residual orbit error left out of the model);
+    ``carrier``: add the carrier-phase aids when both tables have phases,
+    ``default_phase_sigma_cycles`` the noise of a phase without
+    ``phase_sigma_cycles`` (0.1 cycles: 2.6 mm at 11.325 GHz).
     """
 
     clock_offset_sigma_hz: float = 3000.0
@@ -67,6 +75,8 @@ class DifferentialOptions:
     clock_drift_psd_hz2_per_s3: float = 1e-6
     default_sigma_hz: float = 1.0
     orbit_sigma_rtn_m: tuple | None = ORBIT_SIGMA_RTN_M
+    carrier: bool = True
+    default_phase_sigma_cycles: float = 0.1
 
 
 class DifferentialDoppler(LeoDoppler):
@@ -134,14 +144,16 @@ class DifferentialDoppler(LeoDoppler):
 
 
 def differential_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, options=None, *, max_gap_s=MAX_GAP_S):
-    """One :class:`DifferentialDoppler` per rover row with a base correction, sharing the state blocks.
+    """One :class:`DifferentialDoppler` per rover row with a base correction, and the carrier aids; shared blocks.
 
     Parameters
     ----------
     rover, base : leosop.positioning.measurements.Measurements
         With satellite states and ``sigma_hz`` (NaN: ``options.default_sigma_hz``
         for the rover); ``t_s`` of both on the aids' clock. One carrier per
-        satellite, one rover-minus-base offset for all rows.
+        satellite, one rover-minus-base offset for all rows. With
+        ``phase_cycles`` in both (and ``options.carrier``), also the
+        carrier aids (:func:`~leosop.fusion.aids_carrier.carrier_aids`).
     base_pos_ecef_m : array_like, (3,)
     lever_arm_b_m : array_like, (3,)
     options : DifferentialOptions, optional
@@ -150,27 +162,31 @@ def differential_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, options=None,
 
     Returns
     -------
-    list of DifferentialDoppler
-        In the rover's row order (sort by ``t_s`` for the engine); rows of a
-        satellite the base did not see, outside its base rows' span or in a
-        gap, or with non-finite values are left out.
+    list of DifferentialDoppler, DifferentialCarrier and LeoWindowStart
+        Sorted by ``t_s`` (at one time: the rover's row order, then the
+        carrier aid and its clone); rows of a satellite the base did not
+        see, outside its base rows' span or in a gap, or with non-finite
+        values are left out.
     """
     o = options or DifferentialOptions()
     pos_sv, vel_sv = sv_states(rover, "rover")
     sv_states(base, "base")
-    corr, var_base, _, _ = base_corrections(base, base_pos_ecef_m, rover.sat_id, rover.t_s, max_gap_s=max_gap_s)
+    corr, var_base, rows, weights = base_corrections(base, base_pos_ecef_m, rover.sat_id, rover.t_s,
+                                                     max_gap_s=max_gap_s)
     sigma_rover = np.where(np.isfinite(rover.sigma_hz), rover.sigma_hz, o.default_sigma_hz)
     z = rover.doppler_hz - corr
     sigma = np.sqrt(sigma_rover**2 + var_base)
     ok = np.isfinite(z) & np.isfinite(sigma) & np.isfinite(pos_sv).all(-1) & np.isfinite(vel_sv).all(-1)
     clock = StateBlock("diff_clock", (0.0, 0.0), (o.clock_offset_sigma_hz, o.clock_drift_sigma_hz_per_s),
                        (o.clock_offset_psd_hz2_per_s, o.clock_drift_psd_hz2_per_s3), integrated=True)
-    orbits, out = {}, []
-    for k in np.flatnonzero(ok):
-        j = str(rover.sat_id[k])
-        if o.orbit_sigma_rtn_m is not None and j not in orbits:
-            orbits[j] = StateBlock(f"diff_orbit:{j}", (0.0,) * 3, tuple(float(s) for s in o.orbit_sigma_rtn_m),
-                                   (0.0,) * 3, drop_after_s=SAT_DROP_AFTER_S)
-        out.append(DifferentialDoppler(rover.t_s[k], z[k], sigma[k], rover.carrier_hz[k], pos_sv[k], vel_sv[k],
-                                       base_pos_ecef_m, lever_arm_b_m, clock, orbits.get(j)))
-    return out
+    orbits = None
+    if o.orbit_sigma_rtn_m is not None:
+        orbits = {j: StateBlock(f"diff_orbit:{j}", (0.0,) * 3, tuple(float(s) for s in o.orbit_sigma_rtn_m),
+                                (0.0,) * 3, drop_after_s=SAT_DROP_AFTER_S) for j in np.unique(rover.sat_id)}
+    out = [DifferentialDoppler(rover.t_s[k], z[k], sigma[k], rover.carrier_hz[k], pos_sv[k], vel_sv[k],
+                               base_pos_ecef_m, lever_arm_b_m, clock, orbits and orbits[rover.sat_id[k]])
+           for k in np.flatnonzero(ok)]
+    if o.carrier:
+        out += carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, rows, weights, orbits,
+                            default_sigma_cycles=o.default_phase_sigma_cycles)
+    return sorted(out, key=lambda a: a.t_s)

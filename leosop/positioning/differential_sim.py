@@ -12,6 +12,18 @@ shared by every receiver (:func:`simulate_receiver`):
   the orbital rate) is in the truth too;
 - the satellite's oscillator: a frequency offset and drift.
 
+Optionally each receiver also measures the accumulated carrier phase, the
+integral of the same Doppler model (cycles)::
+
+    phase = -|r_s + e - r| f0 / c + (o_j + T) t + (o_j' + T') t^2 / 2 + N + noise,
+
+with the satellite's and the receiver's offsets ``o_j``, ``T`` and drifts
+``o_j'``, ``T'`` (both integrated from ``errors.t0_utc``) and an integer
+``N`` per arc; a cycle slip starts a new arc with a new ``N``. The Doppler
+is the range rate of the same states: the phase's rate agrees with it to
+~0.03 Hz (the offset's velocity is a central difference, the states' rate
+and velocity differ by the light time's; ``tests/test_fuse_differential.py``).
+
 Each receiver has its own position (at rest in ECEF, or a trajectory with
 its velocity, e.g. :func:`straight_drive`), epochs, clock offset and drift,
 white noise and elevation mask. The model states handed out with the
@@ -106,6 +118,7 @@ def _rtn_offset(constellation, index, time_utc, orbit_rtn_m):
     pos, vel, _ = state_ecef_pairs(constellation, index, time_utc)
     return np.einsum("mij,mj->mi", rtn_frames(pos, vel)[0], orbit_rtn_m)
 
+
 def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
     """A vehicle at constant speed along a straight line of the local horizon.
 
@@ -130,9 +143,21 @@ def straight_drive(start_ecef_m, heading_enu, speed_mps, t_s):
     return start + vel * t, np.broadcast_to(vel, (t.shape[0], 3)).copy()
 
 
+def _arcs(sat_rows, slip, rng):
+    """Arc number of each row (rows time-ordered per satellite; ``slip`` (n,) bool starts a new arc at a row) and
+    its integer ambiguity [cycles], a fresh draw in +-10^6 per arc."""
+    arc = np.zeros(sat_rows.size, dtype=int)
+    for j in np.unique(sat_rows):
+        rows = np.flatnonzero(sat_rows == j)
+        arc[rows] = np.cumsum(slip[rows] & (np.arange(rows.size) > 0))
+    key = sat_rows * (arc.max(initial=0) + 1) + arc
+    _, first = np.unique(key, return_inverse=True)
+    return arc, rng.integers(-10**6, 10**6, first.max(initial=-1) + 1)[first].astype(float)
+
+
 def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, vel_rx_ecef_mps=None,
                       clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ,
-                      source="simulated"):
+                      source="simulated", phase_sigma_cycles=None, slip_probability=0.0):
     """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver measures them.
 
     Parameters
@@ -159,13 +184,22 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
     carrier_hz : float
     source : str
         Name carried by the returned measurements.
+    phase_sigma_cycles : float, optional
+        Standard deviation of the white noise of the accumulated carrier
+        phase (0.1 cycles is 2.6 mm at 11.325 GHz); None: no phase (and no
+        draws from ``rng`` beyond the Doppler's).
+    slip_probability : float
+        Probability of a cycle slip at each row of a satellite after its
+        first: a new arc with a new integer ambiguity.
 
     Returns
     -------
     Measurements
         One row per visible satellite and epoch (epoch-major), ``time_utc``
         and ``t_s`` (seconds after ``errors.t0_utc``), the element-set
-        states (light time included) and ``sigma_hz``.
+        states (light time included) and ``sigma_hz``; with
+        ``phase_sigma_cycles`` also ``phase_cycles``, ``phase_sigma_cycles``
+        and ``arc`` (the module's phase model).
     """
     t_ep = np.asarray(time_utc, dtype="datetime64[ns]")
     rx_ep = np.broadcast_to(np.asarray(pos_rx_ecef_m, dtype=float), (len(t_ep), 3))
@@ -195,9 +229,17 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
                + errors.offset_hz[sat_rows] + errors.drift_hz_per_s[sat_rows] * t_s
                + clock_offset_hz + clock_drift_hz_per_s * t_s + sigma_hz * rng.standard_normal(len(t_s)))
     n = len(t_s)
+    phase = {}
+    if phase_sigma_cycles is not None:
+        arc, ambiguity = _arcs(sat_rows, rng.random(n) < slip_probability, rng)
+        osc_cycles = ((errors.offset_hz[sat_rows] + clock_offset_hz) * t_s
+                      + 0.5 * (errors.drift_hz_per_s[sat_rows] + clock_drift_hz_per_s) * t_s**2)
+        phase = {"phase_cycles": (-np.linalg.norm(pos_sv + off - rx, axis=-1) * carrier_hz / C_MPS + osc_cycles
+                                  + ambiguity + phase_sigma_cycles * rng.standard_normal(n)),
+                 "phase_sigma_cycles": np.full(n, float(phase_sigma_cycles)), "arc": arc.astype(str)}
     return Measurements(t_s=t_s, time_utc=t_rows, sat_id=ids, doppler_hz=doppler, sigma_hz=np.full(n, float(sigma_hz)),
                         carrier_hz=np.full(n, float(carrier_hz)), pos_sv_ecef_m=pos_sv, vel_sv_ecef_mps=vel_sv,
-                        line=np.arange(2, n + 2), source=source)
+                        line=np.arange(2, n + 2), source=source, **phase)
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,7 +5,13 @@ A table has a header row and one measurement per row: ``time_utc`` (ISO
 ``carrier_hz`` and the satellite state ``x_sv_m, y_sv_m, z_sv_m, vx_sv_mps,
 vy_sv_mps, vz_sv_mps`` (ECEF at the measurement time); optional ``pass_id``
 (a label: rows of one pass share a transmitter frequency offset in a static
-fix, an extension of DESIGN 4.3). A missing column is an
+fix, an extension of DESIGN 4.3); optional ``phase_cycles``,
+``phase_sigma_cycles`` and ``arc``: the accumulated carrier phase (the
+integral of ``doppler_hz``, cycles), its standard deviation and a label of
+the arc its whole cycles are continuous over (replay's ``carrier.csv``
+names; an empty ``phase_cycles`` leaves the row a Doppler row alone; the
+differential carrier aid, :mod:`leosop.fusion.aids_differential`, takes
+them). A missing column is an
 error for the whole file; a bad row (empty, NaN or non-numeric value,
 non-positive sigma or carrier, duplicate of an earlier row) is set aside with
 its reason in :attr:`Measurements.rejected` so that the rest can be solved.
@@ -74,6 +80,11 @@ class Measurements:
     family : ndarray of str, (n,), or None
         Constellation of each row's satellite (a key of :data:`leosop.constellations.REGISTRY`, ``""``
         unknown); None when read without element sets.
+    phase_cycles, phase_sigma_cycles : ndarray, (n,), or None
+        Accumulated carrier phase (``d phase / dt = doppler_hz``) and its
+        standard deviation, NaN where not given; None without the column.
+    arc : ndarray of str, (n,), or None
+        Label of the phase's arc (a cycle slip starts a new one); None without the column.
     rejected : tuple of (int, str)
         Line number and reason of every row set aside.
     source : str
@@ -92,6 +103,9 @@ class Measurements:
     source: str = ""
     pass_id: np.ndarray | None = None
     family: np.ndarray | None = None
+    phase_cycles: np.ndarray | None = None
+    phase_sigma_cycles: np.ndarray | None = None
+    arc: np.ndarray | None = None
 
     def __len__(self):
         return len(self.doppler_hz)
@@ -108,7 +122,8 @@ class Measurements:
                        doppler_hz=self.doppler_hz[index], sigma_hz=self.sigma_hz[index],
                        carrier_hz=self.carrier_hz[index], pos_sv_ecef_m=pick(self.pos_sv_ecef_m),
                        vel_sv_ecef_mps=pick(self.vel_sv_ecef_mps), line=self.line[index],
-                       pass_id=pick(self.pass_id), family=pick(self.family))
+                       pass_id=pick(self.pass_id), family=pick(self.family), phase_cycles=pick(self.phase_cycles),
+                       phase_sigma_cycles=pick(self.phase_sigma_cycles), arc=pick(self.arc))
 
 
 def _floats(values):
@@ -215,6 +230,11 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
         reason[k] = f"carrier_hz is {text_c[k]!r}, expected a positive number"
     carrier = _fill_carriers(path, carrier, blank, family, carrier_hz, lines, sat_id, reason)
     state = np.stack([number(c) for c in SV_STATE_COLUMNS], axis=-1) if state_given else None
+    phase = number("phase_cycles", default=np.nan) if "phase_cycles" in col else None
+    phase_sigma = number("phase_sigma_cycles", default=np.nan) if "phase_sigma_cycles" in col else None
+    if phase_sigma is not None:
+        for k in np.flatnonzero(np.isfinite(phase_sigma) & ~(phase_sigma > 0) & (reason == "")):
+            reason[k] = f"phase_sigma_cycles is {phase_sigma[k]:g}, expected a positive number or an empty field"
 
     # Duplicates: the same satellite at the same time; the first row is kept.
     key_time = time_utc.astype(np.int64) if time_utc is not None else t_s
@@ -238,6 +258,9 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
         vel_sv_ecef_mps=None if state is None else state[ok, 3:], line=lines[ok], rejected=rejected,
         source=str(path), pass_id=np.array(field("pass_id"), dtype=str)[ok] if "pass_id" in col else None,
         family=family[ok] if constellation is not None else None,
+        phase_cycles=None if phase is None else phase[ok],
+        phase_sigma_cycles=None if phase_sigma is None else phase_sigma[ok],
+        arc=np.array(field("arc"), dtype=str)[ok] if "arc" in col else None,
     )
 
 
@@ -326,6 +349,14 @@ def write_measurements(path, meas):
     if meas.pass_id is not None:
         header.append("pass_id")
         cols.append([str(v) for v in meas.pass_id])
+    for name in ("phase_cycles", "phase_sigma_cycles"):
+        values = getattr(meas, name)
+        if values is not None:
+            header.append(name)
+            cols.append(["" if not np.isfinite(v) else repr(float(v)) for v in values])
+    if meas.arc is not None:
+        header.append("arc")
+        cols.append([str(v) for v in meas.arc])
     write_csv(path, header, zip(*cols))
 
 
