@@ -18,7 +18,8 @@ from test_fuse_leo import CARRIER_HZ
 
 from leosop import frames
 from leosop.errors import InputError
-from leosop.fusion import aids_differential, engine, leo_input
+from leosop.apps import fuse_leo
+from leosop.fusion import aids_differential, engine
 from leosop.fusion.aids import InsView, StateBlock
 from leosop.fusion.aids_carrier import DifferentialCarrier
 from leosop.fusion.common import N_INS
@@ -279,7 +280,7 @@ def test_tables_round_trip_to_the_same_aids(pair, tmp_path):
     rover2, base2 = (read_measurements(p_) for p_ in paths)
     np.testing.assert_array_equal(rover2.phase_cycles, r.phase_cycles)
     np.testing.assert_array_equal(rover2.arc, r.arc)
-    made = leo_input.to_differential_aids(rover2, base2, None, base, np.zeros(3))
+    made = fuse_leo.to_differential_aids(rover2, base2, None, base, np.zeros(3))
     ref = aids_differential.differential_aids(r, b, base, np.zeros(3))
     assert [type(a) for a in made] == [type(a) for a in ref] and [a.t_s for a in made] == [a.t_s for a in ref]
     for a, a_ref in zip(made, ref):
@@ -296,7 +297,7 @@ def test_tables_round_trip_to_the_same_aids(pair, tmp_path):
     other = base2.take(np.flatnonzero(base2.sat_id != base2.sat_id[0]))
     other = dataclasses.replace(other, sat_id=np.char.add(other.sat_id, "9"))
     with pytest.raises(InputError, match=f"{paths[1]}: no row of {paths[0]} has a base correction"):
-        leo_input.to_differential_aids(rover2, other, None, base, np.zeros(3))
+        fuse_leo.to_differential_aids(rover2, other, None, base, np.zeros(3))
 
 
 def test_carrier_rate_moves_both_ends_of_the_interval():
