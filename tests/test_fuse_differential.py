@@ -17,8 +17,8 @@ from test_fuse_engine import STEP, _computed, _true_view
 from test_fuse_leo import CARRIER_HZ
 
 from leosop import frames
-from leosop.errors import InputError
 from leosop.apps import fuse_leo
+from leosop.errors import InputError
 from leosop.fusion import aids_differential, engine
 from leosop.fusion.aids import InsView, StateBlock
 from leosop.fusion.aids_carrier import DifferentialCarrier
