@@ -39,8 +39,12 @@ front end) is always replayed first. Reported per run:
 options at zero offset and drift (an interferer or IQ-imbalance sweep:
 ``--impair "--cw 150e3 70" --impair "--iq-gain-db 2 --iq-phase-deg 10"``).
 
+``--duration-s`` sets a snapshot recording's length (default 60 s; the
+offset's bound falls with it, docs/replay.md "How well the offset is known").
+
 Usage: python tools/bench_lo_offset.py [--kinds snapshot continuous] [--offsets 0 5e3 ...]
        [--drifts 0 25 50] [--front-end consumer] [--impair "OPTIONS" ...] [--no-global] [--workdir DIR]
+       [--duration-s 120]
 """
 
 import argparse
@@ -69,16 +73,20 @@ SITE = (48.137, 11.575, 520.0)
 START = "2025-01-01T19:40:00Z"
 #: 4 MS/s: a comb at 1 MHz offset with 300 kHz of Doppler (+-176 kHz of tones) stays in the band.
 SAMPLE_RATE_HZ = 4e6
+#: Generator options per kind besides the length (``--duration-s``, ``--continuous-s``).
 KINDS = {
-    "snapshot": ["--duration-s", "60", "--snapshot-s", "0.02", "--period-s", "1"],
-    "continuous": [],  # --duration-s from --continuous-s
+    "snapshot": ["--snapshot-s", "0.02", "--period-s", "1"],
+    "continuous": [],
 }
+#: A snapshot recording's default length [s].
+SNAPSHOT_S = 60.0
 #: A track is a satellite's when its truth Doppler is this close (median over the blocks) [Hz].
 MATCH_HZ = 20.0
 
 
-def generate(path, kind, offset_hz, drift_hz_per_s, front_end, impair="", mask_deg=25.0, continuous_s=12.0):
-    span = ["--duration-s", f"{continuous_s:g}"] if kind == "continuous" else KINDS[kind]
+def generate(path, kind, offset_hz, drift_hz_per_s, front_end, impair="", mask_deg=25.0, continuous_s=12.0,
+             snapshot_s=SNAPSHOT_S):
+    span = ["--duration-s", f"{continuous_s if kind == 'continuous' else snapshot_s:g}", *KINDS[kind]]
     cmd = [sys.executable, "-m", "leosop", "generate", "-o", str(path), "--site", ",".join(map(str, SITE)),
            "--start", START, "--sample-rate-hz", str(SAMPLE_RATE_HZ), "--mask-deg", f"{mask_deg:g}", "--seed", "7",
            "--orbit-error-along-m", "300", "--rx-offset-hz", str(offset_hz), "--rx-drift-hz-per-s",
@@ -137,6 +145,8 @@ def main(argv=None):
                     help="generator options of one more run at zero offset and drift (repeatable)")
     ap.add_argument("--mask-deg", type=float, default=25.0, help="the generator's elevation mask (default 25)")
     ap.add_argument("--continuous-s", type=float, default=12.0, help="length of a continuous recording (default 12)")
+    ap.add_argument("--duration-s", type=float, default=SNAPSHOT_S,
+                    help=f"length of a snapshot recording (default {SNAPSHOT_S:g})")
     ap.add_argument("--no-global", action="store_true", help="only with --init 100 km off")
     ap.add_argument("--workdir", help="keep the recordings here (default a temporary directory)")
     args = ap.parse_args(argv)
@@ -159,9 +169,10 @@ def main(argv=None):
     for kind in args.kinds:
         for offset, drift, fe, impair in runs:
             tag = re.sub(r"[^0-9A-Za-z.+-]+", "_", impair.replace("--", "")).strip("_")
-            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}{'_' + tag if tag else ''}.sigmf-meta"
+            span = f"_{args.duration_s:g}s" if kind == "snapshot" and args.duration_s != SNAPSHOT_S else ""
+            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}{span}{'_' + tag if tag else ''}.sigmf-meta"
             if not path.exists():
-                generate(path, kind, offset, drift, fe, impair, args.mask_deg, args.continuous_s)
+                generate(path, kind, offset, drift, fe, impair, args.mask_deg, args.continuous_s, args.duration_s)
             curves, clock = truth(path)
             lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
             for name, init in searches:
