@@ -45,7 +45,7 @@ options at zero offset and drift (an interferer or IQ-imbalance sweep:
 ``--impair "--cw 150e3 70" --impair "--iq-gain-db 2 --iq-phase-deg 10"``).
 
 ``--duration-s`` sets a snapshot recording's length (default 60 s; the
-offset's bound falls with it, docs/replay.md "How well the offset is known").
+offset's bound falls with it, docs/replay.md "What 1 Hz takes").
 
 Usage: python tools/bench_lo_offset.py [--kinds snapshot continuous] [--offsets 0 5e3 ...]
        [--drifts 0 25 50] [--front-end consumer] [--impair "OPTIONS" ...] [--no-global] [--workdir DIR]
