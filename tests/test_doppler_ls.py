@@ -398,11 +398,12 @@ def starlink_like():
     return geo, rate, p, v, t_s, sat, rx
 
 
-def _common_truth(rate, t_s, sat, rng):
-    """Injected clock terms: receiver offset + drift, zero-mean satellite offsets, time offsets (first order)."""
+def _common_truth(rate, t_s, sat, rng, sat_range_hz=(-5.0, 5.0), zero_mean=True):
+    """Injected clock terms: receiver offset + drift, satellite offsets, time offsets (first order)."""
     rx_poly = np.array([1.5e3, -0.7])
-    sat_hz = rng.uniform(-5, 5, 7)
-    sat_hz -= sat_hz.mean()
+    sat_hz = rng.uniform(*sat_range_hz, 7)
+    if zero_mean:
+        sat_hz -= sat_hz.mean()
     dt_s = rng.normal(0.0, 0.05, 7)
     extra = rx_poly[0] + rx_poly[1] * (t_s - 29.5) + sat_hz[sat] + dt_s[sat] * rate
     return extra, rx_poly, sat_hz, dt_s
@@ -452,27 +453,33 @@ def test_common_clock_covariance_is_the_dense_full_state_inverse(starlink_like):
     np.testing.assert_allclose(fix.cov, dense, rtol=1e-5, atol=1e-12)
 
 
-def test_common_clock_errors_are_consistent_with_the_covariance(starlink_like):
+@pytest.mark.parametrize("sat_range_hz,zero_mean,sigma_hz", [
+    ((-5.0, 5.0), True, 0.3),
+    # Starlink's own offsets (0-5 Hz, [Shen 2024]; the LO bench's draw) and its detections' ~0.5 Hz: the
+    # offsets' mean (2.5 Hz) is in the sum, their spread pulled in by the 5 Hz prior, and the sum's sigma
+    # covers that pull (docs/replay.md, "What 1 Hz takes").
+    ((0.0, 5.0), False, 0.5)])
+def test_common_clock_errors_are_consistent_with_the_covariance(starlink_like, sat_range_hz, zero_mean, sigma_hz):
     geo, rate, p, v, t_s, sat, rx = starlink_like
     nees, z2_common, z2_rx = [], [], []
     for seed in range(30):
         rng = np.random.default_rng(100 + seed)
-        extra, rx_poly, sat_hz, _ = _common_truth(rate, t_s, sat, rng)
-        y = geo + extra + rng.normal(0.0, 0.3, geo.shape)
-        fix = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx + 500.0)
+        extra, rx_poly, sat_hz, _ = _common_truth(rate, t_s, sat, rng, sat_range_hz, zero_mean)
+        y = geo + extra + rng.normal(0.0, sigma_hz, geo.shape)
+        fix = solve_static_passes(y, sigma_hz, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx + 500.0)
         e = fix.pos_ecef_m - rx
         nees.append(e @ np.linalg.solve(fix.cov[:3, :3], e))
-        # The replay's LO offset: the receiver's plus the satellites' mean (injected zero-mean: rx_poly[0]).
+        # The replay's LO offset: the receiver's plus the satellites' mean.
         e_common = fix.rx_clock_poly_hz[0] + fix.sat_offset_hz.mean() - (rx_poly[0] + sat_hz.mean())
         z2_common.append((e_common / common_offset_sigma_hz(fix)) ** 2)
         z2_rx.append((e_common / np.sqrt(fix.cov[3, 3])) ** 2)
     # Consistent covariance: NEES ~ chi2(3), mean 3 with standard error sqrt(6 / 30) = 0.45 over 30 seeds;
-    # bounds 1.5-4.8 (about 3.5 standard errors; the satellite offsets are injected zero-mean, U(-5, 5),
-    # against a 5 Hz prior, a small misfit of the prior that shows as NEES slightly below 3).
+    # bounds 1.5-4.8 (about 3.5 standard errors; the satellite offsets' spread, 2.9 or 1.4 Hz, is below the
+    # 5 Hz prior, a small misfit of the prior that shows as NEES below 3; achieved 1.84 and 1.92).
     assert 1.5 < np.mean(nees) < 4.8
     # The common offset's normalised error ~ chi2(1): mean 1, standard error sqrt(2 / 30) = 0.26; bounds
-    # 0.35-1.9 (2.5 and 3.5 of them); achieved 0.85. The receiver term's own sigma holds the prior's
-    # uncertainty of the satellites' mean (5 / sqrt(7) = 1.9 Hz), which is no error of the sum: far too
-    # large (achieved 0.046, bound 0.1).
+    # 0.35-1.9 (2.5 and 3.5 of them); achieved 0.85 and 0.75. The receiver term's own sigma holds the
+    # prior's uncertainty of the satellites' mean (5 / sqrt(7) = 1.9 Hz), which is no error of the sum: it
+    # fails the same test's lower bound (achieved 0.046 and 0.094).
     assert 0.35 < np.mean(z2_common) < 1.9
-    assert np.mean(z2_rx) < 0.1
+    assert np.mean(z2_rx) < 0.35

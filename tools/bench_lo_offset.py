@@ -34,13 +34,22 @@ front end) is always replayed first. Reported per run:
   the data alone (the fix solved again without that error and without the
   passes' disagreement priced in: the Cramer-Rao bound of this geometry),
   the one the error should be measured against on recordings without it.
+  ``d_w_hz`` and ``crb_w_hz``: the same from the data-only fix, but with the
+  satellites' offsets weighted for the least variance of the sum instead of
+  averaged (:func:`_min_variance_weights`; truth weighted alike): what a
+  well-determined satellite's offset, known through its long track, is worth
+  against a short track's, known only through the offset prior.
 
 ``--impair "OPTIONS"`` (repeatable) adds a run per string of generator
 options at zero offset and drift (an interferer or IQ-imbalance sweep:
 ``--impair "--cw 150e3 70" --impair "--iq-gain-db 2 --iq-phase-deg 10"``).
 
+``--duration-s`` sets a snapshot recording's length (default 60 s; the
+offset's bound falls with it, docs/replay.md "What 1 Hz takes").
+
 Usage: python tools/bench_lo_offset.py [--kinds snapshot continuous] [--offsets 0 5e3 ...]
        [--drifts 0 25 50] [--front-end consumer] [--impair "OPTIONS" ...] [--no-global] [--workdir DIR]
+       [--duration-s 120]
 """
 
 import argparse
@@ -69,16 +78,20 @@ SITE = (48.137, 11.575, 520.0)
 START = "2025-01-01T19:40:00Z"
 #: 4 MS/s: a comb at 1 MHz offset with 300 kHz of Doppler (+-176 kHz of tones) stays in the band.
 SAMPLE_RATE_HZ = 4e6
+#: Generator options per kind besides the length (``--duration-s``, ``--continuous-s``).
 KINDS = {
-    "snapshot": ["--duration-s", "60", "--snapshot-s", "0.02", "--period-s", "1"],
-    "continuous": [],  # --duration-s from --continuous-s
+    "snapshot": ["--snapshot-s", "0.02", "--period-s", "1"],
+    "continuous": [],
 }
+#: A snapshot recording's default length [s].
+SNAPSHOT_S = 60.0
 #: A track is a satellite's when its truth Doppler is this close (median over the blocks) [Hz].
 MATCH_HZ = 20.0
 
 
-def generate(path, kind, offset_hz, drift_hz_per_s, front_end, impair="", mask_deg=25.0, continuous_s=12.0):
-    span = ["--duration-s", f"{continuous_s:g}"] if kind == "continuous" else KINDS[kind]
+def generate(path, kind, offset_hz, drift_hz_per_s, front_end, impair="", mask_deg=25.0, continuous_s=12.0,
+             snapshot_s=SNAPSHOT_S):
+    span = ["--duration-s", f"{continuous_s if kind == 'continuous' else snapshot_s:g}", *KINDS[kind]]
     cmd = [sys.executable, "-m", "leosop", "generate", "-o", str(path), "--site", ",".join(map(str, SITE)),
            "--start", START, "--sample-rate-hz", str(SAMPLE_RATE_HZ), "--mask-deg", f"{mask_deg:g}", "--seed", "7",
            "--orbit-error-along-m", "300", "--rx-offset-hz", str(offset_hz), "--rx-drift-hz-per-s",
@@ -137,6 +150,8 @@ def main(argv=None):
                     help="generator options of one more run at zero offset and drift (repeatable)")
     ap.add_argument("--mask-deg", type=float, default=25.0, help="the generator's elevation mask (default 25)")
     ap.add_argument("--continuous-s", type=float, default=12.0, help="length of a continuous recording (default 12)")
+    ap.add_argument("--duration-s", type=float, default=SNAPSHOT_S,
+                    help=f"length of a snapshot recording (default {SNAPSHOT_S:g})")
     ap.add_argument("--no-global", action="store_true", help="only with --init 100 km off")
     ap.add_argument("--workdir", help="keep the recordings here (default a temporary directory)")
     args = ap.parse_args(argv)
@@ -153,15 +168,16 @@ def main(argv=None):
     runs += [(0.0, 0.0, "none", imp) for imp in args.impair]
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
           f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} "
-          f"{'x_zero':>6} {'d_off_hz':>8} "
-          f"{'sig_hz':>6} {'crb_hz':>7} {'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
+          f"{'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'crb_hz':>7} {'d_w_hz':>6} {'crb_w_hz':>8} "
+          f"{'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
         for offset, drift, fe, impair in runs:
             tag = re.sub(r"[^0-9A-Za-z.+-]+", "_", impair.replace("--", "")).strip("_")
-            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}{'_' + tag if tag else ''}.sigmf-meta"
+            span = f"_{args.duration_s:g}s" if kind == "snapshot" and args.duration_s != SNAPSHOT_S else ""
+            path = work / f"{kind}_{fe}_{offset:g}_{drift:g}{span}{'_' + tag if tag else ''}.sigmf-meta"
             if not path.exists():
-                generate(path, kind, offset, drift, fe, impair, args.mask_deg, args.continuous_s)
+                generate(path, kind, offset, drift, fe, impair, args.mask_deg, args.continuous_s, args.duration_s)
             curves, clock = truth(path)
             lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
             for name, init in searches:
@@ -181,29 +197,65 @@ def main(argv=None):
                 d_off = lo.offset_hz - (true_off + drift * _since_start(lo.t_ref_utc)) if lo else np.nan
                 d_drift = lo.drift_hz_per_s - drift if lo else np.nan
                 status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
+                crb, d_w, crb_w = np.nan, np.nan, np.nan
+                again = _data_fix(res, const)
+                if again is not None:
+                    crb = common_offset_sigma_hz(again)
+                    a = _min_variance_weights(again)
+                    truth_w = a @ [clock[str(s)] for s in again.pass_ids] + drift * _since_start(lo.t_ref_utc)
+                    d_w = again.rx_clock_poly_hz[0] + a @ again.sat_offset_hz - truth_w
+                    crb_w = _sum_sigma_hz(again, a)
                 print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
                       f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} "
                       f"{err3d:8.1f} "
                       f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
-                      f"{_data_sigma_hz(res, const):7.2f} {d_drift:8.4f} "
+                      f"{crb:7.2f} {d_w:6.2f} {crb_w:8.2f} {d_drift:8.4f} "
                       f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
 
 
-def _data_sigma_hz(res, const):
-    """Sigma of the common offset from the data alone (NaN without a static fix).
+def _data_fix(res, const):
+    """The replay's fix solved again for the data alone (None without a static fix).
 
-    The replay's fix solved again from its solution with neither the element
-    sets' radial and cross-track error nor the passes' disagreement in the
-    covariance: what the Doppler rows, their sigmas and the priors tell.
+    Solved from the replay's solution with neither the element sets' radial
+    and cross-track error nor the passes' disagreement in the covariance:
+    what the Doppler rows, their sigmas and the priors tell.
     """
     fix = None if res.position is None else res.position.fixes
     if fix is None or getattr(fix, "rx_clock_poly_hz", None) is None or not np.isfinite(fix.pos_ecef_m).all():
-        return np.nan
+        return None
     meas = res.measurements
     pos, vel, reason, _ = satellite_states(meas, const, fix.pos_ecef_m)
     again = solve_static_passes(meas.doppler_hz, meas.sigma_hz, pos, vel, meas.carrier_hz, meas.t_s, meas.sat_id,
                                 pos0_ecef_m=fix.pos_ecef_m, mask=reason == "", clock="common", pass_offsets=False)
-    return common_offset_sigma_hz(again) if np.isfinite(again.pos_ecef_m).all() else np.nan
+    return again if np.isfinite(again.pos_ecef_m).all() else None
+
+
+def _sum_index(fix, a):
+    """Coefficients of receiver offset + ``a`` . satellite offsets over the fix's states, (n_states,)."""
+    n_rx, n_sat = fix.rx_clock_polys_hz.size, len(fix.sat_offset_hz)
+    v = np.zeros(len(fix.cov))
+    v[3] = 1.0
+    v[3 + n_rx:3 + n_rx + n_sat] = a
+    return v
+
+
+def _sum_sigma_hz(fix, a):
+    """Sigma of the receiver offset plus the ``a``-weighted satellite offsets."""
+    v = _sum_index(fix, a)
+    return float(np.sqrt(v @ fix.cov @ v))
+
+
+def _min_variance_weights(fix):
+    """Satellite weights ``a`` (sum 1) of the least-variance receiver offset + ``a`` . satellite offsets, (n_sat,).
+
+    Lagrange: ``C_ss a = -c_0s + lambda 1`` with ``1 . a = 1``, ``C`` the
+    fix's covariance of the receiver offset (0) and the satellite offsets (s).
+    """
+    n_rx, n_sat = fix.rx_clock_polys_hz.size, len(fix.sat_offset_hz)
+    s = 3 + n_rx + np.arange(n_sat)
+    C_ss, c_0s, one = fix.cov[np.ix_(s, s)], fix.cov[3, s], np.ones(n_sat)
+    a0, a1 = -np.linalg.solve(C_ss, c_0s), np.linalg.solve(C_ss, one)
+    return a0 + (1.0 - a0.sum()) / a1.sum() * a1
 
 
 def _since_start(t_utc):
