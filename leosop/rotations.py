@@ -147,9 +147,7 @@ def dcm_to_quat(C):
         [d[..., 1], d[..., 3], sq[..., 2], d[..., 5]],
         [d[..., 2], d[..., 4], d[..., 5], sq[..., 3]],
     ]
-    q = np.zeros(C.shape[:-2] + (4,))
-    for i in range(4):
-        row = stack_last(prods[i]) / (2.0 * np.sqrt(np.maximum(sq[..., i : i + 1], 1e-300)))
-        q = np.where((best == i)[..., None], row, q)
+    rows = stack_last(prods, 2) / (2.0 * np.sqrt(np.maximum(sq, 1e-300)))[..., None]
+    q = np.take_along_axis(rows, best[..., None, None], axis=-2)[..., 0, :]
     q = q * np.where(q[..., :1] < 0, -1.0, 1.0)
     return quat_normalize(q)
