@@ -26,7 +26,7 @@ from .constants import (
     WGS84_F,
     WGS84_M,
 )
-from .shapes import as_vec3
+from .shapes import as_vec3, stack_last
 
 __all__ = [
     "normal_gravity_mps2",
@@ -82,9 +82,7 @@ def radii_m(lat_rad):
 def earth_rate_enu(lat_rad):
     """Earth rotation rate in ENU, ``[0, Omega cos L, Omega sin L]`` [rad/s], shape (..., 3)."""
     lat = np.asarray(lat_rad, dtype=float)
-    return np.stack(
-        [np.zeros_like(lat), OMEGA_E_RAD_PER_S * np.cos(lat), OMEGA_E_RAD_PER_S * np.sin(lat)], axis=-1
-    )
+    return stack_last([np.zeros_like(lat), OMEGA_E_RAD_PER_S * np.cos(lat), OMEGA_E_RAD_PER_S * np.sin(lat)])
 
 
 def transport_rate_enu(lat_rad, alt_m, vel_enu_mps):
@@ -106,7 +104,7 @@ def transport_rate_enu(lat_rad, alt_m, vel_enu_mps):
     R_M, R_N = radii_m(lat)
     h = np.asarray(alt_m, dtype=float)
     ve_rn = vel[..., 0] / (R_N + h)
-    return np.stack([-vel[..., 1] / (R_M + h), ve_rn, ve_rn * np.tan(lat)], axis=-1)
+    return stack_last([-vel[..., 1] / (R_M + h), ve_rn, ve_rn * np.tan(lat)])
 
 
 _K1 = 2.0 / WGS84_A_M * (1.0 + WGS84_F + WGS84_M)

@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .constants import DAY_S, OMEGA_E_RAD_PER_S, WGS84_A_M, WGS84_B_M, WGS84_E2
-from .shapes import as_vec3
+from .shapes import as_vec3, stack_last
 
 __all__ = [
     "geodetic_to_ecef",
@@ -44,9 +44,7 @@ def geodetic_to_ecef(lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike, alt_m: npt.
     sin_lat = np.sin(lat)
     n_m = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * sin_lat**2)
     r_xy = (n_m + alt) * np.cos(lat)
-    return np.stack(
-        [r_xy * np.cos(lon), r_xy * np.sin(lon), (n_m * (1.0 - WGS84_E2) + alt) * sin_lat], axis=-1
-    )
+    return stack_last([r_xy * np.cos(lon), r_xy * np.sin(lon), (n_m * (1.0 - WGS84_E2) + alt) * sin_lat])
 
 
 def ecef_to_geodetic(pos_ecef_m: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
@@ -96,10 +94,8 @@ def C_e_n(lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike) -> npt.NDArray[np.floa
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
     zero = np.zeros_like(lat)
-    east = np.stack([-so, co, zero], axis=-1)
-    north = np.stack([-sl * co, -sl * so, cl], axis=-1)
-    up = np.stack([cl * co, cl * so, sl], axis=-1)
-    return np.stack([east, north, up], axis=-1)
+    # Columns East, North, Up.
+    return stack_last([[-so, -sl * co, cl * co], [co, -sl * so, cl * so], [zero, cl, sl]], 2)
 
 
 def ecef_to_enu(vec_ecef: npt.ArrayLike, lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike) -> npt.NDArray[np.float64]:

@@ -12,6 +12,8 @@ All functions are vectorised over leading axes.
 
 import numpy as np
 
+from .shapes import stack_last
+
 __all__ = [
     "skew",
     "euler_to_dcm",
@@ -31,14 +33,8 @@ def skew(v):
     """Cross-product matrix ``[v x]`` of vectors, shape (..., 3) -> (..., 3, 3)."""
     v = np.asarray(v, dtype=float)
     z = np.zeros_like(v[..., 0])
-    return np.stack(
-        [
-            np.stack([z, -v[..., 2], v[..., 1]], axis=-1),
-            np.stack([v[..., 2], z, -v[..., 0]], axis=-1),
-            np.stack([-v[..., 1], v[..., 0], z], axis=-1),
-        ],
-        axis=-2,
-    )
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return stack_last([[z, -w, y], [w, z, -x], [-y, x, z]], 2)
 
 
 def euler_to_dcm(pitch_rad, roll_rad, yaw_rad):
@@ -47,10 +43,9 @@ def euler_to_dcm(pitch_rad, roll_rad, yaw_rad):
     sp, cp = np.sin(p), np.cos(p)
     sr, cr = np.sin(r), np.cos(r)
     sy, cy = np.sin(y), np.cos(y)
-    row0 = np.stack([cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr], axis=-1)
-    row1 = np.stack([sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr], axis=-1)
-    row2 = np.stack([-cp * sr, sp, cp * cr], axis=-1)
-    return np.stack([row0, row1, row2], axis=-2)
+    return stack_last([[cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr],
+                       [sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr],
+                       [-cp * sr, sp, cp * cr]], 2)
 
 
 def dcm_to_euler(C_n_b):
@@ -114,14 +109,15 @@ def quat_normalize(q):
 
 def quat_to_dcm(q):
     """Rotation matrix of unit quaternions, (..., 4) -> (..., 3, 3)."""
-    q0, q1, q2, q3 = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    return np.stack(
+    q = np.asarray(q, dtype=float)
+    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return stack_last(
         [
-            np.stack([q0*q0 + q1*q1 - q2*q2 - q3*q3, 2 * (q1*q2 - q0*q3), 2 * (q1*q3 + q0*q2)], axis=-1),
-            np.stack([2 * (q1*q2 + q0*q3), q0*q0 - q1*q1 + q2*q2 - q3*q3, 2 * (q2*q3 - q0*q1)], axis=-1),
-            np.stack([2 * (q1*q3 - q0*q2), 2 * (q2*q3 + q0*q1), q0*q0 - q1*q1 - q2*q2 + q3*q3], axis=-1),
+            [q0*q0 + q1*q1 - q2*q2 - q3*q3, 2 * (q1*q2 - q0*q3), 2 * (q1*q3 + q0*q2)],
+            [2 * (q1*q2 + q0*q3), q0*q0 - q1*q1 + q2*q2 - q3*q3, 2 * (q2*q3 - q0*q1)],
+            [2 * (q1*q3 - q0*q2), 2 * (q2*q3 + q0*q1), q0*q0 - q1*q1 - q2*q2 + q3*q3],
         ],
-        axis=-2,
+        2,
     )
 
 
@@ -132,11 +128,9 @@ def dcm_to_quat(C):
     """
     C = np.asarray(C, dtype=float)
     tr = np.trace(C, axis1=-2, axis2=-1)
-    sq = np.stack(
-        [1 + tr, 1 + 2 * C[..., 0, 0] - tr, 1 + 2 * C[..., 1, 1] - tr, 1 + 2 * C[..., 2, 2] - tr], axis=-1
-    )
+    sq = stack_last([1 + tr, 1 + 2 * C[..., 0, 0] - tr, 1 + 2 * C[..., 1, 1] - tr, 1 + 2 * C[..., 2, 2] - tr])
     best = np.argmax(sq, axis=-1)
-    d = np.stack(
+    d = stack_last(
         [
             C[..., 2, 1] - C[..., 1, 2],
             C[..., 0, 2] - C[..., 2, 0],
@@ -144,8 +138,7 @@ def dcm_to_quat(C):
             C[..., 1, 0] + C[..., 0, 1],
             C[..., 0, 2] + C[..., 2, 0],
             C[..., 2, 1] + C[..., 1, 2],
-        ],
-        axis=-1,
+        ]
     )
     # 4 q_i q_j for every pair, arranged per choice of the pivot component.
     prods = [
@@ -154,9 +147,7 @@ def dcm_to_quat(C):
         [d[..., 1], d[..., 3], sq[..., 2], d[..., 5]],
         [d[..., 2], d[..., 4], d[..., 5], sq[..., 3]],
     ]
-    q = np.zeros(C.shape[:-2] + (4,))
-    for i in range(4):
-        row = np.stack(prods[i], axis=-1) / (2.0 * np.sqrt(np.maximum(sq[..., i : i + 1], 1e-300)))
-        q = np.where((best == i)[..., None], row, q)
+    rows = stack_last(prods, 2) / (2.0 * np.sqrt(np.maximum(sq, 1e-300)))[..., None]
+    q = np.take_along_axis(rows, best[..., None, None], axis=-2)[..., 0, :]
     q = q * np.where(q[..., :1] < 0, -1.0, 1.0)
     return quat_normalize(q)

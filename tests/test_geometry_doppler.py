@@ -6,7 +6,7 @@ import numpy as np
 from leosop.constants import C_MPS
 from leosop.constellations import REGISTRY
 from leosop.frames import geodetic_to_ecef, range_rate, rotate_to_later_ecef
-from leosop.geometry.doppler import doppler_rate
+from leosop.geometry.doppler import doppler_rate, sv_motion
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
 
@@ -78,3 +78,17 @@ def test_inertial_time_offset_rate_matches_differences_of_rotated_states():
     fd_grad = np.stack([(doppler_rate(pos, vel, rx + e[j], F_KU_HZ, inertial=True)[0]
                          - doppler_rate(pos, vel, rx - e[j], F_KU_HZ, inertial=True)[0]) / 2.0 for j in range(3)], -1)
     np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-12)
+
+
+def test_satellite_terms_computed_once_give_the_same_rates_to_the_last_bit():
+    """A multi-pass fix computes :func:`sv_motion` once for all its iterates: the rates and gradients are
+    those :func:`doppler_rate` makes on its own, bit for bit, in both offset models."""
+    rng = np.random.default_rng(7)
+    pos = rng.normal(size=(9, 3)) * 7.0e6
+    vel = rng.normal(size=(9, 3)) * 7.5e3
+    rx = rng.normal(size=(4, 3)) * 6.4e6  # four iterates of the receiver
+    for inertial in (False, True):
+        motion = sv_motion(pos, vel, inertial=inertial)
+        alone = doppler_rate(pos, vel, rx, F_KU_HZ, inertial=inertial)
+        shared = doppler_rate(pos, vel, rx, F_KU_HZ, inertial=inertial, motion=motion)
+        assert alone[0].shape == (4, 9) and all(np.array_equal(a, b) for a, b in zip(alone, shared))

@@ -38,3 +38,17 @@ def test_rotation_vector_quaternion_and_product():
     # Rodrigues on the axis: a rotation vector is invariant under its own rotation.
     np.testing.assert_allclose(np.einsum("nij,nj->ni", rot.rotvec_to_dcm(a), a), a, atol=1e-12)
     np.testing.assert_allclose(rot.skew(a) @ b[..., None], np.cross(a, b)[..., None], atol=1e-20)
+
+
+def test_stack_last_is_nested_np_stack_to_the_last_bit():
+    """The small matrices of a filter step (``skew``, ``quat_to_dcm``) are made by ``shapes.stack_last``: the
+    values and C-contiguous layout of ``np.stack`` of ``np.stack``, for one matrix and for a batch."""
+    from leosop.shapes import stack_last
+
+    rng = np.random.default_rng(3)
+    for shape in ((), (4, 5)):
+        e = [[rng.normal(size=shape) for _ in range(3)] for _ in range(2)]
+        want = np.stack([np.stack(r, axis=-1) for r in e], axis=-2)
+        got = stack_last(e, 2)
+        assert got.shape == shape + (2, 3) and got.flags.c_contiguous and np.array_equal(got, want)
+        assert np.array_equal(stack_last(e[0]), np.stack(e[0], axis=-1))

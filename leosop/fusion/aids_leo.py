@@ -188,6 +188,7 @@ class LeoDoppler(Aid):
         self.orbit = orbit
         self.window_s, self.clone = (None, None) if window is None else (float(window[0]), window[1])
         self.states = (clock, sat) + tuple(b for b in (orbit, self.clone) if b is not None)
+        self._last_geometry = (None, None)
 
     def _sv_state(self, ins):
         """The satellite as believed: position less the estimated orbit error and velocity (ECEF), (3,) each."""
@@ -198,12 +199,17 @@ class LeoDoppler(Aid):
     def _geometry(self, ins):
         """``C_e_n``, ``C_n_b``, lever arm and its rotation velocity (ENU), antenna position and velocity,
         satellite position and velocity (ECEF), as a tuple; the lever terms are None without a lever arm. With a
-        window the antenna position is the window's midpoint and the velocity its chord."""
+        window the antenna position is the window's midpoint and the velocity its chord. Kept for the last ``ins``
+        (the engine asks :meth:`matrices`, then :meth:`rate`, of one view)."""
+        if self._last_geometry[0] is ins:
+            return self._last_geometry[1]
         C, C_n_b, l_n, w_n, r, v = _antenna(ins, self.lever_arm_b_m)
         if self.window_s is not None:
             start = ins.states[self.clone.key]
             r, v = 0.5 * (r + start), (r - start) / self.window_s
-        return (C, C_n_b, l_n, w_n, r, v, *self._sv_state(ins))
+        g = (C, C_n_b, l_n, w_n, r, v, *self._sv_state(ins))
+        self._last_geometry = (ins, g)
+        return g
 
     def _clock_hz(self, ins):
         return ins.states[self.states[0].key][0] + ins.states[self.states[1].key][0]

@@ -84,11 +84,24 @@ class Blocks:
             x[:] = b.mean0
 
     def propagate(self, Phi, Qd, dt_s):
-        """Write each block's transition and noise over ``dt_s`` into ``Phi``, ``Qd`` (n_x, n_x); move the estimates."""
+        """Write each block's transition and noise over ``dt_s`` into ``Phi``, ``Qd`` (n_x, n_x); move the estimates.
+
+        ``Phi`` is the identity and ``Qd`` zero over the blocks on entry. A random walk's transition
+        (:meth:`leosop.fusion.aids.StateBlock.transition`) is the identity, which leaves ``Phi`` and its
+        estimate as they are, and its noise diagonal: all the walks' diagonals are written at once.
+        """
+        walks, psd = [], []
         for b, i, x, _ in self.entries.values():
-            sl = slice(i, i + b.size)
-            Phi[sl, sl], Qd[sl, sl] = b.transition(dt_s)
-            x[:] = Phi[sl, sl] @ x
+            if b.integrated:
+                sl = slice(i, i + b.size)
+                Phi[sl, sl], Qd[sl, sl] = b.transition(dt_s)
+                x[:] = Phi[sl, sl] @ x
+            else:
+                walks.append(np.arange(i, i + b.size))
+                psd.append(b.psd)
+        if walks:
+            k = np.concatenate(walks)
+            Qd[k, k] = np.concatenate(psd) * dt_s
 
     def design(self, aid, Ha, H):
         """Copy the INS and block columns of ``aid``'s design ``Ha`` (m, 15 + its blocks) into ``H`` (m, n_x)."""

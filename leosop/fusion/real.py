@@ -269,10 +269,12 @@ def _yaw_bank(state0, P0, t_imu, dt, dth, dvl, var, aids, settings, t_g, sol, wi
     P = P0.copy()
     P[PHI.start + 2, PHI.start + 2] = sigma**2
     best = None
+    # Only the log-likelihoods are compared: each hypothesis records its start alone.
+    quiet = dataclasses.replace(settings, record_every=n)
     for yaw in 2.0 * math.pi * np.arange(options.yaw_hypotheses) / options.yaw_hypotheses:
         state = NavState.from_dcm(state0.lat_rad, state0.lon_rad, state0.alt_m, state0.vel_enu_mps,
                                   euler_to_dcm(pitch, roll, yaw))
-        res = engine.run(state, P, t_imu[:n], dt[:n], dth[:n], dvl[:n], aids, settings, increment_var=var[:n])
+        res = engine.run(state, P, t_imu[:n], dt[:n], dth[:n], dvl[:n], aids, quiet, increment_var=var[:n])
         nll = res.nll.get("gnss_position", 0.0) + res.nll.get("gnss_velocity", 0.0)
         if best is None or nll < best[0]:
             best = (nll, state)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..constants import C_MPS, GM_M3_PER_S2, OMEGA_E_RAD_PER_S
 
-__all__ = ["N_DOPPLER_STATES", "doppler_jacobian", "clock_group_rows", "doppler_rate"]
+__all__ = ["N_DOPPLER_STATES", "doppler_jacobian", "clock_group_rows", "doppler_rate", "sv_motion"]
 
 #: States of a Doppler snapshot fix: position (3), velocity (3), one receiver frequency offset; so a
 #: snapshot needs at least 7 satellites ([Shen 2024] eq. 4-7).
@@ -70,7 +70,8 @@ def clock_group_rows(H, clock_onehot):
     return np.concatenate([np.concatenate([H[..., :6], onehot], -1), pseudo], -2)
 
 
-def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=None, *, inertial=False):
+def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_rx_ecef_mps=None, *, inertial=False,
+                 motion=None):
     """Rate of the Doppler, and its gradient w.r.t. the receiver position.
 
     The satellite's ECEF acceleration is two-body gravity plus the frame's
@@ -98,6 +99,9 @@ def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_
         Derivative for a time offset of the satellite's inertial orbit
         rather than of its ECEF states (the receiver's motion then not
         included).
+    motion : tuple of ndarray, optional
+        :func:`sv_motion` of these satellites with the same ``inertial``
+        (computed here when not given).
 
     Returns
     -------
@@ -106,18 +110,14 @@ def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_
     """
     r_s = np.asarray(pos_sv_ecef_m, dtype=float)
     v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
-    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
-    a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
-           - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
+    # Per second of offset the geometry moves along (w, a_s): the relative ECEF velocity and the satellite's
+    # acceleration, or for an inertial offset the satellite's alone plus the Earth's turn (omega x r, omega x v).
+    w, a_s = sv_motion(r_s, v_s, inertial=inertial) if motion is None else motion
     if vel_rx_ecef_mps is not None:
         v_rel = v_s - np.asarray(vel_rx_ecef_mps, dtype=float)
     else:
         v_rel = v_s
-    # Per second of offset the geometry moves along (w, a_s): the relative ECEF velocity and the satellite's
-    # acceleration, or for an inertial offset the satellite's alone plus the Earth's turn (omega x r, omega x v).
-    if inertial:
-        w, a_s = v_s + np.cross(omega, r_s), a_s + np.cross(omega, v_s)
-    else:
+    if not inertial:
         w = v_rel
     v_s = v_rel
     dr = r_s - np.asarray(pos_rx_ecef_m, dtype=float)[..., None, :]
@@ -132,3 +132,32 @@ def doppler_rate(pos_sv_ecef_m, vel_sv_ecef_mps, pos_rx_ecef_m, carrier_hz, vel_
     grad = k * ((u_w * (v_s - u * rho_dot) + rho_dot * (w - u * u_w) + (v_w - rho_dot * u_w) * u) / rho**2
                 - (a_s - u * u_a) / rho)
     return rate[..., 0], grad
+
+
+def sv_motion(pos_sv_ecef_m, vel_sv_ecef_mps, *, inertial=False):
+    """The satellites' own terms of :func:`doppler_rate`: how each moves per second of a time offset.
+
+    The ECEF acceleration is two-body gravity plus the frame's centrifugal and
+    Coriolis terms; with ``inertial`` the velocity and acceleration of an
+    offset along the inertial orbit (those plus ``(omega x r, omega x v)``,
+    see :func:`doppler_rate`). They do not depend on the receiver: an
+    iterated fix, whose satellites stay while the receiver moves, computes
+    them once.
+
+    Parameters
+    ----------
+    pos_sv_ecef_m, vel_sv_ecef_mps : array_like, (m, 3)
+    inertial : bool
+
+    Returns
+    -------
+    vel_ecef_mps, accel_ecef_mps2 : ndarray, (m, 3)
+    """
+    r_s = np.asarray(pos_sv_ecef_m, dtype=float)
+    v_s = np.asarray(vel_sv_ecef_mps, dtype=float)
+    omega = np.array([0.0, 0.0, OMEGA_E_RAD_PER_S])
+    a_s = (-GM_M3_PER_S2 * r_s / np.linalg.norm(r_s, axis=-1, keepdims=True) ** 3
+           - 2.0 * np.cross(omega, v_s) - np.cross(omega, np.cross(omega, r_s)))
+    if inertial:
+        return v_s + np.cross(omega, r_s), a_s + np.cross(omega, v_s)
+    return v_s, a_s

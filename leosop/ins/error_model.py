@@ -42,7 +42,7 @@ import scipy.linalg
 
 from ..earth import earth_rate_enu, normal_gravity_mps2, radii_m, transport_rate_enu
 from ..rotations import skew
-from ..shapes import as_dcm, as_vec3
+from ..shapes import as_dcm, as_vec3, stack_last
 
 __all__ = [
     "PHI",
@@ -106,21 +106,18 @@ def model15(C_n_b, f_n_mps2, vel_enu_mps, lat_rad, alt_m):
     W = np.linalg.norm(w_ie, axis=-1)
     zero = np.zeros(shape)
 
-    def mat(rows):
-        return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
-
-    M_av = mat([[zero, -1.0 / rm_h, zero], [1.0 / rn_h, zero, zero], [tl / rn_h, zero, zero]])
-    M_1 = mat([[zero, zero, zero], [-W * sl, zero, zero], [W * cl, zero, zero]])
-    M_2 = mat([[zero, zero, vn / rm_h**2], [zero, zero, -ve / rn_h**2],
-               [ve / (cl**2 * rn_h), zero, -ve * tl / rn_h**2]])
+    M_av = stack_last([[zero, -1.0 / rm_h, zero], [1.0 / rn_h, zero, zero], [tl / rn_h, zero, zero]], 2)
+    M_1 = stack_last([[zero, zero, zero], [-W * sl, zero, zero], [W * cl, zero, zero]], 2)
+    M_2 = stack_last([[zero, zero, vn / rm_h**2], [zero, zero, -ve / rn_h**2],
+                      [ve / (cl**2 * rn_h), zero, -ve * tl / rn_h**2]], 2)
     V = skew(v)
     M_vv = V @ M_av - skew(2.0 * w_ie + w_en)
     M_vp = V @ (2.0 * M_1 + M_2)
     M_vp[..., 2, 0] -= (normal_gravity_mps2(lat + _DLAT, h) - normal_gravity_mps2(lat - _DLAT, h)) / (2 * _DLAT)
     M_vp[..., 2, 2] -= (normal_gravity_mps2(lat, h + _DH) - normal_gravity_mps2(lat, h - _DH)) / (2 * _DH)
-    M_pv = mat([[zero, 1.0 / rm_h, zero], [1.0 / (cl * rn_h), zero, zero], [zero, zero, 1.0 + zero]])
-    M_pp = mat([[zero, zero, -vn / rm_h**2], [ve * tl / (cl * rn_h), zero, -ve / (cl * rn_h**2)],
-                [zero, zero, zero]])
+    M_pv = stack_last([[zero, 1.0 / rm_h, zero], [1.0 / (cl * rn_h), zero, zero], [zero, zero, 1.0 + zero]], 2)
+    M_pp = stack_last([[zero, zero, -vn / rm_h**2], [ve * tl / (cl * rn_h), zero, -ve / (cl * rn_h**2)],
+                       [zero, zero, zero]], 2)
 
     F = np.zeros(shape + (15, 15))
     F[..., PHI, PHI] = -skew(w_ie + w_en)

@@ -36,6 +36,7 @@ sequential and numpy's per-call overhead on 3-vectors would dominate
 """
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -73,10 +74,12 @@ class NavState:
         vel = np.asarray(vel_enu_mps, dtype=float).reshape(3)
         return cls(float(lat_rad), float(lon_rad), float(alt_m), vel, dcm_to_quat(np.asarray(C_n_b, dtype=float)))
 
-    @property
+    @functools.cached_property
     def C_n_b(self):
-        """Attitude matrix, shape (3, 3)."""
-        return quat_to_dcm(self.q_n_b)
+        """Attitude matrix, shape (3, 3); made once per state (a filter step reads it several times), read-only."""
+        C = quat_to_dcm(self.q_n_b)
+        C.flags.writeable = False
+        return C
 
     def corrected(self, phi_enu_rad=(0.0, 0.0, 0.0), dvel_enu_mps=(0.0, 0.0, 0.0), dpos=(0.0, 0.0, 0.0)):
         """The state with estimated errors removed (feedback correction).

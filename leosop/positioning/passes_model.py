@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import C_e_n, ecef_to_geodetic
-from ..geometry.doppler import doppler_jacobian, doppler_rate
+from ..geometry.doppler import doppler_jacobian, doppler_rate, sv_motion
 from .robust_ls import batch_rows
 
 __all__ = ["PassRows", "PassesModel", "pass_rows"]
@@ -213,6 +213,9 @@ class PassesModel:
 
     def __init__(self, rows):
         self.rows = rows
+        # The satellites' own terms of the Doppler rate: the same at every iterate.
+        self.motion = (sv_motion(rows.pos_sv_ecef_m, rows.vel_sv_ecef_mps,
+                                 inertial=rows.time_offset_model == "inertial") if rows.time_bias else None)
 
     def normal(self, x, w):
         """Geometry (h, D, rate grad), the per-pass basis A and the linear normal matrix's blocks and solver."""
@@ -224,7 +227,7 @@ class PassesModel:
         grad = None
         if r.time_bias:
             rate, grad = doppler_rate(r.pos_sv_ecef_m, r.vel_sv_ecef_mps, x, r.carrier_hz,
-                                      inertial=r.time_offset_model == "inertial")
+                                      inertial=r.time_offset_model == "inertial", motion=self.motion)
             A = np.concatenate([A, rate[..., None]], -1)
         B_glob, gi = r.B_glob, r.pass_index
         wd = w[:, :n]
