@@ -174,7 +174,7 @@ def test_range_rate_bound_of_the_cell_vote_screen_holds_against_sgp4(walker):
     must hold for every satellite and geometry (here all of the Walker set, above and below the
     horizon, against SGP4 range rates 1 s apart; the states are SGP4's, no interpolation)."""
     from leosop.positioning.measurements import sv_states_from_tle
-    from leosop.replay.cellvote import _range_accel_bound
+    from leosop.replay.cellvote import _range_accel_bound, _speed_turn_max
 
     rx = geodetic_to_ecef(0.6, 1.9, 300.0)
     t0 = walker.epochs_utc[0] + np.timedelta64(5, "h")
@@ -184,7 +184,7 @@ def test_range_rate_bound_of_the_cell_vote_screen_holds_against_sgp4(walker):
     pos, vel = pos.reshape(-1, 3, 3), vel.reshape(-1, 3, 3)
     los = pos - rx
     rr = np.sum(los * vel, axis=-1) / np.linalg.norm(los, axis=-1)
-    bound = _range_accel_bound(pos[:, 1], vel[:, 1], rx)
+    bound = _range_accel_bound(pos[:, 1], *_speed_turn_max(pos[:, 1], vel[:, 1]), rx)
     change = np.abs(rr[:, 2] - rr[:, 0])
     assert np.all(change <= bound)
     # Not vacuous: overhead satellites change range rate by ~100 m/s in 1 s, the bound is the same order.

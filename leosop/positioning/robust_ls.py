@@ -39,6 +39,11 @@ EQUAL_FIT_SIGMAS = 3.0
 _DAMPING_START = 1e-3
 _DAMPING_FACTOR = 10
 _DAMPING_MIN, _DAMPING_MAX = 1e-12, 1e12
+#: An accepted step whose cost decrease is below this fraction of the linear model's grows the
+#: damping instead of shrinking it (Moré 1978's trust-region rule): where the Gauss-Newton model
+#: misjudges the curvature (large residuals at a false minimum), full steps overshoot and the
+#: iteration zig-zags across the valley, ~1 % closer per step.
+_GAIN_MIN = 0.25
 #: Significance of the chi-square test that retries a problem from its alternative start, when the
 #: caller disabled the outlier tests.
 _RETRY_ALPHA = 1e-3
@@ -163,9 +168,13 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
         rt = np.where(wa > 0, y[active] - pt, 0.0)
         ct = np.einsum("pm,pm->p", wa, rt * rt)
         accept = np.isfinite(ct) & (ct <= cost[active])
+        # Gain ratio: the cost's actual decrease over the linear model's, 2 g.dx - dx^T N dx (> 0).
+        predicted = np.einsum("pi,pi->p", dx, 2.0 * g - np.einsum("pij,pj->pi", N, dx))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            good = accept & ((cost[active] - ct) >= _GAIN_MIN * predicted)
         acc = active[accept]
         x[acc], J[acc], r[acc], cost[acc] = xt[accept], Jt[accept], rt[accept], ct[accept]
-        lam[active] = np.where(accept, np.maximum(lam[active] / _DAMPING_FACTOR, _DAMPING_MIN),
+        lam[active] = np.where(good, np.maximum(lam[active] / _DAMPING_FACTOR, _DAMPING_MIN),
                                np.minimum(lam[active] * _DAMPING_FACTOR, _DAMPING_MAX))
         iterations[active] += 1
         done = np.all(np.abs(dx) <= xtol, axis=-1)

@@ -56,17 +56,25 @@ def grid_around(centre_ecef_m, offsets_m, alt_m):
 
 
 
-def _range_accel_bound(pos_sv, vel_sv, pos_rx):
+def _speed_turn_max(pos_sv, vel_sv):
+    """The satellite's speed bound over +-0.5 s [m/s] and the Earth's turn rate at it, ``omega |r|`` [m/s], (...).
+
+    Per reference state, for :func:`_range_accel_bound`.
+    """
+    speed_max = np.sqrt(dot3(vel_sv, vel_sv)) + 0.5 * _SAT_ACCEL_MAX_MPS2
+    return speed_max, OMEGA_E_RAD_PER_S * np.sqrt(dot3(pos_sv, pos_sv))
+
+
+def _range_accel_bound(pos_sv, speed_max, turn_max, pos_rx):
     """Bound of |range rate change| over 1 s of the satellite's inertial time offset [m/s], (...).
 
     The offset moves the satellite's ECEF state along ``w = v + omega x r`` and ``a + omega x v``
     (:mod:`~leosop.replay.ephemeris`), so d(range rate) = ((v . w) - range rate (u . w)) / range
     + u . (a + omega x v) <= |v| |w| / range + |a| + omega |v|, with |v| and the range bounded over
-    the +-0.5 s by the acceleration bound (which also covers omega |v| < 0.6 m/s^2).
+    the +-0.5 s by the acceleration bound (which also covers omega |v| < 0.6 m/s^2); ``speed_max``
+    and ``turn_max`` from :func:`_speed_turn_max`.
     """
     los_m = pos_sv - pos_rx
-    speed_max = np.sqrt(dot3(vel_sv, vel_sv)) + 0.5 * _SAT_ACCEL_MAX_MPS2
-    turn_max = OMEGA_E_RAD_PER_S * np.sqrt(dot3(pos_sv, pos_sv))
     rng_min = np.maximum(np.sqrt(dot3(los_m, los_m)) - 0.5 * speed_max, 1e-3)
     return speed_max * (speed_max + turn_max) / rng_min + _SAT_ACCEL_MAX_MPS2
 
@@ -114,6 +122,7 @@ class CellSearch:
         self.local[cand] = np.arange(len(cand))
         shift = np.array([0.0, -RATE_STEP_S, RATE_STEP_S])[:, None]  # (3 offsets, 1)
         self.ref_pos, self.ref_vel = eph.state_shifted(cand[None, :, None, None], t_ref[:, None, None, :], shift)
+        self.ref_speed_max, self.ref_turn_max = _speed_turn_max(self.ref_pos[:, :, 0], self.ref_vel[:, :, 0])
 
     def _pairs(self, cells, radius_m):
         """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3).
@@ -194,7 +203,8 @@ class CellSearch:
         dop, grad = doppler_model(p0, v0, pos_rx, self.k)
         scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
         feat = ((f_ref - dop) @ FEATURES.T) * scale
-        feat_jac = np.einsum("fr,mrx->mfx", FEATURES, grad) * scale[..., None]  # d feature / d pos, negated
+        # d feature / d pos, negated: FEATURES @ grad summed over the reference times in order (as einsum).
+        feat_jac = sum(FEATURES[:, r, None] * grad[:, None, r] for r in range(3)) * scale[..., None]
         feat_grad = np.sqrt(dot3(feat_jac, feat_jac))
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
         drift = o["lo_drift_max_hz_per_s"]
@@ -207,7 +217,8 @@ class CellSearch:
             extra = extra + v3 * np.stack([np.ones_like(span), turn / span, turn], axis=1)
         b_max = o["lo_offset_max_hz"]
         # The Doppler rates cost twice the rest: first a screen with a bound of them (most triples fail it).
-        rate_max = self.k * _range_accel_bound(p0, v0, pos_rx)  # (m, 3 ref times)
+        rate_max = self.k * _range_accel_bound(p0, self.ref_speed_max[k, sat], self.ref_turn_max[k, sat],
+                                               pos_rx)  # (m, 3 ref times)
         tol_max = (reach * feat_grad + dt_max * (rate_max @ np.abs(FEATURES).T) * scale + 4 * feat_sigma + extra
                    + o["model_sigma_hz"] * 3) * (1 + 1e-9)
         maybe = (np.abs(feat[:, 1]) <= tol_max[:, 1]) & (np.abs(feat[:, 2]) <= tol_max[:, 2]) & \
