@@ -40,7 +40,7 @@ _DAMPING_START = 1e-3
 _DAMPING_FACTOR = 10
 _DAMPING_MIN, _DAMPING_MAX = 1e-12, 1e12
 #: An accepted step whose cost decrease is below this fraction of the linear model's grows the
-#: damping instead of shrinking it (Moré 1978's trust-region rule): where the Gauss-Newton model
+#: damping instead of shrinking it ([More 1978]'s trust-region rule): where the Gauss-Newton model
 #: misjudges the curvature (large residuals at a false minimum), full steps overshoot and the
 #: iteration zig-zags across the valley, ~1 % closer per step.
 _GAIN_MIN = 0.25
