@@ -32,7 +32,7 @@ import warnings
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-CORPUS = REPO / "tests" / "fuzz_corpus"
+CORPUS = REPO / "tests" / "hardening" / "fuzz_corpus"
 DATA = Path(os.environ.get("LEOSOP_SHARED_DATA", REPO.parent / "shared" / "data"))
 _SEED_BYTES = 3000  # heads of real files; libFuzzer's default -max_len is 4096
 _TALLY_EVERY = 10_000  # inputs between two TALLY lines (inputs run, failing, distinct findings)

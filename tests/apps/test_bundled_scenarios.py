@@ -21,9 +21,9 @@ from leosop.errors import InputError
 from leosop.apps.repro import multi
 from leosop.apps.scenarios import BUNDLED_DIR, bundled_names, load_scenario, scenario_tle
 
-from conftest import DATA_DIR, data_path
+from tests.helpers import DATA_DIR, REPO_ROOT, data_path
 
-ROOT = Path(__file__).resolve().parents[1]
+
 HIGH_LATITUDE_TLE = ("tle", "active_3le_2021-08-06_atqlong.txt")
 
 
@@ -77,7 +77,7 @@ def test_multi_warns_and_says_why_when_it_skips_a_row(monkeypatch, no_data_folde
 
 def _cli(args, env_extra=None, cwd=None):
     env = {k: v for k, v in os.environ.items() if k != ENV_VAR}
-    env["PYTHONPATH"] = str(ROOT)
+    env["PYTHONPATH"] = str(REPO_ROOT)
     env.update(env_extra or {})
     return subprocess.run([sys.executable, "-m", "leosop", *args], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=600)

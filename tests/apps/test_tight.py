@@ -1,6 +1,6 @@
 """Tight INS/Doppler coupling of simulate (the engine with LEO Doppler aids): the old loop's results, consistency.
 
-The aid's rows are checked against finite differences in test_fuse_leo.py.
+The aid's rows are checked against finite differences in tests/fusion/test_aids_leo.py.
 """
 
 import dataclasses
@@ -8,9 +8,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from consistency import assert_filter_consistent
 from leosop.apps.scenarios import XIAN_BAOJI
 from leosop.apps.simulate import run_scenario
+
+from tests.helpers import assert_filter_consistent
 
 # The tight filter's own loop (fusion/tight.run, until issue 21) on these runs, seed 0, measurement level:
 # mean, max and last 3D position error [m], mean velocity error [m/s], NIS sum, its dof, updates and

@@ -5,11 +5,12 @@ import datetime as dt
 import numpy as np
 import pytest
 
-from conftest import data_path
 from leosop import frames
 from leosop.constants import OMEGA_E_RAD_PER_S, WGS84_A_M, WGS84_B_M
 from leosop.orbits import read_tle
 from leosop.orbits.propagate import state_ecef
+
+from tests.helpers import data_path
 
 ONE_MM = 1e-3  # m
 ONE_NRAD = 1e-9  # rad: ~6 mm on the Earth's surface

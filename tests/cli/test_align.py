@@ -9,7 +9,8 @@ from leosop.cli import main
 from leosop.constants import OMEGA_E_RAD_PER_S
 from leosop.ins import trajectory
 
-from conftest import data_path
+from tests.helpers import data_path
+
 
 GYRO_Q_ARCSEC = 0.1
 ACCEL_Q_UG_S = 125.0

@@ -11,12 +11,13 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import data_path
 
 from leosop import frames
 from leosop.cli import main
 from leosop.fusion import real
 from leosop.gnss.rtklib_pos import read_pos
+
+from tests.helpers import data_path
 
 CONTRACT = {"n_epochs", "duration_s", "aids", "outages", "runtime_s"}
 OUTAGE_KEYS = {"start_s", "duration_s", "max_horiz_err_m", "end_horiz_err_m", "n_ref"}

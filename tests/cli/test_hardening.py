@@ -19,6 +19,8 @@ import pytest
 from leosop import fileio
 from leosop.cli import COMMANDS, build_parser, main, tle
 
+from tests.helpers import REPO_ROOT
+
 
 #: A small recording: 10 ms of one satellite at 1 MS/s.
 SMALL = ["--duration-s", "0.01", "--truth-step-s", "0.01", "--sample-rate-hz", "1e6", "--sat", "70002"]
@@ -386,7 +388,7 @@ REC = "signals/starlink_xian_snapshots.sigmf-meta"
     (["doppler", REC, "--block-s", "1e300"], "--block-s 1e+300 is longer than the recording (600000 samples"),
 ])
 def test_absurd_option_values_are_refused(tmp_path, capsys, monkeypatch, argv, message):
-    monkeypatch.chdir(fileio.Path(__file__).resolve().parents[1])
+    monkeypatch.chdir(REPO_ROOT)
     argv = [str(tmp_path / a) if a.endswith(".sigmf-meta") and a != REC else a for a in argv]
     status, _, err = _run(capsys, *argv)
     assert status == 2 and message in _one_line(err)

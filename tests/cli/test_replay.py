@@ -13,6 +13,8 @@ import pytest
 from leosop.cli import main
 from leosop.frames import geodetic_to_ecef
 
+from tests.helpers import REPO_ROOT
+
 SITE = (34.342, 108.940, 400.0)  # Xi'an, the bundled scenario's start
 START = "2025-01-01T19:40:00Z"
 
@@ -216,9 +218,7 @@ def test_ofdm_snapshot_recording_is_identified_from_its_pilot_combs(tmp_path, ca
 
 
 def test_bundled_example_identified_and_fixed_with_and_without_a_prior(capsys):
-    from pathlib import Path
-
-    meta = Path(__file__).resolve().parents[1] / "signals" / "starlink_xian_snapshots.sigmf-meta"
+    meta = REPO_ROOT / "signals" / "starlink_xian_snapshots.sigmf-meta"
     truth = {a["leosop:sat_id"] for a in json.loads(meta.read_text())["annotations"] if "leosop:sat_id" in a}
     site = geodetic_to_ecef(np.radians(SITE[0]), np.radians(SITE[1]), SITE[2])
     for prior in (["--init", "34.98,109.71,0"], []):

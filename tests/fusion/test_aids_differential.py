@@ -1,7 +1,7 @@
 """Differential LEO Doppler aids: H against finite differences, the model against the pair simulator's truth.
 
 References: central differences of the aid's own nonlinear model (as
-test_fuse_leo.py does for the single-receiver aid); the measurements of
+tests/fusion/test_aids_leo.py does for the single-receiver aid); the measurements of
 :mod:`leosop.positioning.differential_sim`, whose truth is SGP4 states moved
 by drawn element-set offsets and ``frames.range_rate``, independent of the
 aid's Jacobians.
@@ -11,9 +11,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import central_difference_jacobian, leo_geometry
-from test_fuse_engine import STEP, _computed, _true_view
-from test_fuse_leo import CARRIER_HZ
 
 from leosop import frames
 from leosop.fusion import aids_differential, engine
@@ -25,6 +22,9 @@ from leosop.ins.trajectory import Segment, from_segments
 from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
 from leosop.positioning.differential_sim import draw_satellite_errors, simulate_receiver, straight_drive
+
+from tests.helpers import central_difference_jacobian, leo_geometry
+from tests.fusion.helpers import CARRIER_HZ, STEP, computed_state, true_view
 
 CLOCK = StateBlock("diff_clock", (0.0, 0.0), (3e3, 1.5), (1e-6, 1e-6), integrated=True)
 ORBIT = StateBlock("diff_orbit:44713", (0.0,) * 3, (30.0, 300.0, 100.0), (0.0,) * 3, drop_after_s=30.0)
@@ -39,7 +39,7 @@ SIGMA_HZ = 0.26
 
 def _aid(lever=(0.3, -0.8, 1.2)):
     """A satellite 550 km up and ~900 km away from the test's INS, a base 7.5 km from it."""
-    r_rx, r_sv, v_sv, east, north = leo_geometry(_computed()[0])
+    r_rx, r_sv, v_sv, east, north = leo_geometry(computed_state()[0])
     base = r_rx - 6e3 * east - 4.5e3 * north
     return aids_differential.DifferentialDoppler(0.0, 310.0, 0.3, CARRIER_HZ, r_sv, v_sv, base, lever, CLOCK, ORBIT)
 
@@ -52,12 +52,12 @@ def _with_blocks(view, d):
 
 def test_design_matrix_matches_finite_differences():
     aid = _aid()
-    _, H, R = aid.matrices(_with_blocks(_true_view(np.zeros(N_INS)), np.zeros(5)))
+    _, H, R = aid.matrices(_with_blocks(true_view(np.zeros(N_INS)), np.zeros(5)))
     assert H.shape == (1, N_INS + 5) and R.shape == (1, 1)
     # As test_fuse_leo: 100x the engine tests' INS steps (Doppler round-off), 1 m steps of the orbit offsets
     # (their second-order terms: 1 m over ~1e6 m ranges, 1e-6 relative).
     step = np.r_[100 * STEP, 1e-3, 1e-4, 1.0, 1.0, 1.0]
-    H_fd = central_difference_jacobian(lambda e: -aid.predict(_with_blocks(_true_view(e[:N_INS]), e[N_INS:])), step)
+    H_fd = central_difference_jacobian(lambda e: -aid.predict(_with_blocks(true_view(e[:N_INS]), e[N_INS:])), step)
     assert H[0, N_INS + 1] == 0.0 == H_fd[0, N_INS + 1]  # the drift reaches z through the transition only
     # The orbit columns are the small difference of two receivers' sensitivities (~1e-3 Hz/m at 7.5 km):
     # they must not vanish, or the test would check nothing there.

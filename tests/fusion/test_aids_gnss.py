@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 import pytest
-from conftest import ESBC_CLK, ESBC_SP3
 
 from leosop.fusion import aids, kalman
 from leosop.fusion.aids_gnss import ZWD_KEY, PppEpoch, ambiguity_block, zwd_block
@@ -23,6 +22,8 @@ from leosop.gnss.simulate import SimSettings
 from leosop.ins.error_model import DPOS, DV, PHI
 from leosop.ins.strapdown import NavState
 from leosop.rotations import euler_to_dcm
+
+from tests.helpers import ESBC_CLK, ESBC_SP3
 
 pytestmark = pytest.mark.skipif(not (ESBC_SP3.exists() and ESBC_CLK.exists()), reason="ESBC data absent")
 # The SD filter's values were recorded with the Niell mapping and the standard atmosphere (its troposphere

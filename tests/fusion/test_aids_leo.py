@@ -1,7 +1,7 @@
 """LEO Doppler aids of the engine: H against finite differences, the model against a second formula, state blocks.
 
 References: central differences of the aid's own nonlinear model (as for the
-other aids in test_fuse_engine.py); the Doppler closed form written out here
+other aids in tests/fusion/test_engine.py); the Doppler closed form written out here
 from the DESIGN 4.3 definition (range rate = -doppler c / f0); the clock
 block's transition against the integral of white noise; the velocity of a
 circular drive in closed form for the ``--leo-sim`` reference track.
@@ -12,8 +12,6 @@ import math
 
 import numpy as np
 import pytest
-from conftest import central_difference_jacobian, leo_geometry
-from test_fuse_engine import STEP, _computed, _true_view
 
 from leosop import frames
 from leosop.constants import C_MPS
@@ -27,7 +25,9 @@ from leosop.ins.error_model import DPOS, DV, EPS, PHI
 from leosop.ins.strapdown import NavState
 from leosop.ins.trajectory import static
 
-CARRIER_HZ = 11.325e9
+from tests.helpers import central_difference_jacobian, leo_geometry
+from tests.fusion.helpers import CARRIER_HZ, STEP, computed_state, true_view
+
 CLOCK = StateBlock("leo_clock:starlink", (0.0, 0.0), (100.0, 1.0), (1e-6, 1e-6), integrated=True)
 SAT = StateBlock("leo_sat:44713", (0.0,), (1.5,), (1e-3,), drop_after_s=30.0)
 X_BLOCKS = {CLOCK.key: np.array([123.4, 0.05]), SAT.key: np.array([-1.7])}
@@ -35,7 +35,7 @@ X_BLOCKS = {CLOCK.key: np.array([123.4, 0.05]), SAT.key: np.array([-1.7])}
 
 def _aid(lever=(0.3, -0.8, 1.2)):
     """A satellite 550 km up and ~900 km away, moving at 7.6 km/s, as seen from the test's INS."""
-    _, r_sv, v_sv, _, _ = leo_geometry(_computed()[0])
+    _, r_sv, v_sv, _, _ = leo_geometry(computed_state()[0])
     return aids_leo.LeoDoppler(0.0, -25e3, 3.0, CARRIER_HZ, r_sv, v_sv, lever, CLOCK, SAT)
 
 
@@ -47,7 +47,7 @@ def _with_blocks(view, d_clock=(0.0, 0.0), d_sat=(0.0,)):
 
 def test_design_matrix_matches_finite_differences():
     aid = _aid()
-    computed = _with_blocks(_true_view(np.zeros(N_INS)))
+    computed = _with_blocks(true_view(np.zeros(N_INS)))
     _, H, R = aid.matrices(computed)
     assert H.shape == (1, N_INS + 3) and R.shape == (1, 1)
     # 100x the other aids' steps: a Doppler of ~3e4 Hz from ECEF coordinates of 6e6 m rounds at ~1e-9 m
@@ -55,7 +55,7 @@ def test_design_matrix_matches_finite_differences():
     # still below 1e-6 relative (checked: 1e-7 at 1000x).
     step = np.r_[100 * STEP, 1e-3, 1e-4, 1e-3]
     H_fd = central_difference_jacobian(
-        lambda e: -aid.predict(_with_blocks(_true_view(e[:N_INS]), e[N_INS:N_INS + 2], e[N_INS + 2:])), step)
+        lambda e: -aid.predict(_with_blocks(true_view(e[:N_INS]), e[N_INS:N_INS + 2], e[N_INS + 2:])), step)
     # z(dx) = h(computed) - h(truth(dx)): its derivative at 0 is H. The drift column is zero in H (the drift
     # reaches the measurement through the block's transition), and so in the model.
     assert H[0, N_INS + 1] == 0.0 == H_fd[0, N_INS + 1]
@@ -67,9 +67,9 @@ def test_design_matrix_matches_finite_differences():
 
 def test_prediction_is_the_design_doppler_with_the_clock_states():
     """The DESIGN 4.3 Doppler written out, at the antenna moved by the lever arm (closed-form lever geometry)."""
-    state = _computed()[0]
+    state = computed_state()[0]
     aid = _aid(lever=(0.0, 0.0, 0.0))
-    view = _with_blocks(_true_view(np.zeros(N_INS)))
+    view = _with_blocks(true_view(np.zeros(N_INS)))
     r_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
     v_rx = frames.C_e_n(state.lat_rad, state.lon_rad) @ state.vel_enu_mps
     los = (aid.pos_sv_ecef_m - r_rx) / np.linalg.norm(aid.pos_sv_ecef_m - r_rx)
@@ -109,7 +109,7 @@ def test_orbit_error_columns_match_finite_differences(lever):
     def view(e):
         """The truth moved by the error ``e`` (INS errors, then the blocks: estimate minus truth)."""
         d = np.split(e[N_INS:], [1, 2])
-        return dataclasses.replace(_true_view(e[:N_INS]), states={k: x[k] - di for k, di in zip(x, d)})
+        return dataclasses.replace(true_view(e[:N_INS]), states={k: x[k] - di for k, di in zip(x, d)})
 
     _, H, _ = aid.matrices(view(np.zeros(N_INS + 5)))
     assert H.shape == (1, N_INS + 5)
@@ -131,14 +131,14 @@ def test_window_aid_columns_and_clone_rows_match_finite_differences(lever):
     aid = aids_leo.LeoDoppler(0.5, -25e3, 3.0, CARRIER_HZ, base.pos_sv_ecef_m, base.vel_sv_ecef_mps, lever, CLOCK,
                               SAT, window=(T, clone))
     start = aids_leo.LeoWindowStart(-0.5, lever, clone)
-    r_end, G = start.clone_rows(_true_view(np.zeros(N_INS)))
+    r_end, G = start.clone_rows(true_view(np.zeros(N_INS)))
     v_mean = np.array([3.0, -5.0, 6.5])  # the chord differs from the INS velocity at the end (rocking)
     x = {CLOCK.key: X_BLOCKS[CLOCK.key], SAT.key: X_BLOCKS[SAT.key], clone.key: r_end - T * v_mean}
 
     def view(e):
         """The truth moved by the error ``e`` (INS errors, then the blocks: estimate minus truth)."""
         d = np.split(e[N_INS:], [2, 3])
-        return dataclasses.replace(_true_view(e[:N_INS]), states={k: x[k] - di for k, di in zip(x, d)})
+        return dataclasses.replace(true_view(e[:N_INS]), states={k: x[k] - di for k, di in zip(x, d)})
 
     _, H, _ = aid.matrices(view(np.zeros(N_INS + 6)))
     assert H.shape == (1, N_INS + 6)
@@ -160,7 +160,7 @@ def test_window_aid_columns_and_clone_rows_match_finite_differences(lever):
     expected = -los @ (aid.vel_sv_ecef_mps - v_mean) * CARRIER_HZ / C_MPS + 123.4 - 1.7
     assert aid.predict(view(np.zeros(N_INS + 6)))[0] == pytest.approx(expected, abs=1e-6)
     # The clone's rows: the antenna position over the INS errors, by central differences of clone_rows itself.
-    G_fd = central_difference_jacobian(lambda e: -start.clone_rows(_true_view(e))[0], ins_step)
+    G_fd = central_difference_jacobian(lambda e: -start.clone_rows(true_view(e))[0], ins_step)
     # m per unit error: position columns ~6e6 m/rad, their differences rounded at 1e-9 m / 2e-7 rad = 5e-3 m/rad.
     np.testing.assert_allclose(G, G_fd, rtol=1e-6, atol=2e-2)
     assert np.abs(G[:, PHI]).max() >= 0.5 * np.linalg.norm(lever)  # the lever's rotation is in the clone

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
+
 from leosop import frames
 from leosop.fusion import aids, engine, kalman
 from leosop.fusion.common import N_INS, pos_jacobian
@@ -21,27 +22,7 @@ from leosop.ins.strapdown import NavState
 from leosop.ins.trajectory import static
 from leosop.rotations import euler_to_dcm, quat_to_dcm, rotvec_to_dcm
 
-LAT, LON, ALT = math.radians(40.1), math.radians(-105.15), 1600.0
-# Perturbation sizes per state group for central differences: small enough that the second-order
-# terms (phi^2 ~ 1e-12 rad, position 1e-3 m over 6e6 m radii) sit below 1e-9 of the first-order ones.
-STEP = np.r_[np.full(3, 1e-6), np.full(3, 1e-5), np.full(2, 1e-10), 1e-4, np.full(3, 1e-7), np.full(3, 1e-5)]
-
-
-def _view(state, bg, ba, omega):
-    return aids.InsView(state, bg, ba, omega)
-
-
-def _computed():
-    C = euler_to_dcm(math.radians(3.0), math.radians(-2.0), math.radians(130.0))
-    state = NavState.from_dcm(LAT, LON, ALT, [4.0, -7.0, 0.3], C)
-    return state, np.array([1e-4, -2e-4, 3e-4]), np.array([0.02, -0.01, 0.03]), np.array([0.1, -0.2, 0.5])
-
-
-def _true_view(dx):
-    """The truth that makes ``dx`` the computed-minus-true error of :func:`_computed` (feedback sense)."""
-    state, bg, ba, omega = _computed()
-    truth = state.corrected(dx[PHI], dx[DV], dx[DPOS])
-    return _view(truth, bg + dx[EPS], ba + dx[NABLA], omega - dx[EPS])
+from tests.fusion.helpers import ALT, LAT, LON, STEP, computed_state, true_view
 
 
 def _all_aids():
@@ -59,18 +40,18 @@ def _all_aids():
 
 @pytest.mark.parametrize("aid", _all_aids(), ids=lambda a: a.name)
 def test_design_matrix_matches_finite_differences(aid):
-    state, bg, ba, omega = _computed()
-    computed = _view(state, bg, ba, omega)
+    state, bg, ba, omega = computed_state()
+    computed = aids.InsView(state, bg, ba, omega)
     z, H, R = aid.matrices(computed)
     assert H.shape == (z.size, N_INS) and R.shape == (z.size, z.size)
     np.testing.assert_array_equal(z, aid.predict(computed) - aid.measured)
-    np.testing.assert_allclose(aid.predict(_true_view(np.zeros(N_INS))), aid.predict(computed), atol=1e-12)
+    np.testing.assert_allclose(aid.predict(true_view(np.zeros(N_INS))), aid.predict(computed), atol=1e-12)
     # Innovation z(dx) = h(computed) - h(truth(dx)); its derivative at 0 is H.
     H_fd = np.empty_like(H)
     for i in range(N_INS):
         e = np.zeros(N_INS)
         e[i] = STEP[i]
-        H_fd[:, i] = (aid.predict(_true_view(-e)) - aid.predict(_true_view(e))) / (2 * STEP[i])
+        H_fd[:, i] = (aid.predict(true_view(-e)) - aid.predict(true_view(e))) / (2 * STEP[i])
     scale = np.abs(H).max()
     # Relative 1e-6: central differences are exact to O(step^2) and the functions are smooth.
     np.testing.assert_allclose(H, H_fd, rtol=1e-6, atol=1e-6 * scale)
@@ -81,11 +62,11 @@ def test_lever_arm_geometry_closed_form():
     C = euler_to_dcm(0.0, 0.0, math.radians(90.0))
     state = NavState.from_dcm(LAT, LON, ALT, [0.0, 0.0, 0.0], C)
     aid = aids.GnssPosition(0.0, LAT, LON, ALT, np.eye(3), [0.0, 1.0, 0.5])
-    np.testing.assert_allclose(aid.predict(_view(state, 0, 0, np.zeros(3))), [-1.0, 0.0, 0.5], atol=1e-12)
+    np.testing.assert_allclose(aid.predict(aids.InsView(state, 0, 0, np.zeros(3))), [-1.0, 0.0, 0.5], atol=1e-12)
     # Turning at 0.5 rad/s about Up with a 2 m forward arm: the antenna moves at 1 m/s to the body's left,
     # i.e. South when facing West.
     vel = aids.GnssVelocity(0.0, [0, 0, 0], np.eye(3), [0.0, 2.0, 0.0])
-    np.testing.assert_allclose(vel.predict(_view(state, 0, 0, np.array([0, 0, 0.5]))), [0.0, -1.0, 0.0],
+    np.testing.assert_allclose(vel.predict(aids.InsView(state, 0, 0, np.array([0, 0, 0.5]))), [0.0, -1.0, 0.0],
                                atol=1e-12)
 
 
@@ -143,7 +124,6 @@ def test_static_imu_with_zupt_keeps_velocity_zero_and_attitude_bounded():
     pos_err = frames.ecef_to_enu(frames.geodetic_to_ecef(res.lat_rad[-1], res.lon_rad[-1], res.alt_m[-1])
                                  - truth.pos_ecef_m[-1], truth.lat_rad[-1], truth.lon_rad[-1])
     assert np.linalg.norm(pos_err) < 0.2  # 120 s of velocity errors at 0.01 m/s: 1.2 m worst case, ~0.1 m random
-
 
 
 def test_nhc_and_gnss_velocity_noise_grow_with_the_motion():
@@ -225,7 +205,7 @@ def test_aids_of_one_instant_make_the_sequence_of_their_updates():
     def on_aid(index, aid, z, S, used, reopened):
         seen.append((index, used, z @ np.linalg.solve(S, z)))
 
-    f = engine._Filter(_computed()[0], P0, settings, 0.0, on_aid)
+    f = engine._Filter(computed_state()[0], P0, settings, 0.0, on_aid)
     f.apply(group, 0.0, 0.0, list(range(len(group))))
     x, P, ref = np.zeros(N_INS), P0, []
     for j, a in enumerate(group):
@@ -246,7 +226,7 @@ def test_stale_state_block_is_marginalised_exactly():
     # Dropping a block is Gaussian marginalisation: the other states keep their rows and columns of P,
     # to the bit, and the blocks after it move up.
     settings = engine.EngineSettings(1e-3, 1e-2, 0.0, 0.0)
-    f = engine._Filter(_computed()[0], np.eye(N_INS), settings, 0.0)
+    f = engine._Filter(computed_state()[0], np.eye(N_INS), settings, 0.0)
     old, kept = (aids.StateBlock(k, (0.0, 0.0), (2.0, 3.0), (0.0, 0.0), drop_after_s=30.0) for k in ("a", "b"))
     f.admit(_Linear(0.0, None, None, None, (old,)))
     f.admit(_Linear(10.0, None, None, None, (kept,)))

@@ -5,13 +5,14 @@ import warnings
 
 import numpy as np
 
-from conftest import data_path
 from leosop.fusion import engine
 from leosop.fusion.common import N_INS
 from leosop.ins import flight_mat, gaps
 from leosop.ins.error_model import DV, PHI
 from leosop.ins.imu_io import ImuLog
 from leosop.ins.strapdown import NavState
+
+from tests.helpers import data_path
 
 DT = 0.02  # the flight log's 50 Hz
 

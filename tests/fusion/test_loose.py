@@ -15,7 +15,6 @@ import functools
 import numpy as np
 import pytest
 
-from consistency import assert_filter_consistent
 from leosop import earth, frames
 from leosop.constants import G0_MPS2
 from leosop.fusion import aids_fix, common, kalman
@@ -24,6 +23,8 @@ from leosop.ins import imu, strapdown, trajectory
 from leosop.ins.error_model import DPOS, DV, NABLA
 from leosop.apps.scenarios import XIAN_BAOJI
 from leosop.apps.simulate import run_scenario
+
+from tests.helpers import assert_filter_consistent
 
 ARW = np.radians(0.01) / 60.0  # 0.01 deg/sqrt(h) in rad/sqrt(s)
 VRW = 1e-5 * G0_MPS2  # 1e-5 g/sqrt(Hz) in m/s^2/sqrt(Hz)

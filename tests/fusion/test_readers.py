@@ -9,12 +9,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import data_path
 from scipy.spatial.transform import Rotation
 
 from leosop.errors import InputError
 from leosop.gnss.rtklib_pos import PosSolution, read_pos, write_pos
 from leosop.ins import imu_io
+
+from tests.helpers import data_path
 
 RFU_FROM_FRD = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 

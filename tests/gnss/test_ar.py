@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-from conftest import ESBC_ATX, ESBC_CLK, ESBC_CODES, ESBC_DAY, ESBC_NAV, ESBC_OBS, ESBC_SP3
 
 from leosop.cli import main
 from leosop.errors import InputError
@@ -18,6 +17,8 @@ from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014
 from leosop.gnss.ppp import PppOptions, run_ppp
 from leosop.gnss.products import read_clk, read_sp3
 from leosop.gnss.rinex import read_obs, read_text
+
+from tests.helpers import ESBC_ATX, ESBC_CLK, ESBC_CODES, ESBC_DAY, ESBC_NAV, ESBC_OBS, ESBC_SP3
 
 D, OBS, NAV, SP3, CLK, ATX, CODES = ESBC_DAY, ESBC_OBS, ESBC_NAV, ESBC_SP3, ESBC_CLK, ESBC_ATX, ESBC_CODES
 #: The header's ETRF2000 coordinate in ITRF2014 at the day's epoch (PROVENANCE.md gives the same).

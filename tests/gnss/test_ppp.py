@@ -6,7 +6,6 @@ import json
 import numpy as np
 import pytest
 
-from conftest import ESBC_ATX, ESBC_CLK, ESBC_CODES, ESBC_DAY, ESBC_NAV, ESBC_OBS, ESBC_SP3
 from leosop.cli import main
 from leosop.cli import ppp as ppp_cli
 from leosop.errors import InputError
@@ -16,6 +15,8 @@ from leosop.gnss.etrf import decimal_year, etrf2000_to_itrf2014
 from leosop.gnss.ppp import PppOptions, gps_to_utc, prepare, run_ppp
 from leosop.gnss.products import read_clk, read_sp3
 from leosop.gnss.rinex import check_nav, read_obs, read_text
+
+from tests.helpers import ESBC_ATX, ESBC_CLK, ESBC_CODES, ESBC_DAY, ESBC_NAV, ESBC_OBS, ESBC_SP3
 
 DAY, OBS, NAV, SP3, CLK, CODES = ESBC_DAY, ESBC_OBS, ESBC_NAV, ESBC_SP3, ESBC_CLK, ESBC_CODES
 DATA = DAY.parent
@@ -233,7 +234,7 @@ def test_antex_receiver_offset_if():
     sat = atx.satellite("G01", np.datetime64("2020-06-25"))
     assert sat.pco_m["G01"][2] == pytest.approx(1.5018)
     assert atx.satellite("E13", np.datetime64("2020-06-25")) is None  # no block (PROVENANCE.md)
-    assert atx.receiver("TRM59800.00     NONE") is None  # no calibration: check_antex warns (test_gnss_ar.py)
+    assert atx.receiver("TRM59800.00     NONE") is None  # no calibration: check_antex warns (tests/gnss/test_ar.py)
     assert atx.receiver("ASH701945E_M SCIS") is rx  # spacing does not matter, antenna and radome do
 
 

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from conftest import ESBC_CLK, ESBC_DAY, ESBC_OBS, ESBC_SP3
 from leosop.constants import C_MPS
 from leosop.datadir import ENV_VAR
 from leosop.errors import InputError
@@ -14,6 +13,8 @@ from leosop.gnss.ppp import PppOptions, prepare
 from leosop.gnss.products import read_clk, read_sp3, read_wl_biases
 from leosop.gnss.rinex import read_obs
 from leosop.gnss.simulate import SimSettings, simulate
+
+from tests.helpers import ESBC_CLK, ESBC_DAY, ESBC_OBS, ESBC_SP3
 
 DAY, SP3, CLK, OBS = ESBC_DAY, ESBC_SP3, ESBC_CLK, ESBC_OBS
 needs_data = pytest.mark.skipif(not (SP3.exists() and CLK.exists()), reason="ESBC data absent")

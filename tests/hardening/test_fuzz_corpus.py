@@ -1,6 +1,6 @@
 """Inputs that once broke a reader (found by ``tools/fuzz_readers.py``), replayed.
 
-Each ``crash-*`` file in ``tests/fuzz_corpus/<target>/`` must now be read or
+Each ``crash-*`` file in ``tests/hardening/fuzz_corpus/<target>/`` must now be read or
 refused with an InputError. ``oom-*`` files made a reader allocate gigabytes;
 they are kept for the reader's owner but not replayed here. Findings in readers this change does not own are listed in
 ``OPEN`` with the owner's fix; they are strict xfails, so fixing the reader
@@ -12,10 +12,11 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.helpers import REPO_ROOT
+
 CORPUS = Path(__file__).resolve().parent / "fuzz_corpus"
 
-_spec = importlib.util.spec_from_file_location("fuzz_readers", REPO / "tools" / "fuzz_readers.py")
+_spec = importlib.util.spec_from_file_location("fuzz_readers", REPO_ROOT / "tools" / "fuzz_readers.py")
 fuzz_readers = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(fuzz_readers)
 

@@ -12,7 +12,8 @@ from leosop.ins import alignment as al
 from leosop.apps.repro.alignment import attitude_errors, sweep
 from leosop.rotations import euler_to_dcm, heading_from_yaw
 
-from conftest import data_path
+from tests.helpers import data_path
+
 
 LAT = np.radians(30.0)
 G = float(normal_gravity_mps2(LAT, 0.0))

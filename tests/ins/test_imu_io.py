@@ -2,11 +2,12 @@
 
 import numpy as np
 import pytest
-from conftest import data_path
 
 from leosop import earth
 from leosop.errors import InputError
 from leosop.ins import imu_io
+
+from tests.helpers import data_path
 
 
 def test_psins_laser_gyro_at_rest_senses_earth_rate_and_gravity():

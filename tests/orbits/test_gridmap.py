@@ -36,7 +36,8 @@ from leosop.orbits.gridmap import (
     satellite_carriers_hz,
 )
 from leosop.orbits.propagate import state_ecef
-from conftest import data_path
+
+from tests.helpers import data_path
 
 # Cholesky of the normal matrix against the eigen-decomposition of dop.cofactor:
 # both exact to rounding, conditioned geometries amplify it to ~1e-7.

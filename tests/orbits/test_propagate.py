@@ -4,13 +4,14 @@ import numpy as np
 import pytest
 from sgp4.api import WGS72, Satrec
 
-from conftest import data_path
 from leosop.errors import InputError
 from leosop.orbits import load_constellation
 from leosop.orbits.constellation import Constellation
 from leosop.orbits.propagate import state_ecef, state_ecef_pairs, state_teme
 from leosop.orbits.tle import parse_tle_lines, satrec_epoch_utc
 from leosop.orbits.walker import Shell, walker_delta
+
+from tests.helpers import data_path
 
 # Vallado's C++ output is printed with 8 decimals in km and 9 in km/s; the
 # reference implementation reproduces it to 1.2e-7. Our wrapper adds the

@@ -6,11 +6,12 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import data_path
 from leosop.errors import InputError
 from leosop.orbits import load_constellation, read_omm, read_tle
 from leosop.orbits.propagate import state_teme
 from leosop.orbits.tle import tle_checksum
+
+from tests.helpers import data_path
 
 # ISS (ZARYA), a public element set with valid checksums.
 NAME = "ISS (ZARYA)"

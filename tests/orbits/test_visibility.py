@@ -5,7 +5,6 @@ import datetime as dt
 import numpy as np
 import pytest
 
-from conftest import data_path
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation, read_tle
 from leosop.frames import C_e_n, teme_to_ecef
@@ -13,6 +12,8 @@ from leosop.orbits.visibility import compute_visibility
 from leosop.orbits.visibility_screen import climb_epochs, speed_bound_mps
 from leosop.timebase import jd_ut1, jd_utc
 from leosop.geometry.doppler import doppler_jacobian
+
+from tests.helpers import data_path
 
 DELFT = (np.radians(51.9989), np.radians(4.3733585), 95.0)
 

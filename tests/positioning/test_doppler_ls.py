@@ -3,8 +3,6 @@
 import numpy as np
 import pytest
 
-from leosop.constants import C_MPS
-from leosop.constellations import REGISTRY
 from leosop.frames import C_e_n, azimuth_elevation_range, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from leosop.orbits import load_constellation
 from leosop.orbits.propagate import state_ecef
@@ -15,19 +13,12 @@ from leosop.positioning.static_passes import solve_static_passes
 from leosop.replay.lo import common_offset_sigma_hz
 from leosop.geometry.doppler import doppler_jacobian, doppler_rate
 
-F0_HZ = REGISTRY["starlink"].carrier_hz
+from tests.positioning.helpers import F0_HZ, LAT, LON, common_truth, doppler_hz
+
 #: Noise-free recovery: the solver stops when a step is below 0.1 mm and
 #: 1 um/s; float64 Doppler of ~1e5 Hz carries ~1e-11 Hz, i.e. ~1e-10 m.
 ONE_MM = 1e-3
 ONE_MM_PER_S = 1e-3
-LAT, LON = np.radians(34.342), np.radians(108.940)
-
-
-def _doppler(pos_sv, vel_sv, pos_rx, vel_rx, clock_hz, f0_hz=F0_HZ):
-    """The measurement model written out independently of the solver."""
-    los = pos_sv - pos_rx[..., None, :]
-    rate = np.sum(los * (vel_sv - vel_rx[..., None, :]), -1) / np.linalg.norm(los, axis=-1)
-    return -rate * f0_hz / C_MPS + clock_hz[..., None]
 
 
 @pytest.fixture(scope="module")
@@ -61,8 +52,8 @@ def test_jacobian_matches_finite_differences(sky):
     for j in range(7):
         dx = np.zeros(7)
         dx[j] = step[j]
-        hi = _doppler(ps[0], vs[0], (x + dx)[:3], (x + dx)[3:6], np.array((x + dx)[6]))
-        lo = _doppler(ps[0], vs[0], (x - dx)[:3], (x - dx)[3:6], np.array((x - dx)[6]))
+        hi = doppler_hz(ps[0], vs[0], (x + dx)[:3], (x + dx)[3:6], np.array((x + dx)[6]))
+        lo = doppler_hz(ps[0], vs[0], (x - dx)[:3], (x - dx)[3:6], np.array((x - dx)[6]))
         fd[:, j] = (hi - lo) / (2 * step[j])
     ok = mask[0]
     # Central differences: truncation ~ step^2 * third derivative (< 1e-9 Hz/m for 1 m steps at
@@ -72,7 +63,7 @@ def test_jacobian_matches_finite_differences(sky):
 
 def test_noise_free_recovers_truth_from_1000_km(sky):
     ps, vs, mask, rx, vrx, clock = sky
-    dop = _doppler(ps, vs, rx, vrx, clock)
+    dop = doppler_hz(ps, vs, rx, vrx, clock)
     x0 = np.zeros(7)
     x0[:3] = geodetic_to_ecef(LAT + 1000e3 / 6.371e6, LON, 0.0)  # 1,000 km north, on the ground
     fx = solve_snapshots(dop, 1.0, ps, vs, F0_HZ, mask, x0)
@@ -85,7 +76,7 @@ def test_noise_free_recovers_truth_from_1000_km(sky):
 
 def test_gdop_matches_independent_inverse(sky):
     ps, vs, mask, rx, vrx, clock = sky
-    dop = _doppler(ps, vs, rx, vrx, clock)
+    dop = doppler_hz(ps, vs, rx, vrx, clock)
     fx = solve_snapshots(dop, 1.0, ps, vs, F0_HZ, mask)
     k = 7
     H = doppler_jacobian(ps[k][mask[k]], vs[k][mask[k]], rx[k], vrx[k], F0_HZ)
@@ -104,7 +95,7 @@ def test_monte_carlo_errors_consistent_with_covariance(sky):
     V = np.repeat(vs, n_rep, 0)
     M = np.repeat(mask, n_rep, 0)
     sigma = rng.uniform(0.5, 2.0, M.shape)
-    dop = _doppler(P, V, np.repeat(rx, n_rep, 0), np.repeat(vrx, n_rep, 0), np.repeat(clock, n_rep))
+    dop = doppler_hz(P, V, np.repeat(rx, n_rep, 0), np.repeat(vrx, n_rep, 0), np.repeat(clock, n_rep))
     fx = solve_snapshots(dop + sigma * rng.standard_normal(M.shape), sigma, P, V, F0_HZ, M, alpha=None)
     err = np.concatenate([fx.pos_ecef_m - np.repeat(rx, n_rep, 0), fx.vel_ecef_mps - np.repeat(vrx, n_rep, 0),
                           (fx.clock_offset_hz - np.repeat(clock, n_rep))[:, None]], -1)
@@ -119,7 +110,7 @@ def test_monte_carlo_errors_consistent_with_covariance(sky):
 def test_outlier_is_excluded(sky):
     ps, vs, mask, rx, vrx, clock = sky
     rng = np.random.default_rng(7)
-    dop = _doppler(ps, vs, rx, vrx, clock) + rng.normal(0, 1.0, mask.shape)
+    dop = doppler_hz(ps, vs, rx, vrx, clock) + rng.normal(0, 1.0, mask.shape)
     dop[3, 2] += 40.0  # 40 sigma
     fx = solve_snapshots(dop, 1.0, ps, vs, F0_HZ, mask)
     assert not fx.used[3, 2]
@@ -132,7 +123,7 @@ def test_outlier_is_excluded(sky):
 
 def test_too_few_and_singular_are_reported(sky):
     ps, vs, mask, rx, vrx, clock = sky
-    dop = _doppler(ps, vs, rx, vrx, clock)
+    dop = doppler_hz(ps, vs, rx, vrx, clock)
     m = mask.copy()
     m[0, 6:] = False  # 6 satellites
     # Epoch 1: every satellite the same one, so H has rank 3 (+1 clock) at most.
@@ -148,7 +139,7 @@ def test_too_few_and_singular_are_reported(sky):
 
 def test_not_converged_when_iteration_cap_is_hit(sky):
     ps, vs, mask, rx, vrx, clock = sky
-    dop = _doppler(ps, vs, rx, vrx, clock)
+    dop = doppler_hz(ps, vs, rx, vrx, clock)
     fx = solve_snapshots(dop, 1.0, ps, vs, F0_HZ, mask, max_iter=1)
     assert (fx.status == FixStatus.NOT_CONVERGED).all()
 
@@ -158,7 +149,7 @@ def test_static_recovers_station_with_drift_and_altitude(sky):
     ps, vs, mask, rx, _, _ = sky
     t = np.repeat(np.arange(20.0), mask.shape[1]).reshape(mask.shape)
     clock = 5.0 + 0.1 * (t - 9.5)
-    dop = _doppler(ps, vs, rx, np.zeros_like(rx), np.zeros(20)) + clock
+    dop = doppler_hz(ps, vs, rx, np.zeros_like(rx), np.zeros(20)) + clock
     m = mask.ravel()
     alt = 3000.0
     fix = solve_static(dop.ravel()[m], 1.0, ps.reshape(-1, 3)[m], vs.reshape(-1, 3)[m], F0_HZ, t.ravel()[m],
@@ -204,7 +195,7 @@ def _single_pass(offset_km=400.0, seed=11, sigma_hz=2.0, clock=(-300.0, -0.5, 2e
     up = el > np.radians(5)
     t_s = np.arange(0, 600, 2.0)[up]
     dt = t_s - 0.5 * (t_s.min() + t_s.max())
-    dop = _doppler(pos[0, up][None], vel[0, up][None], station[None], np.zeros((1, 3)), np.zeros(1), f0)[0]
+    dop = doppler_hz(pos[0, up][None], vel[0, up][None], station[None], np.zeros((1, 3)), np.zeros(1), f0)[0]
     dop += np.polyval(clock[::-1], dt) + np.random.default_rng(seed).normal(0.0, sigma_hz, dop.shape)
     return (dop, sigma_hz, pos[0, up], vel[0, up], f0, t_s), station, mirror
 
@@ -255,27 +246,6 @@ def test_static_mirror_is_reported_with_its_chi_square():
     other = solve_static(*args, alt_m=50.0, alt_sigma_m=1.0, pos0_ecef_m=fix.mirror_pos_ecef_m, alpha=None)
     assert np.linalg.norm(other.pos_ecef_m - fix.mirror_pos_ecef_m) < 1.0
     assert other.chi2 == pytest.approx(fix.mirror_chi2, rel=1e-6)
-
-
-@pytest.fixture(scope="module")
-def two_passes():
-    """The first two passes (above 10 deg) of one VHF satellite over a station, each with its own cubic clock."""
-    f0 = 145.87e6
-    const = load_constellation().subset([0])
-    station = geodetic_to_ecef(np.radians(52.0), np.radians(4.37), 95.0)
-    t = np.datetime64("2025-01-01T00:00:00") + np.arange(0, 86400, 2).astype("timedelta64[s]")
-    pos, vel, _ = state_ecef(const, t)
-    _, el, _ = azimuth_elevation_range(pos[0], station)
-    k = np.flatnonzero(el > np.radians(10))
-    pass_id = np.concatenate([[0], np.cumsum(np.diff(k) > 1)])
-    k, pass_id = k[pass_id < 2], pass_id[pass_id < 2]
-    t_s = 2.0 * k
-    clocks = np.array([[-300.0, -0.5, 1e-4, 1e-7], [-250.0, 0.3, -2e-4, 5e-8]])
-    dop = _doppler(pos[0, k][None], vel[0, k][None], station[None], np.zeros((1, 3)), np.zeros(1), f0)[0]
-    t_ref = np.array([0.5 * (t_s[pass_id == p].min() + t_s[pass_id == p].max()) for p in range(2)])
-    dt = t_s - t_ref[pass_id]
-    dop += np.einsum("mk,mk->m", clocks[pass_id], dt[:, None] ** np.arange(4))
-    return (dop, pos[0, k], vel[0, k], f0, t_s, pass_id), station, clocks, t_ref
 
 
 def test_static_passes_noise_free_recovers_station_and_each_clock(two_passes):
@@ -329,7 +299,7 @@ def test_static_passes_flags_an_outlier_in_one_pass(two_passes):
 def test_doppler_rate_matches_finite_differences_of_propagated_states():
     """The ECEF Doppler rate: d(doppler)/dt from SGP4 states 0.1 s apart, and its gradient by differences.
 
-    (The fix's time-bias column is the inertial one, ``tests/test_geometry_doppler.py``.)
+    (The fix's time-bias column is the inertial one, ``tests/geometry/test_doppler.py``.)
     """
     f0 = 145.87e6
     const = load_constellation().subset([0])
@@ -341,8 +311,8 @@ def test_doppler_rate_matches_finite_differences_of_propagated_states():
     (pos_m,), (vel_m,), _ = state_ecef(const, t - dt)
     rate, grad = doppler_rate(pos, vel, station, f0)
     zero = np.zeros((1, 3))
-    fd = (_doppler(pos_p[None], vel_p[None], station[None], zero, np.zeros(1), f0)[0]
-          - _doppler(pos_m[None], vel_m[None], station[None], zero, np.zeros(1), f0)[0]) / 0.1
+    fd = (doppler_hz(pos_p[None], vel_p[None], station[None], zero, np.zeros(1), f0)[0]
+          - doppler_hz(pos_m[None], vel_m[None], station[None], zero, np.zeros(1), f0)[0]) / 0.1
     # Two-body + frame terms leave out J2 (up to ~1.5e-2 m/s^2 in low orbit, x f0/c = 0.49 Hz per m/s:
     # ~7e-3 Hz/s; achieved 5.5e-3); the central difference errs by ~(0.05 s)^2/6 x the third derivative
     # (<1e-4 Hz/s). Bound 1e-2 Hz/s on rates of up to ~35 Hz/s (a 0.03 % error of the time-bias column).
@@ -379,38 +349,9 @@ def test_static_passes_recover_an_injected_time_offset_per_pass(two_passes):
     assert np.linalg.norm(plain.pos_ecef_m - station) > 1e3 and plain.time_bias_s is None
 
 
-@pytest.fixture(scope="module")
-def starlink_like():
-    """7 satellites of the bundled constellation above 25 deg over Xi'an for 60 s at 1 Hz, Ku-band pilot."""
-    const = load_constellation()
-    t = np.datetime64("2025-01-01T04:00:00") + np.arange(60).astype("timedelta64[s]")
-    pos, vel, _ = state_ecef(const, t)
-    rx = geodetic_to_ecef(LAT, LON, 400.0)
-    _, el, _ = azimuth_elevation_range(pos, rx)
-    sats = np.flatnonzero(el.min(-1) > np.radians(25))[:7]
-    assert len(sats) == 7
-    n_ep = len(t)
-    sat = np.repeat(np.arange(7), n_ep)
-    t_s = np.tile(np.arange(n_ep, dtype=float), 7)
-    p, v = pos[sats].reshape(-1, 3), vel[sats].reshape(-1, 3)
-    geo = _doppler(p[None], v[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0]
-    rate, _ = doppler_rate(p, v, rx, F0_HZ, inertial=True)  # the fix's time-offset column
-    return geo, rate, p, v, t_s, sat, rx
-
-
-def _common_truth(rate, t_s, sat, rng):
-    """Injected clock terms: receiver offset + drift, zero-mean satellite offsets, time offsets (first order)."""
-    rx_poly = np.array([1.5e3, -0.7])
-    sat_hz = rng.uniform(-5, 5, 7)
-    sat_hz -= sat_hz.mean()
-    dt_s = rng.normal(0.0, 0.05, 7)
-    extra = rx_poly[0] + rx_poly[1] * (t_s - 29.5) + sat_hz[sat] + dt_s[sat] * rate
-    return extra, rx_poly, sat_hz, dt_s
-
-
 def test_common_clock_noise_free_recovers_offsets_and_time_offsets(starlink_like):
     geo, rate, p, v, t_s, sat, rx = starlink_like
-    extra, rx_poly, sat_hz, dt_s = _common_truth(rate, t_s, sat, np.random.default_rng(1))
+    extra, rx_poly, sat_hz, dt_s = common_truth(rate, t_s, sat, np.random.default_rng(1))
     start = rx + np.array([800.0, -600.0, 300.0])
     fix = solve_static_passes(geo + extra, 0.01, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=start)
     assert fix.status == FixStatus.OK and fix.clock == "common"
@@ -431,7 +372,7 @@ def test_common_clock_noise_free_recovers_offsets_and_time_offsets(starlink_like
 
 def test_common_clock_covariance_is_the_dense_full_state_inverse(starlink_like):
     geo, rate, p, v, t_s, sat, rx = starlink_like
-    extra, *_ = _common_truth(rate, t_s, sat, np.random.default_rng(2))
+    extra, *_ = common_truth(rate, t_s, sat, np.random.default_rng(2))
     y = geo + extra + np.random.default_rng(3).normal(0.0, 0.3, geo.shape)
     fix = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx, alpha=None,
                               sat_offset_sigma_hz=4.0, time_bias_sigma_s=0.2)
@@ -457,7 +398,7 @@ def test_common_clock_errors_are_consistent_with_the_covariance(starlink_like):
     nees, z2_common, z2_rx = [], [], []
     for seed in range(30):
         rng = np.random.default_rng(100 + seed)
-        extra, rx_poly, sat_hz, _ = _common_truth(rate, t_s, sat, rng)
+        extra, rx_poly, sat_hz, _ = common_truth(rate, t_s, sat, rng)
         y = geo + extra + rng.normal(0.0, 0.3, geo.shape)
         fix = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx + 500.0)
         e = fix.pos_ecef_m - rx

@@ -1,7 +1,6 @@
 """The status of a fix (leosop.positioning.quality), its summaries, and all-or-nothing ``--out`` sets."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +15,8 @@ from leosop.orbits.propagate import state_ecef
 from leosop.positioning.measurements import Measurements, sv_states_from_tle, write_measurements
 from leosop.positioning.quality import ALT_MAX_M, ALT_MIN_M, SPEED_MAX_MPS, fix_status
 from leosop.positioning.robust_ls import FixStatus
+
+from tests.helpers import REPO_ROOT
 
 SITE = (34.342, 108.940, 400.0)
 F0_HZ = 11.325e9
@@ -127,7 +128,7 @@ def test_position_out_is_all_or_nothing(capsys, tmp_path, in_the_way):
 
 
 def test_replay_out_is_all_or_nothing_and_refused_before_the_work(capsys, tmp_path):
-    meta = Path(__file__).resolve().parents[1] / "signals" / "starlink_xian_snapshots.sigmf-meta"
+    meta = REPO_ROOT / "signals" / "starlink_xian_snapshots.sigmf-meta"
     out = tmp_path / "out"
     (out / "fixes.csv").mkdir(parents=True)
     # The whole replay takes ~30 s; the refusal comes before it (a bound far below that).

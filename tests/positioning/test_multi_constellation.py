@@ -2,7 +2,6 @@
 
 import dataclasses
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +13,8 @@ from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.snapshot import solve_snapshots
 from leosop.positioning.static import solve_static
 from leosop.positioning.static_passes import solve_static_passes
+
+from tests.helpers import DATA_DIR
 
 #: Noise-free recovery: the solver stops on steps below 0.1 mm; 1 mm leaves room for the last step.
 ONE_MM = 1e-3
@@ -305,8 +306,8 @@ def test_cli_visibility_family_absent_from_file(capsys):
     assert status == 2 and len(err.strip().splitlines()) == 1 and "no oneweb satellites" in err
 
 
-TLE_2021 = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "active_3le_2021-08-06_atqlong.txt"
-TLE_2026 = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "active_3le_2026-04-10_Bochika.txt"
+TLE_2021 = DATA_DIR / "tle" / "active_3le_2021-08-06_atqlong.txt"
+TLE_2026 = DATA_DIR / "tle" / "active_3le_2026-04-10_Bochika.txt"
 
 
 @pytest.mark.skipif(not TLE_2021.is_file(), reason="shared TLE data absent")
@@ -498,9 +499,9 @@ def test_outage_keeps_the_highest_satellite_and_tight_updates_with_it():
 
 def test_tight_mixed_families_filter_is_consistent():
     # Starlink + OneWeb (two clocks, two carriers) on 6 flights of 100 s:
-    # NEES, NIS and whiteness as tests/consistency.py asserts for Starlink
+    # NEES, NIS and whiteness as tests.helpers.assert_filter_consistent asserts for Starlink
     # alone (tools/multi_constellation_goals.py runs 20 full flights).
-    from consistency import assert_filter_consistent
+    from tests.helpers import assert_filter_consistent
 
     from leosop.apps.repro.multi import lag_pairs
     from leosop.apps.simulate import run_scenario

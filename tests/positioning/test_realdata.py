@@ -9,13 +9,14 @@ import csv
 import numpy as np
 import pytest
 
-from conftest import data_path
 from leosop.cli.position import solutions_doc
 from leosop.frames import C_e_n, geodetic_to_ecef
 from leosop.orbits import read_tle
 from leosop.positioning.datasets import doptrack_table, read_doptrack, read_fll, read_gsdc
 from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.solve import position_snapshots, position_static, position_static_passes
+
+from tests.helpers import data_path
 
 
 @pytest.fixture(scope="module")

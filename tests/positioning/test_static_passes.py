@@ -1,9 +1,9 @@
 """Honest sigmas and physical solutions of the multi-pass static fix: residual correlation, horizon, mirror,
 pass offsets.
 
-The two simulated VHF passes of ``test_doppler_ls.two_passes`` (one satellite, 2 s rows above 10 deg,
+The two simulated VHF passes of the ``two_passes`` fixture (one satellite, 2 s rows above 10 deg,
 a cubic clock per pass) with white or AR(1) Doppler noise; for the pass offsets, the 7 Starlink-like
-satellites of ``test_doppler_ls.starlink_like`` (one receiver clock) with each satellite's states offset
+satellites of the ``starlink_like`` fixture (one receiver clock) with each satellite's states offset
 or its time shifted (along its inertial orbit, or with the Earth: a time tag).
 """
 
@@ -16,7 +16,8 @@ from leosop.orbits.propagate import state_ecef, state_ecef_pairs
 from leosop.positioning.passes_noise import integrated_autocorrelation
 from leosop.positioning.robust_ls import FixStatus
 from leosop.positioning.static_passes import _sees, solve_static_passes
-from test_doppler_ls import F0_HZ, _common_truth, _doppler, starlink_like, two_passes  # noqa: F401  (fixtures)
+
+from tests.positioning.helpers import F0_HZ, common_truth, doppler_hz
 
 
 def _ar1(rng, n, phi, sigma):
@@ -42,7 +43,7 @@ def test_integrated_autocorrelation_of_ar1_and_white_noise():
     assert integrated_autocorrelation(np.ones(10)) == (1.0, 0) and integrated_autocorrelation([1.0, 2.0]) == (1.0, 0)
 
 
-def test_white_residuals_leave_the_fix_unchanged(two_passes):  # noqa: F811
+def test_white_residuals_leave_the_fix_unchanged(two_passes):
     (dop, pos, vel, f0, t_s, pass_id), station, _, _ = two_passes
     noisy = dop + np.random.default_rng(4).normal(0.0, 2.0, dop.shape)
     kw = dict(alt_m=95.0, alt_sigma_m=1.0, time_bias=False)
@@ -55,7 +56,7 @@ def test_white_residuals_leave_the_fix_unchanged(two_passes):  # noqa: F811
     assert off.tau is None
 
 
-def test_correlated_noise_gets_an_honest_sigma(two_passes):  # noqa: F811
+def test_correlated_noise_gets_an_honest_sigma(two_passes):
     (dop, pos, vel, f0, t_s, pass_id), station, _, _ = two_passes
     rng = np.random.default_rng(11)
     kw = dict(alt_m=95.0, alt_sigma_m=1.0, time_bias=False, alpha=None, pos0_ecef_m=station)
@@ -78,7 +79,7 @@ def test_correlated_noise_gets_an_honest_sigma(two_passes):  # noqa: F811
     assert np.mean(nees[False]) > 8.0
 
 
-def test_a_solution_must_see_the_satellites(two_passes):  # noqa: F811
+def test_a_solution_must_see_the_satellites(two_passes):
     (dop, pos, vel, f0, t_s, pass_id), station, _, _ = two_passes
     used = np.ones((2, len(dop)), bool)
     # The station sees every row (all above 10 deg); its antipode sees none.
@@ -97,19 +98,19 @@ def _offset_truth(p, v, sat, rng, sigma_m):
     return p + b[sat, :1] * e_r + b[sat, 1:] * e_c
 
 
-def test_pass_offsets_are_found_and_priced_into_the_covariance(starlink_like):  # noqa: F811
+def test_pass_offsets_are_found_and_priced_into_the_covariance(starlink_like):
     geo, rate, p, v, t_s, sat, rx = starlink_like
     kw = dict(clock="common", pos0_ecef_m=rx, alpha=None)
     nees = {True: [], False: []}
     found = []
     for seed in range(12):
         rng = np.random.default_rng(200 + seed)
-        extra, *_ = _common_truth(rate, t_s, sat, rng)
+        extra, *_ = common_truth(rate, t_s, sat, rng)
         # Truth: each satellite's states off by 30 m radial and cross-track (1 sigma), the solver given the
         # nominal ones; 7 satellites x 60 s at 0.3 Hz determine the position to ~1 m, so such offsets are
         # seen as disagreement between the satellites.
         moved = _offset_truth(p, v, sat, rng, 30.0)
-        y = _doppler(moved[None], v[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + extra
+        y = doppler_hz(moved[None], v[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + extra
         y = y + rng.normal(0.0, 0.3, y.shape)
         for on in (True, False):
             fix = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, pass_offsets=on, **kw)
@@ -130,9 +131,9 @@ def test_pass_offsets_are_found_and_priced_into_the_covariance(starlink_like):  
     assert np.mean(nees[False]) > 100.0
 
 
-def test_consistent_passes_leave_the_covariance_bit_identical(starlink_like):  # noqa: F811
+def test_consistent_passes_leave_the_covariance_bit_identical(starlink_like):
     geo, rate, p, v, t_s, sat, rx = starlink_like
-    extra, *_ = _common_truth(rate, t_s, sat, np.random.default_rng(2))
+    extra, *_ = common_truth(rate, t_s, sat, np.random.default_rng(2))
     y = geo + extra + np.random.default_rng(3).normal(0.0, 0.3, geo.shape)
     kw = dict(clock="common", pos0_ecef_m=rx, alpha=None)
     on = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, **kw)
@@ -145,7 +146,7 @@ def test_consistent_passes_leave_the_covariance_bit_identical(starlink_like):  #
     assert off.pass_offset_sigma_m is None
 
 
-def test_element_set_sigma_floors_the_offsets_variance(starlink_like):  # noqa: F811
+def test_element_set_sigma_floors_the_offsets_variance(starlink_like):
     """The element sets' radial / cross-track sigma enters the covariance as the fix's sensitivity to them.
 
     Reference: the fix solved again with one satellite's states moved by one sigma along one axis, for
@@ -156,7 +157,7 @@ def test_element_set_sigma_floors_the_offsets_variance(starlink_like):  # noqa: 
     bound 1e-3.
     """
     geo, rate, p, v, t_s, sat, rx = starlink_like
-    extra, *_ = _common_truth(rate, t_s, sat, np.random.default_rng(2))
+    extra, *_ = common_truth(rate, t_s, sat, np.random.default_rng(2))
     y = geo + extra + np.random.default_rng(3).normal(0.0, 0.3, geo.shape)
     kw = {"clock": "common", "pos0_ecef_m": rx, "alpha": None}
     sigma_rc = np.array([30.0, 60.0])
@@ -176,7 +177,7 @@ def test_element_set_sigma_floors_the_offsets_variance(starlink_like):  # noqa: 
     np.testing.assert_allclose(on.cov[:3, :3] - off.cov[:3, :3], added, atol=1e-3 * np.abs(added).max())
 
 
-def test_each_time_offset_model_fits_its_own_shift_and_not_the_other(starlink_like):  # noqa: F811
+def test_each_time_offset_model_fits_its_own_shift_and_not_the_other(starlink_like):
     """A time-tag error (ECEF states at t + dt, the Earth turned with them) against an element set's along-track
     error (inertial orbit at t + dt, the Earth not turned: the same states rotated east by omega_e dt).
 
@@ -197,7 +198,7 @@ def test_each_time_offset_model_fits_its_own_shift_and_not_the_other(starlink_li
     clock_hz = 1.5e3 - 0.7 * (t_s - 29.5)
     sigma_hz = 1e-3
     for truth, (p_true, v_true) in shifted.items():
-        y = _doppler(p_true[None], v_true[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + clock_hz
+        y = doppler_hz(p_true[None], v_true[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + clock_hz
         fits = {model: solve_static_passes(y, sigma_hz, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx,
                                            time_bias_sigma_s=None, alpha=None, decorrelate=False, pass_offsets=False,
                                            time_offset_model=model) for model in ("earth_fixed", "inertial")}

@@ -2,12 +2,12 @@
 
 import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("bench_fuse", ROOT / "tools" / "bench_fuse.py")
+from tests.helpers import REPO_ROOT
+
+_spec = importlib.util.spec_from_file_location("bench_fuse", REPO_ROOT / "tools" / "bench_fuse.py")
 bench_fuse = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(bench_fuse)
 

@@ -8,14 +8,13 @@ raises (its own asserts included) fails the test.
 """
 
 import re
-from pathlib import Path
 
 import pytest
 
-from conftest import DATA_DIR
+from tests.helpers import DATA_DIR, REPO_ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-DOCS = ROOT / "docs"
+
+DOCS = REPO_ROOT / "docs"
 BLOCK = re.compile(r"^```python runnable( data)?\n(.*?)^```", re.M | re.S)
 LINK = re.compile(r"\]\(([^)#\s]+)(#[^)\s]*)?\)")
 #: The pages of the uses the README and issue 13 list, each with a worked example.

@@ -17,8 +17,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-DOCS = ROOT / "docs"
+from tests.helpers import REPO_ROOT
+
+DOCS = REPO_ROOT / "docs"
 #: What mkdocs.yml loads: MkDocs, mkdocstrings with its Python handler, the "#:" comment extension.
 REQUIRED = ("mkdocs", "mkdocstrings", "mkdocstrings_handlers", "griffe_sphinx")
 #: docs/reference/NAME.md renders one module: "::: leosop.orbits".
@@ -45,7 +46,7 @@ def site(tmp_path_factory):
     out = tmp_path_factory.mktemp("site")
     # About 6 s on one core (mkdocstrings reads the package's sources); the timeout only stops a hang.
     done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     if done.returncode != 0:
         pytest.fail(f"python -m mkdocs build --strict:\n{done.stdout}{done.stderr}", pytrace=False)
     return out

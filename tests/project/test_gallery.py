@@ -8,12 +8,12 @@ summary compared with the page's, so stale numbers fail here.
 
 import importlib.util
 import re
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-DOCS = ROOT / "docs"
+from tests.helpers import REPO_ROOT
+
+DOCS = REPO_ROOT / "docs"
 IMAGE = re.compile(r"!\[[^\]]*\]\((gallery/[^)\s]+\.png)\)")
 #: The whole gallery stays light for a docs checkout.
 TOTAL_BUDGET_BYTES = 2_000_000
@@ -22,7 +22,7 @@ TOTAL_BUDGET_BYTES = 2_000_000
 @pytest.fixture(scope="module")
 def gallery():
     pytest.importorskip("PIL")
-    spec = importlib.util.spec_from_file_location("make_gallery", ROOT / "tools" / "make_gallery.py")
+    spec = importlib.util.spec_from_file_location("make_gallery", REPO_ROOT / "tools" / "make_gallery.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

@@ -22,7 +22,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import REPO_ROOT
+
 
 pytest.importorskip("wheel", reason="building a wheel needs the 'wheel' package (test extra)")
 pytest.importorskip("setuptools", minversion="77",
@@ -57,7 +58,7 @@ def installed(tmp_path_factory):
     # Built from a copy without build/ and egg-info: their leftovers from an
     # earlier build would put files in the wheel that a clean clone lacks.
     src = base / "src"
-    shutil.copytree(ROOT, src, symlinks=True,
+    shutil.copytree(REPO_ROOT, src, symlinks=True,
                     ignore=shutil.ignore_patterns("build", "*.egg-info", ".git", "__pycache__", ".pytest_cache"))
     built = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
                   "-w", str(base / "dist"), str(src)], cwd=base)
@@ -105,7 +106,7 @@ def test_wheel_carries_every_bundled_data_file(installed):
     out = _run([str(python), "-c", probe], cwd=cwd)
     assert out.returncode == 0, out.stderr
     installed_dir = Path(out.stdout.strip())
-    source_dir = ROOT / "leosop" / "data"
+    source_dir = REPO_ROOT / "leosop" / "data"
 
     def listing(d):
         return {p.relative_to(d).as_posix() for p in d.rglob("*")

@@ -20,7 +20,8 @@ import pytest
 
 from leosop.lazy import type_checking_imports
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import REPO_ROOT
+
 
 #: Entry points of the typed public API, by module; their modules are what mypy checks.
 PUBLIC = {
@@ -61,7 +62,7 @@ PUBLIC = {
 def _module_file(name):
     """Repository-relative path of a module, as mypy and pyproject.toml name it."""
     path = Path(*name.split("."))
-    return (path / "__init__.py" if (ROOT / path).is_dir() else path.with_suffix(".py")).as_posix()
+    return (path / "__init__.py" if (REPO_ROOT / path).is_dir() else path.with_suffix(".py")).as_posix()
 
 
 FILES = [_module_file(name) for name in PUBLIC]
@@ -72,7 +73,7 @@ HEAVY = ("pyfftw", "dask", "scipy.stats", "scipy.optimize", "scipy.interpolate",
 
 
 def test_pyproject_lists_the_same_modules():
-    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["mypy"]
+    config = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["mypy"]
     assert sorted(config["files"]) == sorted(FILES)
 
 
@@ -91,7 +92,7 @@ def test_entry_point_is_fully_annotated(module, qualname):
 @pytest.mark.skipif(importlib.util.find_spec("mypy") is None, reason="mypy not installed (pip install .[test])")
 def test_mypy_finds_nothing():
     # The cache (.mypy_cache, git-ignored) makes a repeated run ~2 s; a cold one took ~7 s here.
-    done = subprocess.run([sys.executable, "-m", "mypy", "--no-error-summary", *FILES], cwd=ROOT,
+    done = subprocess.run([sys.executable, "-m", "mypy", "--no-error-summary", *FILES], cwd=REPO_ROOT,
                           capture_output=True, text=True, timeout=120)
     if done.returncode != 0:
         pytest.fail(f"mypy {' '.join(FILES)}:\n{done.stdout}{done.stderr}", pytrace=False)
@@ -100,7 +101,7 @@ def test_mypy_finds_nothing():
 @pytest.mark.parametrize("package", FACADES)
 def test_facade_names_resolve_to_their_home(package):
     facade = importlib.import_module(package)
-    homes = type_checking_imports(ROOT / _module_file(package))
+    homes = type_checking_imports(REPO_ROOT / _module_file(package))
     assert sorted(facade.__all__) == sorted(homes), f"{package}: __all__ differs from its TYPE_CHECKING imports"
     for name, (module, attr) in homes.items():
         assert getattr(facade, name) is getattr(importlib.import_module(module, package), attr), name
@@ -112,6 +113,6 @@ def test_facade_names_resolve_to_their_home(package):
 def test_facades_import_light():
     # A fresh interpreter: this one has loaded everything already.
     code = f"import sys, {', '.join(FACADES)}; print(' '.join(m for m in {HEAVY!r} if m in sys.modules))"
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True, timeout=60,
                           check=True)
     assert done.stdout.split() == [], f"importing {', '.join(FACADES)} loaded {done.stdout.strip()}"

@@ -6,7 +6,6 @@ interpolated grid: two implementations. Truth: the satellites that made the
 tracks; a track no satellite of the snapshot made must come back None.
 """
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,7 +17,9 @@ from leosop.orbits import load_constellation
 from leosop.replay.identify import identify_tracks
 from leosop.replay.simtracks import simulate_track, spurious_track, visible_indices
 
-SNAPSHOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
+from tests.helpers import DATA_DIR
+
+SNAPSHOT = DATA_DIR / "tle" / "starlink_3le_2026-04-08_Bochika.txt"
 #: Prior error of the position: the brief's "within ~100 km".
 PRIOR_OFF_M = np.array([75e3, -65e3, 0.0])
 #: Simulated receiver clock offset: a cheap LNB at 11 GHz.
