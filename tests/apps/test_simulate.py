@@ -106,12 +106,15 @@ def test_loose_fix_measurement_is_linear_in_the_satellite_errors():
     # (error = estimate - truth) to first order (noise-free Doppler), which
     # checks every sign of H on the clock and satellite columns.
     truth, _, fixes, good, model, offset_hz, orbit_m = _noise_free_mixed_fixes()
-    blocks = aids_fix._blocks(model)
+    # Every good fix but the start's (epoch 0) is a correction when the period is zero.
+    made = aids_fix.fix_aids(np.arange(good.size, dtype=float), np.where(good[:, None], fixes.pos_ecef_m, np.nan),
+                             fixes.vel_ecef_mps, np.zeros((good.size, 6, 6)), 0.0, fix_errors=model)
+    assert [aid.epoch for aid in made] == [k for k in np.flatnonzero(good) if k > 0]
     bounds = np.searchsorted(model.epoch_index, np.arange(good.size + 1))
     checked = 0
-    for k in np.flatnonzero(good):
+    for aid in made:
+        k = aid.epoch
         rows = np.arange(bounds[k], bounds[k + 1])
-        aid = aids_fix.LeoFix(float(k), k, fixes.pos_ecef_m[k], fixes.vel_ecef_mps[k], terms=(model, k, rows) + blocks)
         sats = model.sat_index[rows]
         x_true = np.concatenate([RX_HZ[[0, 2]], np.column_stack([offset_hz[sats], orbit_m[sats]]).ravel()])
         state = strapdown.NavState.from_dcm(truth.lat_rad[k], truth.lon_rad[k], truth.alt_m[k],
