@@ -1,86 +1,32 @@
-"""Shared test helpers: where the real public data sets live, central differences, a LEO test geometry.
+"""How the tests are laid out, and the one setting every test run needs.
 
-Real data are read from ``../shared/data`` beside the repository (see each
-folder's PROVENANCE.md there) and never copied into the repository. Tests
-that need a folder skip cleanly when it is absent.
+Layout: the folders mirror the package. A file lives in the folder of the
+``leosop`` package whose code it mainly tests (``tests/fusion/test_engine.py``
+tests ``leosop/fusion/engine.py``); the top-level modules (frames, earth,
+timebase, rotations, ...) are tested in ``tests/base/``. A file whose subject
+is a command - it drives ``leosop <command>`` through ``leosop.cli.main`` and
+checks the command's contract: JSON keys, exit codes, output files, bad-input
+messages - lives in ``tests/cli/``, named after the command; a file whose
+subject is a library module stays with that module even when it makes its
+inputs with the command line. Two folders mirror no package:
+``tests/hardening/`` holds the hostile-input suites of issue 13 that span the
+readers of several packages (hypothesis properties, the fuzz corpus, hostile
+files), and ``tests/project/`` the repository-wide checks (lint, types,
+layers, the docs and their site, the gallery, the install, tools/).
+
+Imports: every folder is a package (an ``__init__.py``), so pytest's default
+import mode puts the repository on ``sys.path`` and names each module from
+there (``tests.fusion.test_engine``): the same basename may sit in two
+folders, and ``python -m pytest``, ``python -m pytest tests/fusion`` and a
+single file import alike. Helpers shared by several packages' tests are in
+``tests/helpers.py``, those of one folder in its ``helpers.py``
+(``from tests.fusion.helpers import STEP``); fixtures are in the folder's
+``conftest.py``. No test module imports another test module, and none
+imports a conftest (pytest loads those itself).
 """
 
 import os
-from pathlib import Path
 
 # As the CLI does (leosop/cli/__init__.py): the filters' many small matrix products are several times slower
 # under a multi-threaded BLAS on a busy machine. It acts only if numpy is not imported yet (pytest does not).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-from leosop import frames  # noqa: E402
-
-DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-
-
-def data_path(*parts):
-    """Path of a file or folder under ``../shared/data``; skip the test if absent."""
-    path = DATA_DIR.joinpath(*parts)
-    if not path.exists():
-        pytest.skip(f"real data not available: {path}")
-    return path
-
-
-#: The IGS station ESBC00DNK on 2020-06-25 (``rinex/esbc_2020-177``, see its PROVENANCE.md): observations,
-#: navigation, GRG orbits and integer clocks, the ANTEX subset, and the signals the PPP uses per system.
-ESBC_DAY = DATA_DIR / "rinex" / "esbc_2020-177"
-ESBC_OBS = ESBC_DAY / "ESBC00DNK_R_20201770000_01D_30S_MO.crx.gz"
-ESBC_NAV = ESBC_DAY / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
-ESBC_SP3 = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
-ESBC_CLK = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
-ESBC_ATX = ESBC_DAY / "esbc_2020-177.atx"
-ESBC_CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
-
-
-def central_difference_jacobian(func, step):
-    """Jacobian of ``func`` at zero by central differences, exact to O(step^2).
-
-    Parameters
-    ----------
-    func : callable
-        Maps an offset, ndarray (n,), to ndarray (m,).
-    step : array_like, (n,)
-        Step of each coordinate.
-
-    Returns
-    -------
-    ndarray, (m, n)
-        Column ``i`` is ``(func(step[i] e_i) - func(-step[i] e_i)) / (2 step[i])``.
-    """
-    step = np.asarray(step, dtype=float)
-    columns = []
-    for i, h in enumerate(step):  # one coordinate at a time: func takes a single offset
-        e = np.zeros(step.size)
-        e[i] = h
-        columns.append((np.asarray(func(e)) - np.asarray(func(-e))) / (2 * h))
-    return np.stack(columns, axis=-1)
-
-
-def leo_geometry(state):
-    """A LEO satellite as seen from an INS state: 550 km up and 700 km east (~900 km away), moving north.
-
-    Parameters
-    ----------
-    state : leosop.ins.strapdown.NavState
-        Gives the receiver's ``lat_rad``, ``lon_rad``, ``alt_m``.
-
-    Returns
-    -------
-    pos_rx_ecef_m, pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (3,)
-        The satellite moves at 7.6 km/s north and climbs at 100 m/s.
-    east, north : ndarray, (3,)
-        Unit vectors of the receiver's local level in ECEF.
-    """
-    pos_rx = frames.geodetic_to_ecef(state.lat_rad, state.lon_rad, state.alt_m)
-    up = pos_rx / np.linalg.norm(pos_rx)
-    east = np.cross([0.0, 0.0, 1.0], up)
-    east /= np.linalg.norm(east)
-    north = np.cross(up, east)
-    return pos_rx, pos_rx + 550e3 * up + 700e3 * east, 7.6e3 * north + 100.0 * up, east, north

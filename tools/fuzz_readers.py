@@ -4,8 +4,8 @@ Each target writes the fuzzer's bytes to a file and calls one reader. The
 contract (DESIGN 4.1): a reader either returns or raises
 :class:`~leosop.errors.InputError` with a message (the CLI prints it as one
 line and exits 2). Any other exception is a finding: the input is saved under
-``tests/fuzz_corpus/<target>/`` (one per distinct exception type and place
-not already in the corpus) and fuzzing goes on; ``tests/test_fuzz_corpus.py``
+``tests/hardening/fuzz_corpus/<target>/`` (one per distinct exception type and place
+not already in the corpus) and fuzzing goes on; ``tests/hardening/test_fuzz_corpus.py``
 replays them.
 
 Usage::
@@ -32,7 +32,7 @@ import warnings
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-CORPUS = REPO / "tests" / "fuzz_corpus"
+CORPUS = REPO / "tests" / "hardening" / "fuzz_corpus"
 DATA = Path(os.environ.get("LEOSOP_SHARED_DATA", REPO.parent / "shared" / "data"))
 _SEED_BYTES = 3000  # heads of real files; libFuzzer's default -max_len is 4096
 _TALLY_EVERY = 10_000  # inputs between two TALLY lines (inputs run, failing, distinct findings)

@@ -11,7 +11,7 @@ most :data:`PNG_BUDGET_BYTES` each) and writes ``docs/gallery.md``
 caption. Figures the captions below do not know yet are listed as such, so a
 new figure shows up in the gallery the next time this runs.
 
-The figures are committed so that the docs show them; ``tests/test_gallery.py``
+The figures are committed so that the docs show them; ``tests/project/test_gallery.py``
 checks that the page is what :func:`render` writes from the code's runs and
 captions, that every figure it shows is there and small, and that the quickest
 run still prints what the page says. The whole gallery takes 3.5 min (1.3 min of CPU) on a

@@ -1,6 +1,6 @@
 """MkDocs hook (mkdocs.yml ``hooks``): the pages' runnable examples render as Python code.
 
-``tests/test_docs.py`` runs the blocks fenced ```` ```python runnable ```` (and
+``tests/project/test_docs.py`` runs the blocks fenced ```` ```python runnable ```` (and
 ```` ```python runnable data ````); GitHub highlights them by the first word,
 but Python-Markdown's fences accept no word after the language and would
 render them as paragraphs, so the site sees them as plain ```` ```python ````.

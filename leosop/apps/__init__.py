@@ -23,5 +23,5 @@ to a use, as the DESIGN's layout draws them:
 Dependencies point one way: an application imports the library (and other
 applications, and :mod:`leosop.plots` for its figures); no library module
 imports an application, and only :mod:`leosop.cli` imports :mod:`.repro`
-(tests/test_layers.py holds these rules).
+(tests/project/test_layers.py holds these rules).
 """

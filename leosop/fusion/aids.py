@@ -17,7 +17,7 @@ Adding a sensor is one class; the filter never changes (the shape of
 Mayorov's pyins ``Measurement`` classes). Lever arms and velocities are in
 the body frame (Right-Forward-Up) of the INS, i.e. after the IMU mounting.
 Every ``H`` is checked against finite differences of :meth:`Aid.predict` in
-``tests/test_fuse_engine.py``.
+``tests/fusion/test_engine.py``.
 """
 
 import dataclasses

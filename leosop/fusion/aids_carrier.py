@@ -31,7 +31,7 @@ A row's noise at ``t2`` is also in the next interval's ``dy`` (at its
 ``t1``): consecutive aids are negatively correlated (-1/2 between their
 noise parts), which the filter takes as independent; over ``n`` intervals it
 then assumes ``n`` times the variance of their telescoping sum, a
-conservative neglect at the millimetre. ``tests/test_fuse_differential.py``
+conservative neglect at the millimetre. ``tests/fusion/test_aids_differential.py``
 checks ``H`` against central differences of this model.
 """
 

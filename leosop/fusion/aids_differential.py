@@ -27,7 +27,7 @@ along-track / cross-track offset ``d_j`` in the inertial orbit's frame
 with the differential fix's prior. ``R`` is the rover's variance plus the
 interpolated base's; rover rows that interpolate one base row share its
 noise, which the filter takes as independent (exact when the base is on the
-rover's epochs). ``tests/test_fuse_differential.py`` checks ``H`` against
+rover's epochs). ``tests/fusion/test_aids_differential.py`` checks ``H`` against
 finite differences of this model.
 
 With the accumulated carrier phase in both tables (``phase_cycles``),

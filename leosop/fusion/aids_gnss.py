@@ -30,7 +30,7 @@ Weights ``sigma / sin(elev)`` per kind, code:phase 1:100 ([Liu 2016]);
 satellites below the elevation mask (at the INS) give no rows. The rows of
 :meth:`PppEpoch.design` are checked against finite differences of
 :meth:`PppEpoch.predict`, and one update against the SD filter of
-:mod:`leosop.gnss.ppp_ins`, in ``tests/test_fuse_ppp.py``.
+:mod:`leosop.gnss.ppp_ins`, in ``tests/fusion/test_aids_gnss.py``.
 """
 
 import dataclasses

@@ -18,7 +18,7 @@ Optionally the satellite position carries an estimated constant orbit error
 (``orbit_model="independent"``) or one shift shared by all
 (``"common"``, [Shen 2024] Table 6's [E, E, E]). The rows are those of
 :func:`leosop.geometry.doppler.doppler_jacobian` chained to the INS errors;
-``tests/test_fuse_leo.py`` checks them against finite differences.
+``tests/fusion/test_aids_leo.py`` checks them against finite differences.
 
 Integration window (``LeoOptions.window_s = T``): a Doppler estimated over
 ``T`` seconds measures the antenna's mean velocity over them, the chord

@@ -5,7 +5,7 @@ of [Boehm 2006] (GMF) and [Boehm 2007] (GPT) are spherical harmonics of
 degree and order 9 in the unnormalised associated Legendre functions without
 the Condon-Shortley phase; their coefficients are the published ones (also
 [IERS 2010] ch. 9, whose software's test values
-``tests/test_gnss_models.py`` reproduces).
+``tests/gnss/test_models.py`` reproduces).
 """
 
 import numpy as np

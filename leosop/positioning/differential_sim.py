@@ -22,7 +22,7 @@ with the satellite's and the receiver's offsets ``o_j``, ``T`` and drifts
 ``N`` per arc; a cycle slip starts a new arc with a new ``N``. The Doppler
 is the range rate of the same states: the phase's rate agrees with it to
 ~0.03 Hz (the offset's velocity is a central difference, the states' rate
-and velocity differ by the light time's; ``tests/test_fuse_differential.py``).
+and velocity differ by the light time's; ``tests/fusion/test_aids_differential.py``).
 
 Each receiver has its own position (at rest in ECEF, or a trajectory with
 its velocity, e.g. :func:`straight_drive`), epochs, clock offset and drift,

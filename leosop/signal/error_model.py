@@ -12,7 +12,7 @@ def doppler_sigma_hz(cn0_dbhz, block_s, *, comb=None, method="fast", sample_rate
     """Standard deviation of a block's Doppler estimate [Hz] (error model for measurement-level runs).
 
     Above threshold the estimators reach the Cramér-Rao bound (validated by
-    tools/bench_doppler.py and tests/test_doppler.py): ``fast`` the bound of
+    tools/bench_doppler.py and tests/signal/test_doppler.py): ``fast`` the bound of
     the whole comb, ``ml`` and ``fmlef`` that of the central tone alone.
     Quantisation of ml/fmlef (their resolution / sqrt(12)) is not included.
 

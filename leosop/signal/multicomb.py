@@ -33,7 +33,7 @@ Tracking (``predicted_hz`` and ``predicted_rate_hz_per_s`` given,
 fitted at once from their own tones (dechirped peak, Newton, position
 check), then the refinement passes clean them. ``batch=False`` fits them
 one after another as the search does; both end within ~0.03 sigma of each
-other (tests/test_multicomb.py). A replay that tracks should call with the
+other (tests/signal/test_multicomb.py). A replay that tracks should call with the
 previous block's estimates propagated (``doppler_hz + rate * block_s``,
 the rate) and ``search=False``, and with ``search=True`` every k-th block
 (and whenever a track is lost) to pick up rising satellites: the search
@@ -46,7 +46,7 @@ Ambiguities
 -----------
 *Comb shifted by one spacing*: handled by the coherent check (step 2).
 *Nearly coinciding tones* (Doppler difference ``m * spacing + delta``):
-measured at 0.05 s blocks, 45 dB-Hz (tests/test_multicomb.py): with
+measured at 0.05 s blocks, 45 dB-Hz (tests/signal/test_multicomb.py): with
 ``delta`` = 150 Hz (7.5/T) and rates 2 kHz/s apart both combs are found
 within 1 sigma; at the same rate and ``m = 0`` with ``delta`` = 0.5 Hz one
 comb is reported (a candidate within 2/T, modulo the spacing, and 4/T^2 in

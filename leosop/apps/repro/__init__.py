@@ -24,7 +24,7 @@ simulated).
 
 Dependencies point downward only: this package imports the library
 (signal, ins, fusion, gnss, ...) and the other applications; only ``cli``
-imports it (tests/test_layers.py). Target functions are imported when a target runs, so listing the
+imports it (tests/project/test_layers.py). Target functions are imported when a target runs, so listing the
 targets costs nothing.
 
 Figures: a reproduction's live in its module here, every other in

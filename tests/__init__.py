@@ -1,0 +1,1 @@
+"""Tests of leosop; the layout is described in conftest.py."""

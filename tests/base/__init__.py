@@ -1,0 +1,1 @@
+"""Tests of leosop's top-level modules (frames, earth, timebase, rotations, ...)."""

@@ -1,0 +1,216 @@
+"""Honest sigmas and physical solutions of the multi-pass static fix: residual correlation, horizon, mirror,
+pass offsets.
+
+The two simulated VHF passes of the ``two_passes`` fixture (one satellite, 2 s rows above 10 deg,
+a cubic clock per pass) with white or AR(1) Doppler noise; for the pass offsets, the 7 Starlink-like
+satellites of the ``starlink_like`` fixture (one receiver clock) with each satellite's states offset
+or its time shifted (along its inertial orbit, or with the Earth: a time tag).
+"""
+
+import numpy as np
+import pytest
+
+from leosop.frames import rotate_to_later_ecef
+from leosop.orbits import load_constellation
+from leosop.orbits.propagate import state_ecef, state_ecef_pairs
+from leosop.positioning.passes_noise import integrated_autocorrelation
+from leosop.positioning.robust_ls import FixStatus
+from leosop.positioning.static_passes import _sees, solve_static_passes
+
+from tests.positioning.helpers import F0_HZ, common_truth, doppler_hz
+
+
+def _ar1(rng, n, phi, sigma):
+    """AR(1) series of stationary standard deviation ``sigma``: tau = (1 + phi) / (1 - phi)."""
+    e = rng.normal(0.0, sigma * np.sqrt(1.0 - phi**2), n)
+    x = np.empty(n)
+    x[0] = rng.normal(0.0, sigma)
+    for k in range(1, n):
+        x[k] = phi * x[k - 1] + e[k]
+    return x
+
+
+def test_integrated_autocorrelation_of_ar1_and_white_noise():
+    rng = np.random.default_rng(1)
+    # Reference: an AR(1) series with coefficient phi has tau = (1 + phi) / (1 - phi) exactly (9 for 0.8).
+    # The estimator's standard deviation is ~tau sqrt(2 (2M + 1) / n) (Sokal): ~4% at M ~ 45, n = 1e5;
+    # bound 15%.
+    tau, M = integrated_autocorrelation(_ar1(rng, 100_000, 0.8, 1.0))
+    assert tau == pytest.approx(9.0, rel=0.15) and 30 <= M <= 80
+    # White noise: tau ~ 1 within 2 sqrt(M / n) per standard deviation (bound 4 of them).
+    tau, M = integrated_autocorrelation(rng.normal(size=5000))
+    assert abs(tau - 1.0) < 4 * 2 * np.sqrt(M / 5000)
+    assert integrated_autocorrelation(np.ones(10)) == (1.0, 0) and integrated_autocorrelation([1.0, 2.0]) == (1.0, 0)
+
+
+def test_white_residuals_leave_the_fix_unchanged(two_passes):
+    (dop, pos, vel, f0, t_s, pass_id), station, _, _ = two_passes
+    noisy = dop + np.random.default_rng(4).normal(0.0, 2.0, dop.shape)
+    kw = dict(alt_m=95.0, alt_sigma_m=1.0, time_bias=False)
+    on = solve_static_passes(noisy, 2.0, pos, vel, f0, t_s, pass_id, **kw)
+    off = solve_static_passes(noisy, 2.0, pos, vel, f0, t_s, pass_id, decorrelate=False, **kw)
+    # White residuals: no pass's tau is significantly above 1, so nothing is scaled or solved again.
+    np.testing.assert_array_equal(on.tau, [1.0, 1.0])
+    np.testing.assert_array_equal(on.pos_ecef_m, off.pos_ecef_m)
+    np.testing.assert_array_equal(on.cov, off.cov)
+    assert off.tau is None
+
+
+def test_correlated_noise_gets_an_honest_sigma(two_passes):
+    (dop, pos, vel, f0, t_s, pass_id), station, _, _ = two_passes
+    rng = np.random.default_rng(11)
+    kw = dict(alt_m=95.0, alt_sigma_m=1.0, time_bias=False, alpha=None, pos0_ecef_m=station)
+    nees = {True: [], False: []}
+    for _ in range(16):
+        noise = np.concatenate([_ar1(rng, int((pass_id == p).sum()), 0.8, 2.0) for p in (0, 1)])
+        for decorrelate in (True, False):
+            # The baseline without the disagreement test either: its variance factor takes up part of the
+            # excess (mean NEES 5.3 instead of the white sigma's ~9x).
+            fix = solve_static_passes(dop + noise, 2.0, pos, vel, f0, t_s, pass_id, decorrelate=decorrelate,
+                                      pass_offsets=decorrelate, **kw)
+            assert fix.status == FixStatus.OK
+            d = fix.pos_ecef_m - station
+            nees[decorrelate].append(d @ np.linalg.solve(fix.cov[:3, :3], d))
+    # Position NEES (3 dof, ~2 with the height held by its 1 m prior): the white-noise sigma ignores the
+    # AR(1) correlation (tau = 9) and is ~3x too small, NEES ~9x too large (achieved: see the bounds' margin);
+    # with each pass's sigma scaled by sqrt(tau estimated from its residuals) the mean NEES is near its dof.
+    # Bounds: 16 seeds put the mean of a consistent NEES within ~[1, 4.5]; the white one is above 8.
+    assert 1.0 < np.mean(nees[True]) < 4.5
+    assert np.mean(nees[False]) > 8.0
+
+
+def test_a_solution_must_see_the_satellites(two_passes):
+    (dop, pos, vel, f0, t_s, pass_id), station, _, _ = two_passes
+    used = np.ones((2, len(dop)), bool)
+    # The station sees every row (all above 10 deg); its antipode sees none.
+    np.testing.assert_array_equal(_sees(np.stack([station, -station]), pos, used), [True, False])
+    # A row below the horizon that is not used does not count.
+    low = np.zeros((1, len(dop)), bool)
+    assert _sees(-station[None], pos, low)[0]
+
+
+def _offset_truth(p, v, sat, rng, sigma_m):
+    """Satellite positions moved by each satellite's own radial and cross-track offset, N(0, sigma_m^2) each."""
+    e_r = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    h = np.cross(p, v)
+    e_c = h / np.linalg.norm(h, axis=-1, keepdims=True)
+    b = rng.normal(0.0, sigma_m, (sat.max() + 1, 2))
+    return p + b[sat, :1] * e_r + b[sat, 1:] * e_c
+
+
+def test_pass_offsets_are_found_and_priced_into_the_covariance(starlink_like):
+    geo, rate, p, v, t_s, sat, rx = starlink_like
+    kw = dict(clock="common", pos0_ecef_m=rx, alpha=None)
+    nees = {True: [], False: []}
+    found = []
+    for seed in range(12):
+        rng = np.random.default_rng(200 + seed)
+        extra, *_ = common_truth(rate, t_s, sat, rng)
+        # Truth: each satellite's states off by 30 m radial and cross-track (1 sigma), the solver given the
+        # nominal ones; 7 satellites x 60 s at 0.3 Hz determine the position to ~1 m, so such offsets are
+        # seen as disagreement between the satellites.
+        moved = _offset_truth(p, v, sat, rng, 30.0)
+        y = doppler_hz(moved[None], v[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + extra
+        y = y + rng.normal(0.0, 0.3, y.shape)
+        for on in (True, False):
+            fix = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, pass_offsets=on, **kw)
+            assert fix.status in (FixStatus.OK, FixStatus.INCONSISTENT)
+            d = fix.pos_ecef_m - rx
+            nees[on].append(d @ np.linalg.solve(fix.cov[:3, :3], d))
+            if on:
+                found.append(fix.pass_offset_sigma_m)
+    # The score test finds the offsets in every seed (achieved 12/12; bound 9/12) and the estimated s is
+    # the injected 30 m's (achieved median 29 m, 13-48 m per seed: a variance from 14 offsets scatters
+    # by ~40%; bounds 15-60 m on the median).
+    found = np.array(found)
+    assert (found > 0).mean() >= 0.75 and 15.0 < np.median(found) < 60.0
+    # Position NEES (3 dof): without the offsets' variance it is in the hundreds (achieved mean 835); with
+    # it near its dof (achieved mean 5.9: an s estimated low costs more NEES than one estimated high
+    # saves, so the mean sits above 3). Bounds: 1-8 and above 100.
+    assert 1.0 < np.mean(nees[True]) < 8.0
+    assert np.mean(nees[False]) > 100.0
+
+
+def test_consistent_passes_leave_the_covariance_bit_identical(starlink_like):
+    geo, rate, p, v, t_s, sat, rx = starlink_like
+    extra, *_ = common_truth(rate, t_s, sat, np.random.default_rng(2))
+    y = geo + extra + np.random.default_rng(3).normal(0.0, 0.3, geo.shape)
+    kw = dict(clock="common", pos0_ecef_m=rx, alpha=None)
+    on = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, **kw)
+    off = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, pass_offsets=False, **kw)
+    # No offsets injected: the score test stays below dof + 3 sqrt(2 dof) and nothing is added.
+    assert on.pass_offset_sigma_m == 0.0 and on.pass_offset_dof == 14
+    assert on.pass_offset_chi2 < on.pass_offset_dof + 3 * np.sqrt(2 * on.pass_offset_dof)
+    np.testing.assert_array_equal(on.cov, off.cov)
+    np.testing.assert_array_equal(on.pos_ecef_m, off.pos_ecef_m)
+    assert off.pass_offset_sigma_m is None
+
+
+def test_element_set_sigma_floors_the_offsets_variance(starlink_like):
+    """The element sets' radial / cross-track sigma enters the covariance as the fix's sensitivity to them.
+
+    Reference: the fix solved again with one satellite's states moved by one sigma along one axis, for
+    each satellite and axis (a second, finite-difference computation of the sandwich term): the
+    covariance the prior adds must be the sum of those shifts' outer products (sigmas 35-69 m here).
+    The shifts are linear in the 30 / 60 m offsets to ~1e-4 (offset over range), the fixes converge to
+    1e-3 of their sigma (0.3 m of the shifts' tens of metres); achieved 2e-4 of the largest element,
+    bound 1e-3.
+    """
+    geo, rate, p, v, t_s, sat, rx = starlink_like
+    extra, *_ = common_truth(rate, t_s, sat, np.random.default_rng(2))
+    y = geo + extra + np.random.default_rng(3).normal(0.0, 0.3, geo.shape)
+    kw = {"clock": "common", "pos0_ecef_m": rx, "alpha": None}
+    sigma_rc = np.array([30.0, 60.0])
+    off = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, **kw)
+    on = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, orbit_sigma_rc_m=sigma_rc, **kw)
+    np.testing.assert_array_equal(on.pos_ecef_m, off.pos_ecef_m)  # the fix itself is unchanged
+    e_r = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    e_c = np.cross(p, v)
+    e_c /= np.linalg.norm(e_c, axis=-1, keepdims=True)
+    added = np.zeros((3, 3))
+    for k in range(7):
+        for axis, s in zip((e_r, e_c), sigma_rc):
+            moved = p + np.where((sat == k)[:, None], s * axis, 0.0)
+            d = solve_static_passes(y, 0.3, moved, v, F0_HZ, t_s, sat, pass_offsets=False, **kw).pos_ecef_m - \
+                off.pos_ecef_m
+            added += np.outer(d, d)
+    np.testing.assert_allclose(on.cov[:3, :3] - off.cov[:3, :3], added, atol=1e-3 * np.abs(added).max())
+
+
+def test_each_time_offset_model_fits_its_own_shift_and_not_the_other(starlink_like):
+    """A time-tag error (ECEF states at t + dt, the Earth turned with them) against an element set's along-track
+    error (inertial orbit at t + dt, the Earth not turned: the same states rotated east by omega_e dt).
+
+    The Doppler is built from SGP4 states at the shifted times (no first-order column involved); each model
+    fits its own shift to second order and leaves the other's east shift, ~7 % of the along-track one, in the
+    residuals and the position.
+    """
+    geo, rate, p, v, t_s, sat, rx = starlink_like
+    const = load_constellation()
+    t0 = np.datetime64("2025-01-01T04:00:00", "ns")  # the fixture's epoch
+    pos0, _, _ = state_ecef(const, [t0])
+    sat_index = np.argmin(np.linalg.norm(pos0[:, 0][None] - p[t_s == 0][:, None], axis=-1), axis=1)
+    dt_s = np.random.default_rng(5).normal(0.0, 0.01, 7)[sat]  # 75 m along-track, 5 m east
+    t_shift = t0 + np.round((t_s + dt_s) * 1e9).astype("timedelta64[ns]")
+    p_tag, v_tag, _ = state_ecef_pairs(const, sat_index[sat], t_shift)
+    shifted = {"earth_fixed": (p_tag, v_tag),
+               "inertial": (rotate_to_later_ecef(p_tag, -dt_s), rotate_to_later_ecef(v_tag, -dt_s))}
+    clock_hz = 1.5e3 - 0.7 * (t_s - 29.5)
+    sigma_hz = 1e-3
+    for truth, (p_true, v_true) in shifted.items():
+        y = doppler_hz(p_true[None], v_true[None], rx[None], np.zeros((1, 3)), np.zeros(1))[0] + clock_hz
+        fits = {model: solve_static_passes(y, sigma_hz, p, v, F0_HZ, t_s, sat, clock="common", pos0_ecef_m=rx,
+                                           time_bias_sigma_s=None, alpha=None, decorrelate=False, pass_offsets=False,
+                                           time_offset_model=model) for model in ("earth_fixed", "inertial")}
+        right, wrong = fits[truth], fits["inertial" if truth == "earth_fixed" else "earth_fixed"]
+        assert right.status == wrong.status == FixStatus.OK and right.time_offset_model == truth
+        # Its own model: left over is the second-order term dt^2 / 2 x the Doppler's acceleration (~1e-4 Hz
+        # at 0.01 s). Achieved rms 5e-5 Hz (chi2/dof 0.003), 2 cm, offsets to 3 us. Bounds: chi2/dof 0.01,
+        # 10 cm, 20 us.
+        assert right.chi2 / right.dof < 0.01 and np.linalg.norm(right.pos_ecef_m - rx) < 0.1
+        np.testing.assert_allclose(right.time_bias_s, dt_s[t_s == 0], rtol=0, atol=2e-5)
+        # The other model leaves the east shift omega_e |r| dt (up to 5 m here) partly in the position, partly
+        # in residuals of ~3 mHz. Achieved chi2/dof 8.8 and 10.2 (3,000x its own model's), 3.9 and 4.1 m.
+        # Bounds: chi2/dof 3 and 300x, 1 m.
+        assert wrong.chi2 / wrong.dof > max(3.0, 300 * right.chi2 / right.dof)
+        assert np.linalg.norm(wrong.pos_ecef_m - rx) > 1.0

@@ -1,0 +1,1 @@
+"""Repository-wide checks: lint, types, layers, docs and their site, gallery, install, tools/."""
