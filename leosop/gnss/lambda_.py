@@ -70,12 +70,16 @@ def decorrelate(Q):
     Z = np.eye(n)
     j, k = n - 2, n - 2
     while j >= 0:
-        if j <= k:
-            for i in range(j + 1, n):  # integer Gauss transformations of column j
-                mu = np.rint(L[i, j])  # np.round's own kernel, without its wrapper (a hot scalar loop)
-                if mu != 0.0:
-                    L[i:, j] -= mu * L[i:, i]
-                    Z[:, j] -= mu * Z[:, i]
+        i = j + 1
+        while j <= k and i < n:  # integer Gauss transformations of column j, rows i = j + 1, ..., n - 1 in turn
+            nz = np.rint(L[i:, j]).nonzero()[0]  # those that round to 0 change nothing: on to the next that does not
+            if not nz.size:
+                break
+            i += int(nz[0])
+            mu = np.rint(L[i, j])
+            L[i:, j] -= mu * L[i:, i]
+            Z[:, j] -= mu * Z[:, i]
+            i += 1
         delta = D[j] + L[j + 1, j] ** 2 * D[j + 1]
         if delta + 1e-6 < D[j + 1]:  # swap j and j + 1: the conditional variances become more even
             eta = D[j] / delta
@@ -85,8 +89,8 @@ def decorrelate(Q):
             L[j, :j] = -L[j + 1, j] * a0 + a1
             L[j + 1, :j] = eta * a0 + lam * a1
             L[j + 1, j] = lam
-            L[j + 2:, [j, j + 1]] = L[j + 2:, [j + 1, j]]
-            Z[:, [j, j + 1]] = Z[:, [j + 1, j]]
+            L[j + 2:, j:j + 2] = L[j + 2:, j:j + 2][:, ::-1]  # column swaps (numpy buffers the overlap)
+            Z[:, j:j + 2] = Z[:, j:j + 2][:, ::-1]
             k, j = j, n - 2
         else:
             j -= 1
