@@ -159,8 +159,10 @@ class PppEpoch(Aid):
     def design(self, ins):
         """``dh/dx``, shape (3 (m' - 1), 15 + 1 + m): INS errors, wet delay, ambiguities (the rate's position term,
         ``(v_sv - v - e e.(v_sv - v)) / rho``, below 2e-4 /s for GPS, neglected as in :mod:`leosop.gnss.ppp_ins`)."""
-        s = ins.state
         _, m_wet, los, _, C, used, ref = self._rows(ins)
+        return self._design(ins.state, m_wet, los, C, used, ref)
+
+    def _design(self, s, m_wet, los, C, used, ref):
         m = self.orb_idx.size
         others = used[used != ref]
         n = others.size
@@ -189,9 +191,10 @@ class PppEpoch(Aid):
 
     def matrices(self, ins):
         """``(z, H, R)`` at ``ins``: innovation ``h(ins) - measured``, :meth:`design`, :meth:`noise`."""
-        h, _, _, elev, _, used, ref = self._rows(ins)
+        h, m_wet, los, elev, C, used, ref = self._rows(ins)
         self.used, self.ref = used, ref
-        return self._sd(h - self.obs, used, ref), self.design(ins), self._noise(elev, used, ref)
+        return (self._sd(h - self.obs, used, ref), self._design(ins.state, m_wet, los, C, used, ref),
+                self._noise(elev, used, ref))
 
     def screen(self, z, H, R, P):
         """Outliers: the rows whose normalised innovation exceeds ``k_outlier``, the largest first, at most six.

@@ -51,9 +51,10 @@ def range_and_rate(orbits, sv_idx, t_s, pos_rx_ecef_m, vel_rx_ecef_mps, *, h_s=0
     ----------
     orbits : leosop.gnss.products.Orbits
     sv_idx : ndarray of int, shape (n,)
-    t_s : float
-        Reception time, seconds since ``orbits.ref_gps``.
-    pos_rx_ecef_m, vel_rx_ecef_mps : ndarray, shape (3,)
+    t_s : float or ndarray, shape (n,)
+        Reception times, seconds since ``orbits.ref_gps``.
+    pos_rx_ecef_m, vel_rx_ecef_mps : ndarray, shape (3,) or (n, 3)
+        One receiver, or one per row (many epochs in one call).
 
     Returns
     -------
@@ -64,9 +65,12 @@ def range_and_rate(orbits, sv_idx, t_s, pos_rx_ecef_m, vel_rx_ecef_mps, *, h_s=0
     """
     sv_idx = np.asarray(sv_idx, int)
     n = sv_idx.size
+    pos_rx_ecef_m = np.broadcast_to(np.asarray(pos_rx_ecef_m, float), (n, 3))
+    vel = np.broadcast_to(np.asarray(vel_rx_ecef_mps, float), (n, 3))
     steps = np.repeat([0.0, -h_s, h_s], n)  # the three instants in one interpolation
-    p = pos_rx_ecef_m + steps[:, None] * np.asarray(vel_rx_ecef_mps)
-    rs, _ = satellite_at_reception(orbits, np.tile(sv_idx, 3), t_s + steps, p)
+    p = np.tile(pos_rx_ecef_m, (3, 1)) + steps[:, None] * np.tile(vel, (3, 1))
+    rs, _ = satellite_at_reception(orbits, np.tile(sv_idx, 3),
+                                   np.tile(np.broadcast_to(np.asarray(t_s, float), (n,)), 3) + steps, p)
     rng = np.linalg.norm(rs - p, axis=-1)
     d = rs[:n] - pos_rx_ecef_m
     return rng[:n], (rng[2 * n:] - rng[n:2 * n]) / (2.0 * h_s), d / rng[:n, None], rs[:n]

@@ -70,12 +70,16 @@ def decorrelate(Q):
     Z = np.eye(n)
     j, k = n - 2, n - 2
     while j >= 0:
-        if j <= k:
-            for i in range(j + 1, n):  # integer Gauss transformations of column j
-                mu = np.round(L[i, j])
-                if mu != 0.0:
-                    L[i:, j] -= mu * L[i:, i]
-                    Z[:, j] -= mu * Z[:, i]
+        i = j + 1
+        while j <= k and i < n:  # integer Gauss transformations of column j, rows i = j + 1, ..., n - 1 in turn
+            nz = np.rint(L[i:, j]).nonzero()[0]  # those that round to 0 change nothing: on to the next that does not
+            if not nz.size:
+                break
+            i += int(nz[0])
+            mu = np.rint(L[i, j])
+            L[i:, j] -= mu * L[i:, i]
+            Z[:, j] -= mu * Z[:, i]
+            i += 1
         delta = D[j] + L[j + 1, j] ** 2 * D[j + 1]
         if delta + 1e-6 < D[j + 1]:  # swap j and j + 1: the conditional variances become more even
             eta = D[j] / delta
@@ -85,8 +89,8 @@ def decorrelate(Q):
             L[j, :j] = -L[j + 1, j] * a0 + a1
             L[j + 1, :j] = eta * a0 + lam * a1
             L[j + 1, j] = lam
-            L[j + 2:, [j, j + 1]] = L[j + 2:, [j + 1, j]]
-            Z[:, [j, j + 1]] = Z[:, [j + 1, j]]
+            L[j + 2:, j:j + 2] = L[j + 2:, j:j + 2][:, ::-1]  # column swaps (numpy buffers the overlap)
+            Z[:, j:j + 2] = Z[:, j:j + 2][:, ::-1]
             k, j = j, n - 2
         else:
             j -= 1
@@ -119,7 +123,7 @@ def search(L, D, z_hat, n_cands=2):
     step = np.zeros(n)
     k = n - 1
     zb[k] = z_hat[k]
-    z[k] = np.round(zb[k])
+    z[k] = np.rint(zb[k])
     y = zb[k] - z[k]
     step[k] = 1.0 if y >= 0 else -1.0
     max_dist = np.inf
@@ -131,7 +135,7 @@ def search(L, D, z_hat, n_cands=2):
                 dist[k] = new
                 S[k, :k + 1] = S[k + 1, :k + 1] + (z[k + 1] - zb[k + 1]) * L[k + 1, :k + 1]
                 zb[k] = z_hat[k] + S[k, k]
-                z[k] = np.round(zb[k])
+                z[k] = np.rint(zb[k])
                 y = zb[k] - z[k]
                 step[k] = 1.0 if y >= 0 else -1.0
                 continue
@@ -169,12 +173,18 @@ def ils(a_hat, Q, n_cands=2):
     sq_norm : ndarray, shape (n_cands,)
         ``(a_hat - a)^T Q^-1 (a_hat - a)`` of each.
     """
+    a, norms, _ = _ils(a_hat, Q, n_cands)
+    return a, norms
+
+
+def _ils(a_hat, Q, n_cands):
+    """:func:`ils` and the conditional variances ``D`` (n,) of its decorrelation (for the success rate)."""
     a_hat = np.asarray(a_hat, float)
     shift = np.round(a_hat)  # search near zero: the same lattice, smaller numbers
     Z, L, D = decorrelate(Q)
     z, norms = search(L, D, Z.T @ (a_hat - shift), n_cands)
     a = np.linalg.solve(Z.T, z.T).T
-    return np.round(a) + shift, norms
+    return np.round(a) + shift, norms, D
 
 
 def bootstrap_success_rate(D):
@@ -206,9 +216,9 @@ def partial_fix(a_hat, Q, *, ratio_min=3.0, min_fixed=4, success_min=0.0):
     while keep.sum() >= max(min_fixed, 1):
         idx = np.flatnonzero(keep)
         Qs = Q[np.ix_(idx, idx)]
-        a, norms = ils(a_hat[idx], Qs)
+        a, norms, D = _ils(a_hat[idx], Qs, 2)
         ratio = norms[1] / max(norms[0], 1e-12)
-        if ratio >= ratio_min and (success_min <= 0.0 or bootstrap_success_rate(decorrelate(Qs)[2]) >= success_min):
+        if ratio >= ratio_min and (success_min <= 0.0 or bootstrap_success_rate(D) >= success_min):
             out = np.full(len(a_hat), np.nan)
             out[idx] = a[0]
             return keep, out, ratio

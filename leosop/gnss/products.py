@@ -67,15 +67,17 @@ class Orbits:
         sv_idx = np.asarray(sv_idx, int)
         dt = self.t_s[1] - self.t_s[0]
         n = len(self.t_s)
-        u = np.nan_to_num((t_s - self.t_s[0]) / dt, nan=-1e9)
-        start = np.clip(np.floor(u).astype(int) - N_LAGRANGE // 2 + 1, 0, n - N_LAGRANGE)
+        u = (t_s - self.t_s[0]) / dt
+        u[np.isnan(u)] = -1e9
+        start = np.minimum(np.maximum(np.floor(u).astype(int) - N_LAGRANGE // 2 + 1, 0), n - N_LAGRANGE)
         k = np.arange(N_LAGRANGE)
         x = u[:, None] - (start[:, None] + k)  # query minus node, in spacings
-        # Lagrange basis: prod_{j != k} (u - u_j) / (u_k - u_j) on unit-spaced nodes.
-        diff = x[:, :, None] - x[:, None, :]  # (n, k, j): x_k - x_j = u_j - u_k
-        num = np.where(np.eye(N_LAGRANGE, dtype=bool), 1.0, x[:, None, :])
-        den = np.where(np.eye(N_LAGRANGE, dtype=bool), 1.0, -diff)
-        w = np.prod(num / den, axis=2)  # (n, k)
+        # Lagrange basis: prod_{j != k} (u - u_j) / (u_k - u_j) on unit-spaced nodes, (n, k, j); the diagonal's
+        # 0 / 0 set to 1 (a hot path: one pass per operation).
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = x[:, None, :] / (x[:, None, :] - x[:, :, None])
+        ratio[:, k, k] = 1.0
+        w = np.prod(ratio, axis=2)  # (n, k)
         nodes = self.pos_ecef_m[start[:, None] + k, sv_idx[:, None]]  # (n, k, 3)
         out = np.einsum("nk,nkc->nc", w, nodes)
         # Extrapolation past the end nodes is limited to 0.1 spacing (90 s for 15-min orbits): a degree-10

@@ -112,6 +112,10 @@ class GnssSim:
     slips: list
 
 
+#: Satellite-epochs per geometry call of :func:`simulate` (bounds its temporary arrays to a few MB).
+_ROWS_PER_CALL = 2048
+
+
 def _gauss_markov(rng, shape, tau_s, dt_s):
     """Unit-variance first-order Gauss-Markov sequences along axis 0."""
     a = np.exp(-dt_s / tau_s)
@@ -156,10 +160,17 @@ def simulate(trajectory, t0_s, orbits, clocks, rng, settings=SimSettings(), *, s
     rho, rate, elev = (np.full(shape, np.nan) for _ in range(3))
     clk_sv, drift_sv = np.full(shape, np.nan), np.full(shape, np.nan)
     up = C_e_n(truth.lat_rad, truth.lon_rad)[:, :, 2]
-    for k in range(n_ep):
-        r, rr, los, _ = range_and_rate(orbits, orb_idx, t[k], pos[k], vel[k])
-        rho[k], rate[k], elev[k] = r, rr, np.arcsin(np.clip(los @ up[k], -1.0, 1.0))
-        clk_sv[k], drift_sv[k] = satellite_clock(orbits, clocks, orb_idx, clk_idx, t[k] - r / C_MPS)
+    per = max(1, _ROWS_PER_CALL // max(n_sv, 1))  # epochs per geometry call: (rows, 3 instants, 11 nodes^2) floats
+    for k0 in range(0, n_ep, per):
+        ks = np.arange(k0, min(k0 + per, n_ep))
+        r, rr, los, _ = range_and_rate(orbits, np.tile(orb_idx, ks.size), np.repeat(t[ks], n_sv),
+                                       np.repeat(pos[ks], n_sv, axis=0), np.repeat(vel[ks], n_sv, axis=0))
+        rho[ks], rate[ks] = r.reshape(-1, n_sv), rr.reshape(-1, n_sv)
+        clk, drift = satellite_clock(orbits, clocks, np.tile(orb_idx, ks.size), np.tile(clk_idx, ks.size),
+                                     np.repeat(t[ks], n_sv) - r / C_MPS)
+        clk_sv[ks], drift_sv[ks] = clk.reshape(-1, n_sv), drift.reshape(-1, n_sv)
+        for i, k in enumerate(ks):
+            elev[k] = np.arcsin(np.clip(los[i * n_sv:(i + 1) * n_sv] @ up[k], -1.0, 1.0))
     seen = (elev > np.radians(s.mask_deg)) & np.isfinite(rho) & np.isfinite(clk_sv)
     if s.outage_start_s is not None:
         seen &= ~((truth.t_s >= s.outage_start_s) & (truth.t_s < s.outage_start_s + s.outage_s))[:, None]

@@ -140,6 +140,7 @@ _GMF_COEF = np.array("""
 """.split(), float).reshape(8, 55) * 1e-5
 _SH_N = np.repeat(np.arange(10), np.arange(1, 11))  # degree of each coefficient
 _SH_M = np.concatenate([np.arange(n + 1) for n in range(10)])  # order
+_DOUBLE_FACTORIAL = [1.0] + [float(np.prod(np.arange(1, 2 * m, 2))) for m in range(1, 10)]  # (2m-1)!!, m = 0..9
 #: MJD of [Niell 1996]'s reference day, 28 January 1980, for the annual term of GMF as of NMF.
 _MJD_JAN28_1980 = 44239.0 - 1.0 + 28.0
 
@@ -153,12 +154,15 @@ def _legendre_9(t):
     u = np.sqrt(np.clip(1.0 - t * t, 0.0, None))
     p = {}
     for m in range(10):
-        p[m, m] = (np.prod(np.arange(1, 2 * m, 2)) if m else 1.0) * u**m  # (2m-1)!! u^m
+        p[m, m] = _DOUBLE_FACTORIAL[m] * u**m  # (2m-1)!! u^m
         if m < 9:
             p[m + 1, m] = (2 * m + 1) * t * p[m, m]
         for n in range(m + 2, 10):
             p[n, m] = ((2 * n - 1) * t * p[n - 1, m] - (n + m - 1) * p[n - 2, m]) / (n - m)
-    return np.stack([p[n, m] * np.ones_like(t) for n, m in zip(_SH_N, _SH_M)], axis=-1)
+    out = np.empty(t.shape + (_SH_N.size,))
+    for i, nm in enumerate(zip(_SH_N.tolist(), _SH_M.tolist())):
+        out[..., i] = p[nm]
+    return out
 
 
 def gmf_mapping(elev_rad, lat_rad, lon_rad, height_m, mjd):

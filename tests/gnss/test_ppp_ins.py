@@ -111,14 +111,21 @@ def test_grg_wide_lane_biases_on_real_data():
     assert len(vals) >= 15 and dev.std() < 0.1
 
 
+@pytest.fixture(scope="module")
+def outage_run(products):
+    """Seed 0, 330 s, GNSS lost at 250 s, default options (bridge_fixed): shared by two tests."""
+    return ppp_ins_study.scenario(0, duration_s=330.0, outage_at_s=250.0, products=products)
+
+
 @needs_data
-def test_outage_bridged_from_the_fixed_solution(products):
+def test_outage_bridged_from_the_fixed_solution(products, outage_run):
     # GNSS lost after a fixed epoch: the INS starts the gap from the fixed solution (bridge_fixed) instead of
     # the float one. Reference: the same run's fixed and float errors one epoch before the gap; one second of
     # fog-grade INS moves the error by millimetres (1 cm allowed), far less than the float-fixed gap (here 1.6
     # cm fixed, 11 cm float; 2 cm asked).
-    runs = {b: ppp_ins_study.scenario(0, duration_s=330.0, outage_at_s=250.0, products=products,
-                                      options=ppp_ins.PppInsOptions(bridge_fixed=b)) for b in (True, False)}
+    assert ppp_ins.PppInsOptions().bridge_fixed
+    runs = {True: outage_run, False: ppp_ins_study.scenario(0, duration_s=330.0, outage_at_s=250.0, products=products,
+                                                            options=ppp_ins.PppInsOptions(bridge_fixed=False))}
     truth, res = runs[True]
     k = int(np.flatnonzero(~res.gnss[1:])[0]) + 1  # first epoch of the gap
     err = {b: np.linalg.norm(r.pos_float_ecef_m[k] - truth[k]) for b, (_, r) in runs.items()}
@@ -137,7 +144,8 @@ def test_outage_bridged_from_the_fixed_solution(products):
     assert res.n_wl_checked > 0 and res.n_wl_mismatch == 0
 
 
-def test_outage_budget_reproduces_the_filter_covariance(products):
+@needs_data
+def test_outage_budget_reproduces_the_filter_covariance(outage_run):
     # The budget propagates the recorded INS-error covariance (PppInsResult.cov_ins) at the gap's first epoch
     # along the true trajectory (Van Loan steps, true specific force, position mapped to ENU metres); the
     # filter propagated it along its own INS (series steps, measured specific force) to its recorded position
@@ -145,7 +153,7 @@ def test_outage_budget_reproduces_the_filter_covariance(products):
     # evaluates the error model at the end of each step on its own INS (the former loop, at the start: 4e-4);
     # 1.5 % allowed: a lost gyro-noise or velocity term (0.17, 0.065-0.078 m of 0.35 m in quadrature) moves the
     # total by 12 % and 2-3 %; a lost accelerometer-noise term (0.05 m, 1 %) would pass.
-    truth, res = ppp_ins_study.scenario(0, duration_s=330.0, outage_at_s=250.0, products=products)
+    truth, res = outage_run
     gap = np.flatnonzero(~res.gnss[1:]) + 1
     doc = ppp_ins_study.outage_budget(res, "fog", 330.0, gap[0], gap[-1])
     np.testing.assert_allclose(doc["total"], doc["filter sigma"], rtol=1.5e-2)
