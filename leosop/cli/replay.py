@@ -105,7 +105,8 @@ def _lo_doc(lo, lo_max, drift_max):
             "lo_drift_hz_per_s": num(lo and lo.drift_hz_per_s),
             "lo_drift_sigma_hz_per_s": num(lo and lo.drift_sigma_hz_per_s),
             "lo_ref_utc": format_utc(lo.t_ref_utc) if lo else None, "lo_source": lo.source if lo else None,
-            "lo_linewidth_hz": num(lo and lo.linewidth_hz), "lo_offset_max_hz": float(lo_max), "lo_drift_max_hz_per_s": float(drift_max)}
+            "lo_linewidth_hz": num(lo and lo.linewidth_hz), "lo_offset_max_hz": float(lo_max),
+            "lo_drift_max_hz_per_s": float(drift_max)}
 
 
 def run(args):
