@@ -23,6 +23,8 @@ front end) is always replayed first. Reported per run:
   with the same search (``x_zero``);
 - ``img``: tracks that are no satellite's but mirror one about 0 Hz (an IQ
   imbalance's image of its comb at minus its Doppler, within 20 Hz);
+- ``lw_hz``: the LO's Wiener linewidth the replay found in the fix's
+  residuals (:func:`leosop.replay.lo.lo_noise`; the preset's is 0.01 Hz);
 - the estimated offset and drift minus the truth. The truth offset is the
   receiver's plus the mean of the identified satellites' own offsets (drawn
   in [0, 5] Hz): nothing separates that mean from the receiver's offset
@@ -169,7 +171,7 @@ def main(argv=None):
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
           f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} "
           f"{'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'crb_hz':>7} {'d_w_hz':>6} {'crb_w_hz':>8} "
-          f"{'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
+          f"{'d_drift':>8} {'sig':>6} {'lw_hz':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
         for offset, drift, fe, impair in runs:
@@ -210,7 +212,13 @@ def main(argv=None):
                       f"{err3d:8.1f} "
                       f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
                       f"{crb:7.2f} {d_w:6.2f} {crb_w:8.2f} {d_drift:8.4f} "
-                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
+                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {_linewidth(lo):6.4f} {status:8} "
+                      f"{elapsed:5.0f} {tag}", flush=True)
+
+
+def _linewidth(lo):
+    """The LO linewidth the replay found in its fix's residuals (NaN without one)."""
+    return np.nan if lo is None or lo.linewidth_hz is None else lo.linewidth_hz
 
 
 def _data_fix(res, const):
