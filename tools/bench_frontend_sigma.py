@@ -50,6 +50,7 @@ CASES = {
     "iq": "--iq-gain-db 0.5 --iq-phase-deg 2",
     "dc": "--dc-dbhz 60",
     "cw": "--cw 700e3 70",
+    "cw_in_band": "--cw 150e3 70",
     "bits8": "--bits 8",
     "agc": "--agc-step-db 6 --agc-period-s 1 --bits 8 --headroom-db 18",
     "lo_drift": "--rx-drift-hz-per-s 50",
