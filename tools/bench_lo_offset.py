@@ -214,8 +214,8 @@ def main(argv=None):
                     crb_w = _sum_sigma_hz(again, a)
                 print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
                       f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} "
-                      f"{err3d:8.1f} "
-                      f"{sig3d:8.1f} {dsig3d:8.2f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
+                      f"{err3d:8.1f} {sig3d:8.1f} {dsig3d:8.2f} "
+                      f"{ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
                       f"{crb:7.2f} {d_w:6.2f} {crb_w:8.2f} {d_drift:8.4f} "
                       f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {_linewidth(lo):6.4f} {status:8} "
                       f"{elapsed:5.0f} {tag}", flush=True)
