@@ -10,7 +10,12 @@ unless the case sets one; every capture searched for combs as the replay
 does (cleaned, :func:`~leosop.signal.multicomb.find_combs`), each detection
 matched to its satellite's truth Doppler (the annotation of its capture,
 within 20 Hz) and its error divided by its sigma. Reported per case: the
-detections matched, the mean and RMS of error / sigma, the RMS of the
+detections matched (``n``), those matching no satellite (``spur``) and
+those beyond 5 sigma (``out``, set aside: the replay's tracks and robust
+fix drop them), the mean and RMS of error / sigma, the same RMS with the
+LO's Wiener sigma of the generated linewidth added to each sigma
+(``z_lo``, :func:`~leosop.signal.frontend.wiener_doppler_sigma_hz`: what the
+replay prices in once it has estimated the linewidth), the RMS of the
 errors and of the sigmas, and the RMS over the snapshots of the errors'
 mean over the satellites of a snapshot (the part common to them, which a
 receiver LO moves alike) with its sigma (that mean's spread were the errors
@@ -32,12 +37,14 @@ import numpy as np  # noqa: E402
 
 from leosop.cli import main as leosop_main  # noqa: E402
 from leosop.signal.iq import open_sigmf  # noqa: E402
+from leosop.signal.frontend import wiener_doppler_sigma_hz  # noqa: E402
 from leosop.signal.multicomb import find_combs  # noqa: E402
 
 FS = 4e6
 SITE = "48.137,11.575,520.0"
 START = "2025-01-01T19:40:00Z"
 MATCH_HZ = 20.0
+SNAPSHOT_S = 0.02
 #: Combs searched per capture: the replay's (``MAX_NEW_COMBS`` of a snapshot block).
 MAX_COMBS = 10
 #: Detections beyond this many sigmas are outliers, which the replay's tracks and robust fix drop.
@@ -62,16 +69,18 @@ CASES = {
 def generate(path, options, snapshots, seed):
     cmd = ["generate", "-o", str(path), "--site", SITE, "--start", START, "--sample-rate-hz", f"{FS:g}",
            "--mask-deg", "25", "--seed", str(seed), "--rx-offset-hz", "0", "--duration-s", str(snapshots),
-           "--snapshot-s", "0.02", "--period-s", "1", *shlex.split(options)]
+           "--snapshot-s", f"{SNAPSHOT_S:g}", "--period-s", "1", *shlex.split(options)]
     with contextlib.redirect_stdout(io.StringIO()):
         assert leosop_main(cmd) == 0
     return open_sigmf(path)
 
 
 def measure(rec):
-    """(error, sigma, snapshot index) of every matched detection, and the detections unmatched."""
+    """(error, sigma, snapshot index) of every matched detection, the detections unmatched, and the LO's
+    Wiener linewidth the recording was generated with [Hz]."""
     meta = json.loads(Path(rec.data_path).with_suffix(".sigmf-meta").read_text())["global"]
     lo0, drift = meta.get("leosop:rx_offset_hz", 0.0), meta.get("leosop:rx_drift_hz_per_s", 0.0)
+    linewidth = (meta.get("leosop:front_end") or {}).get("phase_noise_linewidth_hz", 0.0)
     rows, spurious = [], 0
     for k, cap in enumerate(rec.captures):
         truth = np.array([a["leosop:doppler_hz"] for a in rec.annotations
@@ -85,7 +94,7 @@ def measure(rec):
                 spurious += 1
                 continue
             rows.append((d - truth[j], s, k))
-    return np.array(rows), spurious
+    return np.array(rows), spurious, linewidth
 
 
 def main(argv=None):
@@ -97,15 +106,15 @@ def main(argv=None):
     args = ap.parse_args(argv)
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_fe_sigma_"))
     work.mkdir(parents=True, exist_ok=True)
-    print(f"{'case':12} {'n':>5} {'spur':>4} {'out':>4} {'mean z':>7} {'rms z':>6} {'rms err':>8} {'rms sig':>8} "
-          f"{'common':>7} {'its sig':>7}")
+    print(f"{'case':12} {'n':>5} {'spur':>4} {'out':>4} {'mean z':>7} {'rms z':>6} {'z_lo':>6} {'rms err':>8} "
+          f"{'rms sig':>8} {'common':>7} {'its sig':>7}")
     for name in args.cases:
         parts = []
         spurious = 0
         for seed in range(args.seeds):
             path = work / f"{name}_{seed}_{args.snapshots}.sigmf-meta"
             rec = open_sigmf(path) if path.exists() else generate(path, CASES[name], args.snapshots, seed)
-            r, sp = measure(rec)
+            r, sp, linewidth = measure(rec)
             r[:, 2] += 10_000 * seed
             parts.append(r)
             spurious += sp
@@ -113,13 +122,14 @@ def main(argv=None):
         inlier = np.abs(r[:, 0] / r[:, 1]) <= OUTLIER_Z
         err, sig, snap = r[inlier].T
         z = err / sig
+        z_lo = err / np.hypot(sig, wiener_doppler_sigma_hz(linewidth, SNAPSHOT_S))
         _, inv = np.unique(snap, return_inverse=True)
         count = np.bincount(inv)
         common = np.bincount(inv, err) / count
         common_sig = np.sqrt(np.bincount(inv, sig**2)) / count
-        print(f"{name:12} {z.size:5d} {spurious:4d} {np.sum(~inlier):4d} {np.mean(z):+7.3f} "
-              f"{np.sqrt(np.mean(z**2)):6.3f} {np.sqrt(np.mean(err**2)):8.4f} {np.sqrt(np.mean(sig**2)):8.4f} "
-              f"{np.sqrt(np.mean(common**2)):7.4f} {np.sqrt(np.mean(common_sig**2)):7.4f}", flush=True)
+        rms = lambda x: np.sqrt(np.mean(x**2))  # noqa: E731
+        print(f"{name:12} {z.size:5d} {spurious:4d} {np.sum(~inlier):4d} {np.mean(z):+7.3f} {rms(z):6.3f} "
+              f"{rms(z_lo):6.3f} {rms(err):8.4f} {rms(sig):8.4f} {rms(common):7.4f} {rms(common_sig):7.4f}", flush=True)
 
 
 if __name__ == "__main__":
