@@ -397,6 +397,9 @@ def summary(doc):
                      f"{doc['lo_ref_utc']}, drift {doc['lo_drift_hz_per_s']:+.3f} +- "
                      f"{doc['lo_drift_sigma_hz_per_s']:.3f} Hz/s ({doc['lo_source']}; searched +-"
                      f"{doc['lo_offset_max_hz']:g} Hz, +-{doc['lo_drift_max_hz_per_s']:g} Hz/s)")
+    if doc.get("lo_linewidth_hz"):
+        lines.append(f"receiver LO noise: Wiener linewidth {doc['lo_linewidth_hz']:.2g} Hz, common to each block's "
+                     "combs, in every measurement's sigma")
     if "pss" in doc:
         p = doc["pss"]
         first = p["frame_start_utc"][0] if p["frame_start_utc"] else "n/a"
