@@ -20,9 +20,14 @@ front end) is always replayed first. Reported per run:
   from the fix's covariance: the error to judge it by, as the recordings
   share their satellites' orbit errors and a few metres of ratio to the
   clean one say little) and its ratio to the same kind's clean recording
-  with the same search (``x_zero``);
+  with the same search (``x_zero``); ``dsig3d_m``: the 3-D sigma of the
+  data-only fix (as ``crb_hz`` below), the one the error should be measured
+  against on these recordings, which lack the element sets' radial and
+  cross-track error;
 - ``img``: tracks that are no satellite's but mirror one about 0 Hz (an IQ
   imbalance's image of its comb at minus its Doppler, within 20 Hz);
+- ``lw_hz``: the LO's Wiener linewidth the replay found in the fix's
+  residuals (:func:`leosop.replay.lo.lo_noise`; the preset's is 0.01 Hz);
 - the estimated offset and drift minus the truth. The truth offset is the
   receiver's plus the mean of the identified satellites' own offsets (drawn
   in [0, 5] Hz): nothing separates that mean from the receiver's offset
@@ -168,8 +173,9 @@ def main(argv=None):
     runs += [(0.0, 0.0, "none", imp) for imp in args.impair]
     print(f"{'kind':10} {'fe':8} {'offset_hz':>9} {'drift':>5} {'search':6} {'lo_max':>7} {'tracks':>6} {'true':>4} "
           f"{'id':>3} {'wrong':>5} {'img':>3} {'sats':>4} {'s_id':>4} {'horiz_m':>8} {'err3d_m':>8} {'sig3d_m':>8} "
+          f"{'dsig3d_m':>8} "
           f"{'x_zero':>6} {'d_off_hz':>8} {'sig_hz':>6} {'crb_hz':>7} {'d_w_hz':>6} {'crb_w_hz':>8} "
-          f"{'d_drift':>8} {'sig':>6} {'status':8} {'t_s':>5}")
+          f"{'d_drift':>8} {'sig':>6} {'lw_hz':>6} {'status':8} {'t_s':>5}")
     base = {}
     for kind in args.kinds:
         for offset, drift, fe, impair in runs:
@@ -197,20 +203,27 @@ def main(argv=None):
                 d_off = lo.offset_hz - (true_off + drift * _since_start(lo.t_ref_utc)) if lo else np.nan
                 d_drift = lo.drift_hz_per_s - drift if lo else np.nan
                 status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
-                crb, d_w, crb_w = np.nan, np.nan, np.nan
+                crb, d_w, crb_w, dsig3d = np.nan, np.nan, np.nan, np.nan
                 again = _data_fix(res, const)
                 if again is not None:
                     crb = common_offset_sigma_hz(again)
+                    dsig3d = float(np.sqrt(np.trace(again.cov[:3, :3])))
                     a = _min_variance_weights(again)
                     truth_w = a @ [clock[str(s)] for s in again.pass_ids] + drift * _since_start(lo.t_ref_utc)
                     d_w = again.rx_clock_poly_hz[0] + a @ again.sat_offset_hz - truth_w
                     crb_w = _sum_sigma_hz(again, a)
                 print(f"{kind:10} {fe:8} {offset:9.0f} {drift:5.0f} {name:6} {lo_max:7.0e} {len(res.tracks):6d} "
                       f"{n_true:4d} {n_ok:3d} {n_wrong:5d} {n_image:3d} {n_sats:4d} {n_sats_id:4d} {horiz:8.1f} "
-                      f"{err3d:8.1f} "
-                      f"{sig3d:8.1f} {ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
+                      f"{err3d:8.1f} {sig3d:8.1f} {dsig3d:8.2f} "
+                      f"{ratio:6.2f} {d_off:8.2f} {(lo.offset_sigma_hz if lo else np.nan):6.2f} "
                       f"{crb:7.2f} {d_w:6.2f} {crb_w:8.2f} {d_drift:8.4f} "
-                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {status:8} {elapsed:5.0f} {tag}", flush=True)
+                      f"{(lo.drift_sigma_hz_per_s if lo else np.nan):6.4f} {_linewidth(lo):6.4f} {status:8} "
+                      f"{elapsed:5.0f} {tag}", flush=True)
+
+
+def _linewidth(lo):
+    """The LO linewidth the replay found in its fix's residuals (NaN without one)."""
+    return np.nan if lo is None or lo.linewidth_hz is None else lo.linewidth_hz
 
 
 def _data_fix(res, const):

@@ -105,7 +105,8 @@ def _lo_doc(lo, lo_max, drift_max):
             "lo_drift_hz_per_s": num(lo and lo.drift_hz_per_s),
             "lo_drift_sigma_hz_per_s": num(lo and lo.drift_sigma_hz_per_s),
             "lo_ref_utc": format_utc(lo.t_ref_utc) if lo else None, "lo_source": lo.source if lo else None,
-            "lo_offset_max_hz": float(lo_max), "lo_drift_max_hz_per_s": float(drift_max)}
+            "lo_linewidth_hz": num(lo and lo.linewidth_hz), "lo_offset_max_hz": float(lo_max),
+            "lo_drift_max_hz_per_s": float(drift_max)}
 
 
 def run(args):
@@ -396,6 +397,9 @@ def summary(doc):
                      f"{doc['lo_ref_utc']}, drift {doc['lo_drift_hz_per_s']:+.3f} +- "
                      f"{doc['lo_drift_sigma_hz_per_s']:.3f} Hz/s ({doc['lo_source']}; searched +-"
                      f"{doc['lo_offset_max_hz']:g} Hz, +-{doc['lo_drift_max_hz_per_s']:g} Hz/s)")
+    if doc.get("lo_linewidth_hz"):
+        lines.append(f"receiver LO noise: Wiener linewidth {doc['lo_linewidth_hz']:.2g} Hz, common to each block's "
+                     "combs, in every measurement's sigma")
     if "pss" in doc:
         p = doc["pss"]
         first = p["frame_start_utc"][0] if p["frame_start_utc"] else "n/a"

@@ -13,6 +13,17 @@ satellites' own offsets (0-5 Hz for Starlink, [Shen 2024] Table 1) have a
 zero-mean prior, so their mean is not separable from the receiver's and
 is in the estimate, and its sigma is that of the sum (:func:`lo_estimate`).
 
+The LO also has short-term noise: a Wiener (random-walk) phase of linewidth
+beta moves every comb of a block alike by a frequency of variance
+``3 beta / (5 pi T)`` over a T-long block
+(:func:`~leosop.signal.frontend.wiener_doppler_sigma_hz`), independent from
+block to block: 0.31 Hz for a 20 ms snapshot at 0.01 Hz (the ``consumer``
+preset), as large as a detection's thermal sigma. The comb fit cannot see it
+(any common linear phase is Doppler) and a static fix's clock polynomial does
+not absorb it, so it shows as a common part of each block's residuals;
+:func:`lo_noise` estimates beta from them, and the replay adds its sigma to
+every row and solves again (DESIGN 4.3 rows then carry it).
+
 Before identification, a continuous recording's tracking blocks fit the
 tone model through a rough offset, the median Doppler of the first full
 search's combs (:func:`rough_lo_hz`).
@@ -25,13 +36,16 @@ every channel for the offsets searched, is refused before any work
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
+from scipy.stats import chi2 as chi2_dist
 
 from ..constellations import DEFAULT_FAMILY, REGISTRY
 from ..errors import InputError
 from ..signal.coarse import MAX_DOPPLER_HZ
+from ..signal.frontend import wiener_doppler_sigma_hz
 
 __all__ = ["LO_DRIFT_MAX_HZ_PER_S", "LO_OFFSET_MAX_HZ", "ROUGH_LO_MIN_COMBS", "ROUGH_LO_MIN_HZ", "LoEstimate",
-           "check_band", "common_offset_sigma_hz", "lo_estimate", "rough_lo_hz"]
+           "LO_NOISE_PFA", "LoNoise", "check_band", "common_offset_sigma_hz", "lo_estimate", "lo_noise", "rough_lo_hz"]
 
 #: Default bound of the receiver's common offset searched [Hz]: PLL LNBs are within ~+-25 ppm of
 #: 10.6-10.75 GHz at the worst (+-270 kHz); typical ones within a few ppm (tens of kHz). Free-running
@@ -46,6 +60,9 @@ LO_DRIFT_MAX_HZ_PER_S = 50.0
 ROUGH_LO_MIN_HZ = 0.5 * MAX_DOPPLER_HZ
 #: Combs a full search must find for :func:`rough_lo_hz` to take their median.
 ROUGH_LO_MIN_COMBS = 3
+#: :func:`lo_noise` reports LO noise when the blocks' common residuals exceed the ``1 - LO_NOISE_PFA``
+#: quantile of their chi-square without it: a recording without LO noise is left alone but this often.
+LO_NOISE_PFA = 1e-3
 
 
 @dataclass(frozen=True)
@@ -61,6 +78,9 @@ class LoEstimate:
     source : str
         ``"static fix"`` or ``"identification"`` (a snapshot replay's joint
         least squares of the identified tracks, or when the fix failed).
+    linewidth_hz : float or None
+        The LO's Wiener linewidth the static fix's residuals show
+        (:func:`lo_noise`; 0 when not significant), None without a static fix.
     """
 
     offset_hz: float
@@ -69,9 +89,10 @@ class LoEstimate:
     drift_sigma_hz_per_s: float
     t_ref_utc: np.datetime64
     source: str
+    linewidth_hz: float | None = None
 
 
-def lo_estimate(identification, position=None, measurements=None):
+def lo_estimate(identification, position=None, measurements=None, noise=None):
     """The best estimate of the common receiver offset a replay has, or None.
 
     Parameters
@@ -82,6 +103,8 @@ def lo_estimate(identification, position=None, measurements=None):
         (``clock="common"``) gives the estimate when it solved.
     measurements : Measurements, optional
         The fix's table (its ``epoch_utc`` is the origin of the fix's times).
+    noise : LoNoise, optional
+        The LO noise the fix's residuals showed (:func:`lo_noise`).
 
     Returns
     -------
@@ -93,12 +116,79 @@ def lo_estimate(identification, position=None, measurements=None):
     if poly is not None and len(poly) > 1 and np.all(np.isfinite(poly)) and measurements is not None:
         t_ref = measurements.epoch_utc + np.timedelta64(int(round(fix.rx_t_ref_s * 1e9)), "ns")
         return LoEstimate(float(poly[0]), common_offset_sigma_hz(fix), float(poly[1]), float(np.sqrt(fix.cov[4, 4])),
-                          t_ref, "static fix")
+                          t_ref, "static fix", None if noise is None else noise.linewidth_hz)
     if identification is None or not np.isfinite(identification.lo_offset_hz):
         return None
     ident = identification
     return LoEstimate(ident.lo_offset_hz, ident.lo_offset_sigma_hz, ident.lo_drift_hz_per_s,
                       ident.lo_drift_sigma_hz_per_s, ident.t_ref_utc, "identification")
+
+
+@dataclass(frozen=True)
+class LoNoise:
+    """The receiver LO's short-term frequency noise seen in a static fix's residuals.
+
+    Attributes
+    ----------
+    linewidth_hz : float
+        Wiener (Lorentzian) linewidth beta [Hz]; 0 when the residuals show
+        none significant (:data:`LO_NOISE_PFA`).
+    chi2 : float
+        The blocks' weighted mean residuals squared over their variances
+        without LO noise: chi-square of ``n_blocks`` degrees of freedom
+        when there is none (a little less: the fix absorbs some).
+    n_blocks : int
+        Blocks (instants) with at least one residual.
+    """
+
+    linewidth_hz: float
+    chi2: float
+    n_blocks: int
+
+    def sigma_hz(self, block_s):
+        """Sigma it adds to a block's Doppler [Hz], common to the block's combs, shape of ``block_s``."""
+        return wiener_doppler_sigma_hz(self.linewidth_hz, block_s)
+
+
+def lo_noise(residuals_hz, sigma_hz, block_id, block_s, *, pfa=LO_NOISE_PFA):
+    """The LO linewidth the common part of each block's residuals implies.
+
+    Each block's inverse-variance weighted mean residual ``m`` has variance
+    ``V = 1 / sum(1 / sigma^2)`` from the rows' own noise, plus
+    ``3 beta / (5 pi T)`` from the LO's Wiener phase over the block of
+    length T. When ``sum(m^2 / V)`` exceeds the chi-square's ``1 - pfa``
+    quantile, beta solves ``sum(m^2 / (V + 3 beta / (5 pi T))) = n_blocks``
+    (the moment estimator of a random effect, Paule and Mandel 1982). The
+    fix's states absorb a little of the common part (its clock
+    polynomial wholly), so beta comes out slightly low.
+
+    Parameters
+    ----------
+    residuals_hz, sigma_hz : ndarray, (n,)
+        A static fix's residuals of the rows it used and their sigmas.
+    block_id : ndarray, (n,)
+        The block of each row (its time): rows of one block share the LO's phase.
+    block_s : ndarray, (n,)
+        Length of each row's block [s].
+    pfa : float
+
+    Returns
+    -------
+    LoNoise
+    """
+    _, inv = np.unique(block_id, return_inverse=True)
+    w = 1.0 / np.asarray(sigma_hz, dtype=float) ** 2
+    sw = np.bincount(inv, w)
+    m = np.bincount(inv, w * residuals_hz) / sw
+    v = 1.0 / sw
+    k = wiener_doppler_sigma_hz(1.0, np.bincount(inv, block_s) / np.bincount(inv)) ** 2  # Hz^2 per Hz of beta
+    n = m.size
+    q = float(np.sum(m**2 / v))
+    if n == 0 or q <= chi2_dist.isf(pfa, n):
+        return LoNoise(0.0, q, n)
+    excess = lambda beta: float(np.sum(m**2 / (v + k * beta))) - n  # noqa: E731
+    hi = float(np.max(m**2 / k))  # there every term is below 1
+    return LoNoise(float(brentq(excess, 0.0, hi)), q, n)
 
 
 def common_offset_sigma_hz(fix):

@@ -37,7 +37,7 @@ from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .elements import check_snapshot_age
 from .identify import identify_tracks
-from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, rough_lo_hz
+from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, lo_noise, rough_lo_hz
 from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, narrowed_shift_s, prepared_blocks
 from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
 
@@ -441,6 +441,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         tracker.update(b.t_s - shift_s, b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns"), det,
                        block_s=iq.size / fs)
         block_len[b.t_s - shift_s] = iq.size
+        block_len[b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns")] = iq.size
         if block.spectrum is not None:
             spec_t.append(b.t_s)
             spec.append(block.spectrum)
@@ -471,15 +472,24 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     cpu_s["refit"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     wall_s["refit"] = time.perf_counter() - wall0 - wall_s["blocks"] - wall_s["identify"]
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
-    position = None
+    position = noise = None
     if meas is not None:
         start = getattr(ident, "pos_ecef_m", None)
         start = init_pos_ecef_m if start is None or not np.all(np.isfinite(start)) else start
         if static:
             # One receiver clock (offset and drift) and each satellite's small
             # offset and along-track time offset: the physics of one receiver.
-            position = position_static_passes(meas, meas.sat_id, constellation=constellation,
-                                              init_pos_ecef_m=start, clock="common")
+            fix = lambda m: position_static_passes(m, m.sat_id, constellation=constellation,  # noqa: E731
+                                                   init_pos_ecef_m=start, clock="common")
+            position = fix(meas)
+            # The LO's short-term noise, common to a block's rows, priced into every row (lo.lo_noise).
+            block_s_rows = np.array([block_len[t] for t in meas.time_utc]) / fs
+            used = position.fixes.used
+            noise = lo_noise(position.fixes.residuals_hz[used], meas.sigma_hz[used], meas.time_utc[used],
+                             block_s_rows[used])
+            if noise.linewidth_hz > 0:
+                meas = replace(meas, sigma_hz=np.hypot(meas.sigma_hz, noise.sigma_hz(block_s_rows)))
+                position = fix(meas)
         else:
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
     cpu_s["fix"] = time.process_time() - t0 - sum(cpu_s.values())
@@ -487,4 +497,4 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     f_hz = (np.arange(SPECTRUM_BINS) - SPECTRUM_BINS // 2) * fs / SPECTRUM_BINS
     return ReplayResult(tracks, ident, meas, position, blocks, np.array(spec_t), f_hz,
                         np.array(spec).T if spec else np.zeros((SPECTRUM_BINS, 0)), _pss(rec), cpu_s,
-                        lo_estimate(ident, position if static else None, meas), wall_s)
+                        lo_estimate(ident, position if static else None, meas, noise), wall_s)

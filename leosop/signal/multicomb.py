@@ -100,7 +100,10 @@ class Combs:
     doppler_hz : central-tone Doppler at the block centre [Hz].
     doppler_rate_hz_per_s : its rate [Hz/s].
     cn0_dbhz : mean C/N0 of the tones [dB-Hz].
-    sigma_hz : Cramér-Rao sigma of ``doppler_hz`` from the fitted tone C/N0s [Hz].
+    sigma_hz : Cramér-Rao sigma of ``doppler_hz`` from the fitted tone C/N0s [Hz]. Without the
+        receiver LO's phase noise, which moves every comb of the block alike
+        (:func:`~.frontend.wiener_doppler_sigma_hz`; a replay's static fix
+        estimates it, :func:`leosop.replay.lo.lo_noise`).
     amplitudes : (n_found, n_tones) complex amplitude of each tone at the block
         centre (sample units; ``|a|^2 fs / N0`` is the tone's C/N0).
     statistic : coherent comb power over noise, mean over tones (~1 for noise only).
