@@ -158,7 +158,7 @@ def lo_noise(residuals_hz, sigma_hz, block_id, block_s, *, pfa=LO_NOISE_PFA):
     ``3 beta / (5 pi T)`` from the LO's Wiener phase over the block of
     length T. When ``sum(m^2 / V)`` exceeds the chi-square's ``1 - pfa``
     quantile, beta solves ``sum(m^2 / (V + 3 beta / (5 pi T))) = n_blocks``
-    (the moment estimator of a random effect, Paule and Mandel 1982). The
+    (the moment estimator of a random effect, [Paule 1982]). The
     fix's states absorb a little of the common part (its clock
     polynomial wholly), so beta comes out slightly low.
 
