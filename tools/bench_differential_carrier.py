@@ -149,7 +149,7 @@ def measurement_level(args):
           f"[{lo:.2f}, {hi:.2f}]")
 
 
-def iq_level(seeds):
+def iq_level(seeds, duration_s):
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
@@ -157,10 +157,11 @@ def iq_level(seeds):
             rover = Path(tmp) / "rover.sigmf-meta"
             tic = time.perf_counter()
             subprocess.run([sys.executable, "-m", "leosop", "generate", "-o", str(rover), "--site", site, "--start",
-                            "2025-01-01T19:40:00Z", "--duration-s", "20", "--sample-rate-hz", "1e6", "--seed",
-                            str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300", "--orbit-error-radial-m",
-                            "30", "--orbit-error-cross-m", "100", "--sat-drift-sigma-hz-per-s", "0.01",
-                            "--base-site", base_site, "--out", tmp], check=True, capture_output=True)
+                            "2025-01-01T19:40:00Z", "--duration-s", f"{duration_s:g}", "--sample-rate-hz", "1e6",
+                            "--seed", str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300",
+                            "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
+                            "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
+                           check=True, capture_output=True)
             run = subprocess.run([sys.executable, "-m", "leosop", "replay", str(rover), "--base",
                                   str(Path(tmp) / "rover-base.sigmf-meta"), "--base-site", base_site, "--init", site,
                                   "--static", "--carrier", "--json"], check=True, capture_output=True, text=True)
@@ -187,10 +188,11 @@ def main():
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--tle", type=Path, default=TLE)
     parser.add_argument("--iq-seeds", type=int, nargs="*", default=[], help="also these seeds at IQ level")
+    parser.add_argument("--iq-duration-s", type=float, default=20.0, help="the IQ pair's length (default 20)")
     args = parser.parse_args()
     if args.seeds:
         measurement_level(args)
-    iq_level(args.iq_seeds)
+    iq_level(args.iq_seeds, args.iq_duration_s)
 
 
 if __name__ == "__main__":
