@@ -169,18 +169,19 @@ def iq_level(seeds, duration_s):
             for name, f in (("joint", d), ("SD", d["single_difference"])):
                 fl, fi = (_error_nees(g, truth) for g in (f["float"], f))
                 ratio = "n/a" if f["ratio"] is None else f"{f['ratio']:.2f}"
+                amb = ", ".join(f"{a - round(a):+.3f}+-{s:.3f}" for a, s in zip(f["ambiguity_cycles"],
+                                                                             f["ambiguity_sigma_cycles"]))
                 print(f"IQ seed {seed} {name:5s}: float {fl[0]:.4f} m (NEES {fl[1]:.2f}), final {fi[0]:.4f} m "
                       f"(NEES {fi[1]:.2f}), sigma E/N/U " + "/".join(f"{v:.4f}" for v in f["sigma_enu_m"])
-                      + f" m, ambiguities {f['ambiguities']} ({f['n_fixed']}/{f['n_ambiguities']}, ratio {ratio}), "
+                      + f" m, ambiguities {f['ambiguities']} ({f['n_fixed']}/{f['n_ambiguities']}, ratio {ratio}; "
+                      + f"float - nearest integer: {amb} cycles), "
                       f"chi2/dof {f['chi2'] / f['dof']:.2f}, {f['status']}, {time.perf_counter() - tic:.0f} s")
 
 
 def _error_nees(f, truth):
-    """3-D error [m] and NEES of a JSON position (ECEF and east/north/up sigmas, their correlations unknown: the
-    NEES of the diagonal in ENU)."""
+    """3-D error [m] and NEES of a JSON position (``x_m, y_m, z_m``, ``cov_ecef_m2``)."""
     e = np.array([f["x_m"], f["y_m"], f["z_m"]]) - truth
-    C = C_e_n(np.radians(f["lat_deg"]), np.radians(f["lon_deg"]))
-    return np.linalg.norm(e), float(np.sum((C.T @ e) ** 2 / np.array(f["sigma_enu_m"]) ** 2))
+    return np.linalg.norm(e), float(e @ np.linalg.solve(np.array(f["cov_ecef_m2"]), e))
 
 
 def main():

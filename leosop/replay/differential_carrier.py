@@ -75,17 +75,20 @@ def _position_doc(pos_ecef_m, cov):
     sig = np.sqrt(np.diag(C.T @ cov @ C))
     return {"x_m": float(pos_ecef_m[0]), "y_m": float(pos_ecef_m[1]), "z_m": float(pos_ecef_m[2]),
             "lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)), "alt_m": float(alt),
-            "sigma_enu_m": [float(v) for v in sig]}
+            "sigma_enu_m": [float(v) for v in sig], "cov_ecef_m2": [[float(v) for v in row] for row in cov]}
 
 
 def _fix_doc(fix):
     """A fix's JSON keys: ``status`` ``ok`` when its residuals pass their chi-square test (else
     ``inconsistent``, its sigmas scaled by ``variance_factor``), the position (fixed where ``ambiguities`` says
-    so; ``float`` the float one), sigmas, the integer test's ``ratio`` and counts."""
+    so; ``float`` the float one), sigmas and ECEF covariance, the integer test's ``ratio``, the float
+    double-difference ambiguities and their sigmas, and counts."""
     ok = np.isfinite(fix.chi2_p) and fix.chi2_p >= CHI2_ALPHA
     return {"status": "ok" if ok else "inconsistent", "ambiguities": fix.status,
             **_position_doc(fix.pos_ecef_m, fix.cov), "float": _position_doc(fix.pos_float_ecef_m, fix.cov_float),
-            "ratio": float(fix.ratio) if np.isfinite(fix.ratio) else None, "chi2": fix.chi2, "dof": fix.dof,
+            "ratio": float(fix.ratio) if np.isfinite(fix.ratio) else None,
+            "ambiguity_cycles": [float(v) for v in fix.ambiguity_cycles],
+            "ambiguity_sigma_cycles": [float(v) for v in fix.ambiguity_sigma_cycles], "chi2": fix.chi2, "dof": fix.dof,
             "variance_factor": fix.variance_factor,
             "chi2_p": fix.chi2_p, "n_rows": fix.n_rows, "n_epochs": fix.n_epochs, "n_sats": fix.n_sats,
             "n_ambiguities": fix.n_ambiguities, "n_fixed": fix.n_fixed,
