@@ -52,13 +52,15 @@ chi2/dof 1.11-1.33 (the tracker's phase noise a little above its sigma).
 """
 
 import argparse
-import json
+import contextlib
+import io
 import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: a threaded QR of 3000 x 50 took 20x longer here
 import numpy as np  # noqa: E402
@@ -149,7 +151,10 @@ def measurement_level(args):
           f"[{lo:.2f}, {hi:.2f}]")
 
 
-def iq_level(seeds, duration_s):
+def iq_level(seeds, duration_s, spans_s):
+    """Per seed, generate the pair, replay it (in this process) and print the fixes of its first ``spans_s``."""
+    from leosop.cli import main as leosop_main
+
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
@@ -162,26 +167,56 @@ def iq_level(seeds, duration_s):
                             "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
                             "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
                            check=True, capture_output=True)
-            run = subprocess.run([sys.executable, "-m", "leosop", "replay", str(rover), "--base",
-                                  str(Path(tmp) / "rover-base.sigmf-meta"), "--base-site", base_site, "--init", site,
-                                  "--static", "--carrier", "--json"], check=True, capture_output=True, text=True)
-            d = json.loads(run.stdout)["differential_carrier"]
-            for name, f in (("joint", d), ("SD", d["single_difference"])):
-                fl, fi = (_error_nees(g, truth) for g in (f["float"], f))
-                ratio = "n/a" if f["ratio"] is None else f"{f['ratio']:.2f}"
-                amb = ", ".join(f"{a - round(a):+.3f}+-{s:.3f}" for a, s in zip(f["ambiguity_cycles"],
-                                                                             f["ambiguity_sigma_cycles"]))
-                print(f"IQ seed {seed} {name:5s}: float {fl[0]:.4f} m (NEES {fl[1]:.2f}), final {fi[0]:.4f} m "
-                      f"(NEES {fi[1]:.2f}), sigma E/N/U " + "/".join(f"{v:.4f}" for v in f["sigma_enu_m"])
-                      + f" m, ambiguities {f['ambiguities']} ({f['n_fixed']}/{f['n_ambiguities']}, ratio {ratio}; "
-                      + f"float - nearest integer: {amb} cycles), "
-                      f"chi2/dof {f['chi2'] / f['dof']:.2f}, {f['status']}, {time.perf_counter() - tic:.0f} s")
+            pairs = []
+            with _spans_fixed(spans_s, pairs), contextlib.redirect_stdout(io.StringIO()):
+                code = leosop_main(["replay", str(rover), "--base", str(Path(tmp) / "rover-base.sigmf-meta"),
+                                    "--base-site", base_site, "--init", site, "--static", "--carrier", "--json"])
+            if code:
+                raise SystemExit(f"replay of seed {seed} failed")
+            for span, pair in pairs:
+                for name, f in (("joint", pair.joint), ("SD", pair.single_difference)):
+                    fl, fi = (_error_nees(pos, cov, truth) for pos, cov in ((f.pos_float_ecef_m, f.cov_float),
+                                                                           (f.pos_ecef_m, f.cov)))
+                    amb = ", ".join(f"{a - np.round(a):+.3f}+-{s:.3f}" for a, s in zip(f.ambiguity_cycles,
+                                                                                   f.ambiguity_sigma_cycles))
+                    print(f"IQ seed {seed} {span:3g} s {name:5s}: float {fl[0]:.4f} m (NEES {fl[1]:.2f}), final "
+                          f"{fi[0]:.4f} m (NEES {fi[1]:.2f}), {f.status} {f.n_fixed}/{f.n_ambiguities} ratio "
+                          f"{f.ratio:.2f}; float ambiguities less the nearest integer {amb} cycles; chi2/dof "
+                          f"{f.chi2 / f.dof:.2f}; {time.perf_counter() - tic:.0f} s")
 
 
-def _error_nees(f, truth):
-    """3-D error [m] and NEES of a JSON position (``x_m, y_m, z_m``, ``cov_ecef_m2``)."""
-    e = np.array([f["x_m"], f["y_m"], f["z_m"]]) - truth
-    return np.linalg.norm(e), float(e @ np.linalg.solve(np.array(f["cov_ecef_m2"]), e))
+@contextlib.contextmanager
+def _spans_fixed(spans_s, out):
+    """Replay's differential carrier fix also made of each pair's first ``spans_s`` seconds: (span, CarrierPair)
+    appended to ``out`` (the last the whole pair's, which replay reports)."""
+    import leosop.replay.differential_carrier as dc
+
+    original = dc.differential_carrier_fix
+
+    def first(rc, span_s):
+        keep = seconds_since(rc.time_utc, rc.time_utc[0]) < span_s - 1e-6
+        tracks = SimpleNamespace(**{k: getattr(rc.tracks, k)[:, keep] for k in ("phase_cycles", "phase_sigma_cycles",
+                                                                                "arc")})
+        return SimpleNamespace(sat_id=rc.sat_id, time_utc=rc.time_utc[keep], tracks=tracks)
+
+    def fix(rover, base, *args, **kwargs):
+        span = seconds_since(rover.time_utc[-1], rover.time_utc[0])
+        for s in sorted(v for v in spans_s if v < span):
+            out.append((s, original(first(rover, s), first(base, s), *args, **kwargs)))
+        out.append((round(float(span)), original(rover, base, *args, **kwargs)))
+        return out[-1][1]
+
+    dc.differential_carrier_fix = fix
+    try:
+        yield
+    finally:
+        dc.differential_carrier_fix = original
+
+
+def _error_nees(pos_ecef_m, cov, truth):
+    """3-D error [m] and NEES of a position and its covariance."""
+    e = pos_ecef_m - truth
+    return np.linalg.norm(e), float(e @ np.linalg.solve(cov, e))
 
 
 def main():
@@ -190,10 +225,12 @@ def main():
     parser.add_argument("--tle", type=Path, default=TLE)
     parser.add_argument("--iq-seeds", type=int, nargs="*", default=[], help="also these seeds at IQ level")
     parser.add_argument("--iq-duration-s", type=float, default=20.0, help="the IQ pair's length (default 20)")
+    parser.add_argument("--iq-spans-s", type=float, nargs="*", default=[],
+                        help="also fix from the pair's first S seconds (e.g. 20 40 with --iq-duration-s 60)")
     args = parser.parse_args()
     if args.seeds:
         measurement_level(args)
-    iq_level(args.iq_seeds, args.iq_duration_s)
+    iq_level(args.iq_seeds, args.iq_duration_s, args.iq_spans_s)
 
 
 if __name__ == "__main__":
