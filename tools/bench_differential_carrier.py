@@ -21,12 +21,14 @@ bootstrapped success rate of 0.999). Prints per case the median and RMS
 3-D error, median 3-D sigma and mean NEES of the float and of the final
 (fixed where fixed) fix, and how many seeds fixed all / some ambiguities.
 
-IQ level (``--iq-seeds``): ``leosop generate`` of a 20 s continuous pair at
-1 MS/s (four satellites, the replay docs' example, the same error models,
-base 7.5 km north-east) and ``leosop replay --base ... --carrier --static``:
-the JSON's joint and single-difference fixes against the truth. The
-replay's ambiguities stay float (the tracker's phases start from each
-satellite's first block). About 3.5 minutes per seed.
+IQ level (``--iq-seeds``): ``leosop generate`` of a continuous pair at 1 MS/s
+(``--iq-duration-s``, default 20 s; four satellites, the replay docs'
+example, the same error models, base 7.5 km north-east) and ``leosop
+replay --base ... --carrier --static`` in this process: the joint and
+single-difference fixes (float and final, integers tried) against the truth,
+with NEES, the ratio and the float double-difference ambiguities less their
+nearest integers; ``--iq-spans-s`` also fixes from the pair's first seconds.
+3-7 minutes per seed.
 
 Measured (20 seeds, 7 satellites, 7.5 km unless said; median 3-D error of
 the final fix, mean NEES float / final; 95 % interval [2.02, 4.16]):
@@ -46,19 +48,26 @@ No 20 s case fixes its integers (the success-rate bound; the ratio test
 alone passed wrong integers on 60 s of SD at 0.01 cycles: NEES 48). About
 0.03-0.2 s per fix (OPENBLAS_NUM_THREADS=1).
 
-IQ (4 satellites, 20 s, 7.5 km; seeds 5 / 6 / 7): joint 0.124 / 0.125 /
-0.021 m at sigma up ~0.2 m, single differences 0.91 / 0.58 / 0.28 m;
-chi2/dof 1.11-1.33 (the tracker's phase noise a little above its sigma).
+IQ (4 satellites, 7.5 km; seeds 5 / 6 / 7): 20 s joint 0.196 / 0.112 /
+0.049 m at sigma up ~0.2 m, single differences 0.71 / 0.54 / 0.27 m;
+chi2/dof 1.06-1.18; no integers (DD sigmas 1.3-8 cycles). 60 s (``--iq-duration-s
+60 --iq-spans-s 20 30 40``): the joint fit fixes all three double
+differences on every seed (ratio 466-1086), 9.8 / 9.4 / 1.5 mm float to
+2.5 / 2.3 / 4.3 mm fixed, NEES 1.19 / 1.98 / 6.70; none at 40 s (DD sigmas
+0.16-0.78 cycles); the single differences fix none in 60 s; chi2/dof 1.5-2.0
+over 40-60 s.
 """
 
 import argparse
-import json
+import contextlib
+import io
 import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: a threaded QR of 3000 x 50 took 20x longer here
 import numpy as np  # noqa: E402
@@ -149,7 +158,10 @@ def measurement_level(args):
           f"[{lo:.2f}, {hi:.2f}]")
 
 
-def iq_level(seeds):
+def iq_level(seeds, duration_s, spans_s):
+    """Per seed, generate the pair, replay it (in this process) and print the fixes of its first ``spans_s``."""
+    from leosop.cli import main as leosop_main
+
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
@@ -157,19 +169,61 @@ def iq_level(seeds):
             rover = Path(tmp) / "rover.sigmf-meta"
             tic = time.perf_counter()
             subprocess.run([sys.executable, "-m", "leosop", "generate", "-o", str(rover), "--site", site, "--start",
-                            "2025-01-01T19:40:00Z", "--duration-s", "20", "--sample-rate-hz", "1e6", "--seed",
-                            str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300", "--orbit-error-radial-m",
-                            "30", "--orbit-error-cross-m", "100", "--sat-drift-sigma-hz-per-s", "0.01",
-                            "--base-site", base_site, "--out", tmp], check=True, capture_output=True)
-            run = subprocess.run([sys.executable, "-m", "leosop", "replay", str(rover), "--base",
-                                  str(Path(tmp) / "rover-base.sigmf-meta"), "--base-site", base_site, "--init", site,
-                                  "--static", "--carrier", "--json"], check=True, capture_output=True, text=True)
-            d = json.loads(run.stdout)["differential_carrier"]
-            for name, f in (("joint", d), ("SD", d["single_difference"])):
-                e = np.array([f["x_m"], f["y_m"], f["z_m"]]) - truth
-                print(f"IQ seed {seed} {name:5s}: 3-D error {np.linalg.norm(e):.3f} m, sigma E/N/U "
-                      + "/".join(f"{v:.3f}" for v in f["sigma_enu_m"])
-                      + f" m, chi2/dof {f['chi2'] / f['dof']:.2f}, {f['status']}, {time.perf_counter() - tic:.0f} s")
+                            "2025-01-01T19:40:00Z", "--duration-s", f"{duration_s:g}", "--sample-rate-hz", "1e6",
+                            "--seed", str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300",
+                            "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
+                            "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
+                           check=True, capture_output=True)
+            pairs = []
+            with _spans_fixed(spans_s, pairs), contextlib.redirect_stdout(io.StringIO()):
+                code = leosop_main(["replay", str(rover), "--base", str(Path(tmp) / "rover-base.sigmf-meta"),
+                                    "--base-site", base_site, "--init", site, "--static", "--carrier", "--json"])
+            if code:
+                raise SystemExit(f"replay of seed {seed} failed")
+            for span, pair in pairs:
+                for name, f in (("joint", pair.joint), ("SD", pair.single_difference)):
+                    fl, fi = (_error_nees(pos, cov, truth) for pos, cov in ((f.pos_float_ecef_m, f.cov_float),
+                                                                           (f.pos_ecef_m, f.cov)))
+                    amb = ", ".join(f"{a - np.round(a):+.3f}+-{s:.3f}" for a, s in zip(f.ambiguity_cycles,
+                                                                                   f.ambiguity_sigma_cycles))
+                    print(f"IQ seed {seed} {span:3g} s {name:5s}: float {fl[0]:.4f} m (NEES {fl[1]:.2f}), final "
+                          f"{fi[0]:.4f} m (NEES {fi[1]:.2f}), {f.status} {f.n_fixed}/{f.n_ambiguities} ratio "
+                          f"{f.ratio:.2f}; float ambiguities less the nearest integer {amb} cycles; chi2/dof "
+                          f"{f.chi2 / f.dof:.2f}; {time.perf_counter() - tic:.0f} s")
+
+
+@contextlib.contextmanager
+def _spans_fixed(spans_s, out):
+    """Replay's differential carrier fix also made of each pair's first ``spans_s`` seconds: (span, CarrierPair)
+    appended to ``out`` (the last the whole pair's, which replay reports)."""
+    import leosop.replay.differential_carrier as dc
+
+    original = dc.differential_carrier_fix
+
+    def first(rc, span_s):
+        keep = seconds_since(rc.time_utc, rc.time_utc[0]) < span_s - 1e-6
+        tracks = SimpleNamespace(**{k: getattr(rc.tracks, k)[:, keep] for k in ("phase_cycles", "phase_sigma_cycles",
+                                                                                "arc")})
+        return SimpleNamespace(sat_id=rc.sat_id, time_utc=rc.time_utc[keep], tracks=tracks)
+
+    def fix(rover, base, *args, **kwargs):
+        span = seconds_since(rover.time_utc[-1], rover.time_utc[0])
+        for s in sorted(v for v in spans_s if v < span):
+            out.append((s, original(first(rover, s), first(base, s), *args, **kwargs)))
+        out.append((round(float(span)), original(rover, base, *args, **kwargs)))
+        return out[-1][1]
+
+    dc.differential_carrier_fix = fix
+    try:
+        yield
+    finally:
+        dc.differential_carrier_fix = original
+
+
+def _error_nees(pos_ecef_m, cov, truth):
+    """3-D error [m] and NEES of a position and its covariance."""
+    e = pos_ecef_m - truth
+    return np.linalg.norm(e), float(e @ np.linalg.solve(cov, e))
 
 
 def main():
@@ -177,10 +231,13 @@ def main():
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--tle", type=Path, default=TLE)
     parser.add_argument("--iq-seeds", type=int, nargs="*", default=[], help="also these seeds at IQ level")
+    parser.add_argument("--iq-duration-s", type=float, default=20.0, help="the IQ pair's length (default 20)")
+    parser.add_argument("--iq-spans-s", type=float, nargs="*", default=[],
+                        help="also fix from the pair's first S seconds (e.g. 20 40 with --iq-duration-s 60)")
     args = parser.parse_args()
     if args.seeds:
         measurement_level(args)
-    iq_level(args.iq_seeds)
+    iq_level(args.iq_seeds, args.iq_duration_s, args.iq_spans_s)
 
 
 if __name__ == "__main__":

@@ -29,9 +29,13 @@ into the SigMF annotations, the per-satellite draws into ``leosop:satellites``.
 ``--base-site`` writes a second recording (``--base-output``) at a base
 station, static at that site, for differential replay (issue 23): the same
 satellites with the same satellite errors (orbit error, oscillator offset
-and ``--sat-drift-sigma-hz-per-s`` drift), its own receiver clock, noise,
-carrier phases, geometric C/N0 (``--base-cn0-dbhz``) and capture times
-(``--base-offset-s`` after the rover's). A site option beside ``--site``
+and ``--sat-drift-sigma-hz-per-s`` drift) and the same transmitted carrier
+phases, its own receiver clock, LO phase (``leosop:lo_phase_rad``), noise,
+geometric C/N0 (``--base-cn0-dbhz``) and capture times (``--base-offset-s``
+after the rover's). Each satellite's phases are those of one transmitter
+seen at two ranges (``range_ref_m``: the rover's at its first sample, the
+nominal tone phases' range), so the double differences of the central
+tone's phase between the receivers are their ranges' in cycles. A site option beside ``--site``
 fits the command's one-receiver options best: every other setting (band,
 snapshots, front end, sample format) is the pair's. The base's draws come
 from their own stream of the seed, so the rover's recording is the one the
@@ -390,12 +394,14 @@ def _recordings(args, s):
     if s.sat_drift_sigma > 0:  # drawn only when asked, so that recordings without it keep their noise
         sats = replace(sats, drift_hz_per_s=rng.normal(0.0, s.sat_drift_sigma, len(const)))
     plan = (s.file_starts, s.signal_starts, s.lengths, s.n_step)
+    # ``phase``: each satellite's transmitted carrier phase, as the rover sees it at its first sample (its LO
+    # phase zero, its range there the reference of every receiver's geometric phase)
     recs = [site_recording(args, const, sats, plan, site=(lat, lon, alt), vel_enu=s.vel_enu, start=start,
                            t0_s=0.0, rx=(rx_offset, rx_drift, fe, datatype), cn0_dbhz=args.cn0_dbhz,
                            phase_rad=phase, rng=rng, n=n, fs=fs, comb=s.comb, frame_jumps=s.frame_jumps)]
     if s.base is None:
         return recs, None
-    brng = np.random.default_rng([args.seed, 1])  # the base's own stream: its clock, phases, noise
+    brng = np.random.default_rng([args.seed, 1])  # the base's own stream: its clock, LO phase, noise
     b_offset, b_drift, b_fe, _ = _front_end(args)
     b_offset = (rx_offset + brng.uniform(-_BASE_OFFSET_SPREAD_HZ, _BASE_OFFSET_SPREAD_HZ)
                 if args.base_rx_offset_hz is None else args.base_rx_offset_hz)
@@ -405,8 +411,9 @@ def _recordings(args, s):
     recs.append(site_recording(args, const, sats, plan, site=s.base, vel_enu=np.zeros(3), start=b_start,
                                t0_s=s.base_offset_s, rx=(b_offset, b_drift, b_fe, datatype),
                                cn0_dbhz=args.cn0_dbhz if args.base_cn0_dbhz is None else [args.base_cn0_dbhz],
-                               phase_rad=brng.uniform(0.0, 2.0 * np.pi, len(const)), rng=brng, n=n, fs=fs,
-                               comb=s.comb, frame_jumps=s.frame_jumps, what="base"))
+                               phase_rad=phase, lo_phase_rad=brng.uniform(0.0, 2.0 * np.pi), rng=brng, n=n,
+                               fs=fs, comb=s.comb, frame_jumps=s.frame_jumps, range_ref_m=recs[0].channel.range_ref_m,
+                               what="base"))
     return recs, b_start
 
 
@@ -437,7 +444,7 @@ def _document(args, s, recs, b_start):
         doc["base"] = {"meta": str(s.base_out), "data": str(s.base_out.with_suffix(".sigmf-data")),
                        "site": list(s.base), "start_utc": format_utc(b_start), "offset_s": s.base_offset_s,
                        "rx_offset_hz": float(b.rx[0]), "rx_drift_hz_per_s": float(b.rx[1]),
-                       "satellites": b.satellites}
+                       "lo_phase_rad": b.extra["leosop:lo_phase_rad"], "satellites": b.satellites}
     return doc
 
 

@@ -51,19 +51,29 @@ class SiteRecording:
 
 
 def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, cn0_dbhz, phase_rad, rng, n, fs,
-                    comb, frame_jumps=None, what="rover"):
+                    comb, frame_jumps=None, lo_phase_rad=0.0, range_ref_m=None, what="rover"):
     """One receiver's recording of the shared satellites.
 
     ``start`` is its first sample, ``t0_s`` seconds after the satellite
     errors' reference (the rover's first sample): a drifting satellite
     oscillator is further off by then. ``plan`` is ``(file_starts,
     signal_starts, lengths, n_step)`` of :func:`_captures` and the truth blocks.
+    ``phase_rad`` (n_sats,) is each satellite's transmitted central-tone
+    phase at the reference's first sample, the same for every receiver;
+    ``lo_phase_rad`` this receiver's LO phase, common to its satellites;
+    ``range_ref_m`` (n_sats,) the range of the nominal tone phases
+    (:class:`~leosop.signal.channel.SiteChannel`; None: this receiver's at
+    its first sample). The satellites' oscillators have run on by ``t0_s``:
+    their phase then is added, so that the phase difference between two
+    receivers at one instant holds no satellite clock.
     """
     file_starts, signal_starts, lengths, n_step = plan
     lat, lon, alt = site
     rx_offset, rx_drift, fe, _ = rx
     pos_rx = geodetic_to_ecef(np.radians(lat), np.radians(lon), alt)
     clock = sats.offset_hz + sats.drift_hz_per_s * t0_s + rx_offset
+    sat_cycles = sats.offset_hz * t0_s + 0.5 * sats.drift_hz_per_s * t0_s**2   # the oscillators' phase at t0_s
+    carrier_phase = phase_rad + lo_phase_rad + 2.0 * np.pi * (sat_cycles - np.round(sat_cycles))
     vel_rx = C_e_n(np.radians(lat), np.radians(lon)) @ vel_enu
     t_nodes, range_m, elev = site_geometry(const, pos_rx, start, n / fs, orbit_error=sats.orbit_error,
                                            vel_rx_ecef_mps=vel_rx)
@@ -72,9 +82,9 @@ def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, c
     if np.isfinite(range_m).all() and not np.isfinite(cn0_nodes).any():  # (SGP4 failures: SiteChannel)
         raise InputError(f"--sat {' '.join(const.sat_ids)}: no satellite is above the horizon at {lat:g},{lon:g} "
                          f"({what}) during the recording from {format_utc(start)}")
-    channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb, phase_rad=phase_rad,
+    channel = SiteChannel(t_nodes, range_m, fs, cn0_nodes, clock, comb=comb, phase_rad=carrier_phase,
                           waveform=args.waveform, rx_drift_hz_per_s=rx_drift, sat_drift_hz_per_s=sats.drift_hz_per_s,
-                          frame_jumps=frame_jumps)
+                          frame_jumps=frame_jumps, range_ref_m=range_ref_m)
     blocks = _truth_blocks(file_starts, signal_starts, lengths, n_step, fs)
     t_c = (blocks[:, 1] + 0.5 * (blocks[:, 2] - 1)) / fs
     dop, rate, cn0 = channel.doppler_hz(t_c), channel.doppler_rate_hz_per_s(t_c), channel.cn0_at(t_c)
@@ -93,7 +103,8 @@ def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, c
          "sat_drift_hz_per_s": float(sats.drift_hz_per_s[i]), "cn0_dbhz": _num(cn0_start[i]),
          "orbit_error_along_s": float(err.along_s[i]),
          "orbit_error_along_m": float(err.along_s[i] * speed[i]),
-         "orbit_error_radial_m": float(err.radial_m[i]), "orbit_error_cross_m": float(err.cross_m[i])}
+         "orbit_error_radial_m": float(err.radial_m[i]), "orbit_error_cross_m": float(err.cross_m[i]),
+         "tx_phase_rad": float(phase_rad[i]), "range_ref_m": float(channel.range_ref_m[i])}
         for i, sid in enumerate(const.sat_ids)
     ]
     if frame_jumps is not None:
@@ -118,7 +129,7 @@ def site_recording(args, const, sats, plan, *, site, vel_enu, start, t0_s, rx, c
              "core:geolocation": {"type": "Point", "coordinates": [lon, lat, alt]},
              "leosop:vel_enu_mps": [float(v) for v in vel_enu],
              "leosop:rx_offset_hz": float(rx_offset),
-             "leosop:rx_drift_hz_per_s": float(rx_drift)}
+             "leosop:rx_drift_hz_per_s": float(rx_drift), "leosop:lo_phase_rad": float(lo_phase_rad)}
     if fe.active:
         extra["leosop:front_end"] = dict(fe.metadata(), preset=args.front_end, full_scale=full_scale)
     return SiteRecording(channel, rx, rng, annotations, satellites, extra, full_scale, cap_times)

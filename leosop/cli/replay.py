@@ -423,7 +423,7 @@ def summary(doc):
         lines.append(f"differential carrier phase ({d['model']} fit, {d['n_sats']} satellites, {d['n_epochs']} "
                      f"blocks): {d['lat_deg']:.7f} {d['lon_deg']:.7f} {d['alt_m']:.2f} m  sigma E/N/U "
                      + "/".join(f"{v:.2f}" for v in d["sigma_enu_m"]) + f" m  {d['status']}, ambiguities "
-                     f"{d['ambiguities']}")
+                     f"{d['ambiguities']}" + ("" if d["ratio"] is None else f" (ratio {d['ratio']:.1f})"))
     for c in doc.get("carrier", {}).get("satellites", []):
         rms = "n/a" if c["phase_rate_vs_block_rms_hz"] is None else f"{c['phase_rate_vs_block_rms_hz']:.3f} Hz"
         lines.append(f"carrier {c['sat_id']}: {c['arcs']} arc(s), {c['slips']} slip(s), locked "

@@ -46,10 +46,10 @@ bootstrapped success rate of [Teunissen 1998], partial fixing) and the
 position is conditioned on the accepted integers.
 The double differences are integers only when each receiver's phase is the
 received carrier phase up to whole cycles and a clock common to its
-satellites; a tracker whose phase starts from an arbitrary offset per
-satellite (:func:`~leosop.replay.carrier.track_carrier` references each
-satellite to its first block) gives real-valued ones: the fix is then
-float, and says so.
+satellites (:func:`~leosop.replay.carrier.track_carrier` refers its phase
+to the received central tone for this); a tracker whose phase starts from an
+arbitrary offset per satellite gives real-valued ones, which the ratio test
+and the success-rate bound should refuse.
 
 The base's phase must be on the rover's epochs (the same block plan):
 interpolating a phase between blocks correlates the rows across epochs,

@@ -24,6 +24,26 @@ a phase jump the prediction cannot explain). The whole cycles are continuous
 within an ``arc``; a slip, or a prediction whose phase sigma exceeds
 :data:`ARC_SIGMA_CYCLES` (a long loss of lock), starts a new one.
 
+The phase is the received central tone's, not the template's: tone k of a
+comb arrives with the phase of its transmitter, common to every receiver,
+plus ``-(f_c + k spacing) range / c``: its own delay. Against the template
+the phase error is relative, so the template's central-tone phase is added
+back: block by block the central tone's sum, turned back by the block's
+phase error, ``Y_0 exp(-j 2 pi z)``, has the template's central-tone phase
+(the template's noise cancels: it is in ``z`` too); summed coherently over
+every locked block of the satellite, its angle is the constant that turns
+the accumulated phase into the received central-tone phase up to whole
+cycles (and the transmitted central tone's phase, common to all receivers),
+with the sigma of the whole recording's central-tone SNR
+(``phase_ref_sigma_cycles``, 2e-3 cycles for 1 s at 35 dB-Hz). The
+central tone is the reference because its phase holds no tone-spacing term:
+the other tones' ``k spacing range / c`` differ between receivers by
+kilometres of range over the 6.8 km wavelength of the spacing. Between two
+receivers of the same satellites the phase difference is then the range
+difference in cycles plus a clock phase per receiver and whole cycles: the
+double differences are integers plus geometry (integer ambiguity fixing,
+:mod:`leosop.positioning.differential_carrier`).
+
 What cannot be tracked across snapshot gaps: a snapshot recording (20 ms
 every second, DESIGN 4.2) gives no accumulated phase. Over a gap of a second
 the prediction of a 3-state model carries the Doppler's unmodelled second
@@ -73,11 +93,17 @@ class CarrierTracks:
         Accumulated central-tone carrier phase, the integral of ``doppler_hz``:
         the filter's prediction plus the block's phase error, the receiver's
         NCO phase plus its discriminator (NaN where not locked). Continuous
-        within an arc; its offset is arbitrary per arc.
+        within an arc; its fraction is the received central tone's phase less
+        the transmitted one (the module's note), its whole cycles arbitrary per arc.
     phase_sigma_cycles : ndarray
         Its sigma, ``1 / (2 pi sqrt(2 snr))``: the block's own noise,
         independent from block to block (the prediction carries no error
         into it while the phase error stays well within half a cycle).
+    phase_ref_sigma_cycles : ndarray
+        Sigma of the constant that refers the phase to the central tone (the
+        same in every block of a satellite; NaN where not locked): an error
+        common to the satellite's blocks, which a float ambiguity absorbs
+        and an integer one must stay well below.
     doppler_hz, doppler_sigma_hz, doppler_rate_hz_per_s : ndarray
         The filter's frequency state (DESIGN 4.2 sign, clocks included), its sigma, its rate.
     snr : ndarray
@@ -91,6 +117,7 @@ class CarrierTracks:
     t_s: np.ndarray
     phase_cycles: np.ndarray
     phase_sigma_cycles: np.ndarray
+    phase_ref_sigma_cycles: np.ndarray
     doppler_hz: np.ndarray
     doppler_sigma_hz: np.ndarray
     doppler_rate_hz_per_s: np.ndarray
@@ -169,6 +196,8 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
     P[:, 2, 2] = rate0_sigma_hz_per_s**2
     template = np.full((n_sats, comb.n_tones), np.nan + 0j)
     arc = np.full(n_sats, -1)
+    central = np.zeros(n_sats, dtype=complex)     # sum of Y_0 exp(-j 2 pi z): the template's central-tone phase
+    central_noise = np.zeros(n_sats)              # the noise power of that sum
     template_threshold = gamma.isf(_TEMPLATE_PFA, comb.n_tones)
     rows = []
     t_prev = None
@@ -195,14 +224,22 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
         restart = lock & ((arc < 0) | (P[:, 0, 0] > ARC_SIGMA_CYCLES**2) | (nis > SLIP_NIS))
         slip = restart & (arc >= 0) & (nis > SLIP_NIS)
         phase = np.where(lock, x[:, 0] + z, np.nan)
+        central += np.where(lock, Y[:, comb.n_tones // 2] * np.exp(-2j * np.pi * z), 0.0)
+        central_noise += np.where(lock, noise, 0.0)
         x, P = _update(x, P, np.where(lock, z, 0.0), np.where(lock, r, np.inf), restart)
         arc = np.where(restart, arc + 1, arc)
         rows.append((t_c, phase, np.where(lock, np.sqrt(r), np.nan), x[:, 1].copy(), np.sqrt(P[:, 1, 1]),
                      x[:, 2].copy(), snr, lock, slip, arc.copy()))
     if not rows:
         raise InputError("no blocks to track")
-    cols = list(zip(*rows))
-    return CarrierTracks(np.array(cols[0]), *(np.stack(c, axis=1) for c in cols[1:]))
+    cols = [np.array(c) if k == 0 else np.stack(c, axis=1) for k, c in enumerate(zip(*rows))]
+    lock = cols[7]
+    # the central tone's coherent sum over the locked blocks: its angle and its SNR |sum|^2 / sum of noise powers
+    ref_cycles = np.angle(central) / (2 * np.pi)
+    ref_snr = np.abs(central) ** 2 / np.where(central_noise > 0, central_noise, np.inf)
+    ref_sigma = 1.0 / (2 * np.pi * np.sqrt(2.0 * ref_snr))
+    cols[1] = cols[1] + ref_cycles[:, None]
+    return CarrierTracks(cols[0], cols[1], cols[2], np.where(lock, ref_sigma[:, None], np.nan), *cols[3:])
 
 
 def _noise(iq, Y):

@@ -12,10 +12,11 @@ site and from the rover's first guess).
 Two fixes: the joint fit (each receiver's own phase, each satellite's
 frequency a line: the base at its known site sees the element-set offsets'
 whole range), which is the one reported, and the single differences (no
-assumption on the satellites' oscillators) beside it. The ambiguities stay
-float: the tracker references each satellite's phase to its own first block
-(:mod:`leosop.replay.carrier`), so the double differences carry a fraction
-of a cycle of their own and are no integers.
+assumption on the satellites' oscillators) beside it. Each tries integer
+ambiguities: the tracker's phase is the received central tone's up to whole
+cycles (:mod:`leosop.replay.carrier`), so the double differences are
+integers plus geometry; LAMBDA fixes those that pass its ratio test and
+success-rate bound, and the float fix stays beside the final one.
 """
 
 from dataclasses import dataclass
@@ -25,7 +26,7 @@ import numpy as np
 from ..errors import InputError
 from ..frames import C_e_n, ecef_to_geodetic
 from ..positioning.differential_base import TIME_TOL_S
-from ..positioning.differential_carrier import CHI2_ALPHA, solve_differential_carrier
+from ..positioning.differential_carrier import CHI2_ALPHA, RATIO_MIN, SUCCESS_MIN, solve_differential_carrier
 from ..positioning.measurements import sv_states_from_tle
 from ..timebase import format_utc, seconds_since
 
@@ -34,9 +35,9 @@ __all__ = ["INTEGER_NOTE", "SAT_CLOCK_DEGREE", "CarrierPair", "differential_carr
 #: Degree of each satellite's frequency polynomial in the joint fit (offset and drift, as
 #: :mod:`~leosop.positioning.differential_sim` and ``leosop generate`` model the oscillators).
 SAT_CLOCK_DEGREE = 1
-#: Why the replay's ambiguities stay float (the JSON says it).
-INTEGER_NOTE = ("float ambiguities: the carrier tracker references each satellite's phase to its own first block, "
-                "so the double differences are not whole cycles")
+#: How the replay's ambiguities are fixed (the JSON says it).
+INTEGER_NOTE = (f"integer ambiguities by LAMBDA where the ratio test ({RATIO_MIN:g}) and the bootstrapped success rate "
+                f"({SUCCESS_MIN:g}) pass; 'ambiguities' says fixed, partial or float, 'float' holds the float fix")
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,17 +68,27 @@ class CarrierPair:
                 "single_difference": _fix_doc(self.single_difference)}
 
 
+def _position_doc(pos_ecef_m, cov):
+    """A position's JSON keys: ECEF, geodetic and the sigmas in east / north / up."""
+    lat, lon, alt = ecef_to_geodetic(pos_ecef_m)
+    C = C_e_n(lat, lon)
+    sig = np.sqrt(np.diag(C.T @ cov @ C))
+    return {"x_m": float(pos_ecef_m[0]), "y_m": float(pos_ecef_m[1]), "z_m": float(pos_ecef_m[2]),
+            "lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)), "alt_m": float(alt),
+            "sigma_enu_m": [float(v) for v in sig], "cov_ecef_m2": [[float(v) for v in row] for row in cov]}
+
+
 def _fix_doc(fix):
     """A fix's JSON keys: ``status`` ``ok`` when its residuals pass their chi-square test (else
-    ``inconsistent``, its sigmas scaled by ``variance_factor``), the position, sigmas and counts."""
-    lat, lon, alt = ecef_to_geodetic(fix.pos_ecef_m)
-    C = C_e_n(lat, lon)
-    sig = np.sqrt(np.diag(C.T @ fix.cov @ C))
+    ``inconsistent``, its sigmas scaled by ``variance_factor``), the position (fixed where ``ambiguities`` says
+    so; ``float`` the float one), sigmas and ECEF covariance, the integer test's ``ratio``, the float
+    double-difference ambiguities and their sigmas, and counts."""
     ok = np.isfinite(fix.chi2_p) and fix.chi2_p >= CHI2_ALPHA
     return {"status": "ok" if ok else "inconsistent", "ambiguities": fix.status,
-            "x_m": float(fix.pos_ecef_m[0]), "y_m": float(fix.pos_ecef_m[1]), "z_m": float(fix.pos_ecef_m[2]),
-            "lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)), "alt_m": float(alt),
-            "sigma_enu_m": [float(v) for v in sig], "chi2": fix.chi2, "dof": fix.dof,
+            **_position_doc(fix.pos_ecef_m, fix.cov), "float": _position_doc(fix.pos_float_ecef_m, fix.cov_float),
+            "ratio": float(fix.ratio) if np.isfinite(fix.ratio) else None,
+            "ambiguity_cycles": [float(v) for v in fix.ambiguity_cycles],
+            "ambiguity_sigma_cycles": [float(v) for v in fix.ambiguity_sigma_cycles], "chi2": fix.chi2, "dof": fix.dof,
             "variance_factor": fix.variance_factor,
             "chi2_p": fix.chi2_p, "n_rows": fix.n_rows, "n_epochs": fix.n_epochs, "n_sats": fix.n_sats,
             "n_ambiguities": fix.n_ambiguities, "n_fixed": fix.n_fixed,
@@ -131,6 +142,6 @@ def differential_carrier_fix(rover, base, constellation, base_pos_ecef_m, pos0_e
     phases = [getattr(tracks, name)[at] for tracks, at in (r, b)
               for name in ("phase_cycles", "phase_sigma_cycles", "arc")]
     args = (t_s[k_r], *phases, p_r.reshape(shape), p_b.reshape(shape), v_b.reshape(shape), base_pos_ecef_m, pos0)
-    fixes = [solve_differential_carrier(*args, carrier_hz=carrier_hz, sat_clock_degree=deg, integer=False)
+    fixes = [solve_differential_carrier(*args, carrier_hz=carrier_hz, sat_clock_degree=deg)
              for deg in (SAT_CLOCK_DEGREE, None)]
     return CarrierPair(tuple(common), time_utc, *fixes)

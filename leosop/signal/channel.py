@@ -294,7 +294,8 @@ class SiteChannel:
         at t = 0.
     comb : PilotComb
     phase_rad : ndarray, (n_sats,)
-        Carrier phase of each satellite at t = 0.
+        Carrier phase of each satellite's central tone at t = 0 when the
+        range is ``range_ref_m``.
     waveform : {"tones", "ofdm"}
         The pilot comb alone, or the full OFDM downlink frame with the comb
         at its channel centre (:class:`~leosop.signal.ofdm.OfdmDownlink`;
@@ -314,6 +315,14 @@ class SiteChannel:
     frame_jumps : FrameTimingJumps, optional
         OFDM only: frame-timing jumps, satellite i's drawn with seed
         ``(*frame_jumps.seed, i)`` (:class:`~leosop.signal.ofdm.FrameTimingJumps`).
+    range_ref_m : ndarray, (n_sats,), optional
+        The range at which each satellite's tones have their nominal phases
+        (``phase_rad`` and the comb's): tone k's phase is ``-(f_c + k spacing)
+        (range(t) - range_ref_m) / c`` cycles off them. None: the range at t = 0.
+        Receivers that share it (and their satellites' ``phase_rad`` up to a
+        receiver's own LO phase) see each satellite's phases differ by their
+        ranges, as from one transmitter: double differences of the central
+        tone's phase are the ranges' in cycles.
     """
 
     t_nodes_s: np.ndarray
@@ -327,6 +336,7 @@ class SiteChannel:
     rx_drift_hz_per_s: float = 0.0
     sat_drift_hz_per_s: np.ndarray | None = None
     frame_jumps: "FrameTimingJumps | None" = None
+    range_ref_m: np.ndarray | None = None
 
     def __post_init__(self):
         if not np.all(np.isfinite(self.range_m)):
@@ -344,6 +354,9 @@ class SiteChannel:
         self.sat_drift_hz_per_s = np.broadcast_to(drift, (n_sats,))
         self._range = CubicSpline(self.t_nodes_s, self.range_m, axis=1)
         self._range0 = self._range(0.0)
+        if self.range_ref_m is None:
+            self.range_ref_m = self._range0
+        self.range_ref_m = np.broadcast_to(np.asarray(self.range_ref_m, dtype=float), (n_sats,))
         self._cn0_ref = float(np.max(self.cn0_dbhz[finite]))
         self._amp = 10.0 ** ((self.cn0_dbhz - self._cn0_ref) / 20.0)
         if self.waveform not in WAVEFORMS:
@@ -436,7 +449,7 @@ class SiteChannel:
         recording can be made chunk by chunk or snapshot by snapshot.
         """
         t = (start + np.arange(int(count))) / self.sample_rate_hz
-        geom = -(self._range(t) - self._range0[:, None]) * self.comb.carrier_hz / C_MPS
+        geom = -(self._range(t) - self.range_ref_m[:, None]) * self.comb.carrier_hz / C_MPS
         amp = self.amplitude(t)
         drift = self._drift_hz_per_s()
         iq = np.zeros(t.size, dtype=complex)

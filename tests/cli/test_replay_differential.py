@@ -78,7 +78,7 @@ def test_pair_shares_satellite_errors(pair):
     sats = [m["leosop:satellites"] for m in meta]
     assert [s["sat_id"] for s in sats[0]] == [s["sat_id"] for s in sats[1]]
     for key in ("orbit_error_along_m", "orbit_error_radial_m", "orbit_error_cross_m", "sat_offset_hz",
-                "sat_drift_hz_per_s"):
+                "sat_drift_hz_per_s", "tx_phase_rad", "range_ref_m"):
         assert [s[key] for s in sats[0]] == [s[key] for s in sats[1]], key
     assert any(s["sat_drift_hz_per_s"] != 0.0 for s in sats[0])
     # Each receiver's clock: satellite offset (drifted to its first sample) plus its own receiver offset.
@@ -87,8 +87,22 @@ def test_pair_shares_satellite_errors(pair):
         want = np.array([v["sat_offset_hz"] + v["sat_drift_hz_per_s"] * t0 for v in s]) + rx
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
     assert meta[0]["leosop:rx_offset_hz"] != meta[1]["leosop:rx_offset_hz"]
+    # one transmitter per satellite, one LO per receiver: the rover's LO phase is the reference
+    assert meta[0]["leosop:lo_phase_rad"] == 0.0 and 0.0 < meta[1]["leosop:lo_phase_rad"] < 2 * np.pi
+    assert doc["base"]["lo_phase_rad"] == meta[1]["leosop:lo_phase_rad"]
     assert meta[1]["core:geolocation"]["coordinates"] == [BASE[1], BASE[0], BASE[2]]
     assert doc["base"]["start_utc"] == "2025-01-01T19:40:00.500000Z"
+
+
+def test_rover_samples_do_not_depend_on_the_base(tmp_path):
+    """The base draws from its own stream and takes the rover's satellite phases: the rover's samples are those
+    written without ``--base-site``, bit for bit."""
+    argv = ["generate", "--site", ",".join(map(str, ROVER)), "--start", START, "--duration-s", "0.02",
+            "--truth-step-s", "0.02", "--sample-rate-hz", "1e6", "--sat", "71607", "--seed", "2", *ERRORS]
+    assert main([*argv, "-o", str(tmp_path / "alone.sigmf-meta")]) == 0
+    assert main([*argv, "-o", str(tmp_path / "rover.sigmf-meta"), "--base-site", ",".join(map(str, BASE))]) == 0
+    data = [(tmp_path / f"{name}.sigmf-data").read_bytes() for name in ("alone", "rover", "rover-base")]
+    assert data[0] == data[1] and data[2] != data[1]
 
 
 def test_differential_fix_from_signal(pair, capsys, tmp_path):

@@ -126,7 +126,8 @@ def _carrier(phase, sat_id, time_utc, rows=slice(None), cols=slice(None)):
 
 def test_replay_pair_matches_satellites_and_blocks(scene):
     """The base's satellites in another order, one the rover lacks, its blocks starting earlier: matched by id
-    and instant, the joint fix is within its sigma and its JSON says float ambiguities and the model."""
+    and instant, the joint fix is within its sigma; its JSON says the model, the ambiguities (integers tried, too
+    uncertain from 1.5 s to pass) and the float fix beside the final one."""
     const, base, rover, t, ids = scene
     r, b, pos0 = pair(scene, 6, sigma_cycles=0.001)
     rover_c = _carrier(r, ids[:4], t[5:], slice(0, 4), slice(5, None))
@@ -139,6 +140,11 @@ def test_replay_pair_matches_satellites_and_blocks(scene):
     doc = got.doc()
     assert (doc["model"], doc["ambiguities"], doc["single_difference"]["ambiguities"]) == ("joint", "float", "float")
     assert doc["n_sats"] == 4 and doc["n_epochs"] == t.size - 5
+    assert doc["ratio"] is not None and len(doc["ambiguity_cycles"]) == len(doc["ambiguity_sigma_cycles"]) == 3
+    cov = np.array(doc["float"]["cov_ecef_m2"])
+    np.testing.assert_allclose(cov, got.joint.cov_float, rtol=1e-12)
+    # the east / north / up sigmas are the same covariance rotated: the same trace
+    assert np.sum(np.square(doc["float"]["sigma_enu_m"])) == pytest.approx(np.trace(cov), rel=1e-12)
 
 
 def test_replay_pair_refused(scene):
