@@ -367,19 +367,18 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
     if noise <= 0:
         return [], noise
-    # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges).
-    p = np.fft.fftshift(power)
+    # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges), zero-padded
+    # as np.convolve's "same" mode pads (the smoothing is computed only near the strong bins, _strong_runs).
+    pad = _LINE_SMOOTH_BINS // 2
+    padded = np.zeros(n + _LINE_SMOOTH_BINS - 1, dtype=power.dtype)
+    padded[pad:pad + n // 2] = power[n - n // 2:]
+    padded[pad + n // 2:pad + n] = power[:n - n // 2]
+    p = padded[pad:pad + n]  # np.fft.fftshift(power)
     threshold = -np.log(pfa / n) * noise
-    strong = p > threshold
-    if not strong.any():
+    strong = np.flatnonzero(p > threshold)
+    if not strong.size:
         return [], noise
-    smooth = np.convolve(p, np.full(_LINE_SMOOTH_BINS, 1.0 / _LINE_SMOOTH_BINS), mode="same")
-    above = (smooth > 2.0 * noise) | strong
-    edges = np.diff(np.concatenate([[0], above.view(np.int8), [0]]))
-    lo, hi = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1  # runs of ``above``, inclusive
-    cs = np.concatenate([[0], np.cumsum(strong)])
-    runs = cs[hi + 1] - cs[lo] > 0  # runs holding a strong bin
-    lo, hi = lo[runs], hi[runs]
+    lo, hi = _strong_runs(padded, strong, 2.0 * noise)
     peak = lo + np.array([int(np.argmax(p[a:b + 1])) for a, b in zip(lo, hi)], dtype=np.int64)
     m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
     spacing_bins = comb.tone_spacing_hz * n / fs
@@ -396,6 +395,62 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
         lines.append(Line((peak[i] + k0) * fs / n, power_dbhz, int(lo[i] + k0), int(hi[i] + k0)))
     lines.sort(key=lambda ln: -ln.power_dbhz)
     return lines, noise
+
+
+def _strong_runs(padded, strong, level):
+    """The runs of bins holding a strong bin where the power smoothed over ``_LINE_SMOOTH_BINS`` exceeds ``level``.
+
+    A run is a maximal range of bins each strong or above ``level`` once
+    smoothed (``np.convolve(p, ones / L, mode="same")``, which
+    zero-pads); only runs holding a strong bin are returned. The smoothing
+    is computed in windows around the strong bins (a few percent of the
+    spectrum), widened until every run ends inside its window: each
+    smoothed bin is the same dot product of the same ``L`` bins as over the
+    whole spectrum, so the runs are those of the whole spectrum.
+
+    Parameters
+    ----------
+    padded : ndarray, (n + L - 1,)
+        The power spectrum (fftshift order) with ``L // 2`` zeros before and ``L // 2 - 1`` after.
+    strong : ndarray of int, (n_strong,)
+        Indices of the strong bins, increasing (they are in runs whatever the smoothing).
+    level : float
+
+    Returns
+    -------
+    lo, hi : ndarray of int, (n_runs,)
+        First and last bin of each run, increasing.
+    """
+    L = _LINE_SMOOTH_BINS
+    n = padded.size - L + 1
+    kernel = np.full(L, 1.0 / L)
+    half = 4 * L
+    while True:
+        # Windows [a, b) round the strong bins, merged where they overlap.
+        a, b = np.maximum(strong - half, 0), np.minimum(strong + half + 1, n)
+        new = np.r_[True, a[1:] > b[:-1]]
+        a, b = a[new], np.maximum.reduceat(b, np.flatnonzero(new))
+        # Each window's bins with L - 1 more of padding, gathered: smoothed bin i of a window is the dot
+        # product of padded[i:i + L] (np.convolve's "valid" outputs whose inputs lie in one window).
+        size = b - a + L - 1
+        first = np.cumsum(size) - size  # where each window starts in the gathered array
+        rel = np.arange(size.sum()) - np.repeat(first - a, size)  # bin of padded
+        smooth = np.convolve(padded[rel], kernel, mode="valid")
+        keep = np.ones(smooth.size, bool)  # drop outputs that straddle two windows
+        keep[(first[1:, None] - L + 1 + np.arange(L - 1)).ravel()] = False
+        bins = rel[:smooth.size][keep]  # the smoothed bins
+        above = smooth[keep] > level
+        above[np.searchsorted(bins, strong)] = True
+        # Runs of ``above`` within each window (a new window breaks a run).
+        start = above & np.r_[True, ~above[:-1] | (np.diff(bins) != 1)]
+        end = above & np.r_[~above[1:] | (np.diff(bins) != 1), True]
+        lo, hi = bins[start], bins[end]
+        holds = np.searchsorted(strong, lo) < np.searchsorted(strong, hi, side="right")
+        lo, hi = lo[holds], hi[holds]
+        # A run that reaches its window's edge (not the spectrum's) may go on beyond it: widen.
+        if not (np.isin(lo, a[a > 0]).any() or np.isin(hi + 1, b[b < n]).any()):
+            return lo, hi
+        half *= 4
 
 
 def _window_max(p, a, b):
