@@ -227,7 +227,7 @@ def test_line_runs_found_near_the_strong_bins_are_those_of_the_whole_spectrum():
     exactly those of the smoothing of the whole spectrum (np.convolve "same", its former code): CW lines on
     the bin grid, half a bin off (sinc sidelobes above the level for ~100 bins: the windows must widen), at
     both edges of the spectrum, and a comb."""
-    from leosop.signal.frontend import _LINE_SMOOTH_BINS, _strong_runs
+    from leosop.signal.frontend import _LINE_SMOOTH_BINS, _strong_runs, _window_max
 
     fs, n = 2.5e6, 250_000
     rng = np.random.default_rng(5)
@@ -253,3 +253,8 @@ def test_line_runs_found_near_the_strong_bins_are_those_of_the_whole_spectrum():
         got_lo, got_hi = _strong_runs(padded, strong, level)
         assert held.sum() >= 8 and np.max(hi[held] - lo[held]) > 100  # the wide sidelobes are there
         assert np.array_equal(got_lo, lo[held]) and np.array_equal(got_hi, hi[held])
+    # The partners' windows read only their own bins: each window's max as a plain max (0 outside p).
+    a = rng.integers(-50, n + 50, (40, 6))
+    b = a + rng.integers(-3, 30, a.shape)
+    want = [max(p[max(x, 0):max(min(y + 1, n), 0)], default=0.0) for x, y in zip(a.ravel(), b.ravel())]
+    assert np.array_equal(_window_max(p, a, b), np.reshape(want, a.shape))

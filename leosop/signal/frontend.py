@@ -379,7 +379,11 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     if not strong.size:
         return [], noise
     lo, hi = _strong_runs(padded, strong, 2.0 * noise)
-    peak = lo + np.array([int(np.argmax(p[a:b + 1])) for a, b in zip(lo, hi)], dtype=np.int64)
+    # Each run's peak: the first bin of its largest power (as argmax).
+    idx, first = _ranges(lo, hi + 1)
+    vals = p[idx]
+    hit = np.flatnonzero(vals == np.repeat(np.maximum.reduceat(vals, first), hi - lo + 1))
+    peak = idx[hit[np.searchsorted(hit, first)]]
     m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
     spacing_bins = comb.tone_spacing_hz * n / fs
     half = (hi - lo) // 2 + _PARTNER_BINS + int(np.ceil((comb.n_tones - 1) * spacing_bins * _PARTNER_SPACING_SPREAD))
@@ -432,9 +436,7 @@ def _strong_runs(padded, strong, level):
         a, b = a[new], np.maximum.reduceat(b, np.flatnonzero(new))
         # Each window's bins with L - 1 more of padding, gathered: smoothed bin i of a window is the dot
         # product of padded[i:i + L] (np.convolve's "valid" outputs whose inputs lie in one window).
-        size = b - a + L - 1
-        first = np.cumsum(size) - size  # where each window starts in the gathered array
-        rel = np.arange(size.sum()) - np.repeat(first - a, size)  # bin of padded
+        rel, first = _ranges(a, b + L - 1)  # bins of padded; where each window starts in them
         smooth = np.convolve(padded[rel], kernel, mode="valid")
         keep = np.ones(smooth.size, bool)  # drop outputs that straddle two windows
         keep[(first[1:, None] - L + 1 + np.arange(L - 1)).ravel()] = False
@@ -448,18 +450,33 @@ def _strong_runs(padded, strong, level):
         holds = np.searchsorted(strong, lo) < np.searchsorted(strong, hi, side="right")
         lo, hi = lo[holds], hi[holds]
         # A run that reaches its window's edge (not the spectrum's) may go on beyond it: widen.
-        if not (np.isin(lo, a[a > 0]).any() or np.isin(hi + 1, b[b < n]).any()):
+        w = np.searchsorted(a, lo, side="right") - 1  # each run's window
+        if not np.any(((lo == a[w]) & (a[w] > 0)) | ((hi + 1 == b[w]) & (b[w] < n))):
             return lo, hi
         half *= 4
 
 
+def _ranges(a, b):
+    """The indices ``a[k] .. b[k] - 1`` of every range, concatenated, (sum(b - a),), and where each range
+    starts among them, (n_ranges,); ``b >= a``."""
+    size = b - a
+    first = np.cumsum(size) - size
+    return np.arange(first[-1] + size[-1] if size.size else 0) - np.repeat(first - a, size), first
+
+
 def _window_max(p, a, b):
-    """Largest ``p[a:b + 1]`` per window (0 where a window lies outside ``p``), shape of ``a``."""
-    n = p.size
-    a, b = np.clip(a, 0, n), np.clip(b + 1, 0, n)  # half-open, within [0, n]
-    bounds = np.stack([a.ravel(), b.ravel()], axis=1).ravel()  # a0, b0, a1, b1, ...
-    out = np.maximum.reduceat(np.append(p, 0.0), bounds)[::2]  # max over [a_k, b_k) when a_k < b_k
-    return np.where(b > a, out.reshape(a.shape), 0.0)
+    """Largest ``p[a:b + 1]`` per window (0 where a window lies outside ``p``), shape of ``a``.
+
+    Only the windows' own bins are read (they are a few percent of ``p``).
+    """
+    n, shape = p.size, np.shape(a)
+    a, b = np.clip(a, 0, n).ravel(), np.clip(b + 1, 0, n).ravel()  # half-open, within [0, n]
+    full = b > a
+    out = np.zeros(a.size)
+    if full.any():
+        idx, first = _ranges(a[full], b[full])
+        out[full] = np.maximum.reduceat(p[idx], first)
+    return out.reshape(shape)
 
 
 def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
