@@ -240,7 +240,7 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, threads=1):
                                                          / np.timedelta64(1, "s"))
         found = find_combs(block.iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
                            search=False, gate_hz=TRACK_GATE_HZ, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz,
-                           clean=False)
+                           clean=False, spectrum=block.iq_fft)
         for m, p in enumerate(found.predicted_index):
             i, j = rows[p]
             for c, v in zip(cols, (found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)):
@@ -424,7 +424,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             # After a birth the combs of the last block are searched for again, with as many new.
             n_known = n_last if contiguous else 0
             found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
-                               lo_offset_hz=lo, clean=False)
+                               lo_offset_hz=lo, clean=False, spectrum=block.iq_fft)
             if lo_rough is None:
                 lo_rough = rough_lo_hz(found.doppler_hz)
         else:
@@ -434,7 +434,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
                                search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
                                max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
-                               clean=False)
+                               clean=False, spectrum=block.iq_fft)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         n_last = len(det)
         shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)

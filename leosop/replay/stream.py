@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..signal.fft import fft
 from ..signal.frontend import clean_block
 
 __all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column"]
@@ -95,10 +96,15 @@ class PreparedBlock:
     spectrum : ndarray of float, (SPECTRUM_BINS,) or None
         :func:`spectrum_column` of the narrowed block before cleaning, for
         the blocks the figure keeps; None for the others.
+    iq_fft : ndarray of complex64, (n,)
+        FFT of ``iq`` (:func:`~leosop.signal.fft.fft`), for
+        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker, as
+        the comb search would make it.
     """
 
     iq: np.ndarray
     spectrum: np.ndarray | None
+    iq_fft: np.ndarray
 
 
 def _prepare(rec, factor, comb, spectrum_every, item):
@@ -109,7 +115,9 @@ def _prepare(rec, factor, comb, spectrum_every, item):
     if not np.isfinite(iq.sum()):
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf")
     spectrum = spectrum_column(iq) if spectrum_every and k % spectrum_every == 0 else None
-    return PreparedBlock(clean_block(iq, rec.sample_rate_hz / factor, comb)[0], spectrum)
+    iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb)
+    # The cleaning's FFT is the cleaned block's unless it excised lines.
+    return PreparedBlock(iq, spectrum, fft(iq) if cleaning.spectrum is None else cleaning.spectrum)
 
 
 def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):

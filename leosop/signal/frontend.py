@@ -295,6 +295,10 @@ class Cleaning:
         CW / narrowband interferers excised (lines not part of a comb).
     noise_density : float
         Noise power per Hz in sample units (N0), from the spectrum's median.
+    spectrum : ndarray of complex64, (n,) or None
+        The cleaned block's FFT (:func:`~.fft.fft`) when no line was
+        excised (the FFT the cleaning made; the comb search can reuse it,
+        :func:`~.multicomb.find_combs`); None when lines were excised.
     """
 
     dc: complex
@@ -304,6 +308,7 @@ class Cleaning:
     iq_corrected: bool
     lines: tuple
     noise_density: float
+    spectrum: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 def iq_imbalance(iq):
@@ -521,4 +526,5 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
         for ln in lines:
             spectrum[np.arange(ln.lo_bin, ln.hi_bin + 1) % n] = 0.0
         x = np.fft.ifft(spectrum).astype(np.complex64)
-    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0)
+    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0,
+                       None if lines else spectrum)
