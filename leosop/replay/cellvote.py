@@ -8,6 +8,8 @@ of position offset, receiver offset and drift. The best cells are split
 3 x 3 and voted again.
 """
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from ..constants import OMEGA_E_RAD_PER_S, WGS84_A_M
@@ -107,10 +109,14 @@ def _morton_order(cells):
 
 
 class CellSearch:
-    """The tracks, the ephemeris and the options of one identification, and its cell vote."""
+    """The tracks, the ephemeris and the options of one identification, and its cell vote.
 
-    def __init__(self, tracks, eph, hz_per_mps, opts, region=None):
-        self.tracks, self.eph, self.k, self.o = tracks, eph, hz_per_mps, opts
+    With ``threads`` > 1 the vote's chunks of cells run on that many threads (the same votes; the
+    memory of that many chunks at once, up to ~0.3 GB each).
+    """
+
+    def __init__(self, tracks, eph, hz_per_mps, opts, region=None, threads=1):
+        self.tracks, self.eph, self.k, self.o, self.threads = tracks, eph, hz_per_mps, opts, int(threads)
         self.moving = opts["rx_speed_sigma_mps"] > 0
         self.t_c = float(np.mean([tr.t_mid_s for tr in tracks]))
         sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
@@ -187,17 +193,28 @@ class CellSearch:
         # Cells are voted independently of each other: chunks of neighbours (Morton order) screen
         # their satellites together, and a chunk with too many triples is cut between cells.
         order = _morton_order(cells)
-        for a in range(0, n_cells, _CHUNK_CELLS):
-            chunk = order[a:a + _CHUNK_CELLS]
+        chunks = [order[a:a + _CHUNK_CELLS] for a in range(0, n_cells, _CHUNK_CELLS)]
+
+        def vote_chunk(chunk):
             pairs = self._pairs(cells[chunk], radius_m)
             per_cell = np.cumsum(np.bincount(pairs[:, 0], minlength=len(chunk)))
-            lo = 0
+            out, lo = [], 0
             while lo < len(chunk):
                 hi = max(lo + 1, int(np.searchsorted(per_cell, per_cell[lo - 1] * (lo > 0) + _MAX_PAIRS, "right")))
                 sub = pairs[(pairs[:, 0] >= lo) & (pairs[:, 0] < hi)] - [lo, 0, 0]
-                i = chunk[lo:hi]
-                count[i], cost[i], assign[i], clock[i], moved[i] = self._vote_chunk(cells[i], radius_m, sub)
+                out.append((chunk[lo:hi], self._vote_chunk(cells[chunk[lo:hi]], radius_m, sub)))
                 lo = hi
+            return out
+
+        if self.threads > 1 and len(chunks) > 1:
+            # numpy releases the GIL in the chunks' array work; each thread holds one chunk's arrays.
+            with ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="leosop-vote") as pool:
+                parts = list(pool.map(vote_chunk, chunks))
+        else:
+            parts = map(vote_chunk, chunks)
+        for part in parts:
+            for i, (cnt, cst, asg, clk, mv) in part:
+                count[i], cost[i], assign[i], clock[i], moved[i] = cnt, cst, asg, clk, mv
         return count, cost, assign, clock, moved
 
     def _vote_chunk(self, cells, radius_m, pairs):

@@ -377,7 +377,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     threads : int
         Threads for the blocks: N > 1 reads and cleans the next blocks on
         N - 1 worker threads while this one searches and tracks
-        (:func:`~leosop.replay.stream.prepared_blocks`); the result is the
+        (:func:`~leosop.replay.stream.prepared_blocks`), and votes on N
+        threads in the identification's cell search; the result is the
         same whatever N.
 
     Returns
@@ -455,7 +456,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init, prior_radius_m=radius_m, mask_deg=mask_deg,
                                 carrier_hz=comb.carrier_hz, lo_offset_max_hz=lo_offset_max_hz,
                                 lo_drift_max_hz_per_s=lo_drift_max_hz_per_s,
-                                rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
+                                rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS,
+                                threads=threads) if tracks else None
         return tracks, ident
 
     tracks, ident = identify(raw, init_pos_ecef_m, prior_radius_m)
