@@ -243,11 +243,13 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
           f"{threads} processes ran {control:.2f}x as fast as in one (the cores this run was given)")
 
 
-#: A child's replay: the CLI with its JSON to a file, processor and elapsed time round it (after the imports).
+#: A child's replay: the CLI with its JSON to a file, processor and elapsed time round it (after the imports,
+#: the command's lazy ones too: they are once per process, not per second of recording).
 _CHILD = """
 import json, os, resource, sys, time
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from leosop.cli import main
+import leosop.cli.replay, leosop.positioning.solve, leosop.replay.pipeline  # the command's own imports, untimed
 out, argv = sys.argv[1], sys.argv[2:]
 r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
 with open(out, "w") as fh:
