@@ -1,7 +1,7 @@
 """Replay benchmarks: identification, static fix, throughput and memory.
 
-    python tools/bench_replay.py [--quick] [--memory-gb G] [--sats N] [--parts fix,throughput,memory]
-                                 [--tle FILE --start ISO]
+    python tools/bench_replay.py [--quick] [--memory-gb G] [--sats N] [--parts fix,throughput,threads,baseline,memory]
+                                 [--tle FILE --start ISO] [--threads N] [--baseline-ref REF] [--repeats R]
 
 1. Static fix from 150 snapshots of 20 ms (2.5 MS/s, ``--sats`` of the
    satellites above 40 deg drawn per recording, along-track orbit errors of a few hundred metres and satellite
@@ -23,7 +23,20 @@
    only what the others leave idle), and the bound two idle cores allow: the
    larger of the two threads' shares of the serial processor time (reading
    and cleaning the blocks, ``leosop.replay.stream``; search and tracking).
-3. Memory: peak RSS of ``leosop replay`` on a large continuous recording
+3. This tree against the baseline (``--baseline-ref``, default ``main``,
+   exported with ``git archive``; ``none`` skips it), ``leosop replay
+   --static --init ... --json`` of the same continuous recording with
+   ``--threads 1`` and ``--threads N`` side by side, each run in a child
+   process of its own, alternating, best of ``--repeats``: the processor time
+   (user + system of all its threads, ``resource.getrusage`` round the
+   command, interpreter start and imports left out; ``os.wait4`` of the whole
+   child beside it) per second of recording, the real-time factor that gives
+   on one core (recording length over processor time) and the elapsed one
+   (over wall time), the load average beside them, and whether every run's
+   JSON is byte for byte that of the first. On a shared machine the elapsed
+   times (and, less, the processor times) grow with the load: compare the
+   columns of one run, not runs.
+4. Memory: peak RSS of ``leosop replay`` on a large continuous recording
    (``--memory-gb``, generated whole), beside the peak
    RSS on the short one: bounded by the block, not the file.
 """
@@ -40,6 +53,8 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+
+from baseline_tree import REPO, export_package  # noqa: E402
 
 from leosop.cli import main  # noqa: E402
 from leosop.frames import geodetic_to_ecef  # noqa: E402
@@ -228,6 +243,71 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
           f"{threads} processes ran {control:.2f}x as fast as in one (the cores this run was given)")
 
 
+#: A child's replay: the CLI with its JSON to a file, processor and elapsed time round it (after the imports,
+#: the command's lazy ones too: they are once per process, not per second of recording).
+_CHILD = """
+import json, os, resource, sys, time
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from leosop.cli import main
+import leosop.cli.replay, leosop.positioning.solve, leosop.replay.pipeline  # the command's own imports, untimed
+out, argv = sys.argv[1], sys.argv[2:]
+r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
+with open(out, "w") as fh:
+    sys.stdout = fh
+    rc = main(argv)
+    sys.stdout = sys.__stdout__
+r1 = resource.getrusage(resource.RUSAGE_SELF)
+cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+print(json.dumps({"rc": rc, "cpu_s": cpu, "wall_s": time.perf_counter() - t0}), file=sys.stderr)
+"""
+
+
+def _child_replay(code_dir, rec_path, threads, out):
+    """One ``leosop replay`` of ``rec_path`` in a child importing ``code_dir``'s package:
+    (processor s of the replay, elapsed s of it, processor s of the whole child)."""
+    env = dict(os.environ, PYTHONPATH=str(code_dir), OPENBLAS_NUM_THREADS="1")
+    argv = ["replay", str(rec_path), "--static", "--init", ",".join(map(str, (34.98, 109.71, 0.0))), "--json",
+            "--threads", str(threads)]
+    proc = subprocess.Popen([sys.executable, "-c", _CHILD, str(out), *argv], cwd=code_dir, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    stderr = proc.stderr.read().decode()
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"{code_dir}: replay failed: {stderr.strip()[-2000:]}")
+    got = json.loads(stderr.strip().splitlines()[-1])
+    return got["cpu_s"], got["wall_s"], usage.ru_utime + usage.ru_stime
+
+
+def bench_baseline(tmp, rec_path, seconds, threads, ref, repeats=3):
+    """This tree and the baseline ``ref``, one thread and ``threads``, alternating; best of ``repeats`` each."""
+    codes = [("this tree", REPO)]
+    if ref != "none":
+        base = Path(tmp) / "baseline"
+        base.mkdir()
+        export_package(ref, base)
+        codes.append((ref, base))
+    runs = {(name, n): [] for name, _ in codes for n in (1, threads)}
+    outputs = []
+    for r in range(repeats):
+        for name, code_dir in codes:
+            for n in (1, threads):
+                out = Path(tmp) / f"replay_{len(outputs)}.json"
+                runs[name, n].append(_child_replay(code_dir, rec_path, n, out) + (os.getloadavg()[0],))
+                outputs.append(out.read_bytes())
+    same = all(o == outputs[0] for o in outputs)
+    print(f"replay of {seconds:g} s (2.5 MS/s, continuous) in child processes, best of {repeats} alternating, "
+          f"{os.cpu_count()} cores; CPU = user + system of all threads round the command (whole child with "
+          f"interpreter start in brackets); x real time on one core = recording / CPU, elapsed = recording / wall")
+    print(f"{'code':>16} {'threads':>7} {'CPU s':>7} {'CPU s/s':>8} {'x (1 core)':>10} {'wall s':>7} "
+          f"{'x elapsed':>9} {'load':>5}")
+    for (name, n), rows in runs.items():
+        cpu, wall, whole, load = min(rows)
+        best_wall = min(rw[1] for rw in rows)
+        print(f"{name:>16} {n:>7} {cpu:>7.2f} {cpu / seconds:>8.3f} {seconds / cpu:>10.1f} {best_wall:>7.2f} "
+              f"{seconds / best_wall:>9.1f} {load:>5.1f}   ({whole:.2f} s whole child)")
+    print(f"JSON of all {len(outputs)} runs {'identical' if same else 'DIFFERENT'}")
+
+
 def _peak_rss_mb(argv):
     code = ("import resource, sys; from leosop.cli import main; rc = main(sys.argv[1:]); "
             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, file=sys.stderr); sys.exit(rc)")
@@ -266,8 +346,11 @@ if __name__ == "__main__":
     ap.add_argument("--tle", help="element sets to draw the satellites from and identify against (default the "
                     "bundled Walker set), e.g. ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt")
     ap.add_argument("--start", default=START, help=f"UTC start of the recordings (default {START})")
-    ap.add_argument("--parts", default="fix,throughput,threads,memory", help="which benchmarks, comma-separated "
-                    "(default fix,throughput,threads,memory)")
+    ap.add_argument("--parts", default="fix,throughput,threads,baseline,memory", help="which benchmarks, "
+                    "comma-separated (default fix,throughput,threads,baseline,memory)")
+    ap.add_argument("--baseline-ref", default="main", help="git ref the baseline part compares with (default main; "
+                    "'none': this tree alone)")
+    ap.add_argument("--repeats", type=int, default=3, help="runs of each configuration in the baseline part")
     ap.add_argument("--threads", type=int, default=2, help="threads compared with one (default 2)")
     a = ap.parse_args()
     parts = set(a.parts.split(","))
@@ -276,9 +359,11 @@ if __name__ == "__main__":
         if "fix" in parts:
             bench_fix(tmp, range(2) if a.quick else range(10), a.sats)
         seconds = 5.0 if a.quick else 20.0
-        if parts & {"throughput", "threads", "memory"}:
+        if parts & {"throughput", "threads", "baseline", "memory"}:
             small, rec, const = bench_throughput(tmp, seconds, a.sats)
         if "threads" in parts:
             bench_threads(rec, const, seconds, a.threads)
+        if "baseline" in parts:
+            bench_baseline(tmp, small, seconds, a.threads, a.baseline_ref, a.repeats)
         if "memory" in parts and a.memory_gb > 0:
             bench_memory(tmp, small, a.memory_gb, a.sats)

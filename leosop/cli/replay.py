@@ -82,8 +82,9 @@ def register(subparsers):
                    help="continuous recordings: track each identified satellite's carrier phase (carrier.csv); "
                         "with --static the fix takes its phase-rate Doppler in place of the block Doppler")
     p.add_argument("--threads", type=int, metavar="N", default=1,
-                   help="threads for one recording's blocks (N-1 read and clean blocks ahead of the search), "
-                        f"the same result whatever N (default 1; {len(os.sched_getaffinity(0))} cores here)")
+                   help="threads for one recording (N-1 read and clean blocks ahead of the search; the "
+                        "identification's cell vote on N), the same result whatever N (default 1; "
+                        f"{len(os.sched_getaffinity(0))} cores here)")
 
     p.add_argument("--workers", type=int, metavar="N",
                    help="batch: workers of the local Dask cluster (default: the cores)")

@@ -8,6 +8,8 @@ of position offset, receiver offset and drift. The best cells are split
 3 x 3 and voted again.
 """
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from ..constants import OMEGA_E_RAD_PER_S, WGS84_A_M
@@ -79,6 +81,22 @@ def _range_accel_bound(pos_sv, speed_max, turn_max, pos_rx):
     return speed_max * (speed_max + turn_max) / rng_min + _SAT_ACCEL_MAX_MPS2
 
 
+def _features_of(x):
+    """``FEATURES @ x`` over the reference times, (m, 3 features, 3) from ``x`` (m, 3 times, 3).
+
+    Each feature is the sum of its non-zero terms in the order of the times (``FEATURES`` holds 0, +-1
+    and +-0.5: the products are exact and the zero terms add nothing but the sign of a zero), without
+    the (m, 3, 3, 3) products of a broadcast.
+    """
+    out = np.empty_like(x)
+    for f, row in enumerate(FEATURES):
+        terms = [x[:, r] if w == 1.0 else w * x[:, r] for r, w in enumerate(row) if w != 0.0]
+        out[:, f] = terms[0]
+        for t in terms[1:]:
+            out[:, f] += t
+    return out
+
+
 def _morton_order(cells):
     """Cell indices (n,) along a Z-order curve of latitude and longitude (neighbours mostly adjacent)."""
     u = cells / np.sqrt(dot3(cells, cells))[:, None]
@@ -91,10 +109,14 @@ def _morton_order(cells):
 
 
 class CellSearch:
-    """The tracks, the ephemeris and the options of one identification, and its cell vote."""
+    """The tracks, the ephemeris and the options of one identification, and its cell vote.
 
-    def __init__(self, tracks, eph, hz_per_mps, opts, region=None):
-        self.tracks, self.eph, self.k, self.o = tracks, eph, hz_per_mps, opts
+    With ``threads`` > 1 the vote's chunks of cells run on that many threads (the same votes; the
+    memory of that many chunks at once, up to ~0.3 GB each).
+    """
+
+    def __init__(self, tracks, eph, hz_per_mps, opts, region=None, threads=1):
+        self.tracks, self.eph, self.k, self.o, self.threads = tracks, eph, hz_per_mps, opts, int(threads)
         self.moving = opts["rx_speed_sigma_mps"] > 0
         self.t_c = float(np.mean([tr.t_mid_s for tr in tracks]))
         sin_m = np.sin(np.radians(opts["mask_deg"] - opts["mask_slack_deg"]))
@@ -123,6 +145,9 @@ class CellSearch:
         shift = np.array([0.0, -RATE_STEP_S, RATE_STEP_S])[:, None]  # (3 offsets, 1)
         self.ref_pos, self.ref_vel = eph.state_shifted(cand[None, :, None, None], t_ref[:, None, None, :], shift)
         self.ref_speed_max, self.ref_turn_max = _speed_turn_max(self.ref_pos[:, :, 0], self.ref_vel[:, :, 0])
+        # The unshifted states at the middle reference time, contiguous for the vote's first screen.
+        self.mid_pos = np.ascontiguousarray(self.ref_pos[:, :, 0, 1])
+        self.mid_vel = np.ascontiguousarray(self.ref_vel[:, :, 0, 1])
 
     def _pairs(self, cells, radius_m):
         """(cell, track, sat) triples with the satellite above the mask from somewhere in the cell, (m, 3).
@@ -168,44 +193,50 @@ class CellSearch:
         # Cells are voted independently of each other: chunks of neighbours (Morton order) screen
         # their satellites together, and a chunk with too many triples is cut between cells.
         order = _morton_order(cells)
-        for a in range(0, n_cells, _CHUNK_CELLS):
-            chunk = order[a:a + _CHUNK_CELLS]
+        chunks = [order[a:a + _CHUNK_CELLS] for a in range(0, n_cells, _CHUNK_CELLS)]
+
+        def vote_chunk(chunk):
             pairs = self._pairs(cells[chunk], radius_m)
             per_cell = np.cumsum(np.bincount(pairs[:, 0], minlength=len(chunk)))
-            lo = 0
+            out, lo = [], 0
             while lo < len(chunk):
                 hi = max(lo + 1, int(np.searchsorted(per_cell, per_cell[lo - 1] * (lo > 0) + _MAX_PAIRS, "right")))
                 sub = pairs[(pairs[:, 0] >= lo) & (pairs[:, 0] < hi)] - [lo, 0, 0]
-                i = chunk[lo:hi]
-                count[i], cost[i], assign[i], clock[i], moved[i] = self._vote_chunk(cells[i], radius_m, sub)
+                out.append((chunk[lo:hi], self._vote_chunk(cells[chunk[lo:hi]], radius_m, sub)))
                 lo = hi
+            return out
+
+        if self.threads > 1 and len(chunks) > 1:
+            # numpy releases the GIL in the chunks' array work; each thread holds one chunk's arrays.
+            with ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="leosop-vote") as pool:
+                parts = list(pool.map(vote_chunk, chunks))
+        else:
+            parts = map(vote_chunk, chunks)
+        for part in parts:
+            for i, (cnt, cst, asg, clk, mv) in part:
+                count[i], cost[i], assign[i], clock[i], moved[i] = cnt, cst, asg, clk, mv
         return count, cost, assign, clock, moved
 
     def _vote_chunk(self, cells, radius_m, pairs):
         o = self.o
         n_cells, n_tr = len(cells), len(self.tracks)
         c, k, s = pairs.T
-        t_ref = np.array([tr.t_ref_s for tr in self.tracks])[k]  # (m, 3)
-        f_ref = np.array([tr.f_ref_hz for tr in self.tracks])[k]
+        # Per track, gathered per triple where needed: reference times and values (n_tracks, 3), spans.
+        t_ref = np.array([tr.t_ref_s for tr in self.tracks])
+        f_ref = np.array([tr.f_ref_hz for tr in self.tracks])
         span = np.maximum(t_ref[:, 2] - t_ref[:, 0], 1e-3)
         # Cheap screen at the middle time: the offset must fit the clock range.
         reach = _LINEAR_MARGIN * (radius_m + o["cross_track_max_m"] + o["alt_tol_m"])
         dt_max = o["along_track_max_m"] / SPEED_SV_MPS + _LIGHT_TIME_MAX_S
         s_loc = self.local[s]
-        dm, gm = doppler_model(self.ref_pos[k, s_loc, 0, 1], self.ref_vel[k, s_loc, 0, 1], cells[c], self.k)
-        near = np.abs(f_ref[:, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.sqrt(dot3(gm, gm))
+        dm, gm = doppler_model(self.mid_pos[k, s_loc], self.mid_vel[k, s_loc], cells[c], self.k)
+        near = np.abs(f_ref[k, 1] - dm) <= (o["lo_offset_max_hz"] + reach * np.sqrt(dot3(gm, gm))
                                             + dt_max * _RATE_MAX_HZ_PER_S + o["sat_offset_max_hz"]
-                                            + o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))
-        c, k, s, t_ref, f_ref, span = c[near], k[near], s[near], t_ref[near], f_ref[near], span[near]
+                                            + (o["lo_drift_max_hz_per_s"] * np.abs(t_ref[:, 1] - self.t_c))[k])
+        c, k, s = c[near], k[near], s[near]
+        t_ref, f_ref, span = t_ref[k], f_ref[k], span[k]  # (m, 3), (m, 3), (m,)
         pos_rx = cells[c][:, None, :]
         sat = s_loc[near]
-        p0, v0 = self.ref_pos[k, sat, 0], self.ref_vel[k, sat, 0]  # (m, 3 ref times, 3)
-        dop, grad = doppler_model(p0, v0, pos_rx, self.k)
-        scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
-        feat = ((f_ref - dop) @ FEATURES.T) * scale
-        # d feature / d pos, negated: FEATURES @ grad summed over the reference times in order (as einsum).
-        feat_jac = sum(FEATURES[:, r, None] * grad[:, None, r] for r in range(3)) * scale[..., None]
-        feat_grad = np.sqrt(dot3(feat_jac, feat_jac))
         feat_sigma = np.array([tr.feat_sigma for tr in self.tracks])[k]
         drift = o["lo_drift_max_hz_per_s"]
         t_mid = t_ref[:, 1]
@@ -215,6 +246,19 @@ class CellSearch:
             v3 = 3 * self.k * o["rx_speed_sigma_mps"]
             turn = np.minimum(2.0, _SAT_RATE_MAX_RAD_PER_S * span)
             extra = extra + v3 * np.stack([np.ones_like(span), turn / span, turn], axis=1)
+        # The slope's screen first (most triples fail it): it needs the first and last reference times
+        # alone (FEATURES row 1), and is the same arithmetic as its part of the screen below, bit for bit.
+        keep = self._slope_screen(k, sat, pos_rx, f_ref, span, reach, dt_max, feat_sigma[:, 1], extra[:, 1])
+        c, k, s, t_ref, f_ref, span, pos_rx, sat = c[keep], k[keep], s[keep], t_ref[keep], f_ref[keep], \
+            span[keep], pos_rx[keep], sat[keep]
+        feat_sigma, t_mid, extra = feat_sigma[keep], t_mid[keep], extra[keep]
+        p0, v0 = self.ref_pos[k, sat, 0], self.ref_vel[k, sat, 0]  # (m, 3 ref times, 3)
+        dop, grad = doppler_model(p0, v0, pos_rx, self.k)
+        scale = np.stack([np.ones_like(span), 1 / span, np.ones_like(span)], axis=1)  # (m, 3)
+        feat = ((f_ref - dop) @ FEATURES.T) * scale
+        # d feature / d pos, negated: FEATURES @ grad summed over the reference times in order (as einsum).
+        feat_jac = _features_of(grad) * scale[..., None]
+        feat_grad = np.sqrt(dot3(feat_jac, feat_jac))
         b_max = o["lo_offset_max_hz"]
         # The Doppler rates cost twice the rest: first a screen with a bound of them (most triples fail it).
         rate_max = self.k * _range_accel_bound(p0, self.ref_speed_max[k, sat], self.ref_turn_max[k, sat],
@@ -260,6 +304,28 @@ class CellSearch:
         sel = np.flatnonzero(agree)
         return self._linear_fit(cells, radius_m, c[sel], k[sel], s[sel], feat[sel], feat_jac[sel], sig_fit[sel],
                                 t_mid[sel], clock, cost2[sel])
+
+    def _slope_screen(self, k, sat, pos_rx, f_ref, span, reach, dt_max, slope_sigma, slope_extra):
+        """Triples (m,) whose residual slope fits its bound, as the first part of ``maybe`` in
+        :meth:`_vote_chunk` computes it, from the states at the first and last reference times alone.
+
+        FEATURES' slope row is (-1, 0, 1): its products are exact and its zero term adds nothing, so
+        ``a[:, 2] - a[:, 0]`` is what the product with FEATURES gives; likewise the sums of the
+        gradients and of the rate bounds. ``slope_sigma`` and ``slope_extra`` (m,) are the slope's
+        columns of the feature sigmas and the extra tolerance.
+        """
+        o = self.o
+        ends = (slice(None), slice(None, None, 2))  # reference times 0 and 2
+        p, v = self.ref_pos[k, sat, 0][ends], self.ref_vel[k, sat, 0][ends]  # (m, 2, 3)
+        dop, grad = doppler_model(p, v, pos_rx, self.k)
+        inv_span = 1 / span
+        slope = ((f_ref[:, 2] - dop[:, 1]) - (f_ref[:, 0] - dop[:, 0])) * inv_span
+        jac = (grad[:, 1] - grad[:, 0]) * inv_span[:, None]
+        rate_max = self.k * _range_accel_bound(p, self.ref_speed_max[k, sat][ends], self.ref_turn_max[k, sat][ends],
+                                               pos_rx)  # (m, 2)
+        tol = (reach * np.sqrt(dot3(jac, jac)) + dt_max * (rate_max[:, 0] + rate_max[:, 1]) * inv_span
+               + 4 * slope_sigma + slope_extra + o["model_sigma_hz"] * 3) * (1 + 1e-9)
+        return np.abs(slope) <= tol
 
     def _linear_fit(self, cells, radius_m, c, k, s, feat, feat_jac, sig, t_mid, clock, cost0):
         """Each cell's position offset (east, north, up), clock and drift fitted to its pairs' features (linearised).

@@ -142,7 +142,8 @@ _DEFAULTS = {
 
 def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ,
                     lo_offset_max_hz=LO_OFFSET_MAX_HZ, lo_drift_max_hz_per_s=LO_DRIFT_MAX_HZ_PER_S,
-                    prior_radius_m=150e3, alt_m=None, global_spacing_m=150e3, keep_cells=None, **options):
+                    prior_radius_m=150e3, alt_m=None, global_spacing_m=150e3, keep_cells=None, threads=1,
+                    **options):
     """Identify Doppler tracks against element sets; sets ``track.sat_id`` and ``track.match_rms_hz`` in place.
 
     Parameters
@@ -169,6 +170,8 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
         First cell spacing of the global search.
     keep_cells : int, optional
         Cells kept per refinement level (default 40 with a prior, 300 without).
+    threads : int
+        Threads of the cell vote (:class:`~leosop.replay.cellvote.CellSearch`); the same result whatever N.
     **options
         Tolerances and thresholds; see ``_DEFAULTS`` in this module.
 
@@ -200,7 +203,7 @@ def identify_tracks(tracks, constellation, *, init_pos_ecef_m=None, mask_deg=10.
         prior = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float).reshape(3)
         opts["alt_m"] = (0.0 if prior is None else float(ecef_to_geodetic(prior)[2])) if alt_m is None else float(alt_m)
         region = None if prior is None else (prior, 1.5 * prior_radius_m)
-        search = CellSearch([prepared[k] for k in live], eph, float(carrier_hz) / C_MPS, opts, region)
+        search = CellSearch([prepared[k] for k in live], eph, float(carrier_hz) / C_MPS, opts, region, threads)
         if prior is not None:
             finals = search.search_cells(_prior_cells(prior, prior_radius_m, opts["alt_m"]), prior_radius_m / 5,
                                          keep_cells or 40)

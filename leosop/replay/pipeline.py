@@ -240,7 +240,7 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, threads=1):
                                                          / np.timedelta64(1, "s"))
         found = find_combs(block.iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
                            search=False, gate_hz=TRACK_GATE_HZ, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz,
-                           clean=False)
+                           clean=False, spectrum=block.iq_fft)
         for m, p in enumerate(found.predicted_index):
             i, j = rows[p]
             for c, v in zip(cols, (found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)):
@@ -377,7 +377,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     threads : int
         Threads for the blocks: N > 1 reads and cleans the next blocks on
         N - 1 worker threads while this one searches and tracks
-        (:func:`~leosop.replay.stream.prepared_blocks`); the result is the
+        (:func:`~leosop.replay.stream.prepared_blocks`), and votes on N
+        threads in the identification's cell search; the result is the
         same whatever N.
 
     Returns
@@ -424,7 +425,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             # After a birth the combs of the last block are searched for again, with as many new.
             n_known = n_last if contiguous else 0
             found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
-                               lo_offset_hz=lo, clean=False)
+                               lo_offset_hz=lo, clean=False, spectrum=block.iq_fft)
             if lo_rough is None:
                 lo_rough = rough_lo_hz(found.doppler_hz)
         else:
@@ -434,7 +435,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
                                search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
                                max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
-                               clean=False)
+                               clean=False, spectrum=block.iq_fft)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         n_last = len(det)
         shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
@@ -456,7 +457,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         ident = identify_tracks(tracks, constellation, init_pos_ecef_m=init, prior_radius_m=radius_m, mask_deg=mask_deg,
                                 carrier_hz=comb.carrier_hz, lo_offset_max_hz=lo_offset_max_hz,
                                 lo_drift_max_hz_per_s=lo_drift_max_hz_per_s,
-                                rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS) if tracks else None
+                                rx_speed_sigma_mps=0.0 if static else RX_SPEED_SIGMA_MPS,
+                                threads=threads) if tracks else None
         return tracks, ident
 
     tracks, ident = identify(raw, init_pos_ecef_m, prior_radius_m)

@@ -11,12 +11,14 @@ predictions), and hands the blocks back in their order: the work of each
 block is the same as in one thread, so are the results, bit for bit.
 
 The workers spend their time in numpy and FFTW (:mod:`leosop.signal.fft`,
-per-thread plans), which release the GIL. Measured on a continuous 2.5 MS/s
-recording of 7 satellites (0.1 s blocks, ``tools/bench_replay.py``), the
-preparation is half the streaming stage's processor time (1.05 of 2.10 s
-for 20 s), the comb search and tracking the other half: two threads can at
-best halve the time; more help only where the preparation dominates (wide
-recordings narrowed block by block).
+per-thread plans), which release the GIL; the cleaned block's FFT, made
+here, is handed to the comb search (``find_combs(..., spectrum=)``).
+Measured on a continuous 2.5 MS/s recording of 7 satellites (0.1 s
+blocks, ``tools/bench_replay.py``), the preparation is half the streaming
+stage's processor time (0.81 of 1.69 s for 20 s), the comb search and
+tracking the other half: two threads can at best halve the time; more
+help only where the preparation dominates (wide recordings narrowed
+block by block).
 """
 
 from collections import deque
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..signal.fft import fft
 from ..signal.frontend import clean_block
 
 __all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column"]
@@ -95,10 +98,15 @@ class PreparedBlock:
     spectrum : ndarray of float, (SPECTRUM_BINS,) or None
         :func:`spectrum_column` of the narrowed block before cleaning, for
         the blocks the figure keeps; None for the others.
+    iq_fft : ndarray of complex64, (n,)
+        FFT of ``iq`` (:func:`~leosop.signal.fft.fft`), for
+        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker, as
+        the comb search would make it.
     """
 
     iq: np.ndarray
     spectrum: np.ndarray | None
+    iq_fft: np.ndarray
 
 
 def _prepare(rec, factor, comb, spectrum_every, item):
@@ -109,7 +117,9 @@ def _prepare(rec, factor, comb, spectrum_every, item):
     if not np.isfinite(iq.sum()):
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf")
     spectrum = spectrum_column(iq) if spectrum_every and k % spectrum_every == 0 else None
-    return PreparedBlock(clean_block(iq, rec.sample_rate_hz / factor, comb)[0], spectrum)
+    iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb)
+    # The cleaning's FFT is the cleaned block's unless it excised lines.
+    return PreparedBlock(iq, spectrum, fft(iq) if cleaning.spectrum is None else cleaning.spectrum)
 
 
 def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):

@@ -68,9 +68,13 @@ class DecimationGrid:
     (exact to ``(pi eps L / fs)^2 / 6``, ~1e-6). One FFT and a short inverse
     FFT per channel replace a product of the block with every channel's
     mixer (~10x less work with 7 combs).
+
+    ``spectrum``, the block's :func:`~.fft.fft` (n,) when known (the
+    cleaning's, :class:`~.frontend.Cleaning`), is that FFT when the grid
+    needs no zero-padding (n_seg * seg = n, as for blocks of round sizes).
     """
 
-    def __init__(self, iq, fs, bw_hz, oversample=8.0):
+    def __init__(self, iq, fs, bw_hz, oversample=8.0, *, spectrum=None):
         n = iq.shape[-1]
         self.n, self.fs = n, fs
         self.n_seg, self.seg = decimation_size(n, int(np.ceil(oversample * bw_hz * n / fs)))
@@ -80,7 +84,7 @@ class DecimationGrid:
         self.n_fft = self.n_seg * self.seg
         self.k, self.weights, self.noise_gain = _alias_weights(self.n_fft, self.n_seg, self.seg)
         self._iq = iq
-        self._spectrum = None
+        self._spectrum = spectrum if spectrum is not None and self.n_fft == n else None
         self._windows = None
 
     @property

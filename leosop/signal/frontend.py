@@ -299,6 +299,10 @@ class Cleaning:
         CW / narrowband interferers excised (lines not part of a comb).
     noise_density : float
         Noise power per Hz in sample units (N0), from the spectrum's median.
+    spectrum : ndarray of complex64, (n,) or None
+        The cleaned block's FFT (:func:`~.fft.fft`) when no line was
+        excised (the FFT the cleaning made; the comb search can reuse it,
+        :func:`~.multicomb.find_combs`); None when lines were excised.
     """
 
     dc: complex
@@ -308,6 +312,7 @@ class Cleaning:
     iq_corrected: bool
     lines: tuple
     noise_density: float
+    spectrum: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 def iq_imbalance(iq):
@@ -371,20 +376,23 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
     if noise <= 0:
         return [], noise
-    # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges).
-    p = np.fft.fftshift(power)
+    # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges), zero-padded
+    # as np.convolve's "same" mode pads (the smoothing is computed only near the strong bins, _strong_runs).
+    pad = _LINE_SMOOTH_BINS // 2
+    padded = np.zeros(n + _LINE_SMOOTH_BINS - 1, dtype=power.dtype)
+    padded[pad:pad + n // 2] = power[n - n // 2:]
+    padded[pad + n // 2:pad + n] = power[:n - n // 2]
+    p = padded[pad:pad + n]  # np.fft.fftshift(power)
     threshold = -np.log(pfa / n) * noise
-    strong = p > threshold
-    if not strong.any():
+    strong = np.flatnonzero(p > threshold)
+    if not strong.size:
         return [], noise
-    smooth = np.convolve(p, np.full(_LINE_SMOOTH_BINS, 1.0 / _LINE_SMOOTH_BINS), mode="same")
-    above = (smooth > 2.0 * noise) | strong
-    edges = np.diff(np.concatenate([[0], above.view(np.int8), [0]]))
-    lo, hi = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1  # runs of ``above``, inclusive
-    cs = np.concatenate([[0], np.cumsum(strong)])
-    runs = cs[hi + 1] - cs[lo] > 0  # runs holding a strong bin
-    lo, hi = lo[runs], hi[runs]
-    peak = lo + np.array([int(np.argmax(p[a:b + 1])) for a, b in zip(lo, hi)], dtype=np.int64)
+    lo, hi = _strong_runs(padded, strong, 2.0 * noise)
+    # Each run's peak: the first bin of its largest power (as argmax).
+    idx, first = _ranges(lo, hi + 1)
+    vals = p[idx]
+    hit = np.flatnonzero(vals == np.repeat(np.maximum.reduceat(vals, first), hi - lo + 1))
+    peak = idx[hit[np.searchsorted(hit, first)]]
     m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
     spacing_bins = comb.tone_spacing_hz * n / fs
     half = (hi - lo) // 2 + _PARTNER_BINS + int(np.ceil((comb.n_tones - 1) * spacing_bins * _PARTNER_SPACING_SPREAD))
@@ -402,13 +410,82 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     return lines, noise
 
 
+def _strong_runs(padded, strong, level):
+    """The runs of bins holding a strong bin where the power smoothed over ``_LINE_SMOOTH_BINS`` exceeds ``level``.
+
+    A run is a maximal range of bins each strong or above ``level`` once
+    smoothed (``np.convolve(p, ones / L, mode="same")``, which
+    zero-pads); only runs holding a strong bin are returned. The smoothing
+    is computed in windows around the strong bins (a few percent of the
+    spectrum), widened until every run ends inside its window: each
+    smoothed bin is the same dot product of the same ``L`` bins as over the
+    whole spectrum, so the runs are those of the whole spectrum.
+
+    Parameters
+    ----------
+    padded : ndarray, (n + L - 1,)
+        The power spectrum (fftshift order) with ``L // 2`` zeros before and ``L // 2 - 1`` after.
+    strong : ndarray of int, (n_strong,)
+        Indices of the strong bins, increasing (they are in runs whatever the smoothing).
+    level : float
+
+    Returns
+    -------
+    lo, hi : ndarray of int, (n_runs,)
+        First and last bin of each run, increasing.
+    """
+    L = _LINE_SMOOTH_BINS
+    n = padded.size - L + 1
+    kernel = np.full(L, 1.0 / L)
+    half = 4 * L
+    while True:
+        # Windows [a, b) round the strong bins, merged where they overlap.
+        a, b = np.maximum(strong - half, 0), np.minimum(strong + half + 1, n)
+        new = np.r_[True, a[1:] > b[:-1]]
+        a, b = a[new], np.maximum.reduceat(b, np.flatnonzero(new))
+        # Each window's bins with L - 1 more of padding, gathered: smoothed bin i of a window is the dot
+        # product of padded[i:i + L] (np.convolve's "valid" outputs whose inputs lie in one window).
+        rel, first = _ranges(a, b + L - 1)  # bins of padded; where each window starts in them
+        smooth = np.convolve(padded[rel], kernel, mode="valid")
+        keep = np.ones(smooth.size, bool)  # drop outputs that straddle two windows
+        keep[(first[1:, None] - L + 1 + np.arange(L - 1)).ravel()] = False
+        bins = rel[:smooth.size][keep]  # the smoothed bins
+        above = smooth[keep] > level
+        above[np.searchsorted(bins, strong)] = True
+        # Runs of ``above`` within each window (a new window breaks a run).
+        start = above & np.r_[True, ~above[:-1] | (np.diff(bins) != 1)]
+        end = above & np.r_[~above[1:] | (np.diff(bins) != 1), True]
+        lo, hi = bins[start], bins[end]
+        holds = np.searchsorted(strong, lo) < np.searchsorted(strong, hi, side="right")
+        lo, hi = lo[holds], hi[holds]
+        # A run that reaches its window's edge (not the spectrum's) may go on beyond it: widen.
+        w = np.searchsorted(a, lo, side="right") - 1  # each run's window
+        if not np.any(((lo == a[w]) & (a[w] > 0)) | ((hi + 1 == b[w]) & (b[w] < n))):
+            return lo, hi
+        half *= 4
+
+
+def _ranges(a, b):
+    """The indices ``a[k] .. b[k] - 1`` of every range, concatenated, (sum(b - a),), and where each range
+    starts among them, (n_ranges,); ``b >= a``."""
+    size = b - a
+    first = np.cumsum(size) - size
+    return np.arange(first[-1] + size[-1] if size.size else 0) - np.repeat(first - a, size), first
+
+
 def _window_max(p, a, b):
-    """Largest ``p[a:b + 1]`` per window (0 where a window lies outside ``p``), shape of ``a``."""
-    n = p.size
-    a, b = np.clip(a, 0, n), np.clip(b + 1, 0, n)  # half-open, within [0, n]
-    bounds = np.stack([a.ravel(), b.ravel()], axis=1).ravel()  # a0, b0, a1, b1, ...
-    out = np.maximum.reduceat(np.append(p, 0.0), bounds)[::2]  # max over [a_k, b_k) when a_k < b_k
-    return np.where(b > a, out.reshape(a.shape), 0.0)
+    """Largest ``p[a:b + 1]`` per window (0 where a window lies outside ``p``), shape of ``a``.
+
+    Only the windows' own bins are read (they are a few percent of ``p``).
+    """
+    n, shape = p.size, np.shape(a)
+    a, b = np.clip(a, 0, n).ravel(), np.clip(b + 1, 0, n).ravel()  # half-open, within [0, n]
+    full = b > a
+    out = np.zeros(a.size)
+    if full.any():
+        idx, first = _ranges(a[full], b[full])
+        out[full] = np.maximum.reduceat(p[idx], first)
+    return out.reshape(shape)
 
 
 def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
@@ -453,4 +530,5 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
         for ln in lines:
             spectrum[np.arange(ln.lo_bin, ln.hi_bin + 1) % n] = 0.0
         x = np.fft.ifft(spectrum).astype(np.complex64)
-    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0)
+    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0,
+                       None if lines else spectrum)

@@ -146,8 +146,9 @@ def _subtract_spectrum(spectrum, comb, c, n, fs, n_seg_s):
                    (weight * dft[np.arange(comb.n_tones)[:, None], b % n_seg_s]).astype(spectrum.dtype))
 
 
-def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz):
-    """True when the block's spectrum, the combs ``found`` (Combs) removed, holds another comb.
+def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz, spectrum=None):
+    """True when the block's spectrum (``fft(iq)``, or ``spectrum`` given), the combs ``found`` (Combs)
+    removed, holds another comb.
 
     A detection within the coarse error (modulo the spacing) of a found comb
     is taken as its residue (the subtraction leaves a little of a strong,
@@ -155,7 +156,7 @@ def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz):
     found by a later search, when the two have drifted apart.
     """
     n = iq.shape[-1]
-    spectrum = fft(iq)
+    spectrum = fft(iq) if spectrum is None else spectrum.copy()
     if not np.isfinite(spectrum[0]):
         raise NonFiniteSamples("IQ samples contain NaN or inf")
     n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * n / fs)))
@@ -281,7 +282,7 @@ class _Finder:
 
 def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_doppler_hz=MAX_DOPPLER_HZ,
                max_rate_hz_per_s=MAX_RATE_HZ_PER_S, predicted_hz=None, predicted_rate_hz_per_s=None,
-               gate_hz=None, search=True, n_refine=2, batch=True, lo_offset_hz=0.0, clean=True):
+               gate_hz=None, search=True, n_refine=2, batch=True, lo_offset_hz=0.0, clean=True, spectrum=None):
     """Doppler, rate and C/N0 of every pilot comb in one block.
 
     Parameters
@@ -322,6 +323,10 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     clean : bool
         Remove the block's DC offset, IQ imbalance and CW / narrowband
         interferers first (:func:`~.frontend.clean_block`; one FFT more).
+    spectrum : ndarray of complex64, shape (n,), optional
+        With ``clean=False``: the FFT of ``iq`` (:func:`~.fft.fft`) if known,
+        as the cleaning leaves it (:attr:`~.frontend.Cleaning.spectrum`); the
+        search then spares that FFT (the result is the same).
 
     Returns
     -------
@@ -336,7 +341,8 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     if clean:
         if not np.isfinite(iq.sum()):
             raise NonFiniteSamples("IQ samples contain NaN or inf")
-        iq, _ = clean_block(iq, fs, comb)
+        iq, cleaning = clean_block(iq, fs, comb)
+        spectrum = cleaning.spectrum
     lo = float(lo_offset_hz)
     if lo:
         comb = comb.through_lo(lo)
@@ -352,9 +358,11 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         # another comb, which is rare: a search block then costs little more
         # than a tracking one.
         kw = dict(comb=comb, max_combs=max_combs, pfa=pfa, max_doppler_hz=max_doppler_hz,
-                  max_rate_hz_per_s=max_rate_hz_per_s, gate_hz=gate_hz, n_refine=n_refine, clean=False)
+                  max_rate_hz_per_s=max_rate_hz_per_s, gate_hz=gate_hz, n_refine=n_refine, clean=False,
+                  spectrum=spectrum)
         tracked = find_combs(iq, fs, predicted_hz=pred, predicted_rate_hz_per_s=pred_rate, search=False, **kw)
-        if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa, lo):
+        if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa, lo,
+                                                                    spectrum):
             return tracked
     tracking = pred_rate is not None and pred.size > 0 and not search
     if tracking:
@@ -362,9 +370,9 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         # channels need only pass the gate and that chirp, and the comb position
         # (checked when the comb was found) needs no check.
         grid = DecimationGrid(iq, fs, gate + 0.5 * float(np.max(np.abs(pred_rate[:max_combs]))) * dur + 2.0 * df,
-                              oversample=_TRACK_OVERSAMPLE)
+                              oversample=_TRACK_OVERSAMPLE, spectrum=spectrum)
     else:
-        grid = DecimationGrid(iq, fs, max(error_hz, gate) + 0.5 * max_rate_hz_per_s * dur)
+        grid = DecimationGrid(iq, fs, max(error_hz, gate) + 0.5 * max_rate_hz_per_s * dur, spectrum=spectrum)
     half = comb.n_tones // 2
     finder = _Finder(grid, comb, half if tracking else half + _EXTRA, max_rate_hz_per_s, pfa)
     finder.predictions(pred, pred_rate, gate, batch, max_combs)

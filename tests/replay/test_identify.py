@@ -63,6 +63,21 @@ def test_walker_snapshot_tracks_identified_with_a_prior_100_km_off(walker):
     assert abs(res.lo_offset_hz - clock_mid) < 15.0
 
 
+def test_cell_vote_on_threads_gives_the_same_identification(walker, monkeypatch):
+    """The cell vote's chunks on two threads (cut to 16 cells so that there are many): every number
+    the same as on one thread, bit for bit."""
+    from leosop.replay import cellvote
+
+    monkeypatch.setattr(cellvote, "_CHUNK_CELLS", 16)
+    times = _snapshot_times(walker.epochs_utc[0] + np.timedelta64(3, "h"), 20)
+    tracks, truth, _, init, _ = _scenario(walker, 2, times, 5)
+    res = [identify_tracks(tracks, walker, init_pos_ecef_m=init, mask_deg=10.0, lo_offset_max_hz=20e3,
+                           threads=n) for n in (1, 2)]
+    assert res[0].sat_id == res[1].sat_id == truth
+    for name in ("pos_ecef_m", "match_rms_hz", "lo_offset_hz", "lo_drift_hz_per_s"):
+        assert np.array_equal(getattr(res[0], name), getattr(res[1], name)), name
+
+
 def test_track_of_a_satellite_missing_from_the_snapshot_and_a_spurious_track_are_none(walker):
     times = _snapshot_times(walker.epochs_utc[0] + np.timedelta64(7, "h"), 40)
     tracks, truth, _, init, rng = _scenario(walker, 2, times, 6)

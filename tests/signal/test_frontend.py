@@ -220,3 +220,41 @@ def test_cw_line_among_combs_is_excised(cw_hz, off_hz, rate_hz_per_s):
     assert len(c.lines) == 1
     assert c.lines[0].frequency_hz == pytest.approx(cw_hz, abs=fs / n)
     assert c.lines[0].power_dbhz == pytest.approx(70.0, abs=0.5)
+
+
+def test_line_runs_found_near_the_strong_bins_are_those_of_the_whole_spectrum():
+    """find_lines smooths the spectrum only round its strong bins (frontend._strong_runs); the runs must be
+    exactly those of the smoothing of the whole spectrum (np.convolve "same", its former code): CW lines on
+    the bin grid, half a bin off (sinc sidelobes above the level for ~100 bins: the windows must widen), at
+    both edges of the spectrum, and a comb."""
+    from leosop.signal.frontend import _LINE_SMOOTH_BINS, _strong_runs, _window_max
+
+    fs, n = 2.5e6, 250_000
+    rng = np.random.default_rng(5)
+    t = np.arange(n) / fs
+    x = add_noise(np.zeros(n, complex), 45.0, fs, rng)
+    for f_hz, cn0_dbhz in ((300e3, 70.0), (-410_005.0, 110.0), (fs / 2 - 20.0, 65.0), (-fs / 2 + 5.0, 75.0)):
+        x = x + np.sqrt(10.0 ** (cn0_dbhz / 10.0) / fs) * np.exp(2j * np.pi * f_hz * t)
+    x = x + doppler_blocks(fs, n, 20e3, -3000.0, None, rng=rng, dtype=np.complex128)[0]
+    power = np.fft.fftshift(np.abs(np.fft.fft(x)) ** 2).astype(np.float32)
+    for level in (2.0, 20.0):  # noise means (the exponential bins' mean is 1 here after scaling)
+        p = power / np.median(power) * np.log(2.0)
+        strong = np.flatnonzero(p > 30.0)
+        smooth = np.convolve(p, np.full(_LINE_SMOOTH_BINS, 1.0 / _LINE_SMOOTH_BINS), mode="same")
+        above = np.zeros(n, bool)
+        above[strong] = True
+        above |= smooth > level
+        edges = np.diff(np.concatenate([[0], above.view(np.int8), [0]]))
+        lo, hi = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+        cs = np.concatenate([[0], np.cumsum(above & (p > 30.0))])
+        held = cs[hi + 1] - cs[lo] > 0
+        padded = np.concatenate([np.zeros(_LINE_SMOOTH_BINS // 2, p.dtype), p,
+                                 np.zeros(_LINE_SMOOTH_BINS // 2 - 1, p.dtype)])
+        got_lo, got_hi = _strong_runs(padded, strong, level)
+        assert held.sum() >= 8 and np.max(hi[held] - lo[held]) > 100  # the wide sidelobes are there
+        assert np.array_equal(got_lo, lo[held]) and np.array_equal(got_hi, hi[held])
+    # The partners' windows read only their own bins: each window's max as a plain max (0 outside p).
+    a = rng.integers(-50, n + 50, (40, 6))
+    b = a + rng.integers(-3, 30, a.shape)
+    want = [max(p[max(x, 0):max(min(y + 1, n), 0)], default=0.0) for x, y in zip(a.ravel(), b.ravel())]
+    assert np.array_equal(_window_max(p, a, b), np.reshape(want, a.shape))
