@@ -215,9 +215,11 @@ def fused(traj, k0, t_s, drive_s, r, b, base, rng, grade, options, nhc, gap, res
 def block_fixes(traj, k0, drive_s, r, b, base, kw):
     """Block-wise differential fixes: errors (n_b, 3) and covariances (n_b, 3, 3) in ENU, times from the drive's
     start ``drive_s`` (aids' clock; IMU sample ``k0``) (n_b,)."""
+    # On the drive's clock, so that the blocks start with it.
+    r, b = (dataclasses.replace(m, t_s=m.t_s - drive_s) for m in (r, b))
     fix = solve_differential(r, b, base, block_s=BLOCK_FIX_S, motion="constant_velocity",
                              pos0_ecef_m=traj.at(traj.t_s[k0]).pos_ecef_m[0], **kw)
-    t_fix = fix.t_ref_s - drive_s
+    t_fix = fix.t_ref_s
     k = k0 + np.rint(t_fix * IMU_RATE_HZ).astype(int)
     t_true = traj.t_s[k]
     truth = traj.at(t_true)
