@@ -76,7 +76,7 @@ from leosop.positioning.solve import satellite_states
 from leosop.positioning.static_passes import solve_static_passes
 from leosop.replay.lo import common_offset_sigma_hz
 from leosop.replay.pipeline import replay
-from leosop.signal.frontend import PRESETS
+from leosop.signal.frontend import PRESETS, wiener_doppler_sigma_hz
 from leosop.signal.iq import open_sigmf
 
 SITE = (48.137, 11.575, 520.0)
@@ -188,7 +188,8 @@ def main(argv=None):
             lo_max = 100e3 if abs(offset) + 300e3 <= 400e3 else 3e6
             for name, init in searches:
                 t0 = time.perf_counter()
-                res = replay(open_sigmf(path), const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
+                rec = open_sigmf(path)
+                res = replay(rec, const, init_pos_ecef_m=init, static=True, lo_offset_max_hz=lo_max)
                 elapsed = time.perf_counter() - t0
                 n_true, n_ok, n_wrong, n_sats, n_sats_id, n_image = score(res, curves)
                 fix = None if res.position is None else res.position.fixes
@@ -204,7 +205,7 @@ def main(argv=None):
                 d_drift = lo.drift_hz_per_s - drift if lo else np.nan
                 status = solutions_doc(res.position, res.measurements)[0][0]["status"] if fix is not None else "-"
                 crb, d_w, crb_w, dsig3d = np.nan, np.nan, np.nan, np.nan
-                again = _data_fix(res, const)
+                again = _data_fix(res, const, rec.sample_rate_hz)
                 if again is not None:
                     crb = common_offset_sigma_hz(again)
                     dsig3d = float(np.sqrt(np.trace(again.cov[:3, :3])))
@@ -226,20 +227,27 @@ def _linewidth(lo):
     return np.nan if lo is None or lo.linewidth_hz is None else lo.linewidth_hz
 
 
-def _data_fix(res, const):
+def _data_fix(res, const, sample_rate_hz):
     """The replay's fix solved again for the data alone (None without a static fix).
 
     Solved from the replay's solution with neither the element sets' radial
     and cross-track error nor the passes' disagreement in the covariance:
-    what the Doppler rows, their sigmas and the priors tell.
+    what the Doppler rows, their sigmas, the LO noise the replay found (one
+    state per block, :func:`leosop.replay.lo.lo_noise`) and the priors tell.
     """
     fix = None if res.position is None else res.position.fixes
     if fix is None or getattr(fix, "rx_clock_poly_hz", None) is None or not np.isfinite(fix.pos_ecef_m).all():
         return None
     meas = res.measurements
     pos, vel, reason, _ = satellite_states(meas, const, fix.pos_ecef_m)
+    blocks = {}
+    if res.lo.linewidth_hz:
+        # Snapshot recordings: every block (capture) as long as the first.
+        block_s = res.blocks[0].n_samples / sample_rate_hz
+        blocks = {"block_id": meas.time_utc, "block_sigma_hz": wiener_doppler_sigma_hz(res.lo.linewidth_hz, block_s)}
     again = solve_static_passes(meas.doppler_hz, meas.sigma_hz, pos, vel, meas.carrier_hz, meas.t_s, meas.sat_id,
-                                pos0_ecef_m=fix.pos_ecef_m, mask=reason == "", clock="common", pass_offsets=False)
+                                pos0_ecef_m=fix.pos_ecef_m, mask=reason == "", clock="common", pass_offsets=False,
+                                **blocks)
     return again if np.isfinite(again.pos_ecef_m).all() else None
 
 

@@ -11,9 +11,17 @@ complement) and returns the prediction and the projected Jacobian
 ``(I - A K) D``; :meth:`PassesModel.normal_matrix` is the full normal matrix
 of the fix at its solution. Used by
 :func:`~leosop.positioning.static_passes.solve_static_passes`.
+
+Blocks (optional): rows of one block (one instant of a snapshot receiver)
+share a frequency error ``c_b ~ N(0, q_b)`` (the receiver LO's phase noise
+over the block). Each block gets a state with that prior, solved with the
+shared clocks (the global tier of the Schur complement; its own normal
+matrix is diagonal). Eliminating it leaves the block's rows the covariance
+``diag(sigma^2) + q_b 1 1^T``, so this is the generalised least squares of
+the correlated rows (its chi-square the rows' Mahalanobis distance).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -62,7 +70,12 @@ class PassRows:
     prior : ndarray, (n_loc,)
         Prior weights of the per-pass terms; ``prior_cols`` those non-zero.
     prior_cols : ndarray of int
+    block_index : ndarray of int, (n,)
+        Each Doppler row's block (0 for masked rows and without blocks).
+    block_prior : ndarray, (n_block,)
+        Prior weight ``1 / q_b`` of each block's common frequency error [1/Hz^2].
     n, n_pass, n_clk, n_glob, n_loc, deg, time_bias : int
+        ``n_glob`` the receiver clocks' polynomial terms (the blocks' states not counted).
     common, has_alt : bool
     time_offset_model : {"inertial", "earth_fixed"}
         What a pass's time offset shifts (:data:`~leosop.positioning.static_passes.TIME_OFFSET_MODELS`).
@@ -102,11 +115,25 @@ class PassRows:
     common: bool
     has_alt: bool
     time_offset_model: str = "inertial"
+    block_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    block_prior: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n_block(self):
+        """Blocks with a common frequency error state, int (0 without)."""
+        return self.block_prior.size
 
     @property
     def n_states(self):
-        """Position, receiver clock terms and per-pass terms, int."""
-        return 3 + self.n_glob + self.n_pass * self.n_loc
+        """Position, receiver clock terms, blocks' common errors and per-pass terms, int."""
+        return 3 + self.n_glob + self.n_block + self.n_pass * self.n_loc
+
+    @property
+    def B_all(self):
+        """The global tier's basis, (n, n_glob + n_block): the clocks' polynomials, then each block's indicator."""
+        if not self.n_block:
+            return self.B_glob
+        return np.hstack([self.B_glob, self.block_index[:, None] == np.arange(self.n_block)])
 
     @property
     def scale(self):
@@ -145,11 +172,13 @@ def _in_pass_order(rows, pass_id, clock_group, n_min, common):
 
 def pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, *, mask, common, deg,
               time_bias, sat_offset_sigma_hz, time_bias_sigma_s, clock_group, alt_m, alt_sigma_m,
-              time_offset_model="inertial"):
+              time_offset_model="inertial", block_id=None, block_sigma_hz=None):
     """The rows of a multi-pass fix in pass order and the layout of its linear terms.
 
     Arguments as :func:`~leosop.positioning.static_passes.solve_static_passes`'s
-    (``common`` its clock ``"common"``, ``deg`` the clock degree).
+    (``common`` its clock ``"common"``, ``deg`` the clock degree). Blocks are
+    numbered over the usable rows; a block's prior sigma is the largest of
+    its usable rows'.
 
     Returns
     -------
@@ -169,6 +198,14 @@ def pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, 
     n = rows[0].size
     (y, sigma, f0, t, r_s, v_s, m), gi, clk, labels, clock_labels, pass_clk, order = _in_pass_order(
         rows, pass_id, clock_group, n_loc + 1 - len(prior_cols), common)
+    block_index, block_prior = np.zeros(n, int), np.zeros(0)
+    if block_id is not None:
+        ids = np.broadcast_to(np.asarray(block_id), (n,))[order]
+        sig_b = np.broadcast_to(np.asarray(block_sigma_hz, dtype=float), (n,))[order]
+        _, block_index[m] = np.unique(ids[m], return_inverse=True)
+        sig_max = np.zeros(int(block_index[m].max()) + 1 if m.any() else 0)
+        np.maximum.at(sig_max, block_index[m], sig_b[m])
+        block_prior = 1.0 / sig_max**2
     n_clk = max(len(clock_labels), 1)
     n_glob *= n_clk
     n_pass = len(labels)
@@ -188,6 +225,10 @@ def pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, 
     n_extra = n_pass * len(prior_cols)
     sig_prior = np.repeat(1.0 / np.sqrt(prior[prior_cols]), n_pass)
     y, sigma, m = np.append(y, np.zeros(n_extra)), np.append(sigma, sig_prior), np.append(m, np.ones(n_extra, bool))
+    # The blocks' priors: a pseudo-row per block (measured 0), after the per-pass ones.
+    n_extra += block_prior.size
+    y, sigma = np.append(y, np.zeros(block_prior.size)), np.append(sigma, 1.0 / np.sqrt(block_prior))
+    m = np.append(m, np.ones(block_prior.size, bool))
     has_alt = alt_m is not None
     if has_alt:
         y, sigma, m = np.append(y, alt_m), np.append(sigma, alt_sigma_m), np.append(m, True)
@@ -200,7 +241,7 @@ def pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, 
         pass_clock=pass_clk, seg=seg, t_ref_s=t_ref, half_span_s=half_span_s, rx_t_ref_s=t_rx, half_rx_s=half_rx_s,
         B_glob=B_glob, basis=basis, prior=prior, prior_cols=prior_cols, n=n, n_pass=n_pass, n_clk=n_clk,
         n_glob=n_glob, n_loc=n_loc, deg=deg, time_bias=tb, common=common, has_alt=has_alt,
-        time_offset_model=time_offset_model)
+        time_offset_model=time_offset_model, block_index=block_index, block_prior=block_prior)
 
 
 class PassesModel:
@@ -218,7 +259,10 @@ class PassesModel:
                                  inertial=rows.time_offset_model == "inertial") if rows.time_bias else None)
 
     def normal(self, x, w):
-        """Geometry (h, D, rate grad), the per-pass basis A and the linear normal matrix's blocks and solver."""
+        """Geometry (h, D, rate grad), the per-pass basis A and the linear normal matrix's blocks and solver.
+
+        The global tier is the receivers' polynomials, then the blocks' common errors (module docstring).
+        """
         r = self.rows
         n, seg = r.n, r.seg
         H = doppler_jacobian(r.pos_sv_ecef_m, r.vel_sv_ecef_mps, x, np.zeros((len(x), 3)), r.carrier_hz)
@@ -236,22 +280,46 @@ class PassesModel:
         Gi_ss = np.linalg.pinv(G_ss, hermitian=True)
         G_gg = np.einsum("mi,pm,mj->pij", B_glob, wd, B_glob)
         G_sg = np.add.reduceat(wA[..., :, None] * B_glob[None, :, None, :], seg, axis=1)  # (k, P, l, g)
+        if r.n_block:
+            G_gg, G_sg = self._with_blocks(wd, wA, G_gg, G_sg)
         S = G_gg - np.einsum("pqli,pqlj->pij", G_sg, Gi_ss @ G_sg)
-        Si = np.linalg.pinv(S, hermitian=True) if r.n_glob else S
+        Si = np.linalg.pinv(S, hermitian=True) if r.n_glob + r.n_block else S
 
         def lin(rhs):
             """Linear terms (global (k, g, q), per pass (k, P, l, q)) fitting rows ``rhs`` (k, n, q)."""
             b_s = np.add.reduceat(wA[..., :, None] * rhs[..., None, :], seg, axis=1)
             z_s = Gi_ss @ b_s
             b_g = np.einsum("mi,pm,pmq->piq", B_glob, wd, rhs)
+            if r.n_block:
+                b_g = np.concatenate([b_g, self._block_sums(wd[..., None] * rhs)], 1)
             c_g = Si @ (b_g - np.einsum("pqli,pqlk->pik", G_sg, z_s))
             return c_g, z_s - Gi_ss @ (G_sg @ c_g[:, None])
 
         def fitted(c_g, c_s):
             """Rows (k, n, q) of the linear terms."""
-            return np.einsum("mi,piq->pmq", B_glob, c_g) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
+            out = np.einsum("mi,piq->pmq", B_glob, c_g[:, :r.n_glob]) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
+            return out + c_g[:, r.n_glob + r.block_index] if r.n_block else out
 
         return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss)
+
+    def _block_sums(self, v):
+        """Sums (k, n_block, c) of the rows ``v`` (k, n, c) over each block."""
+        out = np.zeros((self.rows.n_block,) + v.shape[:1] + v.shape[2:])
+        np.add.at(out, self.rows.block_index, np.moveaxis(v, 1, 0))
+        return np.moveaxis(out, 0, 1)
+
+    def _with_blocks(self, wd, wA, G_gg, G_sg):
+        """The global tier's normal blocks with the blocks' states appended: (k, g, g) and (k, P, l, g)."""
+        r = self.rows
+        k, n_b = len(wd), r.n_block
+        G_gb = self._block_sums(wd[..., None] * r.B_glob).transpose(0, 2, 1)  # (k, n_glob, n_block)
+        G_bb = self._block_sums(wd[..., None])[..., 0] + r.block_prior  # diagonal, (k, n_block)
+        G_sb = np.zeros((r.n_pass * n_b, k, wA.shape[-1]))
+        np.add.at(G_sb, r.pass_index * n_b + r.block_index, np.moveaxis(wA, 1, 0))
+        G_sb = G_sb.reshape(r.n_pass, n_b, k, -1).transpose(2, 0, 3, 1)  # (k, P, l, n_block)
+        G_gg = np.concatenate([np.concatenate([G_gg, G_gb], 2),
+                               np.concatenate([G_gb.transpose(0, 2, 1), G_bb[..., None] * np.eye(n_b)], 2)], 1)
+        return G_gg, np.concatenate([G_sg, G_sb], -1)
 
     def pieces(self, x, w):
         """Prediction, projected position Jacobian and the linear terms (global, per pass) at ``x``."""
@@ -263,14 +331,14 @@ class PassesModel:
         K_g, K_s = lin(D)
         pred = h + fitted(c_g, c_s)[..., 0]
         J = D - fitted(K_g, K_s)
-        return pred, J, D, A, c_g[..., 0], c_s[..., 0], K_s, blocks
+        return pred, J, D, A, c_g[..., 0], c_s[..., 0], K_g, K_s, blocks
 
     def __call__(self, x, idx, w):
         """Prediction (k, n_rows) and Jacobian (k, n_rows, 3) of the rows, pseudo-rows included, at ``x`` (k, 3)."""
         r = self.rows
-        pred, J, _, _, _, c_s, K_s, _ = self.pieces(x, w)
-        pred = np.concatenate([pred] + [c_s[:, :, j] for j in r.prior_cols], -1)
-        J = np.concatenate([J] + [-K_s[:, :, j] for j in r.prior_cols], axis=1)
+        pred, J, _, _, c_g, c_s, K_g, K_s, _ = self.pieces(x, w)
+        pred = np.concatenate([pred] + [c_s[:, :, j] for j in r.prior_cols] + [c_g[:, r.n_glob:]], -1)
+        J = np.concatenate([J] + [-K_s[:, :, j] for j in r.prior_cols] + [-K_g[:, r.n_glob:]], axis=1)
         if r.has_alt:
             lat, lon, alt = ecef_to_geodetic(x)
             pred = np.concatenate([pred, alt[:, None]], -1)
@@ -278,7 +346,7 @@ class PassesModel:
         return pred, J
 
     def normal_matrix(self, x, w):
-        """Full normal matrix of ``[pos, global terms, per-pass terms (pass-major)]`` at the solution ``x`` (1, 3).
+        """Full normal matrix of ``[pos, global terms, blocks, per-pass terms (pass-major)]`` at the solution (1, 3).
 
         Returns
         -------
@@ -286,12 +354,13 @@ class PassesModel:
             In scaled time (:attr:`PassRows.scale`).
         D, A : ndarray, (n, 3), (n, n_loc)
             The position derivative at fixed linear terms and the per-pass basis.
-        c_g, c_s : ndarray, (1, n_glob), (1, n_pass, n_loc)
+        c_g, c_s : ndarray, (1, n_glob + n_block), (1, n_pass, n_loc)
             The linear terms at ``x``.
         """
         r = self.rows
-        n, n_glob, n_pass, n_loc = r.n, r.n_glob, r.n_pass, r.n_loc
-        _, _, D, A, c_g, c_s, _, (G_gg, G_sg, G_ss) = self.pieces(x, w)
+        n, n_pass, n_loc = r.n, r.n_pass, r.n_loc
+        n_g = r.n_glob + r.n_block
+        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss) = self.pieces(x, w)
         wd, D, A = w[0, :n], D[0], A[0]
         N = np.zeros((r.n_states, r.n_states))
         N[:3, :3] = np.einsum("mi,m,mj->ij", D, wd, D)
@@ -299,13 +368,13 @@ class PassesModel:
             lat, lon, _ = ecef_to_geodetic(x[0])
             up = C_e_n(lat, lon)[:, 2]
             N[:3, :3] += np.outer(up, up) * w[0, -1]
-        g = slice(3, 3 + n_glob)
-        N[g, :3] = np.einsum("mi,m,mj->ij", r.B_glob, wd, D)
+        g = slice(3, 3 + n_g)
+        N[g, :3] = np.einsum("mi,m,mj->ij", r.B_all, wd, D)
         N[g, g] = G_gg[0]
-        N[3 + n_glob:, :3] = np.add.reduceat((wd[:, None] * A)[:, :, None] * D[:, None, :], r.seg,
-                                             axis=0).reshape(-1, 3)
-        N[3 + n_glob:, g] = G_sg[0].reshape(n_pass * n_loc, n_glob)
+        N[3 + n_g:, :3] = np.add.reduceat((wd[:, None] * A)[:, :, None] * D[:, None, :], r.seg,
+                                          axis=0).reshape(-1, 3)
+        N[3 + n_g:, g] = G_sg[0].reshape(n_pass * n_loc, n_g)
         for p in range(n_pass):
-            sl = slice(3 + n_glob + p * n_loc, 3 + n_glob + (p + 1) * n_loc)
+            sl = slice(3 + n_g + p * n_loc, 3 + n_g + (p + 1) * n_loc)
             N[sl, sl] = G_ss[0, p]
         return np.tril(N) + np.tril(N, -1).T, D, A, c_g, c_s

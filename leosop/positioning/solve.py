@@ -324,7 +324,9 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
                            clock: Literal["per_pass", "common"] = "per_pass", clock_degree: int | None = None,
                            sat_offset_sigma_hz: float = SAT_OFFSET_SIGMA_HZ, time_bias: bool = True,
                            time_bias_sigma_s: float | None = TIME_OFFSET_SIGMA_S,
-                           time_offset_model: Literal["inertial", "earth_fixed"] = "inertial") -> PositionResult:
+                           time_offset_model: Literal["inertial", "earth_fixed"] = "inertial",
+                           block_id: npt.ArrayLike | None = None,
+                           block_sigma_hz: npt.ArrayLike | None = None) -> PositionResult:
     """One batch fix of a receiver at rest from several passes (satellites), frequency terms per pass.
 
     Rows without ``sigma_hz`` get the caller's sigma, or their own pass's:
@@ -358,6 +360,10 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
         orbit (an element set's along-track error) or its ECEF states (a
         receiver's time-tag error); see
         :func:`~leosop.positioning.static_passes.solve_static_passes`.
+    block_id, block_sigma_hz : array_like, (n,), optional
+        Rows sharing a block share a frequency error of this prior sigma [Hz]
+        (a receiver LO's phase noise over a snapshot); see
+        :func:`~leosop.positioning.static_passes.solve_static_passes`.
 
     Returns
     -------
@@ -376,7 +382,7 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
     kw = dict(pos0_ecef_m=init_pos_ecef_m, alt_m=alt_m, alt_sigma_m=alt_sigma_m, mask=usable, clock=clock,
               clock_degree=clock_degree, sat_offset_sigma_hz=sat_offset_sigma_hz, time_bias=time_bias,
               time_bias_sigma_s=time_bias_sigma_s, time_offset_model=time_offset_model,
-              clock_group=group if len(labels) > 1 else None,
+              block_id=block_id, block_sigma_hz=block_sigma_hz, clock_group=group if len(labels) > 1 else None,
               orbit_sigma_rc_m=_element_set_sigma_rc_m(meas, constellation, usable) if source == "tle" else None)
     pos_lt = init_pos_ecef_m
     sigma_pass = None

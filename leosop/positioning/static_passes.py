@@ -77,7 +77,8 @@ class PassesFix(BatchFit):
         Posterior covariance of ``[pos, clock_poly_hz.ravel(), time_bias_s]``
         (clock ``"per_pass"``) or ``[pos, rx_clock_poly_hz, sat_offset_hz,
         time_bias_s]`` (clock ``"common"``); no ``time_bias_s`` states
-        without time biases. Priors are included. With a mirror solution the
+        without time biases, none of the blocks' common errors (``block_id``:
+        marginalised out). Priors are included. With a mirror solution the
         position block is that of the two-point mixture, ``+ w (1 - w) d d^T``
         (``d`` from the fix to the mirror, ``w = 1 / (1 + exp(dchi2 / 2))``):
         a mirror that fits as well (a short low pass) puts the distance
@@ -213,7 +214,9 @@ def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_
                         ambiguity_m: float = 10e3, clock_group: npt.ArrayLike | None = None,
                         decorrelate: bool = True, pass_offsets: bool = True,
                         orbit_sigma_rc_m: npt.ArrayLike | None = None,
-                        time_offset_model: Literal["inertial", "earth_fixed"] = "inertial") -> PassesFix:
+                        time_offset_model: Literal["inertial", "earth_fixed"] = "inertial",
+                        block_id: npt.ArrayLike | None = None,
+                        block_sigma_hz: npt.ArrayLike | None = None) -> PassesFix:
     """Batch Doppler fix of a receiver at rest from several passes (satellites), each with its own frequency terms.
 
     The position is shared. Each pass ``p`` (one satellite's track) has
@@ -322,6 +325,20 @@ def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_
         :func:`~leosop.orbits.accuracy.element_set_sigma_rc_m`: the floor of
         the pass offsets' variance in the covariance (with ``pass_offsets``).
         None: the passes' disagreement alone sets it.
+    block_id : array_like, (m,), optional
+        Block of each row (any sortable type, e.g. its instant): the rows of
+        a block share a frequency error of zero-mean prior sigma
+        ``block_sigma_hz``, independent from block to block (a snapshot
+        receiver's LO phase noise over the block,
+        :func:`~leosop.signal.frontend.wiener_doppler_sigma_hz`). Each block
+        gets that state (:mod:`~leosop.positioning.passes_model`): the
+        generalised least squares of rows whose covariance within a block is
+        ``diag(sigma^2) + q 1 1^T``. The states are marginalised out of
+        ``cov``; chi-square and dof count their priors. None: no such states
+        (the fix bit-identical to one without the argument).
+    block_sigma_hz : array_like, (m,) or scalar, optional
+        With ``block_id``: the prior sigma of each row's block [Hz], positive
+        (a block takes its largest usable row's).
 
     Returns
     -------
@@ -337,10 +354,13 @@ def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_
         raise ValueError("clock degree must be non-negative")
     if common and not sat_offset_sigma_hz > 0:
         raise ValueError("sat_offset_sigma_hz must be positive")
+    if block_id is not None and not (block_sigma_hz is not None and np.all(np.asarray(block_sigma_hz) > 0)):
+        raise ValueError("block_sigma_hz must be positive (and given) with block_id")
     rows = pass_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, t_s, pass_id, mask=mask,
                      common=common, deg=deg, time_bias=time_bias, sat_offset_sigma_hz=sat_offset_sigma_hz,
                      time_bias_sigma_s=time_bias_sigma_s, clock_group=clock_group, alt_m=alt_m,
-                     alt_sigma_m=alt_sigma_m, time_offset_model=time_offset_model)
+                     alt_sigma_m=alt_sigma_m, time_offset_model=time_offset_model, block_id=block_id,
+                     block_sigma_hz=block_sigma_hz)
     model = PassesModel(rows)
     n, m = rows.n, rows.used
     xtol = np.full(3, XTOL_POS_M)
@@ -441,22 +461,24 @@ def _covariance(model, x, w, residuals_hz, ok, pass_offsets, orbit_sigma_rc_m):
 
     The inverse full normal matrix, with the passes' disagreement priced in
     (``pass_offsets``, :mod:`.passes_noise`; ``orbit_sigma_rc_m`` its
-    floor), in [Hz/s^k]. Returns ``(cov,
+    floor), in [Hz/s^k]; the blocks' states marginalised out. Returns ``(cov,
     (variance_factor, offset_sigma_m, offset_chi2, offset_dof), c_g, c_s)``,
-    the last two the linear terms at ``x`` in scaled time.
+    the last two the linear terms at ``x`` in scaled time (``c_g`` the
+    receiver clocks' alone).
     """
     rows = model.rows
     n_glob, n_pass, n_loc, n_states = rows.n_glob, rows.n_pass, rows.n_loc, rows.n_states
+    n_g = n_glob + rows.n_block
     N, D, A, c_g, c_s = model.normal_matrix(x, w)
     scale_glob, scale_loc = rows.scale
-    scale = np.concatenate([np.ones(3), scale_glob, scale_loc.ravel()])
+    scale = np.concatenate([np.ones(3), scale_glob, np.ones(rows.n_block), scale_loc.ravel()])
     N_inv = _inverse_or_nan(N) if ok else np.full((n_states, n_states), np.nan)
     offsets = (1.0, 0.0, 0.0, 0) if pass_offsets else (None,) * 4
     if pass_offsets and n_pass and np.isfinite(N_inv).all():
         # Each pass's satellite offset (radial, cross-track) as a random effect the fix does not estimate:
         # its score test, variance component and sandwich term on the covariance (passes_noise).
         G, M_b, g_b = pass_offset_blocks(rows.pos_sv_ecef_m, rows.vel_sv_ecef_mps, x[0], rows.carrier_hz,
-                                         w[0, :rows.n], D, rows.B_glob, A, rows.seg, residuals_hz)
+                                         w[0, :rows.n], D, rows.B_all, A, rows.seg, residuals_hz)
         offsets = pass_disagreement(M_b - G.T @ N_inv @ G, g_b)
         variance_factor, offset_sigma_m = offsets[:2]
         var_b = np.full((n_pass, 2), offset_sigma_m**2)
@@ -470,11 +492,11 @@ def _covariance(model, x, w, residuals_hz, ok, pass_offsets, orbit_sigma_rc_m):
             NG = N_inv @ G
             N_inv = variance_factor * N_inv + (NG * var_b.ravel()) @ NG.T
     cov = N_inv * scale[:, None] * scale[None, :]
-    # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases].
-    loc = 3 + n_glob + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
+    # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases]; the blocks' states dropped.
+    loc = 3 + n_g + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
     n_poly_loc = n_loc - rows.time_bias
     perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_poly_loc].ravel(), loc[:, n_poly_loc:].ravel()])
-    return cov[np.ix_(perm, perm)], offsets, c_g, c_s
+    return cov[np.ix_(perm, perm)], offsets, c_g[:, :n_glob], c_s
 
 
 def _passes_fix(rows, pos_ecef_m, c_g, c_s, ok, clock, clock_group, offsets, fit):

@@ -21,8 +21,12 @@ block to block: 0.31 Hz for a 20 ms snapshot at 0.01 Hz (the ``consumer``
 preset), as large as a detection's thermal sigma. The comb fit cannot see it
 (any common linear phase is Doppler) and a static fix's clock polynomial does
 not absorb it, so it shows as a common part of each block's residuals;
-:func:`lo_noise` estimates beta from them, and the replay adds its sigma to
-every row and solves again (DESIGN 4.3 rows then carry it).
+:func:`lo_noise` estimates beta from them, and the replay solves again with
+one frequency state per block of that prior variance (``block_id`` of
+:func:`~leosop.positioning.static_passes.solve_static_passes`): the
+generalised least squares of rows whose covariance within a block is
+``diag(sigma^2) + q 1 1^T``. The rows (DESIGN 4.3) keep their own sigmas;
+``linewidth_hz`` tells what they share.
 
 Before identification, a continuous recording's tracking blocks fit the
 tone model through a rough offset, the median Doppler of the first full
@@ -160,7 +164,11 @@ def lo_noise(residuals_hz, sigma_hz, block_id, block_s, *, pfa=LO_NOISE_PFA):
     quantile, beta solves ``sum(m^2 / (V + 3 beta / (5 pi T))) = n_blocks``
     (the moment estimator of a random effect, [Paule 1982]). The
     fix's states absorb a little of the common part (its clock
-    polynomial wholly), so beta comes out slightly low.
+    polynomial wholly), so beta comes out slightly low. The replay takes
+    the residuals of a fix without block states and then solves again with
+    one state per block of prior variance ``3 beta / (5 pi T)``: the moment
+    estimate feeds the exact model (a likelihood maximised over beta under
+    that model would need a fix per trial beta).
 
     Parameters
     ----------

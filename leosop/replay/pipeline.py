@@ -481,17 +481,16 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         if static:
             # One receiver clock (offset and drift) and each satellite's small
             # offset and along-track time offset: the physics of one receiver.
-            fix = lambda m: position_static_passes(m, m.sat_id, constellation=constellation,  # noqa: E731
-                                                   init_pos_ecef_m=start, clock="common")
-            position = fix(meas)
-            # The LO's short-term noise, common to a block's rows, priced into every row (lo.lo_noise).
+            fix = lambda **kw: position_static_passes(meas, meas.sat_id, constellation=constellation,  # noqa: E731
+                                                      init_pos_ecef_m=start, clock="common", **kw)
+            position = fix()
+            # The LO's short-term noise, common to a block's rows: one frequency state per block (lo.lo_noise).
             block_s_rows = np.array([block_len[t] for t in meas.time_utc]) / fs
             used = position.fixes.used
             noise = lo_noise(position.fixes.residuals_hz[used], meas.sigma_hz[used], meas.time_utc[used],
                              block_s_rows[used])
             if noise.linewidth_hz > 0:
-                meas = replace(meas, sigma_hz=np.hypot(meas.sigma_hz, noise.sigma_hz(block_s_rows)))
-                position = fix(meas)
+                position = fix(block_id=meas.time_utc, block_sigma_hz=noise.sigma_hz(block_s_rows))
         else:
             position = position_snapshots(meas, constellation=constellation, init_pos_ecef_m=start)
     cpu_s["fix"] = time.process_time() - t0 - sum(cpu_s.values())

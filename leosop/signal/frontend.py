@@ -74,7 +74,8 @@ def wiener_doppler_sigma_hz(linewidth_hz, block_s):
     to every satellite of the block, independent from block to block. A
     snapshot fix's clock state absorbs it; a static fix's clock polynomial
     does not, and the replay estimates the linewidth from the fix's
-    residuals and adds this sigma to every row (:func:`leosop.replay.lo.lo_noise`).
+    residuals and solves again with one frequency state of this sigma per
+    block (:func:`leosop.replay.lo.lo_noise`).
     0.31 Hz for the ``consumer`` preset's 0.01 Hz over a 20 ms snapshot.
     """
     return np.sqrt(3.0 * np.asarray(linewidth_hz, dtype=float) / (5.0 * np.pi * np.asarray(block_s, dtype=float)))
