@@ -168,7 +168,7 @@ def _whole_cycles(n0, dd_keys, joint):
 def _check(name, a, shape):
     a = np.asarray(a, dtype=float)
     if a.shape != shape:
-        raise InputError(f"{name}: shape {a.shape}, expected {shape}", param=name)
+        raise InputError(f"{name}: shape {a.shape}, expected {shape}")
     return a
 
 
@@ -222,13 +222,12 @@ def solve_differential_carrier(t_s, phase_rover_cycles, sigma_rover_cycles, arc_
     """
     phr = np.asarray(phase_rover_cycles, dtype=float)
     if phr.ndim != 2:
-        raise InputError(f"phase_rover_cycles: shape {phr.shape}, expected (n_sats, n_epochs)",
-                         param="phase_rover_cycles")
+        raise InputError(f"phase_rover_cycles: shape {phr.shape}, expected (n_sats, n_epochs)")
     shape = phr.shape
     n_sats, n_ep = shape
     t = _check("t_s", t_s, (n_ep,))
     if not np.all(np.diff(t) > 0):
-        raise InputError("t_s: the epochs must increase", param="t_s")
+        raise InputError("t_s: the epochs must increase")
     sr = _check("sigma_rover_cycles", sigma_rover_cycles, shape)
     phb = _check("phase_base_cycles", phase_base_cycles, shape)
     sb = _check("sigma_base_cycles", sigma_base_cycles, shape)
