@@ -208,16 +208,25 @@ class Setup:
     rest_s: int = int(REST_S)
 
 
-def grade_imu(rng, grade):
-    """IMU errors drawn from the figures of ``grade`` (:data:`GRADES`), and the filter's settings of that grade."""
-    spec = GRADES[grade]
-    errors = ImuErrors.from_quoted(
-        gyro_bias_deg_per_h=rng.normal(0.0, spec.gyro_bias_sigma_deg_per_s, 3) * 3600.0,
-        gyro_arw_deg_per_rt_h=spec.gyro_arw_deg_per_rt_h,
-        accel_bias_g=rng.normal(0.0, spec.accel_bias_sigma_mps2, 3) / 9.80665,
-        accel_vrw_g_per_rt_hz=spec.accel_vrw_ug_per_rt_hz * 1e-6)
-    return errors, spec
+def grade_imu(grade):
+    """The IMU errors of the model of ``grade`` (:data:`GRADES`) the filter assumes, and that grade's figures.
 
+    The filter's bias is a turn-on bias N(0, sigma^2) plus a random walk of density ``q``; the truth's is a
+    first-order Gauss-Markov bias (:class:`~leosop.ins.imu.ImuErrors`, drawn at its stationary sigma ``sigma``)
+    with the correlation time ``2 sigma^2 / q^2`` (consumer: 5e5 s gyro, 8e4 s accelerometer), whose drive over
+    a run of ``T`` << that time is the walk ``q`` (increments' variance ``2 sigma^2 (1 - exp(-T / tau)) = q^2 T``
+    to ``T / tau``, 0.3 % over the 220 s of a standing start).
+    """
+    spec = GRADES[grade]
+    gyro_sigma, gyro_q = np.radians([spec.gyro_bias_sigma_deg_per_s, spec.gyro_bias_rw_deg_per_s_per_rt_s])
+    accel_sigma, accel_q = spec.accel_bias_sigma_mps2, spec.accel_bias_rw_mps2_per_rt_s
+    settings = spec.settings()
+    errors = ImuErrors(gyro_arw_rad_per_rt_s=settings.gyro_arw_rad_per_rt_s,
+                       gyro_bias_instability_rad_per_s=gyro_sigma, gyro_bias_corr_time_s=2 * (gyro_sigma / gyro_q)**2,
+                       accel_vrw_mps_per_rt_s=settings.accel_vrw_mps_per_rt_s,
+                       accel_bias_instability_mps2=accel_sigma,
+                       accel_bias_corr_time_s=2 * (accel_sigma / accel_q)**2)
+    return errors, spec
 
 
 def rest_aids(t_s, t_imu, dth, rest_end_s, spec):
@@ -246,7 +255,7 @@ def fused(traj, k0, t_s, drive_s, r, b, base, rng, grade, options, nhc, gap, res
     """
     per_ep = int(round(IMU_RATE_HZ))
     k1 = k0 + (len(t_s) - 1) * per_ep
-    errors, spec = grade_imu(rng, grade)
+    errors, spec = grade_imu(grade)
     dth, dvl = corrupt(traj.dtheta_b_rad[k0:k1], traj.dvel_b_mps[k0:k1], traj.dt_s, errors, rng)
     t_imu = traj.t_s[k0 + 1:k1 + 1] - traj.t_s[k0] + t_s[0]
     prior = FilterSettings(pos_sigma_m=(POS_SIGMA_M,) * 3, vel_sigma_mps=(VEL_SIGMA_MPS,) * 3,
