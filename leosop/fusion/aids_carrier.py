@@ -31,7 +31,10 @@ A row's noise at ``t2`` is also in the next interval's ``dy`` (at its
 ``t1``): consecutive aids are negatively correlated (-1/2 between their
 noise parts), which the filter takes as independent; over ``n`` intervals it
 then assumes ``n`` times the variance of their telescoping sum, a
-conservative neglect at the millimetre. ``tests/fusion/test_aids_differential.py``
+conservative neglect at the millimetre (``tools/bench_differential_ins.py``,
+standing start: a mean position NEES of 2.1 over the drive, 2.9 when the
+truth's intervals are made independent, ``--phase-noise walk``).
+``tests/fusion/test_aids_differential.py``
 checks ``H`` against central differences of this model.
 """
 
