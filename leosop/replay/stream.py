@@ -3,7 +3,7 @@
 What a block needs before its comb search does not depend on the blocks
 before it: the samples, their narrowing to the working rate (:func:`narrow`),
 the check for NaN/inf and the front-end cleaning
-(:func:`~leosop.signal.frontend.clean_block`: DC, IQ imbalance,
+(:func:`~leosop.signal.cleaning.clean_block`: DC, IQ imbalance,
 interferers). :func:`prepared_blocks` does that for the next blocks on
 ``threads - 1`` worker threads while the caller searches and tracks the
 current one (which does depend on the blocks before it: the tracker's
@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..signal.fft import fft
-from ..signal.frontend import clean_block
+from ..signal.cleaning import clean_block
 
 __all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column"]
 

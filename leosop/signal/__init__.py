@@ -36,8 +36,9 @@ Left in their modules: the coarse and fine stages behind
 ``estimate_block`` (:mod:`.coarse`, :mod:`.fine`, with :mod:`.quality` for
 the status), the multi-comb machinery (:mod:`.comb_grid`, :mod:`.comb_fit`),
 the OFDM downlink (:mod:`.ofdm`, its own facade over :mod:`.ofdm_frame`,
-:mod:`.ofdm_downlink`, :mod:`.pss`, :mod:`.pss_track`), front-end cleaning and the recording
-survey of ``leosop doctor`` (:mod:`.frontend`, :mod:`.survey`), recorder
+:mod:`.ofdm_downlink`, :mod:`.pss`, :mod:`.pss_track`), the front-end model of the
+generator (:mod:`.frontend`), the receiver's cleaning and the recording survey of
+``leosop doctor`` (:mod:`.cleaning`, :mod:`.survey`), recorder
 conventions (:mod:`.recorders`) and the FFTW plans (:mod:`.fft`). The
 spectrogram figure is in :mod:`leosop.plots.spectra`.
 """

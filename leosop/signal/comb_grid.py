@@ -70,7 +70,7 @@ class DecimationGrid:
     mixer (~10x less work with 7 combs).
 
     ``spectrum``, the block's :func:`~.fft.fft` (n,) when known (the
-    cleaning's, :class:`~.frontend.Cleaning`), is that FFT when the grid
+    cleaning's, :class:`~.cleaning.Cleaning`), is that FFT when the grid
     needs no zero-padding (n_seg * seg = n, as for blocks of round sizes).
     """
 

@@ -78,7 +78,7 @@ from .comb_fit import CombState, cleaned_tones, decimate, fit_comb, refine_combs
 from .comb_grid import DecimationGrid, NonFiniteSamples, cis, dirichlet, tone_phases
 from .fft import fft
 from .fine import segment_grid
-from .frontend import clean_block
+from .cleaning import clean_block
 from .pilot import PilotComb
 
 __all__ = ["Combs", "NonFiniteSamples", "find_combs"]
@@ -322,10 +322,10 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         (:meth:`~.pilot.PilotComb.through_lo`). Reported Dopplers include it.
     clean : bool
         Remove the block's DC offset, IQ imbalance and CW / narrowband
-        interferers first (:func:`~.frontend.clean_block`; one FFT more).
+        interferers first (:func:`~.cleaning.clean_block`; one FFT more).
     spectrum : ndarray of complex64, shape (n,), optional
         With ``clean=False``: the FFT of ``iq`` (:func:`~.fft.fft`) if known,
-        as the cleaning leaves it (:attr:`~.frontend.Cleaning.spectrum`); the
+        as the cleaning leaves it (:attr:`~.cleaning.Cleaning.spectrum`); the
         search then spares that FFT (the result is the same).
 
     Returns

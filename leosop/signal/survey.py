@@ -6,7 +6,7 @@ A few blocks spread over the recording (the first of each capture, up to
 - format: datatype, the recorder's hardware (``core:hw``), RMS and peak of a
   component against the format's full scale, the fraction of I/Q values
   clipped at its extremes (counted on the file's own integers);
-- front end (:func:`~.frontend.clean_block`): DC offset, IQ imbalance and
+- front end (:func:`~.cleaning.clean_block`): DC offset, IQ imbalance and
   the image rejection it leaves, CW / narrowband interferers (frequency,
   power in dB-Hz, the unit of a pilot tone's C/N0), the noise density;
 - combs (:func:`~.multicomb.find_combs` on the cleaned blocks): the
@@ -25,7 +25,8 @@ import numpy as np
 
 from ..errors import InputError
 from .coarse import MAX_DOPPLER_HZ
-from .frontend import clean_block, image_rejection_db
+from .cleaning import clean_block
+from .frontend import image_rejection_db
 from .iq import DATATYPES, FULL_SCALE
 from .multicomb import find_combs
 from .pilot import PilotComb

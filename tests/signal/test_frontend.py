@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
-from leosop.signal.frontend import FrontEnd, clean_block, image_rejection_db, wiener_doppler_sigma_hz
+from leosop.signal.cleaning import clean_block
+from leosop.signal.frontend import FrontEnd, image_rejection_db, wiener_doppler_sigma_hz
 from leosop.signal.iq import open_sigmf
 from leosop.signal.multicomb import find_combs
 from leosop.signal.pilot import PilotComb, add_noise
@@ -223,11 +224,11 @@ def test_cw_line_among_combs_is_excised(cw_hz, off_hz, rate_hz_per_s):
 
 
 def test_line_runs_found_near_the_strong_bins_are_those_of_the_whole_spectrum():
-    """find_lines smooths the spectrum only round its strong bins (frontend._strong_runs); the runs must be
+    """find_lines smooths the spectrum only round its strong bins (cleaning._strong_runs); the runs must be
     exactly those of the smoothing of the whole spectrum (np.convolve "same", its former code): CW lines on
     the bin grid, half a bin off (sinc sidelobes above the level for ~100 bins: the windows must widen), at
     both edges of the spectrum, and a comb."""
-    from leosop.signal.frontend import _LINE_SMOOTH_BINS, _strong_runs, _window_max
+    from leosop.signal.cleaning import _LINE_SMOOTH_BINS, _strong_runs, _window_max
 
     fs, n = 2.5e6, 250_000
     rng = np.random.default_rng(5)

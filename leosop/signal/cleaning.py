@@ -1,0 +1,310 @@
+"""What a recording's front end did, seen in its samples: the receiver's cleaning of a block.
+
+The counterpart of :mod:`.frontend` (which models the impairments for the
+generator): :func:`find_lines` finds CW / narrowband lines in a block's
+power spectrum and tells a comb's tones from interferers,
+:func:`iq_imbalance` and :func:`correct_iq` estimate and undo the IQ
+imbalance, and :func:`clean_block` applies all of it (DC, IQ imbalance,
+interferer excision) before the comb search; ``leosop doctor`` reports what
+it found.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..constants import C_MPS
+
+__all__ = ["Cleaning", "LINE_PFA", "Line", "clean_block", "correct_iq", "find_lines", "iq_imbalance"]
+
+#: False-alarm probability of the line detector per block (a noise bin passes its threshold this often).
+LINE_PFA = 1e-3
+#: A line grows from its peak while the power smoothed over this many bins exceeds twice the noise mean,
+#: so what is left of a strong line after excision (sidelobes) lies below that level.
+_LINE_SMOOTH_BINS = 8
+#: A line with at least this many partners (strong bins at whole tone spacings from it, of comparable power)
+#: is a comb tone.
+_COMB_PARTNERS = 2
+#: Partners are looked for within the line's half-width plus this many bins of the exact multiple of the spacing,
+#: plus the spread of the received spacing: a comb arrives scaled by its Doppler, ``sp (1 + doppler / f_c)`` with
+#: the LO offset taken out (:meth:`~.pilot.PilotComb.through_lo`), and ``|doppler| / f_c`` stays below a range rate
+#: of 8 km/s over c (0.9 bins of a 0.1 s block at the edge tones). The half-width covers a chirped tone's smear.
+_PARTNER_BINS = 2
+_PARTNER_SPACING_SPREAD = 8e3 / C_MPS
+#: A partner's strongest bin is within this of the line's peak [dB]: a comb's tones have one C/N0 and one smear,
+#: their peak bins differ by scalloping (3.9 dB at most) and noise. A 70 dB-Hz CW line is 25 dB above a
+#: 45 dB-Hz comb's tones (issue 26: counted without power, they made it a comb tone).
+_PARTNER_DB = 10.0
+
+
+@dataclass(frozen=True)
+class Line:
+    """A narrowband line found in a block's spectrum.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Peak, baseband.
+    power_dbhz : float
+        Its power in the unit of a tone's C/N0 (power over the noise density).
+    lo_bin, hi_bin : int
+        Bins (FFT order, may be negative) excised for it, inclusive.
+    """
+
+    frequency_hz: float
+    power_dbhz: float
+    lo_bin: int
+    hi_bin: int
+
+
+@dataclass(frozen=True)
+class Cleaning:
+    """What :func:`clean_block` found and removed in one block.
+
+    Attributes
+    ----------
+    dc : complex
+        Block mean removed (sample units).
+    dc_dbhz : float
+        Its power over the noise density (the unit of a tone's C/N0).
+    iq_gain_db, iq_phase_deg : float
+        IQ imbalance estimated (Q over I; the model of :class:`FrontEnd`).
+    iq_corrected : bool
+        True when the imbalance was significant and undone.
+    lines : tuple of Line
+        CW / narrowband interferers excised (lines not part of a comb).
+    noise_density : float
+        Noise power per Hz in sample units (N0), from the spectrum's median.
+    spectrum : ndarray of complex64, (n,) or None
+        The cleaned block's FFT (:func:`~.fft.fft`) when no line was
+        excised (the FFT the cleaning made; the comb search can reuse it,
+        :func:`~.multicomb.find_combs`); None when lines were excised.
+    """
+
+    dc: complex
+    dc_dbhz: float
+    iq_gain_db: float
+    iq_phase_deg: float
+    iq_corrected: bool
+    lines: tuple
+    noise_density: float
+    spectrum: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+
+def iq_imbalance(iq):
+    """Q-over-I gain [dB] and phase error [deg] of a block (DC removed first), and their 1-sigma [dB, deg].
+
+    For a circular received signal (noise, tones off 0 Hz) ``E[I^2] = E[Q^2]``
+    and ``E[I Q] = 0``; the model ``Q' = g (Q cos phi - I sin phi)`` gives
+    ``g^2 = E[Q'^2] / E[I^2]`` and ``sin phi = -E[I Q'] / sqrt(E[I^2] E[Q'^2])``.
+    Each moment ratio has a spread of ~1/sqrt(n).
+    """
+    x = np.asarray(iq)
+    i = x.real - x.real.mean()
+    q = x.imag - x.imag.mean()
+    pi, pq, piq = float(np.dot(i, i)), float(np.dot(q, q)), float(np.dot(i, q))
+    if pi <= 0 or pq <= 0:
+        return 0.0, 0.0, np.inf, np.inf
+    gain_db = 10.0 * np.log10(pq / pi)
+    phase_deg = float(np.degrees(np.arcsin(np.clip(-piq / np.sqrt(pi * pq), -1.0, 1.0))))
+    n = x.size
+    return gain_db, phase_deg, float(20.0 / np.log(10.0) / np.sqrt(n)), float(np.degrees(1.0 / np.sqrt(n)))
+
+
+def correct_iq(iq, gain_db, phase_deg):
+    """Undo the IQ imbalance of :class:`FrontEnd` (``Q = (Q'/g + I sin phi) / cos phi``), complex64 (n,)."""
+    x = np.asarray(iq)
+    g = 10.0 ** (gain_db / 20.0)
+    phi = np.radians(phase_deg)
+    q = (x.imag / g + x.real * np.sin(phi)) / np.cos(phi)
+    return (x.real + 1j * q).astype(np.complex64)
+
+
+def find_lines(power, fs, comb, *, pfa=LINE_PFA):
+    """Strong narrow lines of a block's power spectrum that belong to no comb; the noise mean per bin.
+
+    A bin beyond ``-ln(pfa / n)`` noise means (exponential power) starts a
+    line; the line spans the run of bins around it whose power, smoothed over
+    ``_LINE_SMOOTH_BINS``, exceeds twice the noise mean. A line with at least
+    ``_COMB_PARTNERS`` partners is a comb's tone and kept: whole tone
+    spacings m = +-1..+-(n_tones-1) from its peak (within the line's
+    half-width plus ``_PARTNER_BINS`` and the spacing's Doppler spread)
+    where a strong bin lies within ``_PARTNER_DB`` of the peak's power. A
+    strong CW line among combs has strong bins at its spacings (other combs'
+    tones) but none of its power.
+
+    Parameters
+    ----------
+    power : ndarray, (n,)
+        |FFT|^2 of the block, FFT order.
+    fs : float
+    comb : PilotComb
+
+    Returns
+    -------
+    lines : list of Line
+        Strongest first.
+    noise_bin : float
+        Noise mean per bin (median / ln 2 over a subsample).
+    """
+    n = power.size
+    sub = power[::max(1, n // 16384)]
+    noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
+    if noise <= 0:
+        return [], noise
+    # Work in fftshift order (0 Hz in the middle: runs never wrap except at the band's edges), zero-padded
+    # as np.convolve's "same" mode pads (the smoothing is computed only near the strong bins, _strong_runs).
+    pad = _LINE_SMOOTH_BINS // 2
+    padded = np.zeros(n + _LINE_SMOOTH_BINS - 1, dtype=power.dtype)
+    padded[pad:pad + n // 2] = power[n - n // 2:]
+    padded[pad + n // 2:pad + n] = power[:n - n // 2]
+    p = padded[pad:pad + n]  # np.fft.fftshift(power)
+    threshold = -np.log(pfa / n) * noise
+    strong = np.flatnonzero(p > threshold)
+    if not strong.size:
+        return [], noise
+    lo, hi = _strong_runs(padded, strong, 2.0 * noise)
+    # Each run's peak: the first bin of its largest power (as argmax).
+    idx, first = _ranges(lo, hi + 1)
+    vals = p[idx]
+    hit = np.flatnonzero(vals == np.repeat(np.maximum.reduceat(vals, first), hi - lo + 1))
+    peak = idx[hit[np.searchsorted(hit, first)]]
+    m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
+    spacing_bins = comb.tone_spacing_hz * n / fs
+    half = (hi - lo) // 2 + _PARTNER_BINS + int(np.ceil((comb.n_tones - 1) * spacing_bins * _PARTNER_SPACING_SPREAD))
+    centre = np.round(peak[:, None] + m * spacing_bins).astype(np.int64)  # (runs, 2 K - 2)
+    window_max = _window_max(p, centre - half[:, None], centre + half[:, None])
+    floor = np.maximum(threshold, p[peak] * 10.0 ** (-_PARTNER_DB / 10.0))  # (runs,)
+    partners = np.sum(window_max > floor[:, None], axis=1)
+    lines = []
+    for i in np.flatnonzero(partners < _COMB_PARTNERS):
+        # A tone of amplitude A puts A^2 n^2 into its bins; the noise n N0 fs into each.
+        power_dbhz = 10.0 * np.log10(float(np.sum(p[lo[i]:hi[i] + 1])) * fs / (n * noise))
+        k0 = -(n // 2)  # signed frequency bin of shifted index 0
+        lines.append(Line((peak[i] + k0) * fs / n, power_dbhz, int(lo[i] + k0), int(hi[i] + k0)))
+    lines.sort(key=lambda ln: -ln.power_dbhz)
+    return lines, noise
+
+
+def _strong_runs(padded, strong, level):
+    """The runs of bins holding a strong bin where the power smoothed over ``_LINE_SMOOTH_BINS`` exceeds ``level``.
+
+    A run is a maximal range of bins each strong or above ``level`` once
+    smoothed (``np.convolve(p, ones / L, mode="same")``, which
+    zero-pads); only runs holding a strong bin are returned. The smoothing
+    is computed in windows around the strong bins (a few percent of the
+    spectrum), widened until every run ends inside its window: each
+    smoothed bin is the same dot product of the same ``L`` bins as over the
+    whole spectrum, so the runs are those of the whole spectrum.
+
+    Parameters
+    ----------
+    padded : ndarray, (n + L - 1,)
+        The power spectrum (fftshift order) with ``L // 2`` zeros before and ``L // 2 - 1`` after.
+    strong : ndarray of int, (n_strong,)
+        Indices of the strong bins, increasing (they are in runs whatever the smoothing).
+    level : float
+
+    Returns
+    -------
+    lo, hi : ndarray of int, (n_runs,)
+        First and last bin of each run, increasing.
+    """
+    L = _LINE_SMOOTH_BINS
+    n = padded.size - L + 1
+    kernel = np.full(L, 1.0 / L)
+    half = 4 * L
+    while True:
+        # Windows [a, b) round the strong bins, merged where they overlap.
+        a, b = np.maximum(strong - half, 0), np.minimum(strong + half + 1, n)
+        new = np.r_[True, a[1:] > b[:-1]]
+        a, b = a[new], np.maximum.reduceat(b, np.flatnonzero(new))
+        # Each window's bins with L - 1 more of padding, gathered: smoothed bin i of a window is the dot
+        # product of padded[i:i + L] (np.convolve's "valid" outputs whose inputs lie in one window).
+        rel, first = _ranges(a, b + L - 1)  # bins of padded; where each window starts in them
+        smooth = np.convolve(padded[rel], kernel, mode="valid")
+        keep = np.ones(smooth.size, bool)  # drop outputs that straddle two windows
+        keep[(first[1:, None] - L + 1 + np.arange(L - 1)).ravel()] = False
+        bins = rel[:smooth.size][keep]  # the smoothed bins
+        above = smooth[keep] > level
+        above[np.searchsorted(bins, strong)] = True
+        # Runs of ``above`` within each window (a new window breaks a run).
+        start = above & np.r_[True, ~above[:-1] | (np.diff(bins) != 1)]
+        end = above & np.r_[~above[1:] | (np.diff(bins) != 1), True]
+        lo, hi = bins[start], bins[end]
+        holds = np.searchsorted(strong, lo) < np.searchsorted(strong, hi, side="right")
+        lo, hi = lo[holds], hi[holds]
+        # A run that reaches its window's edge (not the spectrum's) may go on beyond it: widen.
+        w = np.searchsorted(a, lo, side="right") - 1  # each run's window
+        if not np.any(((lo == a[w]) & (a[w] > 0)) | ((hi + 1 == b[w]) & (b[w] < n))):
+            return lo, hi
+        half *= 4
+
+
+def _ranges(a, b):
+    """The indices ``a[k] .. b[k] - 1`` of every range, concatenated, (sum(b - a),), and where each range
+    starts among them, (n_ranges,); ``b >= a``."""
+    size = b - a
+    first = np.cumsum(size) - size
+    return np.arange(first[-1] + size[-1] if size.size else 0) - np.repeat(first - a, size), first
+
+
+def _window_max(p, a, b):
+    """Largest ``p[a:b + 1]`` per window (0 where a window lies outside ``p``), shape of ``a``.
+
+    Only the windows' own bins are read (they are a few percent of ``p``).
+    """
+    n, shape = p.size, np.shape(a)
+    a, b = np.clip(a, 0, n).ravel(), np.clip(b + 1, 0, n).ravel()  # half-open, within [0, n]
+    full = b > a
+    out = np.zeros(a.size)
+    if full.any():
+        idx, first = _ranges(a[full], b[full])
+        out[full] = np.maximum.reduceat(p[idx], first)
+    return out.reshape(shape)
+
+
+def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
+    """A block with its DC, IQ imbalance and CW / narrowband interferers removed, and what was removed.
+
+    1. The block mean (DC offset) is subtracted.
+    2. The IQ imbalance is estimated (:func:`iq_imbalance`) and undone when
+       beyond 5 sigma of its estimate (a comb's image, ``image_rejection_db``
+       below it, would otherwise look like a satellite at minus its Doppler).
+    3. Lines that no comb explains (:func:`find_lines`) are zeroed in the
+       block's spectrum (excision) and the block transformed back.
+
+    A clean block comes back as it was, less its mean (one FFT spent).
+
+    Parameters
+    ----------
+    iq : ndarray of complex, (n,)
+    fs : float
+    comb : PilotComb
+
+    Returns
+    -------
+    iq : ndarray of complex64, (n,)
+    cleaning : Cleaning
+    """
+    from .fft import fft
+
+    x = np.asarray(iq, dtype=np.complex64)
+    n = x.size
+    dc = complex(x.mean())
+    x = x - np.complex64(dc)
+    gain_db, phase_deg, s_gain, s_phase = iq_imbalance(x)
+    corrected = abs(gain_db) > 5.0 * s_gain or abs(phase_deg) > 5.0 * s_phase
+    if corrected:
+        x = correct_iq(x, gain_db, phase_deg)
+    spectrum = fft(x)
+    power = np.abs(spectrum) ** 2
+    lines, noise_bin = find_lines(power, fs, comb, pfa=pfa)
+    n0 = noise_bin / (n * fs) if noise_bin > 0 else np.nan  # |X|^2 of white noise: n * sigma^2 = n * N0 * fs
+    dc_dbhz = 10.0 * np.log10(abs(dc) ** 2 / n0) if abs(dc) > 0 and n0 > 0 else -np.inf
+    if lines:
+        for ln in lines:
+            spectrum[np.arange(ln.lo_bin, ln.hi_bin + 1) % n] = 0.0
+        x = np.fft.ifft(spectrum).astype(np.complex64)
+    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0,
+                       None if lines else spectrum)
