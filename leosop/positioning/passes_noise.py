@@ -45,7 +45,8 @@ from scipy import optimize
 
 from ..geometry.doppler import doppler_jacobian
 
-__all__ = ["PASS_OFFSET_MAX_M", "integrated_autocorrelation", "pass_disagreement", "pass_offset_blocks", "pass_tau"]
+__all__ = ["PASS_OFFSET_MAX_M", "fix_covariance", "integrated_autocorrelation", "pass_disagreement",
+           "pass_offset_blocks", "pass_sigma_scale", "pass_tau"]
 
 #: Largest per-pass satellite offset (radial, cross-track) the passes' disagreement may put into the
 #: covariance [m]: element-set radial and cross-track errors of a LEO object are 0.1-0.3 km at epoch
@@ -199,3 +200,72 @@ def pass_disagreement(F, g):
 def _disagreement_params(p):
     """``(k2, s)`` of :func:`pass_disagreement` from its search variables ``(log k2, s / cap)``, inside the bounds."""
     return np.exp(max(p[0], 0.0)), min(max(p[1], 0.0), 1.0) * PASS_OFFSET_MAX_M
+
+
+def pass_sigma_scale(rows, residuals_hz, used, decorrelate):
+    """Each pass's correlation time and the factor on its sigma, (n_pass,) each.
+
+    Each correlated pass's variance is raised to tau x its whitened
+    residuals' mean square, never lowered: a sigma already above the
+    residuals (noise-free or conservative input) is kept, and a pass with
+    white residuals (tau = 1) keeps its sigma (its chi-square scatter is no
+    evidence). ``decorrelate`` False: tau 1 and no scaling.
+    """
+    gi, n_pass, n = rows.pass_index, rows.n_pass, rows.n
+    tau = pass_tau(residuals_hz, used, gi, n_pass) if decorrelate else np.ones(n_pass)
+    z2 = np.bincount(gi, np.where(used, (residuals_hz / rows.sigma[:n]) ** 2, 0.0), n_pass) / \
+        np.maximum(np.bincount(gi, used, n_pass), 1)
+    return tau, np.where(tau > 1.0, np.sqrt(np.maximum(tau * z2, 1.0)), 1.0)
+
+
+def fix_covariance(model, x, w, residuals_hz, ok, pass_offsets, orbit_sigma_rc_m):
+    """Covariance of ``[pos, global terms, per-pass polynomials or offsets, time biases]`` at the solution.
+
+    The inverse full normal matrix, with the passes' disagreement priced in
+    (``pass_offsets``, :func:`pass_disagreement`; ``orbit_sigma_rc_m`` its
+    floor), in [Hz/s^k]; the blocks' states marginalised out. Returns ``(cov,
+    (variance_factor, offset_sigma_m, offset_chi2, offset_dof), c_g, c_s)``,
+    the last two the linear terms at ``x`` in scaled time (``c_g`` the
+    receiver clocks' alone).
+    """
+    rows = model.rows
+    n_glob, n_pass, n_loc, n_states = rows.n_glob, rows.n_pass, rows.n_loc, rows.n_states
+    n_g = n_glob + rows.n_block
+    N, D, A, c_g, c_s = model.normal_matrix(x, w)
+    scale_glob, scale_loc = rows.scale
+    scale = np.concatenate([np.ones(3), scale_glob, np.ones(rows.n_block), scale_loc.ravel()])
+    N_inv = _inverse_or_nan(N) if ok else np.full((n_states, n_states), np.nan)
+    offsets = (1.0, 0.0, 0.0, 0) if pass_offsets else (None,) * 4
+    if pass_offsets and n_pass and np.isfinite(N_inv).all():
+        # Each pass's satellite offset (radial, cross-track) as a random effect the fix does not estimate:
+        # its score test, variance component and sandwich term on the covariance (passes_noise).
+        G, M_b, g_b = pass_offset_blocks(rows.pos_sv_ecef_m, rows.vel_sv_ecef_mps, x[0], rows.carrier_hz,
+                                         w[0, :rows.n], D, rows.B_all, A, rows.seg, residuals_hz)
+        offsets = pass_disagreement(M_b - G.T @ N_inv @ G, g_b)
+        variance_factor, offset_sigma_m = offsets[:2]
+        var_b = np.full((n_pass, 2), offset_sigma_m**2)
+        if orbit_sigma_rc_m is not None:
+            # The element sets' own accuracy is the floor: the disagreement may show more, never less.
+            n = rows.n
+            sig_rows = np.broadcast_to(np.asarray(orbit_sigma_rc_m, dtype=float), (n, 2))[rows.order]
+            var_b = np.maximum(var_b, np.maximum.reduceat(np.where(rows.used[:n, None], sig_rows, 0.0), rows.seg,
+                                                          axis=0) ** 2)
+        if variance_factor > 1.0 or var_b.any():
+            NG = N_inv @ G
+            N_inv = variance_factor * N_inv + (NG * var_b.ravel()) @ NG.T
+    cov = N_inv * scale[:, None] * scale[None, :]
+    # Reorder to [pos, global terms, per-pass polynomials or offsets, time biases]; the blocks' states dropped.
+    loc = 3 + n_g + np.arange(n_pass * n_loc).reshape(n_pass, n_loc)
+    n_poly_loc = n_loc - rows.time_bias
+    perm = np.concatenate([np.arange(3 + n_glob), loc[:, :n_poly_loc].ravel(), loc[:, n_poly_loc:].ravel()])
+    return cov[np.ix_(perm, perm)], offsets, c_g[:, :n_glob], c_s
+
+
+def _inverse_or_nan(N, rcond=1e-12):
+    """Inverse of a symmetric positive semi-definite matrix, judged on its unit-diagonal scaling; NaN if singular."""
+    diag = np.diagonal(N)
+    d = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+    lam, V = np.linalg.eigh(N * d[:, None] * d[None, :])
+    if not (diag > 0).all() or lam[0] <= rcond * abs(lam[-1]):
+        return np.full(N.shape, np.nan)
+    return (V / lam) @ V.T * d[:, None] * d[None, :]
