@@ -143,23 +143,6 @@ def search_band(sample_rate_hz, comb, lo_offset_max_hz):
     return factor, min(MAX_DOPPLER_HZ + lo_offset_max_hz, (0.5 - BAND_MARGIN) * fs - half_comb)
 
 
-class _CaptureSamples:
-    """One capture's samples as a 1-D complex64 array to slice: each slice one read of the file."""
-
-    ndim = 1
-    dtype = np.dtype(np.complex64)
-
-    def __init__(self, rec, cap):
-        self.rec, self.cap = rec, cap
-
-    def __len__(self):
-        return self.cap.n_samples
-
-    def __getitem__(self, index):
-        start, stop, _ = index.indices(self.cap.n_samples)
-        return self.rec.read(self.cap.sample_start + start, max(stop - start, 0))
-
-
 def _pss(rec):
     """PSS acquisition on the first 10 ms of the first capture of a full-channel recording, the capture's
     start and the frames tracked over it: (PssAcquisition, datetime64, PssTrack), or None."""
@@ -171,7 +154,7 @@ def _pss(rec):
     n = min(cap.n_samples, int(round(0.01 * FS_HZ)))
     if n < 2 * FRAME_SAMPLES:
         return None
-    samples = _CaptureSamples(rec, cap)
+    samples = rec.capture_samples(cap)
     acq = acquire_pss(samples[:n], FS_HZ)
     track = track_pss(samples, acq, channel_hz=rec.center_hz) if rec.center_hz else track_pss(samples, acq)
     return acq, cap.start_utc, track

@@ -164,6 +164,10 @@ class Recording:
         return np.fromfile(self.data_path, dtype=comp, count=2 * count,
                            offset=self.offset_bytes + 2 * start * comp.itemsize)
 
+    def capture_samples(self, cap):
+        """One capture's samples as a 1-D complex64 array-like to slice, each slice one read of the file."""
+        return _CaptureSamples(self, cap)
+
     def blocks(self, block_len):
         """Iterate ``(start, samples)`` over whole consecutive blocks of ``block_len`` samples."""
         if block_len < 1 or block_len > self.n_samples:
@@ -171,6 +175,23 @@ class Recording:
                              f"{self.n_samples} samples ({self.duration_s:.6g} s)")
         for start in range(0, self.n_samples - block_len + 1, block_len):
             yield start, self.read(start, block_len)
+
+
+class _CaptureSamples:
+    """:meth:`Recording.capture_samples`: ``len``, ``dtype``, ``ndim`` and slicing of one capture."""
+
+    ndim = 1
+    dtype = np.dtype(np.complex64)
+
+    def __init__(self, rec, cap):
+        self.rec, self.cap = rec, cap
+
+    def __len__(self):
+        return self.cap.n_samples
+
+    def __getitem__(self, index):
+        start, stop, _ = index.indices(self.cap.n_samples)
+        return self.rec.read(self.cap.sample_start + start, max(stop - start, 0))
 
 
 def _check_rate(sample_rate_hz, where, param=()):
