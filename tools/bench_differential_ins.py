@@ -40,7 +40,8 @@ simulator's, 0.1 cycles = 2.6 mm each, a slip per satellite every ~100 s);
 :func:`~leosop.fusion.aids_differential.differential_aids` then adds the
 differential carrier aid (:mod:`leosop.fusion.aids_carrier`: per pair of
 consecutive epochs the rover-minus-base phase changes, differenced across
-satellites, from the cloned antenna of the earlier epoch). Gap cases: every
+satellites, from the cloned antenna of the earlier epoch, each epoch's
+phase noise a state block the two intervals share). Gap cases: every
 LEO aid withheld over ``GAP_S`` (15 s of the drive), the IMU (and NHC) alone.
 
 Standing start (the ``standing:`` cases): a real car stands while its INS
@@ -199,7 +200,7 @@ REST_S = 60.0
 ZUPT_SIGMA_MPS = 0.01
 ZERO_RATE_WINDOW_S = 1.0
 #: The truth's phase noise (``--phase-noise``): ``white`` per epoch (a receiver's: consecutive intervals share an
-#: epoch's noise), or ``walk`` (:func:`walk_phase`: independent intervals, as the carrier aid assumes).
+#: epoch's noise, what the carrier aid models), or ``walk`` (:func:`walk_phase`: independent intervals).
 PHASE_NOISE = ("white", "walk")
 
 
@@ -256,8 +257,9 @@ def walk_phase(meas, sigma_cycles, rng):
     """``meas`` (noiseless phases) with a random walk of ``sqrt(2) sigma_cycles`` per epoch along each arc.
 
     Each interval's phase change then has the variance of two epochs' white noise of ``sigma_cycles`` (the
-    sigma it is given), independent of the next interval's: the noise the carrier aid assumes
-    (:mod:`leosop.fusion.aids_carrier`), not that of a receiver (``--phase-noise walk``).
+    sigma it is given), independent of the next interval's: the noise the carrier aid assumed before it
+    carried each epoch's noise as states (:mod:`leosop.fusion.aids_carrier`), not that of a receiver
+    (``--phase-noise walk``; a mismatched truth for the aid now).
     """
     phase = meas.phase_cycles.copy()
     key = np.char.add(np.char.add(meas.sat_id.astype(str), "|"), meas.arc.astype(str))
