@@ -35,7 +35,9 @@ block of states (one per satellite, prior its variance, no process noise),
 ``dy_j = ... + n_j(t2) - n_j(t1)`` with no further noise of its own, the
 block of ``t1`` as the previous interval left it (the augmented state of
 coloured measurement noise [Bryson and Henrikson 1968]); it is dropped once
-the next interval has used it. ``K`` and the ambiguities need no states, so
+the next interval has used it (a base row that two rover epochs
+interpolate is in both their blocks, taken as independent: exact when the
+base is on the rover's epochs). ``K`` and the ambiguities need no states, so
 an arc's arbitrary integer and a receiver clock phase of any size cost
 nothing (float ambiguity states would need priors that cover both).
 ``tests/fusion/test_aids_differential.py``
