@@ -137,7 +137,8 @@ epoch's noise as states the two intervals share
 60 s rest), standing carrier + NHC: 1.15 (0.68) / 1.05 (0.57) / 0.72 /
 3.17 m, sigma 1.19 m, NEES 2.74 [2.34, 3.13] (was 1.58 m, 2.12 [1.52,
 2.72]); with the 15 s gap 1.28 m over the drive, 1.77 / 2.90 m over the
-gap / at its end, NEES 2.63 [2.34, 2.92]. The other carrier rows above
+gap / at its end, NEES 2.63 [2.34, 2.92]; moving start 6.74 (4.25) /
+3.15 (2.17) / 1.38 m, NEES 2.73 [2.13, 3.32] (was 7.45 m, 2.30). The other carrier rows above
 are the former aid's. The interval now holds 3 and the RMS fell by a
 quarter: the phases were underweighted before, not only their sigma
 overstated.
