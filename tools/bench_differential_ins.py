@@ -40,7 +40,8 @@ simulator's, 0.1 cycles = 2.6 mm each, a slip per satellite every ~100 s);
 :func:`~leosop.fusion.aids_differential.differential_aids` then adds the
 differential carrier aid (:mod:`leosop.fusion.aids_carrier`: per pair of
 consecutive epochs the rover-minus-base phase changes, differenced across
-satellites, from the cloned antenna of the earlier epoch). Gap cases: every
+satellites, from the cloned antenna of the earlier epoch, each epoch's
+phase noise a state block the two intervals share). Gap cases: every
 LEO aid withheld over ``GAP_S`` (15 s of the drive), the IMU (and NHC) alone.
 
 Standing start (the ``standing:`` cases): a real car stands while its INS
@@ -126,20 +127,21 @@ this rerun the truth had none) raised the standing NEES by ~0.1-0.2
 (carrier + NHC 1.96 -> 2.12, Doppler + NHC 2.37 -> 2.57, whose interval
 now holds 3); a ZUPT of 0.001 m/s instead of 0.01 (the parked truth's is
 zero; a tuning, not adopted) moves it by < 0.11 (2.23 / 2.60). What
-remains is the carrier aid's neglected correlation
-(:mod:`leosop.fusion.aids_carrier`: an epoch's phase noise is in two
-consecutive intervals, -1/2 correlated, which it takes as independent):
-with a truth whose intervals are independent as the aid assumes
-(``--phase-noise walk``) the standing carrier + NHC NEES is 2.89 [2.22,
-3.55] (carrier alone 2.82 [2.16, 3.48]; RMS 1.80 m, the walk's phase being
-worse; sigma 1.86 m unchanged), the moving start's 2.96 [1.90, 4.02] (2.30
-white), 1 km standing 2.71 [1.96, 3.46] (1.64 white); and the more the
-carrier weighs, the lower the white truth's NEES (0.01 cycles: 1.73 [1.42,
-2.03] at 0.89 m). The receiver's white phase noise therefore leaves the
-filter conservative by a factor ~1.2 in sigma (NEES 2.1 against 3) with
-the carrier; the fix is in the aid (the shared noise modelled, e.g. the
-phase with per-arc ambiguity states, or the intervals' correlation
-carried), not in the bench.
+remained was the carrier aid's neglected correlation (an epoch's phase
+noise is in two consecutive intervals, -1/2 correlated, which it took as
+independent): with a truth whose intervals were independent as it assumed
+(``--phase-noise walk``) the standing carrier + NHC NEES was 2.89 [2.22,
+3.55], the moving start's 2.96 [1.90, 4.02]. The aid now carries each
+epoch's noise as states the two intervals share
+(:mod:`leosop.fusion.aids_carrier`); rerun (20 seeds, white phase noise,
+60 s rest), standing carrier + NHC: 1.15 (0.68) / 1.05 (0.57) / 0.72 /
+3.17 m, sigma 1.19 m, NEES 2.74 [2.34, 3.13] (was 1.58 m, 2.12 [1.52,
+2.72]); with the 15 s gap 1.28 m over the drive, 1.77 / 2.90 m over the
+gap / at its end, NEES 2.63 [2.34, 2.92]; moving start 6.74 (4.25) /
+3.15 (2.17) / 1.38 m, NEES 2.73 [2.13, 3.32] (was 7.45 m, 2.30). The other carrier rows above
+are the former aid's. The interval now holds 3 and the RMS fell by a
+quarter: the phases were underweighted before, not only their sigma
+overstated.
 
 Earlier variations (moving start, carrier + NHC, from 30 s): the
 industrial IMU 2.4 m (4 seeds); phases of 0.01 cycles 2.1 and 1.0 m (seeds
@@ -199,7 +201,7 @@ REST_S = 60.0
 ZUPT_SIGMA_MPS = 0.01
 ZERO_RATE_WINDOW_S = 1.0
 #: The truth's phase noise (``--phase-noise``): ``white`` per epoch (a receiver's: consecutive intervals share an
-#: epoch's noise), or ``walk`` (:func:`walk_phase`: independent intervals, as the carrier aid assumes).
+#: epoch's noise, what the carrier aid models), or ``walk`` (:func:`walk_phase`: independent intervals).
 PHASE_NOISE = ("white", "walk")
 
 
@@ -256,8 +258,9 @@ def walk_phase(meas, sigma_cycles, rng):
     """``meas`` (noiseless phases) with a random walk of ``sqrt(2) sigma_cycles`` per epoch along each arc.
 
     Each interval's phase change then has the variance of two epochs' white noise of ``sigma_cycles`` (the
-    sigma it is given), independent of the next interval's: the noise the carrier aid assumes
-    (:mod:`leosop.fusion.aids_carrier`), not that of a receiver (``--phase-noise walk``).
+    sigma it is given), independent of the next interval's: the noise the carrier aid assumed before it
+    carried each epoch's noise as states (:mod:`leosop.fusion.aids_carrier`), not that of a receiver
+    (``--phase-noise walk``; a mismatched truth for the aid now).
     """
     phase = meas.phase_cycles.copy()
     key = np.char.add(np.char.add(meas.sat_id.astype(str), "|"), meas.arc.astype(str))

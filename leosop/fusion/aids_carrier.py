@@ -21,19 +21,25 @@ integral of the two oscillators' frequency difference (a consumer TCXO's
 wander is ~10 Hz at 11 GHz over 1 s, far too much for a clock model at the
 millimetre), is the same in every satellite's ``dy``: the aid's rows are
 differences across satellites, ``z_i = dy_i - dy_0`` (satellite 0 the
-epoch's first), with the covariance those differences make of the
-independent ``dy`` (rover and base phase noise at both epochs). The
-satellite states ``e_j``: the differential Doppler's blocks (radial /
-along-track / cross-track offset ``d_j``, ``e = C d`` in each epoch's
-frame, :func:`~leosop.positioning.differential.rtn_frames`), or none.
+epoch's first). The satellite states ``e_j``: the differential Doppler's
+blocks (radial / along-track / cross-track offset ``d_j``, ``e = C d`` in
+each epoch's frame, :func:`~leosop.positioning.differential.rtn_frames`), or
+none.
 
-A row's noise at ``t2`` is also in the next interval's ``dy`` (at its
-``t1``): consecutive aids are negatively correlated (-1/2 between their
-noise parts), which the filter takes as independent; over ``n`` intervals it
-then assumes ``n`` times the variance of their telescoping sum, a
-conservative neglect at the millimetre (``tools/bench_differential_ins.py``,
-standing start: a mean position NEES of 2.1 over the drive, 2.9 when the
-truth's intervals are made independent, ``--phase-noise walk``).
+An epoch's phase noise ``n_j(t)`` (rover and interpolated base) is in two
+consecutive intervals, with opposite signs: taken as independent, the
+intervals' noise would be -1/2 correlated and the filter conservative (a
+mean position NEES of 2.1 for 3 in ``tools/bench_differential_ins.py``'s
+standing start). The aid carries it exactly instead: each epoch's noise is a
+block of states (one per satellite, prior its variance, no process noise),
+``dy_j = ... + n_j(t2) - n_j(t1)`` with no further noise of its own, the
+block of ``t1`` as the previous interval left it (the augmented state of
+coloured measurement noise [Bryson and Henrikson 1968]); it is dropped once
+the next interval has used it (a base row that two rover epochs
+interpolate is in both their blocks, taken as independent: exact when the
+base is on the rover's epochs). ``K`` and the ambiguities need no states, so
+an arc's arbitrary integer and a receiver clock phase of any size cost
+nothing (float ambiguity states would need priors that cover both).
 ``tests/fusion/test_aids_differential.py``
 checks ``H`` against central differences of this model.
 """
@@ -66,8 +72,11 @@ class DifferentialCarrier(Aid):
     dy_cycles : array_like, (k,)
         Each satellite's rover-minus-base phase change over the interval
         (``k >= 2``; satellite 0 the reference).
-    var_cycles2 : array_like, (k,)
-        Their variances (rover and interpolated base, both epochs).
+    noise : tuple of StateBlock, (2,)
+        The phase noise of the epochs ``t1`` and ``t2`` [cycles], one state
+        per satellite of the epoch.
+    noise_index : array_like of int, (2, k)
+        Each satellite's state in the two blocks.
     carrier_hz : array_like, (k,)
     pos_sv_ecef_m : array_like, (2, k, 3)
         The satellites' element-set positions at ``t1`` and ``t2`` (ECEF).
@@ -86,14 +95,16 @@ class DifferentialCarrier(Aid):
     name = "differential_carrier"
     external_clock = True
 
-    def __init__(self, t_s, dy_cycles, var_cycles2, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps, base_pos_ecef_m,
-                 lever_arm_b_m, clone, orbits=None):
+    def __init__(self, t_s, dy_cycles, noise, noise_index, carrier_hz, pos_sv_ecef_m, vel_sv_ecef_mps,
+                 base_pos_ecef_m, lever_arm_b_m, clone, orbits=None):
         super().__init__(t_s)
         dy = np.asarray(dy_cycles, dtype=float)
         k = dy.size
         self.D = np.hstack([-np.ones((k - 1, 1)), np.eye(k - 1)])  # (k - 1, k): each satellite less the first
         self.measured = self.D @ dy
-        self.R = (self.D * np.asarray(var_cycles2, dtype=float)) @ self.D.T
+        self.R = np.zeros((k - 1, k - 1))  # the noise is in the states of ``noise``
+        self.noise = tuple(noise)
+        self.noise_index = np.asarray(noise_index, dtype=int).reshape(2, k)
         self.per_m = np.asarray(carrier_hz, dtype=float) / C_MPS  # cycles per metre, (k,)
         self.pos_sv_ecef_m = np.asarray(pos_sv_ecef_m, dtype=float).reshape(2, k, 3)
         vel = np.asarray(vel_sv_ecef_mps, dtype=float).reshape(2, k, 3)
@@ -102,7 +113,7 @@ class DifferentialCarrier(Aid):
         self.lever_arm_b_m = np.asarray(lever_arm_b_m, dtype=float).reshape(3)
         self.base_model_m = np.stack([_unit(p, self.base_pos_ecef_m)[0] for p in self.pos_sv_ecef_m])  # (2, k)
         self.orbits = tuple(orbits) if orbits is not None else ()
-        self.states = (*self.orbits, clone)
+        self.states = (*self.orbits, *self.noise, clone)
 
     def _geometry(self, ins):
         """Antenna at ``t1`` and ``t2`` (3,) each, the believed satellites (2, k, 3), ``C_e_n``, lever arm (ENU)
@@ -124,9 +135,14 @@ class DifferentialCarrier(Aid):
         dy = (rho_a2 - rho_b2 + self.base_model_m[1]) - (rho_a1 - rho_b1 + self.base_model_m[0])
         return dy, np.stack([u_a1, u_a2]), np.stack([u_b1, u_b2])
 
+    def _noise(self, ins):
+        """Each satellite's ``n(t2) - n(t1)`` (k,) of the states [cycles]."""
+        n1, n2 = (ins.states[b.key][i] for b, i in zip(self.noise, self.noise_index))
+        return n2 - n1
+
     def predict(self, ins):
         a1, a2, sv = self._geometry(ins)[:3]
-        return self.D @ (-self.per_m * self._dy_m(a1, a2, sv)[0])
+        return self.D @ (-self.per_m * self._dy_m(a1, a2, sv)[0] + self._noise(ins))
 
     def rate(self, ins):
         # An IMU time offset moves both ends of the interval (the clone was made at t1 on the IMU clock too), the
@@ -142,7 +158,11 @@ class DifferentialCarrier(Aid):
         # y = -f (rho(a2) - rho(a1) + ...): d rho / d a = -u, d rho / d s = u.
         J_a2, J_a1 = f * u_a[1], -f * u_a[0]  # (k, 3) each
         k = self.per_m.size
-        H = np.zeros((k - 1, N_INS + 3 * len(self.orbits) + 3))
+        n1, n2 = (b.size for b in self.noise)
+        H = np.zeros((k - 1, N_INS + 3 * len(self.orbits) + n1 + n2 + 3))
+        first = N_INS + 3 * len(self.orbits)
+        H[:, first + self.noise_index[0]] = -self.D
+        H[:, first + n1 + self.noise_index[1]] = self.D
         H[:, :N_INS] = self.D @ J_a2 @ _antenna_jacobian(ins, C, l_n)
         H[:, -3:] = self.D @ J_a1
         if self.orbits:
@@ -177,9 +197,10 @@ def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_we
     -------
     list of DifferentialCarrier and LeoWindowStart
         Sorted by ``t_s``, at one time the carrier aid before the clone made
-        there. An interval takes a satellite when it has a finite phase at
-        both epochs, in one rover arc and one base arc (the two base rows of
-        each interpolation too); intervals with fewer than two are left out.
+        there; consecutive aids share the noise block of their common epoch.
+        An interval takes a satellite when it has a finite phase at both
+        epochs, in one rover arc and one base arc (the two base rows of each
+        interpolation too); intervals with fewer than two are left out.
     """
     if rover.phase_cycles is None or base.phase_cycles is None:
         return []
@@ -201,11 +222,24 @@ def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_we
     pair = ((rover.sat_id[prev] == rover.sat_id[cur]) & (ep[cur] == ep[prev] + 1) & ok[prev] & ok[cur]
             & (arc[prev] == arc[cur]))
     prev, cur = prev[pair], cur[pair]
+    keep = np.bincount(ep[cur], minlength=epochs.size)[ep[cur]] >= 2  # intervals of at least two satellites
+    prev, cur = prev[keep], cur[keep]
+    if cur.size == 0:
+        return []
+    # Each epoch's noise block: the rows of that epoch the intervals use, in row order; a row's state in it.
+    rows = np.unique(np.concatenate([prev, cur]))
+    rows = rows[np.argsort(ep[rows], kind="stable")]
+    first = np.searchsorted(ep[rows], ep[rows])
+    index = np.zeros(len(rover), dtype=int)
+    index[rows] = np.arange(rows.size) - first
+    gap_s = np.diff(epochs)
+    noise = {e: StateBlock(f"diff_carrier_noise:{float(epochs[e])!r}", (0.0,) * n,
+                           tuple(np.sqrt(var[rows[ep[rows] == e]])), (0.0,) * n,
+                           drop_after_s=1.5 * gap_s[min(e, gap_s.size - 1)])
+             for e, n in zip(*np.unique(ep[rows], return_counts=True))}
     aids, clones = [], {}
     for e in np.unique(ep[cur]):
         at = ep[cur] == e
-        if np.count_nonzero(at) < 2:
-            continue
         p, q = prev[at], cur[at]
         t1, t2 = float(epochs[e - 1]), float(epochs[e])
         if e - 1 not in clones:
@@ -213,8 +247,8 @@ def carrier_aids(rover, base, base_pos_ecef_m, lever_arm_b_m, base_rows, base_we
                                        drop_after_s=1.5 * (t2 - t1), cloned=True)
         blocks = None if orbits is None else [orbits[str(j)] for j in rover.sat_id[q]]
         aids.append(DifferentialCarrier(
-            t2, y[q] - y[p], var[p] + var[q], rover.carrier_hz[q], np.stack([rover.pos_sv_ecef_m[p],
-                                                                             rover.pos_sv_ecef_m[q]]),
+            t2, y[q] - y[p], (noise[e - 1], noise[e]), np.stack([index[p], index[q]]), rover.carrier_hz[q],
+            np.stack([rover.pos_sv_ecef_m[p], rover.pos_sv_ecef_m[q]]),
             np.stack([rover.vel_sv_ecef_mps[p], rover.vel_sv_ecef_mps[q]]), b, lever_arm_b_m, clones[e - 1], blocks))
     starts = [LeoWindowStart(float(epochs[e]), lever_arm_b_m, block) for e, block in clones.items()]
     return sorted(aids + starts, key=lambda a: (a.t_s, a.clones))

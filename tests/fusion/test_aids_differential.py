@@ -182,29 +182,39 @@ def _carrier_aid(lever=(0.3, -0.8, 1.2)):
     sv = np.stack([sv2 - vel, sv2])
     orbits = tuple(StateBlock(f"diff_orbit:{j}", (0.0,) * 3, (30.0, 300.0, 100.0), (0.0,) * 3) for j in range(3))
     clone = StateBlock("diff_carrier_start:1.0", (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, cloned=True)
+    # The epochs' noise blocks: a fourth satellite at t1 only, the three in another order at t2.
+    noise = (StateBlock("diff_carrier_noise:1.0", (0.0,) * 4, (0.1,) * 4, (0.0,) * 4),
+             StateBlock("diff_carrier_noise:2.0", (0.0,) * 3, (0.1,) * 3, (0.0,) * 3))
+    index = [[0, 2, 3], [2, 0, 1]]
     # The antenna 1 s before: ~20 m back along the INS's velocity (its own estimate; any point will do for H).
     start = r_rx - 14.0 * north + 12.0 * east
-    x = {**{b.key: np.array([12.0, -250.0, 40.0]) * (j + 1) / 2 for j, b in enumerate(orbits)}, clone.key: start}
-    aid = DifferentialCarrier(2.0, [1.5e5, -2e4, 3e4], [0.02, 0.03, 0.02], np.full(3, CARRIER_HZ), sv,
+    x = {**{b.key: np.array([12.0, -250.0, 40.0]) * (j + 1) / 2 for j, b in enumerate(orbits)}, clone.key: start,
+         noise[0].key: np.array([0.03, -0.2, 0.11, 0.07]), noise[1].key: np.array([-0.05, 0.09, 0.14])}
+    aid = DifferentialCarrier(2.0, [1.5e5, -2e4, 3e4], noise, index, np.full(3, CARRIER_HZ), sv,
                               np.stack([vel, vel]), base, lever, clone, orbits)
     return aid, x
 
 
 def test_carrier_design_matrix_matches_finite_differences():
-    """Every column of the carrier aid's H (INS, the three orbit blocks, the clone) against central differences."""
+    """Every column of the carrier aid's H (INS, the three orbit blocks, the two epochs' noise, the clone) against
+    central differences; the noise columns are exact (+-1 where each row's satellites sit, 0 at the unused one)."""
     aid, x = _carrier_aid()
     keys = [b.key for b in aid.states]
+    sizes = np.cumsum([b.size for b in aid.states])[:-1]
+    n = N_INS + sizes[-1] + 3
 
     def view(e):
-        d = np.split(e[N_INS:], 4)
+        d = np.split(e[N_INS:], sizes)
         return dataclasses.replace(true_view(e[:N_INS]), states={k: x[k] - dk for k, dk in zip(keys, d)})
 
-    z, H, R = aid.matrices(view(np.zeros(N_INS + 12)))
-    assert H.shape == (2, N_INS + 12) and R.shape == (2, 2) and z.shape == (2,)
-    np.testing.assert_allclose(R, [[0.05, 0.02], [0.02, 0.04]])  # the first satellite's variance in both rows
+    z, H, R = aid.matrices(view(np.zeros(n)))
+    assert H.shape == (2, n) and R.shape == (2, 2) and z.shape == (2,)
+    np.testing.assert_array_equal(R, 0.0)  # all the noise is in the states
+    noise = H[:, N_INS + 9:N_INS + 16]
+    np.testing.assert_array_equal(noise, [[1, 0, -1, 0, 1, 0, -1], [1, 0, 0, -1, 0, 1, -1]])
     # The engine tests' INS steps times 10 (cycles of ~1e5 round to 1e-11), 1 mm clone and 1 m orbit steps (the
-    # second-order terms: 1 m over ~1e6 m ranges).
-    step = np.r_[10 * STEP, np.full(9, 1.0), np.full(3, 1e-3)]
+    # second-order terms: 1 m over ~1e6 m ranges), 0.01 cycle noise steps (linear: any step).
+    step = np.r_[10 * STEP, np.full(9, 1.0), np.full(7, 1e-2), np.full(3, 1e-3)]
     H_fd = central_difference_jacobian(lambda e: -aid.predict(view(e)), step)
     # A delta-range does not see the velocity; the orbit columns (what 1 s changes of the baseline's share of an
     # offset, ~1e-3 cycles per metre) must not vanish, or the test would check nothing there.
@@ -228,12 +238,17 @@ def test_carrier_innovation_at_the_truth_is_zero_and_a_slip_drops_its_interval(p
         states = {o.key: orbit_scale * err.orbit_rtn_m[list(err.sat_ids).index(o.key.split(":")[1])]
                   for o in aid.orbits}
         states[aid.states[-1].key] = p[k - 1]  # the antenna at the previous epoch
+        states.update({n.key: np.zeros(n.size) for n in aid.noise})  # noise-free
         view = _truth_view(aid, pair, np.zeros(3))
         return aid.matrices(dataclasses.replace(view, states=states))[0]
 
     aids = carrier(r)
     assert [a.t_s for a in aids] == list(t_s[1:])  # one aid per interval, every satellite in each
     assert all(a.measured.size == np.unique(r.sat_id).size - 1 for a in aids)
+    # Consecutive intervals share their common epoch's noise block, whose prior is the rows' phase sigma.
+    assert all(a.noise[1] is n.noise[0] for a, n in zip(aids[:-1], aids[1:]))
+    sigma = carrier(dataclasses.replace(r, phase_sigma_cycles=np.full(len(r), 0.3)))[0].noise[0].sigma0
+    np.testing.assert_allclose(sigma, 0.3)  # the rover's, the base's being 0
     assert np.max(np.abs(np.concatenate([innovation(a, 1.0) for a in aids]))) < MILLI_CYCLE
     # The orbit states matter: at zero offsets a cycle or so is left over 2 s.
     assert np.max(np.abs(np.concatenate([innovation(a, 0.0) for a in aids]))) > 100 * MILLI_CYCLE
