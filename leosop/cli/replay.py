@@ -38,7 +38,7 @@ from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, write_measurements
 from ..replay.lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ
-from ..signal.iq import open_sigmf
+from ..signal.iq import open_sigmf, sha512_checked
 from ..timebase import format_utc, seconds_since
 from . import add_command
 from .options import mask_deg, parse_site, positive
@@ -136,10 +136,7 @@ def _check_options(args):
 
 
 def _run_single(args):
-    from ..replay.pipeline import replay
-    from .position import solutions_doc
-
-    block_s, lo_max, drift_max, mask, init = _check_options(args)
+    options = _check_options(args)
     threads = args.threads
     if threads < 1:
         raise InputError(f"--threads {threads}: expected an integer >= 1")
@@ -153,7 +150,33 @@ def _run_single(args):
     for name in OUT_FILES if args.out else ():
         check_output_file(Path(args.out) / name, "--out")  # before the work, not after
     path = Path(args.recording[0])
-    rec = open_sigmf(path)  # refuses anything but SigMF; the pipeline refuses a missing core:datetime
+    # Both refuse anything but SigMF (the pipeline refuses a missing core:datetime); their checksums are
+    # checked on a background thread while the replay runs, before anything is written.
+    rec = open_sigmf(path, verify=False)
+    base_rec = open_sigmf(Path(args.base), verify=False) if args.base else None
+    with sha512_checked(*(r for r in (rec, base_rec) if r is not None)):
+        doc, res, diff, carrier, carrier_pair = _replay_doc(args, options, path, rec, base_rec, base_pos)
+    if args.out:
+        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff, carrier, carrier_pair)
+    return doc
+
+
+def _replay_doc(args, options, path, rec, base_rec, base_pos):
+    """The replay of ``rec`` (and of the base's ``base_rec``) and its document; the outputs left to write.
+
+    ``options`` are :func:`_check_options`' checked values.
+
+    Returns
+    -------
+    doc, res, diff, carrier, carrier_pair
+        The document (DESIGN 4.1), the rover's :class:`~leosop.replay.pipeline.ReplayResult`, the
+        differential fix, the carrier tracks and the differential carrier fix (None where not run).
+    """
+    from ..replay.pipeline import replay
+    from .position import solutions_doc
+
+    block_s, lo_max, drift_max, mask, init = options
+    threads = args.threads
     if args.carrier:
         from ..replay.carrier_replay import check_continuous
 
@@ -164,11 +187,9 @@ def _run_single(args):
             check_continuous(rec)
         except InputError as exc:
             raise InputError(f"{exc}; replay it without --carrier") from exc
-    base_rec = None
-    if args.base:
+    if base_rec is not None:
         from ..replay.differential import check_pair
 
-        base_rec = open_sigmf(Path(args.base))
         check_pair(rec, base_rec)
         if args.carrier:
             try:
@@ -233,9 +254,7 @@ def _run_single(args):
         if carrier is not None:
             carrier_pair = _carrier_pair(rec, base_rec, base_res, const, base_pos, carrier, diff, block_s, lo_max)
             doc["differential_carrier"] = carrier_pair.doc()
-    if args.out:
-        _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff, carrier, carrier_pair)
-    return doc
+    return doc, res, diff, carrier, carrier_pair
 
 
 def _carrier_pair(rec, base_rec, base_res, const, base_pos, carrier, diff, block_s, lo_max):

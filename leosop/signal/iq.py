@@ -17,7 +17,9 @@ frequency and the sample rate (:func:`~.recorders.name_metadata`).
 import hashlib
 import json
 import os
+import threading
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
@@ -31,7 +33,8 @@ from ..fileio import check_input_file
 from ..timebase import format_utc, parse_utc
 from .recorders import check_8bit_sign, name_metadata
 
-__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "open_sigmf", "open_raw", "sha512_hex"]
+__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "open_sigmf", "open_raw", "sha512_hex", "check_sha512",
+           "sha512_checked"]
 
 #: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float, zero level in file units).
 DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0, 0.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0, 0.0),
@@ -92,6 +95,8 @@ class Recording:
         snapshot); default one capture of the whole recording at ``start_utc``.
     hw : str or None
         The recorder's hardware as its metadata say (SigMF ``core:hw``).
+    sha512 : str or None
+        The data file's declared SHA-512 (SigMF ``core:sha512``; :func:`check_sha512`).
     """
 
     data_path: Path
@@ -106,6 +111,7 @@ class Recording:
     offset_bytes: int = 0
     captures: list = field(default_factory=list)
     hw: str | None = None
+    sha512: str | None = None
 
     def __post_init__(self):
         self._clip_warned = False
@@ -222,6 +228,54 @@ def sha512_hex(path):
     return h.hexdigest()
 
 
+def check_sha512(rec: Recording) -> None:
+    """Refuse a recording whose data file does not match its declared ``core:sha512`` (none declared: no check).
+
+    Raises
+    ------
+    InputError
+        Naming the data file and the metadata file (truncated or modified).
+    """
+    if rec.sha512 and sha512_hex(rec.data_path) != rec.sha512:
+        raise InputError(f"{rec.data_path}: contents do not match core:sha512 in "
+                         f"{rec.data_path.with_suffix('.sigmf-meta').name} (truncated or modified)")
+
+
+@contextmanager
+def sha512_checked(*recs: Recording):
+    """Check the recordings' ``core:sha512`` on a background thread while the ``with`` body runs.
+
+    For recordings opened with ``open_sigmf(..., verify=False)``: the hash
+    (a whole pass over each data file) overlaps the body's work instead of
+    preceding it; hashlib and the file reads release the GIL, so it takes a
+    core of its own where one is idle. Leaving the block waits for the check
+    and raises its :class:`InputError` on a mismatch, also in place of an
+    error the body raised (a modified file is the better explanation of
+    that). The body must write nothing that the check could still refuse.
+    """
+    failure = []
+
+    def check():
+        try:
+            for rec in recs:
+                check_sha512(rec)
+        except Exception as exc:  # re-raised in the caller's thread
+            failure.append(exc)
+
+    worker = threading.Thread(target=check, name="leosop-sha512", daemon=True)
+    worker.start()
+    try:
+        yield
+    except Exception as exc:
+        worker.join()
+        if failure:
+            raise failure[0] from exc
+        raise
+    worker.join()  # an interrupt (BaseException) leaves the daemon thread to end with the process
+    if failure:
+        raise failure[0]
+
+
 def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Recording:
     """Open a SigMF recording (``.sigmf-meta`` beside its ``.sigmf-data``).
 
@@ -230,7 +284,8 @@ def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Rec
     meta_path : str or Path
         The ``.sigmf-meta`` file (a ``.sigmf-data`` path is accepted too).
     verify : bool
-        Check ``core:sha512`` when present (streamed; catches truncation).
+        Check ``core:sha512`` when present (streamed; catches truncation). Without it the
+        caller checks it later (:func:`check_sha512`, :func:`sha512_checked`).
 
     Returns
     -------
@@ -264,8 +319,6 @@ def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Rec
     offset = _int_field(raw_caps[0], "core:header_bytes", 0, f"{meta_path}: capture 0")
     n = _count_samples(data_path, datatype, offset, str(meta_path))
     captures, center_hz = _captures(raw_caps, n, fs, meta_path)
-    if verify and info.get("core:sha512") and sha512_hex(data_path) != info["core:sha512"]:
-        raise InputError(f"{data_path}: contents do not match core:sha512 in {meta_path.name} (truncated or modified)")
     annotations = meta.get_annotations()
     end = max((a.get("core:sample_start", 0) + a.get("core:sample_count", 0) for a in annotations), default=0)
     if end > n:
@@ -283,7 +336,10 @@ def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Rec
         offset_bytes=offset,
         captures=captures,
         hw=info.get("core:hw"),
+        sha512=info.get("core:sha512") or None,
     )
+    if verify:
+        check_sha512(rec)
     check_8bit_sign(rec, f"{meta_path}: core:datatype")
     return rec
 

@@ -172,6 +172,23 @@ def test_truncated_recording_is_refused_without_outputs(snapshot_recording, tmp_
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
 
 
+def test_modified_recording_is_refused_by_its_checksum_without_outputs(snapshot_recording, tmp_path, capsys):
+    # The checksum runs beside the replay (a background thread): a file of the right size whose bytes
+    # changed ends in the checksum's one-line refusal, exit 2, no output file, even where the replay
+    # stumbles on the change first (a NaN in the first block: fast; the refusal after a whole replay is
+    # tests/signal/test_iq.py's).
+    path, _ = snapshot_recording
+    raw = np.fromfile(path.with_suffix(".sigmf-data"), dtype=np.float32)
+    raw[0] = np.nan
+    bad = tmp_path / "mod.sigmf-meta"
+    bad.write_text(path.read_text())  # core:sha512 kept
+    raw.tofile(tmp_path / "mod.sigmf-data")
+    code, _, err = _replay(capsys, str(bad), "--static", "--init", "34.98,109.71,0", "--out", str(tmp_path / "o"))
+    assert code == 2 and err.count("\n") == 1
+    assert "mod.sigmf-data: contents do not match core:sha512 in mod.sigmf-meta" in err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
 def test_nan_samples_are_refused_naming_the_file_and_samples(snapshot_recording, tmp_path, capsys):
     # replay reads without a pass over the samples for NaN/inf: one sum of the block shows them.
     path, _ = snapshot_recording

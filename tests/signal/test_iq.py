@@ -206,3 +206,30 @@ def test_capture_refusals(tmp_path, case, match):
     with pytest.raises(InputError, match=match) as exc:
         open_sigmf(meta, verify=False)
     assert str(meta) in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_sha512_checked_refuses_a_modified_file_after_the_body(tmp_path):
+    from leosop.signal.iq import sha512_checked
+
+    meta = _write(tmp_path, _samples(1_000))
+    data = meta.with_suffix(".sigmf-data")
+    rec = open_sigmf(meta, verify=False)
+    with sha512_checked(rec):  # intact: nothing raised
+        ran = rec.read(0, 10)
+    assert ran.shape == (10,)
+    raw = bytearray(data.read_bytes())
+    raw[4 * 501] ^= 0x01  # one bit of sample 250's real part: same size, same sample count
+    data.write_bytes(bytes(raw))
+    rec = open_sigmf(meta, verify=False)
+    body_done = []
+    with pytest.raises(InputError, match=r"sigmf-data: contents do not match core:sha512"):
+        with sha512_checked(rec):
+            body_done.append(True)
+    assert body_done == [True]  # the body ran; the refusal came on leaving it
+    # An error of the body on a modified file gives way to the checksum's (the better explanation).
+    with pytest.raises(InputError, match="core:sha512") as info:
+        with sha512_checked(rec):
+            raise InputError("sample 250 is odd")
+    assert "odd" in str(info.value.__cause__)
+    with pytest.raises(InputError, match="core:sha512"):
+        open_sigmf(meta)  # verify=True checks at once, as before
