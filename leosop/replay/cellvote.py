@@ -124,7 +124,10 @@ class CellSearch:
         n_sats = len(eph.ok)
         t_ref = np.array([tr.t_ref_s for tr in tracks])
         # Unit vectors of the satellites at each track's middle time and their footprint half-angles.
-        p, _ = eph.state(np.arange(n_sats)[None, :], t_ref[:, None, 1])  # (n_tracks, n_sats, 3)
+        p, v = eph.state(np.arange(n_sats)[None, :], t_ref[:, None, 1])  # (n_tracks, n_sats, 3)
+        # Every satellite's state at each track's middle time and 1 s later, (n_tracks, n_sats, 3) each:
+        # the identification's Doppler screen of its candidates (:func:`~leosop.replay.match.match`).
+        self.mid_states = (p, v, *eph.state(np.arange(n_sats)[None, :], t_ref[:, None, 1] + 1.0))
         r = np.linalg.norm(p, axis=-1)
         self.unit = p / np.where(r > 0, r, 1.0)[..., None]
         lam = np.arccos(np.clip(WGS84_A_M * cos_m / np.where(eph.ok, r, 1e12), -1, 1)) - np.arcsin(sin_m)

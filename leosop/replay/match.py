@@ -44,81 +44,119 @@ MAX_OUTLIER_FRACTION = 0.1
 def match(search, sol):
     """Best and runner-up candidate per track at a solution.
 
+    Each pass of the fit evaluates the models of every track's candidates at once, in one flat batch
+    (small arrays track by track would cost numpy's overhead per call many times over), then
+    fits track by track on the same (candidates, blocks) arrays as a loop over the tracks would.
+
     Returns
     -------
     list of dict per track: sat, chi2, rms_hz, margin, runner_up (sat or -1), time_offset_s (the best
     candidate's fitted inertial time offset, :mod:`~leosop.replay.ephemeris`).
     """
-    o = search.o
-    pos, cov, vel_rx = sol["pos"], sol["cov"], sol["vel"]
+    fits = [_candidates(search, sol, k) for k in range(len(search.tracks))]
+    # The time offset enters non-linearly: re-linearise; a third pass with the outliers out.
+    for it in range(3):
+        now = [f for f in fits if f is not None and it < f.n_passes]
+        for f, model in zip(now, _models(search, sol, now)):
+            f.step(it, *model, sol["cov"], search.o)
+    return [None if f is None else f.best() for f in fits]
+
+
+def _candidates(search, sol, k):
+    """Track ``k``'s candidates, those nearest in Doppler at its middle (rate-scaled), ready to fit; None
+    when no satellite is above the mask. The rest are kHz away and would only add to the cost."""
+    o, tr = search.o, search.tracks[k]
+    pos, vel_rx = sol["pos"], sol["vel"]
     up = pos / np.linalg.norm(pos)
     sin_mask = np.sin(np.radians(o["mask_deg"] - o["id_mask_slack_deg"]))
-    out = []
-    for tr in search.tracks:
-        p_mid, _ = search.eph.state(np.arange(len(search.eph.ok)), tr.t_mid_s)
-        los = p_mid - pos
-        el_ok = (los @ up) / np.linalg.norm(los, axis=1) >= sin_mask
-        cand = np.flatnonzero(el_ok & search.eph.ok)
-        # Only the candidates nearest in Doppler at the middle (rate-scaled) can fit; the rest
-        # are kHz away and would only add to the cost.
-        pos_mid = pos + (tr.t_mid_s - search.t_c) * vel_rx
-        pm, vm = search.eph.state(cand, tr.t_mid_s)
-        dm = doppler_model(pm, vm - vel_rx, pos_mid, search.k)[0]
-        pm2, vm2 = search.eph.state(cand, tr.t_mid_s + 1.0)
-        slope = np.abs(doppler_model(pm2, vm2 - vel_rx, pos_mid + vel_rx, search.k)[0] - dm)
-        off = np.abs(tr.f_ref_hz[1] - sol["clock"] - sol["drift"] * (tr.t_mid_s - search.t_c) - dm)
-        cand = cand[np.argsort(off / (10.0 + slope * o["along_track_sigma_m"] / SPEED_SV_MPS))[:_ID_CANDIDATES]]
+    p_mid, v_mid, p_next, v_next = (a[k] for a in search.mid_states)
+    los = p_mid - pos
+    el_ok = (los @ up) / np.linalg.norm(los, axis=1) >= sin_mask
+    cand = np.flatnonzero(el_ok & search.eph.ok)
+    pos_mid = pos + (tr.t_mid_s - search.t_c) * vel_rx
+    dm = doppler_model(p_mid[cand], v_mid[cand] - vel_rx, pos_mid, search.k)[0]
+    slope = np.abs(doppler_model(p_next[cand], v_next[cand] - vel_rx, pos_mid + vel_rx, search.k)[0] - dm)
+    off = np.abs(tr.f_ref_hz[1] - sol["clock"] - sol["drift"] * (tr.t_mid_s - search.t_c) - dm)
+    cand = cand[np.argsort(off / (10.0 + slope * o["along_track_sigma_m"] / SPEED_SV_MPS))[:_ID_CANDIDATES]]
+    return _CandidateFit(search, sol, tr, cand) if cand.size else None
+
+
+def _models(search, sol, fits):
+    """Doppler (n_cand, n_blocks), its gradient in the receiver position (n_cand, n_blocks, 3) and its rate in
+    the time offset (n_cand, n_blocks) of each fit's candidates at their current time offsets, in one batch."""
+    if not fits:
+        return []
+    vel_rx = sol["vel"]
+    sat = np.concatenate([np.repeat(f.cand, f.t.size) for f in fits])
+    t = np.concatenate([np.tile(f.t, f.cand.size) for f in fits])
+    pos_t = np.concatenate([np.tile(f.pos_t, (f.cand.size, 1)) for f in fits])
+    tau = np.concatenate([np.repeat(f.tau[:, 0], f.t.size) for f in fits])
+    p, v = search.eph.state_received(sat, t, pos_t, tau)
+    dop, grad = doppler_model(p, v - vel_rx, pos_t, search.k)
+    rate = search.eph.doppler_shift_rate(sat, t, tau, pos_t, search.k)
+    edges = np.cumsum([f.cand.size * f.t.size for f in fits])[:-1]
+    return [(d.reshape(f.shape), g.reshape(*f.shape, 3), r.reshape(f.shape))
+            for f, d, g, r in zip(fits, np.split(dop, edges), np.split(grad, edges), np.split(rate, edges))]
+
+
+class _CandidateFit:
+    """One track's candidates: each one's frequency offset and time offset fitted by weighted least squares
+    with priors, re-linearised pass by pass (:meth:`step`), its outlier blocks left out in the last pass."""
+
+    def __init__(self, search, sol, tr, cand):
+        o = search.o
         idx = tr.sample
-        t, f = tr.t_s[idx], tr.doppler_hz[idx]
-        sig2 = tr.sigma_hz[idx] ** 2 + o["model_sigma_hz"] ** 2
-        base = f - sol["clock"] - sol["drift"] * (t - search.t_c)
-        if cand.size == 0:
-            out.append(None)
-            continue
-        sat = cand[:, None]
-        tau = np.zeros((len(cand), 1))
-        sig_c, sig_tau = o["sat_offset_sigma_hz"], o["along_track_sigma_m"] / SPEED_SV_MPS
-        pos_t = pos + (t - search.t_c)[:, None] * vel_rx
-        keep = np.ones((len(cand), len(t)))  # 0 for a candidate's outlier blocks
-        c_hz = np.zeros(len(cand))
-        n_out = int(MAX_OUTLIER_FRACTION * len(t))
-        # The time offset enters non-linearly: re-linearise; a third pass with the outliers out.
-        for it in range(3 if n_out else 2):
-            p, v = search.eph.state_received(sat, t[None, :], pos_t, tau)
-            dop, grad = doppler_model(p, v - vel_rx, pos_t, search.k)
-            rate = search.eph.doppler_shift_rate(sat, t[None, :], tau, pos_t, search.k)
-            # The fix's own uncertainty inflates the sigma, but only up to a cap: a fix too poor
-            # to test a candidate must not make every candidate pass.
-            var = sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
-                                             o["pos_sigma_cap_hz"] ** 2)
-            r = base[None, :] - dop
-            if it > 0 and n_out:
-                z = np.abs(r - c_hz[:, None]) / np.sqrt(var)  # tau already moved by dtau
-                worst = np.argsort(-z, axis=1)[:, :n_out]
-                keep = np.ones_like(z)
-                np.put_along_axis(keep, worst, np.take_along_axis(z, worst, 1) <= OUTLIER_Z, 1)
-            w = keep / var
-            # Weighted least squares for (c, dtau) with priors c ~ N(0, sig_c), tau ~ N(0, sig_tau).
-            a11 = w.sum(1) + 1 / sig_c**2
-            a12 = (w * rate).sum(1)
-            a22 = (w * rate**2).sum(1) + 1 / sig_tau**2
-            b1 = (w * r).sum(1)
-            b2 = (w * rate * r).sum(1) - tau[:, 0] / sig_tau**2
-            det = a11 * a22 - a12**2
-            c_hz = (a22 * b1 - a12 * b2) / det
-            dtau = (a11 * b2 - a12 * b1) / det
-            tau = tau + dtau[:, None]
-        resid = r - c_hz[:, None] - dtau[:, None] * rate
-        chi2 = (w * resid**2).sum(1) + (c_hz / sig_c) ** 2 + (tau[:, 0] / sig_tau) ** 2
+        self.cand, self.t = cand, tr.t_s[idx]
+        self.shape = (cand.size, self.t.size)
+        self.sig2 = tr.sigma_hz[idx] ** 2 + o["model_sigma_hz"] ** 2
+        self.base = tr.doppler_hz[idx] - sol["clock"] - sol["drift"] * (self.t - search.t_c)
+        self.pos_t = sol["pos"] + (self.t - search.t_c)[:, None] * sol["vel"]
+        self.sig_c, self.sig_tau = o["sat_offset_sigma_hz"], o["along_track_sigma_m"] / SPEED_SV_MPS
+        self.tau = np.zeros((cand.size, 1))
+        self.keep = np.ones(self.shape)  # 0 for a candidate's outlier blocks
+        self.c_hz = np.zeros(cand.size)
+        self.n_out = int(MAX_OUTLIER_FRACTION * self.t.size)
+        self.n_passes = 3 if self.n_out else 2
+
+    def step(self, it, dop, grad, rate, cov, o):
+        """Pass ``it`` of the fit, from the models at the current time offsets (:func:`_models`)."""
+        # The fix's own uncertainty inflates the sigma, but only up to a cap: a fix too poor
+        # to test a candidate must not make every candidate pass.
+        var = self.sig2[None, :] + np.minimum(np.einsum("ntx,xy,nty->nt", grad, cov, grad),
+                                              o["pos_sigma_cap_hz"] ** 2)
+        r = self.base[None, :] - dop
+        if it > 0 and self.n_out:
+            z = np.abs(r - self.c_hz[:, None]) / np.sqrt(var)  # tau already moved by dtau
+            worst = np.argsort(-z, axis=1)[:, :self.n_out]
+            self.keep = np.ones_like(z)
+            np.put_along_axis(self.keep, worst, np.take_along_axis(z, worst, 1) <= OUTLIER_Z, 1)
+        w = self.keep / var
+        sig_c, sig_tau = self.sig_c, self.sig_tau
+        # Weighted least squares for (c, dtau) with priors c ~ N(0, sig_c), tau ~ N(0, sig_tau).
+        a11 = w.sum(1) + 1 / sig_c**2
+        a12 = (w * rate).sum(1)
+        a22 = (w * rate**2).sum(1) + 1 / sig_tau**2
+        b1 = (w * r).sum(1)
+        b2 = (w * rate * r).sum(1) - self.tau[:, 0] / sig_tau**2
+        det = a11 * a22 - a12**2
+        self.c_hz = (a22 * b1 - a12 * b2) / det
+        dtau = (a11 * b2 - a12 * b1) / det
+        self.tau = self.tau + dtau[:, None]
+        self.w, self.resid = w, r - self.c_hz[:, None] - dtau[:, None] * rate
+
+    def best(self):
+        """The best candidate and the runner-up after the last pass (:func:`match`'s dict)."""
+        chi2 = (self.w * self.resid**2).sum(1) + (self.c_hz / self.sig_c) ** 2 + (self.tau[:, 0] / self.sig_tau) ** 2
         chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
         order = np.argsort(chi2)
         best = order[0]
         second = chi2[order[1]] if len(order) > 1 else np.inf
-        used = keep[best] > 0
-        out.append({"sat": int(cand[best]), "chi2": float(chi2[best]), "n": int(used.sum()),
-                    "rms_hz": float(np.sqrt(np.mean(resid[best, used] ** 2))), "margin": float(second - chi2[best]),
-                    "runner_up": int(cand[order[1]]) if len(order) > 1 else -1, "time_offset_s": float(tau[best, 0])})
-    return out
+        used = self.keep[best] > 0
+        return {"sat": int(self.cand[best]), "chi2": float(chi2[best]), "n": int(used.sum()),
+                "rms_hz": float(np.sqrt(np.mean(self.resid[best, used] ** 2))), "margin": float(second - chi2[best]),
+                "runner_up": int(self.cand[order[1]]) if len(order) > 1 else -1,
+                "time_offset_s": float(self.tau[best, 0])}
+
 
 def accept(search, ids):
     """Satellite index and status per track from :func:`match`'s output.
