@@ -44,26 +44,59 @@ class Ephemeris:
         times = t0_utc + np.round(self.t_grid_s * 1e9).astype("timedelta64[ns]")
         pos, vel, status = state_ecef(constellation, times)
         self.ok = (status == 0).all(axis=1) & np.isfinite(pos).all(axis=(1, 2))
-        self.pos, self.vel = np.nan_to_num(pos), np.nan_to_num(vel)
+        # The nodes' positions and velocities times the step (the Hermite tangents), one row per
+        # (satellite, node), (n_sats * n_nodes, 3): a row gather (take) is twice as fast as indexing two axes.
+        self._pos_rows = np.nan_to_num(pos).reshape(-1, 3)
+        self._tangent_rows = (np.nan_to_num(vel) * NODE_STEP_S).reshape(-1, 3)
 
     def state(self, sat, t_s):
         """Position and velocity (..., 3) of satellites ``sat`` at ``t_s`` (broadcast)."""
+        return self._state(sat, t_s)[:2]
+
+    def _state(self, sat, t_s, prev=None):
+        """:meth:`state` and the nodes it interpolated, ``(row, nodes)``, for a later call's ``prev``.
+
+        With ``prev`` from a call of the same shape (the same satellites at nearby times: the light-time
+        iterations, the two sides of a central difference) only the rows whose node changed are gathered
+        anew; the values are those a gather of every row gives.
+        """
+        n_nodes = len(self.t_grid_s)
         x = (np.asarray(t_s, float) - self.t_grid_s[0]) / NODE_STEP_S
-        i = np.clip(np.floor(x).astype(int), 0, len(self.t_grid_s) - 2)
+        i = np.clip(np.floor(x).astype(int), 0, n_nodes - 2)
         s = (x - i)[..., None]
-        p0, p1 = self.pos[sat, i], self.pos[sat, i + 1]
-        v0, v1 = self.vel[sat, i] * NODE_STEP_S, self.vel[sat, i + 1] * NODE_STEP_S
+        row = np.asarray(sat) * n_nodes + i
+        p0, v0, p1, v1 = nodes = self._nodes(row, prev)
         s2, s3 = s * s, s * s * s
         pos = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * v0 + (3 * s2 - 2 * s3) * p1 + (s3 - s2) * v1
         vel = ((6 * s2 - 6 * s) * (p0 - p1) + (3 * s2 - 4 * s + 1) * v0 + (3 * s2 - 2 * s) * v1) / NODE_STEP_S
-        return pos, vel
+        return pos, vel, (row, nodes)
+
+    def _nodes(self, row, prev=None):
+        """Positions and tangents at the nodes ``row`` and ``row + 1``: (p0, v0, p1, v1), each (..., 3)."""
+        tables = (self._pos_rows, self._tangent_rows, self._pos_rows, self._tangent_rows)
+        if prev is not None and prev[0].shape == row.shape:
+            old_row, old = prev
+            changed = np.flatnonzero(row != old_row)
+            if changed.size == 0:
+                return old
+            if 4 * changed.size < row.size:  # a few rows crossed a node: patch them
+                new = tuple(a.copy() for a in old)
+                r = row.reshape(-1)[changed]
+                for a, table, step in zip(new, tables, (0, 0, 1, 1)):
+                    a.reshape(-1, 3)[changed] = table.take(r + step, axis=0)
+                return new
+        return tuple(table.take(row + step, axis=0) for table, step in zip(tables, (0, 0, 1, 1)))
 
     def state_shifted(self, sat, t_s, shift_s):
         """Position and velocity (..., 3) at ``t_s`` of satellites ``sat`` whose inertial orbit is
         ``shift_s`` ahead (broadcast): the ECEF state at ``t_s + shift_s`` in the ECEF frame of ``t_s``."""
+        return self._state_shifted(sat, t_s, shift_s)[:2]
+
+    def _state_shifted(self, sat, t_s, shift_s, prev=None):
+        """:meth:`state_shifted` and its nodes (:meth:`_state`)."""
         shift_s = np.asarray(shift_s, float)
-        pos, vel = self.state(sat, np.asarray(t_s, float) + shift_s)
-        return rotate_to_later_ecef(pos, -shift_s), rotate_to_later_ecef(vel, -shift_s)
+        pos, vel, nodes = self._state(sat, np.asarray(t_s, float) + shift_s, prev)
+        return rotate_to_later_ecef(pos, -shift_s), rotate_to_later_ecef(vel, -shift_s), nodes
 
     def state_received(self, sat, t_s, pos_rx_ecef_m, shift_s=0.0):
         """Apparent state: position at the transmit time in the ECEF frame of the reception time
@@ -71,10 +104,10 @@ class Ephemeris:
         :func:`~leosop.positioning.measurements.sv_states_from_tle`); the inertial orbit
         ``shift_s`` ahead (broadcast, see :meth:`state_shifted`)."""
         shift_s = np.asarray(shift_s, float)
-        pos, vel = self.state(sat, t_s + shift_s)
+        pos, vel, nodes = self._state(sat, t_s + shift_s)
         for _ in range(2):  # each pass gains |range rate| / c ~ 3e-5
             tau = np.linalg.norm(pos - pos_rx_ecef_m, axis=-1) / C_MPS
-            pos, vel = self.state(sat, t_s - tau + shift_s)
+            pos, vel, nodes = self._state(sat, t_s - tau + shift_s, nodes)
         # The transmit-time state of the shifted orbit (frame of t_s - tau + shift_s) in the frame of t_s.
         pos, vel = rotate_to_later_ecef(pos, tau - shift_s), rotate_to_later_ecef(vel, tau - shift_s)
         # d/dt_rx of R(omega tau) r(t_rx - tau): the light time's rate tau_dot = range rate / c
@@ -87,10 +120,11 @@ class Ephemeris:
     def doppler_shift_rate(self, sat, t_s, shift_s, pos_rx_ecef_m, hz_per_mps):
         """Derivative of the Doppler (...) [Hz/s] in the satellite's inertial time offset ``shift_s``:
         a central difference over +-:data:`RATE_STEP_S` of :meth:`state_shifted` (light time left out)."""
-        pa, va = self.state_shifted(sat, t_s, shift_s + RATE_STEP_S)
-        pb, vb = self.state_shifted(sat, t_s, shift_s - RATE_STEP_S)
+        pa, va, nodes = self._state_shifted(sat, t_s, shift_s + RATE_STEP_S)
+        pb, vb, _ = self._state_shifted(sat, t_s, shift_s - RATE_STEP_S, nodes)
         return (doppler_hz(pa, va, pos_rx_ecef_m, hz_per_mps)
                 - doppler_hz(pb, vb, pos_rx_ecef_m, hz_per_mps)) / (2 * RATE_STEP_S)
+
 
 def doppler_model(pos_sv, vel_sv, pos_rx, hz_per_mps, los=False):
     """Doppler (...) and its gradient (..., 3) in the receiver position [Hz/m].
