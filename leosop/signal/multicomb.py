@@ -69,6 +69,7 @@ predicted combs first, in the order given, in tracking mode).
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -124,8 +125,13 @@ class Combs:
         return self.doppler_hz.size
 
 
+@lru_cache(maxsize=16)
 def _spectrum_grid(n, target):
-    """Segments B_s dividing n, nearest to ``target`` (n itself when n has no divisor in range)."""
+    """Segments B_s dividing n, nearest to ``target`` (n itself when n has no divisor in range).
+
+    Cached: a replay asks for the same few (n, target) in every search block, and the scan over
+    the divisors is a Python loop (~0.5 ms).
+    """
     div = [b for b in range(max(16, target // 2), min(4 * target, n // 4) + 1) if n % b == 0]
     return min(div, key=lambda b: abs(b - target)) if div else n
 
