@@ -130,7 +130,7 @@ def tone_phases(comb, doppler_hz, rate, tau):
 
 
 def _frac(c):
-    return c - np.round(c)
+    return c - np.rint(c)  # np.round without its wrappers (same half-to-even rounding)
 
 
 def cis(cycles):

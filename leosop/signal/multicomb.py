@@ -182,7 +182,8 @@ def _duplicate(comb, c, combs, dur):
     sp = comb.tone_spacing_hz
     for o in combs:
         dd = c.doppler_hz - o.doppler_hz
-        if abs(dd - sp * np.round(dd / sp)) < 2.0 / dur and abs(c.rate - o.rate) < 4.0 / dur**2:
+        # np.rint: np.round's rounding without its wrappers (on a scalar they cost 5x the rounding).
+        if abs(dd - sp * np.rint(dd / sp)) < 2.0 / dur and abs(c.rate - o.rate) < 4.0 / dur**2:
             return True
     return False
 
