@@ -217,7 +217,7 @@ def _strong_runs(padded, strong, level):
     while True:
         # Windows [a, b) round the strong bins, merged where they overlap.
         a, b = np.maximum(strong - half, 0), np.minimum(strong + half + 1, n)
-        new = np.r_[True, a[1:] > b[:-1]]
+        new = np.concatenate(([True], a[1:] > b[:-1]))
         a, b = a[new], np.maximum.reduceat(b, np.flatnonzero(new))
         # Each window's bins with L - 1 more of padding, gathered: smoothed bin i of a window is the dot
         # product of padded[i:i + L] (np.convolve's "valid" outputs whose inputs lie in one window).
@@ -229,8 +229,9 @@ def _strong_runs(padded, strong, level):
         above = smooth[keep] > level
         above[np.searchsorted(bins, strong)] = True
         # Runs of ``above`` within each window (a new window breaks a run).
-        start = above & np.r_[True, ~above[:-1] | (np.diff(bins) != 1)]
-        end = above & np.r_[~above[1:] | (np.diff(bins) != 1), True]
+        step = np.diff(bins) != 1
+        start = above & np.concatenate(([True], ~above[:-1] | step))
+        end = above & np.concatenate((~above[1:] | step, [True]))
         lo, hi = bins[start], bins[end]
         holds = np.searchsorted(strong, lo) < np.searchsorted(strong, hi, side="right")
         lo, hi = lo[holds], hi[holds]

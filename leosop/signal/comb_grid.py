@@ -186,7 +186,7 @@ def leakage(grid, sources, f_c, mix):
     val = np.hstack([o.val for o in have])[:, ii]
     nu = np.hstack([o.nu for o in have])[:, ii]
     val *= dirichlet(nu - f_c[jj], grid.counts[:, None], grid.fs)
-    first = np.flatnonzero(np.r_[True, jj[1:] != jj[:-1]])
+    first = np.flatnonzero(np.concatenate(([True], jj[1:] != jj[:-1])))
     out = np.zeros((grid.n_seg, f_c.size), dtype=complex)
     out[:, jj[first]] = np.add.reduceat(val, first, axis=1) * mix[:, jj[first]]
     return out
@@ -208,6 +208,6 @@ def leakage_all(grid, f_c, mix, val, nu):
     if ii.size:
         v = val.reshape(n_seg, -1)[:, ii] * dirichlet(nu.reshape(n_seg, -1)[:, ii] - fc[jj], grid.counts[:, None],
                                                         grid.fs)
-        first = np.flatnonzero(np.r_[True, jj[1:] != jj[:-1]])
+        first = np.flatnonzero(np.concatenate(([True], jj[1:] != jj[:-1])))
         out[:, jj[first]] = np.add.reduceat(v, first, axis=1) * mix.reshape(n_seg, -1)[:, jj[first]]
     return out.reshape(n_seg, n_c, n_w)
