@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..constants import C_MPS
+from .comb_grid import NonFiniteSamples
 
 __all__ = ["Cleaning", "LINE_PFA", "Line", "clean_block", "correct_iq", "find_lines", "iq_imbalance"]
 
@@ -275,7 +276,8 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     3. Lines that no comb explains (:func:`find_lines`) are zeroed in the
        block's spectrum (excision) and the block transformed back.
 
-    A clean block comes back as it was, less its mean (one FFT spent).
+    A clean block comes back as it was, less its mean (one FFT spent). A
+    block holding NaN or inf raises NonFiniteSamples (an InputError).
 
     Parameters
     ----------
@@ -292,7 +294,10 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
 
     x = np.asarray(iq, dtype=np.complex64)
     n = x.size
-    dc = complex(x.mean())
+    total = x.sum()
+    if not np.isfinite(total):  # the callers' check for NaN or inf: one pass over the samples less
+        raise NonFiniteSamples("IQ samples contain NaN or inf")
+    dc = complex(np.complex64(total / np.intp(n)))  # x.mean(), bit for bit (its division in double)
     x = x - np.complex64(dc)
     gain_db, phase_deg, s_gain, s_phase = iq_imbalance(x)
     corrected = abs(gain_db) > 5.0 * s_gain or abs(phase_deg) > 5.0 * s_phase

@@ -354,9 +354,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     if not np.all(np.isfinite(pred)):
         raise InputError("predicted_hz contains NaN or inf")
     if clean:
-        if not np.isfinite(iq.sum()):
-            raise NonFiniteSamples("IQ samples contain NaN or inf")
-        iq, cleaning = clean_block(iq, fs, comb)
+        iq, cleaning = clean_block(iq, fs, comb)  # raises NonFiniteSamples
         spectrum = cleaning.spectrum
     lo = float(lo_offset_hz)
     if lo:
