@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..constants import C_MPS
+from .comb_grid import NonFiniteSamples
 
 __all__ = ["Cleaning", "LINE_PFA", "Line", "clean_block", "correct_iq", "find_lines", "iq_imbalance"]
 
@@ -217,7 +218,7 @@ def _strong_runs(padded, strong, level):
     while True:
         # Windows [a, b) round the strong bins, merged where they overlap.
         a, b = np.maximum(strong - half, 0), np.minimum(strong + half + 1, n)
-        new = np.r_[True, a[1:] > b[:-1]]
+        new = np.concatenate(([True], a[1:] > b[:-1]))
         a, b = a[new], np.maximum.reduceat(b, np.flatnonzero(new))
         # Each window's bins with L - 1 more of padding, gathered: smoothed bin i of a window is the dot
         # product of padded[i:i + L] (np.convolve's "valid" outputs whose inputs lie in one window).
@@ -229,8 +230,9 @@ def _strong_runs(padded, strong, level):
         above = smooth[keep] > level
         above[np.searchsorted(bins, strong)] = True
         # Runs of ``above`` within each window (a new window breaks a run).
-        start = above & np.r_[True, ~above[:-1] | (np.diff(bins) != 1)]
-        end = above & np.r_[~above[1:] | (np.diff(bins) != 1), True]
+        step = np.diff(bins) != 1
+        start = above & np.concatenate(([True], ~above[:-1] | step))
+        end = above & np.concatenate((~above[1:] | step, [True]))
         lo, hi = bins[start], bins[end]
         holds = np.searchsorted(strong, lo) < np.searchsorted(strong, hi, side="right")
         lo, hi = lo[holds], hi[holds]
@@ -274,7 +276,8 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     3. Lines that no comb explains (:func:`find_lines`) are zeroed in the
        block's spectrum (excision) and the block transformed back.
 
-    A clean block comes back as it was, less its mean (one FFT spent).
+    A clean block comes back as it was, less its mean (one FFT spent). A
+    block holding NaN or inf raises NonFiniteSamples (an InputError).
 
     Parameters
     ----------
@@ -291,7 +294,10 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
 
     x = np.asarray(iq, dtype=np.complex64)
     n = x.size
-    dc = complex(x.mean())
+    total = x.sum()
+    if not np.isfinite(total):  # the callers' check for NaN or inf: one pass over the samples less
+        raise NonFiniteSamples("IQ samples contain NaN or inf")
+    dc = complex(np.complex64(total / np.intp(n)))  # x.mean(), bit for bit (its division in double)
     x = x - np.complex64(dc)
     gain_db, phase_deg, s_gain, s_phase = iq_imbalance(x)
     corrected = abs(gain_db) > 5.0 * s_gain or abs(phase_deg) > 5.0 * s_phase

@@ -179,8 +179,8 @@ def refine_combs(grid, comb, combs, clean=True):
     s2 = np.where(pos, sigma2, 1.0)[:, None]
     cn0_k = np.where(pos[:, None], np.maximum(p_sum - n * s2, 0.0) / n**2 * fs / s2, np.inf)
     w = cn0_k @ comb.doppler_scale**2
-    mean_cn0 = np.mean(cn0_k, axis=1)
-    statistic = np.where(pos, np.mean(p_sum, axis=1) / (n * s2[:, 0]), np.inf)
+    mean_cn0 = cn0_k.sum(axis=1) / n_k  # np.mean's arithmetic without its wrappers
+    statistic = np.where(pos, p_sum.sum(axis=1) / n_k / (n * s2[:, 0]), np.inf)
     s = comb.doppler_scale
     phase = np.multiply.outer(grid.tau, doppler) + np.multiply.outer(0.5 * grid.tau**2, rate)  # (B, C)
     nu = comb.offsets_hz + (doppler + np.multiply.outer(grid.tau, rate))[:, :, None] * s

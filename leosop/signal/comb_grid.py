@@ -85,7 +85,6 @@ class DecimationGrid:
         self.k, self.weights, self.noise_gain = _alias_weights(self.n_fft, self.n_seg, self.seg)
         self._iq = iq
         self._spectrum = spectrum if spectrum is not None and self.n_fft == n else None
-        self._windows = None
 
     @property
     def fs_dec(self):
@@ -105,12 +104,9 @@ class DecimationGrid:
         f_c = np.asarray(f_c, dtype=float)
         df = self.fs / self.n_fft
         b = np.round(f_c / df).astype(np.int64)
-        if self._windows is None:
-            # Every run of len(k) bins starting at bin i + k[0], i = 0..n_fft - 1 (circular).
-            x = self.spectrum
-            wrapped = np.concatenate([x[self.k[0]:], x, x[:self.k[-1]]])
-            self._windows = np.lib.stride_tricks.sliding_window_view(wrapped, self.k.size)
-        z = self._windows[b % self.n_fft] * self.weights
+        # Each channel's run of len(k) bins from bin b + k[0] (circular), gathered alone: copying the
+        # whole spectrum into a wrapped one cost more than the few channels a block needs.
+        z = np.take(self.spectrum, np.add.outer(b, self.k), mode="wrap") * self.weights
         z = z.reshape(f_c.size, -1, self.n_seg).sum(axis=1)  # column c: spectral index k[0] + c (mod n_seg)
         y = np.fft.ifft(z, axis=1).T
         # The first column's index k[0] as a phase ramp, and the rotation by the off-bin part.
@@ -134,7 +130,7 @@ def tone_phases(comb, doppler_hz, rate, tau):
 
 
 def _frac(c):
-    return c - np.round(c)
+    return c - np.rint(c)  # np.round without its wrappers (same half-to-even rounding)
 
 
 def cis(cycles):
@@ -190,7 +186,7 @@ def leakage(grid, sources, f_c, mix):
     val = np.hstack([o.val for o in have])[:, ii]
     nu = np.hstack([o.nu for o in have])[:, ii]
     val *= dirichlet(nu - f_c[jj], grid.counts[:, None], grid.fs)
-    first = np.flatnonzero(np.r_[True, jj[1:] != jj[:-1]])
+    first = np.flatnonzero(np.concatenate(([True], jj[1:] != jj[:-1])))
     out = np.zeros((grid.n_seg, f_c.size), dtype=complex)
     out[:, jj[first]] = np.add.reduceat(val, first, axis=1) * mix[:, jj[first]]
     return out
@@ -212,6 +208,6 @@ def leakage_all(grid, f_c, mix, val, nu):
     if ii.size:
         v = val.reshape(n_seg, -1)[:, ii] * dirichlet(nu.reshape(n_seg, -1)[:, ii] - fc[jj], grid.counts[:, None],
                                                         grid.fs)
-        first = np.flatnonzero(np.r_[True, jj[1:] != jj[:-1]])
+        first = np.flatnonzero(np.concatenate(([True], jj[1:] != jj[:-1])))
         out[:, jj[first]] = np.add.reduceat(v, first, axis=1) * mix.reshape(n_seg, -1)[:, jj[first]]
     return out.reshape(n_seg, n_c, n_w)

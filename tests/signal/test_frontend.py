@@ -197,6 +197,20 @@ def test_band_cannot_hold_the_combs_at_the_stated_offset(consumer, capsys):
     assert status == 2 and err.count("\n") == 1 and "beyond the recording's band" in err
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_nan_or_inf_samples_are_refused_by_the_cleaning(bad):
+    """The cleaning's block mean is the NaN/inf check of the comb search and the replay's blocks (they no longer
+    sum the samples themselves): one bad sample among 2e4 must raise, through find_combs too."""
+    from leosop.signal.comb_grid import NonFiniteSamples
+
+    x = add_noise(np.zeros(20_000, complex), 45.0, FS, np.random.default_rng(2)).astype(np.complex64)
+    x[12_345] = bad
+    with pytest.raises(NonFiniteSamples, match="NaN or inf"):
+        clean_block(x, FS, PilotComb())
+    with pytest.raises(NonFiniteSamples, match="NaN or inf"):
+        find_combs(x, FS)
+
+
 @pytest.mark.parametrize("cw_hz, off_hz, rate_hz_per_s", [(700e3, 50.0, 0.0), (700e3, 200.0, 0.0),
                                                           (700e3, 50.0, -3000.0), (700e3, -30.0, -3000.0),
                                                           (700_025.0, 2000.0, -3000.0)])
