@@ -2,7 +2,7 @@
 
     python tools/bench_differential_ins.py [--seeds 5] [--tle FILE] [--cases SUBSTRING ...] [--baseline-km 7.5]
         [--imu-grade consumer] [--phase-sigma-cycles 0.1] [--slip-probability 0.01] [--orbit-scale 1]
-        [--rest-s 60] [--phase-noise white]
+        [--rest-s 60]
 
 The car of tools/bench_differential.py: from the 7.5 km site, 20 m/s
 north-east on the horizon for 150 s (3 km), the 150 epochs of its scene
@@ -200,9 +200,6 @@ REST_S = 60.0
 #: second's mean gyro rate, its sigma the white noise of a 1 s mean (``ZERO_RATE_WINDOW_S``).
 ZUPT_SIGMA_MPS = 0.01
 ZERO_RATE_WINDOW_S = 1.0
-#: The truth's phase noise (``--phase-noise``): ``white`` per epoch (a receiver's: consecutive intervals share an
-#: epoch's noise, what the carrier aid models), or ``walk`` (:func:`walk_phase`: independent intervals).
-PHASE_NOISE = ("white", "walk")
 
 
 def drive(start_ecef_m, duration_s, rest_s=0.0):
@@ -223,14 +220,13 @@ class Setup:
     """What the command line varies: the IMU grade (truth and filter), the phase noise of each receiver
     [cycles] (0.1: 2.6 mm at 11.325 GHz; replay's tracker reaches ~0.01 at 42-44 dB-Hz), the probability of a
     cycle slip at each row (0.01: a satellite slips about every 100 s), and the element-set offsets' scale
-    (truth and the filter's prior), the standing start's rest [s], and the phase noise's kind (``PHASE_NOISE``)."""
+    (truth and the filter's prior), and the standing start's rest [s]."""
 
     imu_grade: str = "consumer"
     phase_sigma_cycles: float = 0.1
     slip_probability: float = 0.01
     orbit_scale: float = 1.0
     rest_s: int = int(REST_S)
-    phase_noise: str = "white"
 
 
 def grade_imu(grade):
@@ -252,23 +248,6 @@ def grade_imu(grade):
                        accel_bias_instability_mps2=accel_sigma,
                        accel_bias_corr_time_s=2 * (accel_sigma / accel_q)**2)
     return errors, spec
-
-
-def walk_phase(meas, sigma_cycles, rng):
-    """``meas`` (noiseless phases) with a random walk of ``sqrt(2) sigma_cycles`` per epoch along each arc.
-
-    Each interval's phase change then has the variance of two epochs' white noise of ``sigma_cycles`` (the
-    sigma it is given), independent of the next interval's: the noise the carrier aid assumed before it
-    carried each epoch's noise as states (:mod:`leosop.fusion.aids_carrier`), not that of a receiver
-    (``--phase-noise walk``; a mismatched truth for the aid now).
-    """
-    phase = meas.phase_cycles.copy()
-    key = np.char.add(np.char.add(meas.sat_id.astype(str), "|"), meas.arc.astype(str))
-    for k in np.unique(key):
-        rows = np.flatnonzero(key == k)
-        rows = rows[np.argsort(meas.t_s[rows], kind="stable")]
-        phase[rows] += np.cumsum(rng.standard_normal(rows.size)) * np.sqrt(2.0) * sigma_cycles
-    return dataclasses.replace(meas, phase_cycles=phase, phase_sigma_cycles=np.full(phase.size, sigma_cycles))
 
 
 def rest_aids(t_s, t_imu, dth, rest_end_s, spec):
@@ -361,22 +340,16 @@ def trial(const, base, t, start, sigma_hz, seed, cases, setup):
 
     t_s = seconds_since(t_all, t_all[0])
     drive_s = t_s[n_lead]
-    walk = setup.phase_noise == "walk"
-    phase = {"phase_sigma_cycles": 0.0 if walk else setup.phase_sigma_cycles,
-             "slip_probability": setup.slip_probability}
-
-    def noisy(meas):
-        return walk_phase(meas, setup.phase_sigma_cycles, rng) if walk else meas
-
-    b = noisy(simulate_receiver(const, err, base, t_all, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase))
+    phase = {"phase_sigma_cycles": setup.phase_sigma_cycles, "slip_probability": setup.slip_probability}
+    b = simulate_receiver(const, err, base, t_all, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase)
     rover = {}
     for kind, rest_s, first in (("fused", 0.0, n_lead), ("standing", setup.rest_s, 0)):
         traj = drive(start, t_s[-1] - drive_s, rest_s)
         k0 = int(round((t_s[first] - drive_s + rest_s + RUN_UP_S) * IMU_RATE_HZ))  # the IMU sample of t_s[first]
         track = traj.at(traj.t_s[k0] + t_s[first:] - t_s[first])
         vel = np.einsum("kij,kj->ki", frames.C_e_n(track.lat_rad, track.lon_rad), track.vel_enu_mps)
-        r = noisy(simulate_receiver(const, err, track.pos_ecef_m, t_all[first:], rng, sigma_hz=sigma_hz,
-                                    vel_rx_ecef_mps=vel, mask_deg=10.0, **clock(), **phase))
+        r = simulate_receiver(const, err, track.pos_ecef_m, t_all[first:], rng, sigma_hz=sigma_hz,
+                              vel_rx_ecef_mps=vel, mask_deg=10.0, **clock(), **phase)
         rover[kind] = traj, k0, t_s[first:], r, b.take(np.flatnonzero(b.t_s >= t_s[first]))
     out = {}
     for name, (kind, arg) in cases.items():
@@ -425,8 +398,6 @@ def main():
                         help="element-set offsets (truth and prior) this many times N(0, 30 / 300 / 100 m) RTN")
     parser.add_argument("--rest-s", type=int, default=Setup.rest_s,
                         help="the standing start's rest before the run-up [whole seconds, the epochs' step]")
-    parser.add_argument("--phase-noise", choices=PHASE_NOISE, default=Setup.phase_noise,
-                        help="the truth's phase noise: white per epoch (a receiver's), or a walk (walk_phase)")
     parser.add_argument("--cases", nargs="*", default=None, help="substrings of the case names to run (default all)")
     args = parser.parse_args()
     cases = {k: v for k, v in CASES.items() if args.cases is None or any(c in k for c in args.cases)}
@@ -437,10 +408,8 @@ def main():
     print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz, phase "
           f"{args.phase_sigma_cycles:g} cycles, slips {args.slip_probability:g} per row; car {CAR_SPEED_MPS:g} m/s; "
           f"{args.seeds} seeds; gap {GAP_S[0]:g}-{GAP_S[1]:g} s; orbit offsets x{args.orbit_scale:g}; "
-          f"baseline {args.baseline_km:g} km; IMU {args.imu_grade}; standing start {args.rest_s} s at rest; "
-          f"phase noise {args.phase_noise}")
-    setup = Setup(args.imu_grade, args.phase_sigma_cycles, args.slip_probability, args.orbit_scale, args.rest_s,
-                  args.phase_noise)
+          f"baseline {args.baseline_km:g} km; IMU {args.imu_grade}; standing start {args.rest_s} s at rest")
+    setup = Setup(args.imu_grade, args.phase_sigma_cycles, args.slip_probability, args.orbit_scale, args.rest_s)
     runs = [trial(const, base, t, start, sigma_hz, seed, cases, setup) for seed in range(args.seeds)]
     print(f"{'case':48s} {'rms_3d_m':>8s} {'rms_h_m':>7s} {'all_3d_m':>8s} {'3d_after':>8s} {'h_after':>7s} "
           f"{'end_3d_m':>8s} {'sig_3d_m':>8s} {'NEES [95 %]':>18s} {'gap_rms_m':>9s} {'gap_end_m':>9s}")
