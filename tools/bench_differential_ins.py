@@ -2,7 +2,7 @@
 
     python tools/bench_differential_ins.py [--seeds 5] [--tle FILE] [--cases SUBSTRING ...] [--baseline-km 7.5]
         [--imu-grade consumer] [--phase-sigma-cycles 0.1] [--slip-probability 0.01] [--orbit-scale 1]
-        [--rest-s 60] [--phase-noise white]
+        [--rest-s 60]
 
 The car of tools/bench_differential.py: from the 7.5 km site, 20 m/s
 north-east on the horizon for 150 s (3 km), the 150 epochs of its scene
@@ -99,14 +99,19 @@ machine; 7.5 km unless said), RMS 3-D (horizontal) over the drive / 3-D
 - the 15 s gap (carrier + NHC): moving 3.35 m RMS over it, 4.16 m at its
   end; standing 2.29 / 3.34 m (1.50 m there without the gap), 1.77 m over
   the drive, 1.49 m at the end;
-- 1 km, carrier + NHC: moving 4.00 (2.91) / 2.17 / 1.55 m, 2.20 [1.59,
-  2.81]; standing 0.73 (0.45) / 0.73 / 0.81 m, 1.64 [1.12, 2.16];
-- 50 km, carrier + NHC: moving 15.6 (10.5) / 11.6 / 5.4 m, 3.11 [2.08,
-  4.14]; standing 5.46 (2.84) / 4.67 / 1.78 m, 2.43 [1.84, 3.03].
+- 1 km, carrier + NHC (the current aid, below): moving 3.76 (2.77) /
+  1.58 / 1.02 m, 2.64 [2.20, 3.07]; standing 0.52 (0.36) / 0.52 / 0.62 /
+  2.43 m, 2.55 [1.87, 3.24] (the former aid: moving 4.00 / 2.17 / 1.55 m,
+  2.20 [1.59, 2.81]; standing 0.73 / 0.73 / 0.81 m, 1.64 [1.12, 2.16]);
+- 50 km, carrier + NHC (the current aid): moving 14.3 (9.5) / 9.75 / 4.14
+  m, 3.41 [2.59, 4.23]; standing 4.27 (1.88) / 3.24 / 1.02 / 8.87 m, 2.96
+  [2.46, 3.46] (the former aid: moving 15.6 / 11.6 / 5.4 m, 3.11 [2.08,
+  4.14]; standing 5.46 / 4.67 / 1.78 m, 2.43 [1.84, 3.03]).
 
 The goal's 2 m RMS over the drive is met with the standing start at 7.5 km
-(1.6 m; 2.2 m without the carrier) and 1 km, not at 50 km (5.5 m), nor with
-the moving start (7.5 m: the 20 m start weighs on the drive's RMS).
+(1.15 m with the current aid; 2.2 m without the carrier) and 1 km (0.52
+m), not at 50 km (4.3 m), nor with the moving start (6.7 m: the 20 m start
+weighs on the drive's RMS).
 
 What limits the standing start at 7.5 km is what the base leaves of the
 element-set offsets (the baseline's share): at rest the filter reaches
@@ -114,15 +119,16 @@ element-set offsets (the baseline's share): at rest the filter reaches
 bias walk), holds ~1.7-1.9 m over the run-up and first minute of driving,
 then falls to ~1.1 m at the end; with the offsets ten times smaller
 (``--orbit-scale 0.1``, 6 seeds, without the walk) 0.41 m over the drive,
-0.22 m at its end. A longer rest helps slowly (30 / 60 / 90 s: 1.61 / 1.58
-/ 1.43 m over the drive, 1.16 / 1.15 / 0.92 m at its end, NEES 1.48 /
-2.12 / 1.85).
+0.22 m at its end. A longer rest helps slowly (current aid, 30 / 60 / 90
+s: 1.25 / 1.15 / 1.04 m over the drive, 0.98 / 0.72 / 0.66 m at its end,
+NEES 2.39 [1.97, 2.82] / 2.74 [2.34, 3.13] / 2.59 [2.13, 3.05]; the former
+aid's 1.61 / 1.58 / 1.43 m, 1.16 / 1.15 / 0.92 m, NEES 1.48 / 2.12 / 1.85).
 
-Consistency: the NEES's 95 % interval holds 3 without the carrier (moving
-Doppler, + NHC; standing Doppler + NHC, barely), moving + carrier (barely)
-and at 50 km (both starts); it lies below 3 for moving carrier + NHC and
-every standing case with the carrier at 7.5 and 1 km (upper ends
-1.93-2.93, the 30 s rest's the lowest). The truth's IMU bias walk (before
+Consistency (the former aid): the NEES's 95 % interval holds 3 without
+the carrier (moving Doppler, + NHC; standing Doppler + NHC, barely), moving
++ carrier (barely) and at 50 km (both starts); it lay below 3 for moving
+carrier + NHC and every standing case with the carrier at 7.5 and 1 km
+(upper ends 1.93-2.93, the 30 s rest's the lowest). The truth's IMU bias walk (before
 this rerun the truth had none) raised the standing NEES by ~0.1-0.2
 (carrier + NHC 1.96 -> 2.12, Doppler + NHC 2.37 -> 2.57, whose interval
 now holds 3); a ZUPT of 0.001 m/s instead of 0.01 (the parked truth's is
@@ -130,18 +136,20 @@ zero; a tuning, not adopted) moves it by < 0.11 (2.23 / 2.60). What
 remained was the carrier aid's neglected correlation (an epoch's phase
 noise is in two consecutive intervals, -1/2 correlated, which it took as
 independent): with a truth whose intervals were independent as it assumed
-(``--phase-noise walk``) the standing carrier + NHC NEES was 2.89 [2.22,
-3.55], the moving start's 2.96 [1.90, 4.02]. The aid now carries each
+(the phase a random walk; a diagnostic since removed, it matches no aid
+now) the standing carrier + NHC NEES was 2.89 [2.22, 3.55], the moving
+start's 2.96 [1.90, 4.02]. The aid now carries each
 epoch's noise as states the two intervals share
 (:mod:`leosop.fusion.aids_carrier`); rerun (20 seeds, white phase noise,
 60 s rest), standing carrier + NHC: 1.15 (0.68) / 1.05 (0.57) / 0.72 /
 3.17 m, sigma 1.19 m, NEES 2.74 [2.34, 3.13] (was 1.58 m, 2.12 [1.52,
 2.72]); with the 15 s gap 1.28 m over the drive, 1.77 / 2.90 m over the
 gap / at its end, NEES 2.63 [2.34, 2.92]; moving start 6.74 (4.25) /
-3.15 (2.17) / 1.38 m, NEES 2.73 [2.13, 3.32] (was 7.45 m, 2.30). The other carrier rows above
-are the former aid's. The interval now holds 3 and the RMS fell by a
-quarter: the phases were underweighted before, not only their sigma
-overstated.
+3.15 (2.17) / 1.38 m, NEES 2.73 [2.13, 3.32] (was 7.45 m, 2.30). The
+other 7.5 km carrier rows of the list above are the former aid's. The
+interval now holds 3 (at 1 and 50 km too, both starts; only the 30 s
+rest's lies below it, [1.97, 2.82]) and the RMS fell by a quarter: the
+phases were underweighted before, not only their sigma overstated.
 
 Earlier variations (moving start, carrier + NHC, from 30 s): the
 industrial IMU 2.4 m (4 seeds); phases of 0.01 cycles 2.1 and 1.0 m (seeds
@@ -200,9 +208,6 @@ REST_S = 60.0
 #: second's mean gyro rate, its sigma the white noise of a 1 s mean (``ZERO_RATE_WINDOW_S``).
 ZUPT_SIGMA_MPS = 0.01
 ZERO_RATE_WINDOW_S = 1.0
-#: The truth's phase noise (``--phase-noise``): ``white`` per epoch (a receiver's: consecutive intervals share an
-#: epoch's noise, what the carrier aid models), or ``walk`` (:func:`walk_phase`: independent intervals).
-PHASE_NOISE = ("white", "walk")
 
 
 def drive(start_ecef_m, duration_s, rest_s=0.0):
@@ -223,14 +228,13 @@ class Setup:
     """What the command line varies: the IMU grade (truth and filter), the phase noise of each receiver
     [cycles] (0.1: 2.6 mm at 11.325 GHz; replay's tracker reaches ~0.01 at 42-44 dB-Hz), the probability of a
     cycle slip at each row (0.01: a satellite slips about every 100 s), and the element-set offsets' scale
-    (truth and the filter's prior), the standing start's rest [s], and the phase noise's kind (``PHASE_NOISE``)."""
+    (truth and the filter's prior), and the standing start's rest [s]."""
 
     imu_grade: str = "consumer"
     phase_sigma_cycles: float = 0.1
     slip_probability: float = 0.01
     orbit_scale: float = 1.0
     rest_s: int = int(REST_S)
-    phase_noise: str = "white"
 
 
 def grade_imu(grade):
@@ -252,23 +256,6 @@ def grade_imu(grade):
                        accel_bias_instability_mps2=accel_sigma,
                        accel_bias_corr_time_s=2 * (accel_sigma / accel_q)**2)
     return errors, spec
-
-
-def walk_phase(meas, sigma_cycles, rng):
-    """``meas`` (noiseless phases) with a random walk of ``sqrt(2) sigma_cycles`` per epoch along each arc.
-
-    Each interval's phase change then has the variance of two epochs' white noise of ``sigma_cycles`` (the
-    sigma it is given), independent of the next interval's: the noise the carrier aid assumed before it
-    carried each epoch's noise as states (:mod:`leosop.fusion.aids_carrier`), not that of a receiver
-    (``--phase-noise walk``; a mismatched truth for the aid now).
-    """
-    phase = meas.phase_cycles.copy()
-    key = np.char.add(np.char.add(meas.sat_id.astype(str), "|"), meas.arc.astype(str))
-    for k in np.unique(key):
-        rows = np.flatnonzero(key == k)
-        rows = rows[np.argsort(meas.t_s[rows], kind="stable")]
-        phase[rows] += np.cumsum(rng.standard_normal(rows.size)) * np.sqrt(2.0) * sigma_cycles
-    return dataclasses.replace(meas, phase_cycles=phase, phase_sigma_cycles=np.full(phase.size, sigma_cycles))
 
 
 def rest_aids(t_s, t_imu, dth, rest_end_s, spec):
@@ -361,22 +348,16 @@ def trial(const, base, t, start, sigma_hz, seed, cases, setup):
 
     t_s = seconds_since(t_all, t_all[0])
     drive_s = t_s[n_lead]
-    walk = setup.phase_noise == "walk"
-    phase = {"phase_sigma_cycles": 0.0 if walk else setup.phase_sigma_cycles,
-             "slip_probability": setup.slip_probability}
-
-    def noisy(meas):
-        return walk_phase(meas, setup.phase_sigma_cycles, rng) if walk else meas
-
-    b = noisy(simulate_receiver(const, err, base, t_all, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase))
+    phase = {"phase_sigma_cycles": setup.phase_sigma_cycles, "slip_probability": setup.slip_probability}
+    b = simulate_receiver(const, err, base, t_all, rng, sigma_hz=sigma_hz, mask_deg=10.0, **clock(), **phase)
     rover = {}
     for kind, rest_s, first in (("fused", 0.0, n_lead), ("standing", setup.rest_s, 0)):
         traj = drive(start, t_s[-1] - drive_s, rest_s)
         k0 = int(round((t_s[first] - drive_s + rest_s + RUN_UP_S) * IMU_RATE_HZ))  # the IMU sample of t_s[first]
         track = traj.at(traj.t_s[k0] + t_s[first:] - t_s[first])
         vel = np.einsum("kij,kj->ki", frames.C_e_n(track.lat_rad, track.lon_rad), track.vel_enu_mps)
-        r = noisy(simulate_receiver(const, err, track.pos_ecef_m, t_all[first:], rng, sigma_hz=sigma_hz,
-                                    vel_rx_ecef_mps=vel, mask_deg=10.0, **clock(), **phase))
+        r = simulate_receiver(const, err, track.pos_ecef_m, t_all[first:], rng, sigma_hz=sigma_hz,
+                              vel_rx_ecef_mps=vel, mask_deg=10.0, **clock(), **phase)
         rover[kind] = traj, k0, t_s[first:], r, b.take(np.flatnonzero(b.t_s >= t_s[first]))
     out = {}
     for name, (kind, arg) in cases.items():
@@ -425,8 +406,6 @@ def main():
                         help="element-set offsets (truth and prior) this many times N(0, 30 / 300 / 100 m) RTN")
     parser.add_argument("--rest-s", type=int, default=Setup.rest_s,
                         help="the standing start's rest before the run-up [whole seconds, the epochs' step]")
-    parser.add_argument("--phase-noise", choices=PHASE_NOISE, default=Setup.phase_noise,
-                        help="the truth's phase noise: white per epoch (a receiver's), or a walk (walk_phase)")
     parser.add_argument("--cases", nargs="*", default=None, help="substrings of the case names to run (default all)")
     args = parser.parse_args()
     cases = {k: v for k, v in CASES.items() if args.cases is None or any(c in k for c in args.cases)}
@@ -437,10 +416,8 @@ def main():
     print(f"{len(const)} Starlink satellites, {len(t)} x 1 s, sigma {sigma_hz:.3f} Hz, phase "
           f"{args.phase_sigma_cycles:g} cycles, slips {args.slip_probability:g} per row; car {CAR_SPEED_MPS:g} m/s; "
           f"{args.seeds} seeds; gap {GAP_S[0]:g}-{GAP_S[1]:g} s; orbit offsets x{args.orbit_scale:g}; "
-          f"baseline {args.baseline_km:g} km; IMU {args.imu_grade}; standing start {args.rest_s} s at rest; "
-          f"phase noise {args.phase_noise}")
-    setup = Setup(args.imu_grade, args.phase_sigma_cycles, args.slip_probability, args.orbit_scale, args.rest_s,
-                  args.phase_noise)
+          f"baseline {args.baseline_km:g} km; IMU {args.imu_grade}; standing start {args.rest_s} s at rest")
+    setup = Setup(args.imu_grade, args.phase_sigma_cycles, args.slip_probability, args.orbit_scale, args.rest_s)
     runs = [trial(const, base, t, start, sigma_hz, seed, cases, setup) for seed in range(args.seeds)]
     print(f"{'case':48s} {'rms_3d_m':>8s} {'rms_h_m':>7s} {'all_3d_m':>8s} {'3d_after':>8s} {'h_after':>7s} "
           f"{'end_3d_m':>8s} {'sig_3d_m':>8s} {'NEES [95 %]':>18s} {'gap_rms_m':>9s} {'gap_end_m':>9s}")

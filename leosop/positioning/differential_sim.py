@@ -15,14 +15,21 @@ shared by every receiver (:func:`simulate_receiver`):
 Optionally each receiver also measures the accumulated carrier phase, the
 integral of the same Doppler model (cycles)::
 
-    phase = -|r_s + e - r| f0 / c + (o_j + T) t + (o_j' + T') t^2 / 2 + N + noise,
+    phase = -|r_s + e - r| f0 / c + (o_j + T) t + (o_j' + T') t^2 / 2 + phi + N + noise,
 
 with the satellite's and the receiver's offsets ``o_j``, ``T`` and drifts
-``o_j'``, ``T'`` (both integrated from ``errors.t0_utc``) and an integer
-``N`` per arc; a cycle slip starts a new arc with a new ``N``. The Doppler
-is the range rate of the same states: the phase's rate agrees with it to
-~0.03 Hz (the offset's velocity is a central difference, the states' rate
-and velocity differ by the light time's; ``tests/fusion/test_aids_differential.py``).
+``o_j'``, ``T'`` (both integrated from ``errors.t0_utc``), the receiver's
+phase ``phi`` common to its satellites and an integer ``N`` per arc (uniform
+in +-10^6); a cycle slip starts a new arc with a new ``N``. The double
+differences of two receivers are then whole cycles. The satellite's transmit
+times at two receivers differ by ~baseline / c; its clock phase is taken at
+the reception time (5 Hz over 30 us: 1e-4 cycles). The Doppler is the range
+rate of the same states: the phase's rate agrees with it to ~0.03 Hz (the
+offset's velocity is a central difference, the states' rate and velocity
+differ by the light time's; ``tests/fusion/test_aids_differential.py``).
+:func:`simulate_receiver` gives the rows of a measurement table (a moving
+receiver, slips); :func:`simulate_phase` the same phase of a receiver at
+rest as (n_sats, n_epochs) tracks.
 
 Each receiver has its own position (at rest in ECEF, or a trajectory with
 its velocity, e.g. :func:`straight_drive`), epochs, clock offset and drift,
@@ -157,7 +164,8 @@ def _arcs(sat_rows, slip, rng):
 
 def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_hz, vel_rx_ecef_mps=None,
                       clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ,
-                      source="simulated", phase_sigma_cycles=None, slip_probability=0.0):
+                      source="simulated", phase_sigma_cycles=None, slip_probability=0.0,
+                      receiver_phase_cycles=0.0):
     """Doppler of the satellites of ``errors`` above ``mask_deg`` as one receiver measures them.
 
     Parameters
@@ -191,6 +199,9 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
     slip_probability : float
         Probability of a cycle slip at each row of a satellite after its
         first: a new arc with a new integer ambiguity.
+    receiver_phase_cycles : float
+        The receiver's phase, common to its satellites (``phi`` of the
+        module's model; its fraction cancels in the double differences).
 
     Returns
     -------
@@ -235,7 +246,7 @@ def simulate_receiver(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, si
         osc_cycles = ((errors.offset_hz[sat_rows] + clock_offset_hz) * t_s
                       + 0.5 * (errors.drift_hz_per_s[sat_rows] + clock_drift_hz_per_s) * t_s**2)
         phase = {"phase_cycles": (-np.linalg.norm(pos_sv + off - rx, axis=-1) * carrier_hz / C_MPS + osc_cycles
-                                  + ambiguity + phase_sigma_cycles * rng.standard_normal(n)),
+                                  + receiver_phase_cycles + ambiguity + phase_sigma_cycles * rng.standard_normal(n)),
                  "phase_sigma_cycles": np.full(n, float(phase_sigma_cycles)), "arc": arc.astype(str)}
     return Measurements(t_s=t_s, time_utc=t_rows, sat_id=ids, doppler_hz=doppler, sigma_hz=np.full(n, float(sigma_hz)),
                         carrier_hz=np.full(n, float(carrier_hz)), pos_sv_ecef_m=pos_sv, vel_sv_ecef_mps=vel_sv,
@@ -253,7 +264,7 @@ class PhaseTracks:
     arc : ndarray of int
         0 where the satellite is above the mask (one arc, no slip), -1 elsewhere.
     pos_sv_ecef_m, vel_sv_ecef_mps : ndarray, (n_sats, n_epochs, 3)
-        The element-set states with this receiver's light time (the model's, not the truth's).
+        The element-set states, their light time to ``pos_light_ecef_m`` (the model's, not the truth's).
     """
 
     phase_cycles: np.ndarray
@@ -265,17 +276,10 @@ class PhaseTracks:
 
 def simulate_phase(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma_cycles, pos_light_ecef_m=None,
                    clock_offset_hz=0.0, clock_drift_hz_per_s=0.0, mask_deg=10.0, carrier_hz=DEFAULT_CARRIER_HZ):
-    """Accumulated carrier phase of a static receiver, the integral of :func:`simulate_receiver`'s Doppler.
+    """:func:`simulate_receiver`'s carrier phase of a receiver at rest, without slips, as tracks per satellite.
 
-    ``phase = -carrier_hz rho / c`` (``rho`` the true light-time range, the
-    element set plus the offset of ``errors``) plus the satellite's and the
-    receiver's clock phases (the integrals of their offsets and drifts from
-    ``errors.t0_utc``), a receiver phase common to its satellites (uniform in
-    a cycle), a whole number of cycles per satellite (uniform in +-1e6) and
-    white noise of ``sigma_cycles``: the double differences of two receivers
-    are whole cycles. The satellite's transmit times at the two receivers
-    differ by ~baseline / c; its clock phase is taken at the reception time
-    (5 Hz over 30 us: 1e-4 cycles).
+    The receiver's phase ``phi`` is drawn uniform in a cycle (the single
+    differences are not whole cycles, the double differences are).
 
     Parameters
     ----------
@@ -283,33 +287,34 @@ def simulate_phase(constellation, errors, pos_rx_ecef_m, time_utc, rng, *, sigma
     errors : SatelliteErrors
     pos_rx_ecef_m : array_like, (3,)
     time_utc : array_like of datetime64, (n_epochs,)
+        Increasing.
     rng : numpy.random.Generator
     sigma_cycles : float
+        Standard deviation of the white phase noise.
     pos_light_ecef_m : array_like, (3,), optional
         Where the returned model states take their light time from (default the receiver: a rover's first guess).
     clock_offset_hz, clock_drift_hz_per_s, mask_deg, carrier_hz : float
+        As :func:`simulate_receiver`'s.
 
     Returns
     -------
     PhaseTracks
+        Each array (n_sats, n_epochs), the satellites in the order of ``errors.sat_ids``.
     """
     t_ep = np.asarray(time_utc, dtype="datetime64[ns]")
+    if np.any(np.diff(t_ep) <= np.timedelta64(0, "ns")):
+        raise ValueError("time_utc: the epochs must increase")
     rx = np.asarray(pos_rx_ecef_m, dtype=float).reshape(3)
+    meas = simulate_receiver(constellation, errors, rx, t_ep, rng, sigma_hz=0.0, clock_offset_hz=clock_offset_hz,
+                             clock_drift_hz_per_s=clock_drift_hz_per_s, mask_deg=mask_deg, carrier_hz=carrier_hz,
+                             phase_sigma_cycles=sigma_cycles, receiver_phase_cycles=rng.uniform())
+    k, n = len(errors.sat_ids), len(t_ep)
+    order = np.argsort(errors.sat_ids)
+    sat = order[np.searchsorted(errors.sat_ids[order], meas.sat_id)]
+    epoch = np.searchsorted(t_ep, meas.time_utc)
+    phase, arc = np.full((k, n), np.nan), np.full((k, n), -1)
+    phase[sat, epoch], arc[sat, epoch] = meas.phase_cycles, meas.arc.astype(int)
     light = rx if pos_light_ecef_m is None else np.asarray(pos_light_ecef_m, dtype=float).reshape(3)
-    lookup = {s: i for i, s in enumerate(constellation.sat_ids.tolist())}
-    index = np.array([lookup[s] for s in errors.sat_ids.tolist()], dtype=int)
-    k, n = len(index), len(t_ep)
-    ids, t_rows = np.repeat(errors.sat_ids, n), np.tile(t_ep, k)
-    pos_sv, vel_sv, reason = sv_states_from_tle(constellation, ids, t_rows, rx)
-    model_pos, model_vel, _ = sv_states_from_tle(constellation, ids, t_rows, light)
-    _, elev, _ = azimuth_elevation_range(pos_sv, rx)
-    keep = ((reason == "") & (np.nan_to_num(elev, nan=-1.0) >= np.radians(mask_deg))).reshape(k, n)
-    off = _rtn_offset(constellation, np.repeat(index, n), t_rows, np.repeat(errors.orbit_rtn_m, n, axis=0))
-    rho = np.linalg.norm(pos_sv + off - rx, axis=-1).reshape(k, n)
-    t_s = seconds_since(t_ep, errors.t0_utc)[None, :]
-    clock = ((errors.offset_hz[:, None] + clock_offset_hz) * t_s
-             + 0.5 * (errors.drift_hz_per_s[:, None] + clock_drift_hz_per_s) * t_s**2)
-    phase = (-rho * carrier_hz / C_MPS + clock + rng.uniform() + rng.integers(-10**6, 10**6, (k, 1))
-             + sigma_cycles * rng.standard_normal((k, n)))
-    return PhaseTracks(np.where(keep, phase, np.nan), np.full((k, n), float(sigma_cycles)), np.where(keep, 0, -1),
-                       model_pos.reshape(k, n, 3), model_vel.reshape(k, n, 3))
+    pos_sv, vel_sv, _ = sv_states_from_tle(constellation, np.repeat(errors.sat_ids, n), np.tile(t_ep, k), light)
+    return PhaseTracks(phase, np.full((k, n), float(sigma_cycles)), arc, pos_sv.reshape(k, n, 3),
+                       vel_sv.reshape(k, n, 3))
