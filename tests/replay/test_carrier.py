@@ -247,8 +247,8 @@ def test_phase_is_the_block_centres_under_a_changing_doppler_jerk():
     def phase(t):
         return f0 * t + rate0 * t**2 / 2 + jerk0 * t**3 / 6 + snap * t**4 / 24
 
-    blocks = [(k * block_s, comb_baseband(comb, k * block_s + np.arange(n) / fs, phase(k * block_s + np.arange(n) / fs)))
-              for k in range(n_blocks)]
+    t = block_s * np.arange(n_blocks)[:, None] + np.arange(n) / fs
+    blocks = [(ts[0], comb_baseband(comb, ts, phase(ts))) for ts in t]
     tracks = track_carrier(blocks, fs, [f0 + rate0 * 0.5 * (n - 1) / fs], [rate0], comb=comb, doppler0_sigma_hz=0.3,
                            rate0_sigma_hz_per_s=1.0)
     assert tracks.lock.all() and (tracks.arc == 0).all()
