@@ -15,6 +15,19 @@ combined against a template, the first locked block's sums: the phase of
 noise ``1 / sqrt(2 snr)`` rad from the block's coherent comb SNR. The
 template's own noise is a constant phase: it cancels in phase differences.
 
+That phase error is the mean of the error over the block, not its value at
+the centre: a prediction whose rate is off by ``dr`` leaves ``dr T^2 / 24``
+in it (mean of ``dr tau^2 / 2``; 4e-4 cycles per Hz/s at T = 0.1 s). The
+filter's rate lags a pass's changing Doppler jerk (tens of Hz/s^2 at Ku
+band) by Hz/s, so its prediction plus the error is the block's mean phase,
+to which the prediction's own rate part is added back (exact); the centre's
+phase is that less half the phase's curvature times the block's mean squared
+time from its centre, the curvature from a cubic over a second of the
+satellite's mean phases (:data:`CURVATURE_WINDOW_S`), not from the lagging
+filter. Before, the lag's bias (1e-3 cycles, drifting as the jerk changes
+over the pass) was the model error that issue 23's 60 s differential
+carrier fixes showed as chi2/dof 1.5-2.
+
 Per block and satellite the result gives the accumulated carrier phase (the
 integral of ``doppler_hz``: its change between two blocks is ``-carrier_hz /
 c`` times the change of range, plus the clocks' integral), its sigma, the
@@ -93,15 +106,19 @@ class CarrierTracks:
     t_s : ndarray, (n_blocks,)
         Block centres [s] on the time base of the blocks' start times.
     phase_cycles : ndarray
-        Accumulated central-tone carrier phase, the integral of ``doppler_hz``:
-        the filter's prediction plus the block's phase error, the receiver's
-        NCO phase plus its discriminator (NaN where not locked). Continuous
+        Accumulated central-tone carrier phase at the block centre, the
+        integral of ``doppler_hz``: the block's mean phase (the filter's
+        prediction plus the block's phase error, the receiver's NCO phase
+        plus its discriminator) less the curvature's part (the module's
+        note; NaN where not locked). Continuous
         within an arc; its fraction is the received central tone's phase less
         the transmitted one (the module's note), its whole cycles arbitrary per arc.
     phase_sigma_cycles : ndarray
         Its sigma, ``1 / (2 pi sqrt(2 snr))``: the block's own noise,
         independent from block to block (the prediction carries no error
-        into it while the phase error stays well within half a cycle).
+        into it while the phase error stays well within half a cycle; the
+        curvature's correction, shared by a second of blocks, adds ~3e-6
+        cycles at 1e-3).
     phase_ref_sigma_cycles : ndarray
         Sigma of the constant that refers the phase to the central tone (the
         same in every block of a satellite; NaN where not locked): an error
