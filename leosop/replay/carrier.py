@@ -15,6 +15,19 @@ combined against a template, the first locked block's sums: the phase of
 noise ``1 / sqrt(2 snr)`` rad from the block's coherent comb SNR. The
 template's own noise is a constant phase: it cancels in phase differences.
 
+That phase error is the mean of the error over the block, not its value at
+the centre: a prediction whose rate is off by ``dr`` leaves ``dr T^2 / 24``
+in it (mean of ``dr tau^2 / 2``; 4e-4 cycles per Hz/s at T = 0.1 s). The
+filter's rate lags a pass's changing Doppler jerk (tens of Hz/s^2 at Ku
+band) by Hz/s, so its prediction plus the error is the block's mean phase,
+to which the prediction's own rate part is added back (exact); the centre's
+phase is that less half the phase's curvature times the block's mean squared
+time from its centre, the curvature from a cubic over a second of the
+satellite's mean phases (:data:`CURVATURE_WINDOW_S`), not from the lagging
+filter. Before, the lag's bias (1e-3 cycles, drifting as the jerk changes
+over the pass) was the model error that issue 23's 60 s differential
+carrier fixes showed as chi2/dof 1.5-2.
+
 Per block and satellite the result gives the accumulated carrier phase (the
 integral of ``doppler_hz``: its change between two blocks is ``-carrier_hz /
 c`` times the change of range, plus the clocks' integral), its sigma, the
@@ -77,6 +90,9 @@ SLIP_NIS = 15.1
 #: Predicted phase sigma [cycles] beyond which the integer cycle count is
 #: taken as lost: the next locked block starts a new arc.
 ARC_SIGMA_CYCLES = 0.1
+#: Window [s] of the phase's curvature that turns a block's mean phase into its centre's: a cubic over a second
+#: of 0.1 s blocks knows it to ~0.007 Hz/s at 1e-3 cycles (3e-6 cycles of phase).
+CURVATURE_WINDOW_S = 1.0
 #: Template detection: the tones' incoherent power exceeds this gamma quantile of noise alone with probability 1e-6.
 _TEMPLATE_PFA = 1e-6
 
@@ -90,15 +106,19 @@ class CarrierTracks:
     t_s : ndarray, (n_blocks,)
         Block centres [s] on the time base of the blocks' start times.
     phase_cycles : ndarray
-        Accumulated central-tone carrier phase, the integral of ``doppler_hz``:
-        the filter's prediction plus the block's phase error, the receiver's
-        NCO phase plus its discriminator (NaN where not locked). Continuous
+        Accumulated central-tone carrier phase at the block centre, the
+        integral of ``doppler_hz``: the block's mean phase (the filter's
+        prediction plus the block's phase error, the receiver's NCO phase
+        plus its discriminator) less the curvature's part (the module's
+        note; NaN where not locked). Continuous
         within an arc; its fraction is the received central tone's phase less
         the transmitted one (the module's note), its whole cycles arbitrary per arc.
     phase_sigma_cycles : ndarray
         Its sigma, ``1 / (2 pi sqrt(2 snr))``: the block's own noise,
         independent from block to block (the prediction carries no error
-        into it while the phase error stays well within half a cycle).
+        into it while the phase error stays well within half a cycle; the
+        curvature's correction, shared by a second of blocks, adds ~3e-6
+        cycles at 1e-3).
     phase_ref_sigma_cycles : ndarray
         Sigma of the constant that refers the phase to the central tone (the
         same in every block of a satellite; NaN where not locked): an error
@@ -223,23 +243,55 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
         nis = z**2 / (P[:, 0, 0] + r)
         restart = lock & ((arc < 0) | (P[:, 0, 0] > ARC_SIGMA_CYCLES**2) | (nis > SLIP_NIS))
         slip = restart & (arc >= 0) & (nis > SLIP_NIS)
-        phase = np.where(lock, x[:, 0] + z, np.nan)
+        # the block's mean phase: z is the mean of the phase error over the block, and the prediction's mean is its
+        # centre phase plus half its rate times the mean squared time from the centre
+        half_sq = (iq.size**2 - 1) / (24.0 * fs**2)
+        phase = np.where(lock, x[:, 0] + z + x[:, 2] * half_sq, np.nan)
         central += np.where(lock, Y[:, comb.n_tones // 2] * np.exp(-2j * np.pi * z), 0.0)
         central_noise += np.where(lock, noise, 0.0)
         x, P = _update(x, P, np.where(lock, z, 0.0), np.where(lock, r, np.inf), restart)
         arc = np.where(restart, arc + 1, arc)
         rows.append((t_c, phase, np.where(lock, np.sqrt(r), np.nan), x[:, 1].copy(), np.sqrt(P[:, 1, 1]),
-                     x[:, 2].copy(), snr, lock, slip, arc.copy()))
+                     x[:, 2].copy(), snr, lock, slip, arc.copy(), half_sq))
     if not rows:
         raise InputError("no blocks to track")
-    cols = [np.array(c) if k == 0 else np.stack(c, axis=1) for k, c in enumerate(zip(*rows))]
+    cols = [np.array(c) if k in (0, 10) else np.stack(c, axis=1) for k, c in enumerate(zip(*rows))]
+    half_sq = cols.pop()
     lock = cols[7]
+    # the block centre's phase: the mean phase less half the phase's curvature times the mean squared time
+    cols[1] = cols[1] - _curvature(cols[0], cols[1], cols[9], lock, cols[5]) * half_sq
     # the central tone's coherent sum over the locked blocks: its angle and its SNR |sum|^2 / sum of noise powers
     ref_cycles = np.angle(central) / (2 * np.pi)
     ref_snr = np.abs(central) ** 2 / np.where(central_noise > 0, central_noise, np.inf)
     ref_sigma = 1.0 / (2 * np.pi * np.sqrt(2.0 * ref_snr))
     cols[1] = cols[1] + ref_cycles[:, None]
     return CarrierTracks(cols[0], cols[1], cols[2], np.where(lock, ref_sigma[:, None], np.nan), *cols[3:])
+
+
+def _curvature(t_s, phase_cycles, arc, lock, rate_hz_per_s, window_s=CURVATURE_WINDOW_S):
+    """Second derivative of the phase at each block [Hz/s]: a cubic fitted to the locked blocks of its arc
+    within ``window_s / 2`` (equal weights), (n_sats, n_blocks).
+
+    A block whose window holds fewer than six such blocks (a cubic and two degrees of freedom; the first
+    and last blocks of a 0.1 s track have six) takes the filter's rate (``rate_hz_per_s``).
+    """
+    n_sats, n = phase_cycles.shape
+    step = np.median(np.diff(t_s)) if n > 1 else window_s
+    h = max(int(np.floor(0.5 * window_s / step + 1e-9)), 0)
+    j = np.arange(n)[:, None] + np.arange(-h, h + 1)[None, :]              # (n, 2h+1) neighbours
+    inside = (j >= 0) & (j < n)
+    jc = np.clip(j, 0, n - 1)
+    tau = t_s[jc] - t_s[:, None]
+    inside &= np.abs(tau) <= 0.5 * window_s + 1e-9
+    use = inside[None] & lock[:, jc] & lock[:, :, None] & (arc[:, jc] == arc[:, :, None])   # (n_sats, n, 2h+1)
+    y = np.where(use, phase_cycles[:, jc] - phase_cycles[:, :, None], 0.0)
+    A = (tau[..., None] ** np.arange(4)) * np.ones((n_sats, 1, 1, 1))     # (n_sats, n, 2h+1, 4)
+    Aw = A * use[..., None]
+    N = np.einsum("snki,snkj->snij", Aw, A)
+    enough = use.sum(axis=-1) >= 6
+    N[~enough] = np.eye(4)
+    coef = np.linalg.solve(N, np.einsum("snki,snk->sni", Aw, y)[..., None])[..., 0]
+    return np.where(enough, 2.0 * coef[..., 2], rate_hz_per_s)
 
 
 def _noise(iq, Y):

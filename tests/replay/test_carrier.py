@@ -21,7 +21,7 @@ from leosop.positioning.measurements import sv_states_from_tle
 from leosop.replay.carrier import phase_rate_doppler, recording_blocks, track_carrier
 from leosop.signal.iq import open_sigmf
 from leosop.signal.multicomb import find_combs
-from leosop.signal.pilot import PilotComb
+from leosop.signal.pilot import PilotComb, comb_baseband
 
 BLOCK_S = 0.02
 #: Three satellites whose combs stay >= 9 kHz from each other's tones (modulo the
@@ -231,3 +231,28 @@ def test_pair_double_differences_are_whole_cycles_plus_geometry(pair_tracks):
     assert np.max(np.abs(frac)) < DD_TOL_CYCLES, frac
     # whole cycles fixed over the pass: the same integer at every block (one arc per satellite and receiver)
     assert np.ptp(np.round(dd), axis=1).max() == 0
+
+
+def test_phase_is_the_block_centres_under_a_changing_doppler_jerk():
+    """A pass's Doppler jerk (tens of Hz/s^2 at Ku band, changing by ~1-2 Hz/s^3) makes the filter's rate lag,
+    ~2 Hz/s at 40 Hz/s^2 here. The block's phase error is its mean over the block, so the rate lag times T^2 / 24
+    (4e-4 cycles per Hz/s at T = 0.1 s) biased the phase: -1.5e-3..+6e-4 cycles on this comb before, drifting
+    with the jerk (issue 23's 60 s fixes: chi2/dof 1.5-2). The phase must be the block centre's whatever the
+    lag: a noise-free comb, 6 s, jerk 40 Hz/s^2 less 2 Hz/s^3."""
+    comb = PilotComb(n_tones=3, tone_spacing_hz=10e3)
+    fs, block_s, n_blocks = 50e3, 0.1, 60
+    n = int(block_s * fs)
+    f0, rate0, jerk0, snap = 1e3, -2500.0, 40.0, -2.0      # Hz, Hz/s, Hz/s^2, Hz/s^3
+
+    def phase(t):
+        return f0 * t + rate0 * t**2 / 2 + jerk0 * t**3 / 6 + snap * t**4 / 24
+
+    t = block_s * np.arange(n_blocks)[:, None] + np.arange(n) / fs
+    blocks = [(ts[0], comb_baseband(comb, ts, phase(ts))) for ts in t]
+    tracks = track_carrier(blocks, fs, [f0 + rate0 * 0.5 * (n - 1) / fs], [rate0], comb=comb, doppler0_sigma_hz=0.3,
+                           rate0_sigma_hz_per_s=1.0)
+    assert tracks.lock.all() and (tracks.arc == 0).all()
+    err = tracks.phase_cycles[0] - phase(tracks.t_s)
+    err -= np.mean(err)
+    # measured 3e-5 (the first and last half second: the curvature's one-sided cubic), 1.5e-3 with the lag's bias
+    assert np.max(np.abs(err)) < 1e-4, np.max(np.abs(err))
