@@ -33,11 +33,14 @@ _EPOCH_YEARS = (1957, 2200)
 _MAX_REV_PER_DAY = 20.0
 # Columns (0-based) that must be blank in each line of a valid element set.
 _BLANKS = {"1": (1, 8, 17, 32, 43, 52, 61, 63), "2": (1, 7, 16, 25, 33, 42, 51)}
+# What each byte adds to the checksum: its value for a digit, 1 for '-', else 0. A table look-up in C: parsing a
+# 10,000-satellite snapshot spent 60% of its time summing characters one by one in Python.
+_CHECKSUM_VALUES = bytes(b - 48 if 48 <= b <= 57 else int(b == 45) for b in range(256))
 
 
 def tle_checksum(line):
-    """Modulo-10 checksum of the first 68 columns (digits, and 1 for each '-')."""
-    return sum(int(c) if c.isdigit() else (c == "-") for c in line[:68]) % 10
+    """Modulo-10 checksum of the first 68 columns (ASCII digits, and 1 for each '-')."""
+    return sum(line[:68].encode("ascii", "replace").translate(_CHECKSUM_VALUES)) % 10
 
 
 def satrec_epoch_utc(satrec):
