@@ -11,12 +11,19 @@ most :data:`MAX_OUTLIER_FRACTION` of them, before its chi-square is tested:
 otherwise two such blocks make a 50-block track of a satellite ``poor_fit``.
 A wrong satellite misses most blocks by far more, which no such trimming
 hides; its chi-square is tested on the blocks kept, as the right one's.
+A short fragment (4-9 blocks, a satellite near the snapshot search's
+comb limit caught for a few seconds) may leave out one block as long as
+:data:`~leosop.replay.features.MIN_BLOCKS` remain: one comb crossing's
+biased block (10-13 Hz, 7-8 sigma on the replay bench) otherwise makes it
+``poor_fit``, and the blocks kept test a candidate as well as a clean
+fragment of that length does.
 """
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from .ephemeris import SPEED_SV_MPS, doppler_model
+from .features import MIN_BLOCKS
 
 __all__ = ["ID_STATUSES", "accept", "match"]
 
@@ -37,7 +44,8 @@ _ID_CANDIDATES = 24
 #: A block this many sigmas off a candidate's fit is left out of its chi-square (Gaussian
 #: noise reaches it once in ~2 million blocks).
 OUTLIER_Z = 5.0
-#: At most this fraction of a track's blocks (rounded down) is left out.
+#: At most this fraction of a track's blocks (rounded down; at least one while
+#: :data:`~leosop.replay.features.MIN_BLOCKS` remain) is left out.
 MAX_OUTLIER_FRACTION = 0.1
 
 
@@ -115,7 +123,7 @@ class _CandidateFit:
         self.tau = np.zeros((cand.size, 1))
         self.keep = np.ones(self.shape)  # 0 for a candidate's outlier blocks
         self.c_hz = np.zeros(cand.size)
-        self.n_out = int(MAX_OUTLIER_FRACTION * self.t.size)
+        self.n_out = max(int(MAX_OUTLIER_FRACTION * self.t.size), min(1, self.t.size - MIN_BLOCKS))
         self.n_passes = 3 if self.n_out else 2
 
     def step(self, it, dop, grad, rate, cov, o):
