@@ -32,7 +32,7 @@ __all__ = ["ID_STATUSES", "accept", "match"]
 #: the tracks); ``no_candidate`` (no satellite above the mask near its Doppler); ``poor_fit`` (the
 #: best candidate's chi-square fails the track's sigma: no satellite of the snapshot explains it);
 #: ``ambiguous`` (the runner-up fits within the margin); ``duplicate`` (its satellite went to a longer
-#: longer track, or one as long that fits it better); ``too_few_identified`` (the solution gives fewer identities than
+#: track, or one as long that fits it better); ``too_few_identified`` (fewer identities than
 #: the minimum, which do not prove the solution they rest on); ``conflicting_solution`` (another
 #: solution, at another position or receiver offset, identifies this track as another satellite
 #: and passes the same tests).
