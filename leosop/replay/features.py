@@ -4,13 +4,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TrackView", "prepare_track", "FEATURES"]
+__all__ = ["TrackView", "prepare_track", "FEATURES", "MIN_BLOCKS"]
 
 #: Reference times per track: first, middle, last. Rows: offset at the
 #: middle, slope, curvature of the residual at those times.
 FEATURES = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 1.0], [-0.5, 1.0, -0.5]])
 #: Half-width of the window that smooths a track's value at a reference time [s].
 _LOCAL_S = 0.25
+#: The fewest blocks a track is identified on (fewer: ``too_short``).
+MIN_BLOCKS = 3
 #: Samples per track in the least squares and the identification.
 _MAX_SAMPLES = 120
 
@@ -51,7 +53,8 @@ def _local_value(t, f, sigma, t0, m):
 
 
 def prepare_track(track, t0_utc):
-    """The track's finite samples in time order, its reference values and feature sigmas; None under 3 samples.
+    """The track's finite samples in time order, its reference values and feature sigmas; None under
+    :data:`MIN_BLOCKS` samples.
 
     Parameters
     ----------
@@ -68,7 +71,7 @@ def prepare_track(track, t0_utc):
     f = np.asarray(track.doppler_hz, float)
     sigma = np.asarray(track.sigma_hz, float)
     good = np.isfinite(t) & np.isfinite(f)
-    if good.sum() < 3:
+    if good.sum() < MIN_BLOCKS:
         return None
     t, f, sigma = t[good], f[good], sigma[good]
     fill = np.nanmedian(np.where(sigma > 0, sigma, np.nan)) if np.any(sigma > 0) else 1.0

@@ -33,7 +33,7 @@ order) on the drift, so the search costs about as much at 3 MHz as at
    best is accepted only when its chi-square is consistent with the
    track's sigma (inflated for model and position errors) and clearly below
    the runner-up's; else ``sat_id`` is None. A satellite claimed by two
-   tracks goes to the better one. Each track gets a status (``ok`` only
+   tracks goes to the longer one (then the better fit). Each track gets a status (``ok`` only
    when the identity is vouched for, :data:`~leosop.replay.match.ID_STATUSES`):
    a track that another solution (another cell, another offset) identifies
    differently under the same tests is ``conflicting_solution``.

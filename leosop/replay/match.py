@@ -2,7 +2,7 @@
 
 A candidate is accepted only when its chi-square is consistent with the
 track's sigma and clearly below the runner-up's; a satellite claimed by two
-tracks goes to the better one.
+tracks goes to the track with more blocks kept, then the better fit.
 
 A few blocks of a long track may be false detections (a weak block's
 strongest peak tens of hertz off, often at the track's start). Each
@@ -11,12 +11,19 @@ most :data:`MAX_OUTLIER_FRACTION` of them, before its chi-square is tested:
 otherwise two such blocks make a 50-block track of a satellite ``poor_fit``.
 A wrong satellite misses most blocks by far more, which no such trimming
 hides; its chi-square is tested on the blocks kept, as the right one's.
+A short fragment (4-9 blocks, a satellite near the snapshot search's
+comb limit caught for a few seconds) may leave out one block as long as
+:data:`~leosop.replay.features.MIN_BLOCKS` remain: one comb crossing's
+biased block (10-13 Hz, 7-8 sigma on the replay bench) otherwise makes it
+``poor_fit``, and the blocks kept test a candidate as well as a clean
+fragment of that length does.
 """
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from .ephemeris import SPEED_SV_MPS, doppler_model
+from .features import MIN_BLOCKS
 
 __all__ = ["ID_STATUSES", "accept", "match"]
 
@@ -24,8 +31,8 @@ __all__ = ["ID_STATUSES", "accept", "match"]
 #: ``too_short`` (under 3 usable blocks); ``no_solution`` (no receiver position and offset explains
 #: the tracks); ``no_candidate`` (no satellite above the mask near its Doppler); ``poor_fit`` (the
 #: best candidate's chi-square fails the track's sigma: no satellite of the snapshot explains it);
-#: ``ambiguous`` (the runner-up fits within the margin); ``duplicate`` (its satellite went to a
-#: track that fits it better); ``too_few_identified`` (the solution gives fewer identities than
+#: ``ambiguous`` (the runner-up fits within the margin); ``duplicate`` (its satellite went to a longer
+#: track, or one as long that fits it better); ``too_few_identified`` (fewer identities than
 #: the minimum, which do not prove the solution they rest on); ``conflicting_solution`` (another
 #: solution, at another position or receiver offset, identifies this track as another satellite
 #: and passes the same tests).
@@ -37,7 +44,8 @@ _ID_CANDIDATES = 24
 #: A block this many sigmas off a candidate's fit is left out of its chi-square (Gaussian
 #: noise reaches it once in ~2 million blocks).
 OUTLIER_Z = 5.0
-#: At most this fraction of a track's blocks (rounded down) is left out.
+#: At most this fraction of a track's blocks (rounded down; at least one while
+#: :data:`~leosop.replay.features.MIN_BLOCKS` remain) is left out.
 MAX_OUTLIER_FRACTION = 0.1
 
 
@@ -115,7 +123,7 @@ class _CandidateFit:
         self.tau = np.zeros((cand.size, 1))
         self.keep = np.ones(self.shape)  # 0 for a candidate's outlier blocks
         self.c_hz = np.zeros(cand.size)
-        self.n_out = int(MAX_OUTLIER_FRACTION * self.t.size)
+        self.n_out = max(int(MAX_OUTLIER_FRACTION * self.t.size), min(1, self.t.size - MIN_BLOCKS))
         self.n_passes = 3 if self.n_out else 2
 
     def step(self, it, dop, grad, rate, cov, o):
@@ -126,7 +134,11 @@ class _CandidateFit:
                                               o["pos_sigma_cap_hz"] ** 2)
         r = self.base[None, :] - dop
         if it > 0 and self.n_out:
-            z = np.abs(r - self.c_hz[:, None]) / np.sqrt(var)  # tau already moved by dtau
+            # Deleted residuals (tau already moved by dtau): a block's own weight pulls a short fit
+            # towards it (leverage h), hiding a 10 Hz block of 4 at 3-4 sigma; 1 - h restores it.
+            a11, a12, a22, det = self.normal
+            h = (a22[:, None] - 2 * a12[:, None] * rate + a11[:, None] * rate**2) / (det[:, None] * var)
+            z = np.abs(r - self.c_hz[:, None]) / np.sqrt(var * np.maximum(1.0 - h, 1e-3))
             worst = np.argsort(-z, axis=1)[:, :self.n_out]
             self.keep = np.ones_like(z)
             np.put_along_axis(self.keep, worst, np.take_along_axis(z, worst, 1) <= OUTLIER_Z, 1)
@@ -139,6 +151,7 @@ class _CandidateFit:
         b1 = (w * r).sum(1)
         b2 = (w * rate * r).sum(1) - self.tau[:, 0] / sig_tau**2
         det = a11 * a22 - a12**2
+        self.normal = (a11, a12, a22, det)
         self.c_hz = (a22 * b1 - a12 * b2) / det
         dtau = (a11 * b2 - a12 * b1) / det
         self.tau = self.tau + dtau[:, None]
@@ -180,10 +193,12 @@ def accept(search, ids):
             status[k] = "ambiguous"
         else:
             sat[k], status[k] = d["sat"], "ok"
-    for s in np.unique(sat[sat >= 0]):  # one comb per satellite: the better fit keeps it
+    # One comb per satellite: the track with the most blocks kept has it (each passed the tests; a
+    # fragment's few blocks, one left out, can fit better per block and carry less), then the better fit.
+    for s in np.unique(sat[sat >= 0]):
         ks = np.flatnonzero(sat == s)
         if len(ks) > 1:
-            keep = ks[np.argmin([ids[k]["chi2"] / ids[k]["n"] for k in ks])]
+            keep = ks[min(range(len(ks)), key=lambda j: (-ids[ks[j]]["n"], ids[ks[j]]["chi2"] / ids[ks[j]]["n"]))]
             lose = ks[ks != keep]
             sat[lose], status[lose] = -1, "duplicate"
     if (sat >= 0).sum() < o["min_identified"]:  # one or two matches do not prove the fix they rest on
