@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..signal.coarse import abs2
 from ..signal.fft import fft
 from ..signal.cleaning import clean_block
 from ..signal.comb_grid import NonFiniteSamples
@@ -85,7 +86,7 @@ def spectrum_column(iq):
     """
     m = min(SPECTRUM_AVERAGES, max(1, iq.size // SPECTRUM_BINS))
     seg = np.resize(iq, (m, SPECTRUM_BINS)) if iq.size < SPECTRUM_BINS else iq[: m * SPECTRUM_BINS].reshape(m, -1)
-    return np.fft.fftshift(np.mean(np.abs(np.fft.fft(seg, axis=1)) ** 2, axis=0))
+    return np.fft.fftshift(np.mean(abs2(fft(seg, scratch=True)), axis=0))
 
 
 @dataclass(frozen=True)
