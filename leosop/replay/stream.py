@@ -101,9 +101,8 @@ class PreparedBlock:
         :func:`spectrum_column` of the narrowed block before cleaning, for
         the blocks the figure keeps; None for the others.
     iq_fft : ndarray of complex64, (n,)
-        FFT of ``iq`` (:func:`~leosop.signal.fft.fft`), for
-        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker, as
-        the comb search would make it.
+        FFT of ``iq`` (the cleaning's, :attr:`~leosop.signal.cleaning.Cleaning.spectrum`), for
+        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker.
     """
 
     iq: np.ndarray
@@ -121,8 +120,7 @@ def _prepare(rec, factor, comb, spectrum_every, item):
         iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb)
     except NonFiniteSamples:
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf") from None
-    # The cleaning's FFT is the cleaned block's unless it excised lines.
-    return PreparedBlock(iq, spectrum, fft(iq) if cleaning.spectrum is None else cleaning.spectrum)
+    return PreparedBlock(iq, spectrum, cleaning.spectrum)
 
 
 def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):

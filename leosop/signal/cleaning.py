@@ -9,6 +9,7 @@ interferer excision) before the comb search; ``leosop doctor`` reports what
 it found.
 """
 
+import functools
 import threading
 from dataclasses import dataclass, field
 
@@ -80,9 +81,9 @@ class Cleaning:
     noise_density : float
         Noise power per Hz in sample units (N0), from the spectrum's median.
     spectrum : ndarray of complex64, (n,) or None
-        The cleaned block's FFT (:func:`~.fft.fft`) when no line was
-        excised (the FFT the cleaning made; the comb search can reuse it,
-        :func:`~.multicomb.find_combs`); None when lines were excised.
+        The cleaned block's FFT (:func:`~.fft.fft`), the one the cleaning
+        made, with the excised lines' bins zeroed (the cleaned block is its
+        inverse); the comb search reuses it (:func:`~.multicomb.find_combs`).
     """
 
     dc: complex
@@ -103,37 +104,67 @@ def iq_imbalance(iq):
     ``g^2 = E[Q'^2] / E[I^2]`` and ``sin phi = -E[I Q'] / sqrt(E[I^2] E[Q'^2])``.
     Each moment ratio has a spread of ~1/sqrt(n).
     """
-    x = np.asarray(iq)
-    return _imbalance(x - x.mean())
+    x = np.asarray(iq, dtype=np.complex64)
+    return _imbalance(*_centre_moments(x, x.mean(), np.empty_like(x)), x.size)
 
 
-def _imbalance(y):
-    """:func:`iq_imbalance` of samples ``y`` (n,) whose mean is removed.
+def _centre_moments(x, dc, out):
+    """``out[:] = x - dc`` (complex64, (n,); ``out`` may be ``x``) and the sums of I^2, Q^2, I Q of ``out``.
 
-    The moments come from two complex dot products, one pass over the
-    samples each: ``sum |y|^2 = sum I^2 + Q^2`` and
-    ``sum y^2 = sum I^2 - Q^2 + 2j I Q``. What is left of the mean after
-    :func:`clean_block` removes its float32 DC (a few ulp of it) adds
-    ``n mean^2`` to the moments, some 1e-12 of them.
+    The sums are of float64 products in float64 (the float32 dot products of
+    BLAS lose ~1e-5 of them over 2.5e5 samples); compiled into one pass when
+    numba is installed (:func:`~.cleankernels.centre_moments`).
     """
-    power = float(np.vdot(y, y).real)
-    square = complex(np.dot(y, y))
-    pi, pq, piq = 0.5 * (power + square.real), 0.5 * (power - square.real), 0.5 * square.imag
+    dc = np.complex64(dc)
+    kernels = _compiled()
+    if kernels is not None:
+        return kernels.centre_moments(x, dc, out)
+    np.subtract(x, dc, out=out)
+    i, q = out.real.astype(np.float64), out.imag.astype(np.float64)
+    return float(i @ i), float(q @ q), float(i @ q)
+
+
+def _imbalance(pi, pq, piq, n):
+    """:func:`iq_imbalance` from the sums of I^2, Q^2 and I Q of ``n`` samples whose mean is removed."""
     if pi <= 0 or pq <= 0:
         return 0.0, 0.0, np.inf, np.inf
     gain_db = 10.0 * np.log10(pq / pi)
     phase_deg = float(np.degrees(np.arcsin(np.clip(-piq / np.sqrt(pi * pq), -1.0, 1.0))))
-    n = y.size
     return gain_db, phase_deg, float(20.0 / np.log(10.0) / np.sqrt(n)), float(np.degrees(1.0 / np.sqrt(n)))
 
 
-def correct_iq(iq, gain_db, phase_deg):
-    """Undo the IQ imbalance of :class:`FrontEnd` (``Q = (Q'/g + I sin phi) / cos phi``), complex64 (n,)."""
+def correct_iq(iq, gain_db, phase_deg, *, out=None):
+    """Undo the IQ imbalance of :class:`FrontEnd` (``Q = (Q'/g + I sin phi) / cos phi``), complex64 (n,).
+
+    ``out``: a complex64 array (n,) to write into (may be ``iq``); default a new one. The arithmetic is
+    float64, rounded to complex64; compiled into one pass when numba is installed, the same bits.
+    """
     x = np.asarray(iq)
     g = 10.0 ** (gain_db / 20.0)
     phi = np.radians(phase_deg)
+    kernels = _compiled()
+    if kernels is not None and x.dtype == np.complex64:
+        if out is None:
+            out = x.astype(np.complex64)
+        elif out is not x:
+            out[...] = x
+        kernels.correct_iq(out, float(g), float(np.sin(phi)), float(np.cos(phi)))
+        return out
     q = (x.imag / g + x.real * np.sin(phi)) / np.cos(phi)
-    return (x.real + 1j * q).astype(np.complex64)
+    out = np.empty(x.shape, dtype=np.complex64) if out is None else out
+    out.real = x.real
+    out.imag = q
+    return out
+
+
+@functools.cache
+def _compiled():
+    """:mod:`leosop.signal.cleankernels`, or None when numba is not installed."""
+    try:
+        from . import cleankernels
+    except ImportError:
+        return None
+    return cleankernels
 
 
 def find_lines(power, fs, comb, *, pfa=LINE_PFA):
@@ -315,8 +346,9 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     3. Lines that no comb explains (:func:`find_lines`) are zeroed in the
        block's spectrum (excision) and the block transformed back.
 
-    A clean block comes back as it was, less its mean (one FFT spent). A
-    block holding NaN or inf raises NonFiniteSamples (an InputError).
+    A clean block comes back as it was, less its mean (one FFT spent; one
+    more, inverse, when lines are excised). A block holding NaN or inf
+    raises NonFiniteSamples (an InputError).
 
     Parameters
     ----------
@@ -329,7 +361,7 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     iq : ndarray of complex64, (n,)
     cleaning : Cleaning
     """
-    from .fft import empty_aligned, fft
+    from .fft import empty_aligned, fft, ifft
 
     x = np.asarray(iq, dtype=np.complex64)
     n = x.size
@@ -337,11 +369,13 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     if not np.isfinite(total):  # the callers' check for NaN or inf: one pass over the samples less
         raise NonFiniteSamples("IQ samples contain NaN or inf")
     dc = complex(np.complex64(total / np.intp(n)))  # x.mean(), bit for bit (its division in double)
-    x = np.subtract(x, np.complex64(dc), out=empty_aligned(n))  # the FFT reads it where it lies
-    gain_db, phase_deg, s_gain, s_phase = _imbalance(x)
+    y = empty_aligned(n)  # the FFT reads it where it lies
+    # What is left of the mean in y (a few ulp of the float32 DC) adds n mean^2 to the moments: ~1e-12 of them.
+    gain_db, phase_deg, s_gain, s_phase = _imbalance(*_centre_moments(x, dc, y), n)
     corrected = abs(gain_db) > 5.0 * s_gain or abs(phase_deg) > 5.0 * s_phase
     if corrected:
-        x = correct_iq(x, gain_db, phase_deg)
+        correct_iq(y, gain_db, phase_deg, out=y)
+    x = y
     spectrum = fft(x)
     # |X|^2 straight into this thread's zero-padded buffer in fftshift order (find_lines' layout).
     padded = _padded_buffer(n)
@@ -355,6 +389,5 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     if lines:
         for ln in lines:
             spectrum[np.arange(ln.lo_bin, ln.hi_bin + 1) % n] = 0.0
-        x = np.fft.ifft(spectrum).astype(np.complex64)
-    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0,
-                       None if lines else spectrum)
+        x = ifft(spectrum)
+    return x, Cleaning(dc, dc_dbhz, gain_db, phase_deg, bool(corrected), tuple(lines), n0, spectrum)
