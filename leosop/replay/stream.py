@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..signal.coarse import abs2
-from ..signal.fft import fft
+from ..signal.fft import empty_aligned, fft, ifft
 from ..signal.cleaning import clean_block
 from ..signal.comb_grid import NonFiniteSamples
 
@@ -63,9 +63,13 @@ def narrow(iq, factor):
         return iq
     n = iq.size // factor * factor
     m = n // factor
-    spec = np.fft.fft(iq[:n])
-    keep = np.concatenate([spec[: m - m // 2], spec[n - m // 2:]])
-    return (np.fft.ifft(keep) * (m / n)).astype(np.complex64)
+    spec = fft(iq[:n], scratch=True)  # the plan's own buffer: only the kept bins are copied out of it
+    keep = empty_aligned(m, dtype=spec.dtype)
+    keep[: m - m // 2] = spec[: m - m // 2]
+    keep[m - m // 2:] = spec[n - m // 2:]
+    out = ifft(keep)
+    out *= m / n
+    return out.astype(np.complex64, copy=False)
 
 
 def narrowed_shift_s(factor, sample_rate_hz):
