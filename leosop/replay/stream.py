@@ -15,7 +15,8 @@ per-thread plans), which release the GIL; the cleaned block's FFT, made
 here, is handed to the comb search (``find_combs(..., spectrum=)``).
 Measured on a continuous 2.5 MS/s recording of 7 satellites (0.1 s
 blocks, ``tools/bench_replay.py``), the preparation is half the streaming
-stage's processor time (0.81 of 1.63 s for 20 s), the comb search and
+stage's processor time (0.58 of 1.20 s for 20 s, under a load of 8 on 2
+cores: ~2.9 ms per block, of which ~1.2 ms the FFT), the comb search and
 tracking the other half: two threads can at best halve the time; more
 help only where the preparation dominates (wide recordings narrowed
 block by block).
