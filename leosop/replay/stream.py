@@ -15,7 +15,8 @@ per-thread plans), which release the GIL; the cleaned block's FFT, made
 here, is handed to the comb search (``find_combs(..., spectrum=)``).
 Measured on a continuous 2.5 MS/s recording of 7 satellites (0.1 s
 blocks, ``tools/bench_replay.py``), the preparation is half the streaming
-stage's processor time (0.81 of 1.63 s for 20 s), the comb search and
+stage's processor time (0.58 of 1.20 s for 20 s, under a load of 8 on 2
+cores: ~2.9 ms per block, of which ~1.2 ms the FFT), the comb search and
 tracking the other half: two threads can at best halve the time; more
 help only where the preparation dominates (wide recordings narrowed
 block by block).
@@ -28,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..signal.fft import fft
+from ..signal.coarse import abs2
+from ..signal.fft import empty_aligned, fft, ifft
 from ..signal.cleaning import clean_block
 from ..signal.comb_grid import NonFiniteSamples
 
@@ -62,9 +64,13 @@ def narrow(iq, factor):
         return iq
     n = iq.size // factor * factor
     m = n // factor
-    spec = np.fft.fft(iq[:n])
-    keep = np.concatenate([spec[: m - m // 2], spec[n - m // 2:]])
-    return (np.fft.ifft(keep) * (m / n)).astype(np.complex64)
+    spec = fft(iq[:n], scratch=True)  # the plan's own buffer: only the kept bins are copied out of it
+    keep = empty_aligned(m, dtype=spec.dtype)
+    keep[: m - m // 2] = spec[: m - m // 2]
+    keep[m - m // 2:] = spec[n - m // 2:]
+    out = ifft(keep)
+    out *= m / n
+    return out.astype(np.complex64, copy=False)
 
 
 def narrowed_shift_s(factor, sample_rate_hz):
@@ -85,7 +91,7 @@ def spectrum_column(iq):
     """
     m = min(SPECTRUM_AVERAGES, max(1, iq.size // SPECTRUM_BINS))
     seg = np.resize(iq, (m, SPECTRUM_BINS)) if iq.size < SPECTRUM_BINS else iq[: m * SPECTRUM_BINS].reshape(m, -1)
-    return np.fft.fftshift(np.mean(np.abs(np.fft.fft(seg, axis=1)) ** 2, axis=0))
+    return np.fft.fftshift(np.mean(abs2(fft(seg, scratch=True)), axis=0))
 
 
 @dataclass(frozen=True)
@@ -100,9 +106,8 @@ class PreparedBlock:
         :func:`spectrum_column` of the narrowed block before cleaning, for
         the blocks the figure keeps; None for the others.
     iq_fft : ndarray of complex64, (n,)
-        FFT of ``iq`` (:func:`~leosop.signal.fft.fft`), for
-        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker, as
-        the comb search would make it.
+        FFT of ``iq`` (the cleaning's, :attr:`~leosop.signal.cleaning.Cleaning.spectrum`), for
+        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker.
     """
 
     iq: np.ndarray
@@ -120,8 +125,7 @@ def _prepare(rec, factor, comb, spectrum_every, item):
         iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb)
     except NonFiniteSamples:
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf") from None
-    # The cleaning's FFT is the cleaned block's unless it excised lines.
-    return PreparedBlock(iq, spectrum, fft(iq) if cleaning.spectrum is None else cleaning.spectrum)
+    return PreparedBlock(iq, spectrum, cleaning.spectrum)
 
 
 def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):
