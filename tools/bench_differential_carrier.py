@@ -171,22 +171,30 @@ def measurement_level(args):
           f"[{lo:.2f}, {hi:.2f}]")
 
 
-def iq_level(seeds, duration_s, spans_s):
-    """Per seed, generate the pair, replay it (in this process) and print the fixes of its first ``spans_s``."""
+def iq_level(seeds, duration_s, spans_s, workdir=None):
+    """Per seed, generate the pair, replay it (in this process) and print the fixes of its first ``spans_s``.
+
+    ``workdir`` (a path with ``{seed}``): the pair is kept there, and a pair already there (``rover.sigmf-meta``
+    and ``rover-base.sigmf-meta``, made with these settings and ``duration_s``) is replayed, not generated again.
+    """
     from leosop.cli import main as leosop_main
 
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
-        with tempfile.TemporaryDirectory() as tmp:
+        keep = workdir is not None
+        with (contextlib.nullcontext(workdir.format(seed=seed)) if keep else tempfile.TemporaryDirectory()) as tmp:
+            Path(tmp).mkdir(parents=True, exist_ok=True)
             rover = Path(tmp) / "rover.sigmf-meta"
             tic = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "leosop", "generate", "-o", str(rover), "--site", site, "--start",
-                            "2025-01-01T19:40:00Z", "--duration-s", f"{duration_s:g}", "--sample-rate-hz", "1e6",
-                            "--seed", str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300",
-                            "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
-                            "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
-                           check=True, capture_output=True)
+            if not (keep and rover.exists() and (Path(tmp) / "rover-base.sigmf-meta").exists()):
+                subprocess.run([sys.executable, "-m", "leosop", "generate", "-o", str(rover), "--site", site,
+                                "--start", "2025-01-01T19:40:00Z", "--duration-s", f"{duration_s:g}",
+                                "--sample-rate-hz", "1e6",
+                                "--seed", str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300",
+                                "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
+                                "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
+                               check=True, capture_output=True)
             pairs = []
             with _spans_fixed(spans_s, pairs), contextlib.redirect_stdout(io.StringIO()):
                 code = leosop_main(["replay", str(rover), "--base", str(Path(tmp) / "rover-base.sigmf-meta"),
@@ -247,10 +255,12 @@ def main():
     parser.add_argument("--iq-duration-s", type=float, default=20.0, help="the IQ pair's length (default 20)")
     parser.add_argument("--iq-spans-s", type=float, nargs="*", default=[],
                         help="also fix from the pair's first S seconds (e.g. 20 40 with --iq-duration-s 60)")
+    parser.add_argument("--iq-workdir", help="keep each seed's pair in this directory ({seed} in it: the seed) and "
+                                             "replay a pair already there instead of generating it")
     args = parser.parse_args()
     if args.seeds:
         measurement_level(args)
-    iq_level(args.iq_seeds, args.iq_duration_s, args.iq_spans_s)
+    iq_level(args.iq_seeds, args.iq_duration_s, args.iq_spans_s, args.iq_workdir)
 
 
 if __name__ == "__main__":
