@@ -64,10 +64,12 @@ difference moves 100-200 Hz within a 0.1 s block) its chirp leaks into the
 sums (a Fresnel integral of ~``1 / sqrt(rate T^2)`` of a tone, 0.2-0.3)
 and the block's phase is off by 10-28 sigma. :func:`comb_crossings`
 flags a block where the closest approach over the block comes within
-:data:`CROSSING_MARGIN` / T; such a block neither updates the filter nor
-gives a phase (``crossing``). A crossing lasts one or two blocks, over
-which the prediction keeps the whole cycles (its phase sigma grows by
-~0.02 cycles a block, far below :data:`ARC_SIGMA_CYCLES`): the arc goes on.
+:data:`CROSSING_MARGIN` / T; such a block gives no phase (``crossing``,
+not ``lock``). The filter still takes it: its error (at most 0.03 cycles
+measured) is well within the prediction's sigma (~0.07 cycles a block with
+the default process noise: no slip), and the next blocks' phases are
+measured, not predicted. Left out of the filter, the prediction over two
+blocks would pass :data:`ARC_SIGMA_CYCLES` and start a new arc.
 
 What cannot be tracked across snapshot gaps: a snapshot recording (20 ms
 every second, DESIGN 4.2) gives no accumulated phase. Over a gap of a second
@@ -146,9 +148,10 @@ class CarrierTracks:
     snr : ndarray
         Coherent comb SNR of the block's correlation (NaN before the template).
     lock, slip, crossing : ndarray of bool
-        ``lock``: the block updated the filter; ``slip``: its innovation failed the test (a new arc begins);
-        ``crossing``: another tracked comb crossed this one's tones in the block (:func:`comb_crossings`), so
-        it was left out (not locked, no phase) whatever its SNR.
+        ``lock``: the block updated the filter and gives a phase; ``slip``: its innovation failed the test (a
+        new arc begins);
+        ``crossing``: another tracked comb crossed this one's tones in the block (:func:`comb_crossings`): no
+        phase and not ``lock`` whatever its SNR (the filter took it all the same: the module's note).
     arc : ndarray of int
         Arc number, -1 before the first lock; whole cycles are continuous within an arc.
     """
@@ -258,11 +261,12 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
         template[new] = Y[new]
         s = np.sum(Y * np.conj(template), axis=1)
         snr = np.abs(s) ** 2 / (noise * np.sum(np.abs(template) ** 2, axis=1))
-        lock = (snr > LOCK_SNR) & ~crossing
+        use = snr > LOCK_SNR                      # the blocks the filter takes; a crossing's phase is not reported
+        lock = use & ~crossing
         z = np.angle(s) / (2 * np.pi)
         r = 1.0 / (2.0 * snr) / (2 * np.pi) ** 2
         nis = z**2 / (P[:, 0, 0] + r)
-        restart = lock & ((arc < 0) | (P[:, 0, 0] > ARC_SIGMA_CYCLES**2) | (nis > SLIP_NIS))
+        restart = use & ((arc < 0) | (P[:, 0, 0] > ARC_SIGMA_CYCLES**2) | (nis > SLIP_NIS))
         slip = restart & (arc >= 0) & (nis > SLIP_NIS)
         # the block's mean phase: z is the mean of the phase error over the block, and the prediction's mean is its
         # centre phase plus half its rate times the mean squared time from the centre
@@ -270,7 +274,7 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
         phase = np.where(lock, x[:, 0] + z + x[:, 2] * half_sq, np.nan)
         central += np.where(lock, Y[:, comb.n_tones // 2] * np.exp(-2j * np.pi * z), 0.0)
         central_noise += np.where(lock, noise, 0.0)
-        x, P = _update(x, P, np.where(lock, z, 0.0), np.where(lock, r, np.inf), restart)
+        x, P = _update(x, P, np.where(use, z, 0.0), np.where(use, r, np.inf), restart)
         arc = np.where(restart, arc + 1, arc)
         rows.append((t_c, phase, np.where(lock, np.sqrt(r), np.nan), x[:, 1].copy(), np.sqrt(P[:, 1, 1]),
                      x[:, 2].copy(), snr, lock, slip, arc.copy(), crossing, half_sq))
