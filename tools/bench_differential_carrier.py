@@ -62,13 +62,16 @@ chi2/dof 1.06-1.18; no integers (DD sigmas 1.3-8 cycles). 60 s (``--iq-duration-
 differences on every seed (ratio 466-1086), 9.8 / 9.4 / 1.5 mm float to
 2.5 / 2.3 / 4.3 mm fixed, NEES 1.19 / 1.98 / 6.70; none at 40 s (DD sigmas
 0.16-0.78 cycles); the single differences fix none in 60 s; chi2/dof 1.5-2.0
-over 40-60 s. Two causes (docs/replay.md): the tracker's rate lag biased
-its phase (fixed: the block centre's phase, not the mean's); with it fixed
-(tracker started from the truth, 60 s, seeds 5 / 6 / 7) chi2/dof is 1.65 /
-1.43 / 1.53 at 40 s and 1.76 / 1.73 / 1.65 at 60 s, fixed 2.8 / 2.0 / 4.6
-mm, NEES 1.3 / 2.4 / 7.5: the rest is comb crossings (a tone of one
-satellite within hertz of another's: 14-27 sigma phase errors in those
-blocks), still open.
+over 40-60 s. Two causes (docs/replay.md), both fixed: the tracker's rate
+lag biased its phase (now the block centre's phase, not the mean's), and
+comb crossings (a tone of one satellite sweeping within 1/T of another's:
+9.8 sigma rms, up to 28, in those blocks; now flagged and left out,
+5-9 blocks per satellite in 60 s, no new arc). With both, on the phases
+tracked from the truth (seeds 5 / 6 / 7): chi2/dof 1.01 / 0.96 / 1.00 at
+20 s, 1.01 / 0.98 / 1.01 at 40 s, 1.00 / 0.99 / 1.02 at 60 s (1.65-1.76 at
+60 s before); 60 s fixes all three double differences, 0.98 / 1.13 / 3.1
+mm, NEES 1.75 / 11.5 / 7.5. ``--iq-workdir /tmp/pairs_{seed}`` keeps the
+pairs and replays them again without generating them (4 minutes a seed).
 """
 
 import argparse
