@@ -62,13 +62,16 @@ chi2/dof 1.06-1.18; no integers (DD sigmas 1.3-8 cycles). 60 s (``--iq-duration-
 differences on every seed (ratio 466-1086), 9.8 / 9.4 / 1.5 mm float to
 2.5 / 2.3 / 4.3 mm fixed, NEES 1.19 / 1.98 / 6.70; none at 40 s (DD sigmas
 0.16-0.78 cycles); the single differences fix none in 60 s; chi2/dof 1.5-2.0
-over 40-60 s. Two causes (docs/replay.md): the tracker's rate lag biased
-its phase (fixed: the block centre's phase, not the mean's); with it fixed
-(tracker started from the truth, 60 s, seeds 5 / 6 / 7) chi2/dof is 1.65 /
-1.43 / 1.53 at 40 s and 1.76 / 1.73 / 1.65 at 60 s, fixed 2.8 / 2.0 / 4.6
-mm, NEES 1.3 / 2.4 / 7.5: the rest is comb crossings (a tone of one
-satellite within hertz of another's: 14-27 sigma phase errors in those
-blocks), still open.
+over 40-60 s. Two causes (docs/replay.md), both fixed: the tracker's rate
+lag biased its phase (now the block centre's phase, not the mean's), and
+comb crossings (a tone of one satellite sweeping within 1/T of another's:
+9.8 sigma rms, up to 28, in those blocks; now flagged and left out,
+5-9 blocks per satellite in 60 s, no new arc). With both, on the phases
+tracked from the truth (seeds 5 / 6 / 7): chi2/dof 1.01 / 0.96 / 1.00 at
+20 s, 1.01 / 0.98 / 1.01 at 40 s, 1.00 / 0.99 / 1.02 at 60 s (1.65-1.76 at
+60 s before); 60 s fixes all three double differences, 0.98 / 1.13 / 3.1
+mm, NEES 1.75 / 11.5 / 7.5. ``--iq-workdir /tmp/pairs_{seed}`` keeps the
+pairs and replays them again without generating them (4 minutes a seed).
 """
 
 import argparse
@@ -171,22 +174,30 @@ def measurement_level(args):
           f"[{lo:.2f}, {hi:.2f}]")
 
 
-def iq_level(seeds, duration_s, spans_s):
-    """Per seed, generate the pair, replay it (in this process) and print the fixes of its first ``spans_s``."""
+def iq_level(seeds, duration_s, spans_s, workdir=None):
+    """Per seed, generate the pair, replay it (in this process) and print the fixes of its first ``spans_s``.
+
+    ``workdir`` (a path with ``{seed}``): the pair is kept there, and a pair already there (``rover.sigmf-meta``
+    and ``rover-base.sigmf-meta``, made with these settings and ``duration_s``) is replayed, not generated again.
+    """
     from leosop.cli import main as leosop_main
 
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
-        with tempfile.TemporaryDirectory() as tmp:
+        keep = workdir is not None
+        with (contextlib.nullcontext(workdir.format(seed=seed)) if keep else tempfile.TemporaryDirectory()) as tmp:
+            Path(tmp).mkdir(parents=True, exist_ok=True)
             rover = Path(tmp) / "rover.sigmf-meta"
             tic = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "leosop", "generate", "-o", str(rover), "--site", site, "--start",
-                            "2025-01-01T19:40:00Z", "--duration-s", f"{duration_s:g}", "--sample-rate-hz", "1e6",
-                            "--seed", str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300",
-                            "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
-                            "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
-                           check=True, capture_output=True)
+            if not (keep and rover.exists() and (Path(tmp) / "rover-base.sigmf-meta").exists()):
+                subprocess.run([sys.executable, "-m", "leosop", "generate", "-o", str(rover), "--site", site,
+                                "--start", "2025-01-01T19:40:00Z", "--duration-s", f"{duration_s:g}",
+                                "--sample-rate-hz", "1e6",
+                                "--seed", str(seed), "--sat", *IQ_SATS, "--orbit-error-along-m", "300",
+                                "--orbit-error-radial-m", "30", "--orbit-error-cross-m", "100",
+                                "--sat-drift-sigma-hz-per-s", "0.01", "--base-site", base_site, "--out", tmp],
+                               check=True, capture_output=True)
             pairs = []
             with _spans_fixed(spans_s, pairs), contextlib.redirect_stdout(io.StringIO()):
                 code = leosop_main(["replay", str(rover), "--base", str(Path(tmp) / "rover-base.sigmf-meta"),
@@ -247,10 +258,12 @@ def main():
     parser.add_argument("--iq-duration-s", type=float, default=20.0, help="the IQ pair's length (default 20)")
     parser.add_argument("--iq-spans-s", type=float, nargs="*", default=[],
                         help="also fix from the pair's first S seconds (e.g. 20 40 with --iq-duration-s 60)")
+    parser.add_argument("--iq-workdir", help="keep each seed's pair in this directory ({seed} in it: the seed) and "
+                                             "replay a pair already there instead of generating it")
     args = parser.parse_args()
     if args.seeds:
         measurement_level(args)
-    iq_level(args.iq_seeds, args.iq_duration_s, args.iq_spans_s)
+    iq_level(args.iq_seeds, args.iq_duration_s, args.iq_spans_s, args.iq_workdir)
 
 
 if __name__ == "__main__":

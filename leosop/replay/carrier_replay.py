@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import InputError
 from ..signal.pilot import PilotComb
 from ..timebase import format_utc
-from .carrier import CarrierTracks, phase_rate_doppler, recording_blocks, track_carrier
+from .carrier import CarrierTracks, comb_crossings, phase_rate_doppler, recording_blocks, track_carrier
 from .tracks import RATE_SIGMA_FACTOR, Track
 
 __all__ = ["WINDOW_S", "ReplayCarrier", "check_continuous", "replay_carrier"]
@@ -88,7 +88,7 @@ class ReplayCarrier:
     fix_note: str | None = None
 
     CSV_HEADER = ("time_utc", "t_s", "sat_id", "phase_cycles", "phase_sigma_cycles", "doppler_hz",
-                  "doppler_sigma_hz", "lock", "slip", "arc", "in_fix")
+                  "doppler_sigma_hz", "lock", "slip", "arc", "in_fix", "crossing")
 
     def csv_rows(self):
         """Rows of ``carrier.csv`` (:attr:`CSV_HEADER`): each satellite from its first block on, in time order.
@@ -104,7 +104,7 @@ class ReplayCarrier:
         cols = (utc, tr.t_s[j].tolist(), [self.sat_id[k] for k in i], num(tr.phase_cycles),
                 num(tr.phase_sigma_cycles), num(self.doppler_hz), num(self.doppler_sigma_hz),
                 tr.lock[i, j].astype(int).tolist(), tr.slip[i, j].astype(int).tolist(), tr.arc[i, j].tolist(),
-                self.in_fix[i, j].astype(int).tolist())
+                self.in_fix[i, j].astype(int).tolist(), tr.crossing[i, j].astype(int).tolist())
         return list(zip(*cols))
 
     def doc(self):
@@ -120,7 +120,9 @@ class ReplayCarrier:
             sats.append({"sat_id": sat, "start_utc": format_utc(self.time_utc[self.first[k]]),
                          "n_blocks": int(lock.size), "locked_fraction": float(np.mean(lock)),
                          "arcs": int(np.unique(self.tracks.arc[k][self.tracks.arc[k] >= 0]).size),
-                         "slips": int(np.sum(self.tracks.slip[k])), "n_phase_rate_rows": int(np.sum(self.in_fix[k])),
+                         "slips": int(np.sum(self.tracks.slip[k])),
+                         "crossing_blocks": int(np.sum(self.tracks.crossing[k])),
+                         "n_phase_rate_rows": int(np.sum(self.in_fix[k])),
                          "phase_rate_sigma_median_hz": float(np.median(sig)) if sig.size else None,
                          "block_sigma_median_hz": float(np.median(np.concatenate([tr.sigma_hz for tr in blocks]))),
                          "phase_rate_vs_block_rms_hz": float(np.sqrt(np.mean(diff**2))) if diff.size else None})
@@ -181,7 +183,8 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
     lo_hz = res.lo.offset_hz if res.lo is not None and np.isfinite(res.lo.offset_hz) else 0.0
     shape = (len(sats), t_s.size)
     cols = {f.name: np.full(shape, np.nan) for f in fields(CarrierTracks) if f.name != "t_s"}
-    cols.update(lock=np.zeros(shape, bool), slip=np.zeros(shape, bool), arc=np.full(shape, -1))
+    cols.update(lock=np.zeros(shape, bool), slip=np.zeros(shape, bool), arc=np.full(shape, -1),
+                crossing=np.zeros(shape, bool))
     for k in np.unique(first):
         group = np.flatnonzero(first == k)
         f0, r0, f0_sigma, r0_sigma = np.array([_start(starts[g], res.blocks[k].n_samples / rec.sample_rate_hz)
@@ -193,6 +196,15 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
                            rate0_sigma_hz_per_s=3.0 * np.max(r0_sigma))
         for name, arr in cols.items():
             arr[group, k:] = getattr(ct, name)
+    # Each tracker saw the crossings of its own group; those between groups (satellites starting at other
+    # blocks) are found here, from every satellite's frequency, and left out the same way (their blocks did
+    # update their filters: harmless to the phase of the blocks after, which is measured, not predicted).
+    cross = comb_crossings(cols["doppler_hz"], cols["doppler_rate_hz_per_s"], block_s, comb.through_lo(lo_hz))
+    cross &= cols["lock"]
+    cols["crossing"] |= cross
+    cols["lock"] &= ~cross
+    for name in ("phase_cycles", "phase_sigma_cycles", "phase_ref_sigma_cycles"):
+        cols[name][cross] = np.nan
     tracks = CarrierTracks(t_s, **cols)
     dop, sig = phase_rate_doppler(tracks, WINDOW_S)
     in_fix = _disjoint_windows(t_s, dop, tracks.arc, tracks.lock, WINDOW_S)
