@@ -53,7 +53,7 @@ def decimate(grid, comb, c, wide):
 
 def decimate_combs(grid, comb, combs, wide):
     """:func:`decimate` for several combs at once."""
-    f_c = np.array([channels_hz(comb, c.d_c, wide) for c in combs])  # (C, W)
+    f_c = channels_hz(comb, np.array([c.d_c for c in combs])[:, None], wide)  # (C, W)
     mix = cis(-np.multiply.outer(grid.t_abs, f_c))
     y = grid.channels(f_c.reshape(-1)).reshape(grid.n_seg, len(combs), -1)
     for j, c in enumerate(combs):
@@ -120,6 +120,11 @@ def cleaned_tones(grid, comb, combs, j):
     return c.y_wide.astype(complex) if r is None else c.y_wide - r
 
 
+def _stacked(arrays):
+    """C arrays (B, W) as one (B, C, W): np.stack(axis=1) without its wrappers (half the time on a comb's few tones)."""
+    return np.concatenate(arrays, axis=1).reshape(arrays[0].shape[0], len(arrays), -1)
+
+
 def newton_combs(y, tau, tpow, ratio, f, r, n_iter=2):
     """:func:`~.fine.newton_comb` for C combs at once (no known phase): ``y`` (B, C, K), ``f``, ``r`` (C,)
     start values. Returns ``(f, r, Y)``, Y (C, K) the phase-aligned sums at the optimum."""
@@ -159,12 +164,11 @@ def refine_combs(grid, comb, combs, clean=True):
     extra = (combs[0].f_c.size - n_k) // 2
     k = slice(extra, extra + n_k)
     f_c = np.array([c.f_c for c in combs])
-    mix = np.stack([c.mix for c in combs], axis=1)
+    mix = _stacked([c.mix for c in combs])
     d_c = np.array([c.d_c for c in combs])
-    z = np.stack([c.y_wide for c in combs], axis=1)
+    z = _stacked([c.y_wide for c in combs])
     if clean:
-        z = z - leakage_all(grid, f_c, mix, np.stack([c.val for c in combs], axis=1),
-                             np.stack([c.nu for c in combs], axis=1))
+        z = z - leakage_all(grid, f_c, mix, _stacked([c.val for c in combs]), _stacked([c.nu for c in combs]))
     y = z[:, :, k]
     delta, rate, y_sum = newton_combs(y, grid.tau, grid.tpow, comb.tone_spacing_hz / comb.carrier_hz,
                                      [c.doppler_hz for c in combs] - d_c, [c.rate for c in combs])
@@ -222,7 +226,7 @@ def track_combs(grid, comb, pred, pred_rate, wide, max_rate, pfa):
     ratio = comb.tone_spacing_hz / comb.carrier_hz
     combs = [CombState(float(p), None, predicted_index=i) for i, p in enumerate(pred)]
     decimate_combs(grid, comb, combs, wide)
-    y = np.stack([c.y_wide[:, extra:extra + comb.n_tones] for c in combs], axis=1)
+    y = _stacked([c.y_wide[:, extra:extra + comb.n_tones] for c in combs])
     f_res = dechirped_peaks_hz(y, grid.tau, pred_rate, grid.seg / grid.fs)
     for c, f, r in zip(combs, f_res, pred_rate):
         c.doppler_hz, c.rate = c.d_c + f, float(r)
@@ -233,7 +237,7 @@ def track_combs(grid, comb, pred, pred_rate, wide, max_rate, pfa):
     rate = np.array([c.rate for c in combs])
     phase = np.multiply.outer(grid.tau, delta) + np.multiply.outer(0.5 * grid.tau**2, rate)
     u = comb_cis(-phase, -ratio * phase, wide)
-    power = abs2(np.sum(np.stack([c.y_wide for c in combs], axis=1) * u, axis=0))  # (C, W)
+    power = abs2(np.sum(_stacked([c.y_wide for c in combs]) * u, axis=0))  # (C, W)
     box = np.cumsum(np.pad(power, ((0, 0), (1, 0))), axis=1)
     shift = np.argmax(box[:, comb.n_tones:] - box[:, :-comb.n_tones], axis=1) - extra
     for c, sh in zip(combs, shift):

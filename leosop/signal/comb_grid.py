@@ -165,10 +165,12 @@ def dirichlet(delta_hz, counts, fs):
     the denominator by its Taylor series to x^5.
     """
     x = (delta_hz * (np.pi / fs)).astype(np.float32)
-    num = np.sin(x * np.asarray(counts, dtype=np.float32))
+    counts = np.asarray(counts, dtype=np.float32)
+    num = np.sin(x * counts)
     den = x * (1.0 - x * x * np.float32(1.0 / 6.0))
-    full = np.broadcast_to(np.asarray(counts, dtype=np.float32), num.shape)
-    return np.divide(num, den, out=np.array(full), where=den != 0.0)
+    out = np.empty(num.shape, dtype=np.float32)
+    out[...] = counts  # the limit at delta = 0 (np.broadcast_to's wrappers cost more than the kernel)
+    return np.divide(num, den, out=out, where=den != 0.0)
 
 
 def leakage(grid, sources, f_c, mix):
