@@ -110,23 +110,23 @@ IQ_ROVER, IQ_BASE = (34.342, 108.94, 400.0), (34.38256, 109.00527, 400.0)
 IQ_SATS = ("71563", "71585", "71607", "72129")
 
 
-def trial(const, base, rovers, t0, seed):
-    """One seed: per case (float error, float cov, final error, final cov, status, seconds)."""
+def trial(const, base, rovers, t0, seed, cases=CASES):
+    """One seed: per case of ``cases`` (float error, float cov, final error, final cov, status, seconds)."""
     rng = np.random.default_rng(seed)
     err = draw_satellite_errors(const.sat_ids, t0, rng)
     clocks = {k: {"clock_offset_hz": rng.normal(0.0, 2e3), "clock_drift_hz_per_s": rng.normal(0.0, 1.0)}
               for k in ("base", *rovers)}
     offset0 = rng.normal(0.0, 30.0, 3)
-    t = t0 + (np.arange(int(max(c[2] for c in CASES) * 1000 / STEP_MS)) * STEP_MS).astype("timedelta64[ms]")
+    t = t0 + (np.arange(int(max(c[2] for c in cases) * 1000 / STEP_MS)) * STEP_MS).astype("timedelta64[ms]")
     sims = {}
-    for sig in sorted({c[3] for c in CASES}):
+    for sig in sorted({c[3] for c in cases}):
         noise = np.random.default_rng([seed, int(sig * 1e6)])
         sims[sig] = {"base": simulate_phase(const, err, base, t, noise, sigma_cycles=sig, **clocks["base"])}
         for name, pos in rovers.items():
             sims[sig][name] = simulate_phase(const, err, pos, t, noise, sigma_cycles=sig,
                                              pos_light_ecef_m=pos + offset0, **clocks[name])
     out = []
-    for label, rover, span, sig, deg, n_sats in CASES:
+    for label, rover, span, sig, deg, n_sats in cases:
         n = int(round(span * 1000 / STEP_MS))
         b, r = sims[sig]["base"], sims[sig][rover]
 
@@ -155,7 +155,8 @@ def measurement_level(args):
     C = C_e_n(np.radians(LAT_DEG), np.radians(LON_DEG))
     rovers = {k: base + C @ np.array(v) for k, v in ROVERS_ENU_M.items()}
     print(f"{len(const)} Starlink satellites, epochs every {STEP_MS} ms, {args.seeds} seeds (measurement level)")
-    runs = [trial(const, base, rovers, t[0], seed) for seed in range(args.seeds)]
+    cases = [c for c in CASES if any(k in c[0] for k in args.cases)] if args.cases else CASES
+    runs = [trial(const, base, rovers, t[0], seed, cases) for seed in range(args.seeds)]
     lo, hi = chi2.ppf([0.025, 0.975], 3 * args.seeds) / args.seeds
     print(f"{'case':40s} {'float: med':>10s} {'rms':>7s} {'sig':>7s} {'NEES':>6s} | {'final: med':>10s} {'rms':>7s} "
           f"{'sig':>7s} {'NEES':>6s} {'fixed/partial':>13s} {'ms':>5s}")
@@ -243,6 +244,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--tle", type=Path, default=TLE)
+    parser.add_argument("--cases", nargs="*", default=[],
+                        help="only the cases whose label holds one of these (e.g. 'joint 60 s, 7.5 km'); their "
+                             "noise draws then differ from the full run's (the simulated span is theirs)")
     parser.add_argument("--iq-seeds", type=int, nargs="*", default=[], help="also these seeds at IQ level")
     parser.add_argument("--iq-duration-s", type=float, default=20.0, help="the IQ pair's length (default 20)")
     parser.add_argument("--iq-spans-s", type=float, nargs="*", default=[],
