@@ -7,27 +7,28 @@ continuous stream and keeping only the snapshots, both in this run, on the
 first 60 s of the baseline (scaled to 600 s) so that the run stays short;
 prints the ratio.
 
-``--parts cli``: whole ``leosop generate`` runs, each in a child process,
-with the pilot combs synthesised by numpy (numba blocked in the child, as if
-not installed: :func:`~leosop.signal.pilot.comb_baseband` satellite by
-satellite, the generator before the compiled kernel) and compiled
-(:mod:`leosop.signal.combkernels`; numba's cache warmed by a first run that
-is not counted), on two recordings: ``snapshot``, the recording of
+``--parts cli``: whole ``leosop generate`` runs, each in a child process:
+the baseline ``--baseline-ref`` (default ``main``, exported with ``git
+archive``), this tree with numba blocked (as if not installed:
+:func:`~leosop.signal.pilot.comb_baseband` satellite by satellite) and this
+tree compiled (:mod:`leosop.signal.combkernels`; numba's cache warmed by a
+first run that is not counted), on two recordings: ``snapshot``, the recording of
 tools/bench_lo_offset.py (4 MS/s, consumer front end, every satellite above
 the horizon, ``--duration-s`` of 20 ms snapshots every second), and
 ``continuous``, tools/bench_replay.py's (2.5 MS/s, cf32, 7 satellites above
 40 deg, ``--continuous-s``). Prints the wall time and the CPU time (user +
 system of the child, ``os.wait4``: robust to other load on the machine) of
-each, their ratio, and how far the two recordings are apart: the samples
-(cf32: max |diff| in units of the strongest tone, besides float32's own
-rounding; ci8: the fraction of codes that differ, by how much) and whether
-the SigMF annotations (the truth Doppler) are identical. ``--replay``
-replays both snapshot recordings (static fix, no prior) and prints the fixes'
-difference beside their sigma. Before them, the channel alone on the
+each, the baseline's CPU over each, and how far each recording is from the
+baseline's: the samples (cf32: max |diff| in units of the strongest tone,
+beside float32's own spacing there; ci8: the fraction of codes that differ,
+by how much) and whether the SigMF metadata (the truth Doppler annotations
+and the rest, the data's hash aside) is identical. ``--replay`` replays the
+baseline's and the compiled snapshot recordings (static fix, no prior) and
+prints the fixes' difference beside their sigma. Before them, the channel alone on the
 snapshot recording's first second: numpy and compiled samples of the same
 channel (before noise and front end), their CPU time and max |diff|.
 
-    python tools/bench_generate.py --parts cli --duration-s 20 --continuous-s 5 [--replay]
+    python tools/bench_generate.py --parts cli --duration-s 20 --continuous-s 5 [--replay] [--baseline-ref main]
 """
 
 import argparse
@@ -40,6 +41,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from baseline_tree import export_package
 
 from leosop.frames import geodetic_to_ecef
 from leosop.orbits import load_constellation
@@ -96,20 +98,23 @@ RECORDINGS = {
                    "--mask-deg", "40", "--seed", "1"],
 }
 
-# A child's ``leosop generate``: argv = kernel ("numpy": numba blocked), then the CLI's arguments.
+# A child's ``leosop generate``: argv = tree ("" this one), kernel ("numpy": numba blocked), the CLI's arguments.
 _CHILD = """
 import sys
-if sys.argv[1] == "numpy":
+if sys.argv[1]:
+    sys.path.insert(0, sys.argv[1])
+if sys.argv[2] == "numpy":
     sys.modules["numba"] = None  # as if numba were not installed
 from leosop.cli import main
-sys.exit(main(sys.argv[2:]))
+sys.exit(main(sys.argv[3:]))
 """
 
 
-def _child(kernel, argv):
-    """Wall and CPU time [s] of one ``leosop generate`` in a child process."""
+def _child(kernel, argv, tree=""):
+    """Wall and CPU time [s] of one ``leosop generate`` in a child process (of the package under ``tree``)."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", _CHILD, kernel, "generate", *argv], stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen([sys.executable, "-c", _CHILD, str(tree), kernel, "generate", *argv],
+                            stdout=subprocess.DEVNULL, env={**os.environ, "PYTHONPATH": ""} if tree else None)
     _, status, usage = os.wait4(proc.pid, 0)
     if status:
         sys.exit(f"leosop generate ({kernel}) failed: {argv}")
@@ -127,11 +132,13 @@ def _visible(work, site_argv, n_sats, seed):
 
 
 def _compare(a, b):
-    """How far two recordings' samples are apart, and whether their annotations are identical (text)."""
+    """How far two recordings' samples are apart, and whether their metadata is identical (text)."""
     meta = [json.loads(p.read_text()) for p in (a, b)]
+    for m in meta:
+        m["global"].pop("core:sha512")
     dtype = meta[0]["global"]["core:datatype"]
     x, y = (np.fromfile(p.with_suffix(".sigmf-data"), np.complex64 if dtype == "cf32_le" else np.int8) for p in (a, b))
-    same = meta[0]["annotations"] == meta[1]["annotations"]
+    same = meta[0] == meta[1]
     if dtype == "cf32_le":
         ulp = np.spacing(np.maximum(np.abs(x.real), np.abs(x.imag)))
         d = np.abs(x.astype(complex) - y)
@@ -139,7 +146,7 @@ def _compare(a, b):
     else:
         d = np.abs(x.astype(int) - y)
         text = f"{np.mean(d > 0):.2%} of ci8 codes differ, by at most {d.max()}"
-    return f"{text}; annotations {'identical' if same else 'DIFFER'}"
+    return f"{text}; metadata {'identical' if same else 'DIFFERS'}"
 
 
 def _channel_check(duration_s):
@@ -177,26 +184,32 @@ def _replay_pair(paths):
     fixes = [replay(open_sigmf(p), const, static=True, lo_offset_max_hz=3e6).position.fixes for p in paths]
     d = np.linalg.norm(fixes[0].pos_ecef_m - fixes[1].pos_ecef_m)
     sig = [float(np.sqrt(np.trace(f.cov[:3, :3]))) for f in fixes]
-    print(f"replay (static, global search): fixes {d:.3g} m apart; 3-D sigma numpy {sig[0]:.3g} m, "
+    print(f"replay (static, global search): fixes {d:.3g} m apart; 3-D sigma baseline {sig[0]:.3g} m, "
           f"compiled {sig[1]:.3g} m")
 
 
-def bench_cli(duration_s, continuous_s, replay_too, work):
+def bench_cli(duration_s, continuous_s, replay_too, work, baseline_ref):
     _channel_check(min(duration_s, 10.0))
     runs = {"snapshot": [*RECORDINGS["snapshot"], "--duration-s", f"{duration_s:g}"],
             "continuous": [*RECORDINGS["continuous"], "--duration-s", f"{continuous_s:g}",
                            "--sat", *_visible(work, RECORDINGS["continuous"], 7, 1)]}
+    base = work / "baseline"
+    base.mkdir(exist_ok=True)
+    export_package(baseline_ref, base)
     for kind, argv in runs.items():
-        paths, times = [], {}
-        for kernel in ("numpy", "numba"):
-            paths.append(work / f"{kind}_{kernel}.sigmf-meta")
-            times[kernel] = _child(kernel, ["-o", str(paths[-1]), *argv])
-        (w0, c0), (w1, c1) = times["numpy"], times["numba"]
-        print(f"{kind} ({' '.join(argv[-2:]) if kind == 'snapshot' else f'{continuous_s:g} s'}): numpy {w0:.1f} s wall "
-              f"{c0:.1f} s CPU; compiled {w1:.1f} s wall {c1:.1f} s CPU; CPU ratio {c0 / c1:.1f}x; "
-              f"{_compare(*paths)}", flush=True)
+        length = f"{duration_s:g} s of snapshots" if kind == "snapshot" else f"{continuous_s:g} s"
+        paths = {}
+        for name, kernel, tree in ((baseline_ref, "numpy", base), ("numba blocked", "numpy", ""),
+                                   ("compiled", "numba", "")):
+            paths[name] = work / f"{kind}_{name.replace(' ', '_')}.sigmf-meta"
+            wall, cpu = _child(kernel, ["-o", str(paths[name]), *argv], tree)
+            if name == baseline_ref:
+                cpu0 = cpu
+            print(f"{kind} ({length}), {name}: {wall:.1f} s wall, {cpu:.1f} s CPU ({cpu0 / cpu:.1f}x less than "
+                  f"{baseline_ref}); " + ("" if name == baseline_ref else _compare(paths[baseline_ref], paths[name])),
+                  flush=True)
         if kind == "snapshot" and replay_too:
-            _replay_pair(paths)
+            _replay_pair([paths[baseline_ref], paths["compiled"]])
 
 
 def main(argv=None):
@@ -206,13 +219,14 @@ def main(argv=None):
     ap.add_argument("--continuous-s", type=float, default=5.0, help="the cli part's continuous recording (default 5)")
     ap.add_argument("--replay", action="store_true", help="replay both snapshot recordings and compare the fixes")
     ap.add_argument("--workdir", help="keep the recordings here (default a temporary directory)")
+    ap.add_argument("--baseline-ref", default="main", help="git ref of the baseline generator (default main)")
     args = ap.parse_args(argv)
     if "snapshot" in args.parts:
         bench_snapshot()
     if "cli" in args.parts:
         work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_generate_"))
         work.mkdir(parents=True, exist_ok=True)
-        bench_cli(args.duration_s, args.continuous_s, args.replay, work)
+        bench_cli(args.duration_s, args.continuous_s, args.replay, work, args.baseline_ref)
 
 
 if __name__ == "__main__":
