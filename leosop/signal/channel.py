@@ -40,7 +40,7 @@ from scipy.interpolate import CubicSpline
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..frames import rotate_to_later_ecef
-from .comb_phases import comb_pieces, compiled
+from .comb_phases import comb_segments, compiled
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
 if TYPE_CHECKING:  # the orbits are imported where used (propagation is not needed to make IQ)
@@ -462,7 +462,7 @@ class SiteChannel:
         iq = np.zeros(int(count), dtype=complex)
         if kernels is not None:
             coef = self.comb.tone_amplitudes * np.exp(1j * self.comb.tone_phases_rad)
-            kernels.add_comb_pieces(coef, *comb_pieces(self, start, count), iq)
+            kernels.add_comb_segments(coef, *comb_segments(self, start, count), iq)
         else:
             t = (start + np.arange(int(count))) / self.sample_rate_hz
             geom = -(self._range(t) - self.range_ref_m[:, None]) * self.comb.carrier_hz / C_MPS

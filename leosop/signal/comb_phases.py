@@ -1,12 +1,13 @@
-"""A chunk of :class:`~leosop.signal.channel.SiteChannel` samples as pieces of polynomial phase, for the compiled comb.
+"""A chunk of :class:`~leosop.signal.channel.SiteChannel` samples as segments of polynomial phase (compiled comb).
 
 Between two nodes the light-time range is one cubic of the spline, and the
 clock phase (offset and drift) a quadratic of time: over the samples of one
 node interval each phase of :func:`~leosop.signal.pilot.comb_baseband` is a
 cubic in the sample index, and the tone amplitude (linear between nodes) a
-line. :func:`comb_pieces` writes those per (satellite, node interval) piece
-of a chunk; :func:`leosop.signal.combkernels.add_comb_pieces` synthesises
-them without an exponential per sample (the error bound is there).
+line. :func:`comb_segments` writes those per satellite and segment (the
+chunk's part within one node interval);
+:func:`leosop.signal.combkernels.add_comb_segments` synthesises them
+without an exponential per sample (the error bound is there).
 """
 
 import functools
@@ -16,7 +17,7 @@ import numpy.typing as npt
 
 from ..constants import C_MPS
 
-__all__ = ["comb_pieces", "compiled"]
+__all__ = ["comb_segments", "compiled"]
 
 
 @functools.cache
@@ -34,7 +35,7 @@ def _frac(cycles):
     return cycles - np.round(cycles)
 
 
-def comb_pieces(channel, start: int, count: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+def comb_segments(channel, start: int, count: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
                                                           npt.NDArray[np.int_], npt.NDArray[np.int_]]:
     """Phase polynomials and amplitude lines of samples ``start .. start+count-1`` of a tones channel.
 
@@ -45,14 +46,16 @@ def comb_pieces(channel, start: int, count: int) -> tuple[npt.NDArray[np.float64
 
     Returns
     -------
-    poly : ndarray, (n_pieces, 2, 4)
+    poly : ndarray, (n_segments, n_sats, 2, 4)
         a0..a3 [cycles] of the lead psi = phi - h theta and of the comb phase
-        theta in the piece's sample index j: phi = geom + clock + phase / 2 pi,
-        theta = spacing t + spacing geom / f_c (as in comb_baseband).
-    amp : ndarray, (n_pieces, 2)
-        Tone amplitude at j = 0 and per sample. Silent pieces are left out.
-    offset, length : ndarray of int, (n_pieces,)
-        First sample of each piece within the chunk, and its length.
+        theta in the segment's sample index j: phi = geom + clock + phase / 2 pi,
+        theta = spacing t + spacing geom / f_c (as in comb_baseband). A segment
+        is the chunk's part within one node interval; only the satellites
+        heard somewhere in the chunk are kept.
+    amp : ndarray, (n_segments, n_sats, 2)
+        Tone amplitude at j = 0 and per sample.
+    offset, length : ndarray of int, (n_segments,)
+        First sample of each segment within the chunk, and its length.
     """
     fs, comb = float(channel.sample_rate_hz), channel.comb
     t_nodes = channel.t_nodes_s
@@ -84,7 +87,6 @@ def comb_pieces(channel, start: int, count: int) -> tuple[npt.NDArray[np.float64
     lead[0] = _frac(lead[0])
     a0 = channel.amplitude(t_a)
     slope = (channel._amp[:, qs + 1] - channel._amp[:, qs]) / ((t_nodes[qs + 1] - t_nodes[qs]) * fs)
-    live = (a0 != 0) | (a0 + slope * (length - 1) != 0)
-    sat, seg = np.nonzero(live)
-    poly = np.stack([lead[:, sat, seg].T, theta[:, sat, seg].T], axis=1)
-    return poly, np.stack([a0[sat, seg], slope[sat, seg]], axis=1), j0[seg], length[seg]
+    live = np.flatnonzero(np.any((a0 != 0) | (a0 + slope * (length - 1) != 0), axis=1))
+    poly = np.stack([lead[:, live], theta[:, live]]).transpose(3, 2, 0, 1)
+    return np.ascontiguousarray(poly), np.stack([a0[live].T, slope[live].T], axis=-1), j0, length

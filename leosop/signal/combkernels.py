@@ -3,10 +3,10 @@
 Imported only when numba is installed (``pip install leosop[fast]``);
 :func:`leosop.signal.pilot.comb_baseband`, summed satellite by satellite in
 :meth:`leosop.signal.channel.SiteChannel.samples`, stays the fallback and the
-reference. :mod:`leosop.signal.comb_phases` cuts a chunk into pieces (one
-satellite, one node interval of the range spline) over which both phases of
-:func:`~leosop.signal.pilot.comb_baseband` are exact cubics in the sample
-index j, p(j) = a0 + a1 j + a2 j^2 + a3 j^3 [cycles]: the lead
+reference. :mod:`leosop.signal.comb_phases` cuts a chunk into segments (its
+part within one node interval of the range spline) over which both phases
+of :func:`~leosop.signal.pilot.comb_baseband` are, for every satellite,
+exact cubics in the sample index j, p(j) = a0 + a1 j + a2 j^2 + a3 j^3 [cycles]: the lead
 psi = phi - h theta (carrier, clocks, common phase, minus h = n_tones // 2
 times the comb phase) and the comb phase theta (z = exp(j 2 pi theta)).
 
@@ -25,6 +25,10 @@ noise. The compiled and numpy samples differ more, by the float64 rounding
 of the ~1000 km range (1.2e-10 m, 2.8e-8 rad at 11.3 GHz) that each path
 does its own way: measured 4e-7 of a unit tone on 4 satellites x 9 tones
 (tests/signal/test_channel.py), 7e-7 on 49 (tools/bench_generate.py).
+Each sample's work runs over the satellites in the innermost loops (real and
+imaginary parts in separate rows), which the compiler turns into SIMD
+instructions: 4x less CPU than one satellite after another, with the same
+operations in the same order (bit-identical results, measured).
 ``cache=True`` writes the machine code next to this file (or under
 ``NUMBA_CACHE_DIR``).
 """
@@ -34,7 +38,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["ANCHOR_SAMPLES", "add_comb_pieces"]
+__all__ = ["ANCHOR_SAMPLES", "add_comb_segments"]
 
 #: Samples between exact evaluations of the rotations (error bound: module docstring).
 ANCHOR_SAMPLES = 512
@@ -44,51 +48,75 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 @_jit
 def _cis(cycles):
-    """exp(j 2 pi cycles) after reducing ``cycles`` to [-0.5, 0.5]."""
+    """cos and sin of 2 pi ``cycles`` after reducing it to [-0.5, 0.5]."""
     x = 2.0 * math.pi * (cycles - np.round(cycles))
-    return complex(math.cos(x), math.sin(x))
+    return math.cos(x), math.sin(x)
 
 
 @_jit
-def _rotations(a, j):
-    """exp(j 2 pi .) of p(j), Delta p(j), Delta^2 p(j), Delta^3 p for p = a[0] + a[1] j + a[2] j^2 + a[3] j^3."""
+def _anchor(a, j, rot, row, s):
+    """exp(j 2 pi .) of p(j), Delta p(j), Delta^2 p(j), Delta^3 p into ``rot[row:row + 8, s]`` (re, im pairs),
+    for p = a[0] + a[1] j + a[2] j^2 + a[3] j^3."""
     jf = float(j)
     p = a[0] + jf * (a[1] + jf * (a[2] + jf * a[3]))
     d1 = a[1] + a[2] * (2.0 * jf + 1.0) + a[3] * (3.0 * jf * jf + 3.0 * jf + 1.0)
     d2 = 2.0 * a[2] + a[3] * (6.0 * jf + 6.0)
-    return _cis(p), _cis(d1), _cis(d2), _cis(6.0 * a[3])
+    rot[row, s], rot[row + 1, s] = _cis(p)
+    rot[row + 2, s], rot[row + 3, s] = _cis(d1)
+    rot[row + 4, s], rot[row + 5, s] = _cis(d2)
+    rot[row + 6, s], rot[row + 7, s] = _cis(6.0 * a[3])
 
 
 @_jit
-def add_comb_pieces(coef, poly, amp, offset, length, out):
-    """Add the comb of every piece to ``out``.
+def add_comb_segments(coef, poly, amp, offset, length, out):
+    """Add the combs of every satellite over every segment to ``out``.
 
     Parameters
     ----------
     coef : ndarray of complex128, (n_tones,)
         Tone amplitude times exp(j phase), lowest tone first.
-    poly : ndarray, (n_pieces, 2, 4)
+    poly : ndarray, (n_segments, n_sats, 2, 4)
         Coefficients a0..a3 [cycles] of the lead psi (row 0) and the comb
-        phase theta (row 1) in the piece's sample index.
-    amp : ndarray, (n_pieces, 2)
-        Tone amplitude at the piece's first sample and its change per sample.
-    offset, length : ndarray of int, (n_pieces,)
-        First sample of each piece in ``out`` and its number of samples.
+        phase theta (row 1) in the segment's sample index.
+    amp : ndarray, (n_segments, n_sats, 2)
+        Tone amplitude at the segment's first sample and its change per sample.
+    offset, length : ndarray of int, (n_segments,)
+        First sample of each segment in ``out`` and its number of samples.
     out : ndarray of complex128, (n,)
     """
-    n_coef = coef.size
-    for p in range(offset.size):
-        for j0 in range(0, length[p], ANCHOR_SAMPLES):
-            lead, l1, l2, l3 = _rotations(poly[p, 0], j0)
-            z, z1, z2, z3 = _rotations(poly[p, 1], j0)
-            for j in range(j0, min(j0 + ANCHOR_SAMPLES, length[p])):
-                acc = coef[n_coef - 1]
-                for k in range(n_coef - 2, -1, -1):
-                    acc = acc * z + coef[k]
-                out[offset[p] + j] += (amp[p, 0] + amp[p, 1] * j) * (lead * acc)
-                lead *= l1
-                l1 *= l2
-                l2 *= l3
-                z *= z1
-                z1 *= z2
-                z2 *= z3
+    n_sats, n_coef = poly.shape[1], coef.size
+    c_re, c_im = coef.real.copy(), coef.imag.copy()
+    rot = np.empty((16, n_sats))  # lead, its three rotations, z, its three: (re, im) rows
+    acc_re, acc_im = np.empty(n_sats), np.empty(n_sats)
+    for g in range(offset.size):
+        for j0 in range(0, length[g], ANCHOR_SAMPLES):
+            for s in range(n_sats):
+                _anchor(poly[g, s, 0], j0, rot, 0, s)
+                _anchor(poly[g, s, 1], j0, rot, 8, s)
+            for j in range(j0, min(j0 + ANCHOR_SAMPLES, length[g])):
+                z_re, z_im = rot[8], rot[9]
+                acc_re[:] = c_re[n_coef - 1]
+                acc_im[:] = c_im[n_coef - 1]
+                for k in range(n_coef - 2, -1, -1):  # Horner over the tones, each satellite's z
+                    ck_re, ck_im = c_re[k], c_im[k]  # (hoisted by hand: the stores below might alias them)
+                    for s in range(n_sats):
+                        re = acc_re[s] * z_re[s] - acc_im[s] * z_im[s] + ck_re
+                        acc_im[s] = acc_re[s] * z_im[s] + acc_im[s] * z_re[s] + ck_im
+                        acc_re[s] = re
+                tot_re = tot_im = 0.0
+                for s in range(n_sats):
+                    m = amp[g, s, 0] + amp[g, s, 1] * j
+                    tot_re += m * (rot[0, s] * acc_re[s] - rot[1, s] * acc_im[s])
+                    tot_im += m * (rot[0, s] * acc_im[s] + rot[1, s] * acc_re[s])
+                out[offset[g] + j] += complex(tot_re, tot_im)
+                for w in range(2):  # phase, Delta, Delta^2 each times the next: one sample on
+                    b = 8 * w
+                    for s in range(n_sats):
+                        r0, i0, r1, i1 = rot[b, s], rot[b + 1, s], rot[b + 2, s], rot[b + 3, s]
+                        r2, i2, r3, i3 = rot[b + 4, s], rot[b + 5, s], rot[b + 6, s], rot[b + 7, s]
+                        rot[b, s] = r0 * r1 - i0 * i1
+                        rot[b + 1, s] = r0 * i1 + i0 * r1
+                        rot[b + 2, s] = r1 * r2 - i1 * i2
+                        rot[b + 3, s] = r1 * i2 + i1 * r2
+                        rot[b + 4, s] = r2 * r3 - i2 * i3
+                        rot[b + 5, s] = r2 * i3 + i2 * r3
