@@ -42,6 +42,8 @@ def comb_segments(channel, start: int, count: int) -> tuple[npt.NDArray[np.float
     Parameters
     ----------
     channel : SiteChannel
+        Its range spline, node amplitudes, clocks and phases are read (the
+        companion of :meth:`~leosop.signal.channel.SiteChannel.samples`).
     start, count : int
 
     Returns
