@@ -37,7 +37,8 @@ Left in their modules: the coarse and fine stages behind
 the status), the multi-comb machinery (:mod:`.comb_grid`, :mod:`.comb_fit`),
 the OFDM downlink (:mod:`.ofdm`, its own facade over :mod:`.ofdm_frame`,
 :mod:`.ofdm_downlink`, :mod:`.pss`, :mod:`.pss_track`), the front-end model of the
-generator (:mod:`.frontend`), the receiver's cleaning and the recording survey of
+generator (:mod:`.frontend`), its compiled comb synthesis (:mod:`.comb_phases`,
+:mod:`.combkernels`, with numba), the receiver's cleaning and the recording survey of
 ``leosop doctor`` (:mod:`.cleaning`, :mod:`.survey`), recorder
 conventions (:mod:`.recorders`) and the FFTW plans (:mod:`.fft`). The
 spectrogram figure is in :mod:`leosop.plots.spectra`.

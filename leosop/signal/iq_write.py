@@ -129,13 +129,16 @@ def write_sigmf_files(data_file, meta_file, chunks, *, sample_rate_hz, center_hz
             str(k).startswith("leosop:") for _, _, md in annotations for k in md):
         # The leosop: keys (comb layout, truth, draws) are declared as an optional extension.
         info[sigmf.EXTENSIONS_KEY] = [{"name": "leosop", "version": SIGMF_EXTENSION_VERSION, "optional": True}]
-    meta = SigMFFile(global_info=info)
     if starts[-1] >= n:
         raise InputError(f"write_sigmf: capture at sample {starts[-1]} but only {n} samples were written")
+    # The annotations as SigMFFile.add_annotation writes them (its stable sort by start of the list in order
+    # given), sorted once: add_annotation sorts the whole list at each call, quadratic in their number.
+    notes = sorted(({**md, sigmf.SAMPLE_START_KEY: int(start), sigmf.SAMPLE_COUNT_KEY: int(count)}
+                    for start, count, md in annotations), key=lambda a: a[sigmf.SAMPLE_START_KEY])
+    meta = SigMFFile(metadata={SigMFFile.GLOBAL_KEY: {}, SigMFFile.CAPTURE_KEY: [], SigMFFile.ANNOTATION_KEY: notes},
+                     global_info=info)
     for start, t in captures:
         meta.add_capture(start, metadata={sigmf.FREQUENCY_KEY: float(center_hz),
                                           sigmf.DATETIME_KEY: _format_utc_ns(t)})
-    for start, count, md in annotations:
-        meta.add_annotation(int(start), int(count), metadata=md)
     Path(meta_file).write_text(meta.dumps(pretty=True) + "\n")
     return n

@@ -9,7 +9,7 @@ import pytest
 
 from leosop.cli import main
 from leosop.signal.cleaning import clean_block
-from leosop.signal.frontend import FrontEnd, image_rejection_db, wiener_doppler_sigma_hz
+from leosop.signal.frontend import FrontEnd, _ar1, image_rejection_db, wiener_doppler_sigma_hz
 from leosop.signal.iq import open_sigmf
 from leosop.signal.multicomb import find_combs
 from leosop.signal.pilot import PilotComb, add_noise
@@ -123,6 +123,22 @@ def test_pll_floor_phase_variance():
     phase = np.angle(fe.apply(np.ones(t.size), t, fs, 100.0, np.random.default_rng(8)))
     # 400k samples, correlation time 16 us: ~25 000 independent values, the variance good to ~1 %; 5 %.
     assert np.var(phase) == pytest.approx(np.pi * 10e3 * 1e-6, rel=0.05)
+
+
+def test_pll_floor_recursion_late_in_a_recording():
+    """Past t = 32 s float sample times jitter dt by ~ulp(t): still one recursion per capture."""
+    fs, rate = 4e6, 2 * np.pi * 30e3
+    t = np.concatenate([100.0 + np.arange(3000) / fs, 101.0 + np.arange(3000) / fs])  # a snapshot gap
+    a = np.exp(-rate * np.diff(t, prepend=t[0] - 1 / fs))
+    assert np.ptp(a[1:3000]) > 1e-9 * a[1]  # the jitter that split the old runs (rtol 1e-9)
+    drive = np.random.default_rng(9).standard_normal(t.size)
+    ref = np.empty(t.size)  # second implementation: the recursion sample by sample, each sample its own a
+    x = 0.3
+    for k in range(t.size):
+        ref[k] = x = a[k] * x + drive[k]
+    # Runs share a to 1e-5 of itself (frontend._ar1); the state is a sum of drives decaying by a per
+    # sample, each off by < 1e-5 relative: 1e-5 of the |x| scale (~1/sqrt(1 - a^2) ~ 5) is the bound.
+    np.testing.assert_allclose(_ar1(a, drive, 0.3), ref, rtol=0, atol=1e-5 * np.max(np.abs(ref)))
 
 
 def test_agc_steps_leave_cn0_alone(tmp_path):

@@ -233,3 +233,17 @@ def test_sha512_checked_refuses_a_modified_file_after_the_body(tmp_path):
     assert "odd" in str(info.value.__cause__)
     with pytest.raises(InputError, match="core:sha512"):
         open_sigmf(meta)  # verify=True checks at once, as before
+
+
+def test_annotations_in_the_order_sigmf_adds_them(tmp_path):
+    # Given out of order and with equal starts: written as sigmf's own add_annotation, one call
+    # each (its stable sort at every call), writes them (a second implementation).
+    notes = [(300, 10, {"leosop:sat_id": "b"}), (0, 10, {"leosop:sat_id": "a"}), (300, 5, {"leosop:sat_id": "c"}),
+             (100, 1, {"leosop:doppler_hz": 2.5})]
+    meta = tmp_path / "rec.sigmf-meta"
+    write_sigmf(meta, [_samples(400)], sample_rate_hz=FS, center_hz=11.325e9, start_utc="2025-01-01T19:40:00Z",
+                annotations=notes)
+    ref = sigmffile.SigMFFile()
+    for start, count, md in notes:
+        ref.add_annotation(start, count, metadata=dict(md))
+    assert json.loads(meta.read_text())["annotations"] == ref.get_annotations()
