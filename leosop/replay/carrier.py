@@ -35,7 +35,14 @@ filter's frequency, a lock indicator (the coherent SNR over :data:`LOCK_SNR`)
 and a cycle-slip flag (normalised innovation squared over :data:`SLIP_NIS`:
 a phase jump the prediction cannot explain). The whole cycles are continuous
 within an ``arc``; a slip, or a prediction whose phase sigma exceeds
-:data:`ARC_SIGMA_CYCLES` (a long loss of lock), starts a new one.
+:data:`ARC_SIGMA_CYCLES` (the filter's own variance propagated over a gap: a
+loss of lock, a missing block), starts a new one. A new arc's phase holds no
+frequency (its integer is gone), so its first block re-acquires the frequency
+and rate from its own :data:`SEGMENTS` segments (the comb fit at the
+prediction; 0.04 Hz and 3 Hz/s at 1e-3 cycles a 0.1 s block): left as
+predicted over the gap, they kept every later prediction past
+:data:`ARC_SIGMA_CYCLES` and each block started an arc of its own (with the
+default process noise one missing 0.1 s block already gives 0.24 cycles).
 
 The phase is the received central tone's, not the template's: tone k of a
 comb arrives with the phase of its transmitter, common to every receiver,
@@ -69,7 +76,7 @@ not ``lock``). The filter still takes it: its error (at most 0.03 cycles
 measured) is well within the prediction's sigma (~0.07 cycles a block with
 the default process noise: no slip), and the next blocks' phases are
 measured, not predicted. Left out of the filter, the prediction over two
-blocks would pass :data:`ARC_SIGMA_CYCLES` and start a new arc.
+blocks (0.24 cycles) would pass :data:`ARC_SIGMA_CYCLES` and start one new arc.
 
 What cannot be tracked across snapshot gaps: a snapshot recording (20 ms
 every second, DESIGN 4.2) gives no accumulated phase. Over a gap of a second
