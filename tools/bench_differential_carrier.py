@@ -183,6 +183,7 @@ def iq_level(seeds, duration_s, spans_s, workdir=None):
     from leosop.cli import main as leosop_main
 
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
+    enu = C_e_n(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]))
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
         keep = workdir is not None
@@ -210,8 +211,10 @@ def iq_level(seeds, duration_s, spans_s, workdir=None):
                                                                            (f.pos_ecef_m, f.cov)))
                     amb = ", ".join(f"{a - np.round(a):+.3f}+-{s:.3f}" for a, s in zip(f.ambiguity_cycles,
                                                                                    f.ambiguity_sigma_cycles))
+                    sig = " / ".join(f"{v:.4f}" for v in np.sqrt(np.diag(enu.T @ f.cov @ enu)))
                     print(f"IQ seed {seed} {span:3g} s {name:5s}: float {fl[0]:.4f} m (NEES {fl[1]:.2f}), final "
-                          f"{fi[0]:.4f} m (NEES {fi[1]:.2f}), {f.status} {f.n_fixed}/{f.n_ambiguities} ratio "
+                          f"{fi[0]:.4f} m (NEES {fi[1]:.2f}, sigma E/N/U {sig} m), {f.status} "
+                          f"{f.n_fixed}/{f.n_ambiguities} ratio "
                           f"{f.ratio:.2f}; float ambiguities less the nearest integer {amb} cycles; chi2/dof "
                           f"{f.chi2 / f.dof:.2f}; {time.perf_counter() - tic:.0f} s")
 
