@@ -64,23 +64,25 @@ No 20 s case fixes its integers (the success-rate bound; the ratio test
 alone passed wrong integers on 60 s of SD at 0.01 cycles: NEES 48). About
 0.03-0.2 s per fix (OPENBLAS_NUM_THREADS=1).
 
-IQ (4 satellites, 7.5 km; seeds 5 / 6 / 7): 20 s joint 0.196 / 0.112 /
-0.049 m at sigma up ~0.2 m, single differences 0.71 / 0.54 / 0.27 m;
-chi2/dof 1.06-1.18; no integers (DD sigmas 1.3-8 cycles). 60 s (``--iq-duration-s
-60 --iq-spans-s 20 30 40``): the joint fit fixes all three double
-differences on every seed (ratio 466-1086), 9.8 / 9.4 / 1.5 mm float to
-2.5 / 2.3 / 4.3 mm fixed, NEES 1.19 / 1.98 / 6.70; none at 40 s (DD sigmas
-0.16-0.78 cycles); the single differences fix none in 60 s; chi2/dof 1.5-2.0
-over 40-60 s. Two causes (docs/replay.md), both fixed: the tracker's rate
-lag biased its phase (now the block centre's phase, not the mean's), and
-comb crossings (a tone of one satellite sweeping within 1/T of another's:
-9.8 sigma rms, up to 28, in those blocks; now flagged and left out,
-5-9 blocks per satellite in 60 s, no new arc). With both, on the phases
-tracked from the truth (seeds 5 / 6 / 7): chi2/dof 1.01 / 0.96 / 1.00 at
-20 s, 1.01 / 0.98 / 1.01 at 40 s, 1.00 / 0.99 / 1.02 at 60 s (1.65-1.76 at
-60 s before); 60 s fixes all three double differences, 0.98 / 1.13 / 3.1
-mm, NEES 1.75 / 11.5 / 7.5. ``--iq-workdir /tmp/pairs_{seed}`` keeps the
-pairs and replays them again without generating them (4 minutes a seed).
+IQ (4 satellites, 7.5 km; seeds 5 / 6 / 7; ``--iq-duration-s 60
+--iq-spans-s 20 40``, the tracker started from the comb search, with the
+block-centre phase and the comb crossings left out): 20 s joint 0.206 /
+0.092 m (seed 7 not rerun) at sigma up 0.19 m, single differences 0.62 /
+0.53 m; chi2/dof 0.88-1.01; no integers (DD sigmas 1.3-6.9 cycles). At 40 s
+seeds 5 and 6 fix one of three (8.7 mm float to 43 mm, 61 to 25 mm, sigma
+up 42 mm). At 60 s the joint fit fixes all three double differences on
+every seed (ratio 947 / 495 / 697), 0.7 / 18.7 / 10.5 mm float to 1.1 /
+1.2 / 3.1 mm fixed, NEES 1.01 / 1.72 / 2.53 float and 1.72 / 11.7 / 7.36
+fixed (seed 6 above the 3-dof bound 7.8: 1.2 mm on 0.2 / 0.1 / 2.4 mm
+sigmas); chi2/dof 1.01 / 0.96 / 1.00 at 20 s, 1.01 / 0.98 / 1.01 at 40 s,
+1.00 / 0.99 / 1.02 at 60 s; the single differences fix none in 60 s.
+Before the two tracker fixes (docs/replay.md): 60 s 9.8 / 9.4 / 1.5 mm
+float to 2.5 / 2.3 / 4.3 mm, NEES 1.19 / 1.98 / 6.70 fixed, none at 40 s,
+chi2/dof 1.5-2.0 over 40-60 s. Tracked from the truth instead (seeds 5 / 6
+/ 7): 60 s 0.98 / 1.13 / 3.1 mm fixed, NEES 1.75 / 11.5 / 7.5.
+``--iq-workdir /tmp/pairs_{seed}`` keeps the pairs and replays them again
+without generating them (4 minutes a seed alone, 15-16 with two seeds in
+parallel on a loaded 2-core machine).
 """
 
 import argparse
@@ -193,6 +195,7 @@ def iq_level(seeds, duration_s, spans_s, workdir=None):
     from leosop.cli import main as leosop_main
 
     truth = geodetic_to_ecef(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]), IQ_ROVER[2])
+    enu = C_e_n(np.radians(IQ_ROVER[0]), np.radians(IQ_ROVER[1]))
     site, base_site = ",".join(map(str, IQ_ROVER)), ",".join(map(str, IQ_BASE))
     for seed in seeds:
         keep = workdir is not None
@@ -220,8 +223,10 @@ def iq_level(seeds, duration_s, spans_s, workdir=None):
                                                                            (f.pos_ecef_m, f.cov)))
                     amb = ", ".join(f"{a - np.round(a):+.3f}+-{s:.3f}" for a, s in zip(f.ambiguity_cycles,
                                                                                    f.ambiguity_sigma_cycles))
+                    sig = " / ".join(f"{v:.4f}" for v in np.sqrt(np.diag(enu.T @ f.cov @ enu)))
                     print(f"IQ seed {seed} {span:3g} s {name:5s}: float {fl[0]:.4f} m (NEES {fl[1]:.2f}), final "
-                          f"{fi[0]:.4f} m (NEES {fi[1]:.2f}), {f.status} {f.n_fixed}/{f.n_ambiguities} ratio "
+                          f"{fi[0]:.4f} m (NEES {fi[1]:.2f}, sigma E/N/U {sig} m), {f.status} "
+                          f"{f.n_fixed}/{f.n_ambiguities} ratio "
                           f"{f.ratio:.2f}; float ambiguities less the nearest integer {amb} cycles; chi2/dof "
                           f"{f.chi2 / f.dof:.2f}; {time.perf_counter() - tic:.0f} s")
 

@@ -35,7 +35,14 @@ filter's frequency, a lock indicator (the coherent SNR over :data:`LOCK_SNR`)
 and a cycle-slip flag (normalised innovation squared over :data:`SLIP_NIS`:
 a phase jump the prediction cannot explain). The whole cycles are continuous
 within an ``arc``; a slip, or a prediction whose phase sigma exceeds
-:data:`ARC_SIGMA_CYCLES` (a long loss of lock), starts a new one.
+:data:`ARC_SIGMA_CYCLES` (the filter's own variance propagated over a gap: a
+loss of lock, a missing block), starts a new one. A new arc's phase holds no
+frequency (its integer is gone), so its first block re-acquires the frequency
+and rate from its own :data:`SEGMENTS` segments (the comb fit at the
+prediction; 0.04 Hz and 3 Hz/s at 1e-3 cycles a 0.1 s block): left as
+predicted over the gap, they kept every later prediction past
+:data:`ARC_SIGMA_CYCLES` and each block started an arc of its own (with the
+default process noise one missing 0.1 s block already gives 0.24 cycles).
 
 The phase is the received central tone's, not the template's: tone k of a
 comb arrives with the phase of its transmitter, common to every receiver,
@@ -69,7 +76,7 @@ not ``lock``). The filter still takes it: its error (at most 0.03 cycles
 measured) is well within the prediction's sigma (~0.07 cycles a block with
 the default process noise: no slip), and the next blocks' phases are
 measured, not predicted. Left out of the filter, the prediction over two
-blocks would pass :data:`ARC_SIGMA_CYCLES` and start a new arc.
+blocks (0.24 cycles) would pass :data:`ARC_SIGMA_CYCLES` and start one new arc.
 
 What cannot be tracked across snapshot gaps: a snapshot recording (20 ms
 every second, DESIGN 4.2) gives no accumulated phase. Over a gap of a second
@@ -112,6 +119,10 @@ CURVATURE_WINDOW_S = 1.0
 #: 60 s pairs (seeds 5 / 6 / 7, 14 400 satellite-blocks): phase errors of 9.8 sigma rms (up to 28) where the tones
 #: cross inside the block, 6.0 within 0.5 / T of it, 2.7 at 0.5-1 / T, 1.0-1.9 beyond 1 / T.
 CROSSING_MARGIN = 1.0
+#: Segments of a block whose phases give the block's own frequency and rate (:func:`_frequency_error`): four
+#: leave one degree of freedom over the three of a quadratic phase; more would cost nothing in the correlation
+#: but thin each segment's SNR below the linearisation's (a locked block's 13.8 / 4 is 3.5 already).
+SEGMENTS = 4
 #: Template detection: the tones' incoherent power exceeds this gamma quantile of noise alone with probability 1e-6.
 _TEMPLATE_PFA = 1e-6
 
@@ -181,7 +192,15 @@ def _transition(dt_s, accel_psd, freq_psd):
 
 
 def _correlate(iq, t0_s, fs, x, comb):
-    """Per-tone sums of the block against the predicted comb of each satellite, (n_sats, n_tones)."""
+    """Per-tone sums of the block's :data:`SEGMENTS` segments against the predicted comb of each satellite.
+
+    Returns
+    -------
+    Ys : ndarray, (n_sats, SEGMENTS, n_tones)
+        The segments' sums (the block's is their sum).
+    tau_s : ndarray, (SEGMENTS, 3)
+        Each segment's share of the samples and its mean of ``tau`` and ``tau^2`` (time from the block centre [s]).
+    """
     n = iq.size
     t = t0_s + np.arange(n) / fs
     tau = t - (t0_s + 0.5 * (n - 1) / fs)
@@ -191,7 +210,34 @@ def _correlate(iq, t0_s, fs, x, comb):
     a = (x[:, :1] - np.round(x[:, :1])) + dphi
     b = sp * t + ratio * (x[:, :1] + dphi)
     phasors = comb_phasors(a.ravel(), b.ravel(), comb.n_tones // 2).reshape(x.shape[0], n, comb.n_tones)
-    return np.einsum("n,snk->sk", iq.astype(complex), phasors)
+    cuts = (np.arange(SEGMENTS + 1) * n) // SEGMENTS
+    seg = [slice(i, j) for i, j in zip(cuts[:-1], cuts[1:])]
+    Ys = np.stack([np.einsum("n,snk->sk", iq[g].astype(complex), phasors[:, g]) for g in seg], axis=1)
+    return Ys, np.array([[(g.stop - g.start) / n, np.mean(tau[g]), np.mean(tau[g] ** 2)] for g in seg])
+
+
+def _frequency_error(Ys, template, r, seg):
+    """The block's own frequency and rate error of the prediction from its segments' phases: the comb fit at the
+    prediction, which needs no earlier block.
+
+    Segment m's phase against the block's, linearised (``Im(s_m e^{-j 2 pi z}) / (2 pi w_m |s|)``, ``w_m`` its
+    share of the samples; noise ``r / w_m``), is ``a + b mean(tau) + c mean(tau^2) / 2``: weighted least
+    squares give ``b`` [Hz] and ``c`` [Hz/s] with covariance ``r`` times that of the fit. At the 0.1 s blocks'
+    1e-3 cycles (4 segments): 0.04 Hz and 3 Hz/s, the steady filter's own prediction to the next block.
+
+    Returns
+    -------
+    y : ndarray, (n_sats, 2)
+    R : ndarray, (n_sats, 2, 2)
+    """
+    sm = np.einsum("smk,sk->sm", Ys, np.conj(template))
+    s = sm.sum(axis=1, keepdims=True)
+    w, tau, tau2 = seg.T
+    delta = np.imag(sm * np.exp(-1j * np.angle(s))) / (2 * np.pi * w * np.abs(s))
+    A = np.stack([np.ones_like(w), tau, 0.5 * tau2], axis=1)                # (SEGMENTS, 3)
+    cov = np.linalg.inv(A.T @ (w[:, None] * A))
+    est = delta @ (w[:, None] * A) @ cov                                   # (n_sats, 3)
+    return est[:, 1:], r[:, None, None] * cov[1:, 1:]
 
 
 def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=None, doppler0_sigma_hz=1.0,
@@ -254,7 +300,8 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
             x = x @ Phi.T
             P = Phi @ P @ Phi.T + Q
         t_prev = t_c
-        Y = _correlate(iq, float(t0_s), fs, x, comb)
+        Ys, seg = _correlate(iq, float(t0_s), fs, x, comb)
+        Y = Ys.sum(axis=1)
         noise = _noise(iq, Y)
         crossing = comb_crossings(x[:, 1], x[:, 2], iq.size / fs, comb)
         new = np.isnan(template[:, 0]) & ~crossing & (np.sum(np.abs(Y) ** 2, axis=1) / noise > template_threshold)
@@ -275,6 +322,12 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
         central += np.where(lock, Y[:, comb.n_tones // 2] * np.exp(-2j * np.pi * z), 0.0)
         central_noise += np.where(lock, noise, 0.0)
         x, P = _update(x, P, np.where(use, z, 0.0), np.where(use, r, np.inf), restart)
+        # a new arc after the first: the frequency and rate from the block itself (the phase's integer is gone, so
+        # the phase cannot teach them; left as predicted over a gap, every later block would start an arc too).
+        # After the restart the phase shares no covariance with them: the update leaves the block's phase as is.
+        reacquire = restart & (arc >= 0)
+        if reacquire.any():
+            x, P = _reacquire(x, P, *_frequency_error(Ys, template, r, seg), reacquire)
         arc = np.where(restart, arc + 1, arc)
         rows.append((t_c, phase, np.where(lock, np.sqrt(r), np.nan), x[:, 1].copy(), np.sqrt(P[:, 1, 1]),
                      x[:, 2].copy(), snr, lock, slip, arc.copy(), crossing, half_sq))
@@ -378,6 +431,18 @@ def _update(x, P, y, r, restart):
     ikh = np.eye(3) - k[:, :, None] * np.array([1.0, 0.0, 0.0])[None, None, :]
     r_used = np.where(np.isfinite(r), r, 0.0)[:, None, None]
     P = ikh @ P @ np.swapaxes(ikh, 1, 2) + r_used * k[:, :, None] * k[:, None, :]
+    return x, 0.5 * (P + np.swapaxes(P, 1, 2))
+
+
+def _reacquire(x, P, y, R, rows):
+    """Update of the frequency and rate of ``rows`` by their measured errors ``y`` (n_sats, 2), covariance ``R``."""
+    x = x.copy()
+    P = P.copy()
+    H = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    K = P[rows] @ H.T @ np.linalg.inv(H @ P[rows] @ H.T + R[rows])         # (n_rows, 3, 2)
+    x[rows] += np.einsum("sij,sj->si", K, y[rows])
+    ikh = np.eye(3) - K @ H
+    P[rows] = ikh @ P[rows] @ np.swapaxes(ikh, 1, 2) + K @ R[rows] @ np.swapaxes(K, 1, 2)
     return x, 0.5 * (P + np.swapaxes(P, 1, 2))
 
 
