@@ -62,7 +62,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.stats import chi2 as chi2_dist
 
-from ..constants import C_MPS
+from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..gnss.lambda_ import partial_fix
 from .differential import ORBIT_SIGMA_RTN_M, rtn_frames
@@ -287,11 +287,15 @@ def solve_differential_carrier(t_s, phase_rover_cycles, sigma_rover_cycles, arc_
                   / np.maximum(np.bincount(key[use], minlength=col.size), 1) / lam)   # (n_keys,)
     y = np.where(use, y - lam * n0[np.maximum(key, 0)], 0.0)
     base_design = base_design[..., :-1]                                  # the datums' column: held at zero
+    # The rover's light time from the current position, not the first guess (30 m: 0.8 mm of satellite motion).
+    # A longer light time tau moves the apparent position R(w tau) r(t - tau) by -(v + w x r) tau: the inertial
+    # velocity in ECEF axes, not v_sv (the rate over reception time), which lacks w x r (~400 m/s; left out, 30 m
+    # of first guess biased the joint 60 s fix by 0.5 mm, its NEES 5.4, tools/bench_differential_carrier.py).
+    v_in = v_sv + np.cross([0.0, 0.0, OMEGA_E_RAD_PER_S], p_r0)
     d = np.zeros((n_sats, 3))      # element-set offsets, relinearised (their square over the range: 0.1 mm here)
     for it in range(1, _MAX_ITER + 1):
-        # the rover's light time from the current position, not the first guess (30 m: 0.8 mm of satellite motion)
         off = np.einsum("skij,sj->ski", C_rtn, d)
-        q_r = p_r0 + off - v_sv * ((np.linalg.norm(p_r0 - x, axis=-1) - rho_r0) / C_MPS)[..., None]
+        q_r = p_r0 + off - v_in * ((np.linalg.norm(p_r0 - x, axis=-1) - rho_r0) / C_MPS)[..., None]
         q_b = p_b + off
         rho_r, rho_b = np.linalg.norm(q_r - x, axis=-1), np.linalg.norm(q_b - base, axis=-1)
         u_r, u_b = (q_r - x) / rho_r[..., None], (q_b - base) / rho_b[..., None]
