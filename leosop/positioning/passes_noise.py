@@ -58,8 +58,9 @@ _SOKAL_C = 5.0
 #: Directions of the pass offsets' information ``F`` kept by the disagreement test, relative to its largest
 #: eigenvalue: ``F = M - G^T N^-1 G`` loses ~1e-10 of that to cancellation (negative eigenvalues of
 #: -1e-10 on 10 s replays, whose spectrum runs on down to 1e-12), so a cut near it (1e-9 before) kept or
-#: dropped a direction on round-off, and a Doppler change of 1e-6 Hz moved ``k2`` by 5 %.
-_RANK_RTOL = 1e-6
+#: dropped a direction on round-off, and a Doppler change of 1e-6 Hz moved ``k2`` by 5 %; 1e-3 of the
+#: cut is round-off's reach here.
+_RANK_RTOL = 1e-7
 #: A pass's sigma is scaled only when its tau exceeds 1 by this many white-noise standard deviations.
 _TAU_SIGNIFICANCE = 3.0
 
