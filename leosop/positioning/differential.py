@@ -88,8 +88,6 @@ MOTIONS = ("rest", "constant_velocity")
 #: Convergence thresholds of the clock terms: 10 uHz and 0.1 uHz/s (higher terms divided by powers of the
 #: half span).
 _XTOL_CLOCK = (1e-5, 1e-7)
-#: A step shorter than this fraction of the posterior sigma along it ends the iteration (as the static fixes).
-_STEP_SIGMA_TOL = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -394,8 +392,7 @@ def solve_differential(rover, base, base_pos_ecef_m, *, pos0_ecef_m=None, block_
     m_all = np.concatenate([~pad, ~present, np.ones((n_b, n_orb), bool)], axis=-1)
     fixed = np.arange(width + n_prior) >= width
     x, res, J, Q, used_all, iterations, chi2, solver_status = solve_robust(
-        model, x0, y_all, s_all, m_all, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha, fixed=fixed,
-        step_sigma_tol=_STEP_SIGMA_TOL)
+        model, x0, y_all, s_all, m_all, n_states, xtol=xtol, max_iter=max_iter, alpha=alpha, fixed=fixed)
     used_b = used_all[:, :width]
     solved = np.isin(solver_status, (FixStatus.OK, FixStatus.INCONSISTENT))
     x = np.where(solved[:, None], x, np.nan)

@@ -55,6 +55,12 @@ __all__ = ["PASS_OFFSET_MAX_M", "fix_covariance", "integrated_autocorrelation", 
 PASS_OFFSET_MAX_M = 1000.0
 #: Sokal's window constant: the autocorrelation sum runs to the first lag M >= C tau(M).
 _SOKAL_C = 5.0
+#: Directions of the pass offsets' information ``F`` kept by the disagreement test, relative to its largest
+#: eigenvalue: ``F = M - G^T N^-1 G`` loses ~1e-10 of that to cancellation (negative eigenvalues of
+#: -1e-10 on 10 s replays, whose spectrum runs on down to 1e-12), so a cut near it (1e-9 before) kept or
+#: dropped a direction on round-off, and a Doppler change of 1e-6 Hz moved ``k2`` by 5 %; 1e-3 of the
+#: cut is round-off's reach here.
+_RANK_RTOL = 1e-7
 #: A pass's sigma is scaled only when its tau exceeds 1 by this many white-noise standard deviations.
 _TAU_SIGNIFICANCE = 3.0
 
@@ -171,7 +177,7 @@ def pass_disagreement(F, g):
     agree (their likelihood is largest without either).
     """
     lam, V = np.linalg.eigh(0.5 * (F + F.T))
-    keep = lam > 1e-9 * max(lam[-1], 0.0) if lam.size and lam[-1] > 0 else np.zeros(lam.size, bool)
+    keep = lam > _RANK_RTOL * max(lam[-1], 0.0) if lam.size and lam[-1] > 0 else np.zeros(lam.size, bool)
     lam, z2 = lam[keep], (V[:, keep].T @ g) ** 2
     dof = int(keep.sum())
     if not dof:

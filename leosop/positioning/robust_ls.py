@@ -3,7 +3,8 @@
 One Levenberg-Marquardt iteration (Gauss-Newton, [Shen 2024] eq. 11-12, with
 Marquardt damping on the Jacobi-scaled normal equations, so that a start
 1,000 km away converges) runs over many problems at once, with an iteration
-cap and per-state step thresholds. Measurements are weighted by
+cap; convergence is judged on the undamped Gauss-Newton step, per state and
+in units of the posterior sigma (:func:`_levenberg_marquardt`). Measurements are weighted by
 ``1 / sigma**2``; the cofactor ``(J^T W J)^-1`` at the solution is the
 covariance.
 
@@ -26,10 +27,14 @@ from scipy.stats import norm as norm_dist
 
 from ..geometry.dop import cofactor
 
-__all__ = ["FixStatus", "BatchFit", "batch_rows", "solve_robust", "XTOL_POS_M", "EQUAL_FIT_SIGMAS"]
+__all__ = ["FixStatus", "BatchFit", "batch_rows", "solve_robust", "XTOL_POS_M", "STEP_SIGMA_TOL", "EQUAL_FIT_SIGMAS"]
 
 #: Step threshold of convergence of a position [m]: 0.1 mm.
 XTOL_POS_M = 1e-4
+#: A fix has also converged when its Gauss-Newton step is below this fraction of the posterior sigma
+#: along it (a weakly determined direction then needs no sub-millimetre steps); the step is then taken,
+#: which leaves it ~this squared short.
+STEP_SIGMA_TOL = 1e-3
 #: Solutions from different starts fit the data equally well when their chi-squares differ by less
 #: than this many standard deviations of a chi-square, ``sqrt(2 dof)`` (e.g. a pass's mirror image).
 EQUAL_FIT_SIGMAS = 3.0
@@ -130,18 +135,29 @@ def batch_rows(doppler_hz, sigma_hz, pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz,
     return y, sigma, f0, t, r_s, v_s, m
 
 
-def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
+def _levenberg_marquardt(model, x0, y, w, xtol, max_iter):
     """Damped Gauss-Newton over independent problems.
 
     ``model(x, idx, w)`` gives predictions (k, m) and Jacobians (k, m, n) of
     the problems ``idx`` at states ``x`` (k, n) with row weights ``w`` (k, m)
     (a model that eliminates linear states needs them); ``y``, ``w`` (P, m)
-    are the measurements and weights (0 drops a row). A problem has
-    converged when its step is below ``xtol`` (n,) in every state, or, with
-    ``step_sigma_tol``, when an accepted step's length in units of the
-    posterior sigma, ``sqrt(dx^T J^T W J dx)``, is below it (a weakly
-    determined direction then needs no sub-millimetre steps). Returns ``x,
-    iterations, converged``.
+    are the measurements and weights (0 drops a row).
+
+    Convergence is judged at the current iterate on its undamped
+    Gauss-Newton step ``dx = N^-1 g`` (``N = J^T W J``, ``g = J^T W r``),
+    never on a damped or rejected trial step: a problem has converged when
+    that step is below ``xtol`` (n,) in every state, or when its length in
+    units of the posterior sigma, ``sqrt(dx^T N dx) = sqrt(g^T N^-1 g)``
+    (the linear model's whole chi-square decrease, square-rooted), is below
+    :data:`STEP_SIGMA_TOL`. It then takes that step without the cost test (its
+    decrease is at the cost's round-off), so that the solution is the
+    minimum to second order whatever path led there. A trial step's cost
+    test is at the mercy of round-off near the minimum: judged on the
+    damped steps, a run of rejections shrank the step below ``xtol`` and
+    stopped a weak geometry (GDOP ~200) up to ~1e-3 of its sigma short,
+    wherever the path happened to be. A problem whose damping reaches its
+    bound on a rejected step has stalled and stops unconverged. Returns
+    ``x, iterations, converged``.
     """
     n_prob, n = x0.shape
     x = x0.copy()
@@ -161,9 +177,21 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
         g = np.einsum("pmi,pm->pi", Ja, wa * ra)
         d = np.sqrt(np.diagonal(N, axis1=-2, axis2=-1))
         d = np.where(d > 0, d, 1.0)
-        Ns = N / (d[:, :, None] * d[:, None, :]) + lam[active, None, None] * eye
-        dx = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
+        Ns = N / (d[:, :, None] * d[:, None, :])
+        gs = (g / d)[..., None]
+        iterations[active] += 1
+        # The Gauss-Newton step (damping at its floor only to keep a singular N solvable) and the test.
+        dx_gn = np.linalg.solve(Ns + _DAMPING_MIN * eye, gs)[..., 0] / d
+        done = np.all(np.abs(dx_gn) <= xtol, axis=-1) | (np.einsum("pi,pi->p", g, dx_gn) <= STEP_SIGMA_TOL**2)
+        done &= np.isfinite(dx_gn).all(-1)
+        x[active[done]] += dx_gn[done]
+        converged[active[done]] = True
+        active, Ns, gs, N, g = active[~done], Ns[~done], gs[~done], N[~done], g[~done]
+        if active.size == 0:
+            break
+        dx = np.linalg.solve(Ns + lam[active, None, None] * eye, gs)[..., 0] / d[~done]
         xt = x[active] + dx
+        wa = w[active]
         pt, Jt = model(xt, active, wa)
         rt = np.where(wa > 0, y[active] - pt, 0.0)
         ct = np.einsum("pm,pm->p", wa, rt * rt)
@@ -174,14 +202,10 @@ def _levenberg_marquardt(model, x0, y, w, xtol, max_iter, step_sigma_tol=None):
             good = accept & ((cost[active] - ct) >= _GAIN_MIN * predicted)
         acc = active[accept]
         x[acc], J[acc], r[acc], cost[acc] = xt[accept], Jt[accept], rt[accept], ct[accept]
+        stalled = ~accept & (lam[active] >= _DAMPING_MAX)
         lam[active] = np.where(good, np.maximum(lam[active] / _DAMPING_FACTOR, _DAMPING_MIN),
                                np.minimum(lam[active] * _DAMPING_FACTOR, _DAMPING_MAX))
-        iterations[active] += 1
-        done = np.all(np.abs(dx) <= xtol, axis=-1)
-        if step_sigma_tol is not None:
-            done |= accept & (np.einsum("pi,pij,pj->p", dx, N, dx) <= step_sigma_tol**2)
-        converged[active[done]] = True
-        active = active[~done]
+        active = active[~stalled]
     return x, iterations, converged
 
 
@@ -201,7 +225,7 @@ def _group_argmax(values, groups):
 
 
 def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, fixed=None, x_alt=None,
-                  groups=None, step_sigma_tol=None):
+                  groups=None):
     """LM, then chi-square test and w-test exclusions one at a time.
 
     Returns ``x, residuals, J, Q (weighted cofactor; times ``chi2 / dof`` for an
@@ -211,7 +235,7 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
     (m,), e.g. the pass of each row) each round excludes the largest
     standardised residual of every group whose largest one exceeds the
     two-sided normal critical value at ``alpha`` (one row per pass at a time
-    instead of one in all), and stops when none does. ``step_sigma_tol``: see
+    instead of one in all), and stops when none does. Convergence: see
     :func:`_levenberg_marquardt`.
     """
     n_prob = x0.shape[0]
@@ -228,7 +252,7 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
     while todo.size:
         sub = lambda xs, i, w_, todo=todo: model(xs, todo[i], w_)  # noqa: E731
         w = np.where(used[todo], w_all[todo], 0.0)
-        xs, it, conv = _levenberg_marquardt(sub, x[todo], y[todo], w, xtol, max_iter, step_sigma_tol)
+        xs, it, conv = _levenberg_marquardt(sub, x[todo], y[todo], w, xtol, max_iter)
         iterations[todo] += it
         pred, J = model(xs, todo, w)
         r = np.where(used[todo], y[todo] - pred, 0.0)
@@ -241,8 +265,7 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
             if retry.any():
                 k = np.flatnonzero(retry)
                 sub2 = lambda xs, i, w_, p=todo[k]: model(xs, p[i], w_)  # noqa: E731
-                xs2, it2, conv2 = _levenberg_marquardt(sub2, x_alt[todo[k]], y[todo[k]], w[k], xtol,
-                                                                 max_iter, step_sigma_tol)
+                xs2, it2, conv2 = _levenberg_marquardt(sub2, x_alt[todo[k]], y[todo[k]], w[k], xtol, max_iter)
                 iterations[todo[k]] += it2
                 pred2, J2 = model(xs2, todo[k], w[k])
                 r2 = np.where(used[todo[k]], y[todo[k]] - pred2, 0.0)

@@ -50,8 +50,6 @@ TIME_OFFSET_MODELS = ("inertial", "earth_fixed")
 #: Default prior standard deviation of a satellite's own frequency offset, clock "common" [Hz]
 #: (Starlink: 0-5 Hz, [Shen 2024] Table 1).
 SAT_OFFSET_SIGMA_HZ = 5.0
-#: Fixes also stop when a step is below this fraction of the posterior sigma along it.
-_STEP_SIGMA_TOL = 1e-3
 #: A solution sees a used row's satellite if it is above minus this elevation [deg]: refraction at VHF
 #: near the horizon is below 1 deg; the margin also covers a station on a mast or a hill.
 HORIZON_TOL_DEG = 2.0
@@ -249,8 +247,9 @@ def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_
     complement) and iterates on the position alone with the projected
     Jacobian ``(I - A K) D``, ``D`` the position derivative at fixed linear
     terms (the exact gradient even though the rate column depends on the
-    position). The iteration stops when a step is below 0.1 mm or 1e-3 of
-    the posterior sigma along it. Priors enter as pseudo-rows (never
+    position). The iteration stops, after taking it, when the Gauss-Newton
+    step is below 0.1 mm or 1e-3 of the posterior sigma along it
+    (:func:`~leosop.positioning.robust_ls.solve_robust`). Priors enter as pseudo-rows (never
     excluded), so chi-square and degrees of freedom count them. The
     covariance is that of the full state. Passes on opposite sides of the
     station resolve the mirror ambiguity of a single pass. Outliers are
@@ -359,7 +358,7 @@ def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_
         k = len(x0)
         ys, ss, ms = (np.broadcast_to(a, (k, rows.y.size)) for a in (rows.y, sigma, used))
         return solve_robust(model, x0, ys, ss, ms, rows.n_states, xtol=xtol, max_iter=max_iter, alpha=alpha_,
-                            fixed=rows.fixed, groups=rows.groups, step_sigma_tol=_STEP_SIGMA_TOL)
+                            fixed=rows.fixed, groups=rows.groups)
 
     if pos0_ecef_m is not None:
         starts = np.asarray(pos0_ecef_m, dtype=float).reshape(-1, 3)
