@@ -333,17 +333,16 @@ def track_carrier(blocks, sample_rate_hz, doppler0_hz, rate0_hz_per_s, *, comb=N
                      x[:, 2].copy(), snr, lock, slip, arc.copy(), crossing, half_sq))
     if not rows:
         raise InputError("no blocks to track")
-    cols = [np.array(c) if k in (0, 11) else np.stack(c, axis=1) for k, c in enumerate(zip(*rows))]
-    half_sq = cols.pop()
-    lock = cols[7]
+    (t_s, phase, sigma, doppler, doppler_sigma, rate, snr, lock, slip, arc, crossing, half_sq) = (
+        np.array(c) if k in (0, 11) else np.stack(c, axis=1) for k, c in enumerate(zip(*rows)))
     # the block centre's phase: the mean phase less half the phase's curvature times the mean squared time
-    cols[1] = cols[1] - _curvature(cols[0], cols[1], cols[9], lock, cols[5]) * half_sq
+    phase = phase - _curvature(t_s, phase, arc, lock, rate) * half_sq
     # the central tone's coherent sum over the locked blocks: its angle and its SNR |sum|^2 / sum of noise powers
     ref_cycles = np.angle(central) / (2 * np.pi)
     ref_snr = np.abs(central) ** 2 / np.where(central_noise > 0, central_noise, np.inf)
     ref_sigma = 1.0 / (2 * np.pi * np.sqrt(2.0 * ref_snr))
-    cols[1] = cols[1] + ref_cycles[:, None]
-    return CarrierTracks(cols[0], cols[1], cols[2], np.where(lock, ref_sigma[:, None], np.nan), *cols[3:])
+    return CarrierTracks(t_s, phase + ref_cycles[:, None], sigma, np.where(lock, ref_sigma[:, None], np.nan),
+                         doppler, doppler_sigma, rate, snr, lock, slip, arc, crossing)
 
 
 def comb_crossings(doppler_hz, rate_hz_per_s, block_s, comb, margin=CROSSING_MARGIN):
