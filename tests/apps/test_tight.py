@@ -53,23 +53,28 @@ def _lag1_pairs(result):
     return np.stack([d["normalized"][:-1][nxt], d["normalized"][1:][nxt]])
 
 
-def test_filter_is_consistent_on_short_flights():
-    # Measurement-level Doppler with the Table 1 satellite offsets and orbit
-    # errors, which the tight filter models: NEES of position and velocity
-    # within [0.5, 2] of its dimension (issue 6) and the NIS sum in the 99.9 %
-    # interval of a chi-square with the total degrees of freedom.
-    scenario = dataclasses.replace(XIAN_BAOJI, duration_s=90.0)
+def _assert_tight_consistent(scenario, seeds=range(8)):
+    """NEES, NIS sum and lag-1 whiteness of the tight filter over ``seeds`` measurement-level runs."""
     nees, nis, dof, lag = [], [], [], []
-    for seed in range(8):
+    for seed in seeds:
         r = run_scenario(scenario, level="measurement", seed=seed, coupling="tight")
         nees.append(r.nees()[1:])
         a, b = r.nis()
         nis.append(a)
         dof.append(b)
         lag.append(_lag1_pairs(r))
-    # Whiteness from each satellite's normalised innovations, m ~ 6000 pairs.
     assert_filter_consistent(np.concatenate(nees), np.concatenate(nis).sum(), np.concatenate(dof).sum(),
                              *np.concatenate(lag, axis=1))
+
+
+def test_filter_is_consistent_on_short_flights():
+    # Measurement-level Doppler with the Table 1 satellite offsets and orbit
+    # errors, which the tight filter models: NEES of position and velocity
+    # within [0.5, 2] of its dimension (issue 6) and the NIS sum in the 99.9 %
+    # interval of a chi-square with the total degrees of freedom.
+    scenario = dataclasses.replace(XIAN_BAOJI, duration_s=90.0)
+    # Whiteness from each satellite's normalised innovations, m ~ 6000 pairs.
+    _assert_tight_consistent(scenario)
 
 
 def test_filter_is_consistent_under_the_common_orbit_shift():
@@ -85,16 +90,7 @@ def test_filter_is_consistent_under_the_common_orbit_shift():
     # 4 / sqrt(m) = 0.050 bound).
     leo = dataclasses.replace(XIAN_BAOJI.leo, orbit_error_m=60.0, orbit_error_model="common")
     scenario = dataclasses.replace(XIAN_BAOJI, duration_s=90.0, leo=leo)
-    nees, nis, dof, lag = [], [], [], []
-    for seed in range(8):
-        r = run_scenario(scenario, level="measurement", seed=seed, coupling="tight")
-        nees.append(r.nees()[1:])
-        a, b = r.nis()
-        nis.append(a)
-        dof.append(b)
-        lag.append(_lag1_pairs(r))
-    assert_filter_consistent(np.concatenate(nees), np.concatenate(nis).sum(), np.concatenate(dof).sum(),
-                             *np.concatenate(lag, axis=1))
+    _assert_tight_consistent(scenario)
 
 
 def test_tight_is_no_worse_than_loose_on_the_same_measurements():
