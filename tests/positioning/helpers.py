@@ -4,6 +4,9 @@ import numpy as np
 
 from leosop.constants import C_MPS
 from leosop.constellations import REGISTRY
+from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
+from leosop.orbits import DEFAULT_TLE, read_tle
+from leosop.orbits.propagate import state_ecef
 
 F0_HZ = REGISTRY["starlink"].carrier_hz
 #: Xi'an, the receiver of the snapshot and Starlink-like tests.
@@ -67,3 +70,29 @@ def common_truth(rate, t_s, sat, rng, sat_range_hz=(-5.0, 5.0), zero_mean=True):
     dt_s = rng.normal(0.0, 0.05, 7)
     extra = rx_poly[0] + rx_poly[1] * (t_s - 29.5) + sat_hz[sat] + dt_s[sat] * rate
     return extra, rx_poly, sat_hz, dt_s
+
+
+def base_rover_scene(offsets, n_sats):
+    """The bundled Walker set after its epoch, a base at 34.3 N 108.9 E and a rover 7.5 km from it.
+
+    Parameters
+    ----------
+    offsets : timedelta64 array, (n_epochs,)
+        The epochs after the element sets' latest epoch.
+    n_sats : int
+        How many of the satellites above 25 deg over the base throughout to keep.
+
+    Returns
+    -------
+    const, base_ecef_m (3,), rover_ecef_m (3,), t (n_epochs,) datetime64, ids (n_sats,)
+    """
+    lat, lon = np.radians(34.3), np.radians(108.9)
+    const = read_tle(DEFAULT_TLE)
+    base = geodetic_to_ecef(lat, lon, 400.0)
+    rover = base + C_e_n(lat, lon) @ np.array([6e3, 4.5e3, 30.0])
+    t = const.epochs_utc.max() + offsets
+    pos, _, _ = state_ecef(const, t[[0, -1]])
+    _, el, _ = azimuth_elevation_range(pos, base)
+    ids = const.sat_ids[np.flatnonzero(el.min(-1) > np.radians(25.0))[:n_sats]]
+    assert len(ids) == n_sats
+    return const, base, rover, t, ids

@@ -7,8 +7,6 @@ import numpy as np
 import pytest
 
 from leosop.errors import InputError
-from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
-from leosop.orbits import DEFAULT_TLE, read_tle
 from leosop.orbits.propagate import state_ecef
 from leosop.positioning.differential import rtn_frames, solve_differential
 from leosop.positioning.differential_base import base_corrections, whitener
@@ -18,27 +16,20 @@ from leosop.positioning.differential_sim import (
     straight_drive,
 )
 
+from tests.positioning.helpers import base_rover_scene
+
 #: Noise-free fixes: the single differences cancel satellite offsets and drifts to round-off; 1e-6 Hz noise
 #: on ~1e5 Hz Doppler leaves micrometres, 1 mm bounds it with margin.
 ONE_MM = 1e-3
 #: The clock difference is recovered to its round-off too (1e-6 Hz noise, 1,000 rows).
 CLOCK_TOL_HZ = 1e-4
-LAT, LON = np.radians(34.3), np.radians(108.9)
 N_EP = 40
 
 
 @pytest.fixture(scope="module")
 def scene():
     """Seven Walker satellites above 25 deg over the base for N_EP s, base and rover 7.5 km apart."""
-    const = read_tle(DEFAULT_TLE)
-    base = geodetic_to_ecef(LAT, LON, 400.0)
-    rover = base + C_e_n(LAT, LON) @ np.array([6e3, 4.5e3, 30.0])
-    t = const.epochs_utc.max() + np.arange(N_EP).astype("timedelta64[s]")
-    pos, _, _ = state_ecef(const, t[[0, -1]])
-    _, el, _ = azimuth_elevation_range(pos, base)
-    ids = const.sat_ids[np.flatnonzero(el.min(-1) > np.radians(25.0))[:7]]
-    assert len(ids) == 7
-    return const, base, rover, t, ids
+    return base_rover_scene(np.arange(N_EP).astype("timedelta64[s]"), 7)
 
 
 def pair(scene, seed, *, sigma_hz, t_base=None, **error_kw):

@@ -7,13 +7,12 @@ import numpy as np
 import pytest
 
 from leosop.errors import InputError
-from leosop.frames import C_e_n, azimuth_elevation_range, geodetic_to_ecef
-from leosop.orbits import DEFAULT_TLE, read_tle
-from leosop.orbits.propagate import state_ecef
 from leosop.positioning.differential_carrier import solve_differential_carrier
 from leosop.positioning.differential_sim import draw_satellite_errors, simulate_phase
 from leosop.replay.differential_carrier import differential_carrier_fix
 from leosop.timebase import seconds_since
+
+from tests.positioning.helpers import base_rover_scene
 
 #: Noise-free fixes: 1e-5 cycles of noise is 0.3 um of range; what is left is the model's approximations (the
 #: rover's light time from its first guess, 30 m off, corrected to first order) and 1 mm bounds it.
@@ -24,22 +23,13 @@ ONE_MM = 1e-3
 FLOAT_TOL_M, FIXED_TOL_M = 30e-6, 10e-6
 #: A double difference of noise-free phase is a whole number of cycles to this (the same round-off, in cycles).
 CYCLE_TOL = 0.02
-LAT, LON = np.radians(34.3), np.radians(108.9)
 CARRIER_HZ = 11.325e9
 
 
 @pytest.fixture(scope="module")
 def scene():
     """Five Walker satellites above 25 deg over the base for 20 s (0.5 s epochs), base and rover 7.5 km apart."""
-    const = read_tle(DEFAULT_TLE)
-    base = geodetic_to_ecef(LAT, LON, 400.0)
-    rover = base + C_e_n(LAT, LON) @ np.array([6e3, 4.5e3, 30.0])
-    t = const.epochs_utc.max() + (500 * np.arange(40)).astype("timedelta64[ms]")
-    pos, _, _ = state_ecef(const, t[[0, -1]])
-    _, el, _ = azimuth_elevation_range(pos, base)
-    ids = const.sat_ids[np.flatnonzero(el.min(-1) > np.radians(25.0))[:5]]
-    assert len(ids) == 5
-    return const, base, rover, t, ids
+    return base_rover_scene((500 * np.arange(40)).astype("timedelta64[ms]"), 5)
 
 
 def pair(scene, seed, *, sigma_cycles, **error_kw):
