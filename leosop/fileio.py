@@ -20,6 +20,7 @@ import tempfile
 from pathlib import Path
 
 from .errors import InputError
+from .interrupt import check
 
 __all__ = ["atomic_path", "atomic_files", "atomic_outputs", "check_input_file", "check_output_file", "check_output_dir",
            "write_json", "write_csv"]
@@ -160,6 +161,7 @@ def atomic_path(path):
     path = Path(path)
     with _staged(path) as tmp:
         yield tmp
+        check()
         os.replace(tmp, path)
 
 
@@ -174,6 +176,7 @@ def atomic_files(paths):
     with contextlib.ExitStack() as stack:
         tmps = [stack.enter_context(_staged(p)) for p in paths]
         yield tmps
+        check()
         moved = []
         try:
             for tmp, path in zip(tmps, paths):
@@ -202,6 +205,7 @@ def atomic_outputs(out_dir):
         out_dir.mkdir(parents=True, exist_ok=True)
         stage = Path(tempfile.mkdtemp(prefix=".stage.", suffix=".part", dir=out_dir))
         yield stage
+        check()
         _commit(stage, out_dir)
     except BaseException as exc:
         _clear(stage)

@@ -10,7 +10,8 @@ The shared layer here holds for every subcommand: option errors are one line
 -33.9,18.4,0``); every ``float`` option must be finite; ``--seed`` must be
 >= 0; ``--out`` and ``-o`` are checked before any work; warnings become one
 line each (numpy's internal ``RuntimeWarning`` only with ``LEOSOP_DEBUG``);
-SIGTERM is handled like Ctrl-C, so staged output files are removed.
+SIGTERM is handled like Ctrl-C, so staged output files are removed, and a stop
+request is kept even where the interrupt is swallowed (:mod:`leosop.interrupt`).
 
 Each subcommand lives in its own module of this package with two functions:
 ``register(subparsers)`` adds its parser (via :func:`add_command`) and
@@ -19,15 +20,12 @@ Each subcommand lives in its own module of this package with two functions:
 """
 
 import argparse
-import contextlib
 import difflib
 import importlib
 import json
 import os
 import re
-import signal
 import sys
-import threading
 import warnings
 
 # The toolkit's matrix products are small and many (per-block decimation,
@@ -37,6 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from ..errors import ExternalError, InputError  # noqa: E402
 from ..fileio import check_output_dir, check_output_file, json_ready  # noqa: E402
+from ..interrupt import check, requested, stop_on_signals  # noqa: E402
 from .options import finite_float  # noqa: E402
 
 #: Subcommand modules, in the order ``--help`` lists them.
@@ -155,23 +154,6 @@ def _show_warning(command):
     return show
 
 
-@contextlib.contextmanager
-def _sigterm_as_interrupt():
-    """Handle SIGTERM like SIGINT (KeyboardInterrupt) so staged outputs are cleaned up."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def main(argv=None):
     """Entry point; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -181,7 +163,7 @@ def main(argv=None):
     if args.command is None:
         print(f"leosop: error: give a command: {', '.join(COMMANDS)} (see leosop --help)", file=sys.stderr)
         return 2
-    with _sigterm_as_interrupt(), warnings.catch_warnings():
+    with stop_on_signals(), warnings.catch_warnings():
         warnings.simplefilter("default")
         warnings.showwarning = _show_warning(args.command)
         return _run(args)
@@ -193,6 +175,7 @@ def _run(args):
     try:
         _check_common(args)
         doc = json_ready(module.run(args))
+        check()  # a stop asked for, then swallowed inside the command: still a stop
         if args.json:
             text = json.dumps(doc, allow_nan=False) + "\n"
         else:
@@ -212,6 +195,8 @@ def _run(args):
     except KeyboardInterrupt:
         return _fail(args, "interrupted", 1)
     except Exception as exc:  # the one place where every failure becomes an exit status
+        if requested():  # a stop asked for and turned into another error on the way (see leosop.interrupt)
+            return _fail(args, "interrupted", 1)
         if os.environ.get("LEOSOP_DEBUG"):
             raise
         return _fail(args, f"internal error: {type(exc).__name__}: {exc} (set LEOSOP_DEBUG=1 for a traceback)", 1)
