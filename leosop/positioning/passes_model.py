@@ -300,7 +300,7 @@ class PassesModel:
             out = np.einsum("mi,piq->pmq", B_glob, c_g[:, :r.n_glob]) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
             return out + c_g[:, r.n_glob + r.block_index] if r.n_block else out
 
-        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss)
+        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss, Gi_ss, Si)
 
     def _block_sums(self, v):
         """Sums (k, n_block, c) of the rows ``v`` (k, n, c) over each block."""
@@ -345,6 +345,27 @@ class PassesModel:
             J = np.concatenate([J, C_e_n(lat, lon)[..., 2][:, None, :]], axis=1)
         return pred, J
 
+    def leverage(self, x, idx, w):
+        """Each row's leverage through the linear terms, ``w_i x_i^T G^-1 x_i`` (k, n_rows), at ``x`` (k, 3).
+
+        ``x_i`` is the row's column of the linear terms (the shared clocks
+        and blocks, its pass's terms), ``G`` their normal matrix with its
+        priors, inverted through the same Schur complement as the fit.
+        Added to the leverage of the projected Jacobian that
+        :meth:`__call__` returns it is the row's leverage in the whole fix
+        (Frisch-Waugh-Lovell): what the w-test of
+        :func:`~leosop.positioning.robust_ls.solve_robust` needs, as a row
+        that its pass's offsets can absorb leaves a small residual however
+        wrong it is. Pseudo-rows get 0 (they are never tested).
+        """
+        r = self.rows
+        _, _, _, A, _, _, (_, G_sg, _, Gi_ss, Si) = self.normal(x, w)
+        gi = r.pass_index
+        GA = np.einsum("pmij,pmj->pmi", Gi_ss[:, gi], A)
+        v = r.B_all - np.einsum("pmlg,pml->pmg", G_sg[:, gi], GA)
+        h = w[:, :r.n] * (np.einsum("pmi,pmi->pm", A, GA) + np.einsum("pmg,pgh,pmh->pm", v, Si, v))
+        return np.concatenate([h, np.zeros((len(x), w.shape[-1] - r.n))], -1)
+
     def normal_matrix(self, x, w):
         """Full normal matrix of ``[pos, global terms, blocks, per-pass terms (pass-major)]`` at the solution (1, 3).
 
@@ -360,7 +381,7 @@ class PassesModel:
         r = self.rows
         n, n_pass, n_loc = r.n, r.n_pass, r.n_loc
         n_g = r.n_glob + r.n_block
-        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss) = self.pieces(x, w)
+        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss, _, _) = self.pieces(x, w)
         wd, D, A = w[0, :n], D[0], A[0]
         N = np.zeros((r.n_states, r.n_states))
         N[:3, :3] = np.einsum("mi,m,mj->ij", D, wd, D)

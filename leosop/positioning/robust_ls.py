@@ -12,6 +12,13 @@ Outliers: when the weighted residual sum fails the chi-square test at
 significance ``alpha``, the measurement with the largest standardised
 residual (Baarda's w-test statistic) is excluded and the problem re-solved,
 one measurement at a time, while at least two redundant measurements remain.
+With groups (a multi-pass fix's passes) each group's largest standardised
+residual is tested on its own at every round, whether or not the sum fails
+(data snooping): among a thousand rows one outlier moves the sum too little
+to fail it. A residual's variance is ``sigma^2 (1 - h)`` with ``h`` the
+row's whole leverage: a model that eliminates linear terms (a pass's
+offsets) adds theirs through its ``leverage`` method, as a row those terms
+absorb leaves a small residual however wrong it is.
 Failures come back as data in ``status`` (:class:`FixStatus`); a fix that
 still fails the test (``INCONSISTENT``) has its covariance scaled by the
 a-posteriori variance factor ``chi2 / dof``, so that its sigma reflects the
@@ -235,7 +242,10 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
     (m,), e.g. the pass of each row) each round excludes the largest
     standardised residual of every group whose largest one exceeds the
     two-sided normal critical value at ``alpha`` (one row per pass at a time
-    instead of one in all), and stops when none does. Convergence: see
+    instead of one in all), whether or not the chi-square test fails, and
+    stops when none does. A model with a ``leverage(x, idx, w)`` method
+    (k, m) adds the leverage of the linear terms it eliminates to the
+    residuals' variance (module docstring). Convergence: see
     :func:`_levenberg_marquardt`.
     """
     n_prob = x0.shape[0]
@@ -282,11 +292,13 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
         ok = conv & np.isfinite(Q[:, 0, 0])
         with np.errstate(invalid="ignore"):
             fail = ok & (dof >= 1) & (chi2 > chi2_dist.isf(alpha, np.maximum(dof, 1)))
-        can = fail & (dof >= 2)
+        # Ungrouped: exclude only when the sum fails; grouped: test each group's largest row (module docstring).
+        can = (fail if groups is None else ok) & (dof >= 2)
         if not can.any():
             break
         p, Jp, Qp = todo[can], J[can], Q[can]
-        var_r = sigma[p] ** 2 - np.einsum("pmi,pij,pmj->pm", Jp, Qp, Jp)
+        h_lin = model.leverage(x[p], p, w[can]) if hasattr(model, "leverage") else 0.0
+        var_r = sigma[p] ** 2 * (1.0 - h_lin) - np.einsum("pmi,pij,pmj->pm", Jp, Qp, Jp)
         wstat = np.abs(r[can]) / np.sqrt(np.maximum(var_r, _RESIDUAL_VAR_FLOOR * sigma[p] ** 2))
         wstat = np.where(used[p] & ~fixed, wstat, -np.inf)
         if groups is None:
