@@ -13,9 +13,12 @@ significance ``alpha``, the measurement with the largest standardised
 residual (Baarda's w-test statistic) is excluded and the problem re-solved,
 one measurement at a time, while at least two redundant measurements remain.
 With groups (a multi-pass fix's passes) each group's largest standardised
-residual is tested on its own at every round, whether or not the sum fails
-(data snooping): among a thousand rows one outlier moves the sum too little
-to fail it. A residual's variance is ``sigma^2 (1 - h)`` with ``h`` the
+residual is tested on its own at every round, also when the sum passes
+(data snooping: among a thousand rows one outlier moves the sum too little
+to fail it), then at ``alpha / n`` for the largest of the group's ``n``
+rows (Bonferroni), so that a pass of white rows loses none but this
+often and rows whose errors are correlated, whose sigmas the fix scales
+only afterwards, are not thinned. A residual's variance is ``sigma^2 (1 - h)`` with ``h`` the
 row's whole leverage: a model that eliminates linear terms (a pass's
 offsets) adds theirs through its ``leverage`` method, as a row those terms
 absorb leaves a small residual however wrong it is.
@@ -242,8 +245,8 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
     (m,), e.g. the pass of each row) each round excludes the largest
     standardised residual of every group whose largest one exceeds the
     two-sided normal critical value at ``alpha`` (one row per pass at a time
-    instead of one in all), whether or not the chi-square test fails, and
-    stops when none does. A model with a ``leverage(x, idx, w)`` method
+    instead of one in all), also when the chi-square test passes (then at
+    ``alpha / n`` for a group of ``n`` rows), and stops when none does. A model with a ``leverage(x, idx, w)`` method
     (k, m) adds the leverage of the linear terms it eliminates to the
     residuals' variance (module docstring). Convergence: see
     :func:`_levenberg_marquardt`.
@@ -305,7 +308,10 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
             used[p, np.argmax(wstat, axis=-1)] = False
         else:
             worst = _group_argmax(wstat, groups)
-            take = np.take_along_axis(wstat, np.maximum(worst, 0), -1) > norm_dist.isf(alpha / 2)
+            # A group's largest of n statistics: while the sum passes, tested at alpha / n (Bonferroni).
+            n_tested = np.stack([np.isfinite(wstat[:, groups == g]).sum(-1) for g in range(worst.shape[-1])], -1)
+            crit = norm_dist.isf(alpha / 2 / np.where(fail[can][:, None], 1, np.maximum(n_tested, 1)))
+            take = np.take_along_axis(wstat, np.maximum(worst, 0), -1) > crit
             pi, gi = np.nonzero(take & (worst >= 0))
             used[p[pi], worst[pi, gi]] = False
             p = p[take.any(-1)]
