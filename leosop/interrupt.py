@@ -9,7 +9,8 @@ outputs. So the handler also records the request: :func:`check` raises
 :class:`KeyboardInterrupt` again wherever it is called (before an output is
 moved into place, at each step of a progress bar), and :func:`requested`
 lets the command line report any failure that follows a request as the
-interruption it is.
+interruption it is. The request lasts as long as the outermost
+:func:`stop_on_signals` block.
 """
 
 import contextlib
@@ -18,7 +19,9 @@ import threading
 
 __all__ = ["check", "requested", "stop_on_signals"]
 
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _requested = False
+_depth = 0
 
 
 def requested() -> bool:
@@ -39,17 +42,36 @@ def _handler(signum, frame):
 
 
 @contextlib.contextmanager
-def stop_on_signals():
-    """Turn SIGINT and SIGTERM into stop requests recorded while the block runs (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
+def _signals_held():
+    """SIGINT and SIGTERM held back (delivered at the end) while the handlers change, where the OS allows."""
+    if not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    global _requested
-    _requested = False
-    previous = {s: signal.signal(s, _handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _SIGNALS)
     try:
         yield
     finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-        _requested = False
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@contextlib.contextmanager
+def stop_on_signals():
+    """Turn SIGINT and SIGTERM into stop requests recorded while the block runs (main thread only).
+
+    Nested blocks share the outermost one's handlers and request.
+    """
+    global _requested, _depth
+    if threading.current_thread() is not threading.main_thread() or _depth:
+        yield
+        return
+    previous = {}
+    try:
+        with _signals_held():
+            _requested, _depth = False, 1
+            previous = {s: signal.signal(s, _handler) for s in _SIGNALS}
+        yield
+    finally:
+        with _signals_held():
+            for s, h in previous.items():
+                signal.signal(s, h)
+            _requested, _depth = False, 0

@@ -173,13 +173,18 @@ def _run(args):
     """Run the subcommand and print its output; every failure becomes an exit status."""
     module = args._module
     try:
-        _check_common(args)
-        doc = json_ready(module.run(args))
-        check()  # a stop asked for, then swallowed inside the command: still a stop
-        if args.json:
-            text = json.dumps(doc, allow_nan=False) + "\n"
-        else:
-            text = module.summary(doc) + "\n" if hasattr(module, "summary") else ""
+        try:
+            _check_common(args)
+            doc = json_ready(module.run(args))
+            check()  # a stop asked for, then swallowed inside the command: still a stop
+            if args.json:
+                text = json.dumps(doc, allow_nan=False) + "\n"
+            else:
+                text = module.summary(doc) + "\n" if hasattr(module, "summary") else ""
+        except Exception:
+            if requested():  # a stop asked for and turned into another error on the way (leosop.interrupt)
+                raise KeyboardInterrupt from None
+            raise
     except InputError as exc:
         return _fail(args, f"error: {option_message(exc)}", 2)
     except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError, FileExistsError) as exc:
@@ -195,8 +200,6 @@ def _run(args):
     except KeyboardInterrupt:
         return _fail(args, "interrupted", 1)
     except Exception as exc:  # the one place where every failure becomes an exit status
-        if requested():  # a stop asked for and turned into another error on the way (see leosop.interrupt)
-            return _fail(args, "interrupted", 1)
         if os.environ.get("LEOSOP_DEBUG"):
             raise
         return _fail(args, f"internal error: {type(exc).__name__}: {exc} (set LEOSOP_DEBUG=1 for a traceback)", 1)

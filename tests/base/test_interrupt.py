@@ -12,6 +12,7 @@ import pytest
 
 import leosop.cli.visibility
 from leosop.cli import main
+from leosop.errors import ExternalError, InputError
 from leosop.fileio import atomic_outputs, atomic_path
 from leosop.interrupt import requested, stop_on_signals
 from leosop.progress import progress
@@ -48,9 +49,13 @@ def test_a_progress_bar_stops_at_its_next_step():
 
 
 def test_a_request_ends_with_its_block(tmp_path):
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     with stop_on_signals():
-        _swallowed_stop()
+        with stop_on_signals():  # nested: the outer block's handlers and request
+            _swallowed_stop()
+        assert requested()
     assert not requested()
+    assert {s: signal.getsignal(s) for s in before} == before
     with stop_on_signals():
         assert not requested()
         with atomic_path(tmp_path / "a.csv") as tmp:
@@ -58,12 +63,14 @@ def test_a_request_ends_with_its_block(tmp_path):
     assert (tmp_path / "a.csv").read_text() == "x\n"
 
 
-@pytest.mark.parametrize("after", ["returns", "raises"])
+@pytest.mark.parametrize("after", ["returns", RuntimeError, InputError, ExternalError, OSError])
 def test_the_command_line_reports_the_stop(monkeypatch, capsys, after):
+    """Whatever the command does after the swallowed stop (numba raises RuntimeError "no compiled object
+    yet"; an error of its own would otherwise be reported as one, status 2 for bad input)."""
     def run(args):
         _swallowed_stop()
-        if after == "raises":  # numba: "no compiled object yet", the interrupt's trace
-            raise RuntimeError("no compiled object yet")
+        if after != "returns":
+            raise after("on the way out")
         return {}
 
     monkeypatch.setattr(leosop.cli.visibility, "run", run)
