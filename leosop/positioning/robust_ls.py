@@ -16,9 +16,10 @@ With groups (a multi-pass fix's passes) each group's largest standardised
 residual is tested on its own at every round, also when the sum passes
 (data snooping: among a thousand rows one outlier moves the sum too little
 to fail it), then at ``alpha / n`` for the largest of the group's ``n``
-rows (Bonferroni), so that a pass of white rows loses none but this
-often and rows whose errors are correlated, whose sigmas the fix scales
-only afterwards, are not thinned. A residual's variance is ``sigma^2 (1 - h)`` with ``h`` the
+rows (Bonferroni), so that, while the sum passes, a pass of white rows
+loses none but this often and rows whose errors are correlated (their
+sigmas scaled only afterwards) are not thinned; once the sum fails every
+group is tested at ``alpha``, as without groups. A residual's variance is ``sigma^2 (1 - h)`` with ``h`` the
 row's whole leverage: a model that eliminates linear terms (a pass's
 offsets) adds theirs through its ``leverage`` method, as a row those terms
 absorb leaves a small residual however wrong it is.

@@ -10,6 +10,7 @@ or its time shifted (along its inertial orbit, or with the Earth: a time tag).
 import numpy as np
 import pytest
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm as norm_dist
 
 from leosop.frames import rotate_to_later_ecef
 from leosop.orbits import load_constellation
@@ -329,61 +330,85 @@ def test_a_weak_fix_answers_a_tiny_input_change_linearly(starlink_like):
         np.testing.assert_allclose(moved.cov[:3, :3], fix.cov[:3, :3], rtol=1e-6, err_msg=start)
 
 
-def test_a_rows_leverage_counts_the_terms_its_pass_absorbs_it_with(starlink_like):
-    """The w-test's leverage: the linear terms' (``PassesModel.leverage``) plus the projected Jacobian's is
-    the diagonal of the whole fix's hat matrix.
+def _leverage_case(starlink_like, clock):
+    """``starlink_like`` with satellite 6 cut to 5 rows; rows, model, weights and the dense design of ``clock``.
 
-    Reference: the hat matrix of the linearised fix written out densely (position by central differences,
-    receiver offset and drift, satellite offsets, time offsets and blocks with their priors), at the truth.
-    One satellite keeps 5 of its 60 rows: its offset and time offset take a large part of each (leverage
-    0.11-0.58, mean 0.31; the rows' median 0.14, mostly their block's state), of which the projected
-    Jacobian alone shows 0.001-0.01. Agreement to 1e-6 (central differences of the position columns;
-    achieved 2e-10).
+    Dense design (rows' input order): position by central differences, then for ``"common"`` the receiver
+    offset and drift, satellite offsets and time offsets and one state per second (the blocks of a
+    snapshot receiver, 0.31 Hz); for ``"per_pass"`` a cubic and a time offset per pass. Its prior
+    pseudo-rows as the fix's.
     """
     geo, rate, p, v, t_s, sat, rx = starlink_like
     keep = (sat != 6) | (t_s < 5)
     geo, rate, p, v, t_s, sat = geo[keep], rate[keep], p[keep], v[keep], t_s[keep], sat[keep]
     sigma = np.random.default_rng(41).uniform(0.2, 0.6, t_s.size)
+    common = clock == "common"
     block, q_sig = t_s.astype(int), 0.31
-    rows = pass_rows(geo, sigma, p, v, F0_HZ, t_s, sat, mask=None, common=True, deg=1, time_bias=True,
-                     sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ, time_bias_sigma_s=TIME_OFFSET_SIGMA_S, clock_group=None,
-                     alt_m=None, alt_sigma_m=None, block_id=block, block_sigma_hz=q_sig)
-    model = PassesModel(rows)
-    w = np.where(rows.used, 1.0 / rows.sigma**2, 0.0)[None]
-    _, J = model(rx[None], np.zeros(1, int), w)
-    h = model.leverage(rx[None], np.zeros(1, int), w)[0] + w[0] * np.einsum(
-        "mi,ij,mj->m", J[0], cofactor(J[0], w[0]), J[0])
+    blocks = dict(block_id=block, block_sigma_hz=q_sig) if common else {}
+    rows = pass_rows(geo, sigma, p, v, F0_HZ, t_s, sat, mask=None, common=common, deg=1 if common else 3,
+                     time_bias=True, sat_offset_sigma_hz=SAT_OFFSET_SIGMA_HZ, time_bias_sigma_s=TIME_OFFSET_SIGMA_S,
+                     clock_group=None, alt_m=None, alt_sigma_m=None, **blocks)
 
     def predict(x):
         return doppler_hz(p[None], v[None], x[None], np.zeros((1, 3)), np.zeros(1))[0]
 
     D = np.stack([predict(rx + e) - predict(rx - e) for e in np.eye(3)], 1) / 2.0
-    n_b = block.max() + 1
-    H = np.hstack([D, np.ones((t_s.size, 1)), t_s[:, None], np.eye(7)[sat], np.eye(7)[sat] * rate[:, None],
-                   np.eye(n_b)[block]])
-    prior = np.diag([0.0] * 5 + [SAT_OFFSET_SIGMA_HZ**-2] * 7 + [TIME_OFFSET_SIGMA_S**-2] * 7 + [q_sig**-2] * n_b)
-    N = H.T @ (H / sigma[:, None] ** 2) + prior
-    hat = np.einsum("mi,ij,mj->m", H, np.linalg.inv(N), H) / sigma**2
-    np.testing.assert_allclose(h[:rows.n], hat[rows.order], rtol=0, atol=1e-6)
-    short = rows.pass_index == 6
+    one = np.eye(7)[sat]
+    u = (t_s - 29.5) / 30.0
+    if common:
+        n_b = block.max() + 1
+        H = np.hstack([D, np.ones((t_s.size, 1)), u[:, None], one, one * rate[:, None], np.eye(n_b)[block]])
+        prior = [0.0] * 5 + [SAT_OFFSET_SIGMA_HZ**-2] * 7 + [TIME_OFFSET_SIGMA_S**-2] * 7 + [q_sig**-2] * n_b
+    else:
+        H = np.hstack([D] + [one * u[:, None] ** k for k in range(4)] + [one * rate[:, None]])
+        prior = [0.0] * 31 + [TIME_OFFSET_SIGMA_S**-2] * 7
+    return rows, PassesModel(rows), np.where(rows.used, 1.0 / rows.sigma**2, 0.0)[None], H, np.array(prior), sigma
+
+
+@pytest.mark.parametrize("clock", ["common", "per_pass"])
+def test_a_rows_leverage_counts_the_terms_its_pass_absorbs_it_with(starlink_like, clock):
+    """The w-test's leverage: the linear terms' (``PassesModel.leverage``) plus the projected Jacobian's is
+    the diagonal of the whole fix's hat matrix.
+
+    Reference: the hat matrix of the linearised fix written out densely (``_leverage_case``) at the truth,
+    by the SVD of the whitened design with its prior rows, columns scaled (the normal equations lose
+    ~0.1 of it with the per-pass cubic and time offset: condition number ~1e14). One satellite keeps 5
+    of its 60 rows: its offset and time offset take a large part of each (clock common: leverage
+    0.11-0.58, mean 0.31, where the rows' median is 0.14, mostly their block's state), of which the
+    projected Jacobian alone shows 0.001-0.01. Agreement to 1e-6 with the clock common (central
+    differences of the position columns; achieved 2e-10). Per pass to 0.01 (achieved 6e-3; 2e-2 before
+    the leverage's inverses were Jacobi-scaled): the fit's own projection, which the projected Jacobian
+    comes from, inverts each pass's 5x5 normal matrix unscaled at a condition number of ~1e14 (open).
+    """
+    rx = starlink_like[-1]
+    rows, model, w, H, prior, sigma = _leverage_case(starlink_like, clock)
+    _, J = model(rx[None], np.zeros(1, int), w)
     projected = w[0] * np.einsum("mi,ij,mj->m", J[0], cofactor(J[0], w[0]), J[0])
+    h = model.leverage(rx[None], np.zeros(1, int), w)[0] + projected
+    A = np.vstack([H / sigma[:, None], np.diag(np.sqrt(prior))[prior > 0]])
+    A = A / np.linalg.norm(A, axis=0)
+    U, sv, _ = np.linalg.svd(A, full_matrices=False)
+    hat = np.sum(U[:, sv > 1e-12 * sv[0]] ** 2, axis=1)[:len(sigma)]
+    np.testing.assert_allclose(h[:rows.n], hat[rows.order], rtol=0, atol=1e-6 if clock == "common" else 1e-2)
+    short = rows.pass_index == 6
     assert hat[rows.order][short].mean() > 0.3 and np.all(projected[:rows.n][short] < 0.02)
 
 
 def test_an_outlier_its_pass_absorbs_is_found_though_the_sum_passes(starlink_like):
-    """Data snooping per pass: one satellite keeps 5 rows and its first is 8 sigma off. Its offset and time
-    offset absorb most of it (leverage ~0.4), so the residual sum stays well inside its chi-square bound
-    and the row's plain residual is ~5 sigma; its standardised residual, with the pass's terms in its
-    leverage, is ~6. The fix leaves it out and equals the fix without it (reference: the same rows with
-    that one masked; no other row excluded, 1e-6 m for the iteration's tolerance)."""
+    """Data snooping per pass: one satellite keeps 3 rows and its last is 5.5 sigma off. Its offset and time
+    offset absorb a third of it (leverage 0.34), so the residual sum stays inside its chi-square bound and
+    the row's plain residual, 3.3 sigma, is below the 3.59 that the largest of 3 rows is tested at; its
+    standardised residual, with the pass's terms in its leverage, is ~4.0. The fix leaves it out and
+    equals the fix without it (reference: the same rows with that one masked; no other row excluded,
+    1e-6 m for the iteration's tolerance). Without the pass's terms in the leverage the row stays."""
     geo, rate, p, v, t_s, sat, rx = starlink_like
-    keep = (sat != 6) | (t_s < 5)
+    keep = (sat != 6) | (t_s < 3)
     geo, rate, p, v, t_s, sat = geo[keep], rate[keep], p[keep], v[keep], t_s[keep], sat[keep]
     rng = np.random.default_rng(43)
     extra, *_ = common_truth(rate, t_s, sat, rng)
     y = geo + extra + rng.normal(0.0, 0.3, t_s.size)
-    bad = np.flatnonzero(sat == 6)[0]
-    y[bad] += 8 * 0.3
+    bad = np.flatnonzero(sat == 6)[2]
+    y[bad] += 5.5 * 0.3
     kw = dict(clock="common", pos0_ecef_m=rx, decorrelate=False, pass_offsets=False)
     fix = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, **kw)
     without = np.arange(t_s.size) != bad
@@ -391,4 +416,5 @@ def test_an_outlier_its_pass_absorbs_is_found_though_the_sum_passes(starlink_lik
     assert not fix.used[bad] and fix.used[without].all()
     np.testing.assert_allclose(fix.pos_ecef_m, ref.pos_ecef_m, rtol=0, atol=1e-6)
     kept = solve_static_passes(y, 0.3, p, v, F0_HZ, t_s, sat, alpha=None, **kw)
-    assert kept.chi2 < chi2_dist.isf(1e-3, kept.dof)  # the sum alone would not have been tested (393.7 < 448.6)
+    assert kept.chi2 < chi2_dist.isf(1e-3, kept.dof)  # the sum alone would not have been tested
+    assert abs(kept.residuals_hz[bad]) / 0.3 < norm_dist.isf(1e-3 / 2 / 3)  # nor the plain residual
