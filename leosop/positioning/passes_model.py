@@ -314,7 +314,7 @@ class PassesModel:
             out = np.einsum("mi,piq->pmq", B_glob, c_g[:, :r.n_glob]) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
             return out + c_g[:, r.n_glob + r.block_index] if r.n_block else out
 
-        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss, Gi_ss, Si)
+        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss)
 
     def _block_sums(self, v):
         """Sums (k, n_block, c) of the rows ``v`` (k, n, c) over each block."""
@@ -373,7 +373,7 @@ class PassesModel:
         wrong it is. Pseudo-rows get 0 (they are never tested).
         """
         r = self.rows
-        _, _, _, A, _, _, (G_gg, G_sg, G_ss, _, _) = self.normal(x, w)
+        _, _, _, A, _, _, (G_gg, G_sg, G_ss) = self.normal(x, w)
         # The inverses again through their Jacobi scaling (:func:`_scaled_pinv`): the fit's own lose ~0.01
         # of a leverage on a short pass with a cubic and a time offset (the fit's projection, and with it
         # the projected Jacobian's part, keeps ~6e-3 of that: open).
@@ -400,7 +400,7 @@ class PassesModel:
         r = self.rows
         n, n_pass, n_loc = r.n, r.n_pass, r.n_loc
         n_g = r.n_glob + r.n_block
-        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss, _, _) = self.pieces(x, w)
+        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss) = self.pieces(x, w)
         wd, D, A = w[0, :n], D[0], A[0]
         N = np.zeros((r.n_states, r.n_states))
         N[:3, :3] = np.einsum("mi,m,mj->ij", D, wd, D)

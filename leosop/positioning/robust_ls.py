@@ -19,10 +19,11 @@ to fail it), then at ``alpha / n`` for the largest of the group's ``n``
 rows (Bonferroni), so that, while the sum passes, a pass of white rows
 loses none but this often and rows whose errors are correlated (their
 sigmas scaled only afterwards) are not thinned; once the sum fails every
-group is tested at ``alpha``, as without groups. A residual's variance is ``sigma^2 (1 - h)`` with ``h`` the
-row's whole leverage: a model that eliminates linear terms (a pass's
-offsets) adds theirs through its ``leverage`` method, as a row those terms
-absorb leaves a small residual however wrong it is.
+group is tested at ``alpha``, as without groups. A residual's variance is
+``sigma^2 (1 - h)`` with ``h`` the row's whole leverage: a model that
+eliminates linear terms (a pass's offsets) adds theirs through its
+``leverage`` method, as a row those terms absorb leaves a small residual
+however wrong it is.
 Failures come back as data in ``status`` (:class:`FixStatus`); a fix that
 still fails the test (``INCONSISTENT``) has its covariance scaled by the
 a-posteriori variance factor ``chi2 / dof``, so that its sigma reflects the
@@ -247,9 +248,10 @@ def solve_robust(model, x0, y, sigma, used, n_states, *, xtol, max_iter, alpha, 
     standardised residual of every group whose largest one exceeds the
     two-sided normal critical value at ``alpha`` (one row per pass at a time
     instead of one in all), also when the chi-square test passes (then at
-    ``alpha / n`` for a group of ``n`` rows), and stops when none does. A model with a ``leverage(x, idx, w)`` method
-    (k, m) adds the leverage of the linear terms it eliminates to the
-    residuals' variance (module docstring). Convergence: see
+    ``alpha / n`` for a group of ``n`` rows), and stops when none does. A
+    model with a ``leverage(x, idx, w)`` method (k, m) adds the leverage of
+    the linear terms it eliminates to the residuals' variance (module
+    docstring). Convergence: see
     :func:`_levenberg_marquardt`.
     """
     n_prob = x0.shape[0]
