@@ -4,8 +4,9 @@
 by the block, whatever the file size), finds every comb in each block
 (:func:`~leosop.signal.multicomb.find_combs`), joins the detections into
 tracks (:class:`~leosop.replay.tracks.Tracker`), identifies the tracks
-against the element sets (:func:`~leosop.replay.identify.identify_tracks`)
-and solves a static batch fix or per-block snapshot fixes from the identified
+against the element sets (:func:`~leosop.replay.identify.identify_tracks`),
+follows the fragments too short to name along the curves of the satellites
+that could be theirs (:mod:`~leosop.replay.extend`, static replays) and solves a static batch fix or per-block snapshot fixes from the identified
 tracks' Doppler (:mod:`leosop.positioning.solve`).
 
 Blocks never straddle a capture: a snapshot recording (DESIGN 4.2) gives one
@@ -36,6 +37,7 @@ from ..signal.fine import cubic_bias_hz
 from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .elements import check_snapshot_age
+from .extend import extend_fragments
 from .identify import identify_tracks
 from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, lo_noise, rough_lo_hz
 from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, narrowed_shift_s, prepared_blocks
@@ -264,7 +266,9 @@ class ReplayResult:
         and tracking), ``identify``, ``refit`` (the tracked blocks fitted
         again through the LO offset and identified again,
         :func:`refit_through_lo`; 0 when the offset is too small to matter),
-        ``fix``; with several threads the sum of their times.
+        ``extend`` (unnamed fragments followed along their candidates' curves
+        and the tracks identified again, :mod:`~leosop.replay.extend`; static
+        replays), ``fix``; with several threads the sum of their times.
     lo : LoEstimate or None
         The receiver's common offset and drift (:mod:`leosop.replay.lo`).
     wall_s : dict
@@ -456,6 +460,16 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
     cpu_s["refit"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     wall_s["refit"] = time.perf_counter() - wall0 - wall_s["blocks"] - wall_s["identify"]
+    if static and ident is not None and np.all(np.isfinite(ident.pos_ecef_m)):
+        # Fragments too short to name, followed along their candidates' curves (extend.py).
+        ext, n_ext = extend_fragments(rec, raw, tracks, blocks, factor, comb, lo_estimate(ident), ident.pos_ecef_m,
+                                      constellation, mask_deg=mask_deg, band_hz=band_hz, gate_hz=TRACK_GATE_HZ,
+                                      threads=threads)
+        if n_ext:
+            raw = [remove_outliers(tr) for tr in ext]
+            tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
+    cpu_s["extend"] = time.process_time() - t0 - sum(cpu_s.values())
+    wall_s["extend"] = time.perf_counter() - wall0 - sum(wall_s.values())
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)
     position = noise = None
     if meas is not None:
