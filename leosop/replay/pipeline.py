@@ -6,7 +6,8 @@ by the block, whatever the file size), finds every comb in each block
 tracks (:class:`~leosop.replay.tracks.Tracker`), identifies the tracks
 against the element sets (:func:`~leosop.replay.identify.identify_tracks`),
 follows the fragments too short to name along the curves of the satellites
-that could be theirs (:mod:`~leosop.replay.extend`, static replays) and solves a static batch fix or per-block snapshot fixes from the identified
+that could be theirs (:mod:`~leosop.replay.extend`, static replays) and
+solves a static batch fix or per-block snapshot fixes from the identified
 tracks' Doppler (:mod:`leosop.positioning.solve`).
 
 Blocks never straddle a capture: a snapshot recording (DESIGN 4.2) gives one
