@@ -23,6 +23,10 @@
    system of the child and its workers, ``os.wait4``: robust to other load on
    the machine), its CPU time over the floor's (with ``--floor``), and whether
    its counts are identical to this tree's first run and how far its GDOP is.
+   ``--split 2``: the same span cut into two halves of its epochs, each a
+   serial child process of this tree, both started at once (no Dask): the
+   speed-up two processes of this work get on this machine at best (no
+   scheduler, no result transfer), which the Dask run is judged against.
 
     OPENBLAS_NUM_THREADS=1 python tools/bench_gdop_map.py \
         --tle ../shared/data/tle/starlink_3le_2026-04-08_Bochika.txt [--floor] [--full] [--dask-workers 1 2]
@@ -84,6 +88,8 @@ def main():
                     help="--full also on local Dask clusters of these many workers")
     ap.add_argument("--kernel", nargs="+", choices=("numba", "numpy"), default=("numba", "numpy"),
                     help="per-pair kernels of this tree's --full runs")
+    ap.add_argument("--split", type=int, nargs="*", default=(),
+                    help="also run the span as N serial child processes at once, a 1/N of the epochs each")
     ap.add_argument("--baseline-ref", default="main", help="git ref of the code --full compares with ('none': skip)")
     a = ap.parse_args()
 
@@ -216,19 +222,32 @@ np.savez(out, n_visible=ds["n_visible"].values, gdop=ds["gdop"].values)
 """
 
 
-def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out):
-    """Wall and CPU time [s] of one whole map computed in a child process importing ``code_dir``'s leosop."""
+def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out, n_split=1):
+    """Wall and CPU time [s] of one whole map computed in a child process importing ``code_dir``'s leosop; with
+    ``n_split`` > 1, in that many serial child processes at once, each a contiguous share of the epochs, their
+    maps joined into ``out``."""
     env = dict(os.environ, PYTHONPATH=str(code_dir), OPENBLAS_NUM_THREADS="1", NUMBA_CACHE_DIR=str(numba_cache))
-    argv = [a.tle, ",".join(a.constellation), a.start, str(a.duration_s), str(a.step_s), str(a.grid_deg),
-            str(a.mask_deg), scheduler, str(n_workers or 0), kernel, str(out)]
+    n = int(np.floor(a.duration_s / a.step_s + 1e-9)) + 1
+    edges = np.linspace(0, n, n_split + 1).round().astype(int)
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", _CHILD, *argv], cwd=code_dir, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    stderr = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    if os.waitstatus_to_exitcode(status) != 0:
-        sys.exit(f"{code_dir}: the map failed: {stderr.decode().strip()[-2000:]}")
-    return time.perf_counter() - t0, usage.ru_utime + usage.ru_stime
+    procs = []
+    for k, (e0, e1) in enumerate(zip(edges[:-1], edges[1:])):
+        start = str(np.datetime64(a.start, "ns") + np.timedelta64(int(round(e0 * a.step_s * 1e9)), "ns"))
+        argv = [a.tle, ",".join(a.constellation), start, str((e1 - e0 - 1) * a.step_s), str(a.step_s),
+                str(a.grid_deg), str(a.mask_deg), scheduler, str(n_workers or 0), kernel, f"{out}.{k}.npz"]
+        procs.append(subprocess.Popen([sys.executable, "-c", _CHILD, *argv], cwd=code_dir, env=env,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
+    cpu = 0.0
+    for proc in procs:
+        stderr = proc.stderr.read()
+        _, status, usage = os.wait4(proc.pid, 0)
+        if os.waitstatus_to_exitcode(status) != 0:
+            sys.exit(f"{code_dir}: the map failed: {stderr.decode().strip()[-2000:]}")
+        cpu += usage.ru_utime + usage.ru_stime
+    wall = time.perf_counter() - t0
+    parts = [np.load(f"{out}.{k}.npz") for k in range(n_split)]
+    np.savez(out, **{key: np.concatenate([p[key] for p in parts]) for key in ("n_visible", "gdop")})
+    return wall, cpu
 
 
 def full_maps(a, floor_s):
@@ -247,11 +266,14 @@ def full_maps(a, floor_s):
             export_package(a.baseline_ref, tmp)
             runs.append((f"{a.baseline_ref}, serial", tmp, "serial", None, ""))
         runs += [(f"this tree, {n} local Dask worker(s)", REPO, "local", n, "") for n in a.dask_workers]
+        runs += [(f"this tree, {n} serial processes, 1/{n} each", REPO, "serial", -n, "") for n in a.split]
         print(f"{'full map':>44} {'wall s':>7} {'CPU s':>7} {'CPU/floor':>9} | identical counts, max GDOP rel. diff"
               " (float32 maps) to the first", flush=True)
         first = None
         for k, (label, code_dir, scheduler, n_workers, kernel) in enumerate(runs):
-            wall, cpu = run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, tmp / f"map{k}.npz")
+            split = -n_workers if n_workers and n_workers < 0 else 1
+            wall, cpu = run_map(code_dir, a, scheduler, None if split > 1 else n_workers, kernel, numba_cache,
+                                tmp / f"map{k}.npz", split)
             maps = np.load(tmp / f"map{k}.npz")
             first = first or (maps, wall)
             same = np.array_equal(maps["n_visible"], first[0]["n_visible"])
