@@ -40,9 +40,23 @@ CONNECT_TIMEOUT = "10s"
 #: page faults each time: ``study gdop-map`` took 2.3x the CPU time of the
 #: same task in the main process. Temporaries up to 32 MiB (glibc's own
 #: ceiling) come from the heap, which keeps up to 256 MiB free.
-_WORKER_MALLOC = {
+#:
+#: The bookkeeping of a local cluster runs on the same cores as its workers:
+#: Dask's statistical profiler samples each worker's stack every 10 ms, the
+#: system monitors poll every 0.5 s, the memory monitor every 0.1 s and the
+#: active memory manager every 2 s. On 2 cores, ``study gdop-map`` spent
+#: ~2 CPU-s per worker and ~3.5 in the client's event loop outside the tasks
+#: (8 % of the cores); with the profiler off, the monitors at 2 s and 1 s
+#: and no memory manager (a task's result goes to the client alone, no
+#: replicas to manage), 0.8 and 2.2-2.7 s (``tools/bench_gdop_map.py
+#: --dask-workers 2 --split 2``). The memory limits are still enforced.
+_LOCAL_CLUSTER = {
     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 256 << 20,
     "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": 32 << 20,
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.active-memory-manager.start": False,
 }
 #: The fewest tasks kept in flight by a bounded window, whatever the worker count.
 _MIN_WINDOW = 4
@@ -60,7 +74,7 @@ def dask_client(scheduler, n_tasks, n_workers=None):
         import dask
 
         n_workers = max(1, min(n_workers or os.cpu_count() or 1, n_tasks))
-        with dask.config.set(_WORKER_MALLOC), LocalCluster(
+        with dask.config.set(_LOCAL_CLUSTER), LocalCluster(
                 n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                 silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
             yield client
