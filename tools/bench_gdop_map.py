@@ -26,6 +26,10 @@
    the serial and the Dask runs pay alike; with the local cluster's start
    and its workers' imports), its CPU time over the floor's (with ``--floor``), and whether
    its counts are identical to this tree's first run and how far its GDOP is.
+   ``--warm-workers 2``: a local cluster of that many workers started by this
+   script beforehand and warmed on a few epochs (imports, the snapshot, the
+   JIT cache loaded), its address passed as ``--scheduler``: a running
+   cluster, as ``leosop study gdop-map --scheduler tcp://...`` uses one.
    ``--split 2``: the same span cut into two halves of its epochs, each a
    serial child process of this tree, both started at once (no Dask): the
    speed-up two processes of this work get on this machine at best (no
@@ -36,6 +40,7 @@
 """
 
 import argparse
+import contextlib
 import math
 import os
 import subprocess
@@ -91,6 +96,8 @@ def main():
                     help="--full also on local Dask clusters of these many workers")
     ap.add_argument("--kernel", nargs="+", choices=("numba", "numpy"), default=("numba", "numpy"),
                     help="per-pair kernels of this tree's --full runs")
+    ap.add_argument("--warm-workers", type=int, nargs="*", default=(),
+                    help="also run on a running local cluster of N workers, warmed beforehand")
     ap.add_argument("--split", type=int, nargs="*", default=(),
                     help="also run the span as N serial child processes at once, a 1/N of the epochs each")
     ap.add_argument("--baseline-ref", default="main", help="git ref of the code --full compares with ('none': skip)")
@@ -256,6 +263,29 @@ def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out, n_split
     return wall, max(float(p["map_s"]) for p in parts), cpu
 
 
+@contextlib.contextmanager
+def warm_cluster(a, n_workers, numba_cache):
+    """The address of a local cluster of ``n_workers`` (the study's settings) warmed on 4 epochs; None for 0.
+
+    Its workers' CPU time is not in the child's (they are not its children)."""
+    if not n_workers:
+        yield None
+        return
+    import dask
+    from distributed import Client, LocalCluster
+
+    from leosop.orbits.gridmap import gdop_map
+    from leosop.parallel import _LOCAL_CLUSTER
+
+    os.environ["NUMBA_CACHE_DIR"] = str(numba_cache)  # the workers inherit it
+    with dask.config.set(_LOCAL_CLUSTER), LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                                       dashboard_address=":0") as cluster, Client(cluster) as client:
+        times = np.datetime64(a.start, "ns") + (np.arange(2 * n_workers) * a.step_s * 1e9).astype("timedelta64[ns]")
+        gdop_map(ConstellationSource(a.tle, tuple(a.constellation)), times, a.grid_deg, a.mask_deg, scheduler=client,
+                 epochs_per_task=1)
+        yield cluster.scheduler_address
+
+
 def full_maps(a, floor_s):
     """This tree, the baseline and the Dask runs, each in a child process; times, ratios and identical maps."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -272,14 +302,16 @@ def full_maps(a, floor_s):
             export_package(a.baseline_ref, tmp)
             runs.append((f"{a.baseline_ref}, serial", tmp, "serial", None, ""))
         runs += [(f"this tree, {n} local Dask worker(s)", REPO, "local", n, "") for n in a.dask_workers]
+        runs += [(f"this tree, {n} warm Dask worker(s)", REPO, "warm", n, "") for n in a.warm_workers]
         runs += [(f"this tree, {n} serial processes, 1/{n} each", REPO, "serial", -n, "") for n in a.split]
         print(f"{'full map':>44} {'wall s':>7} {'map s':>7} {'CPU s':>7} {'CPU/floor':>9} | identical counts, "
               "max GDOP rel. diff (float32 maps) to the first", flush=True)
         first = best_serial = None
         for k, (label, code_dir, scheduler, n_workers, kernel) in enumerate(runs):
             split = -n_workers if n_workers and n_workers < 0 else 1
-            wall, map_s, cpu = run_map(code_dir, a, scheduler, None if split > 1 else n_workers, kernel, numba_cache,
-                                tmp / f"map{k}.npz", split)
+            with warm_cluster(a, n_workers if scheduler == "warm" else 0, numba_cache) as address:
+                wall, map_s, cpu = run_map(code_dir, a, address or scheduler, None if split > 1 else n_workers, kernel,
+                                           numba_cache, tmp / f"map{k}.npz", split)
             maps = np.load(tmp / f"map{k}.npz")
             first = first or (maps, wall)
             same = np.array_equal(maps["n_visible"], first[0]["n_visible"])
@@ -287,13 +319,14 @@ def full_maps(a, floor_s):
             same_nan = np.array_equal(np.isnan(g), np.isnan(g0))
             rel = float(np.nanmax(np.abs(g / g0 - 1), initial=0.0)) if same_nan else math.inf
             ratio = f"{cpu / floor_s:>8.1f}x" if floor_s else f"{'-':>9}"
+            cpu_note = " (the client only)" if scheduler == "warm" else ""
             bits = "bit-identical" if np.array_equal(g, g0, equal_nan=True) else f"{rel:.1e}"
             if scheduler == "serial" and split == 1 and code_dir == REPO:
                 best_serial = (min(best_serial[0], wall), min(best_serial[1], map_s)) if best_serial else (wall, map_s)
             over = (f"; over this tree's fastest serial run {best_serial[0] / wall:.2f}x, the call alone "
                     f"{best_serial[1] / map_s:.2f}x" if best_serial else "")
             print(f"{label:>44} {wall:>7.1f} {map_s:>7.1f} {cpu:>7.1f} {ratio} | {same}, {bits} "
-                  f"(wall speed-up over the first {first[1] / wall:.2f}x{over})", flush=True)
+                  f"(wall speed-up over the first {first[1] / wall:.2f}x{over}){cpu_note}", flush=True)
 
 
 if __name__ == "__main__":
