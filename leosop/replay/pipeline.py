@@ -464,11 +464,13 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     if static and ident is not None and np.all(np.isfinite(ident.pos_ecef_m)):
         # Fragments too short to name, followed along their candidates' curves (extend.py).
         ext, n_ext = extend_fragments(rec, raw, tracks, blocks, factor, comb, lo_estimate(ident), ident.pos_ecef_m,
-                                      constellation, mask_deg=mask_deg, band_hz=band_hz, gate_hz=TRACK_GATE_HZ,
-                                      threads=threads)
+                                      ident.pos_cov_m2, constellation, mask_deg=mask_deg, band_hz=band_hz,
+                                      gate_hz=TRACK_GATE_HZ, threads=threads)
         if n_ext:
-            raw = [remove_outliers(tr) for tr in ext]
-            tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
+            raw_ext = [remove_outliers(tr) for tr in ext]
+            again = identify(raw_ext, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
+            if sum(tr.sat_id is not None for tr in again[0]) >= sum(tr.sat_id is not None for tr in tracks):
+                raw, (tracks, ident) = raw_ext, again
     cpu_s["extend"] = time.process_time() - t0 - sum(cpu_s.values())
     wall_s["extend"] = time.perf_counter() - wall0 - sum(wall_s.values())
     meas = track_measurements(tracks, comb.carrier_hz, 0.0 if static else SAT_OFFSET_SIGMA_HZ)

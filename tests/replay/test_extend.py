@@ -51,8 +51,9 @@ def _follow(rec, const, res, raw, named):
                      tone_spacing_hz=rec.tone_spacing_hz)
     factor, _ = pipeline.search_band(rec.sample_rate_hz, comb, pipeline.LO_OFFSET_MAX_HZ)
     band_hz = (0.5 - pipeline.BAND_MARGIN) * rec.sample_rate_hz / factor - np.max(np.abs(comb.offsets_hz))
-    return extend_fragments(rec, raw, named, res.blocks, factor, comb, res.lo, res.identification.pos_ecef_m, const,
-                            mask_deg=10.0, band_hz=band_hz, gate_hz=pipeline.TRACK_GATE_HZ)
+    ident = res.identification
+    return extend_fragments(rec, raw, named, res.blocks, factor, comb, res.lo, ident.pos_ecef_m, ident.pos_cov_m2,
+                            const, mask_deg=10.0, band_hz=band_hz, gate_hz=pipeline.TRACK_GATE_HZ)
 
 
 def _cut(res, shift_hz=0.0):
@@ -94,3 +95,50 @@ def test_a_fragment_no_satellite_explains_is_left_alone(replayed):
     assert min(abs(np.interp(t_mid, c[:, 0], c[:, 1]) - f_mid) for c in curves.values()) > 500.0
     out, n = _follow(rec, const, res, raw, named)
     assert n == 0 and all(a is b for a, b in zip(out, raw))
+
+
+def test_two_fragments_of_one_satellite_become_one_track(replayed):
+    """Cut into two 3-block fragments 15 blocks apart, a track comes back as one: every block once."""
+    rec, const, res, curves = replayed
+    whole = max((tr for tr in res.tracks if tr.sat_id is not None), key=len)
+    frags = []
+    for m in (6, 21):
+        cut = slice(m - 1, m + 2)
+        frags.append(replace(whole, t_s=whole.t_s[cut], time_utc=whole.time_utc[cut],
+                             doppler_hz=whole.doppler_hz[cut], doppler_rate_hz_per_s=whole.doppler_rate_hz_per_s[cut],
+                             cn0_dbhz=whole.cn0_dbhz[cut], sigma_hz=whole.sigma_hz[cut], sat_id=None,
+                             match_rms_hz=None, id_status="too_short"))
+    others = [tr for tr in res.tracks if tr is not whole]
+    out, n = _follow(rec, const, res, others + frags, others + frags)
+    assert n == 2 and len(out) == len(others) + 1
+    grown = out[-1]
+    assert len(grown) == len(whole) and np.array_equal(grown.t_s, whole.t_s)
+    # The fragments' own blocks kept as they were, the rest found again.
+    for f in frags:
+        assert np.array_equal(grown.doppler_hz[np.isin(grown.t_s, f.t_s)], f.doppler_hz)
+
+
+def test_the_fit_recovers_offset_and_time_offset_and_refuses_beyond_the_bounds():
+    """Rows ``c + tau rate`` plus noise at their sigma: the fit gives back c and tau within 4 sigma of its own
+    covariance (priors are broad against 60 rows); rows that need a time offset of 0.5 s (3.8 km along
+    track, beyond the 1.5 km bound) lose the candidate."""
+    from leosop.replay import extend
+
+    rng = np.random.default_rng(3)
+    n = 60
+    rate = np.linspace(-2500.0, -1500.0, n)  # a pass's Doppler rate changing over a minute
+    sigma = np.full(n, 0.5)
+    for c_true, tau_true in ((7.0, 0.05), (-12.0, -0.1)):
+        r = c_true + tau_true * rate + rng.normal(0, 1, n) * np.hypot(sigma, extend.MODEL_SIGMA_HZ)
+        c, tau, chi2, resid = extend._fit(r[None, :], rate[None, :], sigma)
+        # 2x2 normal matrix of the data alone bounds the sigmas (priors only shrink them).
+        w = 1 / (sigma**2 + extend.MODEL_SIGMA_HZ**2)
+        cov = np.linalg.inv(np.array([[w.sum(), (w * rate).sum()], [(w * rate).sum(), (w * rate**2).sum()]]))
+        assert abs(c[0] - c_true) < 4 * np.sqrt(cov[0, 0]) + 0.5 and abs(tau[0] - tau_true) < 4 * np.sqrt(cov[1, 1])
+        assert chi2[0] < n + 5 * np.sqrt(2 * n)
+    off = 0.5 * rate + rng.normal(0, 0.5, n)
+    cand = extend._Candidate(0, 0, np.zeros(n), rate, rate, np.ones(n, bool), (np.arange(3), off[:3], sigma[:3]),
+                             (0, 2), extend.SAT_OFFSET_MAX_HZ)
+    cand.rows = [(j, off[j], 0.0, 40.0, 0.5) for j in range(3, n)]
+    extend._refit(cand, np.zeros(n))
+    assert cand.lost and cand.rows == []
