@@ -63,7 +63,7 @@ class _Candidate:
     track: int
     sat: int
     d0_hz: np.ndarray          # (n_blocks,) Doppler at zero time offset, at every block
-    shift_rate: np.ndarray     # (n_blocks,) its derivative in the time offset [Hz/s]
+    shift_rate_hz_per_s: np.ndarray     # (n_blocks,) its derivative in the time offset [Hz/s]
     rate_hz_per_s: np.ndarray  # (n_blocks,) its derivative in time [Hz/s]
     visible: np.ndarray        # (n_blocks,) bool, above the mask
     base: tuple                # the fragment's (blocks, doppler_hz, sigma_hz) the fit uses
@@ -76,7 +76,7 @@ class _Candidate:
 
     def predict(self, j, lo_hz):
         """Central-tone Doppler [Hz] predicted at block ``j`` (with the LO offset ``lo_hz`` (n_blocks,))."""
-        return lo_hz[j] + self.d0_hz[j] + self.c_hz + self.tau_s * self.shift_rate[j]
+        return lo_hz[j] + self.d0_hz[j] + self.c_hz + self.tau_s * self.shift_rate_hz_per_s[j]
 
 
 def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_cov_m2, constellation, *, mask_deg,
@@ -231,9 +231,9 @@ def _candidates(i, rows, tr, lo_hz, free, eph, t_rel, pos, pos_cov, k, sin_mask,
     out = []
     t_all = t_rel[:, None] + np.array([0.0, -RATE_STEP_S, RATE_STEP_S])
     for m in keep:
-        d_all, shift_rate, vis = _curves(eph, np.array([sats[m]]), t_all.ravel(), pos, k, sin_mask)
-        d_all, shift_rate, vis = d_all.reshape(t_all.shape), shift_rate.reshape(t_all.shape), vis.reshape(t_all.shape)
-        out.append(_Candidate(i, int(sats[m]), d_all[:, 0], shift_rate[:, 0],
+        d_all, shift_rate_hz_per_s, vis = (a.reshape(t_all.shape) for a in _curves(
+            eph, np.array([sats[m]]), t_all.ravel(), pos, k, sin_mask))
+        out.append(_Candidate(i, int(sats[m]), d_all[:, 0], shift_rate_hz_per_s[:, 0],
                               (d_all[:, 2] - d_all[:, 1]) / (2 * RATE_STEP_S), vis[:, 0],
                               (rows[use[m]], tr.doppler_hz[use[m]], tr.sigma_hz[use[m]]), (rows.min(), rows.max()),
                               float(c_max[m]), c_hz=float(c[m]), tau_s=float(tau[m])))
@@ -247,12 +247,12 @@ def _curves(eph, sats, t_s, pos, k, sin_mask=None):
     t = np.tile(t_s, sats.size)
     ps, vs = eph.state_received(sat, t, pos)
     d0 = doppler_hz(ps, vs, pos, k).reshape(sats.size, t_s.size)
-    shift_rate = eph.doppler_shift_rate(sat, t, 0.0, pos, k).reshape(sats.size, t_s.size)
+    shift_rate_hz_per_s = eph.doppler_shift_rate(sat, t, 0.0, pos, k).reshape(sats.size, t_s.size)
     vis = None
     if sin_mask is not None:
         los = ps - pos
         vis = ((los @ (pos / np.linalg.norm(pos))) / np.linalg.norm(los, axis=1) >= sin_mask).reshape(d0.shape)
-    return d0, shift_rate, vis
+    return d0, shift_rate_hz_per_s, vis
 
 
 def _fit(r_hz, rate, sigma_hz, use=True):
@@ -333,7 +333,7 @@ def _refit(c, lo_hz):
     j = np.concatenate([rows, [r[0] for r in c.rows]]).astype(int)
     f = np.concatenate([f, [r[1] for r in c.rows]])
     sigma = np.concatenate([sigma, [r[4] for r in c.rows]])
-    cc, tau, _, _ = _fit((f - lo_hz[j] - c.d0_hz[j])[None, :], c.shift_rate[j][None, :], sigma)
+    cc, tau, _, _ = _fit((f - lo_hz[j] - c.d0_hz[j])[None, :], c.shift_rate_hz_per_s[j][None, :], sigma)
     c.c_hz, c.tau_s = float(cc[0]), float(tau[0])
     if abs(c.c_hz) > c.c_max_hz or abs(c.tau_s) > ALONG_TRACK_MAX_M / SPEED_SV_MPS:
         c.lost = True
