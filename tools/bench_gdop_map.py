@@ -235,6 +235,11 @@ np.savez(out, n_visible=ds["n_visible"].values, gdop=ds["gdop"].values, map_s=ma
 """
 
 
+def _part(out, k, n_split):
+    """The map file of child ``k``: ``out`` itself when there is one child."""
+    return str(out) if n_split == 1 else f"{out}.{k}.npz"
+
+
 def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out, n_split=1):
     """Wall time, the ``gdop_map`` call's own wall time (the longest of the children's) and CPU time [s] of one
     whole map computed in a child process importing ``code_dir``'s leosop; with ``n_split`` > 1, in that many
@@ -247,7 +252,7 @@ def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out, n_split
     for k, (e0, e1) in enumerate(zip(edges[:-1], edges[1:])):
         start = str(np.datetime64(a.start, "ns") + np.timedelta64(int(round(e0 * a.step_s * 1e9)), "ns"))
         argv = [a.tle, ",".join(a.constellation), start, str((e1 - e0 - 1) * a.step_s), str(a.step_s),
-                str(a.grid_deg), str(a.mask_deg), scheduler, str(n_workers or 0), kernel, f"{out}.{k}.npz"]
+                str(a.grid_deg), str(a.mask_deg), scheduler, str(n_workers or 0), kernel, _part(out, k, n_split)]
         procs.append(subprocess.Popen([sys.executable, "-c", _CHILD, *argv], cwd=code_dir, env=env,
                                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
     cpu = 0.0
@@ -258,8 +263,9 @@ def run_map(code_dir, a, scheduler, n_workers, kernel, numba_cache, out, n_split
             sys.exit(f"{code_dir}: the map failed: {stderr.decode().strip()[-2000:]}")
         cpu += usage.ru_utime + usage.ru_stime
     wall = time.perf_counter() - t0
-    parts = [np.load(f"{out}.{k}.npz") for k in range(n_split)]
-    np.savez(out, **{key: np.concatenate([p[key] for p in parts]) for key in ("n_visible", "gdop")})
+    parts = [np.load(_part(out, k, n_split)) for k in range(n_split)]
+    if n_split > 1:
+        np.savez(out, **{key: np.concatenate([p[key] for p in parts]) for key in ("n_visible", "gdop")})
     return wall, max(float(p["map_s"]) for p in parts), cpu
 
 

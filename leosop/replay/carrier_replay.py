@@ -167,14 +167,12 @@ def replay_carrier(rec, res, constellation, *, block_s, lo_offset_max_hz, static
     """
     from ..positioning.solve import position_static_passes
     from .pipeline import search_band, track_measurements
-    from .stream import narrowed_shift_s
+    from .stream import track_times
 
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     factor, _ = search_band(rec.sample_rate_hz, comb, lo_offset_max_hz)
-    shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
-    t_s = np.array([b.t_s for b in res.blocks]) - shift_s
-    time_utc = np.array([b.time_utc for b in res.blocks]) - np.timedelta64(int(round(shift_s * 1e9)), "ns")
+    t_s, time_utc = track_times(res.blocks, factor, rec.sample_rate_hz)
     ident = [tr for tr in res.tracks if tr.sat_id is not None]
     sats = tuple(sorted({tr.sat_id for tr in ident}))
     starts = [min((tr for tr in ident if tr.sat_id == s), key=lambda tr: tr.t_s[0]) for s in sats]

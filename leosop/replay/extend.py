@@ -35,7 +35,8 @@ import numpy as np
 from ..constants import C_MPS
 from ..signal.multicomb import find_combs
 from .ephemeris import RATE_STEP_S, SPEED_SV_MPS, Ephemeris, doppler_hz, doppler_model
-from .stream import narrowed_shift_s, prepared_blocks
+from .refit import rows_by_block
+from .stream import prepared_blocks, track_times
 from .tracks import Track
 
 __all__ = ["EXTEND_STATUSES", "extend_fragments"]
@@ -124,10 +125,7 @@ def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_
     if not frags or not np.all(np.isfinite(pos)):
         return raw, 0
     fs = rec.sample_rate_hz / factor
-    shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
-    shift = np.timedelta64(int(round(shift_s * 1e9)), "ns")
-    t_blk = np.array([b.t_s - shift_s for b in blocks])
-    utc_blk = np.array([b.time_utc - shift for b in blocks])
+    t_blk, utc_blk = track_times(blocks, factor, rec.sample_rate_hz)
     t0 = utc_blk[0]
     t_rel = (utc_blk - t0) / np.timedelta64(1, "s")
     lo_hz = lo.offset_hz + lo.drift_hz_per_s * ((utc_blk - lo.t_ref_utc) / np.timedelta64(1, "s"))
@@ -145,10 +143,8 @@ def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_
     if not cands:
         return raw, 0
     # Every track's combs per block (Doppler, rate), fitted alongside.
-    others = {}
-    for tr in raw:
-        for t, f, r in zip(tr.t_s, tr.doppler_hz, tr.doppler_rate_hz_per_s):
-            others.setdefault(index[t], []).append((f, r))
+    others = {k: [(raw[i].doppler_hz[j], raw[i].doppler_rate_hz_per_s[j]) for i, j in rows]
+              for k, rows in rows_by_block(raw, t_blk).items()}
     for direction in (1, -1):
         _follow(direction, cands, others, rec, blocks, factor, comb, fs, lo_hz, lo.drift_hz_per_s, band_hz, gate_hz,
                 threads)

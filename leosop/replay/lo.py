@@ -229,7 +229,7 @@ def rough_lo_hz(doppler_hz):
     The Doppler-only tone model misplaces a comb's edge tones by 15 Hz at a
     1 MHz LO offset, a cycle and a half over a 0.1 s block: tracked combs
     lose most of their edge tones' power, fall below the detector and their
-    tracks break up, and no refit (:func:`~leosop.replay.pipeline.refit_through_lo`) brings back a
+    tracks break up, and no refit (:func:`~leosop.replay.refit.refit_through_lo`) brings back a
     detection the first pass did not make. The median of the combs'
     Dopplers is the offset to ~100 kHz (their geometric parts spread
     +-200 kHz round it), which leaves the edge tones within 1.5 Hz.

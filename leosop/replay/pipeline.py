@@ -41,8 +41,9 @@ from .elements import check_snapshot_age
 from .extend import extend_fragments
 from .identify import identify_tracks
 from .lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ, LoEstimate, check_band, lo_estimate, lo_noise, rough_lo_hz
-from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, narrowed_shift_s, prepared_blocks
-from .tracks import Detections, Track, Tracker, join_fragments, remove_outliers
+from .refit import refit_through_lo
+from .stream import SPECTRUM_BINS, SPECTRUM_COLUMNS, prepared_blocks, track_times
+from .tracks import Detections, Tracker, join_fragments, remove_outliers
 
 __all__ = ["Block", "ReplayResult", "block_plan", "replay", "track_measurements"]
 
@@ -177,69 +178,6 @@ def _correct_rate_change(track, n_samples, fs):
     track.doppler_hz = track.doppler_hz - cubic_bias_hz(accel, n_samples, fs)
 
 
-def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, threads=1):
-    """The tracks' blocks fitted again with the tone model through the receiver's LO offset.
-
-    The first pass models the whole common offset as Doppler, scaled with
-    each tone's RF frequency, where an LO offset moves every tone alike
-    (:meth:`~leosop.signal.pilot.PilotComb.through_lo`): at 1 MHz the comb's
-    edge tones sit 15 Hz off. Once identification has estimated the offset,
-    every block a track was detected in is read again and its tracked combs
-    fitted at their Doppler and rate (tracking mode, ``TRACK_GATE_HZ``) with
-    ``lo_offset_hz`` the offset at the block's time. A detection the exact
-    model does not confirm (its comb fails the detector) leaves the track.
-
-    Parameters
-    ----------
-    rec : Recording
-    tracks : list of Track
-        Raw Dopplers (before :func:`_correct_rate_change`, whose sub-hertz
-        change does not matter to the gate).
-    blocks : list of Block
-    factor : int
-        Narrowing factor of the first pass (:func:`search_band`).
-    comb : PilotComb
-    lo : LoEstimate
-    threads : int
-        Threads reading and cleaning blocks (:func:`~leosop.replay.stream.prepared_blocks`).
-
-    Returns
-    -------
-    list of Track
-        New tracks, raw; tracks left with no detection are dropped.
-    """
-    fs = rec.sample_rate_hz / factor
-    shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
-    members = {}  # block index -> [(track, row)]
-    index = {b.t_s - shift_s: k for k, b in enumerate(blocks)}
-    for i, tr in enumerate(tracks):
-        for j, t in enumerate(tr.t_s):
-            members.setdefault(index[t], []).append((i, j))
-    cols = ("doppler_hz", "doppler_rate_hz_per_s", "cn0_dbhz", "sigma_hz")
-    new = [{c: getattr(tr, c).copy() for c in cols} | {"keep": np.zeros(len(tr), bool)} for tr in tracks]
-    members = sorted(members.items())
-    for (k, rows), block in zip(members, prepared_blocks(rec, [blocks[k] for k, _ in members], factor, comb,
-                                                         threads=threads)):
-        pred = np.array([tracks[i].doppler_hz[j] for i, j in rows])
-        rate = np.array([tracks[i].doppler_rate_hz_per_s[j] for i, j in rows])
-        lo_hz = lo.offset_hz + lo.drift_hz_per_s * float((tracks[rows[0][0]].time_utc[rows[0][1]] - lo.t_ref_utc)
-                                                         / np.timedelta64(1, "s"))
-        found = find_combs(block.iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
-                           search=False, gate_hz=TRACK_GATE_HZ, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz,
-                           clean=False, spectrum=block.iq_fft)
-        for m, p in enumerate(found.predicted_index):
-            i, j = rows[p]
-            for c, v in zip(cols, (found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)):
-                new[i][c][j] = v[m]
-            new[i]["keep"][j] = True
-    out = []
-    for tr, n in zip(tracks, new):
-        keep = n["keep"]
-        if keep.any():
-            out.append(Track(tr.t_s[keep], tr.time_utc[keep], *(n[c][keep] for c in cols)))
-    return out
-
-
 @dataclass
 class ReplayResult:
     """What :func:`replay` found.
@@ -266,7 +204,7 @@ class ReplayResult:
         Processor time of each stage [s]: ``blocks`` (reading, comb search
         and tracking), ``identify``, ``refit`` (the tracked blocks fitted
         again through the LO offset and identified again,
-        :func:`refit_through_lo`; 0 when the offset is too small to matter),
+        :func:`~leosop.replay.refit.refit_through_lo`; 0 when the offset is too small to matter),
         ``extend`` (unnamed fragments followed along their candidates' curves
         and the tracks identified again, :mod:`~leosop.replay.extend`; static
         replays), ``fix``; with several threads the sum of their times.
@@ -398,6 +336,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     # Central tones within the band (BAND_MARGIN off its edges), as search_band's.
     band_hz = (0.5 - BAND_MARGIN) * fs - float(np.max(np.abs(comb.offsets_hz)))
     prepared = prepared_blocks(rec, blocks, factor, comb, threads=threads, spectrum_every=every)
+    t_trk, utc_trk = track_times(blocks, factor, rec.sample_rate_hz)
     for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")
                                        if show_progress else prepared)):
         iq = block.iq  # narrowed and cleaned
@@ -426,11 +365,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
                                clean=False, spectrum=block.iq_fft)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         n_last = len(det)
-        shift_s = narrowed_shift_s(factor, rec.sample_rate_hz)
-        tracker.update(b.t_s - shift_s, b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns"), det,
-                       block_s=iq.size / fs)
-        block_len[b.t_s - shift_s] = iq.size
-        block_len[b.time_utc - np.timedelta64(int(round(shift_s * 1e9)), "ns")] = iq.size
+        tracker.update(t_trk[k], utc_trk[k], det, block_s=iq.size / fs)
+        block_len[t_trk[k]] = block_len[utc_trk[k]] = iq.size
         if block.spectrum is not None:
             spec_t.append(b.t_s)
             spec.append(block.spectrum)
@@ -457,7 +393,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     misfit = (0 if lo is None else abs(lo.offset_hz) * np.max(np.abs(comb.offsets_hz)) / comb.carrier_hz
               * max(block_len.values()) / fs)
     if misfit > LO_REFIT_CYCLES:
-        raw = [remove_outliers(tr) for tr in refit_through_lo(rec, raw, blocks, factor, comb, lo, threads=threads)]
+        refit = refit_through_lo(rec, raw, blocks, factor, comb, lo, gate_hz=TRACK_GATE_HZ, threads=threads)
+        raw = [remove_outliers(tr) for tr in refit]
         tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
     cpu_s["refit"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
     wall_s["refit"] = time.perf_counter() - wall0 - wall_s["blocks"] - wall_s["identify"]

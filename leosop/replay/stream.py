@@ -34,7 +34,7 @@ from ..signal.fft import empty_aligned, fft, ifft
 from ..signal.cleaning import clean_block
 from ..signal.comb_grid import NonFiniteSamples
 
-__all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column"]
+__all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column", "track_times"]
 
 #: Columns of the spectrogram kept for the figure, and its frequency bins.
 SPECTRUM_COLUMNS = 600
@@ -76,6 +76,23 @@ def narrow(iq, factor):
 def narrowed_shift_s(factor, sample_rate_hz):
     """How far before a block's centre its :func:`narrow` output's centre lies [s]: ``(factor - 1) / 2`` samples."""
     return 0.5 * (factor - 1) / sample_rate_hz
+
+
+def track_times(blocks, factor, sample_rate_hz):
+    """Where the tracks put each block: the centre of its narrowed samples (:func:`narrowed_shift_s` before
+    the block's centre).
+
+    Returns
+    -------
+    t_s : ndarray, (n_blocks,)
+        Seconds from the recording's first sample.
+    time_utc : ndarray of datetime64[ns], (n_blocks,)
+    """
+    shift_s = narrowed_shift_s(factor, sample_rate_hz)
+    t_s = np.array([b.t_s for b in blocks], float) - shift_s
+    time_utc = (np.array([b.time_utc for b in blocks], "datetime64[ns]")
+                - np.timedelta64(int(round(shift_s * 1e9)), "ns"))
+    return t_s, time_utc
 
 
 def spectrum_column(iq):
