@@ -171,11 +171,12 @@ def _merged(raw, frags, cands, index, t_blk, utc_blk, gate_hz):
         for i in frs:
             for r in best[i].rows:
                 new[sat].setdefault(r[0], r[1:])
-    for sat, rows in new.items():
-        clash = [j for j, r in rows.items()
-                 if any(o != sat and j in other and abs(other[j][0] - r[0]) <= 2 * gate_hz for o, other in new.items())]
-        for j in clash:
-            del rows[j]
+    clash = {sat: [j for j, r in rows.items() if any(o != sat and j in other and abs(other[j][0] - r[0]) <= 2 * gate_hz
+                                                     for o, other in new.items())]
+             for sat, rows in new.items()}  # all found before any is removed: both sides lose the block
+    for sat, blocks in clash.items():
+        for j in blocks:
+            del new[sat][j]
     out, drop = list(raw), set()
     for sat, frs in by_sat.items():
         rows = {}
