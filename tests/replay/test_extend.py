@@ -142,3 +142,25 @@ def test_the_fit_recovers_offset_and_time_offset_and_refuses_beyond_the_bounds()
     cand.rows = [(j, off[j], 0.0, 40.0, 0.5) for j in range(3, n)]
     extend._refit(cand, np.zeros(n))
     assert cand.lost and cand.rows == []
+
+
+def test_a_comb_two_satellites_followed_into_is_left_to_neither():
+    """Two fragments followed along two satellites whose detections share block 5 at one frequency (one comb
+    taken by both): the merged tracks keep their other blocks and leave block 5 out of both."""
+    from leosop.replay import extend
+    from leosop.replay.tracks import Track
+
+    n = 10
+    t_blk = np.arange(n, dtype=float)
+    utc_blk = np.datetime64("2025-01-01T00:00:00", "ns") + (t_blk * 1e9).astype("timedelta64[ns]")
+    raw = [Track(t_blk[:2], utc_blk[:2], np.array([100.0, 90.0]), np.full(2, -10.0), np.full(2, 40.0), np.full(2, 0.5)),
+           Track(t_blk[8:], utc_blk[8:], np.array([5.0, 4.0]), np.full(2, -1.0), np.full(2, 40.0), np.full(2, 0.5))]
+    index = {t: j for j, t in enumerate(t_blk)}
+    cands = []
+    for track, sat, found in ((0, 11, {3: 70.0, 5: 50.0}), (1, 22, {5: 50.5, 6: 8.0})):
+        c = extend._Candidate(track, sat, np.zeros(n), np.zeros(n), np.zeros(n), np.ones(n, bool), (), (0, 0), 30.0)
+        c.rows = [(j, f, 0.0, 40.0, 0.5) for j, f in found.items()]
+        cands.append(c)
+    out, n_ext = extend._merged(raw, [0, 1], cands, index, t_blk, utc_blk, gate_hz=25.0)
+    assert n_ext == 2
+    assert list(out[0].t_s) == [0.0, 1.0, 3.0] and list(out[1].t_s) == [6.0, 8.0, 9.0]
