@@ -10,6 +10,7 @@ previous estimates (Jacobi) and :func:`track_combs` fits predicted combs at
 once. Used by :func:`~leosop.signal.multicomb.find_combs`.
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -157,9 +158,30 @@ def newton_combs(y, tau, tpow, ratio, f, r, n_iter=2):
     return f, r, y0 - 1j * (step_f[:, None] * a * m1 + step_r[:, None] * b * m2)
 
 
-def refine_combs(grid, comb, combs, clean=True):
+@functools.cache
+def _compiled():
+    """:mod:`leosop.signal.fitkernels`, or None when numba is not installed."""
+    try:
+        from . import fitkernels
+    except ImportError:
+        return None
+    return fitkernels
+
+
+def _kernels(kernel):
+    """The compiled kernels for ``kernel`` "numba" (None: when installed), None for "numpy"."""
+    if kernel not in (None, "numba", "numpy") or (kernel == "numba" and _compiled() is None):
+        raise ValueError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
+    return None if kernel == "numpy" else _compiled()
+
+
+def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
     """One pass of re-estimation of every comb (Newton from its estimate) with all the others removed
-    (``clean``), all combs at once (each from the others' previous estimates)."""
+    (``clean``), all combs at once (each from the others' previous estimates).
+
+    ``kernel``: "numpy", or "numba" (:mod:`.fitkernels`, one compiled call; agrees to float32 rounding);
+    None: numba when installed.
+    """
     n, fs, n_k = grid.n, grid.fs, comb.n_tones
     extra = (combs[0].f_c.size - n_k) // 2
     k = slice(extra, extra + n_k)
@@ -167,6 +189,24 @@ def refine_combs(grid, comb, combs, clean=True):
     mix = _stacked([c.mix for c in combs])
     d_c = np.array([c.d_c for c in combs])
     z = _stacked([c.y_wide for c in combs])
+    compiled = _kernels(kernel)
+    if compiled is not None:
+        n_c, n_seg = len(combs), grid.n_seg
+        if clean:
+            val, nu = _stacked([c.val for c in combs]), _stacked([c.nu for c in combs])
+        else:
+            val, nu = np.zeros((n_seg, n_c, n_k), np.complex64), np.zeros((n_seg, n_c, n_k))
+        out_z = np.empty_like(z)
+        doppler, rate, w, mean_cn0, statistic = np.empty((5, n_c))
+        amp = np.empty((n_c, n_k), dtype=complex)
+        val_out, nu_out = np.empty((n_seg, n_c, n_k), np.complex64), np.empty((n_seg, n_c, n_k))
+        compiled.refine(z, clean, extra, n_k, grid.tau, grid.tpow, comb.tone_spacing_hz / comb.carrier_hz,
+                        comb.tone_spacing_hz, comb.offsets_hz, comb.doppler_scale, f_c, mix, val, nu,
+                        grid.counts.astype(float), fs, grid.reach_hz, d_c,
+                        np.array([c.doppler_hz for c in combs]) - d_c, np.array([c.rate for c in combs]), n,
+                        grid.seg, grid.noise_gain, out_z, doppler, rate, w, mean_cn0, statistic, amp, val_out, nu_out)
+        _store(combs, n, fs, out_z, doppler, rate, w, mean_cn0, statistic, amp, val_out, nu_out)
+        return
     if clean:
         z = z - leakage_all(grid, f_c, mix, _stacked([c.val for c in combs]), _stacked([c.nu for c in combs]))
     y = z[:, :, k]
@@ -194,6 +234,13 @@ def refine_combs(grid, comb, combs, clean=True):
     g = e * mix[:, :, k] * dirichlet(nu - f_c[:, k], grid.counts[:, None, None], grid.fs)
     amp = np.sum(y * np.conj(g), axis=0) / np.sum(abs2(g), axis=0)
     val = (e * amp).astype(np.complex64)
+    _store(combs, n, fs, z, doppler, rate, w, mean_cn0, statistic, amp, val, nu)
+
+
+def _store(combs, n, fs, z, doppler, rate, w, mean_cn0, statistic, amp, val, nu):
+    """:func:`refine_combs`' results written to its combs: (C,) ``doppler`` .. ``statistic``, ``amp`` (C, K),
+    ``z`` (B, C, W) and ``val``, ``nu`` (B, C, K); ``w`` (sum of C/N0 times Doppler scale squared) and
+    ``mean_cn0`` (linear) give the Doppler sigma and the C/N0 [dB-Hz]."""
     with np.errstate(divide="ignore"):
         sigma_hz = np.where(w > 0, np.sqrt(crlb_frequency_hz2(10.0 * np.log10(np.where(w > 0, w, 1.0)), n, fs)), np.inf)
         cn0_dbhz = np.where(mean_cn0 > 0, 10.0 * np.log10(np.where(mean_cn0 > 0, mean_cn0, 1.0)), -np.inf)

@@ -91,6 +91,11 @@ class DecimationGrid:
         return self.n_seg * self.fs / self.n
 
     @property
+    def reach_hz(self):
+        """How far from a channel another comb's tone leaks into it [Hz] (``_LEAK_BANDS`` decimated bands)."""
+        return _LEAK_BANDS * self.fs_dec
+
+    @property
     def spectrum(self):
         """FFT of the block zero-padded to n_seg * seg samples (computed once)."""
         if self._spectrum is None:
@@ -181,7 +186,7 @@ def leakage(grid, sources, f_c, mix):
     if not have:
         return None
     nu_mid = np.concatenate([o.nu[grid.n_seg // 2] for o in have])
-    near = np.abs(nu_mid[:, None] - f_c) < _LEAK_BANDS * grid.fs_dec
+    near = np.abs(nu_mid[:, None] - f_c) < grid.reach_hz
     jj, ii = np.nonzero(near.T)  # pairs grouped by channel
     if ii.size == 0:
         return None
@@ -203,7 +208,7 @@ def leakage_all(grid, f_c, mix, val, nu):
     n_seg, n_c, n_w = mix.shape
     n_k = val.shape[2]
     fc = f_c.reshape(-1)
-    near = np.abs(nu[n_seg // 2].reshape(-1) - fc[:, None]) < _LEAK_BANDS * grid.fs_dec  # (C W, C K)
+    near = np.abs(nu[n_seg // 2].reshape(-1) - fc[:, None]) < grid.reach_hz  # (C W, C K)
     near &= np.repeat(np.arange(n_c), n_w)[:, None] != np.repeat(np.arange(n_c), n_k)
     jj, ii = np.nonzero(near)  # pairs grouped by channel
     out = np.zeros((n_seg, n_c * n_w), dtype=complex)
