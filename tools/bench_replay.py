@@ -2,6 +2,7 @@
 
     python tools/bench_replay.py [--quick] [--memory-gb G] [--sats N] [--parts fix,throughput,threads,baseline,memory]
                                  [--tle FILE --start ISO] [--threads N] [--baseline-ref REF] [--repeats R]
+                                 [--seconds S]
 
 1. Static fix from 150 snapshots of 20 ms (2.5 MS/s, ``--sats`` of the
    satellites above 40 deg drawn per recording, along-track orbit errors of a few hundred metres and satellite
@@ -32,10 +33,11 @@
    command, interpreter start and imports left out; ``os.wait4`` of the whole
    child beside it) per second of recording, the real-time factor that gives
    on one core (recording length over processor time) and the elapsed one
-   (over wall time), the load average beside them, and whether every run's
-   JSON is byte for byte that of the first. On a shared machine the elapsed
-   times (and, less, the processor times) grow with the load: compare the
-   columns of one run, not runs.
+   (over wall time), the load average beside them, and whether each code's
+   runs give the same JSON byte for byte (and, where this tree's differs
+   from the baseline's, by how much the fixes do). On a shared machine the
+   elapsed times (and, less, the processor times) grow with the load:
+   compare the columns of one run, not runs.
 4. Memory: peak RSS of ``leosop replay`` on a large continuous recording
    (``--memory-gb``, generated whole), beside the peak
    RSS on the short one: bounded by the block, not the file.
@@ -287,14 +289,13 @@ def bench_baseline(tmp, rec_path, seconds, threads, ref, repeats=3):
         export_package(ref, base)
         codes.append((ref, base))
     runs = {(name, n): [] for name, _ in codes for n in (1, threads)}
-    outputs = []
+    outputs = {name: [] for name, _ in codes}
     for r in range(repeats):
         for name, code_dir in codes:
             for n in (1, threads):
-                out = Path(tmp) / f"replay_{len(outputs)}.json"
+                out = Path(tmp) / f"replay_{sum(map(len, outputs.values()))}.json"
                 runs[name, n].append(_child_replay(code_dir, rec_path, n, out) + (os.getloadavg()[0],))
-                outputs.append(out.read_bytes())
-    same = all(o == outputs[0] for o in outputs)
+                outputs[name].append(out.read_bytes())
     print(f"replay of {seconds:g} s (2.5 MS/s, continuous) in child processes, best of {repeats} alternating, "
           f"{os.cpu_count()} cores; CPU = user + system of all threads round the command (whole child with "
           f"interpreter start in brackets); x real time on one core = recording / CPU, elapsed = recording / wall")
@@ -305,7 +306,17 @@ def bench_baseline(tmp, rec_path, seconds, threads, ref, repeats=3):
         best_wall = min(rw[1] for rw in rows)
         print(f"{name:>16} {n:>7} {cpu:>7.2f} {cpu / seconds:>8.3f} {seconds / cpu:>10.1f} {best_wall:>7.2f} "
               f"{seconds / best_wall:>9.1f} {load:>5.1f}   ({whole:.2f} s whole child)")
-    print(f"JSON of all {len(outputs)} runs {'identical' if same else 'DIFFERENT'}")
+    for name, docs in outputs.items():
+        print(f"JSON of the {len(docs)} runs of {name}: "
+              f"{'identical' if all(o == docs[0] for o in docs) else 'DIFFERENT'}")
+    if len(outputs) == 2:
+        a, b = (json.loads(docs[0]) for docs in outputs.values())
+        if a == b:
+            print("JSON of this tree and the baseline identical")
+        else:
+            fix = [np.array([s[c] for s in d["solutions"] for c in ("x_m", "y_m", "z_m")]) for d in (a, b)]
+            gap = f"{np.max(np.abs(fix[0] - fix[1])):.2g} m" if fix[0].shape == fix[1].shape else "different fixes"
+            print(f"JSON of this tree and the baseline differ: fix positions by {gap}")
 
 
 def _peak_rss_mb(argv):
@@ -352,13 +363,16 @@ if __name__ == "__main__":
                     "'none': this tree alone)")
     ap.add_argument("--repeats", type=int, default=3, help="runs of each configuration in the baseline part")
     ap.add_argument("--threads", type=int, default=2, help="threads compared with one (default 2)")
+    ap.add_argument("--seconds", type=float, help="length of the continuous recording (default 20 s, 5 s with "
+                    "--quick): what is once per recording (imports, identification, fix) weighs less in a "
+                    "longer one")
     a = ap.parse_args()
     parts = set(a.parts.split(","))
     SKY.update(tle=a.tle, start=a.start)
     with tempfile.TemporaryDirectory() as tmp:
         if "fix" in parts:
             bench_fix(tmp, range(2) if a.quick else range(10), a.sats)
-        seconds = 5.0 if a.quick else 20.0
+        seconds = a.seconds or (5.0 if a.quick else 20.0)
         if parts & {"throughput", "threads", "baseline", "memory"}:
             small, rec, const = bench_throughput(tmp, seconds, a.sats)
         if "threads" in parts:
