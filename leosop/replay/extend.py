@@ -81,7 +81,7 @@ class _Candidate:
 
 
 def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_cov_m2, constellation, *, mask_deg,
-                     band_hz, gate_hz, threads=1):
+                     band_hz, gate_hz, threads=1, kernel=None):
     """The unnamed fragments of ``raw`` followed along their candidates' curves (module docstring).
 
     Parameters
@@ -111,6 +111,8 @@ def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_
         Half-width of the tracking window round each prediction [Hz].
     threads : int
         Threads reading and cleaning blocks (:func:`~leosop.replay.stream.prepared_blocks`).
+    kernel : {None, "numba", "numpy"}
+        The comb fits' (:func:`~leosop.signal.multicomb.find_combs`): the replay's, for the whole recording.
 
     Returns
     -------
@@ -147,7 +149,7 @@ def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_
               for k, rows in rows_by_block(raw, t_blk).items()}
     for direction in (1, -1):
         _follow(direction, cands, others, rec, blocks, factor, comb, fs, lo_hz, lo.drift_hz_per_s, band_hz, gate_hz,
-                threads)
+                threads, kernel)
     return _merged(raw, frags, cands, index, t_blk, utc_blk, gate_hz)
 
 
@@ -268,7 +270,8 @@ def _fit(r_hz, rate, sigma_hz, use=True):
     return c, tau, chi2, resid
 
 
-def _follow(direction, cands, index_others, rec, blocks, factor, comb, fs, lo_hz, drift, band_hz, gate_hz, threads):
+def _follow(direction, cands, index_others, rec, blocks, factor, comb, fs, lo_hz, drift, band_hz, gate_hz, threads,
+            kernel):
     """Follow every candidate in one direction (+1 later, -1 earlier) from its fragment's ends.
 
     A candidate stops below the mask, after :data:`MAX_MISSES` captures in a row without a detection (a
@@ -305,7 +308,8 @@ def _follow(direction, cands, index_others, rec, blocks, factor, comb, fs, lo_hz
             rate_all = np.concatenate([[r for _, r in near], [c.rate_hz_per_s[j] + drift for c in here]])
             found = find_combs(block.iq, fs, comb=comb, predicted_hz=f_all,
                                predicted_rate_hz_per_s=np.nan_to_num(rate_all), search=False, gate_hz=gate_hz,
-                               max_combs=f_all.size, lo_offset_hz=lo_hz[j], clean=False, spectrum=block.iq_fft)
+                               max_combs=f_all.size, lo_offset_hz=lo_hz[j], clean=False, spectrum=block.iq_fft,
+                               kernel=kernel)
             # A comb beyond the gate (find_combs keeps one up to two bins further) is not the candidate's.
             hit = {int(p) - f_other.size: m for m, p in enumerate(found.predicted_index)
                    if p >= f_other.size and abs(found.doppler_hz[m] - f_all[p]) <= gate_hz}

@@ -35,6 +35,7 @@ from ..errors import InputError
 from ..positioning.measurements import Measurements
 from ..signal.coarse import MAX_DOPPLER_HZ
 from ..signal.fine import cubic_bias_hz
+from ..signal.comb_fit import fit_kernel
 from ..signal.multicomb import find_combs
 from ..signal.pilot import PilotComb
 from .elements import check_snapshot_age
@@ -335,6 +336,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     lo_rough = None  # the tracking blocks' tone-model LO offset, from the first full search (rough_lo_hz)
     # Central tones within the band (BAND_MARGIN off its edges), as search_band's.
     band_hz = (0.5 - BAND_MARGIN) * fs - float(np.max(np.abs(comb.offsets_hz)))
+    kernel = fit_kernel(len(blocks))  # compiled comb fits where they pay for their load
     prepared = prepared_blocks(rec, blocks, factor, comb, threads=threads, spectrum_every=every)
     t_trk, utc_trk = track_times(blocks, factor, rec.sample_rate_hz)
     for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")
@@ -352,7 +354,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             # After a birth the combs of the last block are searched for again, with as many new.
             n_known = n_last if contiguous else 0
             found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
-                               lo_offset_hz=lo, clean=False, spectrum=block.iq_fft)
+                               lo_offset_hz=lo, clean=False, spectrum=block.iq_fft, kernel=kernel)
             if lo_rough is None:
                 lo_rough = rough_lo_hz(found.doppler_hz)
         else:
@@ -362,7 +364,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
                                search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
                                max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
-                               clean=False, spectrum=block.iq_fft)
+                               clean=False, spectrum=block.iq_fft, kernel=kernel)
         det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
         n_last = len(det)
         tracker.update(t_trk[k], utc_trk[k], det, block_s=iq.size / fs)
@@ -393,7 +395,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     misfit = (0 if lo is None else abs(lo.offset_hz) * np.max(np.abs(comb.offsets_hz)) / comb.carrier_hz
               * max(block_len.values()) / fs)
     if misfit > LO_REFIT_CYCLES:
-        refit = refit_through_lo(rec, raw, blocks, factor, comb, lo, gate_hz=TRACK_GATE_HZ, threads=threads)
+        refit = refit_through_lo(rec, raw, blocks, factor, comb, lo, gate_hz=TRACK_GATE_HZ, threads=threads,
+                                 kernel=kernel)
         raw = [remove_outliers(tr) for tr in refit]
         tracks, ident = identify(raw, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)
     cpu_s["refit"] = time.process_time() - t0 - cpu_s["blocks"] - cpu_s["identify"]
@@ -402,7 +405,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
         # Fragments too short to name, followed along their candidates' curves (extend.py).
         ext, n_ext = extend_fragments(rec, raw, tracks, blocks, factor, comb, lo_estimate(ident), ident.pos_ecef_m,
                                       ident.pos_cov_m2, constellation, mask_deg=mask_deg, band_hz=band_hz,
-                                      gate_hz=TRACK_GATE_HZ, threads=threads)
+                                      gate_hz=TRACK_GATE_HZ, threads=threads, kernel=kernel)
         if n_ext:
             raw_ext = [remove_outliers(tr) for tr in ext]
             again = identify(raw_ext, ident.pos_ecef_m, REFIT_PRIOR_RADIUS_M)

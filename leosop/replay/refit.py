@@ -31,7 +31,7 @@ def rows_by_block(tracks, block_t_s):
     return rows
 
 
-def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=1):
+def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=1, kernel=None):
     """The tracks' blocks fitted again with the tone model through the receiver's LO offset.
 
     The first pass models the whole common offset as Doppler, scaled with
@@ -58,6 +58,8 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=
         Half-width of the tracking window round each detection [Hz].
     threads : int
         Threads reading and cleaning blocks (:func:`~leosop.replay.stream.prepared_blocks`).
+    kernel : {None, "numba", "numpy"}
+        The comb fits' (:func:`~leosop.signal.multicomb.find_combs`): the replay's, for the whole recording.
 
     Returns
     -------
@@ -77,7 +79,7 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=
                                                          / np.timedelta64(1, "s"))
         found = find_combs(block.iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
                            search=False, gate_hz=gate_hz, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz,
-                           clean=False, spectrum=block.iq_fft)
+                           clean=False, spectrum=block.iq_fft, kernel=kernel)
         for m, p in enumerate(found.predicted_index):
             i, j = rows[p]
             for c, v in zip(cols, (found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)):

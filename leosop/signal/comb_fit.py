@@ -21,7 +21,8 @@ from .crlb import crlb_frequency_hz2
 from .fft import fft
 from .fine import comb_phasors, dechirped_peak_hz, newton_comb, rate_dpt, rate_grid_search, trimmed_tone_sum, wrap_hz
 
-__all__ = ["CombState", "cleaned_tones", "decimate", "decimate_combs", "fit_comb", "refine_combs", "track_combs"]
+__all__ = ["COMPILED_MIN_BLOCKS", "CombState", "cleaned_tones", "decimate", "decimate_combs", "fit_comb", "fit_kernel",
+           "refine_combs", "track_combs"]
 
 
 @dataclass
@@ -158,6 +159,19 @@ def newton_combs(y, tau, tpow, ratio, f, r, n_iter=2):
     return f, r, y0 - 1j * (step_f[:, None] * a * m1 + step_r[:, None] * b * m2)
 
 
+#: Blocks a job needs before the compiled fits (:mod:`.fitkernels`) pay for their one-off load: numba's import
+#: and its machine code from the cache take 0.25-0.45 s per process (measured; even a trivial cached
+#: function's first call takes 0.3 s), the fits save ~0.65 ms per tracking block (0.1 s, 7 combs).
+COMPILED_MIN_BLOCKS = 500
+
+
+def fit_kernel(n_blocks):
+    """The ``kernel`` of a job of ``n_blocks`` blocks: "numpy" below :data:`COMPILED_MIN_BLOCKS`, else None
+    (numba when installed). Decided by the job alone, so a recording's result does not depend on what the
+    process ran before."""
+    return "numpy" if n_blocks < COMPILED_MIN_BLOCKS else None
+
+
 @functools.cache
 def _compiled():
     """:mod:`leosop.signal.fitkernels`, or None when numba is not installed."""
@@ -265,9 +279,10 @@ def dechirped_peaks_hz(y, tau, rate, dt_dec):
     return wrap_hz((i + vertex) / (n_fft * dt_dec), 1.0 / dt_dec)
 
 
-def track_combs(grid, comb, pred, pred_rate, wide, max_rate, pfa):
+def track_combs(grid, comb, pred, pred_rate, wide, max_rate, pfa, kernel=None):
     """Every predicted comb fitted at once from its own tones (no cancellation yet), the comb
-    position checked as in :func:`fit_comb` (a shifted comb is refitted alone). Returns the combs."""
+    position checked as in :func:`fit_comb` (a shifted comb is refitted alone). Returns the combs.
+    ``kernel``: :func:`refine_combs`'."""
     half = comb.n_tones // 2
     extra = wide - half
     ratio = comb.tone_spacing_hz / comb.carrier_hz
@@ -277,7 +292,7 @@ def track_combs(grid, comb, pred, pred_rate, wide, max_rate, pfa):
     f_res = dechirped_peaks_hz(y, grid.tau, pred_rate, grid.seg / grid.fs)
     for c, f, r in zip(combs, f_res, pred_rate):
         c.doppler_hz, c.rate = c.d_c + f, float(r)
-    refine_combs(grid, comb, combs, clean=False)
+    refine_combs(grid, comb, combs, clean=False, kernel=kernel)
     if extra == 0:
         return combs
     delta = np.array([c.doppler_hz - c.d_c for c in combs])

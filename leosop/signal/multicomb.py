@@ -213,9 +213,9 @@ def _check(iq, fs, predicted_hz, predicted_rate):
 class _Finder:
     """The combs of one block as they are found: the shared grid, the fitting options and the list so far."""
 
-    def __init__(self, grid, comb, wide, max_rate_hz_per_s, pfa):
+    def __init__(self, grid, comb, wide, max_rate_hz_per_s, pfa, kernel):
         self.grid, self.comb, self.wide = grid, comb, wide
-        self.max_rate, self.pfa = max_rate_hz_per_s, pfa
+        self.max_rate, self.pfa, self.kernel = max_rate_hz_per_s, pfa, kernel
         self.dur, self.df = grid.n / grid.fs, grid.fs / grid.n
         self.combs = []
 
@@ -243,7 +243,7 @@ class _Finder:
         thr = detection_threshold(comb.n_tones, n_cells, self.pfa)
         if pred_rate is not None and pred.size and batch:
             for c in track_combs(grid, comb, pred[:max_combs], pred_rate[:max_combs], self.wide, self.max_rate,
-                                 self.pfa):
+                                 self.pfa, self.kernel):
                 near = abs(c.doppler_hz - pred[c.predicted_index]) <= gate + 2.0 * df
                 if c.statistic > thr and near and not _duplicate(comb, c, combs, dur):
                     combs.append(c)
@@ -297,7 +297,8 @@ class _Finder:
 
 def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_doppler_hz=MAX_DOPPLER_HZ,
                max_rate_hz_per_s=MAX_RATE_HZ_PER_S, predicted_hz=None, predicted_rate_hz_per_s=None,
-               gate_hz=None, search=True, n_refine=2, batch=True, lo_offset_hz=0.0, clean=True, spectrum=None):
+               gate_hz=None, search=True, n_refine=2, batch=True, lo_offset_hz=0.0, clean=True, spectrum=None,
+               kernel=None):
     """Doppler, rate and C/N0 of every pilot comb in one block.
 
     Parameters
@@ -342,6 +343,10 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         With ``clean=False``: the FFT of ``iq`` (:func:`~.fft.fft`) if known,
         as the cleaning leaves it (:attr:`~.cleaning.Cleaning.spectrum`); the
         search then spares that FFT (the result is the same).
+    kernel : {None, "numba", "numpy"}
+        The batched re-estimation compiled (:mod:`.fitkernels`; agrees to
+        float32 rounding) or numpy; None: numba when installed. A job of
+        many blocks picks it with :func:`~.comb_fit.fit_kernel`.
 
     Returns
     -------
@@ -372,7 +377,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         # than a tracking one.
         kw = dict(comb=comb, max_combs=max_combs, pfa=pfa, max_doppler_hz=max_doppler_hz,
                   max_rate_hz_per_s=max_rate_hz_per_s, gate_hz=gate_hz, n_refine=n_refine, clean=False,
-                  spectrum=spectrum)
+                  spectrum=spectrum, kernel=kernel)
         tracked = find_combs(iq, fs, predicted_hz=pred, predicted_rate_hz_per_s=pred_rate, search=False, **kw)
         if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa, lo,
                                                                     spectrum):
@@ -387,10 +392,10 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     else:
         grid = DecimationGrid(iq, fs, max(error_hz, gate) + 0.5 * max_rate_hz_per_s * dur, spectrum=spectrum)
     half = comb.n_tones // 2
-    finder = _Finder(grid, comb, half if tracking else half + _EXTRA, max_rate_hz_per_s, pfa)
+    finder = _Finder(grid, comb, half if tracking else half + _EXTRA, max_rate_hz_per_s, pfa, kernel)
     finder.predictions(pred, pred_rate, gate, batch, max_combs)
     if search and len(finder.combs) < max_combs:
         finder.search(iq, max_combs, max_doppler_hz, smear, lo)
     for _ in range(n_refine if len(finder.combs) > 1 else 0):
-        refine_combs(grid, comb, finder.combs)
+        refine_combs(grid, comb, finder.combs, kernel=kernel)
     return finder.result()

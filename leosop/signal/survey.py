@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import InputError
 from .coarse import MAX_DOPPLER_HZ
 from .cleaning import clean_block
+from .comb_fit import fit_kernel
 from .frontend import image_rejection_db
 from .iq import DATATYPES, FULL_SCALE
 from .multicomb import find_combs
@@ -123,7 +124,8 @@ def survey(rec, *, lo_offset_hz=None, max_doppler_hz=MAX_DOPPLER_HZ, block_s=0.1
     # Pass 1 at the stated offset (or 0 over the whole band); without a stated offset a second pass at
     # the rough estimate, whose tone model fits the combs better.
     lo = 0.0 if lo_offset_hz is None else float(lo_offset_hz)
-    found = [find_combs(y, fs, comb=comb, lo_offset_hz=lo, max_doppler_hz=search, clean=False)
+    kernel = fit_kernel(len(cleaned))
+    found = [find_combs(y, fs, comb=comb, lo_offset_hz=lo, max_doppler_hz=search, clean=False, kernel=kernel)
              for _, y, _ in cleaned]
     lo_rough = None
     all_d = np.concatenate([f.doppler_hz for f in found])
@@ -131,7 +133,8 @@ def survey(rec, *, lo_offset_hz=None, max_doppler_hz=MAX_DOPPLER_HZ, block_s=0.1
         lo_rough = float(np.median(all_d))
         span = min(search, 0.5 * fs - half - abs(lo_rough) - 0.02 * fs)
         if span > 0:
-            found = [find_combs(y, fs, comb=comb, lo_offset_hz=lo_rough, max_doppler_hz=span, clean=False)
+            found = [find_combs(y, fs, comb=comb, lo_offset_hz=lo_rough, max_doppler_hz=span, clean=False,
+                                  kernel=kernel)
                      for _, y, _ in cleaned]
             lo_rough = float(np.median(np.concatenate([f.doppler_hz for f in found]) if found else all_d))
     full = FULL_SCALE.get(rec.datatype)
