@@ -315,7 +315,8 @@ def bench_baseline(tmp, rec_path, seconds, threads, ref, repeats=3):
             print("JSON of this tree and the baseline identical")
         else:
             fix = [np.array([s[c] for s in d["solutions"] for c in ("x_m", "y_m", "z_m")]) for d in (a, b)]
-            gap = f"{np.max(np.abs(fix[0] - fix[1])):.2g} m" if fix[0].shape == fix[1].shape else "different fixes"
+            gap = (f"{np.max(np.abs(fix[0] - fix[1])):.2g} m" if fix[0].shape == fix[1].shape and fix[0].size
+                   else "different fixes" if fix[0].shape != fix[1].shape else "none in either (other keys)")
             print(f"JSON of this tree and the baseline differ: fix positions by {gap}")
 
 

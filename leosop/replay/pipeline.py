@@ -339,39 +339,42 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     kernel = fit_kernel(len(blocks))  # compiled comb fits where they pay for their load
     prepared = prepared_blocks(rec, blocks, factor, comb, threads=threads, spectrum_every=every)
     t_trk, utc_trk = track_times(blocks, factor, rec.sample_rate_hz)
-    for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")
-                                       if show_progress else prepared)):
-        iq = block.iq  # narrowed and cleaned
-        # Tracking mode between full searches, where blocks follow each other.
-        # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
-        contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
-        pred = tracker.predictions(b.t_s) if contiguous else None
-        # Following blocks of a continuous recording fit the tone model through the rough LO offset, the
-        # search centred on it as far either side as the band allows (snapshots: the refit does it).
-        lo = (lo_rough or 0.0) if contiguous else 0.0
-        span = min(max_doppler, band_hz - abs(lo))
-        if pred is None:
-            # After a birth the combs of the last block are searched for again, with as many new.
-            n_known = n_last if contiguous else 0
-            found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
-                               lo_offset_hz=lo, clean=False, spectrum=block.iq_fft, kernel=kernel)
-            if lo_rough is None:
-                lo_rough = rough_lo_hz(found.doppler_hz)
-        else:
-            # Every SEARCH_EVERY-th block also searches the spectrum for new
-            # combs, with the tracked ones fitted first and removed.
-            search = k % SEARCH_EVERY == 0
-            found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
-                               search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
-                               max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
-                               clean=False, spectrum=block.iq_fft, kernel=kernel)
-        det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
-        n_last = len(det)
-        tracker.update(t_trk[k], utc_trk[k], det, block_s=iq.size / fs)
-        block_len[t_trk[k]] = block_len[utc_trk[k]] = iq.size
-        if block.spectrum is not None:
-            spec_t.append(b.t_s)
-            spec.append(block.spectrum)
+    try:
+        for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")
+                                           if show_progress else prepared)):
+            iq = block.iq  # narrowed and cleaned
+            # Tracking mode between full searches, where blocks follow each other.
+            # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
+            contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
+            pred = tracker.predictions(b.t_s) if contiguous else None
+            # Following blocks of a continuous recording fit the tone model through the rough LO offset, the
+            # search centred on it as far either side as the band allows (snapshots: the refit does it).
+            lo = (lo_rough or 0.0) if contiguous else 0.0
+            span = min(max_doppler, band_hz - abs(lo))
+            if pred is None:
+                # After a birth the combs of the last block are searched for again, with as many new.
+                n_known = n_last if contiguous else 0
+                found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
+                                   lo_offset_hz=lo, clean=False, spectrum=block.iq_fft, kernel=kernel)
+                if lo_rough is None:
+                    lo_rough = rough_lo_hz(found.doppler_hz)
+            else:
+                # Every SEARCH_EVERY-th block also searches the spectrum for new
+                # combs, with the tracked ones fitted first and removed.
+                search = k % SEARCH_EVERY == 0
+                found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
+                                   search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
+                                   max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
+                                   clean=False, spectrum=block.iq_fft, kernel=kernel)
+            det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
+            n_last = len(det)
+            tracker.update(t_trk[k], utc_trk[k], det, block_s=iq.size / fs)
+            block_len[t_trk[k]] = block_len[utc_trk[k]] = iq.size
+            if block.spectrum is not None:
+                spec_t.append(b.t_s)
+                spec.append(block.spectrum)
+    finally:
+        prepared.close()  # its workers and the switch interval, also when a block's work raised
     cpu_s = {"blocks": time.process_time() - t0}
     wall_s = {"blocks": time.perf_counter() - wall0}
     raw = [remove_outliers(tr) for tr in join_fragments(tracker.finish(), max(JOIN_GAP_S, 2.0 * max_gap_s))]

@@ -212,8 +212,13 @@ def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):
                 pending.append(pool.submit(prepare, item))
                 if len(pending) > LOOKAHEAD_PER_WORKER * (threads - 1):
                     yield pending.popleft().result()
-            while pending:
+            while len(pending) > 1:
                 yield pending.popleft().result()
+            last = pending.popleft().result() if pending else None
+        # The interval restored before the last block is handed over: a caller that takes every block
+        # (``zip`` with the blocks first never asks for more) leaves nothing set behind.
+        if last is not None:
+            yield last
     finally:
         # An error (or a caller that stops early) leaves blocks queued: drop them, let the running ones end.
         pool.shutdown(wait=True, cancel_futures=True)

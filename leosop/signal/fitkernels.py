@@ -122,7 +122,7 @@ def refine(z_in, clean, k0, n_k, tau, tpow, ratio, spacing_hz, offsets_hz, scale
         Channel mixing frequencies and phasors.
     val : (B, C, K) complex64; nu : (B, C, K)
         Each comb's previous tone values and frequencies (read when ``clean``).
-    counts : (B,) float32; fs, reach_hz : float
+    counts : (B,) float64; fs, reach_hz : float
         Samples per segment, sample rate, leakage reach.
     d_c, f0, r0 : (C,)
         Mixing centres, Doppler offsets from them and rates to start from.

@@ -25,3 +25,20 @@ def test_switch_interval_is_restored_after_overlapping_replays():
     release.set()
     t.join(10.0)
     assert sys.getswitchinterval() == before
+
+
+def test_switch_interval_is_restored_once_every_block_is_taken(monkeypatch):
+    # The replay's loop zips the blocks first, so it never asks the generator for more after the last
+    # block: the interval must be back by then (the generator still suspended), and on an early close.
+    import leosop.replay.stream as stream
+
+    monkeypatch.setattr(stream, "_prepare", lambda rec, factor, comb, every, item: item[0])
+    before = sys.getswitchinterval()
+    blocks = list(range(7))
+    gen = stream.prepared_blocks(None, blocks, 1, None, threads=2)
+    taken = [k for _, k in zip(blocks, gen)]
+    assert taken == blocks and sys.getswitchinterval() == before
+    gen = stream.prepared_blocks(None, blocks, 1, None, threads=3)
+    assert next(gen) == 0 and sys.getswitchinterval() == min(before, SWITCH_INTERVAL_S)
+    gen.close()
+    assert sys.getswitchinterval() == before
