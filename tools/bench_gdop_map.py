@@ -52,9 +52,10 @@ from pathlib import Path
 import numpy as np
 from baseline_tree import REPO, export_package
 
+from leosop.kernels import compiled
 from leosop.orbits.gridcells import (
     _EXACT_BAND_M,
-    _compiled,
+    KERNEL_MODULE,
     _footprint_segments,
     _segment_tables,
     _segment_pairs,
@@ -152,7 +153,7 @@ def floor(const, grid, times, mask_deg):
     per entry of ``H^T H`` (27 besides the count) over the visible pairs.
     """
     sin_mask = math.sin(math.radians(mask_deg))
-    kernels = _compiled()
+    kernels = compiled(KERNEL_MODULE)
     t_sgp4 = t_elev = t_scatter = t_compiled = 0.0
     n_pairs, n_visible = [], []
     n_lon = grid.shape[1]
@@ -222,8 +223,7 @@ if kernel == "numpy":
 import numpy as np
 from leosop.orbits.gridmap import ConstellationSource, gdop_map
 if kernel == "numba":
-    from leosop.orbits.gridcells import _compiled
-    assert _compiled() is not None, "numba is not installed"
+    import numba  # noqa: F401 (the run is meant to use it: refuse where it is missing)
 n = int(np.floor(float(duration) / float(step) + 1e-9)) + 1
 times = np.datetime64(start, "ns") + (np.arange(n) * float(step) * 1e9).astype("timedelta64[ns]")
 import time

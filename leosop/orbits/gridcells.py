@@ -25,7 +25,6 @@ satellites are visible or the geometry is singular. With numba installed
 time are :func:`leosop.orbits.gridmap.gdop_map`'s.
 """
 
-import functools
 import math
 
 import numpy as np
@@ -33,6 +32,7 @@ import numpy as np
 from ..constants import C_MPS, WGS84_B_M
 from ..geometry.dop import gdop as gdop_of_h
 from ..geometry.doppler import N_DOPPLER_STATES, doppler_jacobian
+from ..kernels import pick
 from .grid import READABLE_GRID_DEG, Grid, check_grid_deg, make_grid
 
 __all__ = [
@@ -47,6 +47,8 @@ __all__ = [
     "segment_batches",
 ]
 
+#: The compiled per-pair work (:mod:`leosop.kernels`).
+KERNEL_MODULE = "leosop.orbits.gridkernels"
 #: Widening of the spherical footprint cap [deg]: covers the tilt of the
 #: geodetic normal from the geocentric direction (<= 0.19 deg; the cap edge
 #: moves by at most as much, |d cap / d elevation| <= 1) and geodetic versus
@@ -319,7 +321,7 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg, *, ke
     gdop : ndarray, (n_lat, n_lon)
         NaN below 7 visible satellites or for a singular geometry.
     """
-    kernels = _kernels(kernel)
+    kernels = pick(kernel, KERNEL_MODULE)
     sat, row, j0, n_cols = _footprint_segments(pos_sv_ecef_m, grid, mask_deg)
     args = (np.asarray(pos_sv_ecef_m, dtype=float), np.asarray(vel_sv_ecef_mps, dtype=float),
             np.asarray(carrier_hz, dtype=float), grid, sat, row, j0, n_cols, math.sin(math.radians(mask_deg)))
@@ -332,23 +334,6 @@ def epoch_maps(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, mask_deg, *, ke
         for a in range(0, fix.size, _GDOP_CELLS):
             gdop[fix[a:a + _GDOP_CELLS]] = _normal_gdop(normal[:, fix[a:a + _GDOP_CELLS]])
     return count.reshape(grid.shape), gdop.reshape(grid.shape)
-
-
-@functools.cache
-def _compiled():
-    """:mod:`leosop.orbits.gridkernels`, or None when numba is not installed."""
-    try:
-        from . import gridkernels
-    except ImportError:
-        return None
-    return gridkernels
-
-
-def _kernels(kernel):
-    """The compiled kernels for ``kernel`` "numba" (None: when installed), None for "numpy"."""
-    if kernel not in (None, "numba", "numpy") or (kernel == "numba" and _compiled() is None):
-        raise ValueError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
-    return None if kernel == "numpy" else _compiled()
 
 
 def _epoch_normals(pos_sv_ecef_m, vel_sv_ecef_mps, carrier_hz, grid, sat, row, j0, n_cols, sin_mask):

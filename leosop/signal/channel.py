@@ -40,7 +40,8 @@ from scipy.interpolate import CubicSpline
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..frames import rotate_to_later_ecef
-from .comb_phases import comb_segments, compiled
+from ..kernels import KERNELS, compiled
+from .comb_phases import KERNEL_MODULE, comb_segments
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
 if TYPE_CHECKING:  # the orbits are imported where used (propagation is not needed to make IQ)
@@ -369,7 +370,7 @@ class SiteChannel:
         self._amp = 10.0 ** ((self.cn0_dbhz - self._cn0_ref) / 20.0)
         if self.waveform not in WAVEFORMS:
             raise InputError(f"waveform={self.waveform!r} must be one of {', '.join(WAVEFORMS)}")
-        if self.kernel not in (None, "numba", "numpy") or (self.kernel == "numba" and compiled() is None):
+        if self.kernel not in KERNELS or (self.kernel == "numba" and compiled(KERNEL_MODULE) is None):
             raise InputError(f"kernel={self.kernel!r}: expected 'numpy' or 'numba' (needs numba: "
                              "pip install leosop[fast])")
         self._ofdm = None
@@ -459,7 +460,7 @@ class SiteChannel:
         t = 0; any calls, adjacent or far apart, continue the same phases, so a
         recording can be made chunk by chunk or snapshot by snapshot.
         """
-        kernels = compiled() if self._ofdm is None and self.kernel != "numpy" else None
+        kernels = compiled(KERNEL_MODULE) if self._ofdm is None and self.kernel != "numpy" else None
         iq = np.zeros(int(count), dtype=complex)
         if kernels is not None:
             coef = self.comb.tone_amplitudes * np.exp(1j * self.comb.tone_phases_rad)

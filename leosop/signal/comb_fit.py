@@ -10,11 +10,11 @@ previous estimates (Jacobi) and :func:`track_combs` fits predicted combs at
 once. Used by :func:`~leosop.signal.multicomb.find_combs`.
 """
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..kernels import pick
 from .coarse import abs2
 from .comb_grid import channels_hz, cis, comb_cis, dirichlet, leakage, leakage_all, tone_phases
 from .crlb import crlb_frequency_hz2
@@ -172,23 +172,6 @@ def fit_kernel(n_blocks):
     return "numpy" if n_blocks < COMPILED_MIN_BLOCKS else None
 
 
-@functools.cache
-def _compiled():
-    """:mod:`leosop.signal.fitkernels`, or None when numba is not installed."""
-    try:
-        from . import fitkernels
-    except ImportError:
-        return None
-    return fitkernels
-
-
-def _kernels(kernel):
-    """The compiled kernels for ``kernel`` "numba" (None: when installed), None for "numpy"."""
-    if kernel not in (None, "numba", "numpy") or (kernel == "numba" and _compiled() is None):
-        raise ValueError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
-    return None if kernel == "numpy" else _compiled()
-
-
 def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
     """One pass of re-estimation of every comb (Newton from its estimate) with all the others removed
     (``clean``), all combs at once (each from the others' previous estimates).
@@ -203,7 +186,7 @@ def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
     mix = _stacked([c.mix for c in combs])
     d_c = np.array([c.d_c for c in combs])
     z = _stacked([c.y_wide for c in combs])
-    compiled = _kernels(kernel)
+    compiled = pick(kernel, "leosop.signal.fitkernels")
     if compiled is not None:
         n_c, n_seg = len(combs), grid.n_seg
         if clean:

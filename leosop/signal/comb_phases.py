@@ -10,24 +10,15 @@ chunk's part within one node interval);
 without an exponential per sample (the error bound is there).
 """
 
-import functools
-
 import numpy as np
 import numpy.typing as npt
 
 from ..constants import C_MPS
 
-__all__ = ["comb_segments", "compiled"]
+__all__ = ["KERNEL_MODULE", "comb_segments"]
 
-
-@functools.cache
-def compiled():
-    """:mod:`leosop.signal.combkernels`, or None when numba is not installed."""
-    try:
-        from . import combkernels
-    except ImportError:
-        return None
-    return combkernels
+#: The compiled synthesis of the segments (:mod:`leosop.kernels`).
+KERNEL_MODULE = "leosop.signal.combkernels"
 
 
 def _frac(cycles):

@@ -9,13 +9,14 @@ import pytest
 from leosop.errors import InputError
 from leosop.geometry.dop import gdop
 from leosop.geometry.doppler import doppler_jacobian
+from leosop.kernels import compiled
 from leosop.orbits import load_constellation
 from leosop.orbits.gridcells import (
     _EXACT_BAND_M,
     _IU,
     _JU,
     _Q_OF,
-    _compiled,
+    KERNEL_MODULE,
     _footprint_segments,
     _normal_gdop,
     _segment_pairs,
@@ -130,7 +131,7 @@ def test_table_elevation_test_is_the_reference_test(walker_states):
     assert on_edge.sum() == len(edge) and np.all(np.abs(margin[on_edge]) < _EXACT_BAND_M)
 
 
-@pytest.mark.skipif(_compiled() is None, reason="numba is not installed")
+@pytest.mark.skipif(compiled(KERNEL_MODULE) is None, reason="numba is not installed")
 def test_numba_kernels_are_bit_identical_to_numpy(walker_states, monkeypatch):
     """The compiled per-pair work repeats numpy's operations in numpy's order: identical counts and GDOP bits.
 
@@ -179,9 +180,9 @@ def test_normal_gdop_matches_dop_and_flags_singular():
     np.testing.assert_allclose(_normal_gdop(normal), gdop(H), rtol=1e-9)
     normal[_JU == 6, 0] = 0.0  # no clock information: singular
     assert np.isnan(_normal_gdop(normal)[0]) and np.isfinite(_normal_gdop(normal)[1:]).all()
-    if _compiled():  # the compiled GDOP: the same bits, the same singular cell
+    if compiled(KERNEL_MODULE):  # the compiled GDOP: the same bits, the same singular cell
         out = np.full(50, -1.0)
-        _compiled().normal_gdop(normal, np.arange(50), _Q_OF, out)
+        compiled(KERNEL_MODULE).normal_gdop(normal, np.arange(50), _Q_OF, out)
         np.testing.assert_array_equal(out, _normal_gdop(normal))
 
 
