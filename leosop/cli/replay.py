@@ -81,10 +81,10 @@ def register(subparsers):
     p.add_argument("--carrier", action="store_true",
                    help="continuous recordings: track each identified satellite's carrier phase (carrier.csv); "
                         "with --static the fix takes its phase-rate Doppler in place of the block Doppler")
-    p.add_argument("--threads", type=int, metavar="N", default=1,
+    p.add_argument("--threads", type=int, metavar="N",
                    help="threads for one recording (N-1 read and clean blocks ahead of the search; the "
-                        "identification's cell vote on N), the same result whatever N (default 1; "
-                        f"{len(os.sched_getaffinity(0))} cores here)")
+                        "identification's cell vote on N), the same result whatever N (default: the cores, at "
+                        f"most {MAX_DEFAULT_THREADS}: {_default_threads()} here)")
 
     p.add_argument("--workers", type=int, metavar="N",
                    help="batch: workers of the local Dask cluster (default: the cores)")
@@ -135,9 +135,20 @@ def _check_options(args):
     return block_s, lo_max, drift_max, mask, init
 
 
+#: ``--threads``' default is the cores available up to this: on idle cores two threads replayed a 120 s
+#: recording 1.28x as fast end to end (1.34x the streaming stage) and three no faster than two
+#: (docs/replay.md, "Threads").
+MAX_DEFAULT_THREADS = 2
+
+
+def _default_threads():
+    """``--threads``' default: the cores this process may run on, at most :data:`MAX_DEFAULT_THREADS`."""
+    return max(1, min(MAX_DEFAULT_THREADS, len(os.sched_getaffinity(0))))
+
+
 def _run_single(args):
     options = _check_options(args)
-    threads = args.threads
+    threads = _default_threads() if args.threads is None else args.threads
     if threads < 1:
         raise InputError(f"--threads {threads}: expected an integer >= 1")
     if (args.base is None) != (args.base_site is None):
@@ -155,16 +166,16 @@ def _run_single(args):
     rec = open_sigmf(path, verify=False)
     base_rec = open_sigmf(Path(args.base), verify=False) if args.base else None
     with sha512_checked(*(r for r in (rec, base_rec) if r is not None)):
-        doc, res, diff, carrier, carrier_pair = _replay_doc(args, options, path, rec, base_rec, base_pos)
+        doc, res, diff, carrier, carrier_pair = _replay_doc(args, options, path, rec, base_rec, base_pos, threads)
     if args.out:
         _write_outputs(Path(args.out), doc, res, path.name, rec.start_utc, diff, carrier, carrier_pair)
     return doc
 
 
-def _replay_doc(args, options, path, rec, base_rec, base_pos):
+def _replay_doc(args, options, path, rec, base_rec, base_pos, threads):
     """The replay of ``rec`` (and of the base's ``base_rec``) and its document; the outputs left to write.
 
-    ``options`` are :func:`_check_options`' checked values.
+    ``options`` are :func:`_check_options`' checked values, ``threads`` the replay's.
 
     Returns
     -------
@@ -176,7 +187,6 @@ def _replay_doc(args, options, path, rec, base_rec, base_pos):
     from .position import solutions_doc
 
     block_s, lo_max, drift_max, mask, init = options
-    threads = args.threads
     if args.carrier:
         from ..replay.carrier_replay import check_continuous
 
@@ -280,7 +290,7 @@ def _run_batch(args):
     _check_options(args)
     if args.base or args.base_site:
         raise InputError("--base and --base-site take one rover recording, not a batch")
-    if args.threads != 1:
+    if args.threads is not None:
         raise InputError("--threads runs one recording's blocks in parallel; a batch runs its recordings in "
                          "parallel (--workers)")
     if args.out is None:

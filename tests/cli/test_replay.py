@@ -283,7 +283,8 @@ def test_continuous_recording_600_khz_off_keeps_every_comb_in_tracking_mode(tmp_
 
     With ``--threads`` the blocks are read and cleaned on worker threads, in the first pass and in the
     refit through the LO offset (which this recording needs): the JSON is the same, key for key and
-    bit for bit, with one thread and with three (two workers finishing blocks out of order).
+    bit for bit, with one thread, with three (two workers finishing blocks out of order) and with the
+    default (the cores, at most two).
     """
     path = tmp_path / "cont_lo.sigmf-meta"
     sats = ["70002", "70524", "71563"]
@@ -291,9 +292,9 @@ def test_continuous_recording_600_khz_off_keeps_every_comb_in_tracking_mode(tmp_
     _generate(path, "--duration-s", "1", "--sat", *sats, "--cn0-model", "constant", "--cn0-dbhz", "36",
               "--rx-offset-hz", "600e3", "--rx-drift-hz-per-s", "50")
     docs = []
-    for threads in ("1", "3"):
+    for threads in (["--threads", "1"], ["--threads", "3"], []):
         code, doc, err = _replay(capsys, str(path), "--init", "34.98,109.71,0", "--static", "--lo-offset-max-hz",
-                                 "1e6", "--threads", threads)
+                                 "1e6", *threads)
         assert code == 0, err
         docs.append(doc)
     assert sorted(t["sat_id"] for t in docs[0]["tracks"]) == sats
@@ -301,7 +302,7 @@ def test_continuous_recording_600_khz_off_keeps_every_comb_in_tracking_mode(tmp_
     # The refit ran: 600 kHz puts the edge tones (176 kHz out) 0.9 cycles off over a block, beyond
     # pipeline.LO_REFIT_CYCLES (0.01).
     assert abs(docs[0]["lo_offset_hz"] - 600e3) < 1e3
-    assert docs[0] == docs[1]
+    assert docs[0] == docs[1] == docs[2]
 
 
 def test_element_sets_far_from_the_recording_warn_then_refuse(snapshot_recording, tmp_path, capsys):
