@@ -10,6 +10,8 @@ so it loads only where numba is installed (``pip install leosop[fast]``).
 import functools
 import importlib
 
+from .errors import InputError
+
 __all__ = ["KERNELS", "compiled", "pick"]
 
 #: The values of a ``kernel`` argument: None (numba when installed), "numba" or "numpy".
@@ -30,9 +32,10 @@ def pick(kernel, module):
 
     Raises
     ------
-    ValueError
+    InputError
         ``kernel`` not one of :data:`KERNELS`, or "numba" without numba installed.
     """
     if kernel not in KERNELS or (kernel == "numba" and compiled(module) is None):
-        raise ValueError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
+        raise InputError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])",
+                         param="kernel")
     return None if kernel == "numpy" else compiled(module)

@@ -40,7 +40,7 @@ from scipy.interpolate import CubicSpline
 from ..constants import C_MPS, OMEGA_E_RAD_PER_S
 from ..errors import InputError
 from ..frames import rotate_to_later_ecef
-from ..kernels import KERNELS, compiled
+from ..kernels import compiled, pick
 from .comb_phases import KERNEL_MODULE, comb_segments
 from .pilot import PilotComb, add_noise, comb_baseband, noise_sigma
 
@@ -370,9 +370,7 @@ class SiteChannel:
         self._amp = 10.0 ** ((self.cn0_dbhz - self._cn0_ref) / 20.0)
         if self.waveform not in WAVEFORMS:
             raise InputError(f"waveform={self.waveform!r} must be one of {', '.join(WAVEFORMS)}")
-        if self.kernel not in KERNELS or (self.kernel == "numba" and compiled(KERNEL_MODULE) is None):
-            raise InputError(f"kernel={self.kernel!r}: expected 'numpy' or 'numba' (needs numba: "
-                             "pip install leosop[fast])")
+        pick(self.kernel, KERNEL_MODULE)  # refuses an unknown kernel, and numba where it is not installed
         self._ofdm = None
         if self.frame_jumps is not None and self.waveform != "ofdm":
             raise InputError("frame-timing jumps need waveform='ofdm' (the tones have no frames)")
