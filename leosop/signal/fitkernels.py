@@ -10,7 +10,7 @@ detection statistic, and the tone amplitudes by least squares on the chirp
 model. On a tracking block (80 segments, 7 combs of 9 tones) the numpy path
 is a few hundred calls on small arrays, ~0.55 ms, mostly call overhead;
 this one takes ~0.2 ms, the call with its arrays ~0.3 ms (one thread).
-The phasors are double precision (:func:`_cis`, ~2e-9 rad) where numpy's
+The phasors are double precision (:func:`_cis`) where numpy's
 round the phase to float32 (~1e-7 rad), and the moments are plain loops
 rather than BLAS: the two paths differ by that rounding
 (tests/signal/test_multicomb.py measures and bounds it). ``nogil``: the comb
@@ -29,24 +29,10 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 @_jit
 def _cis(cycles):
-    """exp(j 2 pi cycles), to ~2e-9 (:func:`~.comb_grid.cis` rounds the phase to float32: ~1e-7).
-
-    Reduced to the nearest quarter turn (|x| <= pi / 4) and Taylor series to x^9 (sine) and x^10
-    (cosine): a few multiplications where libm's cosf and sinf took most of the kernel's time.
-    """
-    q = np.rint(4.0 * cycles)
-    x = 2.0 * np.pi * (cycles - 0.25 * q)
-    x2 = x * x
-    s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0)))))
-    c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 - x2 * (1.0 / 3628800.0)))))
-    quarter = int(q) & 3
-    if quarter == 0:
-        return complex(c, s)
-    if quarter == 1:
-        return complex(-s, c)
-    if quarter == 2:
-        return complex(-c, -s)
-    return complex(s, -c)
+    """exp(j 2 pi cycles) in double precision, from the phase reduced to [-0.5, 0.5] cycles
+    (:func:`~.comb_grid.cis` rounds it to float32: ~1e-7 rad)."""
+    x = 2.0 * np.pi * (cycles - np.rint(cycles))
+    return complex(np.cos(x), np.sin(x))
 
 
 @_jit
@@ -62,12 +48,12 @@ def _comb_cis(a_cycles, b_cycles, half, out):
 
 @_jit
 def _dirichlet(delta_hz, count, fs):
-    """:func:`~.comb_grid.dirichlet` of one tone and segment, in double precision (its sine by :func:`_cis`)."""
+    """:func:`~.comb_grid.dirichlet` of one tone and segment, in double precision."""
     x = delta_hz * (np.pi / fs)
     den = x * (1.0 - x * x * (1.0 / 6.0))
     if den == 0.0:
         return count
-    return _cis(x * count / (2.0 * np.pi)).imag / den
+    return np.sin(x * count) / den
 
 
 @_jit
