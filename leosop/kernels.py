@@ -36,6 +36,5 @@ def pick(kernel, module):
         ``kernel`` not one of :data:`KERNELS`, or "numba" without numba installed.
     """
     if kernel not in KERNELS or (kernel == "numba" and compiled(module) is None):
-        raise InputError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])",
-                         param="kernel")
+        raise InputError(f"kernel {kernel!r}: expected 'numpy' or 'numba' (needs numba: pip install leosop[fast])")
     return None if kernel == "numpy" else compiled(module)
