@@ -3,7 +3,7 @@
 import numpy as np
 
 from ..timebase import format_utc
-from .core import pyplot, save_png
+from .core import ENVELOPE_BINS, envelope, pyplot, save_png
 
 __all__ = ["plot_visibility", "plot_skyplot"]
 
@@ -45,17 +45,22 @@ def plot_visibility(path, times_utc, n_visible, gdop, gdop_range, *, mask_deg, t
     mask_deg : float
     title : str
         What was run (element sets, site); drawn above the figure.
+
+    Spans of more than ``2 ENVELOPE_BINS`` epochs are drawn through their :func:`~.core.envelope`.
     """
     plt = pyplot()
-    t = np.asarray(times_utc).astype("datetime64[ms]").astype(object)
+    t = np.asarray(times_utc).astype("datetime64[ms]")
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5), constrained_layout=True)
-    ax1.step(t, n_visible, where="mid", color="C0")
+    if t.size > 2 * ENVELOPE_BINS:  # a long span through its envelope: steps this dense draw as a band anyway
+        ax1.plot(*envelope(t, n_visible), color="C0")
+    else:
+        ax1.step(t, n_visible, where="mid", color="C0")
     ax1.axhline(7, color="0.5", ls="--", lw=0.8, label="7 needed for a Doppler fix")
     ax1.set_ylabel(f"visible satellites\n(mask {mask_deg:g} deg)")
     ax1.legend(loc="upper right", fontsize=8)
     fig.suptitle(title, fontsize="medium")
-    ax2.semilogy(t, gdop, color="C1", label="Doppler, 7 states ([Shen 2024] eq. 10) [m per Hz]")
-    ax2.semilogy(t, gdop_range, color="C2", lw=0.8, label="pseudorange, 4 states [unitless]")
+    ax2.semilogy(*envelope(t, gdop), color="C1", label="Doppler, 7 states ([Shen 2024] eq. 10) [m per Hz]")
+    ax2.semilogy(*envelope(t, gdop_range), color="C2", lw=0.8, label="pseudorange, 4 states [unitless]")
     ax2.set_ylabel("GDOP")
     ax2.legend(loc="upper right", fontsize=8)
     _utc_axis(ax2)

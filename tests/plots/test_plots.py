@@ -217,3 +217,33 @@ def test_world_map_cells_cover_every_longitude(drawn, tmp_path):
     fig, = drawn
     edges_lon = fig.axes[0].collections[0].get_coordinates()[..., 0]
     assert edges_lon.min() <= -180.0 and edges_lon.max() >= 180.0
+
+
+def test_a_day_at_one_second_draws_through_its_envelope_with_every_extreme_and_gap(drawn, tmp_path):
+    from leosop.plots.core import ENVELOPE_BINS, envelope
+
+    n = 86_400
+    rng = np.random.default_rng(3)
+    times = np.datetime64("2026-04-08T00:00:00", "ns") + np.arange(n) * np.timedelta64(1, "s")
+    n_vis = rng.integers(5, 30, n)
+    gdop = 3.0 + rng.random(n)
+    gdop[n_vis < 7] = np.nan  # the gaps a Doppler fix leaves
+    gdop[40_000:50_000] = np.nan  # and a long one
+    gdop[12_345] = 250.0  # a one-second spike must still be drawn
+    sky.plot_visibility(tmp_path / "v.png", times, n_vis, gdop, gdop / 2, mask_deg=40.0)
+    lines = drawn[0].axes[1].get_lines()
+    y = np.asarray(lines[0].get_ydata(), float)
+    assert y.size == 2 * ENVELOPE_BINS  # bounded by the figure, not the span
+    assert np.nanmax(y) == 250.0 and np.nanmin(y) == np.nanmin(gdop)
+    # The long gap stays a gap: the envelope's buckets wholly inside it are NaN.
+    x, e = envelope(np.arange(n), gdop)
+    inside = (x > 40_000 + n / ENVELOPE_BINS) & (x < 50_000 - n / ENVELOPE_BINS)
+    assert inside.any() and np.isnan(e[inside]).all()
+    # Every sample lies within its bucket's [min, max] (the pixels the full series would cover).
+    lo, hi = e[0::2], e[1::2]
+    bucket = np.searchsorted(x[0::2], np.arange(n), side="right") - 1
+    ok = np.isnan(gdop) | ((gdop >= lo[bucket]) & (gdop <= hi[bucket]))
+    assert ok.all()
+    # A short span is drawn as it is (the count as steps).
+    sky.plot_visibility(tmp_path / "w.png", times[:600], n_vis[:600], gdop[:600], gdop[:600] / 2, mask_deg=40.0)
+    assert drawn[1].axes[1].get_lines()[0].get_ydata().size == 600
