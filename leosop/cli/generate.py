@@ -171,7 +171,8 @@ def _front_end_options(p):
                     help="a CW interferer at baseband frequency HZ of power DBHZ (repeatable; replaces the preset's)")
     fe.add_argument("--agc-step-db", type=float, metavar="DB",
                     help="gain drawn uniformly in +-DB every --agc-period-s (default: the snapshot period, else 1 s)")
-    fe.add_argument("--agc-period-s", type=float, metavar="S")
+    fe.add_argument("--agc-period-s", type=float, metavar="S",
+                    help="how often the --agc-step-db gain changes [s] (default: the snapshot period, else 1 s)")
     fe.add_argument("--bits", type=int, choices=(8, 12, 16),
                     help="quantise: 8 (ci8, or cu8 with --datatype cu8), 12 or 16 (ci16)")
     fe.add_argument("--headroom-db", type=float, metavar="DB",

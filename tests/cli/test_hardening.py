@@ -80,6 +80,21 @@ def test_action_groups_show_only_options_that_work(capsys):
     assert parser.parse_args(["tle", "--json", "info", "f"]).json is True
 
 
+def test_every_option_says_what_it_does():
+    """`generate --agc-period-s` was listed with an empty help line: every option of every command has a help."""
+    bare, seen, parsers = [], [], [("leosop", build_parser())]
+    while parsers:
+        name, parser = parsers.pop()
+        seen.append(name)
+        for action in parser._actions:  # argparse keeps no public list of a parser's actions
+            if action.option_strings and not (action.help or "").strip():
+                bare.append(f"{name} {action.option_strings[-1]}")
+            if isinstance(action.choices, dict):
+                parsers.extend((f"{name} {sub}", p) for sub, p in action.choices.items())
+    assert {"leosop generate", "leosop study gdop-map", "leosop imu allan"} <= set(seen)  # the walk reaches them
+    assert bare == []
+
+
 @pytest.mark.parametrize("command", COMMANDS)
 def test_a_command_alone_parses_as_in_the_full_parser(capsys, command):
     """`leosop CMD` registers only CMD's module (issue 24): its --help must be the full parser's, byte for byte."""
