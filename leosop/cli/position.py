@@ -53,7 +53,7 @@ from ..positioning.datasets import doptrack_table, read_doptrack, read_fll
 from ..positioning.differential import MOTIONS
 from ..positioning.differential_pair import solve_pair
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, read_measurements
-from ..positioning.quality import STATUSES, fix_status
+from ..positioning.quality import STATUSES
 from ..positioning.solve import position_snapshots, position_static, position_static_passes
 from ..timebase import format_utc
 from . import add_command
@@ -131,7 +131,7 @@ def _check(args):
 
 
 def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iterations, rms, status, cov_pos):
-    """One solution's JSON keys; ``status`` is ``(label, dof, chi2_p)`` (:func:`fix_status`)."""
+    """One solution's JSON keys; ``status`` is ``(label, dof, chi2_p)`` (:func:`_statuses`)."""
     lat, lon, alt = ecef_to_geodetic(pos)
     C = C_e_n(lat, lon)
     sig_enu = np.sqrt(np.diagonal(C.T @ cov_pos @ C)) if np.isfinite(cov_pos).all() else [np.nan] * 3
@@ -146,12 +146,10 @@ def _solution(t_s, time_utc, pos, vel, clock_hz, gdop, n_sats, n_used, iteration
     }
 
 
-def _statuses(f, speed_mps=None, n_passes=None, alpha=None):
-    """``(label, dof, chi2_p)`` of each fix of ``f`` (:func:`fix_status`), a list."""
-    _, _, alt = ecef_to_geodetic(np.asarray(f.pos_ecef_m))
-    labels, chi2_p = fix_status(f.status, f.dof, f.chi2, alt, speed_mps, ambiguous=getattr(f, "ambiguous", False),
-                                n_passes=n_passes, alpha=alpha)
-    return list(zip(labels, np.atleast_1d(f.dof), chi2_p))
+def _statuses(res, alpha=None):
+    """``(label, dof, chi2_p)`` of each fix of ``res`` (``res.labels``), a list."""
+    labels, chi2_p = res.labels(alpha)
+    return list(zip(labels, np.atleast_1d(res.fixes.dof), chi2_p))
 
 
 def solutions_doc(res, meas, alpha=None):
@@ -178,7 +176,7 @@ def solutions_doc(res, meas, alpha=None):
     passes = None
     if isinstance(f, PassesFix):
         mid = int(np.argmin(np.abs(res.t_s - 0.5 * (res.t_s.min() + res.t_s.max()))))
-        (status,) = _statuses(f, n_passes=len(f.pass_ids), alpha=alpha)
+        (status,) = _statuses(res, alpha)
         sol = _solution(res.t_s[mid], utc(mid), f.pos_ecef_m, np.zeros(3), float(f.clock_offset_hz[mid]), f.gdop,
                         res.n_sats[0], f.n_used, f.iterations, f.residual_rms_hz, status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = float(f.clock_drift_hz_per_s[mid])
@@ -193,7 +191,7 @@ def solutions_doc(res, meas, alpha=None):
                    "sigma_hz": float(sg), "n_used": int(f.used[meas.pass_id == pid].sum())}
                   for pid, t, poly, sg in zip(f.pass_ids, f.t_ref_s, f.clock_poly_hz, sigma_pass)]
     elif isinstance(f, StaticFix):
-        (status,) = _statuses(f, n_passes=res.n_sats[0], alpha=alpha)
+        (status,) = _statuses(res, alpha)
         sol = _solution(res.t_s[0], utc(0), f.pos_ecef_m, np.zeros(3), f.clock_offset_hz, f.gdop, res.n_sats[0],
                         f.n_used, f.iterations, f.residual_rms_hz, status, f.cov[:3, :3])
         sol["clock_drift_hz_per_s"] = f.clock_drift_hz_per_s
@@ -205,7 +203,7 @@ def solutions_doc(res, meas, alpha=None):
         solutions = [sol]
     else:
         rms = f.residual_rms_hz
-        status = _statuses(f, np.linalg.norm(f.vel_ecef_mps, axis=-1), alpha=alpha)
+        status = _statuses(res, alpha)
         solutions = [
             _solution(res.t_s[k], utc(k), f.pos_ecef_m[k], f.vel_ecef_mps[k], f.clock_offset_hz[k], f.gdop[k],
                       res.n_sats[k], f.n_used[k], f.iterations[k], rms[k], status[k], f.cov[k, :3, :3])

@@ -89,6 +89,42 @@ class PositionResult:
     clock_labels: tuple = ()
     n_need: np.ndarray | None = None
 
+    def labels(self, alpha: float | None = None) -> tuple[npt.NDArray[np.str_], npt.NDArray[np.float64]]:
+        """The status a user filters on (:func:`~leosop.positioning.quality.fix_status`) and the residual
+        test's p-value, per fix: ``ok`` only when the toolkit can vouch for the fix.
+
+        ``fixes.status`` is the solver's outcome alone: a converged fix from one pass, or with a mirror
+        solution that fits as well, is ``FixStatus.OK`` there and ``single_pass`` or ``ambiguous`` here.
+
+        Parameters
+        ----------
+        alpha : float, optional
+            Significance of the chi-square test (default
+            :data:`~leosop.positioning.quality.STATUS_ALPHA`).
+
+        Returns
+        -------
+        labels : ndarray of str, (n_fix,)
+            One per epoch (snapshot fixes) or one (static fixes).
+        chi2_p : ndarray, (n_fix,)
+        """
+        from ..frames import ecef_to_geodetic
+        from .quality import fix_status
+        from .static import StaticFix
+        from .static_passes import PassesFix
+
+        f = self.fixes
+        _, _, alt = ecef_to_geodetic(np.asarray(f.pos_ecef_m))
+        speed = n_passes = None
+        if isinstance(f, PassesFix):
+            n_passes = len(f.pass_ids)
+        elif isinstance(f, StaticFix):
+            n_passes = self.n_sats[0]
+        else:
+            speed = np.linalg.norm(f.vel_ecef_mps, axis=-1)
+        return fix_status(f.status, f.dof, f.chi2, alt, speed, ambiguous=getattr(f, "ambiguous", False),
+                          n_passes=n_passes, alpha=alpha)
+
 
 def satellite_states(meas: Measurements, constellation: Constellation | None = None,
                      pos_rx_ecef_m: npt.ArrayLike | None = None

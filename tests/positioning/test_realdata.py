@@ -45,6 +45,9 @@ def test_doptrack_single_pass_static_fixes(doptrack):
     # Every one passes the residual test (sigmas from its own residuals) and none is ok: one pass rests on
     # one element set and a side chosen by the Earth's rotation (9 of these 20 land 430-3,100 km off).
     assert {_status(r, p.meas) for r, p in zip(results, passes)} <= {"single_pass", "ambiguous"}
+    # The Python API says so too (the solver's own status is OK for most: it converged).
+    assert [r.labels()[0][0] for r in results] == [_status(r, p.meas) for r, p in zip(results, passes)]
+    assert sum(f.status == FixStatus.OK for f in fixes) >= 10
     truth = np.array([p.station_pos_ecef_m for p in passes])
     err = np.linalg.norm(np.array([f.pos_ecef_m for f in fixes]) - truth, axis=-1)
     mirror = np.linalg.norm(np.array([f.mirror_pos_ecef_m for f in fixes]) - truth, axis=-1)
