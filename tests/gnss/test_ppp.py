@@ -213,8 +213,11 @@ def test_cli_json_contract(tmp_path, capsys, monkeypatch):
 
 
 ATX = ESBC_ATX
-#: The header coordinate's own uncertainty is not in the filter's sigma; the provenance calls it cm-level.
-COVERAGE_GOAL = 0.95  # issue 20: >= 95 % of epoch-axis errors within 3 sigma after convergence
+#: Epoch-axis errors within 3 sigma after convergence: the project's ~99 % (issue 20 asked 95 %). The reported
+#: sigma's floor (PppOptions.floor_enu_m, for the header coordinate's own cm-level uncertainty and what is not
+#: modelled) was set from this day, the only one with observations: the test guards that calibration, it is
+#: not an independent check of it. Measured 99.0 % with ANTEX, 99.99 % without.
+COVERAGE_GOAL = 0.985
 
 
 def _enu_errors(res):
@@ -288,9 +291,9 @@ def test_sigmas_cover_the_errors_on_real_data(day):
     """3-sigma coverage of the real day's errors against the station's ITRF2014 coordinate (24 h, ~10 s).
 
     Kinematic: after 2 h (taken as converged, as in the issue), per epoch and
-    ENU axis; measured 99.0 % with ANTEX (3-D RMS 4.4 cm), 96.0 % without (8.2 cm; a larger floor
+    ENU axis; measured 99.0 % with ANTEX (3-D RMS 4.3 cm), 99.99 % without (8.2 cm; a larger floor
     for the unmodelled antenna offsets). White noise alone gave 51 %. Static: the error within 3 sigma at
-    1, 3, 6 and 24 h (measured at most 1.9 sigma with ANTEX; white noise alone gave 13 to 40 sigma at 1-6 h).
+    1, 3, 6 and 24 h (measured at most 1.4 sigma with ANTEX; white noise alone gave 13 to 40 sigma at 1-6 h).
     """
     obs, orb, clk = day
     atx = read_antex(ATX)
@@ -298,7 +301,7 @@ def test_sigmas_cover_the_errors_on_real_data(day):
         e, s, t_s, ok = _enu_errors(run_ppp(obs, orb, clk, PppOptions(static=False), antex=antex))
         sel = ok & (t_s >= 7200.0)
         assert np.mean(np.abs(e[sel]) <= 3 * s[sel]) >= COVERAGE_GOAL
-        # Not by inflating alone: the 1-sigma band holds about half of them (measured 63 % / 50 %).
+        # Not by inflating alone: the 1-sigma band holds about two thirds of them (measured 66 % / 62 %).
         assert np.mean(np.abs(e[sel]) <= s[sel]) < 0.8
         assert np.sqrt(np.mean(np.sum(e[sel] ** 2, axis=1))) < rms_max  # 4.4 / 8.2 cm measured
     e, s, t_s, ok = _enu_errors(run_ppp(obs, orb, clk, PppOptions(static=True), antex=atx))
