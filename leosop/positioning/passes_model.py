@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 from ..frames import C_e_n, ecef_to_geodetic
 from ..geometry.doppler import doppler_jacobian, doppler_rate, sv_motion
 from .robust_ls import batch_rows
@@ -150,7 +151,12 @@ def _in_pass_order(rows, pass_id, clock_group, n_min, common):
     y, sigma, f0, t, r_s, v_s, m = rows
     n = y.size
     labels, gi = np.unique(np.asarray(pass_id).ravel(), return_inverse=True)
-    keep = np.bincount(gi[m], minlength=len(labels)) >= n_min
+    counts = np.bincount(gi[m], minlength=len(labels))
+    keep = counts >= n_min
+    if not keep.any():
+        hint = "" if common else ', or clock "common" (fewer terms per pass)'
+        raise InputError(f"no pass has the {n_min} usable rows its own terms need (the most: {counts.max(initial=0)}): "
+                         f"longer passes{hint}", param=() if common else "clock")
     m &= keep[gi]
     labels, gi = labels[keep], np.cumsum(keep)[gi] - 1
     gi[~m] = np.maximum(gi[~m], 0)

@@ -425,8 +425,11 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
     if sigma_hz is None and np.isnan(meas.sigma_hz[usable]).any():
         sigma_pilot = np.nan_to_num(meas.sigma_hz, nan=1.0)
         for _ in range(2):
-            pilot = solve_static_passes(meas.doppler_hz, sigma_pilot, pos, vel, meas.carrier_hz, meas.t_s, pass_id,
-                                        alpha=None, **kw)
+            try:
+                pilot = solve_static_passes(meas.doppler_hz, sigma_pilot, pos, vel, meas.carrier_hz, meas.t_s,
+                                            pass_id, alpha=None, **kw)
+            except InputError as exc:  # the rows' fault: name the table
+                raise InputError(f"{meas.source}: {exc}", param=exc.params) from None
             pass_sigmas = np.array([_robust_sigma(pilot.residuals_hz[(pass_id == p) & pilot.used],
                                                   n_loc + bool(time_bias))
                                     for p in pilot.pass_ids])
@@ -448,8 +451,11 @@ def position_static_passes(meas: Measurements, pass_id: npt.ArrayLike, *, conste
     for _ in range(2 if source == "tle" else 1):
         if source == "tle" and pos_lt is not None:
             pos, vel, reason, _ = satellite_states(meas, constellation, pos_lt)
-        fix = solve_static_passes(meas.doppler_hz, sigma, pos, vel, meas.carrier_hz, meas.t_s, pass_id, alpha=alpha,
-                                  **kw)
+        try:
+            fix = solve_static_passes(meas.doppler_hz, sigma, pos, vel, meas.carrier_hz, meas.t_s, pass_id,
+                                      alpha=alpha, **kw)
+        except InputError as exc:
+            raise InputError(f"{meas.source}: {exc}", param=exc.params) from None
         if np.isfinite(fix.pos_ecef_m).all():
             pos_lt = fix.pos_ecef_m
     t_ref = fix.t_ref_s

@@ -150,6 +150,20 @@ def test_static_with_pass_id_column_solves_passes_jointly(capsys, tmp_path):
     assert err < 5 * np.linalg.norm(s["sigma_enu_m"])
 
 
+def test_static_passes_too_short_for_their_terms_is_exit_2_naming_the_table(capsys, table, tmp_path):
+    """3 epochs a satellite, each its own pass: shorter than a pass's cubic clock and time offset (it crashed)."""
+    path, _ = table
+    rows = path.read_text().splitlines()
+    col = rows[0].split(",").index("sat_id")
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join([rows[0] + ",pass_id"] + [r + "," + r.split(",")[col] for r in rows[1:]]) + "\n")
+    status, _, err = _run(capsys, short, "--static")
+    assert status == 2 and err.count("\n") == 1
+    assert f"{short}: no pass has the 5 usable rows its own terms need (the most: 3)" in err and "--clock" in err
+    status, doc, _ = _run(capsys, short, "--static", "--clock", "common")  # one receiver clock: solvable
+    assert status == 0 and doc["solutions"][0]["n_used"] == len(rows) - 1
+
+
 def test_static_summary_counts_measurements_and_satellites(capsys, table):
     # A static fix uses every row: the human summary says how many rows of how many satellites
     # (it used to print "80/27 sats", rows over satellites).
