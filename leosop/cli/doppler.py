@@ -124,13 +124,13 @@ def run(args):
         raise InputError(f"--max-rate-hz-per-s {args.max_rate_hz_per_s:g}: must be in [0, "
                          f"{_MAX_RATE_LIMIT_HZ_PER_S:g}]")
     if block_s > rec.duration_s:
-        raise InputError(f"--block-s {block_s:g} is longer than the recording ({rec.n_samples} samples, "
-                         f"{rec.duration_s:.6g} s)")
+        raise InputError(f"--block-s {block_s:g} is longer than the recording {rec.data_path} ({rec.n_samples} "
+                         f"samples, {rec.duration_s:.6g} s)")
     block_len = int(round(block_s * fs))
     if block_len < 64:
         raise InputError(f"--block-s {block_s:g}: {block_len} samples at {fs:g} Hz; need at least 64")
     if block_len > rec.n_samples:
-        raise InputError(f"--block-s {block_s:g} ({block_len} samples) is longer than the recording "
+        raise InputError(f"--block-s {block_s:g} ({block_len} samples) is longer than the recording {rec.data_path} "
                          f"({rec.n_samples} samples, {rec.duration_s:.6g} s)")
     comb = PilotComb(carrier_hz=PilotComb.carrier_hz if rec.center_hz is None else rec.center_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)

@@ -303,6 +303,8 @@ def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Rec
     data_path = meta_path.with_suffix(".sigmf-data")
     if not data_path.is_file():
         raise InputError(f"{data_path}: missing SigMF data file for {meta_path.name}")
+    if data_path.stat().st_size == 0:
+        raise InputError(f"{data_path}: empty SigMF data file (no samples for {meta_path.name})")
     _check_structure(meta_path)
     try:
         with warnings.catch_warnings():  # sigmf warns about odd sizes; we raise below
@@ -312,8 +314,6 @@ def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Rec
         raise InputError(f"{meta_path}: not valid SigMF metadata ({exc})".replace("\n", " ")) from None
     info = meta.get_global_info()
     datatype = info["core:datatype"]
-    if info.get("core:num_channels", 1) != 1:
-        raise InputError(f"{meta_path}: core:num_channels must be 1")
     fs = _check_rate(info.get("core:sample_rate"), f"{meta_path}: core:sample_rate")
     raw_caps = meta.get_captures() or [{}]
     offset = _int_field(raw_caps[0], "core:header_bytes", 0, f"{meta_path}: capture 0")
@@ -383,6 +383,10 @@ def _check_structure(meta_path):
         if not isinstance(items, list) or not all(isinstance(c, dict) for c in items):
             raise InputError(f"{meta_path}: '{key}' must be a list of objects")
     _check_types(doc["global"], _GLOBAL_TYPES, f"{meta_path}: global")
+    channels = doc["global"].get("core:num_channels", 1)
+    if channels != 1:  # before the sigmf package, which divides by it
+        raise InputError(f"{meta_path}: global: core:num_channels {channels} is not supported; expected 1 (one "
+                         "channel of interleaved I and Q)")
     datatype = doc["global"].get("core:datatype")
     if datatype not in DATATYPES:  # before the sigmf package, which fails on odd names
         raise InputError(f"{meta_path}: core:datatype {datatype!r} is not supported; expected one of "

@@ -400,7 +400,8 @@ REC = "signals/starlink_xian_snapshots.sigmf-meta"
     (["doppler", REC, "--max-doppler-hz", "1e300"], "--max-doppler-hz 1e+300: must be in (0, 1e+07] Hz"),
     (["doppler", REC, "--max-rate-hz-per-s", "1e300"], "--max-rate-hz-per-s 1e+300: must be in [0, 1e+06]"),
     (["doppler", REC, "--resolution-hz", "1e-300"], "--resolution-hz 1e-300: must be in [1e-09, 1000] Hz"),
-    (["doppler", REC, "--block-s", "1e300"], "--block-s 1e+300 is longer than the recording (600000 samples"),
+    (["doppler", REC, "--block-s", "1e300"],
+     "--block-s 1e+300 is longer than the recording signals/starlink_xian_snapshots.sigmf-data (600000 samples"),
 ])
 def test_absurd_option_values_are_refused(tmp_path, capsys, monkeypatch, argv, message):
     monkeypatch.chdir(REPO_ROOT)

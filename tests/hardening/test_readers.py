@@ -112,6 +112,9 @@ def _sigmf(tmp_path, edit):
     (lambda m: m["global"].update({"leosop:tone_spacing_hz": "x"}), "leosop:tone_spacing_hz 'x' must be a number"),
     (lambda m: m["global"].update({"core:sample_rate": "1000"}), "core:sample_rate '1000' must be a number"),
     (lambda m: m["global"].update({"core:num_channels": True}), "core:num_channels True must be an integer"),
+    # 0 crashed the sigmf package (a division by it); 2 was refused only after it.
+    (lambda m: m["global"].update({"core:num_channels": 0}), "core:num_channels 0 is not supported; expected 1"),
+    (lambda m: m["global"].update({"core:num_channels": 2}), "core:num_channels 2 is not supported; expected 1"),
     (lambda m: m["annotations"][0].update({"core:sample_start": "0"}), "annotation 0: core:sample_start '0'"),
     (lambda m: m["annotations"][0].update({"core:sample_count": 6.5}), "annotation 0: core:sample_count 6.5"),
     (lambda m: m["annotations"][0].update({"leosop:doppler_hz": "5"}), "annotation 0: leosop:doppler_hz '5'"),
@@ -120,6 +123,12 @@ def _sigmf(tmp_path, edit):
 def test_sigmf_wrong_types(tmp_path, edit, message):
     path = _sigmf(tmp_path, edit)
     _one_line_error(lambda: open_sigmf(path), "r.sigmf-meta", message)
+
+
+def test_sigmf_empty_data_file_is_named(tmp_path):
+    path = _sigmf(tmp_path, lambda m: None)
+    path.with_suffix(".sigmf-data").write_bytes(b"")
+    _one_line_error(lambda: open_sigmf(path), "r.sigmf-data", "empty SigMF data file (no samples for r.sigmf-meta)")
 
 
 def test_sigmf_good_metadata_opens(tmp_path):
