@@ -243,4 +243,9 @@ def _fail(args, message, status):
 
 def main_exit():
     """Console-script entry point."""
-    sys.exit(main())
+    try:
+        status = main()
+    except KeyboardInterrupt:  # while the command's modules load or its options parse: as within a command
+        print("leosop: interrupted", file=sys.stderr)
+        status = 1
+    sys.exit(status)

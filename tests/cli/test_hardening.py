@@ -80,6 +80,20 @@ def test_action_groups_show_only_options_that_work(capsys):
     assert parser.parse_args(["tle", "--json", "info", "f"]).json is True
 
 
+def test_an_interrupt_while_the_command_loads_is_one_line(capsys, monkeypatch):
+    """Ctrl-C before the command runs (its modules loading, its options parsing) printed a traceback."""
+    import leosop.cli as cli
+
+    def interrupted(*_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    monkeypatch.setattr(sys, "argv", ["leosop", "visibility"])
+    with pytest.raises(SystemExit) as info:
+        cli.main_exit()
+    assert info.value.code == 1 and capsys.readouterr().err == "leosop: interrupted\n"
+
+
 def test_every_option_says_what_it_does():
     """`generate --agc-period-s` was listed with an empty help line: every option of every command has a help."""
     bare, seen, parsers = [], [], [("leosop", build_parser())]
