@@ -39,6 +39,7 @@ from ..fusion.aids_leo import LeoOptions, leo_aids
 from ..gnss.ppp import gps_to_utc
 from ..gnss.rtklib_pos import Q_FIX
 from ..positioning import measurements as pm
+from ..timebase import format_utc
 from .scenarios import XIAN_BAOJI
 
 __all__ = ["MAX_GAP_S", "REF_VEL_SIGMA_MPS", "SIM_WINDOW_S", "gpst_to_utc", "read", "reference_track", "simulate",
@@ -63,6 +64,18 @@ def gpst_to_utc(t_gpst_s):
 def _run_seconds(time_utc, sol):
     """UTC times of a table -> seconds after the first GNSS epoch (GPST)."""
     return (time_utc - gpst_to_utc(sol.t_gpst_s[0])) / np.timedelta64(1, "s")
+
+
+def _check_overlap(meas, t_s, sol):
+    """Refuse a table none of whose rows (``t_s`` on the run's clock) falls within the GNSS file's span: its aids
+    would all be left unused, as GNSS epochs outside the IMU log are refused."""
+    span = float(sol.t_gpst_s[-1] - sol.t_gpst_s[0])
+    if not np.any((t_s >= 0.0) & (t_s <= span)):
+        when = (f"{format_utc(meas.time_utc.min())} .. {format_utc(meas.time_utc.max())}"
+                if meas.time_utc is not None else f"t_s {t_s.min():g} .. {t_s.max():g} s")
+        gnss = gpst_to_utc(sol.t_gpst_s[[0, -1]])
+        raise InputError(f"{meas.source}: no row during the GNSS file {sol.source} (rows {when}; the GNSS file "
+                         f"{format_utc(gnss[0])} .. {format_utc(gnss[1])})")
 
 
 def reference_track(sol, rate_hz=1.0):
@@ -192,6 +205,7 @@ def to_aids(meas, sol, lever_arm_b_m, options=None):
     options = options or LeoOptions()
     index, labels = pm.clock_groups(meas)
     t = meas.t_s if meas.time_utc is None else _run_seconds(meas.time_utc, sol)
+    _check_overlap(meas, t, sol)
     aids = leo_aids(t, meas.sat_id, np.asarray(labels)[index], meas.doppler_hz, meas.sigma_hz, meas.carrier_hz,
                     meas.pos_sv_ecef_m, meas.vel_sv_ecef_mps, lever_arm_b_m, options)
     aids.sort(key=lambda a: a.t_s)
@@ -229,6 +243,7 @@ def to_differential_aids(rover, base, sol, site_ecef_m, lever_arm_b_m, options=N
                              "table has one constellation")
     on_clock = [dataclasses.replace(m, t_s=m.t_s if m.time_utc is None else _run_seconds(m.time_utc, sol))
                 for m in (rover, base)]
+    _check_overlap(rover, on_clock[0].t_s, sol)
     aids = differential_aids(*on_clock, site_ecef_m, lever_arm_b_m, options)
     if not aids:
         raise InputError(f"{base.source}: no row of {rover.source} has a base correction (no satellite in common "

@@ -186,3 +186,15 @@ def test_leo_table_without_states_needs_tle(tmp_path, capsys):
     assert main(["fuse", *_walk(), "--leo", str(table)]) == 2
     err = capsys.readouterr().err
     assert f"{table}: no satellite state columns" in err and err.count("\n") == 1
+
+
+def test_leo_table_of_another_day_is_refused_like_gnss(tmp_path, capsys):
+    """A table of another time was taken and every aid silently left unused (GNSS of another time is refused)."""
+    table = tmp_path / "m.csv"
+    table.write_text("time_utc,sat_id,doppler_hz,x_sv_m,y_sv_m,z_sv_m,vx_sv_mps,vy_sv_mps,vz_sv_mps\n"
+                     "2025-01-01T19:40:00Z,44713,-1234.5,7e6,0,0,0,7500,0\n")
+    out = tmp_path / "out"
+    assert main(["fuse", *_walk(), "--leo", str(table), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{table}: no row during the GNSS file" in err and "2025-01-01T19:40:00.000000Z" in err
+    assert err.count("\n") == 1 and not out.exists()
