@@ -226,12 +226,18 @@ def read_psins(path):
     for (ln, text), n_cols in zip(rows[:3], (6, 6, 6)):
         header.append(_table(path, [text], ln, n_cols, None)[0])
     att, pos, quanta = header
+    (pos_line, pos_text), (quanta_line, quanta_text) = rows[1], rows[2]
+    pos_fields = pos_text.split()
     dt_ms, g = float(pos[4]), float(pos[5])
+    if not -90.0 <= pos[0] <= 90.0:
+        raise InputError(f"{path}:{pos_line}: header latitude {pos_fields[0]} deg must be within [-90, 90]")
     if not 0.1 <= dt_ms <= 1000.0:
-        raise InputError(f"{path}:{rows[1][0]}: sampling interval {dt_ms} ms is outside 0.1..1000 ms")
-    if not 9.7 <= g <= 9.9 or not np.all(quanta > 0):
-        shown = ", ".join(f"{q:g}" for q in quanta)
-        raise InputError(f"{path}:{rows[1][0]}: g={g} m/s^2 and the quanta [{shown}] must be plausible and > 0")
+        raise InputError(f"{path}:{pos_line}: sampling interval {dt_ms} ms is outside 0.1..1000 ms")
+    if not 9.7 <= g <= 9.9:
+        raise InputError(f"{path}:{pos_line}: g {pos_fields[5]} m/s^2 is outside 9.7..9.9 m/s^2")
+    if not np.all(quanta > 0):
+        raise InputError(f"{path}:{quanta_line}: the gyro and accelerometer quanta [{', '.join(quanta_text.split())}] "
+                         "must all be > 0")
     first = rows[3][0]
     body = [text for _, text in rows[3:]]
     if rows[-1][0] - first + 1 != len(body):

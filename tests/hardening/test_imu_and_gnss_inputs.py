@@ -1,0 +1,45 @@
+"""Bad IMU logs and GNSS products: one-line errors that name the file, line and field, in the file's own values.
+
+Each test reproduces an audit finding; the command-line tests also check that
+only that one line reaches stderr.
+"""
+
+import pytest
+
+from leosop.cli import main
+from leosop.errors import InputError
+from leosop.ins import imu_io
+
+_PSINS_HEADER = ["% PSINS-format SIMU log file", "", "0 0 -90.6 0 0 0", "34.246048 108.909664 380 0 10 9.780327",
+                 "0.1 0.1 0.1 125 125 125"]
+
+
+def _write_psins(path, header=_PSINS_HEADER, n=200):
+    path.write_text("\n".join(header + ["0 0 2 0 0 80"] * n) + "\n")
+    return path
+
+
+def _cli_error(capsys, argv):
+    """Run the CLI, expect exit 2 and exactly one stderr line; return that line."""
+    status = main(argv)
+    err = capsys.readouterr().err
+    assert status == 2
+    assert len(err.strip().splitlines()) == 1, err
+    return err.strip()
+
+
+def test_psins_header_latitude_named_as_the_file_field(tmp_path, capsys):
+    header = _PSINS_HEADER.copy()
+    header[3] = "134.24604800 108.909664 380 0 10 9.780327"
+    path = _write_psins(tmp_path / "lat.imu", header)
+    err = _cli_error(capsys, ["align", "--imu", str(path)])
+    assert "--lat-deg" not in err
+    assert "lat.imu:4: header latitude 134.24604800 deg must be within [-90, 90]" in err
+
+
+def test_psins_zero_quanta_reported_on_their_own_line(tmp_path):
+    header = _PSINS_HEADER.copy()
+    header[4] = "0 0 0 0 0 0"
+    path = _write_psins(tmp_path / "sf0.imu", header)
+    with pytest.raises(InputError, match=r"sf0\.imu:5: the gyro and accelerometer quanta \[0, 0, 0, 0, 0, 0\]"):
+        imu_io.read_psins(path)
