@@ -161,15 +161,20 @@ def _table(path, lines, first_line, n_cols, delimiter):
     raise InputError(f"{path}: could not parse the data rows")
 
 
-def _check_times(path, t, first_line):
-    """Reject non-increasing times and impossible rates; warn about gaps. Returns the gap list."""
+def _check_times(path, t, first_line, written=None):
+    """Reject non-increasing times and impossible rates; warn about gaps. Returns the gap list.
+
+    ``written(i)``, when given, is sample ``i``'s time as the file writes it, for the message.
+    """
     if t.size < 2:
         raise InputError(f"{path}: fewer than two samples")
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = int(bad[0]) + 1
-        raise InputError(f"{path}:{first_line + i}: time {t[i]!r} is not after the previous sample's {t[i - 1]!r}")
+        written = written or (lambda k: repr(float(t[k])))
+        raise InputError(f"{path}:{first_line + i}: time {written(i)} is not after the previous sample's "
+                         f"{written(i - 1)}")
     med = float(np.median(dt))
     rate = 1.0 / med
     if not _RATE_RANGE_HZ[0] <= rate <= _RATE_RANGE_HZ[1]:
@@ -189,8 +194,8 @@ def _rotate(C_b_s, x):
     return x @ C.T
 
 
-def _from_rates(path, t, accel_mps2, gyro_rad_per_s, first_line, C_b_s, epoch, metadata):
-    gaps = _check_times(path, t, first_line)
+def _from_rates(path, t, accel_mps2, gyro_rad_per_s, first_line, C_b_s, epoch, metadata, written=None):
+    gaps = _check_times(path, t, first_line, written)
     dt = np.diff(t)
     dtheta = _rotate(C_b_s, gyro_rad_per_s[1:]) * dt[:, None]
     dvel = _rotate(C_b_s, accel_mps2[1:]) * dt[:, None]
@@ -305,7 +310,7 @@ def read_rtklib_csv(path, *, tag_path=None, C_b_s=np.eye(3)):
     data = _table(path, lines[1:-1], 2, 7, ",")
     start_s, span_s = _read_tag(tag_path or f"{path}.tag")
     tick_s = (data[:, 6] - data[0, 6]) / 1000.0
-    _check_times(path, tick_s, 2)
+    _check_times(path, tick_s, 2, lambda i: f"{lines[1 + i].split(',')[6].strip()} ms")
     t = tick_s * (span_s / tick_s[-1])
     metadata = {"format": "rtklib_csv", "tag_start_gpst": _gpst_iso(start_s), "tick_scale": float(span_s / tick_s[-1]),
                 "C_b_s": np.asarray(C_b_s, dtype=float).tolist()}
@@ -329,7 +334,8 @@ def read_rtklib_sf_csv(path, *, C_b_s=np.eye(3)):
     t = data[:, 0]
     _check_gpst(path, "first time", t[0])
     metadata = {"format": "rtklib_sf_csv", "C_b_s": np.asarray(C_b_s, dtype=float).tolist()}
-    return _from_rates(path, t - t[0], data[:, 1:4] * G0_MPS2, data[:, 4:7], 1, C_b_s, _gpst_iso(t[0]), metadata)
+    return _from_rates(path, t - t[0], data[:, 1:4] * G0_MPS2, data[:, 4:7], 1, C_b_s, _gpst_iso(t[0]), metadata,
+                       lambda i: lines[i].split(",")[0].strip())
 
 
 #: Column names of :func:`read_csv_columns` and their factors to SI: time (Unix-style GPST seconds, or seconds
@@ -392,4 +398,5 @@ def read_csv_columns(path, columns, *, C_b_s=np.eye(3), delimiter=",", skip_rows
     accel = np.stack([col["ax"], col["ay"], col["az"]], axis=-1)
     gyro = np.stack([col["gx"], col["gy"], col["gz"]], axis=-1)
     metadata = {"format": "csv", "columns": dict(columns), "C_b_s": np.asarray(C_b_s, dtype=float).tolist()}
-    return _from_rates(path, t - t[0], accel, gyro, skip_rows + 1, C_b_s, epoch, metadata)
+    return _from_rates(path, t - t[0], accel, gyro, skip_rows + 1, C_b_s, epoch, metadata,
+                       lambda i: used[i].split(",")[0].strip())

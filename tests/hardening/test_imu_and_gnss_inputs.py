@@ -43,3 +43,15 @@ def test_psins_zero_quanta_reported_on_their_own_line(tmp_path):
     path = _write_psins(tmp_path / "sf0.imu", header)
     with pytest.raises(InputError, match=r"sf0\.imu:5: the gyro and accelerometer quanta \[0, 0, 0, 0, 0, 0\]"):
         imu_io.read_psins(path)
+
+
+def test_imu_time_going_back_quoted_as_written(tmp_path, capsys):
+    rows = [f"{1756402241.5630851 + 0.006 * k:.7f},-0.0168877,-0.0065302,1.0107665,0.0017089,-0.0026242,0.0029633,"
+            "0,0,0,0" for k in range(200)]
+    rows[100] = "1756402141.6020906" + rows[100][rows[100].index(","):]
+    path = tmp_path / "sf_back.csv"
+    path.write_text("\n".join(rows) + "\n")
+    err = _cli_error(capsys, ["align", "--imu", str(path), "--format", "csv", "--lat-deg", "45"])
+    assert "np.float64" not in err
+    assert (f"sf_back.csv:101: time 1756402141.6020906 is not after the previous sample's {rows[99].split(',')[0]}"
+            in err)
