@@ -135,15 +135,19 @@ class Clocks:
         return out
 
 
+_EPOCH_FIELDS = ("year", "month", "day", "hour", "minute", "seconds")
+
+
 def _epoch_fields(line, a, path, lineno):
     """Year, month, day, hour, minute, seconds of an epoch written from column ``a`` on."""
     f = line[a:].split()[:6]
-    try:
-        if len(f) == 6:
-            return tuple(float(v) for v in f)
-    except ValueError:
-        pass
-    raise InputError(f"{path}: line {lineno}: unreadable epoch")
+    for name, text in zip(_EPOCH_FIELDS, f + [""] * (6 - len(f))):
+        try:
+            float(text)
+        except ValueError:
+            shown = f"{text!r} is not a number" if text else "is missing"
+            raise InputError(f"{path}: line {lineno}: epoch record {line.strip()!r}: {name} {shown}") from None
+    return tuple(float(v) for v in f)
 
 
 #: Shortest record interval accepted [s] (RINEX clock products are 1 s to 5 min).
@@ -185,6 +189,17 @@ def _grid(times, line_numbers, path, what):
     return t, np.timedelta64(round(step * 1e9), "ns"), index, order
 
 
+def _sp3_coordinate(line, axis, path, lineno):
+    """Coordinate ``axis`` (0 = X) [km] of an SP3 position record; InputError names the satellite and field."""
+    text = line[4 + 14 * axis:18 + 14 * axis].strip()
+    try:
+        return float(text)
+    except ValueError:
+        shown = f"{text!r} is not a number" if text else "is missing"
+        raise InputError(f"{path}: line {lineno}: position record {line[:4]}: {'XYZ'[axis]} coordinate [km] "
+                         f"{shown}") from None
+
+
 def read_sp3(path, *, systems="GE", ref_gps=None):
     """Read an SP3-c or SP3-d orbit file (plain or gzip).
 
@@ -214,10 +229,7 @@ def read_sp3(path, *, systems="GE", ref_gps=None):
             s = line[1:2]
             if s not in systems:
                 continue
-            try:
-                x, y, z = float(line[4:18]), float(line[18:32]), float(line[32:46])
-            except ValueError:
-                raise InputError(f"{path}: line {i + 1}: unreadable position record") from None
+            x, y, z = (_sp3_coordinate(line, axis, path, i + 1) for axis in range(3))
             recs.append((len(epochs) - 1, line[1:4].replace(" ", "0"), x, y, z))
         elif line.startswith("EOF"):
             break

@@ -8,6 +8,7 @@ import pytest
 
 from leosop.cli import main
 from leosop.errors import InputError
+from leosop.gnss.products import read_sp3
 from leosop.ins import imu_io
 
 _PSINS_HEADER = ["% PSINS-format SIMU log file", "", "0 0 -90.6 0 0 0", "34.246048 108.909664 380 0 10 9.780327",
@@ -55,3 +56,26 @@ def test_imu_time_going_back_quoted_as_written(tmp_path, capsys):
     assert "np.float64" not in err
     assert (f"sf_back.csv:101: time 1756402141.6020906 is not after the previous sample's {rows[99].split(',')[0]}"
             in err)
+
+
+def _write_sp3(path, x_text="-11562.163582", epoch="2020  6 25  0  0  0.00000000"):
+    lines = ["#dP2020  6 25  0  0  0.00000000       2 ORBIT IGS14 FIT  GRG",
+             f"*  {epoch}",
+             f"PE01 {x_text:>13s}  14053.114306  23345.128269   -884.707516",
+             "*  2020  6 25  0 15  0.00000000",
+             "PE01 -11562.163582  14053.114306  23345.128269   -884.707516",
+             "EOF"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("x_text, epoch, message", [
+    ("abc2.163582", "2020  6 25  0  0  0.00000000",
+     "x.sp3: line 3: position record PE01: X coordinate [km] 'abc2.163582' is not a number"),
+    ("-11562.163582", "2   abc.163582 0  0.00000000",
+     "x.sp3: line 2: epoch record '*  2   abc.163582 0  0.00000000': month 'abc.163582' is not a number"),
+])
+def test_sp3_unreadable_field_named(tmp_path, x_text, epoch, message):
+    with pytest.raises(InputError) as info:
+        read_sp3(_write_sp3(tmp_path / "x.sp3", x_text, epoch))
+    assert message in str(info.value)
