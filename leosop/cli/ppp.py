@@ -25,7 +25,7 @@ from ..gnss.antex import check_antex, read_antex
 from ..gnss.ar import ArOptions
 from ..gnss.etrf import decimal_year, etrf2000_to_itrf2014, itrf2014_to_etrf2000
 from ..gnss.ppp import PppOptions, gps_to_utc, run_ppp
-from ..gnss.products import read_clk, read_sp3
+from ..gnss.products import read_clk, read_sp3, uncovered_note
 from ..gnss.rinex import check_nav, read_obs
 from ..plots.ppp import ppp_figure
 from ..timebase import format_utc
@@ -85,6 +85,7 @@ def run(args):
     notes, no_ar = [], {}
     if antex is not None:
         notes, no_ar = check_antex(antex, obs.antenna_type, obs.sv, day, clocks.pcvs_applied)
+    notes += [n for n in (uncovered_note(p, obs.time_gps) for p in (orbits, clocks)) if n]
     mask = {} if args.mask_deg is None else {"mask_deg": args.mask_deg, "mask_no_antex_deg": args.mask_deg}
     res = run_ppp(obs, orbits, clocks, PppOptions(static=args.static, systems=args.systems, **mask), antex=antex,
                   ar=ArOptions() if args.ar else None, no_ar=no_ar)

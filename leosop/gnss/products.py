@@ -11,6 +11,7 @@ record, returns NaN.
 """
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from ..constants import DAY_S
 from ..errors import InputError
 from .rinex import epochs_gps, read_text
 
-__all__ = ["Clocks", "Orbits", "read_clk", "read_sp3", "read_wl_biases", "seconds_gps"]
+__all__ = ["Clocks", "Orbits", "read_clk", "read_sp3", "read_wl_biases", "seconds_gps", "uncovered_note"]
 
 #: Lagrange interpolation points for SP3 orbits.
 N_LAGRANGE = 11
@@ -47,6 +48,8 @@ class Orbits:
     t_s: np.ndarray
     sv: list
     pos_ecef_m: np.ndarray
+    #: Queries at most this many record spacings beyond the end records are answered.
+    margin: ClassVar[float] = 0.1
 
     def position(self, sv_idx, t_s):
         """Satellite positions at given times.
@@ -83,7 +86,7 @@ class Orbits:
         # Extrapolation past the end nodes is limited to 0.1 spacing (90 s for 15-min orbits): a degree-10
         # polynomial diverges beyond its nodes: 15 min past the last GRG record of the ESBC day it is off by
         # 0.43 m (median of the satellites) and up to 43 m.
-        out[(u < -0.1) | (u > n - 0.9)] = np.nan
+        out[(u < -self.margin) | (u > n - 1 + self.margin)] = np.nan
         return out
 
     def state(self, sv_idx, t_s, *, h_s=0.5):
@@ -122,6 +125,8 @@ class Clocks:
     bias_s: np.ndarray
     wl_bias_cyc: dict = field(default_factory=dict)
     pcvs_applied: str = ""
+    #: Queries at most this many record spacings beyond the end records are answered.
+    margin: ClassVar[float] = 1.0
 
     def bias(self, sv_idx, t_s):
         """Clock offsets [s] at given times, linear between records, shape (n,)."""
@@ -131,8 +136,37 @@ class Clocks:
         i0 = np.clip(np.floor(u).astype(int), 0, len(self.t_s) - 2)
         f = u - i0
         out = (1 - f) * self.bias_s[i0, sv_idx] + f * self.bias_s[i0 + 1, sv_idx]
-        out[(u < -1) | (u > len(self.t_s))] = np.nan
+        out[(u < -self.margin) | (u > len(self.t_s) - 1 + self.margin)] = np.nan
         return out
+
+
+def uncovered_note(product, times_gps):
+    """A one-line warning when a product falls short of the epochs by more than one record spacing, else None.
+
+    A day's product ends one spacing before midnight (23:45 for 15-min
+    orbits): the observations' last minutes beyond it are left out without a
+    warning, as they are with every complete product.
+
+    Parameters
+    ----------
+    product : Orbits or Clocks
+    times_gps : ndarray of datetime64, shape (n,)
+        The epochs to serve, e.g. the observations'.
+
+    Returns
+    -------
+    str or None
+        Names the product's file, its record span and how many of the epochs
+        fall outside it (their queries return NaN: those epochs are left out).
+    """
+    t_s = seconds_gps(times_gps, product.ref_gps)
+    step = product.t_s[1] - product.t_s[0]
+    if product.t_s[0] - step <= t_s[0] and t_s[-1] <= product.t_s[-1] + step:
+        return None
+    outside = (t_s < product.t_s[0] - product.margin * step) | (t_s > product.t_s[-1] + product.margin * step)
+    first, last = (str(product.ref_gps + np.timedelta64(round(s * 1e9), "ns"))[:19] for s in product.t_s[[0, -1]])
+    return (f"{product.path}: records cover only {first} to {last} GPST, the observations {str(times_gps[0])[:19]} "
+            f"to {str(times_gps[-1])[:19]}: {int(outside.sum())} of the {outside.size} epochs are left out")
 
 
 _EPOCH_FIELDS = ("year", "month", "day", "hour", "minute", "seconds")

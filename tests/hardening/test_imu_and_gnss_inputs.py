@@ -4,12 +4,17 @@ Each test reproduces an audit finding; the command-line tests also check that
 only that one line reaches stderr.
 """
 
+import gzip
+import json
+
+import numpy as np
 import pytest
 
 from leosop.cli import main
 from leosop.errors import InputError
-from leosop.gnss.products import read_sp3
+from leosop.gnss.products import Clocks, Orbits, read_sp3, uncovered_note
 from leosop.ins import imu_io
+from tests.helpers import ESBC_CLK, ESBC_NAV, ESBC_OBS, ESBC_SP3, data_path
 
 _PSINS_HEADER = ["% PSINS-format SIMU log file", "", "0 0 -90.6 0 0 0", "34.246048 108.909664 380 0 10 9.780327",
                  "0.1 0.1 0.1 125 125 125"]
@@ -79,3 +84,32 @@ def test_sp3_unreadable_field_named(tmp_path, x_text, epoch, message):
     with pytest.raises(InputError) as info:
         read_sp3(_write_sp3(tmp_path / "x.sp3", x_text, epoch))
     assert message in str(info.value)
+
+
+def test_products_short_of_the_observations_noted():
+    day = np.datetime64("2020-06-25T00:00:00", "ns")
+    obs_times = day + np.arange(2880) * np.timedelta64(30, "s")
+    half_orbits = Orbits("s_trunc.sp3", day, 900.0 * np.arange(48), ["G01"], np.zeros((48, 1, 3)))
+    note = uncovered_note(half_orbits, obs_times)
+    assert note == ("s_trunc.sp3: records cover only 2020-06-25T00:00:00 to 2020-06-25T11:45:00 GPST, the "
+                    "observations 2020-06-25T00:00:00 to 2020-06-25T23:59:30: 1466 of the 2880 epochs are left out")
+    half_clocks = Clocks("c_trunc.clk", day, 30.0 * np.arange(1440), ["G01"], np.zeros((1440, 1)))
+    assert "c_trunc.clk: records cover only 2020-06-25T00:00:00 to 2020-06-25T11:59:30 GPST" in uncovered_note(
+        half_clocks, obs_times)
+    # A whole day's 15-min orbits end at 23:45: the last minutes are no truncation.
+    day_orbits = Orbits("day.sp3", day, 900.0 * np.arange(96), ["G01"], np.zeros((96, 1, 3)))
+    assert uncovered_note(day_orbits, obs_times) is None
+
+
+def test_ppp_on_half_an_sp3_warns_and_runs(tmp_path, capsys):
+    sp3 = tmp_path / "s_trunc.sp3"
+    with gzip.open(data_path("rinex", "esbc_2020-177", ESBC_SP3.name), "rt") as f:
+        lines = f.read().splitlines()
+    sp3.write_text("\n".join(lines[:len(lines) // 2]) + "\n")
+    status = main(["ppp", str(ESBC_OBS), "--nav", str(ESBC_NAV), "--sp3", str(sp3), "--clk", str(ESBC_CLK),
+                   "--static", "--json"])
+    out, err = capsys.readouterr()
+    assert status == 0
+    warned = json.loads(out)["summary"]["warnings"]
+    assert len(warned) == 1 and "s_trunc.sp3: records cover only" in warned[0] and "epochs are left out" in warned[0]
+    assert f"warning: {warned[0]}" in err
