@@ -13,6 +13,7 @@ mixed files, RINEX 3.05 section 6.7), as ``datetime64[ns]`` named ``time_gps``.
 """
 
 import gzip
+import warnings
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -69,6 +70,18 @@ def read_text(path):
     list of str
         Lines without their line ends.
     """
+    lines, notes = _expand(path)
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    return lines
+
+
+def _expand(path):
+    """:func:`read_text`'s lines, and the Hatanaka expander's warnings, one line each naming the file.
+
+    A reader warns them only once the text has passed its checks: a file it
+    refuses gives the one error line alone.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
@@ -78,15 +91,19 @@ def read_text(path):
             raw = gzip.decompress(raw)
         except (OSError, EOFError, zlib.error) as exc:
             raise InputError(f"{path}: truncated or corrupt gzip data ({exc})") from None
+    notes = []
     if raw[:80].find(b"COMPACT RINEX FORMAT") >= 0 or raw[60:80].startswith(b"CRINEX VERS"):
         import hatanaka
 
         try:
-            raw = hatanaka.decompress(raw)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                raw = hatanaka.decompress(raw)
         except Exception as exc:  # the library raises several types for a damaged file
             raise InputError(f"{path}: Hatanaka decompression failed ({str(exc).splitlines()[0]})") from None
+        notes = [f"{path}: {' '.join(str(w.message).split())}" for w in caught]
     try:
-        return raw.decode("ascii", errors="replace").splitlines()
+        return raw.decode("ascii", errors="replace").splitlines(), notes
     except Exception as exc:  # pragma: no cover - decode with replace does not fail
         raise InputError(f"{path}: not text ({exc})") from None
 
@@ -178,8 +195,14 @@ def read_obs(path, *, systems="GE", codes=None):
         Not RINEX 3 observation data, a mixed-version file (a RINEX 2 epoch
         record in the data), a truncated epoch, a bad number; the message
         names the file and line.
+
+    Warns
+    -----
+    UserWarning
+        The Hatanaka expander's warnings (e.g. epochs it skipped), each naming
+        the file, once the file has been read.
     """
-    lines = read_text(path)
+    lines, notes = _expand(path)
     path = str(path)
     if not lines:
         raise InputError(f"{path}: line 1: empty file")
@@ -306,6 +329,8 @@ def read_obs(path, *, systems="GE", codes=None):
                 la = np.zeros((n_ep, n_sv), np.int8)
                 la[r_ep, r_sv] = flags
                 lli[f"{s}:{code}"] = la
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
     return ObsData(path=path, version=version, marker=marker, time_gps=time_gps, sv=sv, obs=obs, lli=lli,
                    approx_pos_ecef_m=approx, antenna_delta_hen_m=delta, interval_s=float(interval),
                    obs_types=obs_types, antenna_type=ant)

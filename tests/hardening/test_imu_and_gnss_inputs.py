@@ -6,12 +6,15 @@ only that one line reaches stderr.
 
 import gzip
 import json
+import warnings
 
+import hatanaka
 import numpy as np
 import pytest
 
 from leosop.cli import main
 from leosop.errors import InputError
+from leosop.gnss.rinex import read_obs
 from leosop.gnss.products import Clocks, Orbits, read_sp3, uncovered_note
 from leosop.ins import imu_io
 from tests.helpers import ESBC_CLK, ESBC_NAV, ESBC_OBS, ESBC_SP3, data_path
@@ -113,3 +116,35 @@ def test_ppp_on_half_an_sp3_warns_and_runs(tmp_path, capsys):
     warned = json.loads(out)["summary"]["warnings"]
     assert len(warned) == 1 and "s_trunc.sp3: records cover only" in warned[0] and "epochs are left out" in warned[0]
     assert f"warning: {warned[0]}" in err
+
+
+def _small_crinex(path, version=b"3.05"):
+    """The ESBC day's header and first epoch (epoch line, clock line, one line per satellite), as RINEX ``version``."""
+    with gzip.open(data_path("rinex", "esbc_2020-177", ESBC_OBS.name)) as f:
+        lines = f.read().split(b"\n")
+    end = next(i for i, line in enumerate(lines) if b"END OF HEADER" in line)
+    n_sats = int(lines[end + 1][32:35])
+    path.write_bytes(b"\n".join(lines[:end + 3 + n_sats]).replace(
+        b"     3.05           OBSERVATION DATA", b"     " + version + b"           OBSERVATION DATA") + b"\n")
+    return path
+
+
+def test_crinex_of_rinex2_gives_the_one_error_line(tmp_path, capsys):
+    crx = _small_crinex(tmp_path / "o_ver2.crx", b"2.11")
+    err = _cli_error(capsys, ["ppp", str(crx), "--nav", str(ESBC_NAV), "--sp3", str(ESBC_SP3), "--clk", str(ESBC_CLK)])
+    assert "crx2rnx" not in err
+    assert "o_ver2.crx: line 1: RINEX version 2.11, this reader needs RINEX 3" in err
+
+
+def test_expander_warning_on_a_file_read_names_the_file(tmp_path, monkeypatch):
+    crx = _small_crinex(tmp_path / "o.crx")
+    decompress = hatanaka.decompress
+
+    def warning_decompress(raw):
+        warnings.warn("crx2rnx: line 58 : skip until an initialized epoch is found.", stacklevel=1)
+        return decompress(raw)
+
+    monkeypatch.setattr(hatanaka, "decompress", warning_decompress)
+    with pytest.warns(UserWarning) as caught:
+        assert len(read_obs(crx).time_gps) == 1
+    assert [str(w.message) for w in caught] == [f"{crx}: crx2rnx: line 58 : skip until an initialized epoch is found."]
