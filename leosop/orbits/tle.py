@@ -3,7 +3,8 @@
 Accepts LF, CRLF, CR and the doubled CR-CR-LF line endings found in the wild,
 blank lines, ``#`` comment lines, and CelesTrak's optional ``0 `` prefix on name lines. Each record
 is checked for ASCII text, line numbers, the column layout, matching
-catalogue numbers and the modulo-10 checksums before SGP4 initialises it, then
+catalogue numbers, the modulo-10 checksums and a number in each numeric field
+(SGP4 reads text there as 0 or shifted values) before SGP4 initialises it, then
 the element values for ones no orbit has (:func:`check_elements`: an
 inclination of 999 deg or a day of year 999 pass the checksum). A bad
 record raises :class:`~leosop.errors.InputError` naming the file and line,
@@ -12,6 +13,7 @@ or, with ``skip_bad=True``, is skipped with a warning.
 
 import math
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -33,6 +35,25 @@ _EPOCH_YEARS = (1957, 2200)
 _MAX_REV_PER_DAY = 20.0
 # Columns (0-based) that must be blank in each line of a valid element set.
 _BLANKS = {"1": (1, 8, 17, 32, 43, 52, 61, 63), "2": (1, 7, 16, 25, 33, 42, 51)}
+_DECIMAL = (re.compile(r" *[+-]?(\d+\.?\d*|\.\d+) *", re.ASCII), "a decimal number")
+_INTEGER = (re.compile(r" *\d+", re.ASCII), "a whole number")
+_EXPONENT = (re.compile(r"[ +-][\d ]{5}[ +-][\d ]", re.ASCII), "a number in TLE exponent form such as -12345-4")
+_CATALOGUE = (re.compile(r" *\d+|[A-HJ-NP-Z]\d{4}", re.ASCII), "a catalogue number (digits, or a letter and 4 digits)")
+# The numeric fields of each line: first and last column (1-based), name, pattern and what it should hold. Blanks
+# in the implied-decimal fields read as zeros, as in SGP4's own parser.
+_FIELDS = {
+    "1": ((3, 7, "catalogue number", *_CATALOGUE),
+          (19, 20, "epoch year", re.compile(r"[ \d]\d", re.ASCII), "two digits"),
+          (21, 32, "epoch day of year", *_DECIMAL), (34, 43, "mean motion derivative", *_DECIMAL),
+          (45, 52, "mean motion second derivative", *_EXPONENT), (54, 61, "BSTAR", *_EXPONENT),
+          (63, 63, "ephemeris type", re.compile(r"[ \d]", re.ASCII), "a digit"),
+          (65, 68, "element set number", *_INTEGER)),
+    "2": ((3, 7, "catalogue number", *_CATALOGUE), (9, 16, "inclination", *_DECIMAL),
+          (18, 25, "right ascension of the node", *_DECIMAL),
+          (27, 33, "eccentricity", re.compile(r"[\d ]{7}", re.ASCII), "7 digits after an implied decimal point"),
+          (35, 42, "argument of perigee", *_DECIMAL), (44, 51, "mean anomaly", *_DECIMAL),
+          (53, 63, "mean motion", *_DECIMAL), (64, 68, "revolution number", *_INTEGER)),
+}
 # What each byte adds to the checksum: its value for a digit, 1 for '-', else 0. A table look-up in C: parsing a
 # 10,000-satellite snapshot spent 60% of its time summing characters one by one in Python.
 _CHECKSUM_VALUES = bytes(b - 48 if 48 <= b <= 57 else int(b == 45) for b in range(256))
@@ -95,6 +116,11 @@ def _check_line(text, expect, where):
         raise InputError(
             f"{where}: bad TLE checksum on line {expect} (column 69 says {text[68]}, computed {tle_checksum(text)})"
         )
+    for first, last, name, pattern, expected in _FIELDS[expect]:
+        field = text[first - 1:last]
+        if not pattern.fullmatch(field):
+            columns = f"column {first}" if first == last else f"columns {first}-{last}"
+            raise InputError(f"{where}: {name} {field!r} in {columns} of TLE line {expect} is not {expected}")
 
 
 def parse_tle_lines(lines, source="<text>", *, skip_bad=False):

@@ -1,0 +1,42 @@
+"""Element sets as an auditor fed them: text in numeric TLE fields, bad OMM values, and ``tle fetch`` errors.
+
+Every rejection is one line naming the file (or URL), the line or record and
+the field, with exit status 2 for the user's input.
+"""
+
+import re
+
+import pytest
+
+from leosop.errors import InputError
+from leosop.orbits import read_tle
+from leosop.orbits.tle import tle_checksum
+
+# ISS (ZARYA), a public element set with valid checksums (as in tests/orbits/test_tle.py).
+L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"
+L2 = "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537"
+
+
+def _with_text(line, first, last):
+    """``line`` with the first digit of columns ``first``-``last`` made an ``x``, its checksum fixed."""
+    field = re.sub(r"\d", "x", line[first - 1:last], count=1)
+    line = line[:first - 1] + field + line[last:]
+    return line[:68] + str(tle_checksum(line)), field
+
+
+@pytest.mark.parametrize("n, first, last, name", [
+    (1, 3, 7, "catalogue number"), (1, 19, 20, "epoch year"), (1, 21, 32, "epoch day of year"),
+    (1, 34, 43, "mean motion derivative"), (1, 45, 52, "mean motion second derivative"), (1, 54, 61, "BSTAR"),
+    (1, 63, 63, "ephemeris type"), (1, 65, 68, "element set number"),
+    (2, 3, 7, "catalogue number"), (2, 9, 16, "inclination"), (2, 18, 25, "right ascension of the node"),
+    (2, 27, 33, "eccentricity"), (2, 35, 42, "argument of perigee"), (2, 44, 51, "mean anomaly"),
+    (2, 53, 63, "mean motion"), (2, 64, 68, "revolution number"),
+])
+def test_text_in_a_numeric_tle_field_is_named(tmp_path, n, first, last, name):
+    lines = [L1, L2]
+    lines[n - 1], field = _with_text(lines[n - 1], first, last)
+    path = tmp_path / "iss.tle"
+    path.write_text("\n".join(lines) + "\n")
+    columns = f"column {first}" if first == last else f"columns {first}-{last}"
+    with pytest.raises(InputError, match=re.escape(f"iss.tle:{n}: {name} {field!r} in {columns} of TLE line {n}")):
+        read_tle(path)
