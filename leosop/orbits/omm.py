@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,11 @@ _REQUIRED = ("OBJECT_NAME", "NORAD_CAT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICIT
              "MEAN_MOTION_DDOT")
 _DEFAULTS = {"CLASSIFICATION_TYPE": "U", "OBJECT_ID": "", "EPHEMERIS_TYPE": "0", "ELEMENT_SET_NO": "999",
              "REV_AT_EPOCH": "0"}
+_NUMBERS = ("MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE", "ARG_OF_PERICENTER", "MEAN_ANOMALY",
+            "BSTAR", "MEAN_MOTION_DOT", "MEAN_MOTION_DDOT")
+_WHOLE_NUMBERS = ("EPHEMERIS_TYPE", "ELEMENT_SET_NO", "REV_AT_EPOCH")
+#: Largest catalogue number SGP4 takes (Alpha-5 ``Z9999``).
+_MAX_CATALOGUE = 339999
 
 
 def read_omm(path: str | os.PathLike[str]) -> Constellation:
@@ -61,6 +67,7 @@ def read_omm(path: str | os.PathLike[str]) -> Constellation:
         if missing:
             raise InputError(f"{at}: missing OMM field {missing[0]}")
         fields = {**_DEFAULTS, **{k: str(v) for k, v in fields.items() if v is not None}}
+        _check_values(fields, at)
         if "." not in fields["EPOCH"]:
             fields["EPOCH"] += ".0"
         if len(fields["CLASSIFICATION_TYPE"]) != 1:
@@ -85,3 +92,26 @@ def read_omm(path: str | os.PathLike[str]) -> Constellation:
         np.array([satrec_epoch_utc(s) for s in satrecs], dtype="datetime64[ns]"),
         str(path),
     )
+
+
+def _check_values(fields, at):
+    """Refuse a field SGP4's OMM reader cannot convert, or a catalogue number it should not take, naming the field."""
+    for key in _NUMBERS:
+        try:
+            float(fields[key])
+        except ValueError:
+            raise InputError(f"{at}: OMM field {key}: expected a number, found {fields[key]!r}") from None
+    for key in ("NORAD_CAT_ID", *_WHOLE_NUMBERS):
+        try:
+            value = int(fields[key])
+        except ValueError:
+            raise InputError(f"{at}: OMM field {key}: expected a whole number, found {fields[key]!r}") from None
+        if key == "NORAD_CAT_ID" and not 1 <= value <= _MAX_CATALOGUE:
+            raise InputError(f"{at}: OMM field NORAD_CAT_ID: expected a catalogue number 1..{_MAX_CATALOGUE}, "
+                             f"found {value}")
+    epoch = fields["EPOCH"]
+    try:
+        datetime.strptime(epoch, "%Y-%m-%dT%H:%M:%S.%f" if "." in epoch else "%Y-%m-%dT%H:%M:%S")
+    except ValueError:
+        raise InputError(f"{at}: OMM field EPOCH: expected a UTC time such as 2022-12-02T11:26:52.479456, "
+                         f"found {epoch!r}") from None

@@ -4,17 +4,23 @@ Every rejection is one line naming the file (or URL), the line or record and
 the field, with exit status 2 for the user's input.
 """
 
+import csv
+import json
 import re
 
 import pytest
 
 from leosop.errors import InputError
-from leosop.orbits import read_tle
+from leosop.orbits import read_omm, read_tle
 from leosop.orbits.tle import tle_checksum
 
 # ISS (ZARYA), a public element set with valid checksums (as in tests/orbits/test_tle.py).
 L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"
 L2 = "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537"
+OMM = {"OBJECT_NAME": "STARLINK-1007", "NORAD_CAT_ID": 44713, "EPOCH": "2025-01-01T00:00:00.000",
+       "MEAN_MOTION": 15.06, "ECCENTRICITY": 0.0001, "INCLINATION": 53.05, "RA_OF_ASC_NODE": 10.0,
+       "ARG_OF_PERICENTER": 90.0, "MEAN_ANOMALY": 270.0, "BSTAR": 0.0001, "MEAN_MOTION_DOT": 1e-5,
+       "MEAN_MOTION_DDOT": 0}
 
 
 def _with_text(line, first, last):
@@ -40,3 +46,21 @@ def test_text_in_a_numeric_tle_field_is_named(tmp_path, n, first, last, name):
     columns = f"column {first}" if first == last else f"columns {first}-{last}"
     with pytest.raises(InputError, match=re.escape(f"iss.tle:{n}: {name} {field!r} in {columns} of TLE line {n}")):
         read_tle(path)
+
+
+def test_text_in_an_omm_csv_field_is_named(tmp_path):
+    path = tmp_path / "set.csv"
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, OMM)
+        writer.writeheader()
+        writer.writerow({**OMM, "INCLINATION": "abc"})
+    with pytest.raises(InputError, match=re.escape("set.csv:2: OMM field INCLINATION: expected a number, found 'abc'")):
+        read_omm(path)
+
+
+@pytest.mark.parametrize("norad_id", [-5, 0])
+def test_omm_catalogue_number_must_be_positive(tmp_path, norad_id):
+    path = tmp_path / "set.json"
+    path.write_text(json.dumps([{**OMM, "NORAD_CAT_ID": norad_id}]))
+    with pytest.raises(InputError, match=f"set.json: record 1: OMM field NORAD_CAT_ID: .* found {norad_id}$"):
+        read_omm(path)

@@ -45,7 +45,7 @@ def test_omm_json_top_level_not_a_list(tmp_path, top):
     ("INCLINATION", 999.9999, "inclination 999.9999 deg is outside [0, 180]"),
     ("ECCENTRICITY", 1.5, "eccentricity"),
     ("EPOCH", "7827-01-01T00:00:00.000", "epoch year 7827"),
-    ("NORAD_CAT_ID", "4" * 60, "bad OMM field value"),
+    ("NORAD_CAT_ID", "4" * 60, "OMM field NORAD_CAT_ID: expected a catalogue number 1..339999"),
 ])
 def test_omm_impossible_values(tmp_path, field, value, message):
     path = tmp_path / "set.json"
