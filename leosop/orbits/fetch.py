@@ -8,8 +8,8 @@ import urllib.request
 
 from ..errors import ExternalError, InputError
 from ..fileio import atomic_path
-from .omm import read_omm
-from .tle import read_tle
+from .omm import parse_omm
+from .tle import parse_tle_lines
 
 __all__ = ["CELESTRAK_GP_URL", "fetch_group"]
 
@@ -37,7 +37,7 @@ def fetch_group(group, out_path, *, fmt="tle", base_url=None, timeout_s=30.0):
     Returns
     -------
     Constellation
-        What was downloaded.
+        What was downloaded; its ``source`` is the URL.
     """
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", group or ""):
         raise InputError(f"GROUP {group!r}: expected a CelesTrak group name such as starlink or active")
@@ -57,10 +57,14 @@ def fetch_group(group, out_path, *, fmt="tle", base_url=None, timeout_s=30.0):
     text = body.decode("ascii", errors="replace").strip()
     if not text or text.lower().startswith(("invalid query", "no gp data found")):
         raise ExternalError(f"{url}: CelesTrak returned no element sets for group {group!r} ({text[:60]!r})")
+    # Parsed before anything is written, so that messages name the URL (never a temporary file).
+    try:
+        if fmt == "tle":
+            const = parse_tle_lines(body.splitlines(), url)
+        else:
+            const = parse_omm(body.decode("utf-8-sig", errors="replace"), url, fmt=fmt)
+    except InputError as exc:
+        raise ExternalError(f"downloaded data do not parse: {exc}") from None
     with atomic_path(out_path) as tmp:
         tmp.write_bytes(body)
-        try:
-            const = read_tle(tmp) if fmt == "tle" else read_omm(tmp)
-        except InputError as exc:
-            raise ExternalError(f"{url}: downloaded data do not parse ({exc})") from None
     return const

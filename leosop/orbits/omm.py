@@ -15,7 +15,7 @@ from ..fileio import check_input_file
 from .constellation import Constellation
 from .tle import check_elements, satrec_epoch_utc
 
-__all__ = ["read_omm"]
+__all__ = ["read_omm", "parse_omm"]
 
 _REQUIRED = ("OBJECT_NAME", "NORAD_CAT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION",
              "RA_OF_ASC_NODE", "ARG_OF_PERICENTER", "MEAN_ANOMALY", "BSTAR", "MEAN_MOTION_DOT",
@@ -45,20 +45,38 @@ def read_omm(path: str | os.PathLike[str]) -> Constellation:
     path = Path(path)
     check_input_file(path, "OMM file")
     text = path.read_text(encoding="utf-8-sig", errors="replace")  # a BOM (spreadsheet exports) is not a field
+    return parse_omm(text, str(path), fmt="json" if path.suffix.lower() == ".json" else None)
+
+
+def parse_omm(text, source="<text>", *, fmt=None):
+    """Parse OMM element sets from JSON or CSV text.
+
+    Parameters
+    ----------
+    text : str
+    source : str
+        File name (or URL) used in messages.
+    fmt : {"json", "csv"}, optional
+        Default: JSON if the first non-blank character is ``[`` or ``{``, else CSV.
+
+    Returns
+    -------
+    Constellation
+    """
     if not text.strip():
-        raise InputError(f"{path}: empty file, expected OMM element sets")
-    if path.suffix.lower() == ".json" or text.lstrip().startswith(("[", "{")):
+        raise InputError(f"{source}: empty file, expected OMM element sets")
+    if fmt == "json" or (fmt is None and text.lstrip().startswith(("[", "{"))):
         try:
             records = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise InputError(f"{path}:{exc.lineno}: invalid JSON ({exc.msg})") from None
+            raise InputError(f"{source}:{exc.lineno}: invalid JSON ({exc.msg})") from None
         records = [records] if isinstance(records, dict) else records
         if not isinstance(records, list):
-            raise InputError(f"{path}: expected a JSON list of OMM objects, found {type(records).__name__}")
-        where = [f"{path}: record {k + 1}" for k in range(len(records))]
+            raise InputError(f"{source}: expected a JSON list of OMM objects, found {type(records).__name__}")
+        where = [f"{source}: record {k + 1}" for k in range(len(records))]
     else:
         records = list(csv.DictReader(text.splitlines()))
-        where = [f"{path}:{k + 2}" for k in range(len(records))]
+        where = [f"{source}:{k + 2}" for k in range(len(records))]
     names, satrecs = [], []
     for fields, at in zip(records, where):
         if not isinstance(fields, dict):
@@ -84,13 +102,13 @@ def read_omm(path: str | os.PathLike[str]) -> Constellation:
         names.append(fields["OBJECT_NAME"].strip())
         satrecs.append(sat)
     if not satrecs:
-        raise InputError(f"{path}: no OMM element sets found")
+        raise InputError(f"{source}: no OMM element sets found")
     return Constellation(
         tuple(names),
         np.array([str(s.satnum) for s in satrecs]),
         tuple(satrecs),
         np.array([satrec_epoch_utc(s) for s in satrecs], dtype="datetime64[ns]"),
-        str(path),
+        str(source),
     )
 
 

@@ -5,11 +5,14 @@ the field, with exit status 2 for the user's input.
 """
 
 import csv
+import io
 import json
 import re
+import urllib.request
 
 import pytest
 
+from leosop.cli import main
 from leosop.errors import InputError
 from leosop.orbits import read_omm, read_tle
 from leosop.orbits.tle import tle_checksum
@@ -64,3 +67,27 @@ def test_omm_catalogue_number_must_be_positive(tmp_path, norad_id):
     path.write_text(json.dumps([{**OMM, "NORAD_CAT_ID": norad_id}]))
     with pytest.raises(InputError, match=f"set.json: record 1: OMM field NORAD_CAT_ID: .* found {norad_id}$"):
         read_omm(path)
+
+
+def _fetch(capsys, monkeypatch, tmp_path, body, *options):
+    """``tle fetch starlink`` from a fake mirror serving ``body``: (status, stdout, stderr)."""
+    monkeypatch.setattr(urllib.request, "urlopen", lambda url, timeout: io.BytesIO(body))
+    status = main(["tle", "fetch", "starlink", "-o", str(tmp_path / "s.tle"), "--url", "http://mirror/gp.php",
+                   *options])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_fetch_errors_name_the_url_not_a_temporary_file(tmp_path, capsys, monkeypatch):
+    bad = L1[:68] + str((int(L1[68]) + 1) % 10)
+    status, _, err = _fetch(capsys, monkeypatch, tmp_path, f"{bad}\n{L2}\n".encode())
+    assert status == 1 and len(err.strip().splitlines()) == 1, err
+    assert "http://mirror/gp.php?GROUP=starlink&FORMAT=tle:1: bad TLE checksum on line 1" in err
+    assert ".part" not in err and not (tmp_path / "s.tle").exists()
+
+
+def test_fetched_constellation_names_the_url(tmp_path, capsys, monkeypatch):
+    status, out, _ = _fetch(capsys, monkeypatch, tmp_path, f"{L1}\n{L2}\n".encode(), "--json")
+    doc = json.loads(out)
+    assert status == 0 and doc["source"] == "http://mirror/gp.php?GROUP=starlink&FORMAT=tle"
+    assert doc["written"] == str(tmp_path / "s.tle")
