@@ -213,7 +213,8 @@ def _run(args):
 
 #: Library parameters whose option is not ``--`` and the name with ``-`` for ``_`` (as the usage writes it).
 PARAM_OPTIONS = {"name_or_path": "--scenario", "out_dir": "--out", "data_dir": "--data DIR",
-                 "families": "--constellation", "constellation": "--tle", "fmt": "--format", "spec": "--imu-spec"}
+                 "families": "--constellation", "constellation": "--tle", "fmt": "--format", "spec": "--imu-spec",
+                 "base_url": "--url"}
 
 
 def param_option(param):

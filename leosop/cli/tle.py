@@ -35,7 +35,7 @@ def register(subparsers):
     f.add_argument("group", metavar="GROUP", help="CelesTrak group, e.g. starlink, oneweb, iridium-NEXT, active")
     f.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
     f.add_argument("--format", default="tle", choices=("tle", "json", "csv"), help="TLE or OMM JSON/CSV")
-    f.add_argument("--url", help="endpoint instead of CelesTrak's gp.php")
+    f.add_argument("--url", help="http(s) endpoint instead of CelesTrak's gp.php")
     f.add_argument("--out", action=_RefuseOut, help=argparse.SUPPRESS)
     i = add_action(sub, "info", help="count satellites by family and show the epoch span")
     i.add_argument("file", metavar="FILE")

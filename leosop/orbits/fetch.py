@@ -31,7 +31,7 @@ def fetch_group(group, out_path, *, fmt="tle", base_url=None, timeout_s=30.0):
     fmt : {"tle", "json", "csv"}
         TLE (3-line) or OMM JSON/CSV.
     base_url : str, optional
-        Endpoint; default ``$LEOSOP_CELESTRAK_URL`` or :data:`CELESTRAK_GP_URL`.
+        Endpoint, an http(s) URL; default ``$LEOSOP_CELESTRAK_URL`` or :data:`CELESTRAK_GP_URL`.
     timeout_s : float
 
     Returns
@@ -44,6 +44,11 @@ def fetch_group(group, out_path, *, fmt="tle", base_url=None, timeout_s=30.0):
     if fmt not in _FORMATS:
         raise InputError(f"fmt {fmt!r}: expected one of {', '.join(_FORMATS)}", param="fmt")
     base = base_url or os.environ.get("LEOSOP_CELESTRAK_URL") or CELESTRAK_GP_URL
+    parts = urllib.parse.urlsplit(base)
+    if parts.scheme not in ("http", "https") or not parts.netloc:
+        name = "base_url" if base_url else "LEOSOP_CELESTRAK_URL"
+        raise InputError(f"{name} {base!r}: expected an http:// or https:// URL such as {CELESTRAK_GP_URL}",
+                         param="base_url" if base_url else ())
     url = f"{base}?{urllib.parse.urlencode({'GROUP': group, 'FORMAT': _FORMATS[fmt]})}"
     try:
         with urllib.request.urlopen(url, timeout=timeout_s) as resp:

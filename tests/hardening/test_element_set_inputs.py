@@ -91,3 +91,11 @@ def test_fetched_constellation_names_the_url(tmp_path, capsys, monkeypatch):
     doc = json.loads(out)
     assert status == 0 and doc["source"] == "http://mirror/gp.php?GROUP=starlink&FORMAT=tle"
     assert doc["written"] == str(tmp_path / "s.tle")
+
+
+def test_fetch_url_that_is_not_http_names_the_option(tmp_path, capsys):
+    status = main(["tle", "fetch", "starlink", "-o", str(tmp_path / "s.tle"), "--url", "notaurl"])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err == ("leosop tle: error: --url 'notaurl': expected an http:// or https:// URL such as "
+                   "https://celestrak.org/NORAD/elements/gp.php\n")
