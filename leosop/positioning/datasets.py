@@ -15,6 +15,7 @@ the package; see ``PROVENANCE.md`` in each data folder.
 """
 
 import csv
+import lzma
 import tarfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -101,10 +102,17 @@ def read_doptrack(folder):
         path = folder / archive
         if not path.is_file():
             raise InputError(f"{path}: no such DopTrack archive")
-        with tarfile.open(path, "r:xz") as tar:
-            for member in tar:
-                if member.isfile() and member.name.endswith(suffix):
-                    store[Path(member.name).stem] = tar.extractfile(member).read().decode("utf-8")
+        try:
+            with tarfile.open(path, "r:xz") as tar:
+                for member in tar:
+                    if member.isfile() and member.name.endswith(suffix):
+                        store[Path(member.name).stem] = tar.extractfile(member).read().decode("utf-8")
+        except EOFError:
+            raise InputError(f"{path}: truncated: the xz data end before their end-of-stream marker; expected the "
+                             f"complete DopTrack archive of {suffix} files") from None
+        except (tarfile.TarError, lzma.LZMAError) as exc:
+            raise InputError(f"{path}: not an xz-compressed tar archive ({exc}); expected the DopTrack archive of "
+                             f"{suffix} files") from None
     passes = []
     for name in sorted(tables):
         if name not in metas:

@@ -1,0 +1,52 @@
+"""Damaged measurement tables and positioning inputs: each gives a one-line InputError naming the file and line."""
+
+import io
+import lzma
+import tarfile
+
+import pytest
+
+from leosop.cli import main
+from leosop.errors import InputError
+from leosop.positioning.datasets import read_doptrack
+
+
+def _one_line_error(call, *match):
+    with pytest.raises(InputError) as info:
+        call()
+    text = str(info.value)
+    assert "\n" not in text
+    for part in match:
+        assert part in text
+    return text
+
+
+def _xz_tar(files):
+    """Bytes of a tar.xz archive holding ``{name: text}``."""
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w:xz") as tar:
+        for name, text in files.items():
+            data = text.encode()
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda b: b[:len(b) // 2], "truncated"),
+    (lambda b: b"", "not an xz-compressed tar archive"),
+    (lambda b: b"time,frequency\n", "not an xz-compressed tar archive"),
+    (lambda b: lzma.compress(b"no tar inside"), "not an xz-compressed tar archive"),
+], ids=["truncated", "empty", "text", "xz-not-tar"])
+def test_doptrack_damaged_archive(tmp_path, damage, message):
+    (tmp_path / "data.tar.xz").write_bytes(damage(_xz_tar({"data/pass.csv": "0.0,145870000.0\n" * 200})))
+    _one_line_error(lambda: read_doptrack(tmp_path), "data.tar.xz", message)
+
+
+def test_doptrack_truncated_archive_is_exit_2(tmp_path, capsys):
+    archive = _xz_tar({"data/pass.csv": "0.0,145870000.0\n" * 200})
+    (tmp_path / "data.tar.xz").write_bytes(archive[:len(archive) // 2])
+    assert main(["position", str(tmp_path), "--format", "doptrack", "--static"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "data.tar.xz: truncated" in err
