@@ -27,6 +27,7 @@ from ..errors import InputError
 from ..fileio import check_input_file
 from ..frames import geodetic_to_ecef
 from ..orbits.tle import parse_tle_lines
+from ..timebase import parse_utc
 from .measurements import Measurements
 
 __all__ = ["DopTrackPass", "read_doptrack", "doptrack_table", "read_fll", "GsdcEpochs", "read_gsdc",
@@ -205,25 +206,34 @@ def read_fll(csv_path, sat_id):
     check_input_file(path, "FLL log")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.DictReader(fh))
+            reader = csv.DictReader(fh)
+            rows = [(reader.line_num, r) for r in reader]
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text file; expected a CSV FLL log") from None
     need = {"doppler_offset", "timestamp", "measured_freq"}
-    if not rows or not need <= set(rows[0]):
+    if not rows or not need <= set(rows[0][1]):
         raise InputError(f"{path}: expected columns {', '.join(sorted(need))} and at least one row")
-    try:
-        time_utc = np.array([_utc(r["timestamp"]) for r in rows], dtype="datetime64[ns]")
-        doppler = np.array([float(r["doppler_offset"]) for r in rows])
-        carrier = np.array([float(r["measured_freq"]) for r in rows]) - doppler
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{path}: a timestamp, doppler_offset or measured_freq is not valid ({exc})") from None
+    n = len(rows)
+    time_utc = np.empty(n, dtype="datetime64[ns]")
+    doppler, freq = np.empty(n), np.empty(n)
+    for k, (line, r) in enumerate(rows):
+        for key in ("timestamp", "doppler_offset", "measured_freq"):
+            if r[key] is None:
+                raise InputError(f"{path}:{line}: no {key} field: the line ends early (cut off?), expected the "
+                                 f"header's {len(reader.fieldnames)} fields")
+        time_utc[k] = parse_utc(r["timestamp"], name=f"{path}:{line}: timestamp")
+        for key, out in (("doppler_offset", doppler), ("measured_freq", freq)):
+            try:
+                out[k] = float(r[key])
+            except ValueError:
+                raise InputError(f"{path}:{line}: {key} {r[key]!r} is not a number") from None
+    carrier = freq - doppler
     if not (np.all(np.isfinite(doppler)) and np.all(carrier > 0)):
         raise InputError(f"{path}: doppler_offset must be finite and measured_freq - doppler_offset positive")
-    n = len(rows)
     return Measurements(
         t_s=(time_utc - time_utc[0]).astype(np.int64) * 1e-9, time_utc=time_utc, sat_id=np.full(n, str(sat_id)),
-        doppler_hz=doppler, sigma_hz=np.full(n, np.nan), carrier_hz=carrier, line=np.arange(2, n + 2),
-        source=str(path),
+        doppler_hz=doppler, sigma_hz=np.full(n, np.nan), carrier_hz=carrier,
+        line=np.array([line for line, _ in rows]), source=str(path),
     )
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from leosop.cli import main
 from leosop.errors import InputError
-from leosop.positioning.datasets import read_doptrack
+from leosop.positioning.datasets import read_doptrack, read_fll
 
 
 def _one_line_error(call, *match):
@@ -50,3 +50,17 @@ def test_doptrack_truncated_archive_is_exit_2(tmp_path, capsys):
     assert main(["position", str(tmp_path), "--format", "doptrack", "--static"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "data.tar.xz: truncated" in err
+
+
+_FLL = "index,doppler_offset,timestamp,measured_freq\n0,2240.5,2018-01-13T16:12:01.862011Z,145882240.5\n"
+
+
+@pytest.mark.parametrize("last, message", [
+    ("1,2239.0,2018", "fll.csv:3: no measured_freq field"),
+    ("1,2239.0,2018-01-13T16:12:01.962011Z,1458822x", "fll.csv:3: measured_freq '1458822x' is not a number"),
+    ("1,2239.0,2018-01-13T25:12:01Z,145882239.0", "fll.csv:3: timestamp: '2018-01-13T25:12:01Z'"),
+], ids=["cut-off", "number", "time"])
+def test_fll_bad_last_line_names_line_and_field(tmp_path, last, message):
+    path = tmp_path / "fll.csv"
+    path.write_text(_FLL + last)
+    _one_line_error(lambda: read_fll(path, "43137"), message)
