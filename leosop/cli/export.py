@@ -60,7 +60,7 @@ def _read(path):
     """Header and rows of a CSV, with the kind it is."""
     path = Path(path)
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
     except UnicodeDecodeError as exc:
         # No offset: the reader decodes in chunks, so exc.start is not the file's.

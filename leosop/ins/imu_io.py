@@ -206,7 +206,7 @@ def _from_rates(path, t, accel_mps2, gyro_rad_per_s, first_line, C_b_s, epoch, m
 def _read_lines(path):
     path = Path(path)
     try:
-        return path.read_text().splitlines()
+        return path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read as text ({exc})") from None
 

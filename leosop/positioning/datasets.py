@@ -272,7 +272,7 @@ def read_gsdc(device_gnss_csv):
     GsdcEpochs
     """
     path = Path(device_gnss_csv)
-    with open(path, newline="") as fh:
+    with open(path, newline="", encoding="utf-8-sig") as fh:
         numbered = [(k + 2, r) for k, r in enumerate(csv.DictReader(fh)) if r.get("SignalType", "") in _L1_SIGNALS]
     rows = [r for _, r in numbered]
     need = ("utcTimeMillis", "Svid", "ConstellationType", "PseudorangeRateMetersPerSecond",

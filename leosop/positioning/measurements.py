@@ -159,7 +159,7 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
     """
     path = Path(path)
     check_input_file(path, "measurement file")
-    with open(path, newline="", encoding="utf-8", errors="replace") as fh:
+    with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:  # a BOM (Excel) is not a field
         rows = [r for r in csv.reader(fh)]
     numbered = [(k + 1, r) for k, r in enumerate(rows) if r and any(c.strip() for c in r)]
     if not numbered:

@@ -4,11 +4,14 @@ import io
 import lzma
 import tarfile
 
+import numpy as np
 import pytest
 
 from leosop.cli import main
 from leosop.errors import InputError
-from leosop.positioning.datasets import read_doptrack, read_fll
+from leosop.ins.imu_io import read_rtklib_sf_csv
+from leosop.positioning.datasets import read_doptrack, read_fll, read_gsdc
+from leosop.positioning.measurements import read_measurements
 
 
 def _one_line_error(call, *match):
@@ -64,3 +67,36 @@ def test_fll_bad_last_line_names_line_and_field(tmp_path, last, message):
     path = tmp_path / "fll.csv"
     path.write_text(_FLL + last)
     _one_line_error(lambda: read_fll(path, "43137"), message)
+
+
+def test_measurement_table_with_a_byte_order_mark(tmp_path):
+    path = tmp_path / "meas.csv"
+    path.write_text("\ufefftime_utc,sat_id,doppler_hz\n2025-01-01T19:40:00Z,70002,-186307.1\n", encoding="utf-8")
+    meas = read_measurements(path)
+    assert list(meas.sat_id) == ["70002"] and meas.doppler_hz[0] == -186307.1
+
+
+def test_export_csv_with_a_byte_order_mark(tmp_path, capsys):
+    path = tmp_path / "fixes.csv"
+    path.write_text("\ufefftime_utc,lat_deg,lon_deg,alt_m,status\n2025-01-01T19:40:00Z,34.3,108.9,400.0,ok\n",
+                    encoding="utf-8")
+    assert main(["export", str(path), "--to", "geojson"]) == 0
+    assert (tmp_path / "fixes.geojson").is_file()
+
+
+def test_imu_csv_with_a_byte_order_mark(tmp_path):
+    path = tmp_path / "imu_sf.csv"
+    rows = [f"{1.6e9 + 0.01 * k:.2f},0,0,1,0,0,0,0,0,0,0" for k in range(20)]
+    path.write_text("\ufeff" + "\n".join(rows) + "\n", encoding="utf-8")
+    assert read_rtklib_sf_csv(path).t_s.size == 19
+
+
+def test_gsdc_csv_with_a_byte_order_mark(tmp_path):
+    values = {"utcTimeMillis": "1619712000000", "Svid": "5", "ConstellationType": "1", "SignalType": "GPS_L1",
+              "PseudorangeRateMetersPerSecond": "100.0", "PseudorangeRateUncertaintyMetersPerSecond": "0.1",
+              "SvClockDriftMetersPerSecond": "0.0", "RawPseudorangeMeters": "2.2e7", "DriftNanosPerSecond": "0.0",
+              **{f"SvPosition{a}EcefMeters": "1.5e7" for a in "XYZ"},
+              **{f"SvVelocity{a}EcefMetersPerSecond": "1000.0" for a in "XYZ"}}
+    path = tmp_path / "device_gnss.csv"
+    path.write_text("\ufeff" + ",".join(values) + "\n" + ",".join(values.values()) + "\n", encoding="utf-8")
+    assert read_gsdc(path).meas.time_utc[0] == np.datetime64("2021-04-29T16:00:00", "ns")
