@@ -7,6 +7,7 @@ table (observed values, then its predictions).
 """
 
 import re
+import warnings
 from functools import lru_cache
 
 import numpy as np
@@ -53,8 +54,10 @@ def parse_utc(value, *, name="time"):
         if re.search(r"T.*[+-]\d\d:?\d\d$", s):
             raise InputError(f"{name}: {str(text)!r} has a UTC offset; give the time in UTC (ending in Z)")
         try:
-            native = np.datetime64(s)  # its own unit: years beyond datetime64[ns] do not wrap around here
-        except ValueError:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")  # numpy warns of (and shifts by) a time zone it parses, e.g. "+01"
+                native = np.datetime64(s)  # its own unit: years beyond datetime64[ns] do not wrap around here
+        except (ValueError, UserWarning):
             raise InputError(f"{name}: {str(text)!r} is not an ISO 8601 UTC time (e.g. 2024-01-02T03:04:05Z)") from None
         if not np.isnat(native) and not _NS_SPAN[0] <= native <= _NS_SPAN[1]:
             raise InputError(f"{name}: {str(text)!r} is outside the years 1678..2261 that the toolkit's "

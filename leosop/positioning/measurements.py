@@ -1,11 +1,12 @@
 """Doppler measurement tables (DESIGN 4.3) and the satellite states they need.
 
 A table has a header row and one measurement per row: ``time_utc`` (ISO
-8601) or ``t_s``; ``sat_id``; ``doppler_hz``; optional ``sigma_hz``,
-``carrier_hz`` and the satellite state ``x_sv_m, y_sv_m, z_sv_m, vx_sv_mps,
-vy_sv_mps, vz_sv_mps`` (ECEF at the measurement time); optional ``pass_id``
-(a label: rows of one pass share a transmitter frequency offset in a static
-fix, an extension of DESIGN 4.3); optional ``phase_cycles``,
+8601 UTC; an offset such as ``+01:00`` is converted to UTC) or ``t_s``;
+``sat_id``; ``doppler_hz``; optional ``sigma_hz``, ``carrier_hz`` and the
+satellite state ``x_sv_m, y_sv_m, z_sv_m, vx_sv_mps, vy_sv_mps, vz_sv_mps``
+(ECEF at the measurement time); optional ``pass_id`` (a label: rows of one
+pass share a transmitter frequency offset in a static fix, an extension of
+DESIGN 4.3); optional ``phase_cycles``,
 ``phase_sigma_cycles`` and ``arc``: the accumulated carrier phase (the
 integral of ``doppler_hz``, cycles), its standard deviation and a label of
 the arc its whole cycles are continuous over (replay's ``carrier.csv``
@@ -33,6 +34,8 @@ frame of the reception time (the Earth turns ``omega_e * tau`` meanwhile).
 
 import csv
 import os
+import re
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -137,6 +140,27 @@ def _floats(values):
     return out, ~np.isfinite(out)
 
 
+#: ISO 8601 time of day ending in a UTC offset: the rest, sign, hours, minutes.
+_UTC_OFFSET = re.compile(r"(.*\d:\d\d(?::\d\d(?:\.\d*)?)?)\s*([+-])(\d\d)(?::?(\d\d))?")
+
+
+def _utc_ns(text):
+    """datetime64[ns] UTC of ISO 8601 text ending in ``Z``, an offset (``+01:00``) or nothing; NaT if not a time."""
+    s, offset_min = text[:-1] if text.endswith("Z") else text, 0
+    m = _UTC_OFFSET.fullmatch(s)
+    if m:
+        s, sign, hours, minutes = m.group(1), m.group(2), int(m.group(3)), int(m.group(4) or 0)
+        if hours > 14 or minutes > 59:
+            return np.datetime64("NaT", "ns")
+        offset_min = (60 * hours + minutes) * (1 if sign == "+" else -1)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # numpy warns of a time zone it parses (any text left after the time)
+            return np.datetime64(s, "ns") - np.timedelta64(offset_min, "m")
+    except (ValueError, UserWarning):
+        return np.datetime64("NaT", "ns")
+
+
 def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None = None,
                       constellation: Constellation | None = None) -> Measurements:
     """Read a Doppler measurement CSV (DESIGN 4.3).
@@ -205,13 +229,10 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
         text = field("time_utc")
         time_utc = np.full(len(body), np.datetime64("NaT"), dtype="datetime64[ns]")
         for i, s in enumerate(text):
-            s = s[:-1] if s.endswith("Z") else s[:-6] if s.endswith("+00:00") else s
-            try:
-                time_utc[i] = np.datetime64(s, "ns")
-            except ValueError:
-                pass
+            time_utc[i] = _utc_ns(s)
             if np.isnat(time_utc[i]) and reason[i] == "":
-                reason[i] = f"time_utc is {text[i]!r}, expected ISO 8601 UTC (e.g. 2024-01-02T03:04:05Z)"
+                reason[i] = (f"time_utc is {text[i]!r}, expected ISO 8601 in UTC or with a UTC offset "
+                             "(e.g. 2024-01-02T03:04:05Z, 2024-01-02T04:04:05+01:00)")
         t_s = np.zeros(len(body))
     else:
         t_s = number("t_s")

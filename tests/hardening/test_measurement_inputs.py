@@ -13,6 +13,9 @@ from leosop.ins.imu_io import read_rtklib_sf_csv
 from leosop.positioning.datasets import read_doptrack, read_fll, read_gsdc
 from leosop.positioning.measurements import read_measurements
 
+# A warning (numpy's about time zones) is output without a file or line: none may appear.
+pytestmark = pytest.mark.filterwarnings("error")
+
 
 def _one_line_error(call, *match):
     with pytest.raises(InputError) as info:
@@ -100,3 +103,25 @@ def test_gsdc_csv_with_a_byte_order_mark(tmp_path):
     path = tmp_path / "device_gnss.csv"
     path.write_text("\ufeff" + ",".join(values) + "\n" + ",".join(values.values()) + "\n", encoding="utf-8")
     assert read_gsdc(path).meas.time_utc[0] == np.datetime64("2021-04-29T16:00:00", "ns")
+
+
+@pytest.mark.parametrize("time_utc", ["2025-01-01T20:40:00+01:00", "2025-01-01T14:40:00-0500",
+                                      "2025-01-01T20:40:00 +01:00"])
+def test_measurement_time_with_utc_offset_is_converted(tmp_path, time_utc):
+    path = tmp_path / "meas.csv"
+    path.write_text(f"time_utc,sat_id,doppler_hz\n{time_utc},70002,-186307.1\n")
+    assert read_measurements(path).time_utc[0] == np.datetime64("2025-01-01T19:40:00", "ns")
+
+
+@pytest.mark.parametrize("time_utc", ["2025-01-01T19:40:00+1", "2025-01-01T19:40:00.5x", "2025-01-01T19:40:00+25:00"])
+def test_measurement_time_with_bad_suffix_names_line_and_value(tmp_path, time_utc):
+    path = tmp_path / "meas.csv"
+    path.write_text(f"time_utc,sat_id,doppler_hz\n2025-01-01T19:40:00Z,70002,1.0\n{time_utc},70003,2.0\n")
+    (line, reason), = read_measurements(path).rejected
+    assert line == 3 and reason.startswith(f"time_utc is {time_utc!r}, expected ISO 8601 in UTC or with a UTC offset")
+
+
+def test_fll_time_with_a_bad_suffix_is_refused_without_a_warning(tmp_path):
+    path = tmp_path / "fll.csv"
+    path.write_text(_FLL + "1,2239.0,2018-01-13T16:12:01.962011+01,145882239.0\n")
+    _one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: timestamp: '2018-01-13T16:12:01.962011+01'")
