@@ -145,6 +145,11 @@ def satellite_states(meas: Measurements, constellation: Constellation | None = N
     reason : ndarray of str, (n,)
     source : str
         ``"csv"`` or ``"tle"``.
+
+    Raises
+    ------
+    InputError
+        States from element sets, and no row's satellite has one.
     """
     if meas.pos_sv_ecef_m is not None and meas.vel_sv_ecef_mps is not None:  # the state columns come together
         ok = np.isfinite(meas.pos_sv_ecef_m).all(-1) & np.isfinite(meas.vel_sv_ecef_mps).all(-1)
@@ -156,6 +161,12 @@ def satellite_states(meas: Measurements, constellation: Constellation | None = N
     if meas.time_utc is None:
         raise InputError(f"{meas.source}: satellite states from constellation need a time_utc column "
                          "(the table has t_s)", param="constellation")
+    if len(meas) and not np.isin(meas.sat_id, constellation.sat_ids).any():
+        ids = np.unique(meas.sat_id)
+        shown = ", ".join(ids[:4].tolist()) + (f", ... {ids.size} in all" if ids.size > 4 else "")
+        raise InputError(f"{meas.source}: no sat_id of the table ({shown}) has an element set in "
+                         f"{constellation.source or 'the element sets'}; give the satellites' element sets as "
+                         "constellation", param="constellation")
     pos, vel, reason = sv_states_from_tle(constellation, meas.sat_id, meas.time_utc, pos_rx_ecef_m)
     return pos, vel, reason, "tle"
 

@@ -10,6 +10,7 @@ import pytest
 from leosop.cli import main
 from leosop.errors import InputError
 from leosop.ins.imu_io import read_rtklib_sf_csv
+from leosop.orbits import DEFAULT_TLE
 from leosop.positioning.datasets import read_doptrack, read_fll, read_gsdc
 from leosop.positioning.measurements import read_measurements
 
@@ -125,3 +126,14 @@ def test_fll_time_with_a_bad_suffix_is_refused_without_a_warning(tmp_path):
     path = tmp_path / "fll.csv"
     path.write_text(_FLL + "1,2239.0,2018-01-13T16:12:01.962011+01,145882239.0\n")
     _one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: timestamp: '2018-01-13T16:12:01.962011+01'")
+
+
+def test_no_sat_id_of_the_table_in_the_element_sets(tmp_path, capsys):
+    tle = tmp_path / "one.tle"
+    tle.write_text("\n".join(DEFAULT_TLE.read_text().splitlines()[:3]) + "\n")
+    path = tmp_path / "meas.csv"
+    path.write_text("time_utc,sat_id,doppler_hz\n2025-01-01T19:40:00Z,99999,1.0\n2025-01-01T19:40:00Z,99998,2.0\n")
+    assert main(["position", str(path), "--tle", str(tle)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "meas.csv: no sat_id of the table (99998, 99999) has an element set in " in err
+    assert "one.tle; give the satellites' element sets as --tle" in err
