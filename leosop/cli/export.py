@@ -98,8 +98,10 @@ def _column(path, header, body, name, kind=float):
             out[i] = float(text) if text else np.nan
         except ValueError:
             raise InputError(f"{path}:{i + 2}: {name} {text!r} is not a number") from None
-    if name.endswith("lat_deg") and np.any(np.abs(out) > 90.0):
-        raise InputError(f"{path}: {name} outside [-90, 90] deg")
+    outside = np.abs(out) > 90.0
+    if name.endswith("lat_deg") and outside.any():
+        i = int(np.argmax(outside))
+        raise InputError(f"{path}:{i + 2}: {name} {body[i][j].strip()} is outside [-90, 90] deg")
     return out
 
 

@@ -137,3 +137,12 @@ def test_no_sat_id_of_the_table_in_the_element_sets(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "meas.csv: no sat_id of the table (99998, 99999) has an element set in " in err
     assert "one.tle; give the satellites' element sets as --tle" in err
+
+
+def test_export_latitude_out_of_range_names_line_and_value(tmp_path, capsys):
+    path = tmp_path / "fixes.csv"
+    path.write_text("time_utc,lat_deg,lon_deg,alt_m,status\n2025-01-01T19:40:00Z,34.3,108.9,400.0,ok\n"
+                    "2025-01-01T19:40:01Z,123,108.9,400.0,ok\n")
+    assert main(["export", str(path), "--to", "geojson"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "fixes.csv:3: lat_deg 123 is outside [-90, 90] deg" in err
