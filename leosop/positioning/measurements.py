@@ -227,12 +227,17 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
     time_utc = None
     if "time_utc" in col:
         text = field("time_utc")
-        time_utc = np.full(len(body), np.datetime64("NaT"), dtype="datetime64[ns]")
-        for i, s in enumerate(text):
-            time_utc[i] = _utc_ns(s)
-            if np.isnat(time_utc[i]) and reason[i] == "":
-                reason[i] = (f"time_utc is {text[i]!r}, expected ISO 8601 in UTC or with a UTC offset "
-                             "(e.g. 2024-01-02T03:04:05Z, 2024-01-02T04:04:05+01:00)")
+        try:  # the usual table (UTC, Z or nothing) at once; offsets, typos and blanks row by row
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                time_utc = np.array([s[:-1] if s.endswith("Z") else s for s in text], dtype="datetime64[ns]")
+            if np.isnat(time_utc).any():
+                raise ValueError
+        except (ValueError, UserWarning):
+            time_utc = np.array([_utc_ns(s) for s in text], dtype="datetime64[ns]")
+        for i in np.flatnonzero(np.isnat(time_utc) & (reason == "")):
+            reason[i] = (f"time_utc is {text[i]!r}, expected ISO 8601 in UTC or with a UTC offset "
+                         "(e.g. 2024-01-02T03:04:05Z, 2024-01-02T04:04:05+01:00)")
         t_s = np.zeros(len(body))
     else:
         t_s = number("t_s")
