@@ -68,7 +68,9 @@ def _run_seconds(time_utc, sol):
 
 def _check_overlap(meas, t_s, sol):
     """Refuse a table none of whose rows (``t_s`` on the run's clock) falls within the GNSS file's span: its aids
-    would all be left unused, as GNSS epochs outside the IMU log are refused."""
+    would all be left unused, as GNSS epochs outside the IMU log are refused. No GNSS file (None): no check."""
+    if sol is None:
+        return
     span = float(sol.t_gpst_s[-1] - sol.t_gpst_s[0])
     if not np.any((t_s >= 0.0) & (t_s <= span)):
         when = (f"{format_utc(meas.time_utc.min())} .. {format_utc(meas.time_utc.max())}"
