@@ -21,7 +21,7 @@ never silently dropped; the rest is still solved.
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -113,7 +113,7 @@ class PositionResult:
         from .static import StaticFix
         from .static_passes import PassesFix
 
-        f = self.fixes
+        f: Any = self.fixes
         _, _, alt = ecef_to_geodetic(np.asarray(f.pos_ecef_m))
         speed = n_passes = None
         if isinstance(f, PassesFix):
