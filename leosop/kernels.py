@@ -2,8 +2,9 @@
 
 Each compiled path has its numpy twin as fallback and reference: the map's
 per-pair work (:mod:`leosop.orbits.gridkernels`), the generator's combs
-(:mod:`leosop.signal.combkernels`) and the replay's comb fits
-(:mod:`leosop.signal.fitkernels`). A kernel module imports numba at its top,
+(:mod:`leosop.signal.combkernels`), the replay's comb fits
+(:mod:`leosop.signal.fitkernels`) and its cleaning's line finding
+(:mod:`leosop.signal.cleankernels`). A kernel module imports numba at its top,
 so it loads only where numba is installed (``pip install leosop[fast]``).
 """
 

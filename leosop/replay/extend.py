@@ -112,7 +112,8 @@ def extend_fragments(rec, raw, named, blocks, factor, comb, lo, pos_ecef_m, pos_
     threads : int
         Threads reading and cleaning blocks (:func:`~leosop.replay.stream.prepared_blocks`).
     kernel : {None, "numba", "numpy"}
-        The comb fits' (:func:`~leosop.signal.multicomb.find_combs`): the replay's, for the whole recording.
+        The comb fits' and the cleaning's (:func:`~leosop.signal.multicomb.find_combs`): the replay's, for the
+        whole recording.
 
     Returns
     -------
@@ -285,7 +286,7 @@ def _follow(direction, cands, index_others, rec, blocks, factor, comb, fs, lo_hz
     first = (min if direction > 0 else max)(start[id(c)] for c in live)
     todo = list(range(first, n) if direction > 0 else range(first, -1, -1))
     misses = dict.fromkeys(map(id, live), 0)
-    stream = prepared_blocks(rec, [blocks[j] for j in todo], factor, comb, threads=threads)
+    stream = prepared_blocks(rec, [blocks[j] for j in todo], factor, comb, threads=threads, kernel=kernel)
     try:
         for j, block in zip(todo, stream):
             started = {id(c): (j - start[id(c)]) * direction >= 0 for c in live}

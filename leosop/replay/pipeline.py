@@ -336,8 +336,8 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     lo_rough = None  # the tracking blocks' tone-model LO offset, from the first full search (rough_lo_hz)
     # Central tones within the band (BAND_MARGIN off its edges), as search_band's.
     band_hz = (0.5 - BAND_MARGIN) * fs - float(np.max(np.abs(comb.offsets_hz)))
-    kernel = fit_kernel(len(blocks))  # compiled comb fits where they pay for their load
-    prepared = prepared_blocks(rec, blocks, factor, comb, threads=threads, spectrum_every=every)
+    kernel = fit_kernel(len(blocks))  # compiled comb fits and line finding where they pay for their load
+    prepared = prepared_blocks(rec, blocks, factor, comb, threads=threads, spectrum_every=every, kernel=kernel)
     t_trk, utc_trk = track_times(blocks, factor, rec.sample_rate_hz)
     try:
         for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")

@@ -59,7 +59,8 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=
     threads : int
         Threads reading and cleaning blocks (:func:`~leosop.replay.stream.prepared_blocks`).
     kernel : {None, "numba", "numpy"}
-        The comb fits' (:func:`~leosop.signal.multicomb.find_combs`): the replay's, for the whole recording.
+        The comb fits' and the cleaning's (:func:`~leosop.signal.multicomb.find_combs`): the replay's, for the
+        whole recording.
 
     Returns
     -------
@@ -72,7 +73,7 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=
     new = [{c: getattr(tr, c).copy() for c in cols} | {"keep": np.zeros(len(tr), bool)} for tr in tracks]
     members = sorted(members.items())
     for (k, rows), block in zip(members, prepared_blocks(rec, [blocks[k] for k, _ in members], factor, comb,
-                                                         threads=threads)):
+                                                         threads=threads, kernel=kernel)):
         pred = np.array([tracks[i].doppler_hz[j] for i, j in rows])
         rate = np.array([tracks[i].doppler_rate_hz_per_s[j] for i, j in rows])
         lo_hz = lo.offset_hz + lo.drift_hz_per_s * float((tracks[rows[0][0]].time_utc[rows[0][1]] - lo.t_ref_utc)

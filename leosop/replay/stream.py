@@ -143,14 +143,14 @@ class PreparedBlock:
     iq_fft: np.ndarray
 
 
-def _prepare(rec, factor, comb, spectrum_every, item):
+def _prepare(rec, factor, comb, spectrum_every, kernel, item):
     """Read, narrow, check and clean block ``item = (k, block)``: a PreparedBlock."""
     k, b = item
     # NaN/inf: the cleaning's block mean finds them (spares read() its own pass over the samples).
     iq = narrow(rec.read(b.start, b.n_samples, check_finite=False), factor)
     spectrum = spectrum_column(iq) if spectrum_every and k % spectrum_every == 0 else None
     try:
-        iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb)
+        iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb, kernel=kernel)
     except NonFiniteSamples:
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf") from None
     return PreparedBlock(iq, spectrum, cleaning.spectrum)
@@ -173,7 +173,7 @@ def _short_switch_interval():
                 sys.setswitchinterval(_switch["saved"])
 
 
-def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):
+def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0, kernel=None):
     """The blocks read, narrowed and cleaned, in order; with ``threads`` > 1 on worker threads, ahead.
 
     Parameters
@@ -191,6 +191,8 @@ def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):
         ahead of the caller (the caller's thread is the N-th).
     spectrum_every : int
         Every this-many-th block (0: none) carries its :func:`spectrum_column`.
+    kernel : {None, "numba", "numpy"}
+        The cleaning's (:func:`~leosop.signal.cleaning.clean_block`).
 
     Yields
     ------
@@ -199,7 +201,7 @@ def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0):
         inf raises InputError when its turn comes, as in one thread.
     """
     def prepare(item):
-        return _prepare(rec, factor, comb, spectrum_every, item)
+        return _prepare(rec, factor, comb, spectrum_every, kernel, item)
 
     if threads <= 1:
         yield from map(prepare, enumerate(blocks))

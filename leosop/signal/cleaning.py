@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..constants import C_MPS
+from ..kernels import pick
 from .comb_grid import NonFiniteSamples
 
 __all__ = ["Cleaning", "LINE_PFA", "Line", "clean_block", "correct_iq", "find_lines", "iq_imbalance"]
@@ -146,7 +147,7 @@ def correct_iq(iq, gain_db, phase_deg, *, out=None):
     return out
 
 
-def find_lines(power, fs, comb, *, pfa=LINE_PFA):
+def find_lines(power, fs, comb, *, pfa=LINE_PFA, kernel=None):
     """Strong narrow lines of a block's power spectrum that belong to no comb; the noise mean per bin.
 
     A bin beyond ``-ln(pfa / n)`` noise means (exponential power) starts a
@@ -165,6 +166,10 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
         |FFT|^2 of the block, FFT order.
     fs : float
     comb : PilotComb
+    pfa : float
+    kernel : {None, "numba", "numpy"}
+        The runs, peaks and partners compiled (:mod:`.cleankernels`) or
+        numpy; None: numba when installed (the same lines either way).
 
     Returns
     -------
@@ -178,7 +183,7 @@ def find_lines(power, fs, comb, *, pfa=LINE_PFA):
     p = padded[_LINE_SMOOTH_BINS // 2:][:n]
     p[:n // 2] = power[n - n // 2:]
     p[n // 2:] = power[:n - n // 2]
-    return _lines(padded, _noise_bin(power[::_noise_step(n)]), fs, comb, pfa)
+    return _lines(padded, _noise_bin(power[::_noise_step(n)]), fs, comb, pfa, kernel)
 
 
 def _noise_step(n):
@@ -191,7 +196,7 @@ def _noise_bin(sub):
     return float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
 
 
-def _lines(padded, noise, fs, comb, pfa):
+def _lines(padded, noise, fs, comb, pfa, kernel=None):
     """:func:`find_lines` of a power spectrum in fftshift order, zero-padded (``padded``, (n + L - 1,), as
     np.convolve's "same" mode pads: L // 2 zeros before, L // 2 - 1 after), and its noise mean per bin."""
     if noise <= 0:
@@ -204,19 +209,26 @@ def _lines(padded, noise, fs, comb, pfa):
     strong = np.flatnonzero(p > threshold)
     if not strong.size:
         return [], noise
-    lo, hi = _strong_runs(padded, strong, 2.0 * noise)
-    # Each run's peak: the first bin of its largest power (as argmax).
-    idx, first = _ranges(lo, hi + 1)
-    vals = p[idx]
-    hit = np.flatnonzero(vals == np.repeat(np.maximum.reduceat(vals, first), hi - lo + 1))
-    peak = idx[hit[np.searchsorted(hit, first)]]
     m = np.concatenate([np.arange(-(comb.n_tones - 1), 0), np.arange(1, comb.n_tones)])
     spacing_bins = comb.tone_spacing_hz * n / fs
-    half = (hi - lo) // 2 + _PARTNER_BINS + int(np.ceil((comb.n_tones - 1) * spacing_bins * _PARTNER_SPACING_SPREAD))
-    centre = np.round(peak[:, None] + m * spacing_bins).astype(np.int64)  # (runs, 2 K - 2)
-    window_max = _window_max(p, centre - half[:, None], centre + half[:, None])
-    floor = np.maximum(threshold, p[peak] * 10.0 ** (-_PARTNER_DB / 10.0))  # (runs,)
-    partners = np.sum(window_max > floor[:, None], axis=1)
+    half_extra = _PARTNER_BINS + int(np.ceil((comb.n_tones - 1) * spacing_bins * _PARTNER_SPACING_SPREAD))
+    floor_ratio = 10.0 ** (-_PARTNER_DB / 10.0)
+    compiled = pick(kernel, "leosop.signal.cleankernels")
+    if compiled is not None:
+        lo, hi, peak, partners = compiled.line_runs(padded, strong, _LINE_SMOOTH_BINS, threshold, 2.0 * noise,
+                                                    m * spacing_bins, half_extra, floor_ratio)
+    else:
+        lo, hi = _strong_runs(padded, strong, 2.0 * noise)
+        # Each run's peak: the first bin of its largest power (as argmax).
+        idx, first = _ranges(lo, hi + 1)
+        vals = p[idx]
+        hit = np.flatnonzero(vals == np.repeat(np.maximum.reduceat(vals, first), hi - lo + 1))
+        peak = idx[hit[np.searchsorted(hit, first)]]
+        half = (hi - lo) // 2 + half_extra
+        centre = np.round(peak[:, None] + m * spacing_bins).astype(np.int64)  # (runs, 2 K - 2)
+        window_max = _window_max(p, centre - half[:, None], centre + half[:, None])
+        floor = np.maximum(threshold, p[peak] * floor_ratio)  # (runs,)
+        partners = np.sum(window_max > floor[:, None], axis=1)
     lines = []
     for i in np.flatnonzero(partners < _COMB_PARTNERS):
         # A tone of amplitude A puts A^2 n^2 into its bins; the noise n N0 fs into each.
@@ -315,7 +327,7 @@ def _padded_buffer(n):
     return buf
 
 
-def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
+def clean_block(iq, fs, comb, *, pfa=LINE_PFA, kernel=None):
     """A block with its DC, IQ imbalance and CW / narrowband interferers removed, and what was removed.
 
     1. The block mean (DC offset) is subtracted.
@@ -334,6 +346,10 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     iq : ndarray of complex, (n,)
     fs : float
     comb : PilotComb
+    pfa : float
+    kernel : {None, "numba", "numpy"}
+        As :func:`find_lines`'; a job of many blocks picks it with
+        :func:`~.comb_fit.fit_kernel`.
 
     Returns
     -------
@@ -361,7 +377,8 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA):
     np.abs(spectrum[n - n // 2:], out=p[:n // 2])
     np.abs(spectrum[:n - n // 2], out=p[n // 2:])
     np.square(p, out=p)
-    lines, noise_bin = _lines(padded, _noise_bin(np.square(np.abs(spectrum[::_noise_step(n)]))), fs, comb, pfa)
+    lines, noise_bin = _lines(padded, _noise_bin(np.square(np.abs(spectrum[::_noise_step(n)]))), fs, comb, pfa,
+                              kernel)
     n0 = noise_bin / (n * fs) if noise_bin > 0 else np.nan  # |X|^2 of white noise: n * sigma^2 = n * N0 * fs
     dc_dbhz = 10.0 * np.log10(abs(dc) ** 2 / n0) if abs(dc) > 0 and n0 > 0 else -np.inf
     if lines:

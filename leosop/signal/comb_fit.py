@@ -159,9 +159,10 @@ def newton_combs(y, tau, tpow, ratio, f, r, n_iter=2):
     return f, r, y0 - 1j * (step_f[:, None] * a * m1 + step_r[:, None] * b * m2)
 
 
-#: Blocks a job needs before the compiled fits (:mod:`.fitkernels`) pay for their one-off load: numba's import
-#: and its machine code from the cache take 0.25-0.45 s per process (measured; even a trivial cached
-#: function's first call takes 0.3 s), the fits save ~0.65 ms per tracking block (0.1 s, 7 combs).
+#: Blocks a job needs before the compiled kernels pay for their one-off load: numba's import and its machine
+#: code from the cache take 0.25-0.45 s per process (measured; even a trivial cached function's first call
+#: takes 0.3 s); the fits (:mod:`.fitkernels`) save ~0.65 ms per tracking block (0.1 s, 7 combs), the
+#: cleaning's line finding (:mod:`.cleankernels`) ~0.5 ms.
 COMPILED_MIN_BLOCKS = 500
 
 

@@ -344,8 +344,9 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
         as the cleaning leaves it (:attr:`~.cleaning.Cleaning.spectrum`); the
         search then spares that FFT (the result is the same).
     kernel : {None, "numba", "numpy"}
-        The batched re-estimation compiled (:mod:`.fitkernels`; agrees to
-        float32 rounding) or numpy; None: numba when installed. A job of
+        The batched re-estimation (:mod:`.fitkernels`; agrees to float32
+        rounding) and the cleaning's line finding (:mod:`.cleankernels`)
+        compiled, or numpy; None: numba when installed. A job of
         many blocks picks it with :func:`~.comb_fit.fit_kernel`.
 
     Returns
@@ -359,7 +360,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     if not np.all(np.isfinite(pred)):
         raise InputError("predicted_hz contains NaN or inf")
     if clean:
-        iq, cleaning = clean_block(iq, fs, comb)  # raises NonFiniteSamples
+        iq, cleaning = clean_block(iq, fs, comb, kernel=kernel)  # raises NonFiniteSamples
         spectrum = cleaning.spectrum
     lo = float(lo_offset_hz)
     if lo:

@@ -113,10 +113,11 @@ def survey(rec, *, lo_offset_hz=None, max_doppler_hz=MAX_DOPPLER_HZ, block_s=0.1
     block_len = int(round(block_s * fs))
     starts = _blocks(rec, block_len, n_blocks)
     blocks, cleaned, raw_stats = [], [], []
+    kernel = fit_kernel(len(starts))
     for s in starts:
         raw = np.asarray(rec.read_raw(s, block_len))
         x = rec.read(s, block_len)
-        y, c = clean_block(x, fs, comb)
+        y, c = clean_block(x, fs, comb, kernel=kernel)
         cleaned.append((s, y, c))
         rms = float(np.sqrt(np.mean(np.abs(x) ** 2) / 2.0))
         peak = float(np.max(np.abs(x.view(np.float32))))
@@ -124,7 +125,6 @@ def survey(rec, *, lo_offset_hz=None, max_doppler_hz=MAX_DOPPLER_HZ, block_s=0.1
     # Pass 1 at the stated offset (or 0 over the whole band); without a stated offset a second pass at
     # the rough estimate, whose tone model fits the combs better.
     lo = 0.0 if lo_offset_hz is None else float(lo_offset_hz)
-    kernel = fit_kernel(len(cleaned))
     found = [find_combs(y, fs, comb=comb, lo_offset_hz=lo, max_doppler_hz=search, clean=False, kernel=kernel)
              for _, y, _ in cleaned]
     lo_rough = None

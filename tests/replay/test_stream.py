@@ -32,7 +32,7 @@ def test_switch_interval_is_restored_once_every_block_is_taken(monkeypatch):
     # block: the interval must be back by then (the generator still suspended), and on an early close.
     import leosop.replay.stream as stream
 
-    monkeypatch.setattr(stream, "_prepare", lambda rec, factor, comb, every, item: item[0])
+    monkeypatch.setattr(stream, "_prepare", lambda rec, factor, comb, every, kernel, item: item[0])
     before = sys.getswitchinterval()
     blocks = list(range(7))
     gen = stream.prepared_blocks(None, blocks, 1, None, threads=2)

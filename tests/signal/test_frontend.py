@@ -291,6 +291,33 @@ def test_line_runs_found_near_the_strong_bins_are_those_of_the_whole_spectrum():
     assert np.array_equal(_window_max(p, a, b), np.reshape(want, a.shape))
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_line_finding_gives_the_numpy_lines(seed):
+    """cleankernels.line_runs (numba) against find_lines' numpy path: the same lines, bin for bin, on spectra
+    with CW lines on and off the bin grid (wide sidelobe runs), at both edges, beside and among combs of
+    7 satellites whose tones partner each other, and on noise alone; their powers to float rounding."""
+    pytest.importorskip("numba")
+    from leosop.signal.cleaning import find_lines
+
+    fs, n = 2.5e6, 250_000
+    comb = PilotComb()
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    x = add_noise(np.zeros(n, complex), 45.0, fs, rng)
+    for d in rng.uniform(-0.4 * fs, 0.4 * fs, 7):
+        x = x + doppler_blocks(fs, n, d, rng.uniform(-3000.0, 0.0), None, rng=rng, dtype=np.complex128)[0]
+    if seed:  # seed 0: combs and noise alone
+        for f_hz in rng.uniform(-fs / 2, fs / 2, 4 * seed).tolist() + [fs / 2 - 20.0, -fs / 2 + 5.0]:
+            x = x + np.sqrt(10.0 ** (rng.uniform(55.0, 110.0) / 10.0) / fs) * np.exp(2j * np.pi * f_hz * t)
+    power = (np.abs(np.fft.fft(x)) ** 2).astype(np.float32)
+    lines = [find_lines(power, fs, comb, kernel=k) for k in ("numpy", "numba")]
+    assert lines[0][1] == lines[1][1]  # the same noise estimate
+    got = [[(ln.lo_bin, ln.hi_bin, ln.frequency_hz) for ln in found] for found, _ in lines]
+    assert got[0] == got[1] and (len(got[0]) >= 4 * seed + 2 if seed else got[0] == [])
+    np.testing.assert_allclose([ln.power_dbhz for ln in lines[1][0]], [ln.power_dbhz for ln in lines[0][0]],
+                               rtol=0, atol=1e-9)
+
+
 def test_excised_block_spectrum_is_the_fft_of_the_cleaned_block():
     """With a line excised the cleaning hands on its spectrum, the line's bins zeroed, as the cleaned block's FFT
     (the replay's comb search takes it instead of a second FFT): numpy's FFT of the cleaned samples agrees to
