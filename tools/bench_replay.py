@@ -23,7 +23,9 @@
    cores: Linux shares the CPU between sessions, so a second thread gains
    only what the others leave idle), and the bound two idle cores allow: the
    larger of the two threads' shares of the serial processor time (reading
-   and cleaning the blocks, ``leosop.replay.stream``; search and tracking).
+   and cleaning the blocks, ``leosop.replay.stream``; search and tracking), and the
+   preparation alone on ``--threads`` worker threads with the search left
+   out: the ceiling of this design however fast the search were.
 3. This tree against the baseline (``--baseline-ref``, default ``main``,
    exported with ``git archive``; ``none`` skips it), ``leosop replay
    --static --init ... --json`` of the same continuous recording with
@@ -175,15 +177,16 @@ def bench_throughput(tmp, seconds, n_sats, repeats=3):
     return path, rec, const
 
 
-def _prepare_cpu_s(rec):
-    """Processor time of reading, narrowing and cleaning every 0.1 s block in one thread (the workers' share)."""
+def _prepare_s(rec, threads=1):
+    """Processor and elapsed time of reading, narrowing and cleaning every 0.1 s block (the workers' share),
+    in one thread, or on ``threads`` worker threads with nothing else to do (the caller takes the blocks)."""
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     factor = search_band(rec.sample_rate_hz, comb, LO_OFFSET_MAX_HZ)[0]
-    t0 = time.process_time()
-    for _ in prepared_blocks(rec, block_plan(rec, 0.1), factor, comb):
+    t0, w0 = time.process_time(), time.perf_counter()
+    for _ in prepared_blocks(rec, block_plan(rec, 0.1), factor, comb, threads=threads + (threads > 1)):
         pass
-    return time.process_time() - t0
+    return time.process_time() - t0, time.perf_counter() - w0
 
 
 def _count(n):
@@ -230,7 +233,8 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
     same = same and len(results[1].tracks) == len(results[threads].tracks) and np.array_equal(
         results[1].position.fixes.pos_ecef_m, results[threads].position.fixes.pos_ecef_m)
     (b1, e1), (bn, en) = (min(wall[n]) for n in wall)
-    prep = _prepare_cpu_s(rec)
+    prep = _prepare_s(rec)[0]
+    prep_alone = min(_prepare_s(rec, threads)[1] for _ in range(repeats))
     serial_cpu = min(cpu[1])
     control = _cores_available(threads)
     print(f"threads: {seconds:g} s recording, best of {repeats} alternating (load average "
@@ -241,7 +245,9 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
           f"{serial_cpu:.2f} s (1 thread), {min(cpu[threads]):.2f} s ({threads}); reading and cleaning {prep:.2f} s, "
           f"search and tracking {serial_cpu - prep:.2f} s: on idle cores at most "
           f"{serial_cpu / max(prep, serial_cpu - prep):.2f}x the serial speed, "
-          f"{seconds / max(prep, serial_cpu - prep):.1f}x real time. Control: a pure-Python loop split across "
+          f"{seconds / max(prep, serial_cpu - prep):.1f}x real time. The preparation alone on {threads} worker "
+          f"threads (no search: a ceiling of this design) {prep_alone:.2f} s = {seconds / prep_alone:.1f}x real time. "
+          f"Control: a pure-Python loop split across "
           f"{threads} processes ran {control:.2f}x as fast as in one (the cores this run was given)")
 
 

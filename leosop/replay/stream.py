@@ -13,13 +13,13 @@ block is the same as in one thread, so are the results, bit for bit.
 The workers spend their time in numpy and FFTW (:mod:`leosop.signal.fft`,
 per-thread plans), which release the GIL; the cleaned block's FFT, made
 here, is handed to the comb search (``find_combs(..., spectrum=)``).
-Measured on a continuous 2.5 MS/s recording of 7 satellites (0.1 s
-blocks, ``tools/bench_replay.py``, idle cores), the preparation is more
-than half the streaming stage's processor time (0.61 of 1.1 s for 20 s:
-~3 ms per block, of which ~1 ms the FFT), the comb search and tracking the
-rest: two threads can at best run it in the preparation's time (1.34x
-measured on 120 s); more help only where the preparation dominates (wide
-recordings narrowed block by block).
+Measured on a continuous 2.5 MS/s recording of 7 satellites (120 s, 0.1 s
+blocks, compiled kernels, ``tools/bench_replay.py``, idle cores), the
+preparation is about half the streaming stage's processor time (2.79 of
+5.18 s: 2.3 ms a block, of which ~1 ms the FFT), the comb search and
+tracking the rest: two threads can at best run it in the preparation's
+time (1.41x measured); more help only where the preparation dominates
+(wide recordings narrowed block by block).
 """
 
 import sys
