@@ -282,8 +282,12 @@ def run(args):
                                  alpha=alpha)
     solutions, passes, residuals = solutions_doc(res, meas, alpha)
     if solutions and not any(np.isfinite([s["x_m"], s["y_m"], s["z_m"]]).all() for s in solutions):
-        raise InputError(f"{args.meas}: no finite fix from {len(solutions)} solve(s); check the doppler_hz "
-                         "values (Hz, sign of DESIGN 4.3), the satellite states and --init")
+        if args.static and args.alt_m is None and max(s["n_sats"] for s in solutions) == 1:
+            raise InputError(f"{args.meas}: no finite fix from one satellite's pass, which determines the "
+                             "receiver's height weakly at best; give the height with --alt-m")
+        raise InputError(f"{args.meas}: no finite fix from {len(solutions)} solve(s) "
+                         f"({', '.join(sorted({s['status'] for s in solutions}))}); check the doppler_hz values "
+                         "(Hz, sign of DESIGN 4.3), the satellite states and --init")
     for line, reason in res.rejected:
         print(f"leosop position: warning: {meas.source}:{line}: {reason}", file=sys.stderr)
     doc = {

@@ -447,7 +447,7 @@ def test_position_refuses_to_report_nan_fixes(tmp_path, capsys, mode):
     meas = _absurd_doppler_csv(tmp_path / "absurd.csv")
     status, out, err = _run(capsys, "position", meas, *mode, "--out", str(tmp_path / "out"))
     assert status == 2 and out == ""
-    assert "absurd.csv: no finite fix from 1 solve(s); check the doppler_hz values" in _one_line(err)
+    assert "absurd.csv: no finite fix from 1 solve(s) (not_converged); check the doppler_hz values" in _one_line(err)
     assert not (tmp_path / "out").exists() and _leftovers(tmp_path) == []
 
 

@@ -217,6 +217,12 @@ def test_fox1d_pass_with_its_catalogue_number(capsys):
     (sol,) = json.loads(capsys.readouterr().out)["solutions"]
     far = np.linalg.norm(np.array([sol["x_m"], sol["y_m"], sol["z_m"]]) - site)
     assert far > 1000e3 and sol["status"] == "ambiguous"
+    # Without the height the first log gives no finite fix; the error says to give it (it said to check the
+    # Doppler's sign and the states).
+    argv[1] = str(folder / "DOPPLER_FOX-1D_20180113_161201.862011_UTC_10sps.csv")
+    assert main(argv[:9] + ["--json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no finite fix from one satellite's pass" in err and "--alt-m" in err
 
 
 def _gsdc(sub):
