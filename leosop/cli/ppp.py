@@ -88,7 +88,7 @@ def run(args):
     notes += [n for n in (uncovered_note(p, obs.time_gps) for p in (orbits, clocks)) if n]
     mask = {} if args.mask_deg is None else {"mask_deg": args.mask_deg, "mask_no_antex_deg": args.mask_deg}
     res = run_ppp(obs, orbits, clocks, PppOptions(static=args.static, systems=args.systems, **mask), antex=antex,
-                  ar=ArOptions() if args.ar else None, no_ar=no_ar)
+                  ar=ArOptions() if args.ar else None, no_ar=no_ar, show_progress=True)
     if res.no_antenna:
         notes.append(f"{args.antex}: no block valid on {day} for {', '.join(res.no_antenna)}: left out of the "
                      "solution")

@@ -283,7 +283,7 @@ def prepare(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
 
 def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = PppOptions(),
             antex: Antex | None = None, *, ar: ArOptions | None = None,
-            no_ar: dict[str, str] | None = None) -> PppResult:
+            no_ar: dict[str, str] | None = None, show_progress: bool = False) -> PppResult:
     """PPP over every epoch of ``obs``: float, and with ``ar`` ambiguity-fixed (:mod:`leosop.gnss.ar`).
 
     Parameters
@@ -295,6 +295,8 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
     no_ar : dict of str -> str, optional
         Satellites not to fix, with the reason (e.g. an antenna offset of
         another frame than the clocks').
+    show_progress : bool
+        A progress bar over the epochs on stderr (when it is a terminal).
 
     Returns
     -------
@@ -350,7 +352,9 @@ def run_ppp(obs: ObsData, orbits: Orbits, clocks: Clocks, options: PppOptions = 
         ar_ok = ok & (elev >= np.radians(ar.mask_deg)) & (mw_n >= ar.wl_min_epochs) & np.isfinite(wl_se)
         ar_ok[:, [sv.index(s) for s in skip_ar]] = False
         lam_nl, beta = nl_constants(sv)
-    for i in range(n_ep):
+    if show_progress:
+        from ..progress import progress
+    for i in progress(range(n_ep), desc="ppp", unit="epoch") if show_progress else range(n_ep):
         js_i = np.flatnonzero(ok[i])
         if len(js_i) < 5:
             continue

@@ -90,6 +90,29 @@ def test_static_window_converges(day):
     assert np.isnan(res["GE"].grad_ne_m).all()
 
 
+@needs_data
+def test_progress_over_the_epochs_and_a_stop_ends_the_run(day, monkeypatch):
+    """The day's PPP takes seconds to tens of seconds: a bar over the epochs, whose steps also honour Ctrl-C."""
+    import leosop.progress
+    from leosop import interrupt
+
+    obs, orb, clk = day
+    obs2 = _window(obs, 40)
+    steps = []
+    real = leosop.progress.progress
+
+    def counting(iterable, **kw):
+        steps.append(kw.get("desc"))
+        return real(iterable, **kw)
+
+    monkeypatch.setattr(leosop.progress, "progress", counting)
+    quiet, shown = (run_ppp(obs2, orb, clk, PppOptions(static=True), show_progress=p) for p in (False, True))
+    assert steps == ["ppp"] and np.array_equal(quiet.pos_ecef_m, shown.pos_ecef_m, equal_nan=True)
+    monkeypatch.setattr(interrupt, "_requested", True)  # a stop asked for (leosop.interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        run_ppp(obs2, orb, clk, PppOptions(static=True), show_progress=True)
+
+
 def test_gps_to_utc():
     assert gps_to_utc(np.datetime64("2020-06-25T00:00:18")) == np.datetime64("2020-06-25T00:00:00")
 
