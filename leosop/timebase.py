@@ -7,7 +7,6 @@ table (observed values, then its predictions).
 """
 
 import re
-import warnings
 from functools import lru_cache
 
 import numpy as np
@@ -15,14 +14,48 @@ import numpy as np
 from .constants import DAY_S, JD_UNIX_EPOCH
 from .errors import InputError
 
-__all__ = ["parse_utc", "round_utc", "format_utc", "seconds_since", "utc_from_seconds", "jd_utc", "jd_ut1",
-           "utc_from_jd", "ut1_minus_utc_s"]
+__all__ = ["ISO_TIME", "parse_utc", "split_utc_offset", "round_utc", "format_utc", "seconds_since", "utc_from_seconds",
+           "jd_utc", "jd_ut1", "utc_from_jd", "ut1_minus_utc_s"]
 
 _NS_PER_DAY = int(DAY_S) * 1_000_000_000
 
 
 #: First and last instants a datetime64[ns] holds (whole days inside its range).
 _NS_SPAN = (np.datetime64("1678-01-01"), np.datetime64("2261-12-31"))
+
+
+#: An ISO 8601 time of day ending in a UTC offset: the time, sign, hours and minutes (``+01:00``, ``+0100``,
+#: ``+01``). numpy parses such offsets with a warning and shifts by them; the toolkit reads them itself.
+_UTC_OFFSET = re.compile(r"(.*\d:\d\d(?::\d\d(?:\.\d*)?)?)\s*([+-])(\d\d)(?::?(\d\d))?")
+
+
+#: What numpy is given: an ISO 8601 date and time without a zone (numpy would parse any text after the time
+#: as one, with a warning).
+ISO_TIME = re.compile(r"[+-]?\d{4,}(?:-\d\d(?:-\d\d(?:[T ]\d\d(?::\d\d(?::\d\d(?:\.\d*)?)?)?)?)?)?")
+
+
+def split_utc_offset(text):
+    """ISO 8601 ``text`` without its zone, and the zone's offset east of UTC [min].
+
+    A trailing ``Z``, ``+00:00`` or no zone gives 0; an offset beyond 14 h
+    (or minutes beyond 59), or text that is no ISO 8601 time
+    (:data:`ISO_TIME`) once the zone is off, gives None.
+
+    Returns
+    -------
+    time : str
+    offset_min : int or None
+    """
+    s = text.strip()
+    offset = 0
+    if s.endswith("Z"):
+        s = s[:-1]
+    elif (m := _UTC_OFFSET.fullmatch(s)) is not None:
+        hours, minutes = int(m.group(3)), int(m.group(4) or 0)
+        if hours > 14 or minutes > 59:
+            return s, None
+        s, offset = m.group(1), (60 * hours + minutes) * (1 if m.group(2) == "+" else -1)
+    return s, offset if ISO_TIME.fullmatch(s) else None
 
 
 def parse_utc(value, *, name="time"):
@@ -46,18 +79,14 @@ def parse_utc(value, *, name="time"):
         return arr.astype("datetime64[ns]")[()]
     flat = []
     for text in arr.ravel():
-        s = str(text).strip()
-        if s.endswith("Z"):
-            s = s[:-1]
-        elif s.endswith("+00:00"):
-            s = s[:-6]
-        if re.search(r"T.*[+-]\d\d:?\d\d$", s):
+        s, offset_min = split_utc_offset(str(text))
+        if offset_min:
             raise InputError(f"{name}: {str(text)!r} has a UTC offset; give the time in UTC (ending in Z)")
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")  # numpy warns of (and shifts by) a time zone it parses, e.g. "+01"
-                native = np.datetime64(s)  # its own unit: years beyond datetime64[ns] do not wrap around here
-        except (ValueError, UserWarning):
+            if offset_min is None:
+                raise ValueError
+            native = np.datetime64(s)  # its own unit: years beyond datetime64[ns] do not wrap around here
+        except ValueError:
             raise InputError(f"{name}: {str(text)!r} is not an ISO 8601 UTC time (e.g. 2024-01-02T03:04:05Z)") from None
         if not np.isnat(native) and not _NS_SPAN[0] <= native <= _NS_SPAN[1]:
             raise InputError(f"{name}: {str(text)!r} is outside the years 1678..2261 that the toolkit's "

@@ -282,7 +282,8 @@ def run(args):
                                  alpha=alpha)
     solutions, passes, residuals = solutions_doc(res, meas, alpha)
     if solutions and not any(np.isfinite([s["x_m"], s["y_m"], s["z_m"]]).all() for s in solutions):
-        if args.static and args.alt_m is None and max(s["n_sats"] for s in solutions) == 1:
+        one_pass = meas.pass_id is None or np.unique(meas.pass_id).size == 1
+        if args.static and args.alt_m is None and max(s["n_sats"] for s in solutions) == 1 and one_pass:
             raise InputError(f"{args.meas}: no finite fix from one satellite's pass, which determines the "
                              "receiver's height weakly at best; give the height with --alt-m")
         raise InputError(f"{args.meas}: no finite fix from {len(solutions)} solve(s) "

@@ -161,7 +161,8 @@ def uncovered_note(product, times_gps):
     """
     t_s = seconds_gps(times_gps, product.ref_gps)
     step = product.t_s[1] - product.t_s[0]
-    if product.t_s[0] - step <= t_s[0] and t_s[-1] <= product.t_s[-1] + step:
+    # A day's product starts at its first epoch: only its end has a spacing of slack.
+    if product.t_s[0] - product.margin * step <= t_s[0] and t_s[-1] <= product.t_s[-1] + step:
         return None
     outside = (t_s < product.t_s[0] - product.margin * step) | (t_s > product.t_s[-1] + product.margin * step)
     first, last = (str(product.ref_gps + np.timedelta64(round(s * 1e9), "ns"))[:19] for s in product.t_s[[0, -1]])

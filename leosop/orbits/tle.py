@@ -36,7 +36,7 @@ _MAX_REV_PER_DAY = 20.0
 # Columns (0-based) that must be blank in each line of a valid element set.
 _BLANKS = {"1": (1, 8, 17, 32, 43, 52, 61, 63), "2": (1, 7, 16, 25, 33, 42, 51)}
 _DECIMAL = (re.compile(r" *[+-]?(\d+\.?\d*|\.\d+) *", re.ASCII), "a decimal number")
-_INTEGER = (re.compile(r" *\d+", re.ASCII), "a whole number")
+_INTEGER = (re.compile(r" *\d*", re.ASCII), "a whole number")
 _EXPONENT = (re.compile(r"[ +-][\d ]{5}[ +-][\d ]", re.ASCII), "a number in TLE exponent form such as -12345-4")
 _CATALOGUE = (re.compile(r" *\d+|[A-HJ-NP-Z]\d{4}", re.ASCII), "a catalogue number (digits, or a letter and 4 digits)")
 # The numeric fields of each line: first and last column (1-based), name, pattern and what it should hold. Blanks

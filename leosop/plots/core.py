@@ -37,9 +37,10 @@ def envelope(x, y, n_bins=ENVELOPE_BINS):
 
     A line through (first x, min), (last x, max) of every run covers the
     pixels the whole series would (a few runs per pixel column), so a day at
-    1 s draws as it did, in a fraction of the time and memory. Runs of NaN
-    stay NaN (gaps stay gaps). Series of at most ``2 n_bins`` points come
-    back as they are.
+    1 s draws as it did, in a fraction of the time and memory. A run all NaN
+    stays NaN: gaps of a run or more stay gaps (shorter ones are bridged, at
+    a pixel's scale). Series of at most ``2 n_bins`` points come back as
+    they are.
 
     Parameters
     ----------

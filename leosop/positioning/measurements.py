@@ -34,8 +34,6 @@ frame of the reception time (the Earth turns ``omega_e * tau`` meanwhile).
 
 import csv
 import os
-import re
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -48,7 +46,7 @@ from ..fileio import check_input_file, write_csv
 from ..frames import rotate_to_later_ecef
 from ..orbits.constellation import Constellation
 from ..orbits.propagate import state_ecef_pairs
-from ..timebase import format_utc, seconds_since
+from ..timebase import ISO_TIME, format_utc, seconds_since, split_utc_offset
 
 __all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states_from_tle", "clock_groups",
            "row_families", "SV_STATE_COLUMNS", "DEFAULT_CARRIER_HZ", "MAX_TLE_AGE_DAYS"]
@@ -140,24 +138,14 @@ def _floats(values):
     return out, ~np.isfinite(out)
 
 
-#: ISO 8601 time of day ending in a UTC offset: the rest, sign, hours, minutes.
-_UTC_OFFSET = re.compile(r"(.*\d:\d\d(?::\d\d(?:\.\d*)?)?)\s*([+-])(\d\d)(?::?(\d\d))?")
-
-
 def _utc_ns(text):
     """datetime64[ns] UTC of ISO 8601 text ending in ``Z``, an offset (``+01:00``) or nothing; NaT if not a time."""
-    s, offset_min = text[:-1] if text.endswith("Z") else text, 0
-    m = _UTC_OFFSET.fullmatch(s)
-    if m:
-        s, sign, hours, minutes = m.group(1), m.group(2), int(m.group(3)), int(m.group(4) or 0)
-        if hours > 14 or minutes > 59:
-            return np.datetime64("NaT", "ns")
-        offset_min = (60 * hours + minutes) * (1 if sign == "+" else -1)
+    s, offset_min = split_utc_offset(text)
+    if offset_min is None:
+        return np.datetime64("NaT", "ns")
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")  # numpy warns of a time zone it parses (any text left after the time)
-            return np.datetime64(s, "ns") - np.timedelta64(offset_min, "m")
-    except (ValueError, UserWarning):
+        return np.datetime64(s, "ns") - np.timedelta64(offset_min, "m")
+    except ValueError:
         return np.datetime64("NaT", "ns")
 
 
@@ -227,13 +215,14 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
     time_utc = None
     if "time_utc" in col:
         text = field("time_utc")
-        try:  # the usual table (UTC, Z or nothing) at once; offsets, typos and blanks row by row
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")
-                time_utc = np.array([s[:-1] if s.endswith("Z") else s for s in text], dtype="datetime64[ns]")
+        try:  # the usual table (UTC: Z or no zone) at once; offsets, typos and blanks row by row
+            plain = [s[:-1] if s.endswith("Z") else s for s in text]
+            if not all(map(ISO_TIME.fullmatch, plain)):  # a UTC offset, a typo: numpy would take it for a zone
+                raise ValueError
+            time_utc = np.array(plain, dtype="datetime64[ns]")
             if np.isnat(time_utc).any():
                 raise ValueError
-        except (ValueError, UserWarning):
+        except ValueError:
             time_utc = np.array([_utc_ns(s) for s in text], dtype="datetime64[ns]")
         for i in np.flatnonzero(np.isnat(time_utc) & (reason == "")):
             reason[i] = (f"time_utc is {text[i]!r}, expected ISO 8601 in UTC or with a UTC offset "

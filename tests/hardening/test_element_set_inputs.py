@@ -33,6 +33,15 @@ def _with_text(line, first, last):
     return line[:68] + str(tle_checksum(line)), field
 
 
+def test_blank_counters_still_read(tmp_path):
+    """Hand-made element sets leave the element set and revolution numbers blank; SGP4 reads them as 0."""
+    l1, l2 = L1[:64] + "    " + L1[68:], L2[:63] + "     " + L2[68:]
+    l1, l2 = (ln[:68] + str(tle_checksum(ln)) for ln in (l1, l2))
+    path = tmp_path / "blank.tle"
+    path.write_text(f"ISS\n{l1}\n{l2}\n")
+    assert len(read_tle(path)) == 1
+
+
 @pytest.mark.parametrize("n, first, last, name", [
     (1, 3, 7, "catalogue number"), (1, 19, 20, "epoch year"), (1, 21, 32, "epoch day of year"),
     (1, 34, 43, "mean motion derivative"), (1, 45, 52, "mean motion second derivative"), (1, 54, 61, "BSTAR"),

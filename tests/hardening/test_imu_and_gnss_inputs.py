@@ -102,6 +102,10 @@ def test_products_short_of_the_observations_noted():
     # A whole day's 15-min orbits end at 23:45: the last minutes are no truncation.
     day_orbits = Orbits("day.sp3", day, 900.0 * np.arange(96), ["G01"], np.zeros((96, 1, 3)))
     assert uncovered_note(day_orbits, obs_times) is None
+    # One record late at the start is: orbits answer 0.1 spacing before their first record, the first 27
+    # epochs (00:00 to 00:13:00) are left out, with the day's last 26 (after 23:46:30) as always.
+    late = Orbits("late.sp3", day, 900.0 * np.arange(1, 96), ["G01"], np.zeros((95, 1, 3)))
+    assert uncovered_note(late, obs_times).endswith(": 53 of the 2880 epochs are left out")
 
 
 def test_ppp_on_half_an_sp3_warns_and_runs(tmp_path, capsys):
