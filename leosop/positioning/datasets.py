@@ -228,8 +228,12 @@ def read_fll(csv_path, sat_id):
             except ValueError:
                 raise InputError(f"{path}:{line}: {key} {r[key]!r} is not a number") from None
     carrier = freq - doppler
-    if not (np.all(np.isfinite(doppler)) and np.all(carrier > 0)):
-        raise InputError(f"{path}: doppler_offset must be finite and measured_freq - doppler_offset positive")
+    bad = np.flatnonzero(~(np.isfinite(doppler) & (carrier > 0)))
+    if bad.size:
+        line, r = rows[bad[0]]
+        raise InputError(f"{path}:{line}: doppler_offset {r['doppler_offset']!r} and measured_freq "
+                         f"{r['measured_freq']!r}: the offset must be finite and the frequency less it positive "
+                         f"({bad.size} such row(s))")
     return Measurements(
         t_s=(time_utc - time_utc[0]).astype(np.int64) * 1e-9, time_utc=time_utc, sat_id=np.full(n, str(sat_id)),
         doppler_hz=doppler, sigma_hz=np.full(n, np.nan), carrier_hz=carrier,

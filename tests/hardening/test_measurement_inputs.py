@@ -122,6 +122,14 @@ def test_measurement_time_with_bad_suffix_names_line_and_value(tmp_path, time_ut
     assert line == 3 and reason.startswith(f"time_utc is {time_utc!r}, expected ISO 8601 in UTC or with a UTC offset")
 
 
+@pytest.mark.parametrize("row", ["1,inf,2018-01-13T16:12:01.962011Z,145882239.0",
+                                 "1,2239.0,2018-01-13T16:12:01.962011Z,-5.0"])
+def test_fll_offset_not_finite_or_carrier_not_positive_names_the_line(tmp_path, row):
+    path = tmp_path / "fll.csv"
+    path.write_text(_FLL + row + "\n")
+    _one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: doppler_offset", "(1 such row(s))")
+
+
 def test_fll_time_with_a_bad_suffix_is_refused_without_a_warning(tmp_path):
     path = tmp_path / "fll.csv"
     path.write_text(_FLL + "1,2239.0,2018-01-13T16:12:01.962011+01,145882239.0\n")
