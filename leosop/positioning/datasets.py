@@ -107,7 +107,11 @@ def read_doptrack(folder):
             with tarfile.open(path, "r:xz") as tar:
                 for member in tar:
                     if member.isfile() and member.name.endswith(suffix):
-                        store[Path(member.name).stem] = tar.extractfile(member).read().decode("utf-8")
+                        raw = tar.extractfile(member).read()
+                        try:
+                            store[Path(member.name).stem] = raw.decode("utf-8")
+                        except UnicodeDecodeError:
+                            raise InputError(f"{path}: {member.name} is not UTF-8 text") from None
         except EOFError:
             raise InputError(f"{path}: truncated: the xz data end before their end-of-stream marker; expected the "
                              f"complete DopTrack archive of {suffix} files") from None
@@ -118,27 +122,41 @@ def read_doptrack(folder):
     for name in sorted(tables):
         if name not in metas:
             raise InputError(f"{folder}: pass {name} has no metadata file")
-        meta = yaml.safe_load(metas[name])
-        data = np.loadtxt(tables[name].splitlines(), delimiter=",", comments="#", ndmin=2)
-        epoch = _utc(meta["tracking"]["epoch"])
-        time_utc = epoch + np.round(data[:, 0] * 1e9).astype("timedelta64[ns]")
-        n = len(data)
-        meas = Measurements(
-            t_s=data[:, 0] - data[0, 0], time_utc=time_utc, sat_id=np.full(n, str(meta["satellite"]["noradid"])),
-            doppler_hz=data[:, 1] - DELFI_C3_CARRIER_HZ, sigma_hz=np.full(n, np.nan),
-            carrier_hz=np.full(n, DELFI_C3_CARRIER_HZ), line=np.arange(2, n + 2), source=f"{folder}/{name}.csv",
-        )
-        tle = (meta["satellite"]["tle"]["line1"], meta["satellite"]["tle"]["line2"])
-        site = meta["station"]["position"]
-        lat, lon, alt = float(site["latitude"]), float(site["longitude"]), float(site["altitude"])
-        passes.append(DopTrackPass(
-            name=name, meas=meas, constellation=parse_tle_lines(tle, f"{name}.yml"), tle_lines=tle,
-            station_pos_ecef_m=geodetic_to_ecef(np.radians(lat), np.radians(lon), alt),
-            station_lat_deg=lat, station_lon_deg=lon, station_alt_m=alt,
-            fca_hz=float(meta["tracking"]["fca"]), tca_utc=_utc(meta["tracking"]["tca"]),
-            max_elevation_deg=float(meta["prediction"]["max_elevation"]),
-        ))
+        try:
+            passes.append(_doptrack_pass(folder, name, tables[name], metas[name]))
+        except InputError:
+            raise
+        except (yaml.YAMLError, ValueError, KeyError, TypeError, IndexError) as exc:
+            first = " ".join(str(exc).split())[:200]
+            raise InputError(f"{folder}: pass {name}: malformed {name}.csv or {name}.yml ({type(exc).__name__}: "
+                             f"{first}); expected DopTrack's recording and metadata files") from None
     return passes
+
+
+def _doptrack_pass(folder, name, table, meta_text):
+    """One DopTrack pass from its recording's CSV text and its metadata's YAML text."""
+    import yaml
+
+    meta = yaml.safe_load(meta_text)
+    data = np.loadtxt(table.splitlines(), delimiter=",", comments="#", ndmin=2)
+    epoch = _utc(meta["tracking"]["epoch"])
+    time_utc = epoch + np.round(data[:, 0] * 1e9).astype("timedelta64[ns]")
+    n = len(data)
+    meas = Measurements(
+        t_s=data[:, 0] - data[0, 0], time_utc=time_utc, sat_id=np.full(n, str(meta["satellite"]["noradid"])),
+        doppler_hz=data[:, 1] - DELFI_C3_CARRIER_HZ, sigma_hz=np.full(n, np.nan),
+        carrier_hz=np.full(n, DELFI_C3_CARRIER_HZ), line=np.arange(2, n + 2), source=f"{folder}/{name}.csv",
+    )
+    tle = (meta["satellite"]["tle"]["line1"], meta["satellite"]["tle"]["line2"])
+    site = meta["station"]["position"]
+    lat, lon, alt = float(site["latitude"]), float(site["longitude"]), float(site["altitude"])
+    return DopTrackPass(
+        name=name, meas=meas, constellation=parse_tle_lines(tle, f"{name}.yml"), tle_lines=tle,
+        station_pos_ecef_m=geodetic_to_ecef(np.radians(lat), np.radians(lon), alt),
+        station_lat_deg=lat, station_lon_deg=lon, station_alt_m=alt,
+        fca_hz=float(meta["tracking"]["fca"]), tca_utc=_utc(meta["tracking"]["tca"]),
+        max_elevation_deg=float(meta["prediction"]["max_elevation"]),
+    )
 
 
 def doptrack_table(passes, pos_rx_ecef_m=None):

@@ -154,3 +154,29 @@ def test_export_latitude_out_of_range_names_line_and_value(tmp_path, capsys):
     assert main(["export", str(path), "--to", "geojson"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "fixes.csv:3: lat_deg 123 is outside [-90, 90] deg" in err
+
+
+def _doptrack_folder(tmp_path, csv_bytes, yml_bytes=b"{}"):
+    """A DopTrack folder of one pass whose recording and metadata hold the given bytes."""
+    import io
+    import tarfile
+
+    for archive, name, data in (("data.tar.xz", "data/p.csv", csv_bytes), ("metadata.tar.xz", "metadata/p.yml",
+                                                                            yml_bytes)):
+        with tarfile.open(tmp_path / archive, "w:xz") as tar:
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    return tmp_path
+
+
+@pytest.mark.parametrize("csv_bytes, yml_bytes, message", [
+    (b"0;145871000\n", b"{}", "pass p: malformed p.csv or p.yml (ValueError: could not convert"),
+    (b"0,145871000\n", b"tracking: {}\n", "pass p: malformed p.csv or p.yml (KeyError: 'epoch')"),
+    (b"0,145871000\n", b"a: [\n", "pass p: malformed p.csv or p.yml (ParserError"),
+    (b"\xff\xfe0,1\n", b"{}", "data.tar.xz: data/p.csv is not UTF-8 text"),
+])
+def test_doptrack_malformed_member_names_the_pass(tmp_path, csv_bytes, yml_bytes, message):
+    """A valid archive whose files are not DopTrack's gave an internal error (ValueError, KeyError, YAML)."""
+    folder = _doptrack_folder(tmp_path, csv_bytes, yml_bytes)
+    _one_line_error(lambda: read_doptrack(folder), message)
