@@ -1,4 +1,5 @@
-"""Helpers shared by tests of several packages: data paths, central differences, a LEO test geometry, consistency.
+"""Helpers shared by tests of several packages: data paths, central differences, a LEO test geometry, consistency,
+one-line input errors.
 
 Real data are read from ``../shared/data`` beside the repository (see each
 folder's PROVENANCE.md there) and never copied into the repository. Tests
@@ -13,6 +14,7 @@ import pytest
 from scipy import stats
 
 from leosop import frames
+from leosop.errors import InputError
 
 #: The repository (tests/ sits at its top).
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -37,6 +39,17 @@ ESBC_SP3 = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
 ESBC_CLK = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
 ESBC_ATX = ESBC_DAY / "esbc_2020-177.atx"
 ESBC_CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
+
+
+def one_line_error(call, *match):
+    """Call ``call()``, which must raise InputError with a one-line message holding every ``match``; the message."""
+    with pytest.raises(InputError) as info:
+        call()
+    text = str(info.value)
+    assert "\n" not in text
+    for part in match:
+        assert part in text
+    return text
 
 
 def central_difference_jacobian(func, step):

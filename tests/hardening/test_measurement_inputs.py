@@ -8,32 +8,23 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
-from leosop.errors import InputError
 from leosop.ins.imu_io import read_rtklib_sf_csv
 from leosop.orbits import DEFAULT_TLE
 from leosop.positioning.datasets import read_doptrack, read_fll, read_gsdc
 from leosop.positioning.measurements import read_measurements
 
+from tests.helpers import one_line_error
+
 # A warning (numpy's about time zones) is output without a file or line: none may appear.
 pytestmark = pytest.mark.filterwarnings("error")
 
 
-def _one_line_error(call, *match):
-    with pytest.raises(InputError) as info:
-        call()
-    text = str(info.value)
-    assert "\n" not in text
-    for part in match:
-        assert part in text
-    return text
-
-
 def _xz_tar(files):
-    """Bytes of a tar.xz archive holding ``{name: text}``."""
+    """Bytes of a tar.xz archive holding ``{name: text or bytes}``."""
     buf = io.BytesIO()
     with tarfile.open(fileobj=buf, mode="w:xz") as tar:
         for name, text in files.items():
-            data = text.encode()
+            data = text.encode() if isinstance(text, str) else text
             info = tarfile.TarInfo(name)
             info.size = len(data)
             tar.addfile(info, io.BytesIO(data))
@@ -48,7 +39,7 @@ def _xz_tar(files):
 ], ids=["truncated", "empty", "text", "xz-not-tar"])
 def test_doptrack_damaged_archive(tmp_path, damage, message):
     (tmp_path / "data.tar.xz").write_bytes(damage(_xz_tar({"data/pass.csv": "0.0,145870000.0\n" * 200})))
-    _one_line_error(lambda: read_doptrack(tmp_path), "data.tar.xz", message)
+    one_line_error(lambda: read_doptrack(tmp_path), "data.tar.xz", message)
 
 
 def test_doptrack_truncated_archive_is_exit_2(tmp_path, capsys):
@@ -70,7 +61,7 @@ _FLL = "index,doppler_offset,timestamp,measured_freq\n0,2240.5,2018-01-13T16:12:
 def test_fll_bad_last_line_names_line_and_field(tmp_path, last, message):
     path = tmp_path / "fll.csv"
     path.write_text(_FLL + last)
-    _one_line_error(lambda: read_fll(path, "43137"), message)
+    one_line_error(lambda: read_fll(path, "43137"), message)
 
 
 def test_measurement_table_with_a_byte_order_mark(tmp_path):
@@ -127,13 +118,13 @@ def test_measurement_time_with_bad_suffix_names_line_and_value(tmp_path, time_ut
 def test_fll_offset_not_finite_or_carrier_not_positive_names_the_line(tmp_path, row):
     path = tmp_path / "fll.csv"
     path.write_text(_FLL + row + "\n")
-    _one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: doppler_offset", "(1 such row(s))")
+    one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: doppler_offset", "(1 such row(s))")
 
 
 def test_fll_time_with_a_bad_suffix_is_refused_without_a_warning(tmp_path):
     path = tmp_path / "fll.csv"
     path.write_text(_FLL + "1,2239.0,2018-01-13T16:12:01.962011+01,145882239.0\n")
-    _one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: timestamp: '2018-01-13T16:12:01.962011+01'")
+    one_line_error(lambda: read_fll(path, "43137"), "fll.csv:3: timestamp: '2018-01-13T16:12:01.962011+01'")
 
 
 def test_no_sat_id_of_the_table_in_the_element_sets(tmp_path, capsys):
@@ -156,20 +147,6 @@ def test_export_latitude_out_of_range_names_line_and_value(tmp_path, capsys):
     assert err.count("\n") == 1 and "fixes.csv:3: lat_deg 123 is outside [-90, 90] deg" in err
 
 
-def _doptrack_folder(tmp_path, csv_bytes, yml_bytes=b"{}"):
-    """A DopTrack folder of one pass whose recording and metadata hold the given bytes."""
-    import io
-    import tarfile
-
-    for archive, name, data in (("data.tar.xz", "data/p.csv", csv_bytes), ("metadata.tar.xz", "metadata/p.yml",
-                                                                            yml_bytes)):
-        with tarfile.open(tmp_path / archive, "w:xz") as tar:
-            info = tarfile.TarInfo(name)
-            info.size = len(data)
-            tar.addfile(info, io.BytesIO(data))
-    return tmp_path
-
-
 @pytest.mark.parametrize("csv_bytes, yml_bytes, message", [
     (b"0;145871000\n", b"{}", "pass p: malformed p.csv or p.yml (ValueError: could not convert"),
     (b"0,145871000\n", b"tracking: {}\n", "pass p: malformed p.csv or p.yml (KeyError: 'epoch')"),
@@ -178,5 +155,6 @@ def _doptrack_folder(tmp_path, csv_bytes, yml_bytes=b"{}"):
 ])
 def test_doptrack_malformed_member_names_the_pass(tmp_path, csv_bytes, yml_bytes, message):
     """A valid archive whose files are not DopTrack's gave an internal error (ValueError, KeyError, YAML)."""
-    folder = _doptrack_folder(tmp_path, csv_bytes, yml_bytes)
-    _one_line_error(lambda: read_doptrack(folder), message)
+    (tmp_path / "data.tar.xz").write_bytes(_xz_tar({"data/p.csv": csv_bytes}))
+    (tmp_path / "metadata.tar.xz").write_bytes(_xz_tar({"metadata/p.yml": yml_bytes}))
+    one_line_error(lambda: read_doptrack(tmp_path), message)

@@ -10,11 +10,12 @@ import json
 import pytest
 
 from leosop.cli import main
-from leosop.errors import InputError
 from leosop.ins.imu_io import read_rtklib_sf_csv
 from leosop.orbits import DEFAULT_TLE, read_omm, read_tle
 from leosop.orbits.tle import tle_checksum
 from leosop.signal.iq import open_sigmf
+
+from tests.helpers import one_line_error
 
 _OMM = {"OBJECT_NAME": "STARLINK-1007", "NORAD_CAT_ID": 44713, "EPOCH": "2025-01-01T00:00:00.000",
         "MEAN_MOTION": 15.06, "ECCENTRICITY": 0.0001, "INCLINATION": 53.05, "RA_OF_ASC_NODE": 10.0,
@@ -22,21 +23,11 @@ _OMM = {"OBJECT_NAME": "STARLINK-1007", "NORAD_CAT_ID": 44713, "EPOCH": "2025-01
         "MEAN_MOTION_DDOT": 0}
 
 
-def _one_line_error(call, *match):
-    with pytest.raises(InputError) as info:
-        call()
-    text = str(info.value)
-    assert "\n" not in text
-    for part in match:
-        assert part in text
-    return text
-
-
 @pytest.mark.parametrize("top", ["0", "null", '"starlink"', "3.5"])
 def test_omm_json_top_level_not_a_list(tmp_path, top):
     path = tmp_path / "set.json"
     path.write_text(top)
-    _one_line_error(lambda: read_omm(path), "set.json", "expected a JSON list of OMM objects")
+    one_line_error(lambda: read_omm(path), "set.json", "expected a JSON list of OMM objects")
 
 
 @pytest.mark.parametrize("field, value, message", [
@@ -50,7 +41,7 @@ def test_omm_json_top_level_not_a_list(tmp_path, top):
 def test_omm_impossible_values(tmp_path, field, value, message):
     path = tmp_path / "set.json"
     path.write_text(json.dumps([{**_OMM, field: value}]))
-    _one_line_error(lambda: read_omm(path), "set.json: record 1", message)
+    one_line_error(lambda: read_omm(path), "set.json: record 1", message)
 
 
 def test_omm_good_record_still_reads(tmp_path):
@@ -78,7 +69,7 @@ def _tle_with(line_no, col0, text):
 def test_tle_valid_checksum_impossible_values(tmp_path, line_no, col0, text, where, message):
     path = tmp_path / "bad.tle"
     path.write_text(_tle_with(line_no, col0, text))
-    _one_line_error(lambda: read_tle(path), f"bad.tle:{where}:", message)
+    one_line_error(lambda: read_tle(path), f"bad.tle:{where}:", message)
 
 
 def test_tle_unchanged_record_reads(tmp_path):
@@ -122,13 +113,13 @@ def _sigmf(tmp_path, edit):
 ])
 def test_sigmf_wrong_types(tmp_path, edit, message):
     path = _sigmf(tmp_path, edit)
-    _one_line_error(lambda: open_sigmf(path), "r.sigmf-meta", message)
+    one_line_error(lambda: open_sigmf(path), "r.sigmf-meta", message)
 
 
 def test_sigmf_empty_data_file_is_named(tmp_path):
     path = _sigmf(tmp_path, lambda m: None)
     path.with_suffix(".sigmf-data").write_bytes(b"")
-    _one_line_error(lambda: open_sigmf(path), "r.sigmf-data", "empty SigMF data file (no samples for r.sigmf-meta)")
+    one_line_error(lambda: open_sigmf(path), "r.sigmf-data", "empty SigMF data file (no samples for r.sigmf-meta)")
 
 
 def test_sigmf_good_metadata_opens(tmp_path):
@@ -148,14 +139,14 @@ def test_scenario_not_utf8_is_bad_input(tmp_path, capsys):
 def test_empty_imu_sf_csv(tmp_path):
     path = tmp_path / "imu_sf.csv"
     path.write_text("")
-    _one_line_error(lambda: read_rtklib_sf_csv(path), "imu_sf.csv", "0 line(s)")
+    one_line_error(lambda: read_rtklib_sf_csv(path), "imu_sf.csv", "0 line(s)")
 
 
 def test_imu_sf_csv_time_beyond_gps_era(tmp_path):
     path = tmp_path / "imu_sf.csv"
     rows = [f"{1.6e15 + 0.01 * k:.2f},0,0,1,0,0,0,0,0,0,0" for k in range(20)]
     path.write_text("\n".join(rows) + "\n")
-    _one_line_error(lambda: read_rtklib_sf_csv(path), "imu_sf.csv", "is not GPST seconds since 1970")
+    one_line_error(lambda: read_rtklib_sf_csv(path), "imu_sf.csv", "is not GPST seconds since 1970")
 
 
 def test_omm_csv_with_a_byte_order_mark(tmp_path):
