@@ -77,11 +77,6 @@ class DopTrackPass:
     max_elevation_deg: float
 
 
-def _utc(value):
-    """datetime or text from YAML to datetime64[ns] (times in the files are UTC)."""
-    return np.datetime64(str(value).replace(" ", "T").rstrip("Z"), "ns")
-
-
 def read_doptrack(folder):
     """All passes of the DopTrack Delfi-C3 archives, sorted by name.
 
@@ -139,7 +134,7 @@ def _doptrack_pass(folder, name, table, meta_text):
 
     meta = yaml.safe_load(meta_text)
     data = np.loadtxt(table.splitlines(), delimiter=",", comments="#", ndmin=2)
-    epoch = _utc(meta["tracking"]["epoch"])
+    epoch = parse_utc(str(meta["tracking"]["epoch"]), name=f"{name}.yml: tracking: epoch")
     time_utc = epoch + np.round(data[:, 0] * 1e9).astype("timedelta64[ns]")
     n = len(data)
     meas = Measurements(
@@ -154,7 +149,8 @@ def _doptrack_pass(folder, name, table, meta_text):
         name=name, meas=meas, constellation=parse_tle_lines(tle, f"{name}.yml"), tle_lines=tle,
         station_pos_ecef_m=geodetic_to_ecef(np.radians(lat), np.radians(lon), alt),
         station_lat_deg=lat, station_lon_deg=lon, station_alt_m=alt,
-        fca_hz=float(meta["tracking"]["fca"]), tca_utc=_utc(meta["tracking"]["tca"]),
+        fca_hz=float(meta["tracking"]["fca"]),
+        tca_utc=parse_utc(str(meta["tracking"]["tca"]), name=f"{name}.yml: tracking: tca"),
         max_elevation_deg=float(meta["prediction"]["max_elevation"]),
     )
 
