@@ -14,7 +14,7 @@ import numpy as np
 from .constants import DAY_S, JD_UNIX_EPOCH
 from .errors import InputError
 
-__all__ = ["ISO_TIME", "parse_utc", "split_utc_offset", "round_utc", "format_utc", "seconds_since", "utc_from_seconds",
+__all__ = ["parse_utc", "split_utc_offset", "round_utc", "format_utc", "seconds_since", "utc_from_seconds",
            "jd_utc", "jd_ut1", "utc_from_jd", "ut1_minus_utc_s"]
 
 _NS_PER_DAY = int(DAY_S) * 1_000_000_000
@@ -31,7 +31,7 @@ _UTC_OFFSET = re.compile(r"(.*\d:\d\d(?::\d\d(?:\.\d*)?)?)\s*([+-])(\d\d)(?::?(\
 
 #: What numpy is given: an ISO 8601 date and time without a zone (numpy would parse any text after the time
 #: as one, with a warning).
-ISO_TIME = re.compile(r"[+-]?\d{4,}(?:-\d\d(?:-\d\d(?:[T ]\d\d(?::\d\d(?::\d\d(?:\.\d*)?)?)?)?)?)?")
+_ISO_TIME = re.compile(r"[+-]?\d{4,}(?:-\d\d(?:-\d\d(?:[T ]\d\d(?::\d\d(?::\d\d(?:\.\d*)?)?)?)?)?)?")
 
 
 def split_utc_offset(text):
@@ -39,7 +39,7 @@ def split_utc_offset(text):
 
     A trailing ``Z``, ``+00:00`` or no zone gives 0; an offset beyond 14 h
     (or minutes beyond 59), or text that is no ISO 8601 time
-    (:data:`ISO_TIME`) once the zone is off, gives None.
+    (``_ISO_TIME``) once the zone is off, gives None.
 
     Returns
     -------
@@ -55,7 +55,7 @@ def split_utc_offset(text):
         if hours > 14 or minutes > 59:
             return s, None
         s, offset = m.group(1), (60 * hours + minutes) * (1 if m.group(2) == "+" else -1)
-    return s, offset if ISO_TIME.fullmatch(s) else None
+    return s, offset if _ISO_TIME.fullmatch(s) else None
 
 
 def parse_utc(value, *, name="time"):

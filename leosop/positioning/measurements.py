@@ -46,7 +46,7 @@ from ..fileio import check_input_file, write_csv
 from ..frames import rotate_to_later_ecef
 from ..orbits.constellation import Constellation
 from ..orbits.propagate import state_ecef_pairs
-from ..timebase import ISO_TIME, format_utc, seconds_since, split_utc_offset
+from ..timebase import format_utc, seconds_since, split_utc_offset
 
 __all__ = ["Measurements", "read_measurements", "write_measurements", "sv_states_from_tle", "clock_groups",
            "row_families", "SV_STATE_COLUMNS", "DEFAULT_CARRIER_HZ", "MAX_TLE_AGE_DAYS"]
@@ -138,15 +138,21 @@ def _floats(values):
     return out, ~np.isfinite(out)
 
 
-def _utc_ns(text):
-    """datetime64[ns] UTC of ISO 8601 text ending in ``Z``, an offset (``+01:00``) or nothing; NaT if not a time."""
-    s, offset_min = split_utc_offset(text)
-    if offset_min is None:
-        return np.datetime64("NaT", "ns")
-    try:
-        return np.datetime64(s, "ns") - np.timedelta64(offset_min, "m")
+def _utc_ns(texts):
+    """datetime64[ns] UTC of ISO 8601 texts ending in ``Z``, an offset (``+01:00``) or nothing; NaT where one is
+    not a time. Array (n,)."""
+    parts = [split_utc_offset(s) for s in texts]  # the zone off (numpy would parse it with a warning)
+    minutes = np.array([m or 0 for _, m in parts], dtype="timedelta64[m]")
+    try:  # the usual table at once; a date numpy cannot read sends it row by row
+        out = np.array([s if m is not None else "NaT" for s, m in parts], dtype="datetime64[ns]")
     except ValueError:
-        return np.datetime64("NaT", "ns")
+        out = np.empty(len(parts), dtype="datetime64[ns]")
+        for k, (s, m) in enumerate(parts):
+            try:
+                out[k] = np.datetime64(s if m is not None else "NaT", "ns")
+            except ValueError:
+                out[k] = np.datetime64("NaT")
+    return out - minutes
 
 
 def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None = None,
@@ -215,15 +221,7 @@ def read_measurements(path: str | os.PathLike[str], *, carrier_hz: float | None 
     time_utc = None
     if "time_utc" in col:
         text = field("time_utc")
-        try:  # the usual table (UTC: Z or no zone) at once; offsets, typos and blanks row by row
-            plain = [s[:-1] if s.endswith("Z") else s for s in text]
-            if not all(map(ISO_TIME.fullmatch, plain)):  # a UTC offset, a typo: numpy would take it for a zone
-                raise ValueError
-            time_utc = np.array(plain, dtype="datetime64[ns]")
-            if np.isnat(time_utc).any():
-                raise ValueError
-        except ValueError:
-            time_utc = np.array([_utc_ns(s) for s in text], dtype="datetime64[ns]")
+        time_utc = _utc_ns(text)
         for i in np.flatnonzero(np.isnat(time_utc) & (reason == "")):
             reason[i] = (f"time_utc is {text[i]!r}, expected ISO 8601 in UTC or with a UTC offset "
                          "(e.g. 2024-01-02T03:04:05Z, 2024-01-02T04:04:05+01:00)")
