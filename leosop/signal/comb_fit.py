@@ -18,11 +18,11 @@ from ..kernels import pick
 from .coarse import abs2
 from .comb_grid import channels_hz, cis, comb_cis, dirichlet, leakage, leakage_all, tone_phases
 from .crlb import crlb_frequency_hz2
-from .fft import fft
+from .fft import empty_aligned, fft, ifft
 from .fine import comb_phasors, dechirped_peak_hz, newton_comb, rate_dpt, rate_grid_search, trimmed_tone_sum, wrap_hz
 
-__all__ = ["COMPILED_MIN_BLOCKS", "CombState", "cleaned_tones", "decimate", "decimate_combs", "fit_comb", "fit_kernel",
-           "refine_combs", "track_combs"]
+__all__ = ["COMPILED_MIN_BLOCKS", "CombState", "Fit", "cleaned_tones", "cn0_sigma", "decimate", "decimate_combs",
+           "fit_comb", "fit_kernel", "refine_arrays", "refine_combs", "track_arrays", "track_combs"]
 
 
 @dataclass
@@ -189,21 +189,12 @@ def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
     z = _stacked([c.y_wide for c in combs])
     compiled = pick(kernel, "leosop.signal.fitkernels")
     if compiled is not None:
-        n_c, n_seg = len(combs), grid.n_seg
-        if clean:
-            val, nu = _stacked([c.val for c in combs]), _stacked([c.nu for c in combs])
-        else:
-            val, nu = np.zeros((n_seg, n_c, n_k), np.complex64), np.zeros((n_seg, n_c, n_k))
-        out_z = np.empty_like(z)
-        doppler, rate, w, mean_cn0, statistic = np.empty((5, n_c))
-        amp = np.empty((n_c, n_k), dtype=complex)
-        val_out, nu_out = np.empty((n_seg, n_c, n_k), np.complex64), np.empty((n_seg, n_c, n_k))
-        compiled.refine(z, clean, extra, n_k, grid.tau, grid.tpow, comb.tone_spacing_hz / comb.carrier_hz,
-                        comb.tone_spacing_hz, comb.offsets_hz, comb.doppler_scale, f_c, mix, val, nu,
-                        grid.counts.astype(float), fs, grid.reach_hz, d_c,
-                        np.array([c.doppler_hz for c in combs]) - d_c, np.array([c.rate for c in combs]), n,
-                        grid.seg, grid.noise_gain, out_z, doppler, rate, w, mean_cn0, statistic, amp, val_out, nu_out)
-        _store(combs, n, fs, out_z, doppler, rate, w, mean_cn0, statistic, amp, val_out, nu_out)
+        val = _stacked([c.val for c in combs]) if clean else None
+        nu = _stacked([c.nu for c in combs]) if clean else None
+        fit = refine_arrays(compiled, grid, comb, z, extra, f_c, mix, d_c,
+                            np.array([c.doppler_hz for c in combs]) - d_c, np.array([c.rate for c in combs]), val, nu)
+        _store(combs, n, fs, fit.z, fit.doppler_hz, fit.rate, fit.w, fit.mean_cn0, fit.statistic, fit.amp, fit.val,
+               fit.nu)
         return
     if clean:
         z = z - leakage_all(grid, f_c, mix, _stacked([c.val for c in combs]), _stacked([c.nu for c in combs]))
@@ -235,13 +226,82 @@ def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
     _store(combs, n, fs, z, doppler, rate, w, mean_cn0, statistic, amp, val, nu)
 
 
+@dataclass
+class Fit:
+    """One compiled fitting pass over C combs (:func:`refine_arrays`), arrays of shape (C,) unless stated.
+
+    ``w`` (sum of tone C/N0 times Doppler scale squared) and ``mean_cn0`` (linear) give the Doppler sigma
+    and the C/N0 (:func:`cn0_sigma`); ``amp`` (C, K) the tone amplitudes, ``val`` (B, C, K) complex64 and
+    ``nu`` (B, C, K) the tones' values and frequencies at the segment centres, ``z`` (B, C, W) the tones
+    the fit used (cleaned).
+    """
+
+    doppler_hz: np.ndarray
+    rate: np.ndarray
+    w: np.ndarray
+    mean_cn0: np.ndarray
+    statistic: np.ndarray
+    amp: np.ndarray
+    val: np.ndarray
+    nu: np.ndarray
+    z: np.ndarray
+
+
+def refine_arrays(compiled, grid, comb, z_in, extra, f_c, mix, d_c, f0, r0, val=None, nu=None):
+    """One pass of :func:`refine_combs` in one compiled call (:func:`.fitkernels.refine`), on arrays.
+
+    Parameters
+    ----------
+    compiled : module
+        :mod:`.fitkernels`.
+    grid : DecimationGrid
+    comb : PilotComb
+    z_in : ndarray of complex128, (B, C, W)
+        Raw decimated tones of each comb's W channels; the comb's are ``extra .. extra + K - 1``.
+    extra : int
+    f_c : (C, W); mix : (B, C, W) complex128
+        Channel mixing frequencies and phasors.
+    d_c, f0, r0 : (C,)
+        Mixing centres, Doppler offsets from them and rates to start from.
+    val, nu : ndarray, (B, C, K), optional
+        The combs' previous tone values and frequencies: given, each comb's channels are cleaned of
+        the others' tones first.
+
+    Returns
+    -------
+    Fit
+    """
+    n_seg, n_c, _ = z_in.shape
+    n_k = comb.n_tones
+    clean = val is not None
+    if not clean:
+        val, nu = np.zeros((n_seg, n_c, n_k), np.complex64), np.zeros((n_seg, n_c, n_k))
+    out_z = np.empty_like(z_in)
+    doppler, rate, w, mean_cn0, statistic = np.empty((5, n_c))
+    amp = np.empty((n_c, n_k), dtype=complex)
+    val_out, nu_out = np.empty((n_seg, n_c, n_k), np.complex64), np.empty((n_seg, n_c, n_k))
+    compiled.refine(z_in, clean, extra, n_k, grid.tau, grid.tpow, comb.tone_spacing_hz / comb.carrier_hz,
+                    comb.tone_spacing_hz, comb.offsets_hz, comb.doppler_scale, f_c, mix, val, nu,
+                    grid.counts.astype(float), grid.fs, grid.reach_hz, d_c, f0, r0, grid.n, grid.seg,
+                    grid.noise_gain, out_z, doppler, rate, w, mean_cn0, statistic, amp, val_out, nu_out)
+    return Fit(doppler, rate, w, mean_cn0, statistic, amp, val_out, nu_out, out_z)
+
+
+def cn0_sigma(w, mean_cn0, n, fs):
+    """Doppler sigma [Hz] and C/N0 [dB-Hz] of combs from :class:`Fit`'s ``w`` and ``mean_cn0`` (C,), for
+    blocks of ``n`` samples at ``fs``: the Cramér-Rao bound of the tones' C/N0s, inf (-inf dB-Hz) without
+    signal."""
+    with np.errstate(divide="ignore"):
+        sigma_hz = np.where(w > 0, np.sqrt(crlb_frequency_hz2(10.0 * np.log10(np.where(w > 0, w, 1.0)), n, fs)), np.inf)
+        cn0_dbhz = np.where(mean_cn0 > 0, 10.0 * np.log10(np.where(mean_cn0 > 0, mean_cn0, 1.0)), -np.inf)
+    return sigma_hz, cn0_dbhz
+
+
 def _store(combs, n, fs, z, doppler, rate, w, mean_cn0, statistic, amp, val, nu):
     """:func:`refine_combs`' results written to its combs: (C,) ``doppler`` .. ``statistic``, ``amp`` (C, K),
     ``z`` (B, C, W) and ``val``, ``nu`` (B, C, K); ``w`` (sum of C/N0 times Doppler scale squared) and
     ``mean_cn0`` (linear) give the Doppler sigma and the C/N0 [dB-Hz]."""
-    with np.errstate(divide="ignore"):
-        sigma_hz = np.where(w > 0, np.sqrt(crlb_frequency_hz2(10.0 * np.log10(np.where(w > 0, w, 1.0)), n, fs)), np.inf)
-        cn0_dbhz = np.where(mean_cn0 > 0, 10.0 * np.log10(np.where(mean_cn0 > 0, mean_cn0, 1.0)), -np.inf)
+    sigma_hz, cn0_dbhz = cn0_sigma(w, mean_cn0, n, fs)
     for j, c in enumerate(combs):
         c.z_wide = z[:, j]
         c.doppler_hz, c.rate = float(doppler[j]), float(rate[j])
@@ -294,3 +354,48 @@ def track_combs(grid, comb, pred, pred_rate, wide, max_rate, pfa, kernel=None):
             fit_comb(grid, comb, c, c.y_wide.astype(complex), max_rate=max_rate, pfa=pfa, start=(0.0, c.rate),
                  resolve=False)
     return combs
+
+
+def track_arrays(compiled, grid, comb, pred, pred_rate):
+    """:func:`track_combs` of a tracking block (each comb's own channels, no position check) in compiled
+    calls and two FFTs, on arrays.
+
+    Every predicted comb is decimated (:func:`.fitkernels.fold`, the channels' inverse FFTs,
+    :func:`.fitkernels.channel_tones`), started at its dechirped peak (:func:`.fitkernels.dechirped_peaks`)
+    and fitted by one pass of :func:`refine_arrays` without cleaning. A tracking block of 7 combs
+    takes a few numpy calls where :func:`track_combs` makes some two hundred, and most of it runs
+    without the GIL.
+
+    Parameters
+    ----------
+    compiled : module
+        :mod:`.fitkernels`.
+    grid : DecimationGrid
+    comb : PilotComb
+    pred, pred_rate : ndarray, (C,)
+        Predicted central-tone Dopplers [Hz] and rates [Hz/s].
+
+    Returns
+    -------
+    fit : Fit
+    channels : tuple
+        ``(z, f_c, mix, d_c)``: the raw decimated tones (B, C, K) complex128, the channels' mixing
+        frequencies (C, K) and phasors (B, C, K), and the mixing centres (C,), for
+        :func:`refine_arrays`' further passes.
+    """
+    n_c, n_k, n_seg = pred.size, comb.n_tones, grid.n_seg
+    d_c = np.asarray(pred, dtype=float)
+    f_c = channels_hz(comb, d_c[:, None], n_k // 2)
+    df = grid.fs / grid.n_fft
+    bins = np.round(f_c.reshape(-1) / df).astype(np.int64)
+    k0 = int(grid.k[0])
+    folded = empty_aligned((n_c * n_k, n_seg), dtype=np.complex64)
+    compiled.fold(grid.spectrum, bins, k0, grid.weights, folded)
+    z = np.empty((n_seg, n_c, n_k), dtype=complex)
+    mix = np.empty_like(z)
+    zd = empty_aligned((n_c, n_k, 2 * n_seg), dtype=np.complex64)
+    rate = np.asarray(pred_rate, dtype=float)
+    compiled.channel_tones(ifft(folded), bins, df, k0, f_c, grid.t_abs, grid.tau, rate, z, mix, zd)
+    f0 = np.empty(n_c)
+    compiled.dechirped_peaks(fft(zd, scratch=True), grid.seg / grid.fs, f0)
+    return refine_arrays(compiled, grid, comb, z, 0, f_c, mix, d_c, f0, rate), (z, f_c, mix, d_c)

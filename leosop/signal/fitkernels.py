@@ -50,10 +50,16 @@ def _comb_cis(a_cycles, b_cycles, half, out):
 def _dirichlet(delta_hz, count, fs):
     """:func:`~.comb_grid.dirichlet` of one tone and segment, in double precision."""
     x = delta_hz * (np.pi / fs)
+    return _dirichlet_of(np.sin(x * count), x, count)
+
+
+@_jit
+def _dirichlet_of(sin_xl, x, count):
+    """:func:`_dirichlet` from its numerator ``sin(x L)`` and ``x = pi delta / fs``."""
     den = x * (1.0 - x * x * (1.0 / 6.0))
     if den == 0.0:
         return count
-    return np.sin(x * count) / den
+    return sin_xl / den
 
 
 @_jit
@@ -123,6 +129,7 @@ def refine(z_in, clean, k0, n_k, tau, tpow, ratio, spacing_hz, offsets_hz, scale
     """
     n_seg, n_c, n_w = z_in.shape
     half = n_k // 2
+    last = n_seg - 1
     if clean:
         _leakage(z_in, f_c, mix, val, nu, counts, fs, reach_hz, z)
     else:
@@ -133,26 +140,30 @@ def refine(z_in, clean, k0, n_k, tau, tpow, ratio, spacing_hz, offsets_hz, scale
         s = 1.0 + ratio * (k - half)
         a[k] = 2.0 * np.pi * s
         bq[k] = np.pi * s
-    u = np.empty(n_k, dtype=np.complex128)
+    u = np.empty((n_seg, n_k), dtype=np.complex128)
     m = np.empty((5, n_k), dtype=np.complex128)
     y_sum = np.empty(n_k, dtype=np.complex128)
     resid = np.empty(n_k)
     cn0_k = np.empty(n_k)
-    g_col = np.empty((n_seg, n_k), dtype=np.complex128)
     e_col = np.empty((n_seg, n_k), dtype=np.complex128)
     for j in range(n_c):
         f, r = f0[j], r0[j]
         step_f = step_r = 0.0
         live = True
         for _ in range(2):
-            m[:] = 0.0
             for b in range(n_seg):
                 phase = tau[b] * f + 0.5 * tpow[b, 2] * r
-                _comb_cis(-phase, -ratio * phase, half, u)
-                for k in range(n_k):
-                    v = u[k] * z[b, j, k0 + k]
-                    for p in range(5):
-                        m[p, k] += tpow[b, p] * v
+                _comb_cis(-phase, -ratio * phase, half, u[b])
+            for k in range(n_k):  # the moments sum_b tau^p u z, p = 0..4, in registers
+                m0 = m1 = m2 = m3 = m4 = 0j
+                for b in range(n_seg):
+                    v = u[b, k] * z[b, j, k0 + k]
+                    m0 += v
+                    m1 += tpow[b, 1] * v
+                    m2 += tpow[b, 2] * v
+                    m3 += tpow[b, 3] * v
+                    m4 += tpow[b, 4] * v
+                m[0, k], m[1, k], m[2, k], m[3, k], m[4, k] = m0, m1, m2, m3, m4
             g_f = g_r = h_ff = h_fr = h_rr = 0.0
             for k in range(n_k):
                 y0c = m[0, k].conjugate()
@@ -199,22 +210,149 @@ def refine(z_in, clean, k0, n_k, tau, tpow, ratio, spacing_hz, offsets_hz, scale
             cn0_sum += cn0_k[k]
         w[j], mean_cn0[j] = w_j, cn0_sum / n_k
         statistic[j] = p_tot / n_k / (n * sigma2) if sigma2 > 0 else np.inf
-        # Tone amplitudes by least squares on the chirp model.
+        # Tone amplitudes by least squares on the chirp model. The Dirichlet kernels' numerators
+        # sin(x L) follow the equally spaced segment centres (all but the last) as a rotation (~1e-15 rad).
         for b in range(n_seg):
             phase = tau[b] * dop + 0.5 * tau[b] ** 2 * r
             _comb_cis(phase, spacing_hz * tau[b] + ratio * phase, half, e_col[b])
-            for k in range(n_k):
-                f_t = offsets_hz[k] + (dop + tau[b] * r) * scale_hz[k]
-                nu_out[b, j, k] = f_t
-                g_col[b, k] = e_col[b, k] * mix[b, j, k0 + k] * _dirichlet(f_t - f_c[j, k0 + k], counts[b], fs)
         for k in range(n_k):
+            kk = k0 + k
+            rot = _cis(0.5 * counts[0] / fs * (offsets_hz[k] + (dop + tau[0] * r) * scale_hz[k] - f_c[j, kk]))
+            step = _cis(0.5 * counts[0] / fs * r * scale_hz[k] * (tau[1] - tau[0])) if n_seg > 1 else rot
             num = 0j
             den = 0.0
             for b in range(n_seg):
-                g = g_col[b, k]
-                num += z[b, j, k0 + k] * g.conjugate()
+                f_t = offsets_hz[k] + (dop + tau[b] * r) * scale_hz[k]
+                nu_out[b, j, k] = f_t
+                x = (f_t - f_c[j, kk]) * (np.pi / fs)
+                if b < last and counts[b] == counts[0]:
+                    d = _dirichlet_of(rot.imag, x, counts[b])
+                else:
+                    d = _dirichlet_of(np.sin(x * counts[b]), x, counts[b])
+                rot *= step
+                g = e_col[b, k] * mix[b, j, kk] * d
+                num += z[b, j, kk] * g.conjugate()
                 den += g.real * g.real + g.imag * g.imag
             amp[j, k] = num / den
         for b in range(n_seg):
             for k in range(n_k):
                 val_out[b, j, k] = np.complex64(e_col[b, k] * amp[j, k])
+
+
+@_jit
+def fold(spectrum, bins, k0, weights, out):
+    """The alias sums of :meth:`~.comb_grid.DecimationGrid.channels` for channels at FFT bins ``bins``.
+
+    ``out[c, q] = sum_p spectrum[(bins[c] + k0 + q + p B) mod n] weights[q + p B]``: the
+    (n_ch, B) input of the channels' B-point inverse FFTs.
+
+    Parameters
+    ----------
+    spectrum : ndarray of complex64, (n,)
+    bins : ndarray of int64, (n_ch,)
+    k0 : int
+        The grid's first bin offset (``grid.k[0]``).
+    weights : ndarray of complex64, (R B,)
+        The grid's alias weights.
+    out : ndarray of complex64, (n_ch, B)
+    """
+    n = spectrum.size
+    n_ch, n_seg = out.shape
+    n_alias = weights.size // n_seg
+    for c in range(n_ch):
+        start = bins[c] + k0
+        for q in range(n_seg):
+            acc = 0j
+            for p in range(n_alias):
+                acc += spectrum[(start + q + p * n_seg) % n] * weights[q + p * n_seg]
+            out[c, q] = acc
+
+
+@_jit
+def channel_tones(y_t, bins, df, k0, f_c, t_abs, tau, rate, z, mix, zd):
+    """A tracking block's decimated tones from the channels' inverse FFTs, and what their fits need.
+
+    The phase ramp and off-bin rotation of :meth:`~.comb_grid.DecimationGrid.channels`, the
+    channels' mixing phasors (:func:`~.comb_fit.decimate_combs`) and the tones dechirped at their
+    predicted rates for :func:`~.comb_fit.dechirped_peaks_hz`. Phasors along the segments and the tones
+    are products of two exponentials (segment centres equally spaced but the last): ~1e-15 rad.
+
+    Parameters
+    ----------
+    y_t : ndarray of complex64, (C K, B)
+        Inverse FFTs of :func:`fold`'s output, comb by comb, tone by tone.
+    bins : (C K,) int64; df : float; k0 : int
+        Their FFT bins, the bin spacing and the grid's first bin offset.
+    f_c : (C, K)
+        Channel mixing frequencies (:func:`~.comb_grid.channels_hz`), linear in the tone.
+    t_abs, tau : (B,)
+        Segment centres from the first sample and from the block centre.
+    rate : (C,)
+        Predicted rates [Hz/s].
+    z : (B, C, K) complex128
+        Out: the decimated tones.
+    mix : (B, C, K) complex128
+        Out: ``exp(-j 2 pi f_c t_abs)``.
+    zd : (C, K, 2 B) complex64
+        Out: the tones times ``exp(-j pi rate tau^2)``, zero-padded.
+    """
+    n_c, n_k = f_c.shape
+    n_seg = tau.size
+    last = n_seg - 1
+    zd[:] = 0.0
+    dechirp = np.empty(n_seg, dtype=np.complex128)
+    for j in range(n_c):
+        step_hz = f_c[j, 1] - f_c[j, 0] if n_k > 1 else 0.0
+        for m in range(n_seg):
+            e0 = _cis(-t_abs[m] * f_c[j, 0])
+            z_k = _cis(-t_abs[m] * step_hz)
+            for k in range(n_k):
+                mix[m, j, k] = e0
+                e0 *= z_k
+            dechirp[m] = _cis(-0.5 * rate[j] * tau[m] * tau[m])
+        for k in range(n_k):
+            c = j * n_k + k
+            off_hz = f_c[j, k] - bins[c] * df
+            ramp = _cis(-t_abs[0] * off_hz)
+            step = _cis(k0 / n_seg - (t_abs[1] - t_abs[0]) * off_hz) if n_seg > 1 else ramp
+            for m in range(n_seg):
+                if m == last and m > 0:
+                    ramp = _cis(k0 / n_seg * m - t_abs[m] * off_hz)
+                v = complex(y_t[c, m]) * ramp
+                z[m, j, k] = v
+                zd[j, k, m] = v * dechirp[m]
+                ramp *= step
+
+
+@_jit
+def dechirped_peaks(spec, dt_dec, out):
+    """:func:`~.comb_fit.dechirped_peaks_hz` from the FFTs of :func:`channel_tones`' ``zd``.
+
+    Parameters
+    ----------
+    spec : ndarray of complex64, (C, K, n_fft)
+    dt_dec : float
+        Segment length [s].
+    out : ndarray, (C,)
+        Out: each comb's peak frequency [Hz], the parabola's vertex between bins, within +-1 / (2 dt_dec).
+    """
+    n_c, n_k, n_fft = spec.shape
+    p = np.empty(n_fft)
+    fs_dec = 1.0 / dt_dec
+    for j in range(n_c):
+        best, i_best = -np.inf, 0
+        for i in range(n_fft):
+            s = top = 0.0
+            for k in range(n_k):
+                v = spec[j, k, i]
+                a = float(v.real) * float(v.real) + float(v.imag) * float(v.imag)
+                s += a
+                top = max(top, a)
+            p[i] = s - top if n_k >= 5 else s  # trimmed_tone_sum
+            if p[i] > best:
+                best, i_best = p[i], i
+        pm, p0, pp = p[i_best - 1], p[i_best], p[(i_best + 1) % n_fft]
+        den = pm - 2.0 * p0 + pp
+        vertex = min(max(0.5 * (pm - pp) / den, -0.5), 0.5) if den != 0.0 else 0.0
+        f = (i_best + vertex) / (n_fft * dt_dec)
+        out[j] = (f + 0.5 * fs_dec) % fs_dec - 0.5 * fs_dec

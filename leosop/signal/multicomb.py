@@ -74,8 +74,10 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import InputError
+from ..kernels import pick
 from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, coarse_fft, detection_threshold
-from .comb_fit import CombState, cleaned_tones, decimate, fit_comb, refine_combs, track_combs
+from .comb_fit import (CombState, cleaned_tones, cn0_sigma, decimate, fit_comb, refine_arrays, refine_combs,
+                       track_arrays, track_combs)
 from .comb_grid import DecimationGrid, NonFiniteSamples, cis, dirichlet
 from .fft import fft
 from .fine import segment_grid
@@ -186,13 +188,49 @@ def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz, sp
 
 def _duplicate(comb, c, combs, dur):
     """True when ``c`` lies within 2/T (modulo the spacing) and 4/T^2 of a comb already found."""
+    return _near_any(comb, c.doppler_hz, c.rate, [o.doppler_hz for o in combs], [o.rate for o in combs], dur)
+
+
+def _near_any(comb, doppler_hz, rate, dopplers_hz, rates, dur):
+    """True when a comb at ``doppler_hz``, ``rate`` lies within 2/T (modulo the spacing) and 4/T^2 of one of
+    the combs at ``dopplers_hz``, ``rates`` (sequences of floats: a few, so scalar arithmetic)."""
     sp = comb.tone_spacing_hz
-    for o in combs:
-        dd = c.doppler_hz - o.doppler_hz
+    for d, r in zip(dopplers_hz, rates):
+        dd = doppler_hz - d
         # np.rint: np.round's rounding without its wrappers (on a scalar they cost 5x the rounding).
-        if abs(dd - sp * np.rint(dd / sp)) < 2.0 / dur and abs(c.rate - o.rate) < 4.0 / dur**2:
+        if abs(dd - sp * np.rint(dd / sp)) < 2.0 / dur and abs(rate - r) < 4.0 / dur**2:
             return True
     return False
+
+
+def _detection_threshold(grid, comb, max_rate_hz_per_s, pfa):
+    """The tracking detector's threshold on a comb's statistic: ``pfa`` over the block's rate-frequency cells."""
+    dur = grid.n / grid.fs
+    return detection_threshold(comb.n_tones, grid.n_seg * max(1, int(np.ceil(2.0 * max_rate_hz_per_s * dur**2))),
+                               pfa)
+
+
+def _track_compiled(compiled, grid, comb, pred, pred_rate, gate, threshold, n_refine):
+    """Tracking with the batch fit compiled (:func:`~.comb_fit.track_arrays`): the predictions that pass
+    the detector near their prediction and are no other's duplicate, then ``n_refine`` cleaning passes.
+    The same steps as :class:`_Finder`'s ``predictions`` and :func:`find_combs`' refinement; Combs."""
+    fit, (z, f_c, mix, d_c) = track_arrays(compiled, grid, comb, pred, pred_rate)
+    dur, df = grid.n / grid.fs, grid.fs / grid.n
+    dopplers, rates = fit.doppler_hz.tolist(), fit.rate.tolist()  # Python floats: a few combs, scalar tests
+    passed = (fit.statistic > threshold) & (np.abs(fit.doppler_hz - pred) <= gate + 2.0 * df)
+    keep = []
+    for j in np.flatnonzero(passed).tolist():
+        if not _near_any(comb, dopplers[j], rates[j], [dopplers[i] for i in keep], [rates[i] for i in keep], dur):
+            keep.append(j)
+    if len(keep) < pred.size:
+        z, f_c, mix, d_c = z[:, keep], f_c[keep], mix[:, keep], d_c[keep]
+        fit.doppler_hz, fit.rate, fit.w, fit.mean_cn0, fit.statistic, fit.amp, fit.val, fit.nu = (
+            fit.doppler_hz[keep], fit.rate[keep], fit.w[keep], fit.mean_cn0[keep], fit.statistic[keep], fit.amp[keep],
+            fit.val[:, keep], fit.nu[:, keep])
+    for _ in range(n_refine if len(keep) > 1 else 0):
+        fit = refine_arrays(compiled, grid, comb, z, 0, f_c, mix, d_c, fit.doppler_hz - d_c, fit.rate, fit.val, fit.nu)
+    sigma_hz, cn0_dbhz = cn0_sigma(fit.w, fit.mean_cn0, grid.n, grid.fs)
+    return Combs(fit.doppler_hz, fit.rate, cn0_dbhz, sigma_hz, fit.amp, fit.statistic, np.array(keep, dtype=int))
 
 
 def _check(iq, fs, predicted_hz, predicted_rate):
@@ -239,8 +277,7 @@ class _Finder:
     def predictions(self, pred, pred_rate, gate, batch, max_combs):
         """Tracking: each prediction from its own tones; kept if the coherent power passes the detector."""
         grid, comb, combs, dur, df = self.grid, self.comb, self.combs, self.dur, self.df
-        n_cells = grid.n_seg * max(1, int(np.ceil(2.0 * self.max_rate * dur**2)))
-        thr = detection_threshold(comb.n_tones, n_cells, self.pfa)
+        thr = _detection_threshold(grid, comb, self.max_rate, self.pfa)
         if pred_rate is not None and pred.size and batch:
             for c in track_combs(grid, comb, pred[:max_combs], pred_rate[:max_combs], self.wide, self.max_rate,
                                  self.pfa, self.kernel):
@@ -393,6 +430,10 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     else:
         grid = DecimationGrid(iq, fs, max(error_hz, gate) + 0.5 * max_rate_hz_per_s * dur, spectrum=spectrum)
     half = comb.n_tones // 2
+    compiled = pick(kernel, "leosop.signal.fitkernels")
+    if tracking and batch and compiled is not None:
+        return _track_compiled(compiled, grid, comb, pred[:max_combs], pred_rate[:max_combs], gate,
+                               _detection_threshold(grid, comb, max_rate_hz_per_s, pfa), n_refine)
     finder = _Finder(grid, comb, half if tracking else half + _EXTRA, max_rate_hz_per_s, pfa, kernel)
     finder.predictions(pred, pred_rate, gate, batch, max_combs)
     if search and len(finder.combs) < max_combs:
