@@ -15,11 +15,12 @@ per-thread plans), which release the GIL; the cleaned block's FFT, made
 here, is handed to the comb search (``find_combs(..., spectrum=)``).
 Measured on a continuous 2.5 MS/s recording of 7 satellites (120 s, 0.1 s
 blocks, compiled kernels, ``tools/bench_replay.py``, idle cores), the
-preparation is about half the streaming stage's processor time (2.79 of
-5.18 s: 2.3 ms a block, of which ~1 ms the FFT), the comb search and
+preparation is about half the streaming stage's processor time (2.40 of
+4.77 s: 2.0 ms a block, of which ~1 ms the FFT), the comb search and
 tracking the rest: two threads can at best run it in the preparation's
-time (1.41x measured); more help only where the preparation dominates
-(wide recordings narrowed block by block).
+time (1.41x measured on idle cores, before the search was compiled); more
+help only where the preparation dominates (wide recordings narrowed block
+by block).
 """
 
 import sys

@@ -31,7 +31,9 @@ multi-satellite Starlink receivers of Humphreys 2023 and Kozhaya 2023]:
 Tracking (``predicted_hz`` and ``predicted_rate_hz_per_s`` given,
 ``batch=True``): all predictions are decimated in one matrix product and
 fitted at once from their own tones (dechirped peak, Newton, position
-check), then the refinement passes clean them. ``batch=False`` fits them
+check), then the refinement passes clean them; with the compiled kernels
+(``kernel``) a block that only tracks runs as a few compiled calls on arrays
+(:func:`~.comb_fit.track_arrays`, the same steps). ``batch=False`` fits them
 one after another as the search does; both end within ~0.03 sigma of each
 other (tests/signal/test_multicomb.py). A replay that tracks should call with the
 previous block's estimates propagated (``doppler_hz + rate * block_s``,
