@@ -21,11 +21,12 @@
    length over elapsed time of the streaming stage, their ratio, the load
    average beside them (on a shared machine other processes take the
    cores: Linux shares the CPU between sessions, so a second thread gains
-   only what the others leave idle), and the bound two idle cores allow: the
-   larger of the two threads' shares of the serial processor time (reading
-   and cleaning the blocks, ``leosop.replay.stream``; search and tracking), and the
-   preparation alone on ``--threads`` worker threads with the search left
-   out: the ceiling of this design however fast the search were.
+   only what the others leave idle), and the bound idle cores allow: the
+   search and tracking run on one thread, the reading and cleaning of the
+   blocks (``leosop.replay.stream``) on all of them (the searching thread
+   prepares blocks whenever it would wait), so the larger of the search's
+   processor time and the whole over the threads; and the preparation alone
+   on ``--threads`` threads with the search left out.
 3. This tree against the baseline (``--baseline-ref``, default ``main``,
    exported with ``git archive``; ``none`` skips it), ``leosop replay
    --static --init ... --json`` of the same continuous recording with
@@ -178,13 +179,13 @@ def bench_throughput(tmp, seconds, n_sats, repeats=3):
 
 
 def _prepare_s(rec, threads=1):
-    """Processor and elapsed time of reading, narrowing and cleaning every 0.1 s block (the workers' share),
-    in one thread, or on ``threads`` worker threads with nothing else to do (the caller takes the blocks)."""
+    """Processor and elapsed time of reading, narrowing and cleaning every 0.1 s block, in one thread, or on
+    ``threads`` threads with nothing else to do (the caller's thread among them: it only takes the blocks)."""
     comb = PilotComb(carrier_hz=rec.center_hz or PilotComb.carrier_hz, n_tones=rec.n_tones,
                      tone_spacing_hz=rec.tone_spacing_hz)
     factor = search_band(rec.sample_rate_hz, comb, LO_OFFSET_MAX_HZ)[0]
     t0, w0 = time.process_time(), time.perf_counter()
-    for _ in prepared_blocks(rec, block_plan(rec, 0.1), factor, comb, threads=threads + (threads > 1)):
+    for _ in prepared_blocks(rec, block_plan(rec, 0.1), factor, comb, threads=threads):
         pass
     return time.process_time() - t0, time.perf_counter() - w0
 
@@ -237,6 +238,7 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
     prep_alone = min(_prepare_s(rec, threads)[1] for _ in range(repeats))
     serial_cpu = min(cpu[1])
     control = _cores_available(threads)
+    bound = max(serial_cpu - prep, serial_cpu / threads)
     print(f"threads: {seconds:g} s recording, best of {repeats} alternating (load average "
           f"{', '.join(f'{v:.1f}' for v in os.getloadavg())} on {os.cpu_count()} cores): streaming 1 thread "
           f"{b1:.2f} s = {seconds / b1:.1f}x real time, {threads} threads {bn:.2f} s = {seconds / bn:.1f}x, "
@@ -244,9 +246,9 @@ def bench_threads(rec, const, seconds, threads, repeats=3):
           f"results {'identical' if same else 'DIFFERENT'}. Processor time of the streaming stage "
           f"{serial_cpu:.2f} s (1 thread), {min(cpu[threads]):.2f} s ({threads}); reading and cleaning {prep:.2f} s, "
           f"search and tracking {serial_cpu - prep:.2f} s: on idle cores at most "
-          f"{serial_cpu / max(prep, serial_cpu - prep):.2f}x the serial speed, "
-          f"{seconds / max(prep, serial_cpu - prep):.1f}x real time. The preparation alone on {threads} worker "
-          f"threads (no search: a ceiling of this design) {prep_alone:.2f} s = {seconds / prep_alone:.1f}x real time. "
+          f"{serial_cpu / bound:.2f}x the serial speed, {seconds / bound:.1f}x real time (the search runs on one "
+          f"thread, the preparation on all). The preparation alone on {threads} "
+          f"threads (no search) {prep_alone:.2f} s = {seconds / prep_alone:.1f}x real time. "
           f"Control: a pure-Python loop split across "
           f"{threads} processes ran {control:.2f}x as fast as in one (the cores this run was given)")
 

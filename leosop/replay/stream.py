@@ -1,4 +1,4 @@
-"""A recording's blocks read, narrowed and cleaned, in order, on worker threads ahead of the comb search.
+"""A recording's blocks read, narrowed and cleaned, in order, on several threads ahead of the comb search.
 
 What a block needs before its comb search does not depend on the blocks
 before it: the samples, their narrowing to the working rate (:func:`narrow`),
@@ -7,26 +7,27 @@ the check for NaN/inf and the front-end cleaning
 interferers). :func:`prepared_blocks` does that for the next blocks on
 ``threads - 1`` worker threads while the caller searches and tracks the
 current one (which does depend on the blocks before it: the tracker's
-predictions), and hands the blocks back in their order: the work of each
-block is the same as in one thread, so are the results, bit for bit.
+predictions), and the caller's thread prepares the next block not yet
+started whenever the one it needs is not ready, rather than wait. The
+blocks come back in their order: the work of each block is the same as in
+one thread, so are the results, bit for bit.
 
-The workers spend their time in numpy and FFTW (:mod:`leosop.signal.fft`,
-per-thread plans), which release the GIL; the cleaned block's FFT, made
-here, is handed to the comb search (``find_combs(..., spectrum=)``).
-Measured on a continuous 2.5 MS/s recording of 7 satellites (120 s, 0.1 s
-blocks, compiled kernels, ``tools/bench_replay.py``, idle cores), the
-preparation is about half the streaming stage's processor time (2.40 of
-4.77 s: 2.0 ms a block, of which ~1 ms the FFT), the comb search and
-tracking the rest: two threads can at best run it in the preparation's
-time (1.41x measured on idle cores, before the search was compiled); more
-help only where the preparation dominates (wide recordings narrowed block
-by block).
+The preparation spends its time in numpy and FFTW (:mod:`leosop.signal.fft`,
+per-thread plans), which release the GIL, as do the compiled comb fits; the
+cleaned block's FFT, made here, is handed to the comb search
+(``find_combs(..., spectrum=)``). Measured on a continuous 2.5 MS/s
+recording of 7 satellites (120 s, 0.1 s blocks, compiled kernels,
+``tools/bench_replay.py``, idle cores), the preparation is about half the
+streaming stage's processor time (2.40 of 4.77 s: 2.0 ms a block, of which
+~1 ms the FFT), the comb search and tracking the rest. With one worker
+thread the preparation alone set the pace (the caller waited ~1.2 ms a
+block); with the caller preparing too, two threads replayed a 60 s
+recording at 36-38x real time against 27-30x (alternating runs, idle
+cores). A third thread is slower on two cores.
 """
 
 import sys
 import threading
-from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -188,8 +189,10 @@ def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0, k
         The comb the cleaning keeps (its tones are not interferers).
     threads : int
         1: each block prepared when the caller asks for it. N > 1: N - 1
-        worker threads prepare up to :data:`LOOKAHEAD_PER_WORKER` blocks each
-        ahead of the caller (the caller's thread is the N-th).
+        worker threads prepare up to :data:`LOOKAHEAD_PER_WORKER` blocks per
+        thread ahead of the caller, and the caller's thread, the N-th, takes
+        the next block not yet started whenever the one it asks for is not
+        ready (rather than wait).
     spectrum_every : int
         Every this-many-th block (0: none) carries its :func:`spectrum_column`.
     kernel : {None, "numba", "numpy"}
@@ -207,21 +210,86 @@ def prepared_blocks(rec, blocks, factor, comb, *, threads=1, spectrum_every=0, k
     if threads <= 1:
         yield from map(prepare, enumerate(blocks))
         return
-    pool = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="leosop-replay")
-    pending = deque()
+    work = _Shared(blocks, prepare, LOOKAHEAD_PER_WORKER * threads)
+    workers = [threading.Thread(target=work.run, name=f"leosop-replay-{i}", daemon=True) for i in range(threads - 1)]
     try:
         with _short_switch_interval():
-            for item in enumerate(blocks):
-                pending.append(pool.submit(prepare, item))
-                if len(pending) > LOOKAHEAD_PER_WORKER * (threads - 1):
-                    yield pending.popleft().result()
-            while len(pending) > 1:
-                yield pending.popleft().result()
-            last = pending.popleft().result() if pending else None
+            for t in workers:
+                t.start()
+            for k in range(len(blocks) - 1):
+                yield work.take(k)
+            last = work.take(len(blocks) - 1) if blocks else None
         # The interval restored before the last block is handed over: a caller that takes every block
         # (``zip`` with the blocks first never asks for more) leaves nothing set behind.
         if last is not None:
             yield last
     finally:
-        # An error (or a caller that stops early) leaves blocks queued: drop them, let the running ones end.
-        pool.shutdown(wait=True, cancel_futures=True)
+        # An error (or a caller that stops early) leaves blocks unstarted: drop them, let the running ones end.
+        work.stop()
+        for t in workers:
+            if t.is_alive():
+                t.join()
+
+
+class _Shared:
+    """The blocks' preparation shared by worker threads and the caller: the next block to start, the
+    blocks ready (or the error of one), and how far ahead of the caller the threads may run."""
+
+    def __init__(self, blocks, prepare, ahead):
+        self.blocks, self.prepare, self.ahead = blocks, prepare, ahead
+        self.next = 0  # the next block to start
+        self.taken = 0  # blocks handed to the caller
+        self.ready = {}  # k -> (PreparedBlock, None) or (None, exception)
+        self.stopped = False
+        self.cond = threading.Condition()
+
+    def _claim(self):
+        """The next block to start within the window, or None (called holding the lock)."""
+        if self.stopped or self.next >= min(len(self.blocks), self.taken + self.ahead):
+            return None
+        k, self.next = self.next, self.next + 1
+        return k
+
+    def _do(self, k):
+        try:
+            out = (self.prepare((k, self.blocks[k])), None)
+        except Exception as exc:  # raised in the caller when block k's turn comes
+            out = (None, exc)
+        with self.cond:
+            self.ready[k] = out
+            self.cond.notify_all()
+
+    def run(self):
+        """A worker thread: prepare blocks while there are any within the window, else wait."""
+        while True:
+            with self.cond:
+                k = self._claim()
+                while k is None:
+                    if self.stopped or self.next >= len(self.blocks):
+                        return
+                    self.cond.wait()
+                    k = self._claim()
+            self._do(k)
+
+    def take(self, k):
+        """Block ``k`` for the caller; until it is ready the caller prepares the next unstarted block."""
+        while True:
+            with self.cond:
+                if k in self.ready:
+                    block, exc = self.ready.pop(k)
+                    self.taken = k + 1
+                    self.cond.notify_all()
+                    break
+                j = self._claim()
+                if j is None:
+                    self.cond.wait()
+                    continue
+            self._do(j)
+        if exc is not None:
+            raise exc
+        return block
+
+    def stop(self):
+        with self.cond:
+            self.stopped = True
+            self.cond.notify_all()

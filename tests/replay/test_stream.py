@@ -42,3 +42,35 @@ def test_switch_interval_is_restored_once_every_block_is_taken(monkeypatch):
     assert next(gen) == 0 and sys.getswitchinterval() == min(before, SWITCH_INTERVAL_S)
     gen.close()
     assert sys.getswitchinterval() == before
+
+
+def test_blocks_come_in_order_prepared_by_the_caller_too(monkeypatch):
+    # Worker threads and the caller's thread share the blocks (the caller prepares the next unstarted block
+    # while the one it needs is not ready); the blocks come back in their order whoever prepared them, and an
+    # error is raised when its block's turn comes, after the blocks before it.
+    import time
+
+    import pytest
+
+    import leosop.replay.stream as stream
+
+    ran_on = {}
+
+    def prepare(rec, factor, comb, every, kernel, item):
+        k = item[0]
+        ran_on[k] = threading.current_thread()
+        time.sleep(0.002 * (k % 3))  # uneven work: blocks finish out of order
+        if k == 9:
+            raise ValueError("block 9")
+        return k
+
+    monkeypatch.setattr(stream, "_prepare", prepare)
+    blocks = list(range(12))
+    for threads in (2, 3):
+        ran_on.clear()
+        gen = stream.prepared_blocks(None, blocks, 1, None, threads=threads)
+        assert [next(gen) for _ in range(9)] == list(range(9))
+        with pytest.raises(ValueError, match="block 9"):
+            next(gen)
+        assert threading.current_thread() in ran_on.values()  # the caller prepared some blocks
+        assert len(set(ran_on.values())) > 1  # and the workers others
