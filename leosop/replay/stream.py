@@ -250,17 +250,19 @@ class _Shared:
         k, self.next = self.next, self.next + 1
         return k
 
-    def _do(self, k):
+    def _do(self, k, catch=Exception):
+        """Prepare block ``k``; an error (``catch``) is kept for the caller, to raise when k's turn comes."""
         try:
             out = (self.prepare((k, self.blocks[k])), None)
-        except Exception as exc:  # raised in the caller when block k's turn comes
+        except catch as exc:
             out = (None, exc)
         with self.cond:
             self.ready[k] = out
             self.cond.notify_all()
 
     def run(self):
-        """A worker thread: prepare blocks while there are any within the window, else wait."""
+        """A worker thread: prepare blocks while there are any within the window, else wait. Whatever a
+        block raises goes to the caller (a worker that died would leave its block never ready)."""
         while True:
             with self.cond:
                 k = self._claim()
@@ -269,7 +271,7 @@ class _Shared:
                         return
                     self.cond.wait()
                     k = self._claim()
-            self._do(k)
+            self._do(k, catch=BaseException)
 
     def take(self, k):
         """Block ``k`` for the caller; until it is ready the caller prepares the next unstarted block."""
