@@ -82,7 +82,8 @@ def register(subparsers):
                    help="continuous recordings: track each identified satellite's carrier phase (carrier.csv); "
                         "with --static the fix takes its phase-rate Doppler in place of the block Doppler")
     p.add_argument("--threads", type=int, metavar="N",
-                   help="threads for one recording (N-1 read and clean blocks ahead of the search; the "
+                   help="threads for one recording (N-1 read and clean blocks ahead of the search, which does too "
+                        "while it waits; the "
                         "identification's cell vote on N), the same result whatever N (default: the cores, at "
                         f"most {MAX_DEFAULT_THREADS}: {_default_threads()} here)")
 
@@ -136,7 +137,7 @@ def _check_options(args):
 
 
 #: ``--threads``' default is the cores available up to this: on idle cores two threads replayed a 120 s
-#: recording 1.28x as fast end to end (1.34x the streaming stage) and three no faster than two
+#: recording 1.17x as fast end to end (1.80x the streaming stage) and three slower than two
 #: (docs/replay.md, "Threads").
 MAX_DEFAULT_THREADS = 2
 
