@@ -13,6 +13,9 @@ reference.
 - :func:`fold`, :func:`channel_tones`, :func:`dechirped_peaks`: the rest of
   a tracking block (:func:`~leosop.signal.comb_fit.track_arrays`): the
   channels' decimation from the block's FFT, and each comb's dechirped peak.
+- :func:`comb_segments`, :func:`subtract_windows`: found combs subtracted
+  from a block's FFT before the search for more
+  (:func:`~leosop.signal.multicomb.find_combs`).
 
 On a tracking block (80 segments, 7 combs of 9 tones) the numpy path is a
 few hundred calls on small arrays, mostly call overhead; :func:`refine`
@@ -31,7 +34,7 @@ beside the block cleaning of another (:mod:`leosop.replay.stream`).
 import numba
 import numpy as np
 
-__all__ = ["channel_tones", "dechirped_peaks", "fold", "refine"]
+__all__ = ["channel_tones", "comb_segments", "dechirped_peaks", "fold", "refine", "subtract_windows"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -365,3 +368,95 @@ def dechirped_peaks(spec, dt_dec, out):
         vertex = min(max(0.5 * (pm - pp) / den, -0.5), 0.5) if den != 0.0 else 0.0
         f = (i_best + vertex) / (n_fft * dt_dec)
         out[j] = (f + 0.5 * fs_dec) % fs_dec - 0.5 * fs_dec
+
+
+@_jit
+def comb_segments(tau, offsets_hz, scale_hz, doppler, rate, amp, out):
+    """Each comb's tones at the segment centres: ``amp[c, k] exp(j 2 pi (tau off_k + s_k (d_c tau + r_c tau^2 / 2)))``.
+
+    The first step of :func:`~leosop.signal.multicomb._subtract_spectrum` (whose FFT over the
+    segments follows). The phase is linear in the tone and, over equally spaced segments,
+    quadratic in the segment: each comb's two phasors follow the segments by products, recomputed
+    exactly every 64 segments (~1e-14 rad).
+
+    Parameters
+    ----------
+    tau : (B,)
+        Segment centres from the block centre [s], equally spaced.
+    offsets_hz, scale_hz : (K,)
+        Tone offsets and Doppler scale factors (both linear in the tone).
+    doppler, rate : (C,)
+    amp : (C, K) complex
+    out : ndarray of complex64, (C, K, B)
+    """
+    n_c, n_k, n_seg = out.shape
+    d_off = offsets_hz[1] - offsets_hz[0] if n_k > 1 else 0.0
+    d_scale = scale_hz[1] - scale_hz[0] if n_k > 1 else 0.0
+    dt = tau[1] - tau[0] if n_seg > 1 else 0.0
+    for c in range(n_c):
+        # first(b) = tau off_0 + ph s_0 and step(b) = tau d_off + ph d_scale, ph = d tau + r tau^2 / 2:
+        # both quadratic in b, so each phasor's ratio between segments changes by a fixed factor.
+        for b in range(n_seg):
+            if b % 64 == 0:
+                t0, t1 = tau[b], tau[b] + dt
+                ph0 = doppler[c] * t0 + 0.5 * rate[c] * t0 * t0
+                ph1 = doppler[c] * t1 + 0.5 * rate[c] * t1 * t1
+                e = _cis(t0 * offsets_hz[0] + ph0 * scale_hz[0])
+                z = _cis(t0 * d_off + ph0 * d_scale)
+                # Ratios to the next segment, and their change per segment (rate dt^2 in ph).
+                e_step = _cis((t1 - t0) * offsets_hz[0] + (ph1 - ph0) * scale_hz[0])
+                z_step = _cis((t1 - t0) * d_off + (ph1 - ph0) * d_scale)
+                e_curve = _cis(rate[c] * dt * dt * scale_hz[0])
+                z_curve = _cis(rate[c] * dt * dt * d_scale)
+            v = e
+            for k in range(n_k):
+                out[c, k, b] = amp[c, k] * v
+                v *= z
+            e *= e_step
+            z *= z_step
+            e_step *= e_curve
+            z_step *= z_curve
+
+
+@_jit
+def subtract_windows(spectrum, dft, nu0_hz, fs, seg):
+    """The second step of :func:`~leosop.signal.multicomb._subtract_spectrum`: each tone's model
+    subtracted from the block's FFT over a window of B bins around it, in place, tone after tone.
+
+    Bin b of tone (c, k) loses ``D(nu0 - b df) exp(-j 2 pi b (L - 1) / (2 n)) dft[c, k, b mod B]``,
+    D the Dirichlet kernel of a segment of L samples. Along the window both factors rotate by a
+    fixed step (recomputed exactly every 64 bins: ~1e-14 rad).
+
+    Parameters
+    ----------
+    spectrum : ndarray of complex64, (n,)
+    dft : ndarray of complex64, (C, K, B)
+        FFTs over the segments of :func:`comb_segments`' output.
+    nu0_hz : (C, K)
+        The tones' frequencies at the middle segment.
+    fs : float
+    seg : int
+        Samples per segment (L).
+    """
+    n = spectrum.size
+    n_c, n_k, n_seg = dft.shape
+    df = fs / n
+    dx = np.pi / n  # x = pi (nu0 - b df) / fs falls by this per bin
+    step_num = _cis(-0.5 * seg * dx / np.pi)
+    step_rot = _cis(-(seg - 1) / (2.0 * n))
+    for c in range(n_c):
+        for k in range(n_k):
+            b0 = int(np.rint(nu0_hz[c, k] / df)) - n_seg // 2
+            x0 = np.pi * (nu0_hz[c, k] - b0 * df) / fs
+            i, q = b0 % n, b0 % n_seg  # the bin and its column of dft
+            num = rot = 0j
+            for j in range(n_seg):
+                x = x0 - j * dx
+                if j % 64 == 0:
+                    num = _cis(0.5 * seg * x / np.pi)
+                    rot = _cis(-(b0 + j) * (seg - 1) / (2.0 * n))
+                spectrum[i] -= np.complex64(_dirichlet_of(num.imag, x, seg) * rot * dft[c, k, q])
+                num *= step_num
+                rot *= step_rot
+                i = i + 1 if i + 1 < n else 0
+                q = q + 1 if q + 1 < n_seg else 0

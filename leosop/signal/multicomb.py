@@ -81,7 +81,7 @@ from .coarse import MAX_DOPPLER_HZ, MAX_RATE_HZ_PER_S, PFA, coarse_fft, detectio
 from .comb_fit import (CombState, cleaned_tones, cn0_sigma, decimate, fit_comb, refine_arrays, refine_combs,
                        track_arrays, track_combs)
 from .comb_grid import DecimationGrid, NonFiniteSamples, cis, dirichlet
-from .fft import fft
+from .fft import empty_aligned, fft
 from .fine import segment_grid
 from .cleaning import clean_block
 from .pilot import PilotComb
@@ -140,10 +140,11 @@ def _spectrum_grid(n, target):
     return min(div, key=lambda b: abs(b - target)) if div else n
 
 
-def _subtract_spectrum(spectrum, comb, doppler_hz, rate, amp, n, fs, n_seg_s):
+def _subtract_spectrum(spectrum, comb, doppler_hz, rate, amp, n, fs, n_seg_s, kernel=None):
     """Remove combs (central-tone Doppler ``doppler_hz`` and ``rate``, (C,), tone amplitudes ``amp``, (C, K))
     from the block's FFT (in place) over ``n_seg_s`` bins around each tone, all at once (the bins are
-    subtracted in the combs' order, as one at a time)."""
+    subtracted in the combs' order, as one at a time). ``kernel``: as :func:`find_combs`' (compiled:
+    :func:`.fitkernels.comb_segments` and :func:`.fitkernels.subtract_windows`, agreeing to float32 rounding)."""
     doppler_hz, rate = np.asarray(doppler_hz, dtype=float), np.asarray(rate, dtype=float)
     if not doppler_hz.size:
         return
@@ -151,10 +152,16 @@ def _subtract_spectrum(spectrum, comb, doppler_hz, rate, amp, n, fs, n_seg_s):
     df = fs / n
     _, _, tau, _ = segment_grid(n, fs, n_seg_s, seg)
     s = comb.doppler_scale
-    # :func:`~.comb_grid.tone_phases` of every comb, (C, B_s, K), and the tone frequencies at the middle segment.
+    nu0 = comb.offsets_hz + (doppler_hz + rate * tau[n_seg_s // 2])[:, None] * s  # (C, K) at the middle segment
+    compiled = pick(kernel, "leosop.signal.fitkernels")
+    if compiled is not None:
+        tones = empty_aligned((doppler_hz.size, comb.n_tones, n_seg_s), dtype=np.complex64)
+        compiled.comb_segments(tau, comb.offsets_hz, s, doppler_hz, rate, np.asarray(amp, dtype=complex), tones)
+        compiled.subtract_windows(spectrum, fft(tones, scratch=True), nu0, float(fs), seg)
+        return
+    # :func:`~.comb_grid.tone_phases` of every comb, (C, B_s, K).
     ph = doppler_hz[:, None] * tau + (0.5 * rate)[:, None] * tau**2
     cycles = np.multiply.outer(tau, comb.offsets_hz) + ph[:, :, None] * s
-    nu0 = comb.offsets_hz + (doppler_hz + rate * tau[n_seg_s // 2])[:, None] * s  # (C, K)
     dft = fft((np.asarray(amp)[:, None, :] * cis(cycles)).transpose(0, 2, 1))  # (C, K, B_s)
     b = np.rint(nu0 / df).astype(int)[:, :, None] + np.arange(-(n_seg_s // 2), n_seg_s - n_seg_s // 2)
     # Sum over the segments of the segment-centre value times each segment's kernel and delay.
@@ -163,7 +170,7 @@ def _subtract_spectrum(spectrum, comb, doppler_hz, rate, amp, n, fs, n_seg_s):
                    (weight * np.take_along_axis(dft, b % n_seg_s, axis=2)).astype(spectrum.dtype).ravel())
 
 
-def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz, spectrum=None):
+def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz, spectrum=None, kernel=None):
     """True when the block's spectrum (``fft(iq)``, or ``spectrum`` given), the combs ``found`` (Combs)
     removed, holds another comb.
 
@@ -178,7 +185,7 @@ def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz, sp
         raise NonFiniteSamples("IQ samples contain NaN or inf")
     n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * n / fs)))
     _subtract_spectrum(spectrum, comb, found.doppler_hz, found.doppler_rate_hz_per_s, found.amplitudes, n, fs,
-                       n_seg_s)
+                       n_seg_s, kernel)
     coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=pfa,
                         centre_hz=centre_hz)
     if not coarse.detected:
@@ -304,7 +311,7 @@ class _Finder:
         n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * dur)))
         if combs:
             _subtract_spectrum(spectrum, comb, [c.doppler_hz for c in combs], [c.rate for c in combs],
-                               [c.amp for c in combs], n, fs, n_seg_s)
+                               [c.amp for c in combs], n, fs, n_seg_s, self.kernel)
         residues = 0
         while len(combs) < max_combs:
             coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=self.pfa,
@@ -320,7 +327,7 @@ class _Finder:
                 residues += 1
                 if residues > _MAX_RESIDUES:
                     break
-            _subtract_spectrum(spectrum, comb, [c.doppler_hz], [c.rate], [c.amp], n, fs, n_seg_s)
+            _subtract_spectrum(spectrum, comb, [c.doppler_hz], [c.rate], [c.amp], n, fs, n_seg_s, self.kernel)
 
     def result(self):
         """The combs found, as :class:`Combs`."""
@@ -420,7 +427,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
                   spectrum=spectrum, kernel=kernel)
         tracked = find_combs(iq, fs, predicted_hz=pred, predicted_rate_hz_per_s=pred_rate, search=False, **kw)
         if tracked.n_found >= max_combs or not _another_comb(iq, fs, comb, tracked, smear, max_doppler_hz, pfa, lo,
-                                                                    spectrum):
+                                                                    spectrum, kernel):
             return tracked
     tracking = pred_rate is not None and pred.size > 0 and not search
     if tracking:

@@ -238,3 +238,25 @@ def test_compiled_tracking_agrees_with_numpy(n_refine):
     assert np.allclose(a.sigma_hz, b.sigma_hz, rtol=1e-4)
     assert np.allclose(a.statistic, b.statistic, rtol=1e-5)
     assert np.max(np.abs(a.amplitudes - b.amplitudes)) < 3e-6 * np.max(np.abs(a.amplitudes))
+
+
+@NEEDS_NUMBA
+def test_compiled_subtraction_agrees_with_numpy():
+    # Second implementation: found combs subtracted from a block's FFT (multicomb._subtract_spectrum), compiled
+    # (phasors by products along the tones, segments and bins; single-precision FFT) against numpy, with two
+    # combs 30 Hz apart (overlapping windows) and one near the band's edge (windows wrapping). Measured: the
+    # two residual spectra differ by 1.2-2.9e-7 of the largest value removed (float32 rounding); bound 2e-6.
+    from leosop.signal.multicomb import _subtract_spectrum
+
+    rng = np.random.default_rng(8)
+    comb, n = PilotComb(), N
+    spectrum = (rng.standard_normal(n) + 1j * rng.standard_normal(n)).astype(np.complex64)
+    d = np.r_[rng.uniform(-2.5e5, 2.5e5, 5), 0.0, 0.5 * FS - 5e3]
+    d[5] = d[0] + 30.0
+    r = rng.uniform(-4500.0, 1000.0, 7)
+    amp = 30.0 * (rng.standard_normal((7, comb.n_tones)) + 1j * rng.standard_normal((7, comb.n_tones)))
+    for n_seg_s in (1000, 1024):
+        a, b = spectrum.copy(), spectrum.copy()
+        _subtract_spectrum(a, comb, d, r, amp, n, FS, n_seg_s, kernel="numpy")
+        _subtract_spectrum(b, comb, d, r, amp, n, FS, n_seg_s, kernel="numba")
+        assert np.max(np.abs(a - b)) < 2e-6 * np.max(np.abs(spectrum - a))
