@@ -46,7 +46,7 @@ SPECTRUM_COLUMNS = 600
 SPECTRUM_BINS = 1024
 #: Periodograms averaged per spectrogram column (a figure needs no more).
 SPECTRUM_AVERAGES = 16
-#: Blocks each worker thread may run ahead of the caller (bounds the memory to a few blocks).
+#: Blocks prepared ahead of the search per thread (the caller's too): the window bounds the memory to a few blocks.
 LOOKAHEAD_PER_WORKER = 2
 #: The interpreter's thread switch interval while worker threads prepare blocks [s]. A worker whose FFT
 #: ended (GIL released) waits for the GIL until the comb search's thread gives it up, which CPython forces
