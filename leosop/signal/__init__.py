@@ -35,7 +35,7 @@ Doppler estimation:
 Left in their modules: the coarse and fine stages behind
 ``estimate_block`` (:mod:`.coarse`, :mod:`.fine`, with :mod:`.quality` for
 the status), the multi-comb machinery (:mod:`.comb_grid`, :mod:`.comb_fit`, its
-compiled re-estimation :mod:`.fitkernels`, with numba),
+compiled fits, tracking blocks and comb subtraction :mod:`.fitkernels`, with numba),
 the OFDM downlink (:mod:`.ofdm`, its own facade over :mod:`.ofdm_frame`,
 :mod:`.ofdm_downlink`, :mod:`.pss`, :mod:`.pss_track`), the front-end model of the
 generator (:mod:`.frontend`), its compiled comb synthesis (:mod:`.comb_phases`,
