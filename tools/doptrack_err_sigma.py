@@ -5,9 +5,13 @@ the element sets), which position_static_passes estimates by default: every
 fix from one pass, from each day's passes and from all 98, height known, no
 start given, time offsets on (``--off``: off, for comparison). Prints, per
 set, the number of fixes, failures (no finite solution), the median error,
-the median and the largest err/sigma and how many are below 3.
+the median and the largest err/sigma and how many are below 3; for the days
+of 3 passes or more, each fix's horizontal NEES (``error' P^-1 error`` on
+the 2 x 2 horizontal covariance, chi-square with 2 dof when consistent), its
+mean and how many are within the 2-D 99 % region.
 
 Usage: OPENBLAS_NUM_THREADS=1 python tools/doptrack_err_sigma.py [--data DIR] [--off] [--sets day,single,all]
+(``--sets day`` alone: under 2 min of CPU; single passes ~5 min, all 98 ~2 min.)
 
 Measured (time offsets on; the machine shared, 20-34 min wall per run), median over the fixes:
 
@@ -66,10 +70,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from real_doppler_position import DATA, _horizontal, fix_passes  # noqa: E402
+from real_doppler_position import DATA, _horizontal, _nees_h, fix_passes  # noqa: E402
 
 from leosop.positioning.datasets import read_doptrack  # noqa: E402
 from leosop.progress import progress  # noqa: E402
+
+#: The 2-D 99 % region of a consistent horizontal NEES: chi-square with 2 dof, -2 ln(0.01).
+CHI2_2DOF_99 = 9.21
+#: Days with at least this many passes enter the NEES summary (two-pass fixes are flagged ``few_passes``).
+NEES_MIN_PASSES = 3
 
 
 def _row(name, fixes, p0):
@@ -81,6 +90,15 @@ def _row(name, fixes, p0):
     line += f"{np.nanmedian(r):8.2f} {np.nanmax(r):8.2f} {int((r[ok] < 3).sum()):5d}/{int(ok.sum())}"
     print(line, flush=True)
     return r
+
+
+def _nees_days(fixes, by_day, p0):
+    """Horizontal NEES of each day with NEES_MIN_PASSES passes or more, their mean and the share within 99 %."""
+    nees = np.array([_nees_h(f, p0) for f, s in zip(fixes, by_day) if len(s) >= NEES_MIN_PASSES])
+    print(f"{'':>9s} horizontal NEES, {nees.size} days of {NEES_MIN_PASSES}+ passes: "
+          f"{' '.join(f'{x:.2f}' for x in nees)}")
+    print(f"{'':>9s} mean {np.nanmean(nees):.2f} (2 when consistent), median {np.nanmedian(nees):.2f} (1.39), "
+          f"{int((nees < CHI2_2DOF_99).sum())}/{nees.size} within the 2-D 99 % region ({CHI2_2DOF_99})")
 
 
 def main():
@@ -99,8 +117,10 @@ def main():
     by_day = [[p for p, d in zip(passes, days) if d == day] for day in np.unique(days)]
     sets = args.sets.split(",")
     if "day" in sets:
-        r = _row("per day", [fix_passes(s, **kw) for s in progress(by_day, desc="days")], p0)
+        fixes = [fix_passes(s, **kw) for s in progress(by_day, desc="days")]
+        r = _row("per day", fixes, p0)
         print(f"{'':>9s} per-day err/sigma: {' '.join(f'{x:.1f}' for x in r)}")
+        _nees_days(fixes, by_day, p0)
     if "single" in sets:
         _row("one pass", [fix_passes([p], **kw) for p in progress(passes, desc="passes")], p0)
     if "all" in sets:
