@@ -28,16 +28,20 @@ Used by :func:`~leosop.positioning.static_passes.solve_static_passes` (DopTrack,
   enough to pass for each pass's own terms, which the residuals'
   correlation time underrates); in F's eigenbasis ``E[z_i^2] = k2 lam_i +
   lam_i^2 s^2``. Both are fitted by maximum likelihood (:func:`pass_disagreement`;
-  ``k2 >= 1``, ``s`` capped at :data:`PASS_OFFSET_MAX_M`) and the
+  ``s`` capped at :data:`PASS_OFFSET_MAX_M`), ``k2`` then raised to the
+  Student-t covariance of a factor estimated on the test's few degrees of
+  freedom (``dof / (dof - 2)`` times the fit, never below 1), and the
   covariance of the fix (unchanged) becomes ``k2 N^-1 + s^2 N^-1 G G^T
   N^-1`` (``G`` the offsets' cross information with the states). Passes
   whose disagreement is likeliest without either leave the covariance
   unchanged, bit for bit. Simulated per-pass offsets of 30 m are found as
-  such (``s`` 29 m, ``k2`` 1, position NEES 5.9 on 3 dof); on DopTrack the
-  disagreement is a factor (all 98 passes: ``k2`` 4.7, ``s`` 0), which fits
+  such (``s`` 29 m, ``k2`` 1, position NEES 5.8 on 3 dof); on DopTrack the
+  disagreement is a factor (all 98 passes: ``k2`` 4.96, ``s`` 0), which fits
   it better than offsets alone (those would have to be 3 km cross-track, 8
   km on low passes, for 1-2 day old element sets) and leaves each day's fix
-  within 3 sigma (tools/doptrack_err_sigma.py).
+  within 3 sigma; over the 23 days of 3-6 passes the horizontal NEES has mean
+  2.93 (3.79 with the plug-in factor; tools/doptrack_err_sigma.py,
+  docs/notes/few-pass-variance-factor.md).
 """
 
 import numpy as np
@@ -171,10 +175,23 @@ def pass_disagreement(F, g):
     direction alike) and per-pass radial and cross-track satellite offsets
     ``~ N(0, s^2 I)`` (weighted by ``lam_i`` once more: they show most where
     the passes see them best). Both are fitted by maximum likelihood, ``z``
-    Gaussian, with ``k2 >= 1`` (a sigma is never lowered, as the Particle Data
-    Group's scale factor) and ``0 <= s <= PASS_OFFSET_MAX_M``: on a grid, then
-    refined. Returns ``(k2, s, T, dof)``; ``(1, 0, T, dof)`` when the passes
-    agree (their likelihood is largest without either).
+    Gaussian, ``0 <= s <= PASS_OFFSET_MAX_M``: on a grid, then refined.
+
+    ``z`` is free of the fix's states (a restricted likelihood: REML would
+    give the same), so the fitted ``k2`` is not biased low (simulated: within
+    7 %); but it rests on ``dof`` values only (6 for three passes), and a
+    factor estimated on ``dof`` degrees of freedom makes the fix's error
+    Student-t rather than Gaussian: plugged in (a factor alone), the
+    horizontal NEES is ``2 F(2, dof)``, mean ``2 dof / (dof - 2)`` (3 at 6
+    dof) instead of 2. The factor returned is therefore the fitted one times
+    ``dof / (dof - 2)``, the t's covariance (the posterior mean of ``k2``
+    under the scale-invariant prior); it is fitted with ``k2 >= (dof - 2) /
+    dof`` so that the factor returned is >= 1 (a sigma is never lowered, as
+    the Particle Data Group's scale factor) and leaves 1 continuously. At 2
+    dof or fewer (one pass) the t has no covariance and the fitted factor is
+    returned as it is. Returns ``(k2, s, T, dof)``; ``(1, 0, T, dof)`` when
+    the passes agree (their likelihood is largest with ``k2`` at its floor
+    and no offsets).
     """
     lam, V = np.linalg.eigh(0.5 * (F + F.T))
     keep = lam > _RANK_RTOL * max(lam[-1], 0.0) if lam.size and lam[-1] > 0 else np.zeros(lam.size, bool)
@@ -183,29 +200,30 @@ def pass_disagreement(F, g):
     if not dof:
         return 1.0, 0.0, 0.0, 0
     T = float(np.sum(z2 / lam))
+    t_factor = dof / (dof - 2.0) if dof > 2 else 1.0
 
     def nll(k2, s):
         v = np.multiply.outer(k2, lam) + np.multiply.outer(s**2, lam**2)
         return 0.5 * np.sum(np.log(v) + z2 / v, axis=-1)
 
-    k2_grid = np.concatenate([[1.0], np.logspace(0.0, 4.0, 161)[1:]])
+    k2_grid = np.concatenate([[1.0], np.logspace(0.0, 4.0, 161)[1:]]) / t_factor
     s_grid = np.concatenate([[0.0], np.logspace(-1.0, np.log10(PASS_OFFSET_MAX_M), 81)])
     cost = nll(k2_grid[:, None], s_grid[None, :])
     i, j = np.unravel_index(np.argmin(cost), cost.shape)
     if i == 0 and j == 0:
         return 1.0, 0.0, T, dof
     start = [np.log(k2_grid[i]), s_grid[j] / PASS_OFFSET_MAX_M]
-    res = optimize.minimize(lambda p: nll(*_disagreement_params(p)), start, method="Nelder-Mead",
+    res = optimize.minimize(lambda p: nll(*_disagreement_params(p, k2_grid[0])), start, method="Nelder-Mead",
                             options={"xatol": 1e-4, "fatol": 1e-9})
-    k2, s_m = _disagreement_params(res.x)
+    k2, s_m = _disagreement_params(res.x, k2_grid[0])
     if nll(k2, s_m) > cost[i, j]:
         k2, s_m = k2_grid[i], s_grid[j]
-    return float(k2), float(s_m), T, dof
+    return (float(t_factor * k2) if k2 > k2_grid[0] else 1.0), float(s_m), T, dof
 
 
-def _disagreement_params(p):
+def _disagreement_params(p, k2_min):
     """``(k2, s)`` of :func:`pass_disagreement` from its search variables ``(log k2, s / cap)``, inside the bounds."""
-    return np.exp(max(p[0], 0.0)), min(max(p[1], 0.0), 1.0) * PASS_OFFSET_MAX_M
+    return np.exp(p[0]) if p[0] > np.log(k2_min) else k2_min, min(max(p[1], 0.0), 1.0) * PASS_OFFSET_MAX_M
 
 
 def pass_sigma_scale(rows, residuals_hz, used, decorrelate):

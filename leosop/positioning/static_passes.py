@@ -139,7 +139,10 @@ class PassesFix(BatchFit):
     pass_offset_dof : int or None
     pass_variance_factor : float or None
         Factor (>= 1) on the covariance that the disagreement implies beside
-        the offsets; 1 when none; None with ``pass_offsets=False``.
+        the offsets: the maximum-likelihood one times ``dof / (dof - 2)``
+        (the Student-t covariance of a factor estimated on ``pass_offset_dof``
+        degrees of freedom, :func:`~leosop.positioning.passes_noise.pass_disagreement`);
+        1 when none; None with ``pass_offsets=False``.
     """
 
     pos_ecef_m: np.ndarray
