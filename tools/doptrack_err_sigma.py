@@ -51,6 +51,23 @@ sigma 4,094 m, err/sigma median 1.05 (max 2.67), 30/30 below 3; one pass
 117), 85/98 below 3; all 98: err 525 m, sigma 550 m, err/sigma 0.96 (was
 478 m, 498 m, 0.96). 6.5 min for ``--sets single,all`` on an idle machine.
 
+With the passes' variance factor as a Student-t covariance (``pass_disagreement``: the
+maximum-likelihood factor times dof / (dof - 2); docs/notes/few-pass-variance-factor.md),
+8 min of CPU for the three sets:
+
+=========  ==========================================  ==========================================
+set        before (maximum-likelihood factor)          after (Student-t factor)
+=========  ==========================================  ==========================================
+per day    30 fixes, 0 failed, err 3,778 m, sigma      30, 0 failed, err 3,778 m, sigma 4,708 m,
+           4,094 m, err/sigma 1.05 (max 2.67), 30/30   err/sigma 0.89 (max 2.67), 30/30 below 3;
+           below 3; horizontal NEES of the 23 days of  NEES mean 2.93, median 2.07, 23/23 within
+           3-6 passes mean 3.79, median 2.88, 22/23
+           within chi2(2) 9.21
+one pass   98, 0 failed, err 11.3 km, sigma 377 km,    unchanged (2 dof: the t has no covariance)
+           err/sigma 0.18 (max 117), 85/98 below 3
+all 98     err 525 m, sigma 550 m, err/sigma 0.96      err 525 m, sigma 553 m, err/sigma 0.95
+=========  ==========================================  ==========================================
+
 What the residuals show: at 0.5 s the per-pass residuals (1.5-6 Hz RMS) are
 far from white (lag-1 correlation up to 0.8, integrated correlation times
 up to ~48 rows), so white sigmas were 2-7x too small; the remaining excess

@@ -224,8 +224,8 @@ def solve_static_passes(doppler_hz: npt.ArrayLike, sigma_hz: npt.ArrayLike, pos_
     to +2.2 s) they fit alike: the same residual RMS (median 2.39 Hz), the
     lower chi-square with either model on about half the days, each day's
     fix moved by a median 0.2 km against errors of ~4.5 km (err/sigma median
-    1.00 inertial, 1.09 Earth-fixed; all 98 passes 516 m at sigma 544 m
-    against 478 m at 498 m; ``tools/real_doppler_position.py
+    0.89 inertial, 0.91 Earth-fixed; all 98 passes 525 m at sigma 553 m
+    against 499 m at 505 m; ``tools/real_doppler_position.py
     --time-offset-model both``). The data do not tell them apart, so the
     inertial model, right for the error an element set is known to have,
     stays the default.

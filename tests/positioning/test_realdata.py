@@ -94,10 +94,11 @@ def test_doptrack_passes_in_one_fix_resolve_the_side(doptrack):
     assert 0.1 < fix.chi2 / fix.n_used < 0.3
     # ... and the posterior sigma 343 m instead of the white-noise 90 m left the error (1.9 km) at 5.6 sigma
     # (18.9 with white sigmas): each pass's element set is off, a bias common to the pass that no
-    # residual shows. The passes disagree, though: their score test gives chi-square 154 on 37 dof, and
-    # its maximum-likelihood split is a variance factor 4.15 and no per-pass offsets (the capped 1 km
-    # offsets of the earlier model gave sigma 655 m, err/sigma 2.94); with it sigma 695 m, err/sigma
-    # 2.77. Bounds: sigma 500-900 m, err/sigma 1-3.5 (the data are fixed).
+    # residual shows. The passes disagree, though: their score test gives chi-square 143 on 31 dof, and
+    # its maximum-likelihood split is a variance factor 4.60 and no per-pass offsets (the capped 1 km
+    # offsets of the earlier model gave sigma 655 m, err/sigma 2.94); as the Student-t covariance of a
+    # factor on 31 dof, 4.92: sigma 749 m, err/sigma 2.58 (725 m, 2.67 with the fitted 4.60). Bounds:
+    # sigma 500-900 m, err/sigma 1-3.5 (the data are fixed).
     assert fix.pass_offset_chi2 > fix.pass_offset_dof + 3 * np.sqrt(2 * fix.pass_offset_dof)
     assert 500 < sigma < 900 and 1 < err / sigma < 3.5
 
@@ -105,9 +106,9 @@ def test_doptrack_passes_in_one_fix_resolve_the_side(doptrack):
 def test_doptrack_fixes_marked_ok_hold_the_station_within_3_sigma(doptrack, first_day_fix):
     # A fix is ok only when the toolkit can vouch for it: here, that its sigma covers its error. The fixes
     # of the archive's first four days (light time at each day's first fix): 3 passes on 04-01, 04-03 and
-    # 04-04 are ok with the station at 0.87, 1.11 and 1.20 sqrt(trace) of the position covariance (0.87, 1.17
-    # and 1.23 with Earth-fixed time offsets; at most 1.53 sigma along an axis); 04-02's two passes are
-    # few_passes (over all 30 days, three of the five two-pass days are 3.8-7.5 sigma off along one axis,
+    # 04-04 are ok with the station at 1.06, 0.92 and 0.99 sqrt(trace) of the position covariance (1.06, 0.96
+    # and 1.02 with Earth-fixed time offsets; at most 1.27 sigma along an axis); 04-02's two passes are
+    # few_passes (over all 30 days, two of the five two-pass days are 3.6 and 5.4 sigma off along one axis,
     # docs/positioning.md).
     passes = doptrack
     days = {}
@@ -142,18 +143,19 @@ def test_doptrack_time_bias_per_pass_on_20_passes(doptrack):
     # geometry: achieved 4.6 km, err/sigma 8.8 with each pass's sigma scaled for its residuals'
     # correlation (6.2 km and 22 with white sigmas; clock only: 1.9 km, 5.6). On DopTrack's few-pass
     # sets the time offsets do not pay. The posterior sigma was 525 m (278 m with white sigmas); the
-    # passes' disagreement (score test chi-square 176 on 37 dof) makes it 1.21 km (maximum-likelihood
-    # variance factor 4.75, no per-pass offsets) and err/sigma 3.8: overconfident, the error lying along
-    # the time offsets' trade-off with the position, which no disagreement between passes shows. (The
-    # earlier model, capped 1 km per-pass offsets, gave 2.13 km and 2.18 here, but fitted the passes'
-    # disagreement worse and left 3 of DopTrack's 30 days above 3; tools/doptrack_err_sigma.py.)
+    # passes' disagreement (score test chi-square 168 on 29 dof) makes it 1.47 km (variance factor 6.23,
+    # the fitted 5.80 as a Student-t covariance; no per-pass offsets) and err/sigma 3.7 (error 5.4 km):
+    # overconfident, the error lying along the time offsets' trade-off with the position, which no
+    # disagreement between passes shows. (The earlier model, capped 1 km per-pass offsets, gave 2.13 km
+    # and 2.18 here, but fitted the passes' disagreement worse and left 3 of DopTrack's 30 days above 3;
+    # tools/doptrack_err_sigma.py.)
     # Bounds: error 4-8 km, sigma 0.9-3 km, err/sigma 1-4.5 (the data are fixed).
     assert fix.status in (FixStatus.OK, FixStatus.INCONSISTENT) and fix.time_bias_s.shape == (20,)
     assert 4e3 < err < 8e3 and 1 < err / sigma < 4.5 and 0.9e3 < sigma < 3e3
     # The well-determined offsets stay within a few seconds (along-track errors of 1-1.5 day old element
     # sets plus time tags): |dt| up to 1.74 s, median 0.48 s for the 9 with sigma < 0.1 s before the
-    # passes' disagreement; with its variance factor their sigmas are 0.16-0.30 s (13 passes below
-    # 0.35 s, |dt| up to 1.75 s, median 0.76 s; the estimates are unchanged). Bounds 3 s and 1.5 s.
+    # passes' disagreement; with its variance factor the best nine's sigmas are 0.19-0.25 s (12 passes
+    # below 0.35 s, |dt| up to 1.88 s, median 0.80 s; the estimates are unchanged). Bounds 3 s and 1.5 s.
     good = dt_sigma < 0.35
     assert good.sum() >= 10
     assert np.abs(fix.time_bias_s[good]).max() < 3.0 and np.median(np.abs(fix.time_bias_s[good])) < 1.5
@@ -166,7 +168,7 @@ def test_doptrack_one_day_with_time_offsets_converges(first_day_fix):
     # solution 2,500 km off whose residuals set the sigmas, and each outlier round then crept along the
     # weakly determined along-track direction with 0.1 mm steps until the 200-iteration cap. Now: a
     # second pilot with the first one's sigmas, and steps below 1e-3 sigma end the iteration.
-    # Achieved: OK, 3.3 km horizontal at 5.1 km sigma; bounds: solved, within 10 km.
+    # Achieved: OK, 3.0 km horizontal at 2.8 km sigma; bounds: solved, within 10 km.
     assert fix.status in (FixStatus.OK, FixStatus.INCONSISTENT) and fix.time_bias_s.shape == (3,)
     assert np.linalg.norm(fix.pos_ecef_m - passes[0].station_pos_ecef_m) < 10e3
 
