@@ -193,8 +193,7 @@ def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
         nu = _stacked([c.nu for c in combs]) if clean else None
         fit = refine_arrays(compiled, grid, comb, z, extra, f_c, mix, d_c,
                             np.array([c.doppler_hz for c in combs]) - d_c, np.array([c.rate for c in combs]), val, nu)
-        _store(combs, n, fs, fit.z, fit.doppler_hz, fit.rate, fit.w, fit.mean_cn0, fit.statistic, fit.amp, fit.val,
-               fit.nu)
+        _store(combs, n, fs, fit)
         return
     if clean:
         z = z - leakage_all(grid, f_c, mix, _stacked([c.val for c in combs]), _stacked([c.nu for c in combs]))
@@ -223,7 +222,7 @@ def refine_combs(grid, comb, combs, clean=True, *, kernel=None):
     g = e * mix[:, :, k] * dirichlet(nu - f_c[:, k], grid.counts[:, None, None], grid.fs)
     amp = np.sum(y * np.conj(g), axis=0) / np.sum(abs2(g), axis=0)
     val = (e * amp).astype(np.complex64)
-    _store(combs, n, fs, z, doppler, rate, w, mean_cn0, statistic, amp, val, nu)
+    _store(combs, n, fs, Fit(doppler, rate, w, mean_cn0, statistic, amp, val, nu, z))
 
 
 @dataclass
@@ -245,6 +244,11 @@ class Fit:
     val: np.ndarray
     nu: np.ndarray
     z: np.ndarray
+
+    def subset(self, keep):
+        """The fit of the combs ``keep`` (indices) alone."""
+        return Fit(self.doppler_hz[keep], self.rate[keep], self.w[keep], self.mean_cn0[keep], self.statistic[keep],
+                   self.amp[keep], self.val[:, keep], self.nu[:, keep], self.z[:, keep])
 
 
 def refine_arrays(compiled, grid, comb, z_in, extra, f_c, mix, d_c, f0, r0, val=None, nu=None):
@@ -297,16 +301,14 @@ def cn0_sigma(w, mean_cn0, n, fs):
     return sigma_hz, cn0_dbhz
 
 
-def _store(combs, n, fs, z, doppler, rate, w, mean_cn0, statistic, amp, val, nu):
-    """:func:`refine_combs`' results written to its combs: (C,) ``doppler`` .. ``statistic``, ``amp`` (C, K),
-    ``z`` (B, C, W) and ``val``, ``nu`` (B, C, K); ``w`` (sum of C/N0 times Doppler scale squared) and
-    ``mean_cn0`` (linear) give the Doppler sigma and the C/N0 [dB-Hz]."""
-    sigma_hz, cn0_dbhz = cn0_sigma(w, mean_cn0, n, fs)
+def _store(combs, n, fs, fit):
+    """:func:`refine_combs`' results (a :class:`Fit`) written to its combs."""
+    sigma_hz, cn0_dbhz = cn0_sigma(fit.w, fit.mean_cn0, n, fs)
     for j, c in enumerate(combs):
-        c.z_wide = z[:, j]
-        c.doppler_hz, c.rate = float(doppler[j]), float(rate[j])
-        c.sigma_hz, c.cn0_dbhz, c.statistic = float(sigma_hz[j]), float(cn0_dbhz[j]), float(statistic[j])
-        c.amp, c.val, c.nu = amp[j], val[:, j], nu[:, j]
+        c.z_wide = fit.z[:, j]
+        c.doppler_hz, c.rate = float(fit.doppler_hz[j]), float(fit.rate[j])
+        c.sigma_hz, c.cn0_dbhz, c.statistic = float(sigma_hz[j]), float(cn0_dbhz[j]), float(fit.statistic[j])
+        c.amp, c.val, c.nu = fit.amp[j], fit.val[:, j], fit.nu[:, j]
 
 
 def dechirped_peaks_hz(y, tau, rate, dt_dec):

@@ -232,10 +232,7 @@ def _track_compiled(compiled, grid, comb, pred, pred_rate, gate, threshold, n_re
         if not _near_any(comb, dopplers[j], rates[j], [dopplers[i] for i in keep], [rates[i] for i in keep], dur):
             keep.append(j)
     if len(keep) < pred.size:
-        z, f_c, mix, d_c = z[:, keep], f_c[keep], mix[:, keep], d_c[keep]
-        fit.doppler_hz, fit.rate, fit.w, fit.mean_cn0, fit.statistic, fit.amp, fit.val, fit.nu = (
-            fit.doppler_hz[keep], fit.rate[keep], fit.w[keep], fit.mean_cn0[keep], fit.statistic[keep], fit.amp[keep],
-            fit.val[:, keep], fit.nu[:, keep])
+        z, f_c, mix, d_c, fit = z[:, keep], f_c[keep], mix[:, keep], d_c[keep], fit.subset(keep)
     for _ in range(n_refine if len(keep) > 1 else 0):
         fit = refine_arrays(compiled, grid, comb, z, 0, f_c, mix, d_c, fit.doppler_hz - d_c, fit.rate, fit.val, fit.nu)
     sigma_hz, cn0_dbhz = cn0_sigma(fit.w, fit.mean_cn0, grid.n, grid.fs)
