@@ -19,7 +19,10 @@ reference.
 
 On a tracking block (80 segments, 7 combs of 9 tones) the numpy path is a
 few hundred calls on small arrays, mostly call overhead; :func:`refine`
-takes ~0.2 ms (~0.3 ms cleaning). Over a 60 s replay (7 satellites, one
+takes ~0.2 ms (~0.3 ms cleaning). Its phasors at equally spaced segment
+centres come by rotation (:func:`_quad_cis`) rather than a sine and cosine
+each: 0.253 -> 0.207 ms a call (100 segments, 7 combs, calls recorded from
+a 60 s replay). Over a 60 s replay (7 satellites, one
 thread) the comb search averages 1.45 ms a block with the whole tracking
 block compiled, 1.75 ms with only :func:`refine`.
 The phasors are double precision (:func:`_cis`) where numpy's round the
@@ -48,14 +51,33 @@ def _cis(cycles):
 
 
 @_jit
-def _comb_cis(a_cycles, b_cycles, half, out):
-    """exp(j 2 pi (a + k b)), k = -half..half, into ``out`` (2 half + 1,): :func:`~.comb_grid.comb_cis`."""
-    e0, z = _cis(a_cycles), _cis(b_cycles)
+def _comb_from(e0, z, half, out):
+    """``e0 z^k``, k = -half..half, into ``out`` (2 half + 1,)."""
     zc = z.conjugate()
     out[half] = e0
     for k in range(1, half + 1):
         out[half + k] = out[half + k - 1] * z
         out[half - k] = out[half - k + 1] * zc
+
+
+@_jit
+def _comb_cis(a_cycles, b_cycles, half, out):
+    """exp(j 2 pi (a + k b)), k = -half..half, into ``out`` (2 half + 1,): :func:`~.comb_grid.comb_cis`."""
+    _comb_from(_cis(a_cycles), _cis(b_cycles), half, out)
+
+
+@_jit
+def _quad_cis(c1, c2, tau0, dt, out):
+    """exp(j 2 pi (c1 tau_b + c2 tau_b^2)) at ``tau_b = tau0 + b dt`` into ``out`` (n,): two rotations a
+    step in place of a sine and cosine (the phase's first and second differences; ~1e-14 rad after
+    100 steps, against :func:`_cis`' ~1e-16)."""
+    e = _cis(c1 * tau0 + c2 * tau0 * tau0)
+    d = _cis(c1 * dt + c2 * dt * (2.0 * tau0 + dt))
+    dd = _cis(2.0 * c2 * dt * dt)
+    for b in range(out.size):
+        out[b] = e
+        e *= d
+        d *= dd
 
 
 @_jit
@@ -158,12 +180,23 @@ def refine(z_in, clean, k0, n_k, tau, tpow, ratio, spacing_hz, offsets_hz, scale
     resid = np.empty(n_k)
     cn0_k = np.empty(n_k)
     e_col = np.empty((n_seg, n_k), dtype=np.complex128)
+    eb = np.empty(n_seg, dtype=np.complex128)
+    zb = np.empty(n_seg, dtype=np.complex128)
+    # The phasors of the leading segments of equal length (equally spaced centres) by rotation.
+    n_uni = 1
+    while n_uni < n_seg and counts[n_uni] == counts[0]:
+        n_uni += 1
+    dt = tau[1] - tau[0] if n_seg > 1 else 0.0
     for j in range(n_c):
         f, r = f0[j], r0[j]
         step_f = step_r = 0.0
         live = True
         for _ in range(2):
-            for b in range(n_seg):
+            _quad_cis(-f, -0.5 * r, tau[0], dt, eb[:n_uni])
+            _quad_cis(-ratio * f, -0.5 * ratio * r, tau[0], dt, zb[:n_uni])
+            for b in range(n_uni):
+                _comb_from(eb[b], zb[b], half, u[b])
+            for b in range(n_uni, n_seg):
                 phase = tau[b] * f + 0.5 * tpow[b, 2] * r
                 _comb_cis(-phase, -ratio * phase, half, u[b])
             for k in range(n_k):  # the moments sum_b tau^p u z, p = 0..4, in registers
@@ -224,7 +257,11 @@ def refine(z_in, clean, k0, n_k, tau, tpow, ratio, spacing_hz, offsets_hz, scale
         statistic[j] = p_tot / n_k / (n * sigma2) if sigma2 > 0 else np.inf
         # Tone amplitudes by least squares on the chirp model. The Dirichlet kernels' numerators
         # sin(x L) follow the equally spaced segment centres (all but the last) as a rotation (~1e-15 rad).
-        for b in range(n_seg):
+        _quad_cis(dop, 0.5 * r, tau[0], dt, eb[:n_uni])
+        _quad_cis(spacing_hz + ratio * dop, 0.5 * ratio * r, tau[0], dt, zb[:n_uni])
+        for b in range(n_uni):
+            _comb_from(eb[b], zb[b], half, e_col[b])
+        for b in range(n_uni, n_seg):
             phase = tau[b] * dop + 0.5 * tau[b] ** 2 * r
             _comb_cis(phase, spacing_hz * tau[b] + ratio * phase, half, e_col[b])
         for k in range(n_k):
