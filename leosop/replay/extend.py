@@ -307,7 +307,7 @@ def _follow(direction, cands, index_others, rec, blocks, factor, comb, fs, lo_hz
                 continue
             f_all = np.concatenate([f_other, [c.predict(j, lo_hz) for c in here]])
             rate_all = np.concatenate([[r for _, r in near], [c.rate_hz_per_s[j] + drift for c in here]])
-            found = find_combs(block.iq, fs, comb=comb, predicted_hz=f_all,
+            found = find_combs(None, fs, comb=comb, predicted_hz=f_all,
                                predicted_rate_hz_per_s=np.nan_to_num(rate_all), search=False, gate_hz=gate_hz,
                                max_combs=f_all.size, lo_offset_hz=lo_hz[j], clean=False, spectrum=block.iq_fft,
                                kernel=kernel)

@@ -342,7 +342,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
     try:
         for k, (b, block) in enumerate(zip(blocks, progress(prepared, total=len(blocks), desc="replay", unit="block")
                                            if show_progress else prepared)):
-            iq = block.iq  # narrowed and cleaned
+            n_block = block.n_samples  # narrowed
             # Tracking mode between full searches, where blocks follow each other.
             # (contiguous in time: snapshot captures lie back to back in the file, seconds apart)
             contiguous = k > 0 and abs(b.t_s - blocks[k - 1].t_s - b.n_samples / rec.sample_rate_hz) < 1e-6
@@ -354,7 +354,7 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
             if pred is None:
                 # After a birth the combs of the last block are searched for again, with as many new.
                 n_known = n_last if contiguous else 0
-                found = find_combs(iq, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
+                found = find_combs(None, fs, comb=comb, max_doppler_hz=span, max_combs=n_known + MAX_NEW_COMBS,
                                    lo_offset_hz=lo, clean=False, spectrum=block.iq_fft, kernel=kernel)
                 if lo_rough is None:
                     lo_rough = rough_lo_hz(found.doppler_hz)
@@ -362,14 +362,14 @@ def replay(rec, constellation, *, block_s=0.1, init_pos_ecef_m=None, static=True
                 # Every SEARCH_EVERY-th block also searches the spectrum for new
                 # combs, with the tracked ones fitted first and removed.
                 search = k % SEARCH_EVERY == 0
-                found = find_combs(iq, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
+                found = find_combs(None, fs, comb=comb, predicted_hz=pred[0], predicted_rate_hz_per_s=pred[1],
                                    search=search, gate_hz=TRACK_GATE_HZ, max_doppler_hz=span, lo_offset_hz=lo,
                                    max_combs=pred[0].size + MAX_NEW_COMBS, n_refine=2 if search else TRACK_REFINE,
                                    clean=False, spectrum=block.iq_fft, kernel=kernel)
             det = Detections(found.doppler_hz, found.doppler_rate_hz_per_s, found.cn0_dbhz, found.sigma_hz)
             n_last = len(det)
-            tracker.update(t_trk[k], utc_trk[k], det, block_s=iq.size / fs)
-            block_len[t_trk[k]] = block_len[utc_trk[k]] = iq.size
+            tracker.update(t_trk[k], utc_trk[k], det, block_s=n_block / fs)
+            block_len[t_trk[k]] = block_len[utc_trk[k]] = n_block
             if block.spectrum is not None:
                 spec_t.append(b.t_s)
                 spec.append(block.spectrum)

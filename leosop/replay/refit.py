@@ -78,7 +78,7 @@ def refit_through_lo(rec, tracks, blocks, factor, comb, lo, *, gate_hz, threads=
         rate = np.array([tracks[i].doppler_rate_hz_per_s[j] for i, j in rows])
         lo_hz = lo.offset_hz + lo.drift_hz_per_s * float((tracks[rows[0][0]].time_utc[rows[0][1]] - lo.t_ref_utc)
                                                          / np.timedelta64(1, "s"))
-        found = find_combs(block.iq, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
+        found = find_combs(None, fs, comb=comb, predicted_hz=pred, predicted_rate_hz_per_s=np.nan_to_num(rate),
                            search=False, gate_hz=gate_hz, max_combs=max(10, len(rows)), lo_offset_hz=lo_hz,
                            clean=False, spectrum=block.iq_fft, kernel=kernel)
         for m, p in enumerate(found.predicted_index):

@@ -3,7 +3,7 @@
 What a block needs before its comb search does not depend on the blocks
 before it: the samples, their narrowing to the working rate (:func:`narrow`),
 the check for NaN/inf and the front-end cleaning
-(:func:`~leosop.signal.cleaning.clean_block`: DC, IQ imbalance,
+(:func:`~leosop.signal.cleaning.clean_spectrum`: DC, IQ imbalance,
 interferers). :func:`prepared_blocks` does that for the next blocks on
 ``threads - 1`` worker threads while the caller searches and tracks the
 current one (which does depend on the blocks before it: the tracker's
@@ -14,8 +14,9 @@ one thread, so are the results, bit for bit.
 
 The preparation spends its time in numpy and FFTW (:mod:`leosop.signal.fft`,
 per-thread plans), which release the GIL, as do the compiled comb fits; the
-cleaned block's FFT, made here, is handed to the comb search
-(``find_combs(..., spectrum=)``). Measured on a continuous 2.5 MS/s
+cleaned block's FFT, made here in place over the block's DC-free copy, is
+handed to the comb search (``find_combs(None, ..., spectrum=)``), which needs
+no more of the block. Measured on a continuous 2.5 MS/s
 recording of 7 satellites (120 s, 0.1 s blocks, compiled kernels,
 ``tools/bench_replay.py``, idle cores), the preparation is about half the
 streaming stage's processor time (2.40 of 4.77 s: 2.0 ms a block, of which
@@ -36,7 +37,7 @@ import numpy as np
 from ..errors import InputError
 from ..signal.coarse import abs2
 from ..signal.fft import empty_aligned, fft, ifft
-from ..signal.cleaning import clean_block
+from ..signal.cleaning import clean_spectrum
 from ..signal.comb_grid import NonFiniteSamples
 
 __all__ = ["PreparedBlock", "narrow", "narrowed_shift_s", "prepared_blocks", "spectrum_column", "track_times"]
@@ -130,19 +131,22 @@ class PreparedBlock:
 
     Attributes
     ----------
-    iq : ndarray of complex64, (n,)
-        The narrowed block, cleaned (what ``find_combs(..., clean=False)`` takes).
     spectrum : ndarray of float, (SPECTRUM_BINS,) or None
         :func:`spectrum_column` of the narrowed block before cleaning, for
         the blocks the figure keeps; None for the others.
     iq_fft : ndarray of complex64, (n,)
-        FFT of ``iq`` (the cleaning's, :attr:`~leosop.signal.cleaning.Cleaning.spectrum`), for
-        ``find_combs(..., spectrum=iq_fft)``: made here, on the worker.
+        FFT of the narrowed block, cleaned (:func:`~leosop.signal.cleaning.clean_spectrum`), for
+        ``find_combs(None, ..., clean=False, spectrum=iq_fft)``: made here, on the worker. The block in
+        time is not kept (the search needs only its FFT): one buffer a block, not two.
     """
 
-    iq: np.ndarray
     spectrum: np.ndarray | None
     iq_fft: np.ndarray
+
+    @property
+    def n_samples(self):
+        """Samples of the narrowed block."""
+        return self.iq_fft.size
 
 
 def _prepare(rec, factor, comb, spectrum_every, kernel, item):
@@ -152,10 +156,10 @@ def _prepare(rec, factor, comb, spectrum_every, kernel, item):
     iq = narrow(rec.read(b.start, b.n_samples, check_finite=False), factor)
     spectrum = spectrum_column(iq) if spectrum_every and k % spectrum_every == 0 else None
     try:
-        iq, cleaning = clean_block(iq, rec.sample_rate_hz / factor, comb, kernel=kernel)
+        cleaning = clean_spectrum(iq, rec.sample_rate_hz / factor, comb, kernel=kernel)
     except NonFiniteSamples:
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf") from None
-    return PreparedBlock(iq, spectrum, cleaning.spectrum)
+    return PreparedBlock(spectrum, cleaning.spectrum)
 
 
 @contextmanager

@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import InputError
-from .fft import fft
+from .fft import fft, ifft
 from .fine import decimation_size, segment_grid
 
 __all__ = ["ALIAS_BANDS", "DecimationGrid", "NonFiniteSamples", "channels_hz", "cis", "comb_cis", "dirichlet",
@@ -72,10 +72,12 @@ class DecimationGrid:
     ``spectrum``, the block's :func:`~.fft.fft` (n,) when known (the
     cleaning's, :class:`~.cleaning.Cleaning`), is that FFT when the grid
     needs no zero-padding (n_seg * seg = n, as for blocks of round sizes).
+    Given, ``iq`` may be None: the block in time is then its inverse FFT,
+    made only for a grid that pads.
     """
 
     def __init__(self, iq, fs, bw_hz, oversample=8.0, *, spectrum=None):
-        n = iq.shape[-1]
+        n = iq.shape[-1] if iq is not None else spectrum.shape[-1]
         self.n, self.fs = n, fs
         self.n_seg, self.seg = decimation_size(n, int(np.ceil(oversample * bw_hz * n / fs)))
         self.t_l, self.t_m, self.tau, self.tpow = segment_grid(n, fs, self.n_seg, self.seg)
@@ -83,7 +85,7 @@ class DecimationGrid:
         self.t_abs = self.tau + 0.5 * (n - 1) / fs  # segment centres from the first sample
         self.n_fft = self.n_seg * self.seg
         self.k, self.weights, self.noise_gain = _alias_weights(self.n_fft, self.n_seg, self.seg)
-        self._iq = iq
+        self._iq = iq if iq is not None else ifft(spectrum) if self.n_fft != n else None
         self._spectrum = spectrum if spectrum is not None and self.n_fft == n else None
 
     @property

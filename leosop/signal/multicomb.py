@@ -179,8 +179,8 @@ def _another_comb(iq, fs, comb, found, smear, max_doppler_hz, pfa, centre_hz, sp
     fast-chirping comb), not as another comb: a new comb hidden there is
     found by a later search, when the two have drifted apart.
     """
-    n = iq.shape[-1]
     spectrum = fft(iq) if spectrum is None else spectrum.copy()
+    n = spectrum.shape[-1]
     if not np.isfinite(spectrum[0]):
         raise NonFiniteSamples("IQ samples contain NaN or inf")
     n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * n / fs)))
@@ -242,9 +242,10 @@ def _track_compiled(compiled, grid, comb, pred, pred_rate, gate, threshold, n_re
 def _check(iq, fs, predicted_hz, predicted_rate):
     if not np.isfinite(fs) or fs <= 0:
         raise InputError(f"sample_rate_hz={fs} must be a finite number > 0")
-    iq = np.asarray(iq)
-    if iq.ndim != 1 or not np.iscomplexobj(iq):
-        raise InputError(f"IQ samples must be a 1-D complex array, got {iq.dtype} of shape {iq.shape}")
+    if iq is not None:
+        iq = np.asarray(iq)
+        if iq.ndim != 1 or not np.iscomplexobj(iq):
+            raise InputError(f"IQ samples must be a 1-D complex array, got {iq.dtype} of shape {iq.shape}")
     p = np.atleast_1d(np.asarray([] if predicted_hz is None else predicted_hz, dtype=float))
     if p.ndim != 1:
         raise InputError(f"predicted_hz must be 1-D, got shape {p.shape}")
@@ -298,11 +299,15 @@ class _Finder:
                 if not (c.statistic > thr and near) or _duplicate(comb, c, combs[:-1], dur):
                     combs.pop()
 
-    def search(self, iq, max_combs, max_doppler_hz, smear, lo):
-        """Search the block's spectrum, the combs found so far subtracted, for more combs, strongest first."""
+    def search(self, iq, block_fft, max_combs, max_doppler_hz, smear, lo):
+        """Search the block's spectrum (``block_fft``, the FFT of ``iq``, if known), the combs found so far
+        subtracted, for more combs, strongest first."""
         grid, comb, combs, dur = self.grid, self.comb, self.combs, self.dur
         n, fs = grid.n, grid.fs
-        spectrum = grid.spectrum.copy() if grid.n_fft == n else fft(iq)
+        if grid.n_fft == n:
+            spectrum = grid.spectrum.copy()
+        else:
+            spectrum = fft(iq) if block_fft is None else block_fft.copy()
         if not np.isfinite(spectrum[0]):
             raise NonFiniteSamples("IQ samples contain NaN or inf")
         n_seg_s = _spectrum_grid(n, max(1024, int(8 * smear * dur)))
@@ -346,7 +351,9 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
 
     Parameters
     ----------
-    iq : ndarray of complex, shape (n,)
+    iq : ndarray of complex, shape (n,), or None
+        The block; None with ``clean=False`` and its ``spectrum`` given
+        (as :func:`~.cleaning.clean_spectrum` leaves it).
     sample_rate_hz : float
     comb : PilotComb, optional
     max_combs : int
@@ -402,13 +409,15 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     iq, pred, pred_rate = _check(iq, fs, predicted_hz, predicted_rate_hz_per_s)
     if not np.all(np.isfinite(pred)):
         raise InputError("predicted_hz contains NaN or inf")
+    if iq is None and (clean or spectrum is None):
+        raise InputError("iq=None needs the block's spectrum and clean=False")
     if clean:
         iq, cleaning = clean_block(iq, fs, comb, kernel=kernel)  # raises NonFiniteSamples
         spectrum = cleaning.spectrum
     lo = float(lo_offset_hz)
     if lo:
         comb = comb.through_lo(lo)
-    n = iq.shape[-1]
+    n = spectrum.shape[-1] if iq is None else iq.shape[-1]
     dur = n / fs
     df = fs / n
     smear = max_rate_hz_per_s * dur
@@ -443,7 +452,7 @@ def find_combs(iq, sample_rate_hz, *, comb=None, max_combs=10, pfa=PFA, max_dopp
     finder = _Finder(grid, comb, half if tracking else half + _EXTRA, max_rate_hz_per_s, pfa, kernel)
     finder.predictions(pred, pred_rate, gate, batch, max_combs)
     if search and len(finder.combs) < max_combs:
-        finder.search(iq, max_combs, max_doppler_hz, smear, lo)
+        finder.search(iq, spectrum, max_combs, max_doppler_hz, smear, lo)
     for _ in range(n_refine if len(finder.combs) > 1 else 0):
         refine_combs(grid, comb, finder.combs, kernel=kernel)
     return finder.result()

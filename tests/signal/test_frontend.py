@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from leosop.cli import main
+from leosop.errors import InputError
 from leosop.signal.cleaning import clean_block
 from leosop.signal.frontend import FrontEnd, _ar1, image_rejection_db, wiener_doppler_sigma_hz
 from leosop.signal.iq import open_sigmf
@@ -334,6 +335,46 @@ def test_excised_block_spectrum_is_the_fft_of_the_cleaned_block():
     np.testing.assert_allclose(c.spectrum, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
     # The line's bins of the cleaned block hold what rounding leaves: far below its 75 dB-Hz.
     assert np.max(np.abs(ref[bins])) < 1e-5 * np.abs(np.fft.fft(x)[bins]).max()
+
+
+def test_clean_spectrum_is_clean_blocks_spectrum():
+    """clean_spectrum (the replay's preparation: the FFT in place, no block in time) against clean_block on a block
+    with a CW line, DC and IQ imbalance: the same DC, imbalance and lines, and the same spectrum to FFTW's rounding
+    (in and out of place take different codelets; the rounding scales with the largest bin before excision, the
+    line's: ~1e-7 of it seen, 1e-6 with margin). find_combs
+    from that spectrum alone (iq=None) finds the combs the block does, to the spectrum's rounding (the same
+    bound on Doppler over its sigma as the compiled path's test, 1e-4)."""
+    from leosop.signal.cleaning import clean_spectrum
+
+    fs, n = 2.5e6, 250_000
+    rng = np.random.default_rng(3)
+    x = sum(add_noise(doppler_blocks(fs, n, f, r, None, rng=rng, dtype=np.complex128)[0], 45.0, fs, rng) / 2
+            for f, r in ((40e3, -2000.0), (-120e3, -1500.0)))
+    x = FrontEnd(cw=((300e3, 75.0),), dc_dbhz=60.0, iq_gain_db=0.5, iq_phase_deg=2.0).apply(
+        x, np.arange(n) / fs, fs, 45.0, rng).astype(np.complex64)
+    y, a = clean_block(x, fs, PilotComb())
+    b = clean_spectrum(x, fs, PilotComb())
+    assert (a.dc, a.iq_gain_db, a.iq_phase_deg, a.iq_corrected) == (b.dc, b.iq_gain_db, b.iq_phase_deg, b.iq_corrected)
+    assert len(b.lines) == 1 and b.iq_corrected
+    assert [(ln.frequency_hz, ln.lo_bin, ln.hi_bin) for ln in a.lines] == \
+        [(ln.frequency_hz, ln.lo_bin, ln.hi_bin) for ln in b.lines]
+    assert b.lines[0].power_dbhz == pytest.approx(a.lines[0].power_dbhz, abs=1e-4)  # the bins' float32 rounding
+    # FFTW's rounding scales with the block's largest bin before excision (the CW line's).
+    top = np.abs(np.fft.fft(x)).max()
+    np.testing.assert_allclose(b.spectrum, a.spectrum, rtol=0, atol=1e-6 * top)
+    with_iq = find_combs(y, fs, clean=False, spectrum=a.spectrum, max_combs=4)
+    alone = find_combs(None, fs, clean=False, spectrum=b.spectrum, max_combs=4)
+    assert with_iq.n_found == alone.n_found == 2
+    np.testing.assert_array_less(np.abs(alone.doppler_hz - with_iq.doppler_hz), 1e-4 * with_iq.sigma_hz)
+    # A block whose decimation grid pads (n_seg * seg > n): the block in time comes from the spectrum.
+    y, a = clean_block(x[:249_997], fs, PilotComb())
+    b = clean_spectrum(x[:249_997], fs, PilotComb())
+    with_iq = find_combs(y, fs, clean=False, spectrum=a.spectrum, max_combs=4)
+    alone = find_combs(None, fs, clean=False, spectrum=b.spectrum, max_combs=4)
+    assert with_iq.n_found == alone.n_found >= 2
+    np.testing.assert_array_less(np.abs(alone.doppler_hz - with_iq.doppler_hz), 1e-4 * with_iq.sigma_hz)
+    with pytest.raises(InputError, match="iq=None"):
+        find_combs(None, fs, spectrum=b.spectrum)
 
 
 def test_iq_moments_against_float64():
