@@ -152,11 +152,14 @@ class PreparedBlock:
 def _prepare(rec, factor, comb, spectrum_every, kernel, item):
     """Read, narrow, check and clean block ``item = (k, block)``: a PreparedBlock."""
     k, b = item
-    # NaN/inf: the cleaning's block mean finds them (spares read() its own pass over the samples).
-    iq = narrow(rec.read(b.start, b.n_samples, check_finite=False), factor)
+    # NaN/inf: the cleaning's block mean finds them (spares read() its own pass over the samples). The
+    # samples are read into one aligned buffer that the cleaning turns into their FFT (narrow()'s output is
+    # one too): a block's work touches one buffer of its size, in the cache it was read to.
+    iq = rec.read(b.start, b.n_samples, check_finite=False, out=empty_aligned(b.n_samples) if factor == 1 else None)
+    iq = narrow(iq, factor)
     spectrum = spectrum_column(iq) if spectrum_every and k % spectrum_every == 0 else None
     try:
-        cleaning = clean_spectrum(iq, rec.sample_rate_hz / factor, comb, kernel=kernel)
+        cleaning = clean_spectrum(iq, rec.sample_rate_hz / factor, comb, kernel=kernel, overwrite_iq=True)
     except NonFiniteSamples:
         raise InputError(f"{rec.data_path}: samples {b.start}..{b.start + b.n_samples - 1} hold NaN or inf") from None
     return PreparedBlock(spectrum, cleaning.spectrum)

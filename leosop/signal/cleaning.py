@@ -362,8 +362,11 @@ def clean_block(iq, fs, comb, *, pfa=LINE_PFA, kernel=None):
     return _clean(iq, fs, comb, pfa, kernel, in_place=False)
 
 
-def clean_spectrum(iq, fs, comb, *, pfa=LINE_PFA, kernel=None):
+def clean_spectrum(iq, fs, comb, *, pfa=LINE_PFA, kernel=None, overwrite_iq=False):
     """:func:`clean_block`'s cleaning, for a caller that needs only the cleaned block's FFT.
+
+    ``overwrite_iq``: ``iq`` (an aligned complex64 array, :func:`~.fft.empty_aligned`) may be
+    overwritten, and becomes the spectrum: no copy of the block is made.
 
     The FFT is made in place over the block's DC-free copy (one buffer
     instead of two) and the lines are zeroed in it; the cleaned block in
@@ -380,12 +383,13 @@ def clean_spectrum(iq, fs, comb, *, pfa=LINE_PFA, kernel=None):
     Cleaning
         Its ``spectrum`` is the cleaned block's FFT, complex64 (n,).
     """
-    return _clean(iq, fs, comb, pfa, kernel, in_place=True)[1]
+    return _clean(iq, fs, comb, pfa, kernel, in_place=True, overwrite=overwrite_iq)[1]
 
 
-def _clean(iq, fs, comb, pfa, kernel, in_place):
-    """:func:`clean_block` (``in_place`` False) or :func:`clean_spectrum` (True: the returned block is None)."""
-    from .fft import empty_aligned, fft, fft_in_place, ifft
+def _clean(iq, fs, comb, pfa, kernel, in_place, overwrite=False):
+    """:func:`clean_block` (``in_place`` False) or :func:`clean_spectrum` (True: the returned block is None;
+    ``overwrite``: its FFT made in ``iq`` itself where it can be)."""
+    from .fft import aligned, empty_aligned, fft, fft_in_place, ifft
 
     x = np.asarray(iq, dtype=np.complex64)
     n = x.size
@@ -393,7 +397,8 @@ def _clean(iq, fs, comb, pfa, kernel, in_place):
     if not np.isfinite(total):  # the callers' check for NaN or inf: one pass over the samples less
         raise NonFiniteSamples("IQ samples contain NaN or inf")
     dc = complex(np.complex64(total / np.intp(n)))  # x.mean(), bit for bit (its division in double)
-    x = np.subtract(x, np.complex64(dc), out=empty_aligned(n))  # the FFT reads it where it lies
+    into = x if overwrite and x is iq and x.flags.c_contiguous and aligned(x) else empty_aligned(n)
+    x = np.subtract(x, np.complex64(dc), out=into)  # the FFT reads it where it lies
     # What is left of the mean in x (a few ulp of the float32 DC) adds n mean^2 to the moments: ~1e-12 of them.
     gain_db, phase_deg, s_gain, s_phase = _imbalance(x)
     corrected = abs(gain_db) > 5.0 * s_gain or abs(phase_deg) > 5.0 * s_phase

@@ -122,16 +122,27 @@ class Recording:
     def duration_s(self):
         return self.n_samples / self.sample_rate_hz
 
-    def read(self, start: int, count: int, check_finite: bool = True) -> npt.NDArray[np.complex64]:
+    def read(self, start: int, count: int, check_finite: bool = True,
+             out: npt.NDArray[np.complex64] | None = None) -> npt.NDArray[np.complex64]:
         """Samples ``start .. start+count-1`` as complex64, shape (count,).
 
-        Raises InputError if the range leaves the recording or (with
+        ``out``: a C-contiguous complex64 array (count,) to write them into
+        (returned), e.g. an aligned one (:func:`~.fft.empty_aligned`) that
+        an FFT then takes where it lies; cf32 files are read straight into
+        it. Raises InputError if the range leaves the recording or (with
         ``check_finite``, for a caller that does not detect them itself)
         holds NaN/inf.
         """
-        raw = self.read_raw(start, count)
-        _, scale, zero = DATATYPES[self.datatype]
-        raw = np.asarray(raw, dtype=np.float32)
+        comp, scale, zero = DATATYPES[self.datatype]
+        if out is not None and (out.dtype != np.complex64 or out.shape != (count,) or not out.flags.c_contiguous):
+            raise ValueError(f"out must be a C-contiguous complex64 array of shape ({count},)")
+        if out is not None and comp == np.float32:
+            raw = self._read_into(start, count, out.view(np.float32))
+        elif out is not None:
+            raw = out.view(np.float32)
+            np.copyto(raw, self.read_raw(start, count), casting="unsafe")
+        else:
+            raw = np.asarray(self.read_raw(start, count), dtype=np.float32)
         if zero:
             raw -= np.float32(zero)
         if scale != 1.0:
@@ -140,7 +151,7 @@ class Recording:
         elif check_finite and not np.all(np.isfinite(raw)):
             bad = start + int(np.flatnonzero(~np.isfinite(raw))[0]) // 2
             raise InputError(f"{self.data_path}: sample {bad} is NaN or inf")
-        return raw.view(np.complex64)
+        return raw.view(np.complex64) if out is None else out
 
     def _check_clipping(self, comps, start):
         """Warn once per recording when more than :data:`CLIP_WARN_FRACTION` of a read's components sit
@@ -156,6 +167,21 @@ class Recording:
                           "the receiver's gain (clipping spreads every strong line into spurs and biases C/N0)",
                           stacklevel=3)
 
+    def _read_into(self, start, count, comps):
+        """:meth:`read_raw` of a cf32 file straight into ``comps`` (float32, (2 count,)); returns it."""
+        self._check_range(start, count)
+        with open(self.data_path, "rb") as f:
+            f.seek(self.offset_bytes + 8 * start)
+            got = f.readinto(memoryview(comps).cast("B"))
+        if got != comps.nbytes:
+            raise InputError(f"{self.data_path}: ends before sample {start + count} (a file cut short?)")
+        return comps
+
+    def _check_range(self, start, count):
+        if start < 0 or count < 0 or start + count > self.n_samples:
+            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
+                             f"{self.n_samples} samples of the recording")
+
     def read_raw(self, start, count):
         """Components of samples ``start .. start+count-1`` as stored (I, Q interleaved), shape (2 count,).
 
@@ -163,9 +189,7 @@ class Recording:
         with one system call (faster than a memory map, whose page faults
         cost more than the copy; 8-bit files move half of ci16's bytes).
         """
-        if start < 0 or count < 0 or start + count > self.n_samples:
-            raise InputError(f"{self.data_path}: samples {start}..{start + count} are outside the "
-                             f"{self.n_samples} samples of the recording")
+        self._check_range(start, count)
         comp = DATATYPES[self.datatype][0]
         return np.fromfile(self.data_path, dtype=comp, count=2 * count,
                            offset=self.offset_bytes + 2 * start * comp.itemsize)

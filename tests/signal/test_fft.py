@@ -55,3 +55,20 @@ def test_aligned_input_is_read_where_it_lies():
     assert np.array_equal(got, through_buffer) and np.array_equal(a, x)
     fft(a[::-1].copy())
     assert np.array_equal(got, through_buffer)
+
+
+@pytest.mark.parametrize("dtype, rtol", [(np.complex64, 1e-5), (np.complex128, 1e-12)])
+def test_fft_in_place_matches_numpy(dtype, rtol):
+    """fft_in_place writes the FFT over its aligned input (the tolerances as above); other inputs refused."""
+    from leosop.signal.fft import fft_in_place
+
+    rng = np.random.default_rng(5)
+    x = empty_aligned(3000, dtype=dtype)
+    x[:] = rng.standard_normal(3000) + 1j * rng.standard_normal(3000)
+    ref = np.fft.fft(x.astype(complex))
+    assert fft_in_place(x) is x
+    np.testing.assert_allclose(x, ref, rtol=0, atol=rtol * np.abs(ref).max())
+    with pytest.raises(ValueError, match="empty_aligned"):
+        fft_in_place(np.zeros(10))  # real
+    with pytest.raises(ValueError, match="empty_aligned"):
+        fft_in_place(empty_aligned(20)[::2])  # not contiguous

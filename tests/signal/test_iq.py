@@ -75,6 +75,27 @@ def test_raw(tmp_path, dtype):
     np.testing.assert_allclose(rec.read(0, 2_000), expect, rtol=1e-6)
 
 
+@pytest.mark.parametrize("datatype", ["cf32_le", "ci16_le", "cu8"])
+def test_read_into_a_given_buffer(tmp_path, datatype):
+    """read(..., out=): the same samples as read() into the caller's buffer (cf32 read straight into it, the
+    integer formats converted into it), the buffer returned; a wrong buffer and a file cut short refused."""
+    from leosop.signal.fft import empty_aligned
+
+    x = _samples(4_000)
+    meta = _write(tmp_path, x, datatype=datatype)
+    rec = open_sigmf(meta)
+    out = empty_aligned(1_000)
+    assert rec.read(1_500, 1_000, out=out) is out
+    np.testing.assert_array_equal(out, rec.read(1_500, 1_000))
+    with pytest.raises(ValueError, match="complex64 array of shape"):
+        rec.read(0, 1_000, out=np.empty(999, np.complex64))
+    if datatype == "cf32_le":
+        data = rec.data_path.read_bytes()
+        rec.data_path.write_bytes(data[:8 * 3_500])
+        with pytest.raises(InputError, match="cut short"):
+            rec.read(3_000, 1_000, out=out)
+
+
 def test_bad_files(tmp_path):
     meta = _write(tmp_path, _samples(1_000))
     data = meta.with_suffix(".sigmf-data")
