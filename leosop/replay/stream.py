@@ -18,9 +18,9 @@ cleaned block's FFT, made here in place over the block's DC-free copy, is
 handed to the comb search (``find_combs(None, ..., spectrum=)``), which needs
 no more of the block. Measured on a continuous 2.5 MS/s
 recording of 7 satellites (120 s, 0.1 s blocks, compiled kernels,
-``tools/bench_replay.py``, idle cores), the preparation is about half the
-streaming stage's processor time (2.40 of 4.77 s: 2.0 ms a block, of which
-~1 ms the FFT), the comb search and tracking the rest. With one worker
+``tools/bench_replay.py``, idle cores), the preparation is about 60 % of the
+streaming stage's processor time (2.28-2.60 of 3.84-3.93 s: ~2 ms a block,
+of which ~1 ms the FFT), the comb search and tracking the rest. With one worker
 thread the preparation alone set the pace (the caller waited ~1.2 ms a
 block); with the caller preparing too, two threads replayed a 60 s
 recording at 36-38x real time against 27-30x (alternating runs, idle
