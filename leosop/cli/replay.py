@@ -38,7 +38,8 @@ from ..frames import geodetic_to_ecef
 from ..orbits import load_constellation
 from ..positioning.measurements import DEFAULT_CARRIER_HZ, write_measurements
 from ..replay.lo import LO_DRIFT_MAX_HZ_PER_S, LO_OFFSET_MAX_HZ
-from ..signal.iq import open_sigmf, sha512_checked
+from ..signal.checksum import sha512_checked
+from ..signal.iq import open_sigmf
 from ..timebase import format_utc, seconds_since
 from . import add_command
 from .options import mask_deg, parse_site, positive

@@ -14,8 +14,8 @@ one thread, so are the results, bit for bit.
 
 The preparation spends its time in numpy and FFTW (:mod:`leosop.signal.fft`,
 per-thread plans), which release the GIL, as do the compiled comb fits; the
-cleaned block's FFT, made here in place over the block's DC-free copy, is
-handed to the comb search (``find_combs(None, ..., spectrum=)``), which needs
+cleaned block's FFT, made here in place in the buffer the block was read
+into, is handed to the comb search (``find_combs(None, ..., spectrum=)``), which needs
 no more of the block. Measured on a continuous 2.5 MS/s
 recording of 7 satellites (120 s, 0.1 s blocks, compiled kernels,
 ``tools/bench_replay.py``, idle cores), the preparation is about 60 % of the

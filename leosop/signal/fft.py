@@ -86,14 +86,7 @@ def fft_in_place(x):
     """
     if x.dtype not in (np.complex64, np.complex128) or not x.flags.c_contiguous or not aligned(x):
         raise ValueError("fft_in_place needs a C-contiguous complex array from empty_aligned")
-    plan = _plan(x.shape, x.shape[-1], x.dtype.str, in_place=True)
-    own = plan.input_array
-    plan.update_arrays(x, x)
-    try:
-        plan.execute()
-    finally:
-        plan.update_arrays(own, own)
-    return x
+    return _execute_on(_plan(x.shape, x.shape[-1], x.dtype.str, in_place=True), x, x)
 
 
 def ifft(x):
@@ -124,10 +117,12 @@ def _transform(x, n, scratch, inverse):
     return out if scratch else out.copy()
 
 
-def _execute_on(plan, x):
-    """``plan`` executed on ``x`` into a new aligned output; the plan's own buffers restored after."""
+def _execute_on(plan, x, out=None):
+    """``plan`` executed on ``x`` into ``out`` (default a new aligned array; ``x`` itself for an in-place
+    plan); the plan's own buffers restored after."""
     own_in, own_out = plan.input_array, plan.output_array
-    out = pyfftw.empty_aligned(own_out.shape, dtype=own_out.dtype)
+    if out is None:
+        out = pyfftw.empty_aligned(own_out.shape, dtype=own_out.dtype)
     plan.update_arrays(x, out)
     try:
         plan.execute()

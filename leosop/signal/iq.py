@@ -14,12 +14,9 @@ Raw files take their parameters from options; a gqrx file name
 frequency and the sample rate (:func:`~.recorders.name_metadata`).
 """
 
-import hashlib
 import json
 import os
-import threading
 import warnings
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
@@ -31,10 +28,10 @@ from ..constellations import DEFAULT_FAMILY, REGISTRY, CombModel
 from ..errors import InputError
 from ..fileio import check_input_file
 from ..timebase import format_utc, parse_utc
+from .checksum import check_sha512
 from .recorders import check_8bit_sign, name_metadata
 
-__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "open_sigmf", "open_raw", "sha512_hex", "check_sha512",
-           "sha512_checked"]
+__all__ = ["DATATYPES", "FULL_SCALE", "Capture", "Recording", "open_sigmf", "open_raw"]
 
 #: Accepted sample formats: SigMF name -> (numpy component dtype, scale to float, zero level in file units).
 DATATYPES = {"cf32_le": (np.dtype("<f4"), 1.0, 0.0), "ci16_le": (np.dtype("<i2"), 1.0 / 32768.0, 0.0),
@@ -241,63 +238,6 @@ def _count_samples(data_path, datatype, offset_bytes, where):
         raise InputError(f"{where}: {data_path} holds {size} bytes, not a whole number of "
                          f"{sample_bytes}-byte {datatype} samples (truncated?)")
     return size // sample_bytes
-
-
-def sha512_hex(path):
-    """SHA-512 of a file's bytes as hex text (``core:sha512``), read in 4 MB pieces."""
-    h = hashlib.sha512()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 22), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def check_sha512(rec: Recording) -> None:
-    """Refuse a recording whose data file does not match its declared ``core:sha512`` (none declared: no check).
-
-    Raises
-    ------
-    InputError
-        Naming the data file and the metadata file (truncated or modified).
-    """
-    if rec.sha512 and sha512_hex(rec.data_path) != rec.sha512:
-        raise InputError(f"{rec.data_path}: contents do not match core:sha512 in "
-                         f"{rec.data_path.with_suffix('.sigmf-meta').name} (truncated or modified)")
-
-
-@contextmanager
-def sha512_checked(*recs: Recording):
-    """Check the recordings' ``core:sha512`` on a background thread while the ``with`` body runs.
-
-    For recordings opened with ``open_sigmf(..., verify=False)``: the hash
-    (a whole pass over each data file) overlaps the body's work instead of
-    preceding it; hashlib and the file reads release the GIL, so it takes a
-    core of its own where one is idle. Leaving the block waits for the check
-    and raises its :class:`InputError` on a mismatch, also in place of an
-    error the body raised (a modified file is the better explanation of
-    that). The body must write nothing that the check could still refuse.
-    """
-    failure = []
-
-    def check():
-        try:
-            for rec in recs:
-                check_sha512(rec)
-        except Exception as exc:  # re-raised in the caller's thread
-            failure.append(exc)
-
-    worker = threading.Thread(target=check, name="leosop-sha512", daemon=True)
-    worker.start()
-    try:
-        yield
-    except Exception as exc:
-        worker.join()
-        if failure:
-            raise failure[0] from exc
-        raise
-    worker.join()  # an interrupt (BaseException) leaves the daemon thread to end with the process
-    if failure:
-        raise failure[0]
 
 
 def open_sigmf(meta_path: str | os.PathLike[str], *, verify: bool = True) -> Recording:

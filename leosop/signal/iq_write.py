@@ -11,7 +11,8 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import atomic_files
 from ..timebase import parse_utc
-from .iq import DATATYPES, FULL_SCALE, sha512_hex
+from .checksum import sha512_hex
+from .iq import DATATYPES, FULL_SCALE
 
 __all__ = ["quantise", "write_sigmf", "write_sigmf_files", "SIGMF_EXTENSION_VERSION"]
 

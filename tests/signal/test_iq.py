@@ -230,7 +230,7 @@ def test_capture_refusals(tmp_path, case, match):
 
 
 def test_sha512_checked_refuses_a_modified_file_after_the_body(tmp_path):
-    from leosop.signal.iq import sha512_checked
+    from leosop.signal.checksum import sha512_checked
 
     meta = _write(tmp_path, _samples(1_000))
     data = meta.with_suffix(".sigmf-data")
