@@ -20,6 +20,10 @@ from .gridcells import (FOOTPRINT_MARGIN_DEG, READABLE_GRID_DEG, Grid, brute_for
 from .gridmap_netcdf import GDOP_UNITS, map_dataset, write_netcdf
 from .propagate import state_ecef
 
+#: The smallest task of a map's tail (:func:`_task_blocks`): ~0.1 s of work at 1 deg, against ~10 ms of Dask's
+#: own cost per task.
+_MIN_EPOCHS_PER_TASK = 2
+
 __all__ = [
     "Grid", "make_grid", "check_grid_deg", "ConstellationSource", "satellite_carriers_hz",
     "footprint_pairs", "epoch_maps", "brute_force_epoch", "maps_for_times", "gdop_map", "write_netcdf",
@@ -104,6 +108,19 @@ def _epochs_per_task(n_sats, grid_deg, n_epochs, n_workers):
     return int(min(by_result, by_states, by_balance, 60))
 
 
+def _task_blocks(todo, per, n_workers):
+    """``todo``'s epoch indices cut into tasks of ``per`` epochs, the last ones shrinking so that the workers end
+    together: a task takes at most the remaining epochs over twice the workers (guided self-scheduling
+    [Polychronopoulos 1987]), at least ``_MIN_EPOCHS_PER_TASK``. With one worker, plain blocks of ``per``."""
+    blocks, a = [], 0
+    while a < len(todo):
+        left = len(todo) - a
+        size = per if n_workers <= 1 else min(per, max(-(-left // (2 * n_workers)), _MIN_EPOCHS_PER_TASK))
+        blocks.append(todo[a:a + size])
+        a += size
+    return blocks
+
+
 def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers=None, epochs_per_task=None,
              work_dir=None):
     """Visible count and Doppler GDOP over a global grid and time, as an ``xarray.Dataset``.
@@ -119,7 +136,8 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
     n_workers : int, optional
         Workers of the local cluster (``scheduler=None``); default the cores.
     epochs_per_task : int, optional
-        Default: sized so that a task's output stays near 64 MB.
+        Every task that many epochs. Default: sized so that a task's output stays near 64 MB, the last
+        tasks shrinking so that the workers end together (:func:`_task_blocks`).
     work_dir : path-like, optional
         Keep every finished task's maps there (:class:`leosop.chunkstore.ChunkStore`,
         keyed by their epochs) and take the epochs already there instead of
@@ -144,8 +162,10 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
     done = _resume(store, times, grid, counts, gdops) if store else np.zeros(len(times), bool)
     todo = np.flatnonzero(~done)
     workers = 1 if scheduler == "serial" else (n_workers or os.cpu_count() or 1)
-    per = epochs_per_task or _epochs_per_task(len(const), grid.step_deg, len(todo), workers)
-    blocks = [todo[a:a + per] for a in range(0, len(todo), per)]
+    if epochs_per_task:
+        blocks = [todo[a:a + epochs_per_task] for a in range(0, len(todo), epochs_per_task)]
+    else:
+        blocks = _task_blocks(todo, _epochs_per_task(len(const), grid.step_deg, len(todo), workers), workers)
 
     def keep(idx, block_counts, block_gdops):
         counts[idx], gdops[idx] = block_counts, block_gdops

@@ -35,6 +35,7 @@ from leosop.orbits.gridmap import (
     gdop_map,
     make_grid,
     satellite_carriers_hz,
+    _task_blocks,
 )
 from leosop.orbits.propagate import state_ecef
 
@@ -238,6 +239,20 @@ def test_dask_matches_serial(walker_states):
     serial = gdop_map(const, times, 10.0, 40.0, scheduler="serial")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   dashboard_address=":0") as cluster, distributed.Client(cluster) as client:
-        par = gdop_map(ConstellationSource(), times, 10.0, 40.0, scheduler=client, epochs_per_task=1)
-    np.testing.assert_array_equal(par["n_visible"].values, serial["n_visible"].values)
-    np.testing.assert_array_equal(par["gdop"].values, serial["gdop"].values)
+        one = gdop_map(ConstellationSource(), times, 10.0, 40.0, scheduler=client, epochs_per_task=1)
+        guided = gdop_map(ConstellationSource(), times, 10.0, 40.0, scheduler=client, n_workers=2)
+    for par in (one, guided):
+        np.testing.assert_array_equal(par["n_visible"].values, serial["n_visible"].values)
+        np.testing.assert_array_equal(par["gdop"].values, serial["gdop"].values)
+
+
+def test_task_blocks_shrink_to_the_end():
+    """Every epoch once, in order; full tasks first, then at most the remaining epochs over twice the workers."""
+    todo = np.arange(5, 1446)
+    blocks = _task_blocks(todo, 60, 2)
+    np.testing.assert_array_equal(np.concatenate(blocks), todo)
+    sizes = np.array([len(b) for b in blocks])
+    left = len(todo) - np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    assert sizes.max() == 60 and np.all(np.diff(sizes) <= 0)
+    np.testing.assert_array_equal(sizes, np.minimum(np.minimum(60, np.maximum(-(-left // 4), 2)), left))
+    assert [len(b) for b in _task_blocks(np.arange(130), 60, 1)] == [60, 60, 10]
