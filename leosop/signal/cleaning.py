@@ -40,6 +40,9 @@ _PARTNER_SPACING_SPREAD = 8e3 / C_MPS
 #: their peak bins differ by scalloping (3.9 dB at most) and noise. A 70 dB-Hz CW line is 25 dB above a
 #: 45 dB-Hz comb's tones (issue 26: counted without power, they made it a comb tone).
 _PARTNER_DB = 10.0
+#: The reach of a line's skirt (:func:`_subtract_skirt`): as far from its peak as a pure tone of its energy E
+#: leaks above this fraction of the noise (up to ``E / (pi^2 m^2)`` into the bin m bins away).
+_SKIRT_FRACTION = 0.1
 #: Each thread's power-spectrum buffer (:func:`_padded_buffer`).
 _local = threading.local()
 
@@ -241,6 +244,53 @@ def _lines(padded, noise, fs, comb, pfa, kernel=None):
     return lines, noise
 
 
+def _subtract_skirt(spectrum, line, noise_bin, fs):
+    """Take a pure tone's leakage out of the bins beside a line's run, in place.
+
+    A CW line between two bins leaks ``E / (pi^2 m^2)`` of its energy E into the bin m bins away: a
+    75 dB-Hz line still holds twice the noise 5 kHz out, past its excised run (which ends where the
+    smoothed power falls to twice the noise). A comb tone on that skirt lifts a noise cell of the comb
+    search over its threshold: weak spurious combs beside every CW line off the bin grid. The tone's
+    frequency comes from its peak bin and neighbours (Candan's estimator for the rectangular window),
+    its amplitude from the peak bin; its Dirichlet kernel is subtracted over the bins within
+    :data:`_SKIRT_FRACTION`'s reach either side of the run, unless that leaves them with more power
+    than before (a line that is not one steady tone).
+
+    Parameters
+    ----------
+    spectrum : ndarray of complex, (n,)
+        The block's FFT (FFT order).
+    line : Line
+    noise_bin : float
+        Noise mean per bin of ``|spectrum|^2``.
+    fs : float
+    """
+    n = spectrum.size
+    if not noise_bin > 0:
+        return
+    kp = int(round(line.frequency_hz * n / fs))
+    x_m, x_0, x_p = (complex(spectrum[k % n]) for k in (kp - 1, kp, kp + 1))
+    den = 2.0 * x_0 - x_m - x_p
+    if den == 0:
+        return
+    delta = float(np.clip(((x_m - x_p) / den).real * np.tan(np.pi / n) / (np.pi / n), -0.5, 0.5))
+
+    def kernel(k):  # sum_t exp(j 2 pi (f - k) t / n), t = 0..n-1, f = kp + delta
+        u = kp + delta - k
+        return np.exp(1j * np.pi * u * (n - 1) / n) * np.sin(np.pi * u) / np.sin(np.pi * u / n)
+
+    amp = x_0 / kernel(np.array([kp]))[0]
+    reach = int(np.ceil(np.sqrt(abs(amp) ** 2 * n * n / (_SKIRT_FRACTION * noise_bin)) / np.pi))
+    k = np.concatenate([np.arange(line.lo_bin - reach, line.lo_bin),
+                        np.arange(line.hi_bin + 1, line.hi_bin + reach + 1)])
+    k = k[np.abs(k - kp) < n // 2]  # once round the circle at most
+    idx = k % n
+    before = spectrum[idx]
+    after = before - amp * kernel(k)
+    if np.sum(np.abs(after) ** 2) < np.sum(np.abs(before.astype(complex)) ** 2):
+        spectrum[idx] = after
+
+
 def _strong_runs(padded, strong, level):
     """The runs of bins holding a strong bin where the power smoothed over ``_LINE_SMOOTH_BINS`` exceeds ``level``.
 
@@ -416,6 +466,7 @@ def _clean(iq, fs, comb, pfa, kernel, in_place, overwrite=False):
     n0 = noise_bin / (n * fs) if noise_bin > 0 else np.nan  # |X|^2 of white noise: n * sigma^2 = n * N0 * fs
     dc_dbhz = 10.0 * np.log10(abs(dc) ** 2 / n0) if abs(dc) > 0 and n0 > 0 else -np.inf
     for ln in lines:
+        _subtract_skirt(spectrum, ln, noise_bin, fs)
         spectrum[np.arange(ln.lo_bin, ln.hi_bin + 1) % n] = 0.0
     if in_place:
         x = None
