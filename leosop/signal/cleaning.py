@@ -251,7 +251,7 @@ def _subtract_skirt(spectrum, line, noise_bin, fs):
     75 dB-Hz line still holds twice the noise 5 kHz out, past its excised run (which ends where the
     smoothed power falls to twice the noise). A comb tone on that skirt lifts a noise cell of the comb
     search over its threshold: weak spurious combs beside every CW line off the bin grid. The tone's
-    frequency comes from its peak bin and neighbours (Candan's estimator for the rectangular window),
+    frequency comes from its peak bin and neighbours ([Candan 2011], for the rectangular window),
     its amplitude from the peak bin; its Dirichlet kernel is subtracted over the bins within
     :data:`_SKIRT_FRACTION`'s reach either side of the run, unless that leaves them with more power
     than before (a line that is not one steady tone).
