@@ -315,12 +315,18 @@ class _Finder:
             _subtract_spectrum(spectrum, comb, [c.doppler_hz for c in combs], [c.rate for c in combs],
                                [c.amp for c in combs], n, fs, n_seg_s, self.kernel)
         residues = 0
+        confirm = _detection_threshold(grid, comb, self.max_rate, self.pfa)
         while len(combs) < max_combs:
             coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=self.pfa,
                                 centre_hz=lo)
             if not coarse.detected:
                 break
             c = self.fit_new(coarse.doppler_hz, None, -1)
+            if not c.statistic > confirm:
+                # The coherent fit does not confirm the power detector: noise at the strongest window left
+                # (a comb that passes the power detector at all has a coherent statistic of ~10 or more).
+                combs.pop()
+                break
             if _duplicate(comb, c, combs[:-1], dur):
                 # The residue of a comb already found (nearly coinciding tones are
                 # not cancelled exactly): remove it too and search on, a few times
