@@ -322,14 +322,10 @@ class _Finder:
             if not coarse.detected:
                 break
             c = self.fit_new(coarse.doppler_hz, None, -1)
-            if not c.statistic > confirm:
-                # The coherent fit does not confirm the power detector: noise at the strongest window left
-                # (a comb that passes the power detector at all has a coherent statistic of ~10 or more).
-                combs.pop()
-                break
-            if _duplicate(comb, c, combs[:-1], dur):
-                # The residue of a comb already found (nearly coinciding tones are
-                # not cancelled exactly): remove it too and search on, a few times
+            if not c.statistic > confirm or _duplicate(comb, c, combs[:-1], dur):
+                # Not a new comb: noise that the coherent fit does not confirm (a comb the power detector
+                # finds at all scores ~10 or more), or the residue of a comb already found (nearly
+                # coinciding tones are not cancelled exactly). Remove it too and search on, a few times
                 # at most, rather than miss the weaker combs behind it.
                 combs.pop()
                 residues += 1
