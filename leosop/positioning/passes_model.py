@@ -274,6 +274,9 @@ class PassesModel:
 
     def __init__(self, rows):
         self.rows = rows
+        # The receivers' common clock offset, taken out of the rows before the linear fit and put back into
+        # its constant terms (set at the first call, :meth:`_offset_hz`).
+        self._y0 = None
         # The satellites' own terms of the Doppler rate: the same at every iterate.
         self.motion = (sv_motion(rows.pos_sv_ecef_m, rows.vel_sv_ecef_mps,
                                  inertial=rows.time_offset_model == "inertial") if rows.time_bias else None)
@@ -345,13 +348,32 @@ class PassesModel:
         """Prediction, projected position Jacobian and the linear terms (global, per pass) at ``x``."""
         r = self.rows
         h, D, grad, A, lin, fitted, blocks = self.normal(x, w)
-        c_g, c_s = lin((r.y[:r.n] - h)[..., None])
+        rhs = r.y[:r.n] - h
+        y0 = self._offset_hz(rhs)
+        c_g, c_s = lin((rhs - y0)[..., None])
+        if y0:
+            c_g = c_g.copy()
+            c_g[:, :r.n_glob:r.n_glob // r.n_clk] += y0  # each receiver clock's constant term
         if r.time_bias:
             D = D + c_s[:, r.pass_index, -1, 0, None] * grad
         K_g, K_s = lin(D)
         pred = h + fitted(c_g, c_s)[..., 0]
         J = D - fitted(K_g, K_s)
         return pred, J, D, A, c_g[..., 0], c_s[..., 0], K_g, K_s, blocks
+
+    def _offset_hz(self, rhs):
+        """The rows' common offset from the geometry, ``median(y - h)`` of the first call's first problem
+        (0 without shared receiver clocks).
+
+        An LNB's offset (hundreds of kHz) left in the rows made the eliminated clock terms carry it, and
+        their solve's round-off (~1e-10 of them) jittered the predictions by ~0.005 sigma: with a drift as
+        well, the fix's chi-square varied by ~0.06 from call to call and its step test was never met (4,000
+        iterations, ``not_converged``, where the rows less the offset converge in 11)."""
+        if self._y0 is None:
+            r = self.rows
+            used = r.used[:r.n]
+            self._y0 = float(np.median(rhs[0][used])) if r.common and r.n_glob and used.any() else 0.0
+        return self._y0
 
     def __call__(self, x, idx, w):
         """Prediction (k, n_rows) and Jacobian (k, n_rows, 3) of the rows, pseudo-rows included, at ``x`` (k, 3)."""
