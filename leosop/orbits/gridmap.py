@@ -163,7 +163,7 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
     todo = np.flatnonzero(~done)
     workers = 1 if scheduler == "serial" else (n_workers or os.cpu_count() or 1)
     if epochs_per_task:
-        blocks = [todo[a:a + epochs_per_task] for a in range(0, len(todo), epochs_per_task)]
+        blocks = _task_blocks(todo, epochs_per_task, 1)  # as asked, none shrinking
     else:
         blocks = _task_blocks(todo, _epochs_per_task(len(const), grid.step_deg, len(todo), workers), workers)
 

@@ -279,15 +279,18 @@ def _subtract_skirt(spectrum, line, noise_bin, fs):
         u = kp + delta - k
         return np.exp(1j * np.pi * u * (n - 1) / n) * np.sin(np.pi * u) / np.sin(np.pi * u / n)
 
-    amp = x_0 / kernel(np.array([kp]))[0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        amp = x_0 / kernel(kp)  # not finite for a line exactly on its bin (delta 0): no skirt then
+    if not np.isfinite(amp):
+        return
     reach = int(np.ceil(np.sqrt(abs(amp) ** 2 * n * n / (_SKIRT_FRACTION * noise_bin)) / np.pi))
     k = np.concatenate([np.arange(line.lo_bin - reach, line.lo_bin),
                         np.arange(line.hi_bin + 1, line.hi_bin + reach + 1)])
     k = k[np.abs(k - kp) < n // 2]  # once round the circle at most
     idx = k % n
-    before = spectrum[idx]
+    before = spectrum[idx].astype(complex)
     after = before - amp * kernel(k)
-    if np.sum(np.abs(after) ** 2) < np.sum(np.abs(before.astype(complex)) ** 2):
+    if np.sum(np.abs(after) ** 2) < np.sum(np.abs(before) ** 2):
         spectrum[idx] = after
 
 
