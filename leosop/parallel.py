@@ -21,16 +21,25 @@ a ``distributed.Client``
 
 A task's function must be picklable (a module-level function, or a
 ``functools.partial`` of one) for worker processes.
+
+Large results of a local cluster's tasks need not travel back over TCP:
+:func:`shared_outputs` gives arrays mapped from files in RAM (``/dev/shm``)
+that the tasks fill in place (:class:`SharedArray`).
 """
 
 import contextlib
 import itertools
 import logging
 import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
 
 from .errors import ExternalError
 
-__all__ = ["CONNECT_TIMEOUT", "dask_client", "run_tasks"]
+__all__ = ["CONNECT_TIMEOUT", "SharedArray", "dask_client", "run_tasks", "shared_outputs"]
 
 #: How long to try reaching a scheduler given by address.
 CONNECT_TIMEOUT = "10s"
@@ -50,16 +59,75 @@ CONNECT_TIMEOUT = "10s"
 #: and no memory manager (a task's result goes to the client alone, no
 #: replicas to manage), 0.8 and 2.2-2.7 s (``tools/bench_gdop_map.py
 #: --dask-workers 2 --split 2``; measured with the memory monitor at 1 s
-#: too, now left at its 0.1 s so that memory limits act as promptly).
+#: too, now left at its 0.1 s so that memory limits act as promptly). The
+#: event loops' tick (a callback every 20 ms that times how late it runs,
+#: for the "event loop was unresponsive" warning) at 1 s: 0.1-0.6 CPU-s less
+#: in the client over a 40 s map, as much again in the workers, two
+#: alternating pairs of one-off runs; the warning still comes.
 _LOCAL_CLUSTER = {
     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 256 << 20,
     "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": 32 << 20,
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.scheduler.active-memory-manager.start": False,
+    "distributed.admin.tick.interval": "1s",
 }
 #: The fewest tasks kept in flight by a bounded window, whatever the worker count.
 _MIN_WINDOW = 4
+#: A file system in RAM, where :func:`shared_outputs` maps its arrays: writing and mapping cost no disk I/O.
+_SHARED_DIR = "/dev/shm"
+#: Room :func:`shared_outputs` leaves free there for others (a full tmpfs kills a process writing to it).
+_SHARED_HEADROOM = 256 << 20
+
+
+@dataclass(frozen=True)
+class SharedArray:
+    """An array of :func:`shared_outputs` as a task sees it: where it lies, its shape and type (picklable)."""
+
+    path: str
+    shape: tuple
+    dtype: str
+
+    def put(self, index, values):
+        """``array[index] = values`` in the caller's array (no copy travels back)."""
+        np.memmap(self.path, dtype=self.dtype, mode="r+", shape=self.shape)[index] = values
+
+
+@contextlib.contextmanager
+def shared_outputs(scheduler, specs):
+    """Zero-filled arrays that the tasks of a local cluster fill in place, or None.
+
+    With ``scheduler=None`` (the local cluster :func:`run_tasks` starts, whose
+    workers share this machine's memory) and ``/dev/shm`` with room, each
+    ``(shape, dtype)`` of ``specs`` becomes a file there, mapped here: yields
+    ``(arrays, handles)``, the tasks get the :class:`SharedArray` handles and
+    write their parts with :meth:`SharedArray.put` instead of returning them.
+    The files are removed on exit; on POSIX the arrays stay valid (the
+    mapping holds the memory until they are freed). Otherwise (a remote or
+    given scheduler, no ``/dev/shm``, too little room) yields None and the
+    results travel back as usual.
+
+    Parameters
+    ----------
+    scheduler : None, str or distributed.Client
+    specs : sequence of (tuple, dtype)
+    """
+    need = sum(int(np.prod(shape)) * np.dtype(dtype).itemsize for shape, dtype in specs)
+    try:
+        room = os.statvfs(_SHARED_DIR).f_bavail * os.statvfs(_SHARED_DIR).f_frsize
+    except (AttributeError, OSError):  # not POSIX, or no RAM file system
+        room = 0
+    if scheduler is not None or os.name != "posix" or need == 0 or need + _SHARED_HEADROOM > room:
+        yield None
+        return
+    folder = tempfile.mkdtemp(prefix="leosop-", dir=_SHARED_DIR)
+    try:
+        handles = [SharedArray(os.path.join(folder, f"{k}.bin"), tuple(int(n) for n in shape), np.dtype(dtype).str)
+                   for k, (shape, dtype) in enumerate(specs)]
+        arrays = [np.asarray(np.memmap(h.path, dtype=h.dtype, mode="w+", shape=h.shape)) for h in handles]
+        yield arrays, handles
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @contextlib.contextmanager

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..parallel import shared_outputs
 from ..constellations import REGISTRY, carriers_hz
 from .gridcells import (FOOTPRINT_MARGIN_DEG, READABLE_GRID_DEG, Grid, brute_force_epoch, check_grid_deg, epoch_maps,
                         footprint_pairs, make_grid)
@@ -93,10 +94,17 @@ def maps_for_times(constellation, times_utc, grid_deg, mask_deg):
     return counts, gdops
 
 
-def _task(chunk, rng=None):
-    """Worker entry: ``chunk = (source, times, grid_deg, mask_deg)``."""
+def _task(chunk, idx=None, into=None):
+    """Worker entry: ``chunk = (source, times, grid_deg, mask_deg)``; the maps, or, with ``into`` (the
+    :class:`~leosop.parallel.SharedArray` of the counts and of the GDOP), None once they are written there at
+    epochs ``idx``."""
     source, times, grid_deg, mask_deg = chunk
-    return maps_for_times(source, times, grid_deg, mask_deg)
+    maps = maps_for_times(source, times, grid_deg, mask_deg)
+    if into is None:
+        return maps
+    for out, values in zip(into, maps):
+        out.put(idx, values)
+    return None
 
 
 def _epochs_per_task(n_sats, grid_deg, n_epochs, n_workers):
@@ -149,15 +157,25 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
     xarray.Dataset
         ``n_visible(time, lat, lon)`` int16, ``gdop(time, lat, lon)`` float32.
     """
+    times = np.atleast_1d(np.asarray(times_utc, dtype="datetime64[ns]"))
+    grid = make_grid(grid_deg)
+    const = source.load() if isinstance(source, ConstellationSource) else source
+    specs = [((len(times),) + grid.shape, np.int16), ((len(times),) + grid.shape, np.float32)]
+    with shared_outputs(scheduler, specs) as shared:
+        (counts, gdops), into = shared or ([np.empty(shape, dtype) for shape, dtype in specs], None)
+        _fill(source, const, times, grid, mask_deg, counts, gdops, scheduler=scheduler, n_workers=n_workers,
+              epochs_per_task=epochs_per_task, work_dir=work_dir, into=into)
+    return map_dataset(times, grid, mask_deg, counts, gdops, const)
+
+
+def _fill(source, const, times, grid, mask_deg, counts, gdops, *, scheduler, n_workers, epochs_per_task, work_dir,
+          into):
+    """:func:`gdop_map`'s work: ``counts`` and ``gdops`` filled, by the tasks themselves when ``into`` is
+    their shared handles."""
     import os
 
     from ..chunkstore import ChunkStore
 
-    times = np.atleast_1d(np.asarray(times_utc, dtype="datetime64[ns]"))
-    grid = make_grid(grid_deg)
-    const = source.load() if isinstance(source, ConstellationSource) else source
-    counts = np.empty((len(times),) + grid.shape, dtype=np.int16)
-    gdops = np.empty((len(times),) + grid.shape, dtype=np.float32)
     store = ChunkStore(work_dir) if work_dir is not None else None
     done = _resume(store, times, grid, counts, gdops) if store else np.zeros(len(times), bool)
     todo = np.flatnonzero(~done)
@@ -167,22 +185,22 @@ def gdop_map(source, times_utc, grid_deg, mask_deg, *, scheduler=None, n_workers
     else:
         blocks = _task_blocks(todo, _epochs_per_task(len(const), grid.step_deg, len(todo), workers), workers)
 
-    def keep(idx, block_counts, block_gdops):
-        counts[idx], gdops[idx] = block_counts, block_gdops
+    def keep(idx, maps):
+        if maps is not None:
+            counts[idx], gdops[idx] = maps
         if store:
             store.save(f"epochs-{times[idx[0]].astype(np.int64)}", time_ns=times[idx].astype(np.int64),
-                       n_visible=block_counts, gdop=block_gdops)
+                       n_visible=counts[idx], gdop=gdops[idx])
 
     if scheduler == "serial":
         from ..progress import progress
 
         for idx in progress(blocks, total=len(blocks), desc="gdop-map", unit="task"):
-            keep(idx, *maps_for_times(const, times[idx], grid.step_deg, mask_deg))
+            keep(idx, maps_for_times(const, times[idx], grid.step_deg, mask_deg))
     elif blocks:
         if not isinstance(source, ConstellationSource):
             raise TypeError("a Dask run needs a ConstellationSource (SGP4 records do not pickle)")
-        _run_dask(source, times, blocks, grid.step_deg, mask_deg, scheduler, n_workers, keep)
-    return map_dataset(times, grid, mask_deg, counts, gdops, const)
+        _run_dask(source, times, blocks, grid.step_deg, mask_deg, scheduler, n_workers, keep, into)
 
 
 def _resume(store, times, grid, counts, gdops):
@@ -203,12 +221,14 @@ def _resume(store, times, grid, counts, gdops):
     return done
 
 
-def _run_dask(source, times, blocks, grid_deg, mask_deg, scheduler, n_workers, keep):
-    """Run each block of epoch indices as a task; ``keep(idx, counts, gdops)`` as each finishes."""
+def _run_dask(source, times, blocks, grid_deg, mask_deg, scheduler, n_workers, keep, into):
+    """Run each block of epoch indices as a task; ``keep(idx, maps)`` as each finishes (``maps`` None when the
+    task wrote them ``into`` the shared arrays)."""
     from ..parallel import run_tasks
     from ..progress import progress
 
     with progress(total=len(blocks), desc="gdop-map", unit="task") as bar:
-        run_tasks(_task, (((source, times[idx], grid_deg, mask_deg),) for idx in blocks), n_tasks=len(blocks),
-                  scheduler=scheduler, n_workers=n_workers, on_result=lambda k, maps: keep(blocks[k], *maps),
+        run_tasks(_task, (((source, times[idx], grid_deg, mask_deg), idx, into) for idx in blocks),
+                  n_tasks=len(blocks),
+                  scheduler=scheduler, n_workers=n_workers, on_result=lambda k, maps: keep(blocks[k], maps),
                   label=lambda k: f"the epochs from {times[blocks[k][0]]}", bar=bar)

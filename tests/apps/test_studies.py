@@ -80,3 +80,36 @@ def test_run_tasks_error_names_the_task_or_goes_to_on_error(client):
     run_tasks(_square_or_fail, [(i, 3) for i in range(6)], scheduler=client, on_result=results.__setitem__,
               on_error=lambda i, exc: errors.setdefault(i, str(exc)))
     assert errors == {3: "bad input 3"} and results == {i: i * i for i in (0, 1, 2, 4, 5)}
+
+
+def _put_squares(handle, idx):
+    handle.put(idx, np.asarray(idx) ** 2)
+
+
+def test_shared_outputs_are_filled_in_place_and_their_files_go(client, monkeypatch):
+    """Another process's writes land in the caller's array; the files are gone on exit, the array stays valid;
+    a given scheduler, or too little room in RAM, gets None (the results then travel back)."""
+    import multiprocessing
+    import os
+
+    from leosop import parallel
+
+    if not os.path.isdir(parallel._SHARED_DIR):
+        pytest.skip("no /dev/shm on this system")
+    with parallel.shared_outputs(None, [((10,), np.int64), ((2, 3), np.float32)]) as shared:
+        (squares, zeros), (handle, _) = shared
+        folder = os.path.dirname(handle.path)
+        assert not squares.any() and not zeros.any()
+        ctx = multiprocessing.get_context("spawn")  # a fresh process, as a Dask worker is
+        for idx in ([1, 2, 3], [9]):
+            worker = ctx.Process(target=_put_squares, args=(handle, idx))
+            worker.start()
+            worker.join()
+            assert worker.exitcode == 0
+    assert not os.path.exists(folder)
+    np.testing.assert_array_equal(squares, [0, 1, 4, 9, 0, 0, 0, 0, 0, 81])
+    with parallel.shared_outputs(client, [((10,), np.int64)]) as shared:
+        assert shared is None
+    monkeypatch.setattr(parallel, "_SHARED_HEADROOM", 1 << 62)
+    with parallel.shared_outputs(None, [((10,), np.int64)]) as shared:
+        assert shared is None

@@ -246,6 +246,36 @@ def test_dask_matches_serial(walker_states):
         np.testing.assert_array_equal(par["gdop"].values, serial["gdop"].values)
 
 
+def test_local_cluster_writes_the_maps_in_place(walker_states, monkeypatch):
+    """``scheduler=None``: worker processes of a local cluster write their epochs into shared arrays; the maps are
+    bit-identical to the serial ones and no file is left in /dev/shm."""
+    import contextlib
+    import os
+
+    from leosop.orbits import gridmap
+
+    pytest.importorskip("distributed")
+    if not os.path.isdir("/dev/shm"):
+        pytest.skip("no /dev/shm on this system")
+    const, times, _, _, _ = walker_states
+    used, shared_outputs = [], gridmap.shared_outputs
+
+    @contextlib.contextmanager
+    def spy(*args):
+        with shared_outputs(*args) as shared:
+            used.append(shared is not None)
+            yield shared
+
+    monkeypatch.setattr(gridmap, "shared_outputs", spy)
+    before = set(os.listdir("/dev/shm"))
+    serial = gdop_map(const, times, 10.0, 40.0, scheduler="serial")
+    local = gdop_map(ConstellationSource(), times, 10.0, 40.0, scheduler=None, n_workers=2)
+    assert used == [False, True]
+    np.testing.assert_array_equal(local["n_visible"].values, serial["n_visible"].values)
+    np.testing.assert_array_equal(local["gdop"].values, serial["gdop"].values)
+    assert {f for f in os.listdir("/dev/shm") if f.startswith("leosop-")} <= before
+
+
 def test_task_blocks_shrink_to_the_end():
     """Every epoch once, in order; full tasks first, then at most the remaining epochs over twice the workers."""
     todo = np.arange(5, 1446)
