@@ -96,6 +96,7 @@ def test_shared_outputs_are_filled_in_place_and_their_files_go(client, monkeypat
 
     if not os.path.isdir(parallel._SHARED_DIR):
         pytest.skip("no /dev/shm on this system")
+    before = set(os.listdir(parallel._SHARED_DIR))
     with parallel.shared_outputs(None, [((10,), np.int64), ((2, 3), np.float32)]) as shared:
         (squares, zeros), (handle, _) = shared
         folder = os.path.dirname(handle.path)
@@ -110,6 +111,14 @@ def test_shared_outputs_are_filled_in_place_and_their_files_go(client, monkeypat
     np.testing.assert_array_equal(squares, [0, 1, 4, 9, 0, 0, 0, 0, 0, 81])
     with parallel.shared_outputs(client, [((10,), np.int64)]) as shared:
         assert shared is None
+    def full(fd, offset, n_bytes):
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as m:  # another process took the room after the check
+        m.setattr(os, "posix_fallocate", full)
+        with parallel.shared_outputs(None, [((10,), np.int64)]) as shared:
+            assert shared is None
     monkeypatch.setattr(parallel, "_SHARED_HEADROOM", 1 << 62)
     with parallel.shared_outputs(None, [((10,), np.int64)]) as shared:
         assert shared is None
+    assert set(os.listdir(parallel._SHARED_DIR)) <= before
