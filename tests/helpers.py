@@ -7,6 +7,9 @@ that need a folder skip cleanly when it is absent. Import as
 ``from tests.helpers import data_path`` (tests/conftest.py says why).
 """
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +42,16 @@ ESBC_SP3 = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_15M_ORB.SP3.gz"
 ESBC_CLK = ESBC_DAY / "GRG0MGXFIN_20201770000_01D_30S_CLK.CLK.gz"
 ESBC_ATX = ESBC_DAY / "esbc_2020-177.atx"
 ESBC_CODES = {"G": ["C1C", "C1W", "C2W", "L1C", "L2W"], "E": ["C1C", "C5Q", "L1C", "L5Q"]}
+
+
+def peak_rss_mb(*args):
+    """Peak resident memory [MB] of one ``leosop`` run in a child process of its own (os.wait4's rusage; Linux)."""
+    proc = subprocess.Popen([sys.executable, "-m", "leosop", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    stderr = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0, stderr.decode()
+    return usage.ru_maxrss / 1024  # kB on Linux
 
 
 def one_line_error(call, *match):

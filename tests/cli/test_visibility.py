@@ -3,7 +3,6 @@
 import csv
 import http.server
 import json
-import os
 import subprocess
 import sys
 import threading
@@ -12,6 +11,7 @@ import pytest
 
 from leosop.cli import main
 from leosop.orbits import DEFAULT_TLE
+from tests.helpers import peak_rss_mb
 
 
 def run_cli(*args):
@@ -177,16 +177,6 @@ def test_tle_fetch_refuses_out(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-def _peak_rss_mb(*args):
-    """Peak resident memory [MB] of one ``leosop`` run in a child process of its own (os.wait4's rusage)."""
-    proc = subprocess.Popen([sys.executable, "-m", "leosop", *args], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)
-    stderr = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    assert os.waitstatus_to_exitcode(status) == 0, stderr.decode()
-    return usage.ru_maxrss / 1024  # kB on Linux
-
-
 def test_peak_memory_stays_flat_when_the_span_doubles(tmp_path):
     # 60 satellites, 0.5 s steps: 20,001 then 40,001 epochs, both past --json-max-epochs and the figure's
     # binning. The whole-span code (before chunking) kept ~1.2 kB per epoch (the grid's geometry, the padded
@@ -194,7 +184,7 @@ def test_peak_memory_stays_flat_when_the_span_doubles(tmp_path):
     # +1.4 MB. 8 MB leaves room for the allocator's noise and still fails the old growth by 3x.
     tle = tmp_path / "small.tle"
     tle.write_text("\n".join(DEFAULT_TLE.read_text().splitlines()[:180]) + "\n")
-    peaks = [_peak_rss_mb("visibility", "--tle", str(tle), "--start", "2025-01-01T00:00:00Z", "--duration-s",
+    peaks = [peak_rss_mb("visibility", "--tle", str(tle), "--start", "2025-01-01T00:00:00Z", "--duration-s",
                           str(seconds), "--step-s", "0.5", "--mask-deg", "10", "--json-max-epochs", "1000",
                           "--out", str(tmp_path / str(seconds))) for seconds in (10_000, 20_000)]
     assert peaks[1] - peaks[0] < 8.0, peaks
