@@ -114,28 +114,39 @@ def shared_outputs(scheduler, specs):
     scheduler : None, str or distributed.Client
     specs : sequence of (tuple, dtype)
     """
+    made = _shared_files(specs) if scheduler is None else None
+    if made is None:
+        yield None
+        return
+    folder, arrays, handles = made
+    try:
+        yield arrays, handles
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _shared_files(specs):
+    """``(folder, arrays, handles)`` of :func:`shared_outputs`, or None where they cannot be made."""
     need = sum(int(np.prod(shape)) * np.dtype(dtype).itemsize for shape, dtype in specs)
     try:
         room = os.statvfs(_SHARED_DIR).f_bavail * os.statvfs(_SHARED_DIR).f_frsize
     except (AttributeError, OSError):  # not POSIX, or no RAM file system
         room = 0
-    if scheduler is not None or not hasattr(os, "posix_fallocate") or need == 0 or need + _SHARED_HEADROOM > room:
-        yield None
-        return
-    folder = tempfile.mkdtemp(prefix="leosop-", dir=_SHARED_DIR)
+    if not hasattr(os, "posix_fallocate") or need == 0 or need + _SHARED_HEADROOM > room:
+        return None
+    folder = None
     try:
+        folder = tempfile.mkdtemp(prefix="leosop-", dir=_SHARED_DIR)
         handles = [SharedArray(os.path.join(folder, f"{k}.bin"), tuple(int(n) for n in shape), np.dtype(dtype).str)
                    for k, (shape, dtype) in enumerate(specs)]
-        try:
-            for h in handles:
-                _reserve(h.path, int(np.prod(h.shape)) * np.dtype(h.dtype).itemsize)
-        except OSError:  # the room went to another process meanwhile
-            arrays = None
-        else:
-            arrays = [np.asarray(np.memmap(h.path, dtype=h.dtype, mode="r+", shape=h.shape)) for h in handles]
-        yield None if arrays is None else (arrays, handles)
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
+        for h in handles:
+            _reserve(h.path, int(np.prod(h.shape)) * np.dtype(h.dtype).itemsize)
+        arrays = [np.asarray(np.memmap(h.path, dtype=h.dtype, mode="r+", shape=h.shape)) for h in handles]
+    except OSError:  # not writable, or the room went to another process meanwhile
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return folder, arrays, handles
 
 
 def _reserve(path, n_bytes):

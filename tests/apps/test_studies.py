@@ -88,7 +88,8 @@ def _put_squares(handle, idx):
 
 def test_shared_outputs_are_filled_in_place_and_their_files_go(client, monkeypatch):
     """Another process's writes land in the caller's array; the files are gone on exit, the array stays valid;
-    a given scheduler, or too little room in RAM, gets None (the results then travel back)."""
+    a given scheduler, too little room in RAM, a failed reservation or no folder there gets None (the results then
+    travel back)."""
     import multiprocessing
     import os
 
@@ -97,6 +98,7 @@ def test_shared_outputs_are_filled_in_place_and_their_files_go(client, monkeypat
     if not os.path.isdir(parallel._SHARED_DIR):
         pytest.skip("no /dev/shm on this system")
     before = set(os.listdir(parallel._SHARED_DIR))
+    monkeypatch.setattr(parallel, "_SHARED_HEADROOM", 0)  # a container's /dev/shm may hold 64 MB only
     with parallel.shared_outputs(None, [((10,), np.int64), ((2, 3), np.float32)]) as shared:
         (squares, zeros), (handle, _) = shared
         folder = os.path.dirname(handle.path)
@@ -116,6 +118,10 @@ def test_shared_outputs_are_filled_in_place_and_their_files_go(client, monkeypat
 
     with monkeypatch.context() as m:  # another process took the room after the check
         m.setattr(os, "posix_fallocate", full)
+        with parallel.shared_outputs(None, [((10,), np.int64)]) as shared:
+            assert shared is None
+    with monkeypatch.context() as m:  # a place that is no folder
+        m.setattr(parallel, "_SHARED_DIR", __file__)
         with parallel.shared_outputs(None, [((10,), np.int64)]) as shared:
             assert shared is None
     monkeypatch.setattr(parallel, "_SHARED_HEADROOM", 1 << 62)

@@ -267,6 +267,7 @@ def test_local_cluster_writes_the_maps_in_place(walker_states, monkeypatch):
             yield shared
 
     monkeypatch.setattr(gridmap, "shared_outputs", spy)
+    monkeypatch.setattr("leosop.parallel._SHARED_HEADROOM", 0)  # a container's /dev/shm may hold 64 MB only
     before = set(os.listdir("/dev/shm"))
     serial = gdop_map(const, times, 10.0, 40.0, scheduler="serial")
     local = gdop_map(ConstellationSource(), times, 10.0, 40.0, scheduler=None, n_workers=2)
