@@ -282,7 +282,8 @@ class PassesModel:
                                  inertial=rows.time_offset_model == "inertial") if rows.time_bias else None)
 
     def normal(self, x, w):
-        """Geometry (h, D, rate grad), the per-pass basis A and the linear normal matrix's blocks and solver.
+        """Geometry (h, D, rate grad), the per-pass basis A, the linear terms' solver and their normal matrix's
+        blocks with the inverses of the per-pass blocks and of the global tier's Schur complement.
 
         The global tier is the receivers' polynomials, then the blocks' common errors (module docstring).
         """
@@ -300,13 +301,15 @@ class PassesModel:
         wd = w[:, :n]
         wA = wd[..., None] * A
         G_ss = np.add.reduceat(wA[..., :, None] * A[..., None, :], seg, axis=1) + np.diag(r.prior)
-        Gi_ss = np.linalg.pinv(G_ss, hermitian=True)
+        # Inverted through their Jacobi scaling (:func:`_scaled_pinv`): unscaled, a short pass's cubic and time
+        # offset (condition ~1e14) cost the projection ~6e-3 of a row's leverage; scaled, 8e-6.
+        Gi_ss = _scaled_pinv(G_ss)
         G_gg = np.einsum("mi,pm,mj->pij", B_glob, wd, B_glob)
         G_sg = np.add.reduceat(wA[..., :, None] * B_glob[None, :, None, :], seg, axis=1)  # (k, P, l, g)
         if r.n_block:
             G_gg, G_sg = self._with_blocks(wd, wA, G_gg, G_sg)
         S = G_gg - np.einsum("pqli,pqlj->pij", G_sg, Gi_ss @ G_sg)
-        Si = np.linalg.pinv(S, hermitian=True) if r.n_glob + r.n_block else S
+        Si = _scaled_pinv(S) if r.n_glob + r.n_block else S
 
         def lin(rhs):
             """Linear terms (global (k, g, q), per pass (k, P, l, q)) fitting rows ``rhs`` (k, n, q)."""
@@ -323,7 +326,7 @@ class PassesModel:
             out = np.einsum("mi,piq->pmq", B_glob, c_g[:, :r.n_glob]) + np.einsum("pmi,pmiq->pmq", A, c_s[:, gi])
             return out + c_g[:, r.n_glob + r.block_index] if r.n_block else out
 
-        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss)
+        return h, D, grad, A, lin, fitted, (G_gg, G_sg, G_ss, Gi_ss, Si)
 
     def _block_sums(self, v):
         """Sums (k, n_block, c) of the rows ``v`` (k, n, c) over each block."""
@@ -401,12 +404,7 @@ class PassesModel:
         wrong it is. Pseudo-rows get 0 (they are never tested).
         """
         r = self.rows
-        _, _, _, A, _, _, (G_gg, G_sg, G_ss) = self.normal(x, w)
-        # The inverses again through their Jacobi scaling (:func:`_scaled_pinv`): the fit's own lose ~0.01
-        # of a leverage on a short pass with a cubic and a time offset (the fit's projection, and with it
-        # the projected Jacobian's part, keeps ~6e-3 of that: open).
-        Gi_ss = _scaled_pinv(G_ss)
-        Si = _scaled_pinv(G_gg - np.einsum("pqli,pqlj->pij", G_sg, Gi_ss @ G_sg)) if r.n_glob + r.n_block else G_gg
+        _, _, _, A, _, _, (_, G_sg, _, Gi_ss, Si) = self.normal(x, w)
         gi = r.pass_index
         GA = np.einsum("pmij,pmj->pmi", Gi_ss[:, gi], A)
         v = r.B_all - np.einsum("pmlg,pml->pmg", G_sg[:, gi], GA)
@@ -428,7 +426,7 @@ class PassesModel:
         r = self.rows
         n, n_pass, n_loc = r.n, r.n_pass, r.n_loc
         n_g = r.n_glob + r.n_block
-        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss) = self.pieces(x, w)
+        _, _, D, A, c_g, c_s, _, _, (G_gg, G_sg, G_ss, _, _) = self.pieces(x, w)
         wd, D, A = w[0, :n], D[0], A[0]
         N = np.zeros((r.n_states, r.n_states))
         N[:3, :3] = np.einsum("mi,m,mj->ij", D, wd, D)
