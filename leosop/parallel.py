@@ -61,9 +61,9 @@ CONNECT_TIMEOUT = "10s"
 #: --dask-workers 2 --split 2``; measured with the memory monitor at 1 s
 #: too, now left at its 0.1 s so that memory limits act as promptly). The
 #: event loops' tick (a callback every 20 ms that times how late it runs,
-#: for the "event loop was unresponsive" warning) at 1 s: 0.1-0.6 CPU-s less
-#: in the client over a 40 s map, as much again in the workers, two
-#: alternating pairs of one-off runs; the warning still comes.
+#: for the "event loop was unresponsive" warning) at 1 s: 0.25-0.6 CPU-s
+#: less in the client over a 40 s map and 0.1-0.9 in the workers (two
+#: alternating pairs of one-off runs); the warning still comes.
 _LOCAL_CLUSTER = {
     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 256 << 20,
     "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": 32 << 20,
