@@ -127,20 +127,22 @@ def shared_outputs(scheduler, specs):
 
 def _shared_files(specs):
     """``(folder, arrays, handles)`` of :func:`shared_outputs`, or None where they cannot be made."""
-    need = sum(int(np.prod(shape)) * np.dtype(dtype).itemsize for shape, dtype in specs)
+    specs = [(tuple(int(n) for n in shape), np.dtype(dtype)) for shape, dtype in specs]
+    sizes = [int(np.prod(shape)) * dtype.itemsize for shape, dtype in specs]
     try:
-        room = os.statvfs(_SHARED_DIR).f_bavail * os.statvfs(_SHARED_DIR).f_frsize
+        fs = os.statvfs(_SHARED_DIR)
+        room = fs.f_bavail * fs.f_frsize
     except (AttributeError, OSError):  # not POSIX, or no RAM file system
         room = 0
-    if not hasattr(os, "posix_fallocate") or need == 0 or need + _SHARED_HEADROOM > room:
+    if not hasattr(os, "posix_fallocate") or sum(sizes) == 0 or sum(sizes) + _SHARED_HEADROOM > room:
         return None
     folder = None
     try:
         folder = tempfile.mkdtemp(prefix="leosop-", dir=_SHARED_DIR)
-        handles = [SharedArray(os.path.join(folder, f"{k}.bin"), tuple(int(n) for n in shape), np.dtype(dtype).str)
+        handles = [SharedArray(os.path.join(folder, f"{k}.bin"), shape, dtype.str)
                    for k, (shape, dtype) in enumerate(specs)]
-        for h in handles:
-            _reserve(h.path, int(np.prod(h.shape)) * np.dtype(h.dtype).itemsize)
+        for h, size in zip(handles, sizes):
+            _reserve(h.path, size)
         arrays = [np.asarray(np.memmap(h.path, dtype=h.dtype, mode="r+", shape=h.shape)) for h in handles]
     except OSError:  # not writable, or the room went to another process meanwhile
         if folder is not None:

@@ -131,7 +131,8 @@ def coarse_fft(spectrum: npt.NDArray[np.complexfloating], sample_rate_hz: float,
     # excised by the cleaning (zero) are not noise: a line's hole of a few
     # percent of the band would pull the median down and every statistic up.
     sub = power[::max(1, power.size // 8192)]
-    sub = sub[sub > 0] if np.any(sub > 0) else sub
+    kept = sub[sub > 0]
+    sub = kept if kept.size else sub
     noise = float(np.partition(sub, sub.size // 2)[sub.size // 2]) / np.log(2.0)
     grouped = (power.reshape(-1, g) @ np.ones(g, dtype=power.dtype)).astype(float) if g > 1 else power.astype(float)
     comb_power = np.zeros(n_groups)

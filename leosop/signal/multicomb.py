@@ -71,7 +71,7 @@ predicted combs first, in the order given, in tracking mode).
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -264,6 +264,11 @@ class _Finder:
         self.dur, self.df = grid.n / grid.fs, grid.fs / grid.n
         self.combs = []
 
+    @cached_property
+    def threshold(self):
+        """The tracking detector's threshold (:func:`_detection_threshold`), which a new comb must pass too."""
+        return _detection_threshold(self.grid, self.comb, self.max_rate, self.pfa)
+
     def fit_new(self, d_c, start, index):
         """Decimate at ``d_c``, append and fit a comb with the others removed; refit if its position shifts."""
         grid, comb, combs, wide = self.grid, self.comb, self.combs, self.wide
@@ -284,7 +289,7 @@ class _Finder:
     def predictions(self, pred, pred_rate, gate, batch, max_combs):
         """Tracking: each prediction from its own tones; kept if the coherent power passes the detector."""
         grid, comb, combs, dur, df = self.grid, self.comb, self.combs, self.dur, self.df
-        thr = _detection_threshold(grid, comb, self.max_rate, self.pfa)
+        thr = self.threshold
         if pred_rate is not None and pred.size and batch:
             for c in track_combs(grid, comb, pred[:max_combs], pred_rate[:max_combs], self.wide, self.max_rate,
                                  self.pfa, self.kernel):
@@ -315,14 +320,13 @@ class _Finder:
             _subtract_spectrum(spectrum, comb, [c.doppler_hz for c in combs], [c.rate for c in combs],
                                [c.amp for c in combs], n, fs, n_seg_s, self.kernel)
         residues = 0
-        confirm = _detection_threshold(grid, comb, self.max_rate, self.pfa)
         while len(combs) < max_combs:
             coarse = coarse_fft(spectrum, fs, comb, max_doppler_hz=max_doppler_hz, smear_hz=smear, pfa=self.pfa,
                                 centre_hz=lo)
             if not coarse.detected:
                 break
             c = self.fit_new(coarse.doppler_hz, None, -1)
-            if not c.statistic > confirm or _duplicate(comb, c, combs[:-1], dur):
+            if not c.statistic > self.threshold or _duplicate(comb, c, combs[:-1], dur):
                 # Not a new comb: noise that the coherent fit does not confirm (a comb the power detector
                 # finds at all scores ~10 or more), or the residue of a comb already found (nearly
                 # coinciding tones are not cancelled exactly). Remove it too and search on, a few times
